@@ -1,0 +1,225 @@
+//! A simulated DAQ on a CAN interface: answers DAQ-over-CAN commands and streams sample blocks
+//! from a signal function, with injectable faults (dropped, duplicated, corrupted data frames).
+
+use std::time::Duration;
+
+use crate::can::codec::{kind, Message, Reassembler, SampleFormat, Segmenter, WireBlock, WireChannel};
+use crate::can::{BusEvent, CanBus, CanError, CanId, FrameKind, WireFrame};
+use crate::device::DeviceIdentity;
+
+/// Faults the simulator injects into its data frames (counted over all data frames sent).
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct SimFaults {
+    /// Skip every n-th data frame.
+    pub drop_every: Option<u64>,
+    /// Send every n-th data frame twice.
+    pub duplicate_every: Option<u64>,
+    /// Flip a payload bit in every n-th data frame (the frame counter stays intact).
+    pub corrupt_every: Option<u64>,
+}
+
+/// How the simulated DAQ behaves.
+#[derive(Debug, Clone)]
+pub struct SimCanDaqSettings {
+    /// Identifier it listens to for commands.
+    pub command_id: CanId,
+    /// Identifier of its answers.
+    pub status_id: CanId,
+    /// Identifier of its sample blocks.
+    pub data_id: CanId,
+    /// Frames it sends (classic or FD).
+    pub frames: FrameKind,
+    /// Who it says it is.
+    pub identity: DeviceIdentity,
+    /// Sample encoding.
+    pub format: SampleFormat,
+    /// Volts per ADC count it announces for every channel (V).
+    pub volts_per_count: f32,
+    /// Number of device channels (0..count are valid in CONFIGURE).
+    pub channel_count: u16,
+    /// Highest sample rate it accepts (Hz).
+    pub max_sample_rate_hz: f64,
+    /// Send blocks at the configured sample rate (true) or as fast as the bus takes them (false).
+    pub real_time: bool,
+    /// Injected faults.
+    pub faults: SimFaults,
+}
+
+impl Default for SimCanDaqSettings {
+    fn default() -> Self {
+        SimCanDaqSettings {
+            command_id: CanId::Standard(0x100),
+            status_id: CanId::Standard(0x101),
+            data_id: CanId::Standard(0x102),
+            frames: FrameKind::Classic,
+            identity: DeviceIdentity {
+                manufacturer: "IDENT-SIM".into(),
+                model: "CANDAQ-8".into(),
+                serial: "0001".into(),
+                firmware: "1.0".into(),
+            },
+            format: SampleFormat::I24,
+            volts_per_count: 10.0 / 8_388_608.0,
+            channel_count: 8,
+            max_sample_rate_hz: 1.0e6,
+            real_time: true,
+            faults: SimFaults::default(),
+        }
+    }
+}
+
+/// A signal source: the ADC count of `device_channel` at sample `index` (since START).
+pub type Signal = Box<dyn FnMut(u16, u64) -> i32 + Send>;
+
+/// What the simulator did (to compare with what the host detected).
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct SimStats {
+    /// Blocks produced.
+    pub blocks: u64,
+    /// Data frames produced (before fault injection).
+    pub data_frames: u64,
+    /// Data frames skipped.
+    pub dropped: u64,
+    /// Data frames sent twice.
+    pub duplicated: u64,
+    /// Data frames corrupted.
+    pub corrupted: u64,
+    /// Commands received.
+    pub commands: u64,
+}
+
+struct Stream {
+    channels: Vec<u16>,
+    samples_per_block: u16,
+    sample_rate_hz: f64,
+}
+
+/// Serves the DAQ-over-CAN protocol on `interface` until `stop` resolves (or `max_blocks` blocks
+/// were sent, if given). Returns what it did.
+pub async fn serve(
+    interface: &str,
+    settings: SimCanDaqSettings,
+    mut signal: Signal,
+    max_blocks: Option<u64>,
+    stop: tokio::sync::oneshot::Receiver<()>,
+) -> Result<SimStats, CanError> {
+    let bus = CanBus::open_filtered(interface, &[settings.command_id])?;
+    let mut rx = Reassembler::new();
+    let mut tx_status = Segmenter::new(settings.status_id, settings.frames);
+    let mut tx_data = Segmenter::new(settings.data_id, settings.frames);
+    let mut stats = SimStats::default();
+    let mut stream: Option<Stream> = None;
+    let mut streaming = false;
+    let mut block_seq: u32 = 0;
+    let mut frames: Vec<WireFrame> = Vec::new();
+    let mut body = Vec::new();
+    let mut counts: Vec<i32> = Vec::new();
+    let mut ticker = tokio::time::interval(Duration::from_millis(10));
+    ticker.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Burst);
+    tokio::pin!(stop);
+
+    loop {
+        if max_blocks.is_some_and(|m| stats.blocks >= m) {
+            streaming = false;
+        }
+        tokio::select! {
+            _ = &mut stop => return Ok(stats),
+            ev = bus.recv() => {
+                let BusEvent::Frame(f) = ev? else { continue };
+                let p = rx.push(f.data());
+                let Some(body_in) = p.message else { continue };
+                stats.commands += 1;
+                let answer = match Message::decode(body_in) {
+                    Ok(Message::Identify) => Message::Identity(settings.identity.to_idn()),
+                    Ok(Message::Configure { sample_rate_mhz, samples_per_block, channels }) => {
+                        let rate = sample_rate_mhz as f64 / 1000.0;
+                        if let Some(bad) = channels.iter().find(|&&c| c >= settings.channel_count) {
+                            Message::Nak { command: kind::CONFIGURE, code: 2, message: format!("no channel {bad} (device has {})", settings.channel_count) }
+                        } else if rate <= 0.0 || rate > settings.max_sample_rate_hz || samples_per_block == 0 || channels.is_empty() {
+                            Message::Nak { command: kind::CONFIGURE, code: 3, message: format!("rate {rate} Hz / block {samples_per_block} not supported") }
+                        } else {
+                            streaming = false;
+                            let announce = Message::Announce {
+                                sample_rate_mhz,
+                                samples_per_block,
+                                channels: channels.iter().map(|&c| WireChannel { device_channel: c, volts_per_count: settings.volts_per_count }).collect(),
+                            };
+                            stream = Some(Stream { channels, samples_per_block, sample_rate_hz: rate });
+                            announce
+                        }
+                    }
+                    Ok(Message::Start) => match &stream {
+                        None => Message::Nak { command: kind::START, code: 1, message: "not configured".into() },
+                        Some(s) => {
+                            streaming = true;
+                            block_seq = 0;
+                            let period = Duration::from_secs_f64(s.samples_per_block as f64 / s.sample_rate_hz);
+                            ticker = tokio::time::interval(period.max(Duration::from_micros(1)));
+                            ticker.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Burst);
+                            Message::Ack { command: kind::START }
+                        }
+                    },
+                    Ok(Message::Stop) => {
+                        streaming = false;
+                        Message::Ack { command: kind::STOP }
+                    }
+                    Ok(other) => Message::Nak { command: 0, code: 4, message: format!("unexpected {}", other.name()) },
+                    Err(e) => Message::Nak { command: body_in.first().copied().unwrap_or(0), code: 5, message: e.to_string() },
+                };
+                answer.encode(&mut body).map_err(|source| CanError::Encode { interface: interface.into(), message: "answer", source })?;
+                frames.clear();
+                tx_status.segment(&body, &mut frames).map_err(|source| CanError::Encode { interface: interface.into(), message: "answer", source })?;
+                for f in &frames {
+                    bus.send(f).await?;
+                }
+            }
+            _ = ticker.tick(), if streaming => {
+                let Some(s) = &stream else { continue };
+                if !settings.real_time {
+                    tokio::task::yield_now().await;
+                }
+                let spb = s.samples_per_block as u64;
+                let first = block_seq as u64 * spb;
+                counts.clear();
+                let (lo, hi) = settings.format.range();
+                for i in 0..spb {
+                    for &c in &s.channels {
+                        counts.push(signal(c, first + i).clamp(lo, hi));
+                    }
+                }
+                let block = Message::Block(WireBlock { seq: block_seq, format: settings.format, channel_count: s.channels.len() as u8, counts: std::mem::take(&mut counts) });
+                block.encode(&mut body).map_err(|source| CanError::Encode { interface: interface.into(), message: "block", source })?;
+                if let Message::Block(b) = block { counts = b.counts; }
+                frames.clear();
+                tx_data.segment(&body, &mut frames).map_err(|source| CanError::Encode { interface: interface.into(), message: "block", source })?;
+                for f in &frames {
+                    stats.data_frames += 1;
+                    let n = stats.data_frames;
+                    let hit = |every: Option<u64>| every.is_some_and(|e| e > 0 && n % e == 0);
+                    if hit(settings.faults.drop_every) {
+                        stats.dropped += 1;
+                        continue;
+                    }
+                    let mut f = *f;
+                    if hit(settings.faults.corrupt_every) && f.data().len() > 1 {
+                        let mut d = f.data().to_vec();
+                        let last = d.len() - 1;
+                        d[1 + n as usize % last] ^= 0x10;
+                        f = WireFrame::from_parts(f.id(), f.kind(), &d);
+                        stats.corrupted += 1;
+                    }
+                    bus.send(&f).await?;
+                    if hit(settings.faults.duplicate_every) {
+                        bus.send(&f).await?;
+                        stats.duplicated += 1;
+                    }
+                }
+                stats.blocks += 1;
+                block_seq = block_seq.wrapping_add(1);
+                if !settings.real_time {
+                    ticker.reset_immediately();
+                }
+            }
+        }
+    }
+}

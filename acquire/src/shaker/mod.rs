@@ -1,0 +1,189 @@
+//! The shaker-controller seam: what a sweep needs from any exciter controller (a SCPI instrument
+//! on a serial port, or the simulated one), its waveforms, status and errors.
+
+pub mod scpi;
+pub mod serial;
+
+pub use serial::{ScpiShaker, ShakerOptions};
+
+use std::time::Duration;
+
+use async_trait::async_trait;
+use serde::{Deserialize, Serialize};
+
+use crate::device::DeviceIdentity;
+
+/// An exciter controller. Object safe; a sweep holds a `Box<dyn Shaker>`. Every method is bounded
+/// by the implementation's timeout and retries; errors reported by the device are returned as
+/// [`ShakerError::Device`], never swallowed.
+#[async_trait]
+pub trait Shaker: Send {
+    /// Where the controller is connected, for messages and records.
+    fn port(&self) -> &str;
+    /// Asks the controller who it is (`*IDN?`).
+    async fn identify(&mut self) -> Result<DeviceIdentity, ShakerError>;
+    /// Returns the controller to its power-on state (output off) and clears its error queue.
+    async fn reset(&mut self) -> Result<(), ShakerError>;
+    /// Selects the waveform and its parameters.
+    async fn set_waveform(&mut self, waveform: &Waveform) -> Result<(), ShakerError>;
+    /// Sine frequency (Hz).
+    async fn set_frequency(&mut self, hz: f64) -> Result<(), ShakerError>;
+    /// Drive force amplitude (N): peak for sine and chirp, RMS for random and burst random.
+    async fn set_force(&mut self, newtons: f64) -> Result<(), ShakerError>;
+    /// Switches the amplifier output on or off.
+    async fn set_output(&mut self, on: bool) -> Result<(), ShakerError>;
+    /// Output state, the controller's own force reading and its questionable-status flags.
+    async fn status(&mut self) -> Result<ShakerStatus, ShakerError>;
+}
+
+/// An excitation waveform. Frequencies in Hz, times in s.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "snake_case")]
+pub enum Waveform {
+    /// A sine at the frequency set by [`Shaker::set_frequency`].
+    Sine,
+    /// Continuous random noise, flat between `f_lo_hz` and `f_hi_hz`.
+    Random {
+        /// Lower band edge (Hz).
+        f_lo_hz: f64,
+        /// Upper band edge (Hz).
+        f_hi_hz: f64,
+    },
+    /// Burst random: noise for `duty` (0-1) of each `period_s`, silence for the rest.
+    BurstRandom {
+        /// Lower band edge (Hz).
+        f_lo_hz: f64,
+        /// Upper band edge (Hz).
+        f_hi_hz: f64,
+        /// Fraction of the period with drive (0-1).
+        duty: f64,
+        /// Burst period (s).
+        period_s: f64,
+    },
+    /// A linear chirp from `f_lo_hz` to `f_hi_hz` over `period_s`, repeated.
+    Chirp {
+        /// Start frequency (Hz).
+        f_lo_hz: f64,
+        /// End frequency (Hz).
+        f_hi_hz: f64,
+        /// Sweep time (s).
+        period_s: f64,
+    },
+}
+
+/// The controller's status.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ShakerStatus {
+    /// Amplifier output on.
+    pub output_on: bool,
+    /// Force amplitude measured by the controller's own load cell (N; peak for sine).
+    pub measured_force_n: f64,
+    /// Questionable-status condition register (see [`scpi::questionable`]).
+    pub questionable: u16,
+}
+
+impl ShakerStatus {
+    /// Names of the questionable-status bits that are set (`interlock open`, …).
+    pub fn problems(&self) -> Vec<&'static str> {
+        scpi::questionable::names(self.questionable)
+    }
+}
+
+/// Errors of a shaker controller. Each names the port and says what to check.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum ShakerError {
+    /// The transport could not be opened.
+    #[error(transparent)]
+    Transport(#[from] crate::transport::TransportError),
+    /// Reading or writing failed.
+    #[error("shaker controller on {port}: I/O error: {source}; check the cable and that the controller is on")]
+    Io {
+        /// Port.
+        port: String,
+        /// Underlying error.
+        source: std::io::Error,
+    },
+    /// The controller went away (end of stream / hang-up).
+    #[error("shaker controller on {port}: connection lost ({detail}); check the cable and the controller's power")]
+    Disconnected {
+        /// Port.
+        port: String,
+        /// What was seen.
+        detail: String,
+    },
+    /// No answer within the timeout, after all retries.
+    #[error("shaker controller on {port}: no answer to `{command}` within {waited:?} ({attempts} attempts){hint}")]
+    Timeout {
+        /// Port.
+        port: String,
+        /// Command sent.
+        command: String,
+        /// Timeout per attempt.
+        waited: Duration,
+        /// Attempts made.
+        attempts: u32,
+        /// What to check.
+        hint: String,
+    },
+    /// The answer could not be understood.
+    #[error("shaker controller on {port}: answer to `{command}` is not understood: {got:?}; is `port` really the shaker controller, at the right baud rate?")]
+    Garbled {
+        /// Port.
+        port: String,
+        /// Command sent.
+        command: String,
+        /// What came back (lossily decoded).
+        got: String,
+    },
+    /// The controller identified itself as something else.
+    #[error("shaker controller on {port}: identifies as `{got}`, stand file expects `{expected}`; check which device is on this port")]
+    WrongIdentity {
+        /// Port.
+        port: String,
+        /// Identity received.
+        got: String,
+        /// Identity expected.
+        expected: String,
+    },
+    /// The controller reported an error for a command (from its `SYST:ERR?` queue).
+    #[error("shaker controller on {port}: `{command}` failed: {code},\"{message}\"{more}")]
+    Device {
+        /// Port.
+        port: String,
+        /// Command that failed.
+        command: String,
+        /// SCPI error code.
+        code: i32,
+        /// SCPI error message.
+        message: String,
+        /// Further queued errors, if any.
+        more: String,
+    },
+    /// A value outside what this driver may send (NaN, negative force).
+    #[error("shaker controller on {port}: refusing to send {what} = {value}")]
+    InvalidValue {
+        /// Port.
+        port: String,
+        /// Which quantity.
+        what: String,
+        /// The value.
+        value: f64,
+    },
+}
+
+impl ShakerError {
+    /// Maps an I/O error on `port`: end-of-stream and hang-up become [`ShakerError::Disconnected`].
+    pub fn from_io(port: &str, e: std::io::Error) -> ShakerError {
+        use std::io::ErrorKind as K;
+        match e.kind() {
+            K::UnexpectedEof | K::BrokenPipe | K::ConnectionReset | K::NotConnected => {
+                ShakerError::Disconnected { port: port.to_string(), detail: e.to_string() }
+            }
+            _ if e.raw_os_error() == Some(5) => {
+                ShakerError::Disconnected { port: port.to_string(), detail: e.to_string() }
+            }
+            _ => ShakerError::Io { port: port.to_string(), source: e },
+        }
+    }
+}

@@ -1,0 +1,603 @@
+//! Stand files (`configs/stands/*.toml`): which ports the devices are on, the DAQ channel map
+//! with each sensor's body, position, direction and calibration, and — for the simulated stand —
+//! the truth model, noise and faults. Every error names file:line:column and what to fix.
+
+use std::ops::Range;
+use std::path::{Path, PathBuf};
+use std::time::Duration;
+
+use serde::{Deserialize, Serialize};
+use serde_spanned::Spanned;
+
+use crate::units::{Dimension, Value};
+
+/// A resolved, validated stand (SI units throughout).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Stand {
+    /// Free-text name.
+    pub name: String,
+    /// File it was read from (empty when parsed from a string).
+    pub file: String,
+    /// The file's text, recorded verbatim in each session.
+    pub text: String,
+    /// The shaker controller.
+    pub shaker: ShakerPort,
+    /// The DAQ.
+    pub daq: DaqPort,
+    /// DAQ channels in stream order.
+    pub channels: Vec<Channel>,
+    /// The simulated stand's truth (only used by [`crate::sim`]).
+    pub truth: Option<Truth>,
+    /// Faults the simulated stand injects.
+    pub faults: Faults,
+}
+
+/// Where a device is.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum PortSpec {
+    /// `"sim"`: served by the simulated stand.
+    Sim,
+    /// A device path such as `/dev/ttyUSB0`.
+    Path(String),
+}
+
+/// Shaker-controller settings.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct ShakerPort {
+    /// Port.
+    pub port: PortSpec,
+    /// Baud rate (bit/s).
+    pub baud: u32,
+    /// Expected identity `manufacturer,model` (empty: accept any).
+    pub identity: String,
+    /// Answer timeout.
+    pub timeout: Duration,
+    /// Retries after a timeout.
+    pub retries: u32,
+    /// Largest force the sweep may command (N).
+    pub max_force_n: f64,
+}
+
+/// DAQ settings.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct DaqPort {
+    /// Port.
+    pub port: PortSpec,
+    /// Baud rate (bit/s).
+    pub baud: u32,
+    /// Expected identity `manufacturer,model` (empty: accept any).
+    pub identity: String,
+    /// Requested sample rate (Hz).
+    pub sample_rate_hz: f64,
+    /// Samples per channel per block.
+    pub samples_per_block: u16,
+    /// Command timeout.
+    pub timeout: Duration,
+    /// Retries after a timeout.
+    pub retries: u32,
+}
+
+/// What a channel measures.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ChannelKind {
+    /// The excitation force (N) at the exciter.
+    Force,
+    /// Acceleration (m/s²) along `direction` at `position` on `body`.
+    Acceleration,
+}
+
+/// One DAQ channel.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Channel {
+    /// Unique name.
+    pub name: String,
+    /// Channel number on the DAQ.
+    pub device_channel: u16,
+    /// What it measures.
+    pub kind: ChannelKind,
+    /// Sensitivity (V/N or V/(m/s²)): physical value = volts / sensitivity.
+    pub sensitivity: f64,
+    /// Body the sensor is on (acceleration channels).
+    pub body: Option<String>,
+    /// Sensor position, global frame (m).
+    pub position_m: [f64; 3],
+    /// Measuring direction, global frame, unit length.
+    pub direction: [f64; 3],
+    /// Line in the stand file, for later messages.
+    pub line: usize,
+}
+
+/// The simulated stand's truth.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Truth {
+    /// The structure.
+    pub model: TruthModel,
+    /// Shaker-structure interaction: delivered force = commanded · gain / (1 + j f / cutoff).
+    pub shaker_gain: f64,
+    /// Cut-off frequency of the shaker's force roll-off (Hz).
+    pub shaker_cutoff_hz: f64,
+    /// Sensor noise RMS on acceleration channels (m/s²).
+    pub noise_acceleration: f64,
+    /// Sensor noise RMS on the force channel (N).
+    pub noise_force: f64,
+    /// Simulated time per wall-clock time (1 = real time; larger runs faster).
+    pub speed: f64,
+    /// Seed of the noise generator.
+    pub seed: u64,
+}
+
+/// Structure models the simulated stand can use as truth.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum TruthModel {
+    /// A rigid body on a spring with hysteretic damping, moving along `direction`.
+    Sdof {
+        /// Body name the sensors refer to.
+        body: String,
+        /// Mass (kg).
+        mass: f64,
+        /// Stiffness (N/m).
+        stiffness: f64,
+        /// Loss factor η (hysteretic damping, = ψ / 2π).
+        loss_factor: f64,
+        /// Direction of motion, global, unit.
+        direction: [f64; 3],
+    },
+    /// An `identify` model file (resolved relative to the stand file).
+    ModelFile(PathBuf),
+}
+
+/// Faults injected by the simulated stand. Probabilities per frame (0-1).
+#[derive(Debug, Clone, PartialEq, Default, Serialize)]
+pub struct Faults {
+    /// Seed of the fault generator.
+    pub seed: u64,
+    /// DAQ frames dropped.
+    pub drop: f64,
+    /// DAQ frames with a corrupted byte.
+    pub corrupt: f64,
+    /// DAQ frames sent twice.
+    pub duplicate: f64,
+    /// DAQ frames delayed by `delay_time`.
+    pub delay: f64,
+    /// Delay applied to delayed frames.
+    pub delay_time: Duration,
+    /// The DAQ goes silent (no data, no answers) after this many blocks.
+    pub daq_silent_after_blocks: Option<u64>,
+    /// The shaker controller stops answering after this many command lines.
+    pub shaker_silent_after_commands: Option<u64>,
+    /// Both cables are pulled (ptys closed) after this many DAQ blocks.
+    pub cable_pull_after_blocks: Option<u64>,
+}
+
+/// A stand-file error: where and what.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("{file}:{line}:{column}: {message}")]
+pub struct StandError {
+    /// File.
+    pub file: String,
+    /// Line (1-based).
+    pub line: usize,
+    /// Column (1-based).
+    pub column: usize,
+    /// What is wrong and how to fix it.
+    pub message: String,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawStand {
+    name: Option<String>,
+    shaker: Spanned<RawShaker>,
+    daq: Spanned<RawDaq>,
+    #[serde(default)]
+    channel: Vec<Spanned<RawChannel>>,
+    truth: Option<Spanned<RawTruth>>,
+    faults: Option<RawFaults>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawShaker {
+    port: Spanned<String>,
+    baud: Option<u32>,
+    identity: Option<String>,
+    timeout: Option<Spanned<Value>>,
+    retries: Option<u32>,
+    max_force: Option<Spanned<Value>>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawDaq {
+    port: Spanned<String>,
+    baud: Option<u32>,
+    identity: Option<String>,
+    sample_rate: Spanned<Value>,
+    samples_per_block: Option<Spanned<u16>>,
+    timeout: Option<Spanned<Value>>,
+    retries: Option<u32>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawChannel {
+    name: Spanned<String>,
+    device_channel: Spanned<u16>,
+    kind: Spanned<ChannelKind>,
+    sensitivity: Spanned<Value>,
+    body: Option<Spanned<String>>,
+    position: Option<Spanned<Vec<Value>>>,
+    direction: Option<Spanned<Vec<f64>>>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawTruth {
+    model: Option<Spanned<String>>,
+    sdof: Option<Spanned<RawSdof>>,
+    shaker_gain: Option<f64>,
+    shaker_cutoff: Option<Spanned<Value>>,
+    noise_acceleration: Option<Spanned<Value>>,
+    noise_force: Option<Spanned<Value>>,
+    speed: Option<Spanned<f64>>,
+    seed: Option<u64>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawSdof {
+    body: String,
+    mass: Spanned<Value>,
+    stiffness: Spanned<Value>,
+    loss_factor: Spanned<f64>,
+    direction: Spanned<Vec<f64>>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawFaults {
+    seed: Option<u64>,
+    drop: Option<Spanned<f64>>,
+    corrupt: Option<Spanned<f64>>,
+    duplicate: Option<Spanned<f64>>,
+    delay: Option<Spanned<f64>>,
+    delay_time: Option<Spanned<Value>>,
+    daq_silent_after_blocks: Option<u64>,
+    shaker_silent_after_commands: Option<u64>,
+    cable_pull_after_blocks: Option<u64>,
+}
+
+struct Ctx<'a> {
+    file: &'a str,
+    text: &'a str,
+}
+
+impl Ctx<'_> {
+    fn at(&self, span: Range<usize>, message: impl Into<String>) -> StandError {
+        let start = span.start.min(self.text.len());
+        let before = &self.text[..start];
+        let line = before.matches('\n').count() + 1;
+        let column = before.rfind('\n').map(|i| start - i).unwrap_or(start + 1);
+        StandError { file: self.file.to_string(), line, column, message: message.into() }
+    }
+
+    fn line_of(&self, span: Range<usize>) -> usize {
+        self.text[..span.start.min(self.text.len())].matches('\n').count() + 1
+    }
+
+    fn value(&self, v: &Spanned<Value>, dim: Dimension, what: &str) -> Result<f64, StandError> {
+        v.get_ref().si(dim).map_err(|e| self.at(v.span(), format!("{what}: {e}")))
+    }
+
+    fn positive(&self, v: &Spanned<Value>, dim: Dimension, what: &str) -> Result<f64, StandError> {
+        let x = self.value(v, dim, what)?;
+        if x > 0.0 {
+            Ok(x)
+        } else {
+            Err(self.at(v.span(), format!("{what} must be > 0 {}, got {x}", dim.si())))
+        }
+    }
+
+    fn unit_vector(&self, v: &Spanned<Vec<f64>>, what: &str) -> Result<[f64; 3], StandError> {
+        let d = v.get_ref();
+        if d.len() != 3 || d.iter().any(|x| !x.is_finite()) {
+            return Err(self.at(v.span(), format!("{what} must be three numbers [x, y, z]")));
+        }
+        let n = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+        if n < 1e-9 {
+            return Err(self.at(v.span(), format!("{what} has zero length; give the sensor's measuring axis, e.g. [1, 0, 0]")));
+        }
+        Ok([d[0] / n, d[1] / n, d[2] / n])
+    }
+
+    fn probability(&self, v: &Option<Spanned<f64>>, what: &str) -> Result<f64, StandError> {
+        match v {
+            None => Ok(0.0),
+            Some(p) if (0.0..=1.0).contains(p.get_ref()) => Ok(*p.get_ref()),
+            Some(p) => Err(self.at(p.span(), format!("faults.{what} is a probability per frame and must be within 0..1"))),
+        }
+    }
+}
+
+fn port_spec(p: &str) -> PortSpec {
+    if p == "sim" {
+        PortSpec::Sim
+    } else {
+        PortSpec::Path(p.to_string())
+    }
+}
+
+impl Stand {
+    /// Reads and validates a stand file.
+    pub fn load(path: &Path) -> Result<Stand, StandError> {
+        let file = path.display().to_string();
+        let text = std::fs::read_to_string(path).map_err(|e| StandError {
+            file: file.clone(),
+            line: 0,
+            column: 0,
+            message: format!("cannot read the stand file: {e}"),
+        })?;
+        let mut stand = Stand::parse(&text, &file)?;
+        if let Some(Truth { model: TruthModel::ModelFile(p), .. }) = &mut stand.truth {
+            if p.is_relative() {
+                *p = path.parent().unwrap_or(Path::new(".")).join(&*p);
+            }
+        }
+        Ok(stand)
+    }
+
+    /// Parses and validates stand-file text; `file` is used in messages.
+    pub fn parse(text: &str, file: &str) -> Result<Stand, StandError> {
+        let cx = Ctx { file, text };
+        let raw: RawStand = toml::from_str(text).map_err(|e| {
+            let span = e.span().unwrap_or(0..0);
+            cx.at(span, e.message().to_string())
+        })?;
+
+        let rs = raw.shaker.get_ref();
+        let shaker = ShakerPort {
+            port: port_spec(rs.port.get_ref()),
+            baud: rs.baud.unwrap_or(115_200),
+            identity: rs.identity.clone().unwrap_or_default(),
+            timeout: match &rs.timeout {
+                Some(t) => Duration::from_secs_f64(cx.positive(t, Dimension::Time, "shaker.timeout")?),
+                None => Duration::from_millis(500),
+            },
+            retries: rs.retries.unwrap_or(2),
+            max_force_n: match &rs.max_force {
+                Some(f) => cx.positive(f, Dimension::Force, "shaker.max_force")?,
+                None => 5000.0,
+            },
+        };
+        let rd = raw.daq.get_ref();
+        let daq = DaqPort {
+            port: port_spec(rd.port.get_ref()),
+            baud: rd.baud.unwrap_or(3_000_000),
+            identity: rd.identity.clone().unwrap_or_default(),
+            sample_rate_hz: cx.positive(&rd.sample_rate, Dimension::Frequency, "daq.sample_rate")?,
+            samples_per_block: match &rd.samples_per_block {
+                Some(s) if *s.get_ref() == 0 => return Err(cx.at(s.span(), "daq.samples_per_block must be ≥ 1")),
+                Some(s) => *s.get_ref(),
+                None => 64,
+            },
+            timeout: match &rd.timeout {
+                Some(t) => Duration::from_secs_f64(cx.positive(t, Dimension::Time, "daq.timeout")?),
+                None => Duration::from_millis(500),
+            },
+            retries: rd.retries.unwrap_or(2),
+        };
+        if let (PortSpec::Path(a), PortSpec::Path(b)) = (&shaker.port, &daq.port) {
+            if a == b {
+                return Err(cx.at(rd.port.span(), format!("daq.port {b} is also the shaker's port; each device needs its own port")));
+            }
+        }
+
+        if raw.channel.is_empty() {
+            return Err(cx.at(raw.daq.span(), "no [[channel]] entries; list at least the force channel and one accelerometer"));
+        }
+        let mut channels: Vec<Channel> = Vec::new();
+        for sc in &raw.channel {
+            let c = sc.get_ref();
+            let name = c.name.get_ref().trim().to_string();
+            if name.is_empty() {
+                return Err(cx.at(c.name.span(), "channel name is empty"));
+            }
+            if let Some(o) = channels.iter().find(|o| o.name == name) {
+                return Err(cx.at(c.name.span(), format!("channel name `{name}` is already used on line {}; names must be unique", o.line)));
+            }
+            let dc = *c.device_channel.get_ref();
+            if let Some(o) = channels.iter().find(|o| o.device_channel == dc) {
+                return Err(cx.at(
+                    c.device_channel.span(),
+                    format!("channel `{name}`: device_channel {dc} is already used by channel `{}` (line {}); each channel needs its own DAQ input", o.name, o.line),
+                ));
+            }
+            let kind = *c.kind.get_ref();
+            let sensitivity = cx.positive(&c.sensitivity, Dimension::Sensitivity, &format!("channel `{name}`: sensitivity"))?;
+            let (body, position_m, direction) = match kind {
+                ChannelKind::Force => {
+                    let position = match &c.position {
+                        Some(p) => vec3(&cx, p, &name)?,
+                        None => [0.0; 3],
+                    };
+                    let direction = match &c.direction {
+                        Some(d) => cx.unit_vector(d, &format!("channel `{name}`: direction"))?,
+                        None => [0.0; 3],
+                    };
+                    (c.body.as_ref().map(|b| b.get_ref().clone()), position, direction)
+                }
+                ChannelKind::Acceleration => {
+                    let missing = |what: &str| cx.at(sc.span(), format!("acceleration channel `{name}` needs `{what}`"));
+                    let body = c.body.as_ref().ok_or_else(|| missing("body"))?.get_ref().clone();
+                    let position = vec3(&cx, c.position.as_ref().ok_or_else(|| missing("position"))?, &name)?;
+                    let direction = cx.unit_vector(
+                        c.direction.as_ref().ok_or_else(|| missing("direction"))?,
+                        &format!("channel `{name}`: direction"),
+                    )?;
+                    (Some(body), position, direction)
+                }
+            };
+            channels.push(Channel {
+                name,
+                device_channel: dc,
+                kind,
+                sensitivity,
+                body,
+                position_m,
+                direction,
+                line: cx.line_of(sc.span()),
+            });
+        }
+        let forces: Vec<&Channel> = channels.iter().filter(|c| c.kind == ChannelKind::Force).collect();
+        if forces.len() != 1 {
+            let span = raw.channel.first().map(|c| c.span()).unwrap_or(0..0);
+            return Err(cx.at(
+                span,
+                format!("the channel map needs exactly one `kind = \"force\"` channel (the closed loop and every FRF refer to it); found {}", forces.len()),
+            ));
+        }
+        if !channels.iter().any(|c| c.kind == ChannelKind::Acceleration) {
+            return Err(cx.at(raw.daq.span(), "the channel map has no acceleration channel"));
+        }
+        let frame = channels.len() * daq.samples_per_block as usize * 4 + 9;
+        if frame > crate::daq::frame::MAX_FRAME {
+            let span = rd.samples_per_block.as_ref().map(|s| s.span()).unwrap_or(raw.daq.span());
+            return Err(cx.at(
+                span,
+                format!("{} channels × {} samples per block do not fit a {}-byte frame; lower daq.samples_per_block", channels.len(), daq.samples_per_block, crate::daq::frame::MAX_FRAME),
+            ));
+        }
+
+        let truth = match &raw.truth {
+            None => None,
+            Some(st) => Some(truth(&cx, st, &channels)?),
+        };
+        let faults = match &raw.faults {
+            None => Faults::default(),
+            Some(f) => Faults {
+                seed: f.seed.unwrap_or(1),
+                drop: cx.probability(&f.drop, "drop")?,
+                corrupt: cx.probability(&f.corrupt, "corrupt")?,
+                duplicate: cx.probability(&f.duplicate, "duplicate")?,
+                delay: cx.probability(&f.delay, "delay")?,
+                delay_time: match &f.delay_time {
+                    Some(t) => Duration::from_secs_f64(cx.positive(t, Dimension::Time, "faults.delay_time")?),
+                    None => Duration::from_millis(20),
+                },
+                daq_silent_after_blocks: f.daq_silent_after_blocks,
+                shaker_silent_after_commands: f.shaker_silent_after_commands,
+                cable_pull_after_blocks: f.cable_pull_after_blocks,
+            },
+        };
+        let uses_sim = shaker.port == PortSpec::Sim || daq.port == PortSpec::Sim;
+        if uses_sim && truth.is_none() {
+            return Err(cx.at(raw.shaker.span(), "port = \"sim\" needs a [truth] section (the simulated structure)"));
+        }
+        Ok(Stand {
+            name: raw.name.unwrap_or_else(|| file.to_string()),
+            file: file.to_string(),
+            text: text.to_string(),
+            shaker,
+            daq,
+            channels,
+            truth,
+            faults,
+        })
+    }
+
+    /// The force channel's index in stream order (validated to exist exactly once).
+    pub fn force_channel(&self) -> usize {
+        self.channels.iter().position(|c| c.kind == ChannelKind::Force).unwrap_or(0)
+    }
+
+    /// The DAQ configuration this stand asks for.
+    pub fn daq_config(&self) -> crate::daq::DaqConfig {
+        crate::daq::DaqConfig {
+            sample_rate_hz: self.daq.sample_rate_hz,
+            channels: self.channels.iter().map(|c| c.device_channel).collect(),
+            samples_per_block: self.daq.samples_per_block,
+        }
+    }
+}
+
+fn vec3(cx: &Ctx<'_>, p: &Spanned<Vec<Value>>, name: &str) -> Result<[f64; 3], StandError> {
+    let v = p.get_ref();
+    if v.len() != 3 {
+        return Err(cx.at(p.span(), format!("channel `{name}`: position must be three values [x, y, z], e.g. [\"320 mm\", \"0 mm\", \"45 mm\"]")));
+    }
+    let mut out = [0.0; 3];
+    for (o, x) in out.iter_mut().zip(v) {
+        *o = x.si(Dimension::Length).map_err(|e| cx.at(p.span(), format!("channel `{name}`: position: {e}")))?;
+    }
+    Ok(out)
+}
+
+fn truth(cx: &Ctx<'_>, st: &Spanned<RawTruth>, channels: &[Channel]) -> Result<Truth, StandError> {
+    let t = st.get_ref();
+    let model = match (&t.model, &t.sdof) {
+        (Some(_), Some(s)) | (None, Some(s)) if t.model.is_some() => {
+            return Err(cx.at(s.span(), "[truth] has both `model` and `sdof`; keep one"))
+        }
+        (None, Some(s)) => {
+            let r = s.get_ref();
+            let eta = *r.loss_factor.get_ref();
+            if !(0.0..1.0).contains(&eta) {
+                return Err(cx.at(r.loss_factor.span(), "truth.sdof.loss_factor must be within 0..1 (η = ψ/2π)"));
+            }
+            TruthModel::Sdof {
+                body: r.body.clone(),
+                mass: cx.positive(&r.mass, Dimension::Mass, "truth.sdof.mass")?,
+                stiffness: cx.positive(&r.stiffness, Dimension::Stiffness, "truth.sdof.stiffness")?,
+                loss_factor: eta,
+                direction: cx.unit_vector(&r.direction, "truth.sdof.direction")?,
+            }
+        }
+        (Some(m), None) => TruthModel::ModelFile(PathBuf::from(m.get_ref())),
+        (None, None) => return Err(cx.at(st.span(), "[truth] needs `model = \"path\"` or an `sdof = {...}` table")),
+    };
+    if let TruthModel::Sdof { body, .. } = &model {
+        for c in channels.iter().filter(|c| c.kind == ChannelKind::Acceleration) {
+            if c.body.as_deref() != Some(body) {
+                return Err(StandError {
+                    file: cx.file.to_string(),
+                    line: c.line,
+                    column: 1,
+                    message: format!(
+                        "channel `{}`: body `{}` is not in the truth model (it has one body, `{body}`)",
+                        c.name,
+                        c.body.as_deref().unwrap_or("")
+                    ),
+                });
+            }
+        }
+    }
+    let speed = match &t.speed {
+        Some(s) if *s.get_ref() > 0.0 && s.get_ref().is_finite() => *s.get_ref(),
+        Some(s) => return Err(cx.at(s.span(), "truth.speed must be > 0 (1 = real time)")),
+        None => 1.0,
+    };
+    Ok(Truth {
+        model,
+        shaker_gain: t.shaker_gain.unwrap_or(1.0),
+        shaker_cutoff_hz: match &t.shaker_cutoff {
+            Some(v) => cx.positive(v, Dimension::Frequency, "truth.shaker_cutoff")?,
+            None => f64::INFINITY,
+        },
+        noise_acceleration: match &t.noise_acceleration {
+            Some(v) => cx.value(v, Dimension::Acceleration, "truth.noise_acceleration")?.abs(),
+            None => 0.0,
+        },
+        noise_force: match &t.noise_force {
+            Some(v) => cx.value(v, Dimension::Force, "truth.noise_force")?.abs(),
+            None => 0.0,
+        },
+        speed,
+        seed: t.seed.unwrap_or(1),
+    })
+}
+
+#[cfg(test)]
+mod tests;

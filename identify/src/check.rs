@@ -1,0 +1,178 @@
+//! Physical validation of a resolved model, shared by every loader. Problems are reported against
+//! an [`Item`] (which body/SDE/force/output and which field) so that each file format can point at
+//! its own location: a TOML line and column, or a JSON path.
+
+use nalgebra::Matrix3;
+
+use crate::model::Model;
+
+/// A field of an element of the model.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Item {
+    /// `bodies[i].field`.
+    Body(usize, &'static str),
+    /// `sdes[i].field`.
+    Sde(usize, &'static str),
+    /// `excitation.forces[i].field`.
+    Force(usize, &'static str),
+    /// `outputs[i].field`.
+    Output(usize, &'static str),
+    /// The model as a whole.
+    Model,
+}
+
+/// A problem found in a model.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Problem {
+    /// Where.
+    pub item: Item,
+    /// What is wrong and how to fix it.
+    pub message: String,
+}
+
+/// Checks that `r` is a proper rotation (orthonormal, right-handed) to `tol`.
+pub fn rotation_problem(r: &Matrix3<f64>, tol: f64) -> Option<String> {
+    if r.iter().any(|v| !v.is_finite()) {
+        return Some("the axes contain NaN or infinite values".into());
+    }
+    let err = (r.transpose() * r - Matrix3::identity()).abs().max();
+    if err > tol {
+        return Some(format!(
+            "the axes are not orthonormal (|RᵀR − I| = {err:.2e}); give three mutually \
+             perpendicular unit vectors"
+        ));
+    }
+    if r.determinant() < 0.0 {
+        let c = r.column(0).cross(&r.column(1));
+        return Some(format!(
+            "the axes are left-handed; axis 3 must be axis 1 × axis 2 = [{:.6}, {:.6}, {:.6}]",
+            c.x, c.y, c.z
+        ));
+    }
+    None
+}
+
+/// Errors (which make the model unusable) and warnings (which do not) of a resolved model.
+pub fn check(model: &Model) -> (Vec<Problem>, Vec<Problem>) {
+    let mut errors = Vec::new();
+    let mut warnings = Vec::new();
+    let mut err = |item, message: String| errors.push(Problem { item, message });
+    let nb = model.bodies.len();
+    if nb == 0 {
+        err(Item::Model, "the model has no bodies; add at least one [[body]]".into());
+    }
+    for (i, b) in model.bodies.iter().enumerate() {
+        if !(b.mass.is_finite() && b.mass > 0.0) {
+            err(Item::Body(i, "mass"), format!("body \"{}\": mass must be a positive number of kg, got {}", b.name, b.mass));
+        }
+        if b.inertia.iter().any(|j| !(j.is_finite() && *j > 0.0)) {
+            err(Item::Body(i, "inertia"), format!(
+                "body \"{}\": principal moments of inertia must be positive (kg·m²), got {:?}",
+                b.name, b.inertia
+            ));
+        }
+        if b.position.iter().any(|v| !v.is_finite()) {
+            err(Item::Body(i, "position"), format!("body \"{}\": position is not finite", b.name));
+        }
+        if let Some(m) = rotation_problem(&b.rotation, 1e-9) {
+            err(Item::Body(i, "rotation"), format!("body \"{}\": {m}", b.name));
+        }
+        if let Some(j) = model.bodies[..i].iter().position(|o| o.name == b.name) {
+            err(Item::Body(i, "name"), format!("body name \"{}\" is used twice (bodies {} and {}); names must be unique", b.name, j + 1, i + 1));
+        }
+    }
+    for (i, s) in model.sdes.iter().enumerate() {
+        for (side, b) in s.bodies.iter().enumerate() {
+            if let Some(b) = b {
+                if *b >= nb {
+                    err(Item::Sde(i, "bodies"), format!("sde \"{}\": body index {b} (side {side}) does not exist; there are {nb} bodies", s.name));
+                }
+            }
+        }
+        match s.bodies {
+            [Some(a), Some(b)] if a == b => err(Item::Sde(i, "bodies"), format!(
+                "sde \"{}\" joins body {} to itself; an SDE joins two different bodies, or a body and the ground",
+                s.name, model.bodies.get(a).map(|b| b.name.as_str()).unwrap_or("?")
+            )),
+            [None, None] => err(Item::Sde(i, "bodies"), format!("sde \"{}\" joins the ground to the ground; name at least one body", s.name)),
+            _ => {}
+        }
+        if s.point.iter().any(|v| !v.is_finite()) {
+            err(Item::Sde(i, "point"), format!("sde \"{}\": point is not finite", s.name));
+        }
+        if let Some(m) = rotation_problem(&s.rotation, 1e-9) {
+            err(Item::Sde(i, "rotation"), format!("sde \"{}\": {m}", s.name));
+        }
+        let k = s.law.stiffness();
+        let psi = s.law.dissipation();
+        if k.iter().chain(&psi).any(|v| !v.is_finite()) {
+            err(Item::Sde(i, "k"), format!("sde \"{}\": stiffness or dissipation is NaN or infinite", s.name));
+        } else if k.iter().any(|v| *v < 0.0) {
+            err(Item::Sde(i, "k"), format!("sde \"{}\": stiffnesses must be ≥ 0, got {k:?}", s.name));
+        } else if psi.iter().any(|v| *v < 0.0) {
+            err(Item::Sde(i, "psi"), format!("sde \"{}\": dissipation ψ must be ≥ 0, got {psi:?}", s.name));
+        }
+        if let Some(j) = model.sdes[..i].iter().position(|o| o.name == s.name) {
+            err(Item::Sde(i, "name"), format!("sde name \"{}\" is used twice (elements {} and {}); names must be unique", s.name, j + 1, i + 1));
+        }
+    }
+    for (i, f) in model.forces.iter().enumerate() {
+        if f.body >= nb {
+            err(Item::Force(i, "body"), format!("force {}: body index {} does not exist; there are {nb} bodies", i + 1, f.body));
+        }
+        if f.point.iter().chain(f.force.iter()).chain(f.moment.iter()).any(|v| !v.is_finite()) {
+            err(Item::Force(i, "force"), format!("force {}: point, force or moment is not finite", i + 1));
+        }
+    }
+    for (i, o) in model.outputs.iter().enumerate() {
+        if o.body >= nb {
+            err(Item::Output(i, "body"), format!("output {}: body index {} does not exist; there are {nb} bodies", i + 1, o.body));
+        }
+        if o.dof > 5 {
+            err(Item::Output(i, "dof"), format!("output {}: dof {} is out of range 0-5 (u1 u2 u3 r1 r2 r3)", i + 1, o.dof));
+        }
+    }
+    if !errors.is_empty() {
+        return (errors, warnings);
+    }
+    // Connectivity: bodies touched by no enabled SDE, and groups with no path to the ground.
+    let mut touched = vec![false; nb];
+    let mut parent: Vec<usize> = (0..=nb).collect(); // index nb = ground
+    fn find(p: &mut [usize], mut x: usize) -> usize {
+        while p[x] != x {
+            p[x] = p[p[x]];
+            x = p[x];
+        }
+        x
+    }
+    for s in model.sdes.iter().filter(|s| s.enabled) {
+        let ends = s.bodies.map(|b| b.unwrap_or(nb));
+        for b in s.bodies.iter().flatten() {
+            touched[*b] = true;
+        }
+        let (a, b) = (find(&mut parent, ends[0]), find(&mut parent, ends[1]));
+        parent[a] = b;
+    }
+    for (i, b) in model.bodies.iter().enumerate() {
+        if !touched[i] {
+            warnings.push(Problem { item: Item::Body(i, "name"), message: format!(
+                "body \"{}\" is connected to nothing: it has six free rigid-body modes and its \
+                 response is unbounded at 0 Hz; connect it with an SDE or remove it",
+                b.name
+            ) });
+        }
+    }
+    let ground = find(&mut parent, nb);
+    let floating: Vec<&str> = (0..nb)
+        .filter(|&i| touched[i] && find(&mut parent, i) != ground)
+        .map(|i| model.bodies[i].name.as_str())
+        .collect();
+    if !floating.is_empty() {
+        warnings.push(Problem { item: Item::Model, message: format!(
+            "bodies {} have no path to the ground: the model has free rigid-body modes (response \
+             unbounded at 0 Hz); add isolators or supports if that is not intended",
+            floating.join(", ")
+        ) });
+    }
+    (errors, warnings)
+}

@@ -1,0 +1,284 @@
+//! The resolved model JSON: the interchange contract with other tools
+//! (`docs/model-json.md`, from `shared/docs/model-json.md`). SI units only, every SDE reduced to
+//! six stiffnesses and six dissipations in its own frame, every excitation to forces at points.
+//! Rotations are row-major 3×3 matrices whose **columns** are the body's principal axes (or the
+//! SDE's axes) in the global frame. This module reads and writes exactly that form, and the
+//! frequency-response JSON of `ident frf --json`.
+
+use nalgebra::{Matrix3, Vector3};
+use serde::{Deserialize, Serialize};
+
+use crate::check::Item;
+use crate::frf::Response;
+use crate::model::{Body, Characteristic, Model, PointForce, Quantity, Sde, SdeKind, SdeLaw};
+
+/// The resolved model as serialized.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ModelJson {
+    /// Free text.
+    pub name: String,
+    /// Rigid finite elements.
+    pub bodies: Vec<BodyJson>,
+    /// Spring-damping elements (enabled ones only).
+    pub sdes: Vec<SdeJson>,
+    /// Forces at points.
+    pub excitation: ExcitationJson,
+    /// Output characteristics.
+    pub outputs: Vec<OutputJson>,
+}
+
+/// `bodies[i]`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct BodyJson {
+    /// Unique name.
+    pub name: String,
+    /// kg.
+    pub mass: f64,
+    /// Principal central moments, kg·m².
+    pub inertia: [f64; 3],
+    /// Centre of mass, global, m.
+    pub position: [f64; 3],
+    /// Row-major; columns are the principal axes in the global frame.
+    pub rotation: [[f64; 3]; 3],
+}
+
+/// `sdes[k]`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SdeJson {
+    /// Unique name.
+    pub name: String,
+    /// `[p, r]`, `null` = ground.
+    pub bodies: [Option<usize>; 2],
+    /// Global, m.
+    pub point: [f64; 3],
+    /// Row-major; columns are the SDE's axes 1-3 in the global frame.
+    pub rotation: [[f64; 3]; 3],
+    /// N/m (1-3), N·m/rad (4-6).
+    pub k: [f64; 6],
+    /// ψ = ΔW/W per spring.
+    pub psi: [f64; 6],
+}
+
+/// `excitation`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ExcitationJson {
+    /// Forces at points.
+    pub forces: Vec<ForceJson>,
+}
+
+/// `excitation.forces[i]`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ForceJson {
+    /// Body index.
+    pub body: usize,
+    /// Global, m; default the body's centre of mass.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub point: Option<[f64; 3]>,
+    /// N, global.
+    pub force: [f64; 3],
+    /// N·m, global.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub moment: Option<[f64; 3]>,
+}
+
+/// `outputs[i]`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct OutputJson {
+    /// Body index.
+    pub body: usize,
+    /// 0-5: u1 u2 u3 r1 r2 r3.
+    pub dof: u8,
+    /// `displacement`, `velocity` or `acceleration`.
+    pub quantity: String,
+}
+
+fn rows(m: &Matrix3<f64>) -> [[f64; 3]; 3] {
+    std::array::from_fn(|i| std::array::from_fn(|j| m[(i, j)]))
+}
+
+fn from_rows(r: &[[f64; 3]; 3]) -> Matrix3<f64> {
+    Matrix3::from_fn(|i, j| r[i][j])
+}
+
+/// The resolved JSON of a model (disabled SDEs are left out: they do not exist in the resolved
+/// form).
+pub fn to_json(model: &Model) -> ModelJson {
+    ModelJson {
+        name: model.name.clone(),
+        bodies: model
+            .bodies
+            .iter()
+            .map(|b| BodyJson {
+                name: b.name.clone(),
+                mass: b.mass,
+                inertia: b.inertia,
+                position: b.position.into(),
+                rotation: rows(&b.rotation),
+            })
+            .collect(),
+        sdes: model
+            .sdes
+            .iter()
+            .filter(|s| s.enabled)
+            .map(|s| SdeJson {
+                name: s.name.clone(),
+                bodies: s.bodies,
+                point: s.point.into(),
+                rotation: rows(&s.rotation),
+                k: s.law.stiffness(),
+                psi: s.law.dissipation(),
+            })
+            .collect(),
+        excitation: ExcitationJson {
+            forces: model
+                .forces
+                .iter()
+                .map(|f| ForceJson {
+                    body: f.body,
+                    point: Some(f.point.into()),
+                    force: f.force.into(),
+                    moment: (f.moment != Vector3::zeros()).then(|| f.moment.into()),
+                })
+                .collect(),
+        },
+        outputs: model
+            .outputs
+            .iter()
+            .map(|o| OutputJson {
+                body: o.body,
+                dof: o.dof,
+                quantity: o.quantity.as_str().into(),
+            })
+            .collect(),
+    }
+}
+
+/// A problem located by JSON path.
+#[derive(Debug, Clone, PartialEq)]
+pub struct JsonProblem {
+    /// e.g. `$.sdes[3].bodies`.
+    pub path: String,
+    /// What is wrong.
+    pub message: String,
+}
+
+/// The JSON path of a model item.
+pub fn json_path(item: Item) -> String {
+    match item {
+        Item::Body(i, f) => format!("$.bodies[{i}].{f}"),
+        Item::Sde(i, f) => format!("$.sdes[{i}].{f}"),
+        Item::Force(i, f) => format!("$.excitation.forces[{i}].{f}"),
+        Item::Output(i, f) => format!("$.outputs[{i}].{f}"),
+        Item::Model => "$".into(),
+    }
+}
+
+/// Converts the serialized form to a model (structural conversion only; [`crate::check::check`]
+/// validates the physics). Errors: an unknown quantity, or a body index out of range.
+pub fn from_json(j: &ModelJson) -> Result<Model, JsonProblem> {
+    let nb = j.bodies.len();
+    let mut forces = Vec::new();
+    for (i, f) in j.excitation.forces.iter().enumerate() {
+        let Some(body) = j.bodies.get(f.body) else {
+            return Err(JsonProblem {
+                path: format!("$.excitation.forces[{i}].body"),
+                message: format!("body index {} does not exist; there are {nb} bodies (0-based)", f.body),
+            });
+        };
+        forces.push(PointForce {
+            body: f.body,
+            point: f.point.map(Vector3::from).unwrap_or_else(|| Vector3::from(body.position)),
+            force: f.force.into(),
+            moment: f.moment.map(Vector3::from).unwrap_or_else(Vector3::zeros),
+        });
+    }
+    let mut outputs = Vec::new();
+    for (i, o) in j.outputs.iter().enumerate() {
+        let quantity = Quantity::parse(&o.quantity).ok_or_else(|| JsonProblem {
+            path: format!("$.outputs[{i}].quantity"),
+            message: format!(
+                "unknown quantity \"{}\"; use displacement, velocity or acceleration",
+                o.quantity
+            ),
+        })?;
+        outputs.push(Characteristic { body: o.body, dof: o.dof, quantity });
+    }
+    Ok(Model {
+        name: j.name.clone(),
+        bodies: j
+            .bodies
+            .iter()
+            .map(|b| Body {
+                name: b.name.clone(),
+                mass: b.mass,
+                inertia: b.inertia,
+                position: b.position.into(),
+                rotation: from_rows(&b.rotation),
+            })
+            .collect(),
+        sdes: j
+            .sdes
+            .iter()
+            .map(|s| Sde {
+                name: s.name.clone(),
+                kind: SdeKind::General,
+                bodies: s.bodies,
+                point: s.point.into(),
+                rotation: from_rows(&s.rotation),
+                law: SdeLaw::General { k: s.k, psi: s.psi },
+                enabled: true,
+            })
+            .collect(),
+        forces,
+        outputs,
+    })
+}
+
+/// `ident frf --json` output: `{ "freqs_hz": [...], "outputs": [ {body, dof, quantity, re, im} ] }`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct FrfJson {
+    /// Hz.
+    pub freqs_hz: Vec<f64>,
+    /// One entry per output characteristic.
+    pub outputs: Vec<FrfOutputJson>,
+}
+
+/// One characteristic of [`FrfJson`].
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct FrfOutputJson {
+    /// Body index.
+    pub body: usize,
+    /// 0-5.
+    pub dof: u8,
+    /// Quantity name.
+    pub quantity: String,
+    /// Real parts, SI.
+    pub re: Vec<f64>,
+    /// Imaginary parts, SI.
+    pub im: Vec<f64>,
+}
+
+/// The contract's FRF JSON of a response.
+pub fn frf_json(model: &Model, r: &Response) -> FrfJson {
+    FrfJson {
+        freqs_hz: r.freqs_hz.clone(),
+        outputs: model
+            .outputs
+            .iter()
+            .enumerate()
+            .map(|(o, c)| FrfOutputJson {
+                body: c.body,
+                dof: c.dof,
+                quantity: c.quantity.as_str().into(),
+                re: r.output(o).iter().map(|v| v.re).collect(),
+                im: r.output(o).iter().map(|v| v.im).collect(),
+            })
+            .collect(),
+    }
+}

@@ -1,0 +1,425 @@
+//! Frequency response of the output characteristics and its analytic Jacobian with respect to
+//! SDE parameters (paper eq. 4.1; sensitivities for eq. 4.7, 4.15, 4.16).
+//!
+//! Two solution paths give one answer:
+//! - **direct**: per frequency line, one complex LU of `A(ω) = K + jD − ω²M` (O(n³) per line);
+//! - **modal**: one eigen-decomposition of `M^-½ (K + jD) M^-½ = V Λ V⁻¹` (hysteretic damping
+//!   makes it frequency independent), then `A(ω)⁻¹ = X (Λ − ω²)⁻¹ Y` with `X = M^-½ V`,
+//!   `Y = V⁻¹ M^-½`: O(n) per output and per parameter per line.
+//!
+//! The Jacobian uses the adjoint form: with `w_o = A⁻¹ e_o` (A is complex symmetric),
+//! `∂q_o/∂p = −w_oᵀ (∂A/∂p) q = −Σ_i c_i (T w_o)_i (T q)_i`, touching only the SDE that owns `p`.
+
+use faer::dyn_stack::{MemBuffer, MemStack, StackReq};
+use faer::linalg::lu::partial_pivoting::{factor, solve};
+use faer::{Mat, Par};
+
+use crate::model::{Model, ParamRef, Quantity};
+use crate::system::{ParamBlock, System};
+use crate::C64;
+
+const TWO_PI: f64 = 2.0 * std::f64::consts::PI;
+
+/// Which solution path to use.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Method {
+    /// Direct for small problems or few lines, modal otherwise.
+    #[default]
+    Auto,
+    /// Per-frequency LU.
+    Direct,
+    /// One eigen-decomposition, then O(n) per line.
+    Modal,
+}
+
+impl Method {
+    /// The path [`Method::Auto`] picks for `n` DOFs and `lines` frequency lines: modal once the
+    /// per-line LUs (≈ n³/3 each) outweigh one eigen-decomposition (≈ 25 n³ complex).
+    pub fn resolve(self, n: usize, lines: usize) -> Method {
+        match self {
+            Method::Auto if lines > 75 || (n > 120 && lines > 8) => Method::Modal,
+            Method::Auto => Method::Direct,
+            m => m,
+        }
+    }
+}
+
+/// Errors of the frequency-response computation.
+#[derive(Debug, thiserror::Error, PartialEq)]
+pub enum SolveError {
+    /// `K + jD − ω²M` is singular at this frequency.
+    #[error(
+        "the model is singular at {freq_hz} Hz: a body or mechanism is free to move (rigid-body \
+         mode) and the frequency hits it; check that every body is connected, or leave out 0 Hz"
+    )]
+    Singular {
+        /// Frequency (Hz).
+        freq_hz: f64,
+    },
+    /// A frequency is negative or not finite.
+    #[error("frequency {freq_hz} Hz is not a finite, non-negative number")]
+    BadFrequency {
+        /// Offending value.
+        freq_hz: f64,
+    },
+    /// The eigen-decomposition of the modal path did not converge.
+    #[error("eigen-decomposition failed ({0}); use the direct method (--method direct)")]
+    Eigen(String),
+    /// A requested parameter does not exist in the model.
+    #[error("parameter {0} is not a parameter of an enabled SDE of this model")]
+    UnknownParam(String),
+}
+
+/// Frequency response of a model's outputs, and optionally its Jacobian.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Response {
+    /// Frequencies (Hz).
+    pub freqs_hz: Vec<f64>,
+    /// Number of output characteristics.
+    pub outputs: usize,
+    /// Parameters of the Jacobian (empty if none was requested).
+    pub params: Vec<ParamRef>,
+    /// `values[o * lines + k]`: output `o` at line `k` (SI units of its quantity).
+    pub values: Vec<C64>,
+    /// `jacobian[(p * outputs + o) * lines + k]`: ∂ values / ∂ parameter `p` (per SI unit of `p`).
+    pub jacobian: Vec<C64>,
+}
+
+impl Response {
+    /// Output `o` over all lines.
+    pub fn output(&self, o: usize) -> &[C64] {
+        let l = self.freqs_hz.len();
+        &self.values[o * l..(o + 1) * l]
+    }
+
+    /// ∂ output `o` / ∂ parameter `p` over all lines.
+    pub fn derivative(&self, p: usize, o: usize) -> &[C64] {
+        let l = self.freqs_hz.len();
+        let s = (p * self.outputs + o) * l;
+        &self.jacobian[s..s + l]
+    }
+}
+
+/// Frequency response of `model`'s outputs at `freqs_hz`, with the Jacobian with respect to
+/// `params` (pass `&[]` for none).
+///
+/// ```
+/// # use identify::frf::{response, Method};
+/// # let model = identify::textbook::single_body(100.0, 1.0e6, 0.2);
+/// let r = response(&model, &[10.0, 20.0], &[], Method::Auto).unwrap();
+/// assert_eq!(r.output(0).len(), 2);
+/// ```
+pub fn response(
+    model: &Model,
+    freqs_hz: &[f64],
+    params: &[ParamRef],
+    method: Method,
+) -> Result<Response, SolveError> {
+    let system = System::assemble(model);
+    let blocks = system.param_blocks(model, params);
+    let blocks: Vec<ParamBlock> = blocks
+        .into_iter()
+        .zip(params)
+        .map(|(b, p)| b.ok_or_else(|| SolveError::UnknownParam(model.param_label(*p))))
+        .collect::<Result<_, _>>()?;
+    for &f in freqs_hz {
+        if !f.is_finite() || f < 0.0 {
+            return Err(SolveError::BadFrequency { freq_hz: f });
+        }
+    }
+    let quantities: Vec<Quantity> = model.outputs.iter().map(|c| c.quantity).collect();
+    let mut out = Response {
+        freqs_hz: freqs_hz.to_vec(),
+        outputs: quantities.len(),
+        params: params.to_vec(),
+        values: vec![C64::new(0.0, 0.0); quantities.len() * freqs_hz.len()],
+        jacobian: vec![C64::new(0.0, 0.0); params.len() * quantities.len() * freqs_hz.len()],
+    };
+    match method.resolve(system.n, freqs_hz.len()) {
+        Method::Modal => ModalSolver::new(&system)?.fill(&system, &blocks, &quantities, &mut out)?,
+        _ => DirectSolver::new(&system).fill(&system, &blocks, &quantities, &mut out)?,
+    }
+    Ok(out)
+}
+
+/// The full DOF vector (6 per body, body principal axes, displacement in m and rad) in response
+/// to the model's excitation, one vector per frequency. Used by the simulated stand.
+pub fn dof_response(model: &Model, freqs_hz: &[f64]) -> Result<Vec<Vec<C64>>, SolveError> {
+    let system = System::assemble(model);
+    let mut solver = DirectSolver::new(&system);
+    freqs_hz
+        .iter()
+        .map(|&f| {
+            if !f.is_finite() || f < 0.0 {
+                return Err(SolveError::BadFrequency { freq_hz: f });
+            }
+            solver.factor(&system, f)?;
+            let mut q = solver.solve_load(&system);
+            if q.iter().any(|v| !v.is_finite()) {
+                return Err(SolveError::Singular { freq_hz: f });
+            }
+            q.truncate(system.n);
+            Ok(q)
+        })
+        .collect()
+}
+
+/// Accumulates `∂q_o/∂p` for every parameter given the SDE deformations under the load (`dq`)
+/// and under each output's unit load (`dw[o]`).
+fn jacobian_line(
+    blocks: &[ParamBlock],
+    dq: &[[C64; 6]],
+    dw: &[Vec<[C64; 6]>],
+    factor: &[C64],
+    lines: usize,
+    k: usize,
+    jac: &mut [C64],
+) {
+    let outputs = factor.len();
+    for (p, pb) in blocks.iter().enumerate() {
+        let q6 = &dq[pb.block];
+        for o in 0..outputs {
+            let w6 = &dw[o][pb.block];
+            let mut acc = C64::new(0.0, 0.0);
+            for i in 0..6 {
+                acc += pb.coeff[i] * w6[i] * q6[i];
+            }
+            jac[(p * outputs + o) * lines + k] = -acc * factor[o];
+        }
+    }
+}
+
+/// Per-frequency LU, with buffers sized once.
+struct DirectSolver {
+    a: Mat<C64>,
+    rhs: Mat<C64>,
+    perm: Vec<usize>,
+    perm_inv: Vec<usize>,
+    mem: MemBuffer,
+}
+
+impl DirectSolver {
+    fn new(system: &System) -> DirectSolver {
+        let n = system.n;
+        let cols = 1 + system.output_dofs.len();
+        let req = StackReq::any_of(&[
+            factor::lu_in_place_scratch::<usize, C64>(n, n, Par::Seq, Default::default()),
+            solve::solve_in_place_scratch::<usize, C64>(n, cols, Par::Seq),
+        ]);
+        DirectSolver {
+            a: Mat::zeros(n, n),
+            rhs: Mat::zeros(n, cols),
+            perm: vec![0; n],
+            perm_inv: vec![0; n],
+            mem: MemBuffer::new(req),
+        }
+    }
+
+    /// Factors `A(ω)` and solves for the load and every output's unit vector (columns 0 and
+    /// 1..=outputs of `rhs`).
+    fn factor(&mut self, s: &System, freq_hz: f64) -> Result<(), SolveError> {
+        let n = s.n;
+        let w2 = (TWO_PI * freq_hz).powi(2);
+        for i in 0..n {
+            for j in 0..n {
+                self.a[(i, j)] = C64::new(s.k[i * n + j], s.d[i * n + j]);
+            }
+            self.a[(i, i)].re -= w2 * s.mass[i];
+        }
+        self.rhs.fill(C64::new(0.0, 0.0));
+        for i in 0..n {
+            self.rhs[(i, 0)] = C64::new(s.load[i], 0.0);
+        }
+        for (o, &d) in s.output_dofs.iter().enumerate() {
+            self.rhs[(d, o + 1)] = C64::new(1.0, 0.0);
+        }
+        let (_, perm) = factor::lu_in_place(
+            self.a.as_mut(),
+            &mut self.perm,
+            &mut self.perm_inv,
+            Par::Seq,
+            MemStack::new(&mut self.mem),
+            Default::default(),
+        );
+        solve::solve_in_place(
+            self.a.as_ref(),
+            self.a.as_ref(),
+            perm,
+            self.rhs.as_mut(),
+            Par::Seq,
+            MemStack::new(&mut self.mem),
+        );
+        let singular = (0..n).any(|i| {
+            let u = self.a[(i, i)];
+            u == C64::new(0.0, 0.0) || !u.is_finite()
+        });
+        if singular {
+            return Err(SolveError::Singular { freq_hz });
+        }
+        Ok(())
+    }
+
+    fn solve_load(&self, s: &System) -> Vec<C64> {
+        (0..s.n).map(|i| self.rhs[(i, 0)]).collect()
+    }
+
+    fn fill(
+        mut self,
+        s: &System,
+        blocks: &[ParamBlock],
+        quantities: &[Quantity],
+        out: &mut Response,
+    ) -> Result<(), SolveError> {
+        let lines = out.freqs_hz.len();
+        let outputs = quantities.len();
+        let mut dq = vec![[C64::new(0.0, 0.0); 6]; s.sdes.len()];
+        let mut dw = vec![vec![[C64::new(0.0, 0.0); 6]; s.sdes.len()]; outputs];
+        let mut fac = vec![C64::new(0.0, 0.0); outputs];
+        for (k, &f) in out.freqs_hz.clone().iter().enumerate() {
+            self.factor(s, f)?;
+            let omega = TWO_PI * f;
+            for (o, q) in quantities.iter().enumerate() {
+                fac[o] = q.factor(omega);
+                let v = self.rhs[(s.output_dofs[o], 0)] * fac[o];
+                if !v.is_finite() {
+                    return Err(SolveError::Singular { freq_hz: f });
+                }
+                out.values[o * lines + k] = v;
+            }
+            if blocks.is_empty() {
+                continue;
+            }
+            let rhs = &self.rhs;
+            for pb in blocks {
+                let b = &s.sdes[pb.block];
+                dq[pb.block] = b.deformation(|i| rhs[(i, 0)]);
+                for (o, dwo) in dw.iter_mut().enumerate() {
+                    dwo[pb.block] = b.deformation(|i| rhs[(i, o + 1)]);
+                }
+            }
+            jacobian_line(blocks, &dq, &dw, &fac, lines, k, &mut out.jacobian);
+        }
+        Ok(())
+    }
+}
+
+/// Complex modal decomposition of the hysteretically damped system.
+pub struct ModalSolver {
+    /// Eigenvalues λ of `M^-½ (K + jD) M^-½` (rad²/s², complex).
+    pub lambda: Vec<C64>,
+    /// `X = M^-½ V` (n×n): physical mode shapes.
+    pub x: Mat<C64>,
+    /// `Y = V⁻¹ M^-½` (n×n).
+    pub y: Mat<C64>,
+}
+
+impl ModalSolver {
+    /// Decomposes the system (one O(n³) eigen-decomposition and one inverse).
+    pub fn new(s: &System) -> Result<ModalSolver, SolveError> {
+        let n = s.n;
+        let scale: Vec<f64> = s.mass.iter().map(|m| 1.0 / m.sqrt()).collect();
+        let a = Mat::<C64>::from_fn(n, n, |i, j| {
+            C64::new(s.k[i * n + j], s.d[i * n + j]) * (scale[i] * scale[j])
+        });
+        let eig = a.eigen().map_err(|e| SolveError::Eigen(format!("{e:?}")))?;
+        let v = eig.U();
+        let lambda: Vec<C64> = (0..n).map(|i| eig.S()[i]).collect();
+        let lu = v.partial_piv_lu();
+        let mut v_inv = Mat::<C64>::identity(n, n);
+        faer::linalg::solvers::Solve::solve_in_place(&lu, v_inv.as_mut());
+        if (0..n).any(|i| (0..n).any(|j| !v_inv[(i, j)].is_finite())) {
+            return Err(SolveError::Eigen(
+                "the mode shapes are linearly dependent (defective eigenproblem)".into(),
+            ));
+        }
+        let x = Mat::<C64>::from_fn(n, n, |i, j| v[(i, j)] * scale[i]);
+        let y = Mat::<C64>::from_fn(n, n, |i, j| v_inv[(i, j)] * scale[j]);
+        Ok(ModalSolver { lambda, x, y })
+    }
+
+    fn fill(
+        &self,
+        s: &System,
+        blocks: &[ParamBlock],
+        quantities: &[Quantity],
+        out: &mut Response,
+    ) -> Result<(), SolveError> {
+        let n = s.n;
+        let lines = out.freqs_hz.len();
+        let outputs = quantities.len();
+        // Modal load b = Y P, output rows of X, unit-load modal vectors Y e_o.
+        let b: Vec<C64> = (0..n)
+            .map(|m| (0..n).map(|i| self.y[(m, i)] * s.load[i]).sum())
+            .collect();
+        let yo: Vec<Vec<C64>> = s
+            .output_dofs
+            .iter()
+            .map(|&d| (0..n).map(|m| self.y[(m, d)]).collect())
+            .collect();
+        let xo: Vec<Vec<C64>> = s
+            .output_dofs
+            .iter()
+            .map(|&d| (0..n).map(|m| self.x[(d, m)]).collect())
+            .collect();
+        // E_κ = T_κ X for every SDE that carries a parameter: 6×n each, row-major.
+        let mut e: Vec<Vec<C64>> = vec![Vec::new(); s.sdes.len()];
+        for pb in blocks {
+            if e[pb.block].is_empty() {
+                let blk = &s.sdes[pb.block];
+                let mut em = vec![C64::new(0.0, 0.0); 6 * n];
+                for m in 0..n {
+                    let d = blk.deformation(|i| self.x[(i, m)]);
+                    for r in 0..6 {
+                        em[r * n + m] = d[r];
+                    }
+                }
+                e[pb.block] = em;
+            }
+        }
+        let mut eta = vec![C64::new(0.0, 0.0); n];
+        let mut inv = vec![C64::new(0.0, 0.0); n];
+        let mut zeta = vec![vec![C64::new(0.0, 0.0); n]; outputs];
+        let mut dq = vec![[C64::new(0.0, 0.0); 6]; s.sdes.len()];
+        let mut dw = vec![vec![[C64::new(0.0, 0.0); 6]; s.sdes.len()]; outputs];
+        let mut fac = vec![C64::new(0.0, 0.0); outputs];
+        let lambda_scale = self.lambda.iter().map(|l| l.norm()).fold(0.0, f64::max).max(1.0);
+        for (k, &f) in out.freqs_hz.iter().enumerate() {
+            let omega = TWO_PI * f;
+            let w2 = omega * omega;
+            for m in 0..n {
+                let den = self.lambda[m] - w2;
+                if den.norm() <= 1e-13 * lambda_scale {
+                    return Err(SolveError::Singular { freq_hz: f });
+                }
+                inv[m] = den.inv();
+                eta[m] = b[m] * inv[m];
+            }
+            for (o, q) in quantities.iter().enumerate() {
+                fac[o] = q.factor(omega);
+                let v: C64 = xo[o].iter().zip(&eta).map(|(x, e)| x * e).sum();
+                out.values[o * lines + k] = v * fac[o];
+            }
+            if blocks.is_empty() {
+                continue;
+            }
+            for (o, z) in zeta.iter_mut().enumerate() {
+                for m in 0..n {
+                    z[m] = yo[o][m] * inv[m];
+                }
+            }
+            for pb in blocks {
+                let em = &e[pb.block];
+                dq[pb.block] = std::array::from_fn(|r| {
+                    em[r * n..(r + 1) * n].iter().zip(&eta).map(|(a, b)| a * b).sum()
+                });
+                for (o, z) in zeta.iter().enumerate() {
+                    dw[o][pb.block] = std::array::from_fn(|r| {
+                        em[r * n..(r + 1) * n].iter().zip(z).map(|(a, b)| a * b).sum()
+                    });
+                }
+            }
+            jacobian_line(blocks, &dq, &dw, &fac, lines, k, &mut out.jacobian);
+        }
+        Ok(())
+    }
+}

@@ -1,0 +1,524 @@
+//! The resolved RFE model: bodies, spring-damping elements (SDEs), excitation and output
+//! characteristics, all in SI units and the global frame. Everything that computes (FRF, modes,
+//! sensitivities, identification) takes a [`Model`]; model files (TOML, resolved JSON) load into it.
+
+use nalgebra::{Matrix3, Vector3};
+
+/// A rigid finite element (RFE): a rigid body with six degrees of freedom.
+///
+/// Its generalized coordinates are `q = [u1, u2, u3, r1, r2, r3]`: small translations of the centre
+/// of mass (m) and small rotations (rad), both along the body's principal central axes.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Body {
+    /// Unique name, as used in model files and reports.
+    pub name: String,
+    /// Mass (kg), > 0.
+    pub mass: f64,
+    /// Principal central moments of inertia (kg·m²), each > 0.
+    pub inertia: [f64; 3],
+    /// Centre of mass in the global frame (m).
+    pub position: Vector3<f64>,
+    /// `global_from_body`: its columns are the principal axes expressed in the global frame
+    /// (orthonormal, right-handed).
+    pub rotation: Matrix3<f64>,
+}
+
+impl Body {
+    /// Diagonal of the body's 6×6 inertia block: `[m, m, m, J1, J2, J3]`.
+    pub fn inertia_diagonal(&self) -> [f64; 6] {
+        let [j1, j2, j3] = self.inertia;
+        [self.mass, self.mass, self.mass, j1, j2, j3]
+    }
+}
+
+/// How the tangential contact stiffness of a contact joint is given.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Tangential {
+    /// `kt` directly (Pa/m).
+    Value(f64),
+    /// `kt = kn / ratio`: the ratio is held fixed when `kn` changes (the paper's kn/kt = 2.5).
+    Ratio(f64),
+}
+
+/// Stiffness and damping law of an SDE, with its own parameters.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum SdeLaw {
+    /// A contact joint (slideway or rotary joint): per-unit-area contact stiffnesses over a
+    /// working area. `k = [A·kn, A·kt, A·kt, J1·kt, J2·kn, J3·kn]`,
+    /// `psi = [ψn, ψt, ψt, ψt, ψn, ψn]` (paper eq. 3.6-3.7).
+    Contact {
+        /// Working area A (m²).
+        area: f64,
+        /// Second moments of the working area (m⁴): J1 polar about the normal (axis 1),
+        /// J2 and J3 about the tangential axes 2 and 3.
+        moments: [f64; 3],
+        /// Normal contact stiffness per unit area (Pa/m; 1 MPa/µm = 1e12 Pa/m).
+        kn: f64,
+        /// Tangential contact stiffness per unit area.
+        kt: Tangential,
+        /// Relative energy dissipation ψ = ΔW/W in the normal direction (-).
+        psi_n: f64,
+        /// Relative energy dissipation in the tangential direction (-).
+        psi_t: f64,
+    },
+    /// A single spring along axis 1 (lead screw, exciter): `k = [k, 0, 0, 0, 0, 0]` (eq. 3.9-3.10).
+    Axial {
+        /// Stiffness (N/m).
+        k: f64,
+        /// Relative energy dissipation (-).
+        psi: f64,
+    },
+    /// A vibration isolator: `k = [kn, kt, kt, 0, 0, 0]` (eq. 3.11-3.12).
+    Isolator {
+        /// Normal stiffness along axis 1 (N/m).
+        kn: f64,
+        /// Tangential stiffness along axes 2 and 3 (N/m).
+        kt: f64,
+        /// Relative energy dissipation, normal (-).
+        psi_n: f64,
+        /// Relative energy dissipation, tangential (-).
+        psi_t: f64,
+    },
+    /// Six independent springs: three translational (N/m) and three rotational (N·m/rad).
+    General {
+        /// Stiffnesses along/about axes 1-3.
+        k: [f64; 6],
+        /// Relative energy dissipation per spring (-).
+        psi: [f64; 6],
+    },
+}
+
+/// The named parameters an SDE law exposes to sensitivity analysis and identification.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum ParamName {
+    /// Normal stiffness (contact: Pa/m; isolator: N/m).
+    Kn,
+    /// Tangential stiffness (contact with `kt` given directly: Pa/m; isolator: N/m).
+    Kt,
+    /// Axial stiffness (N/m).
+    K,
+    /// Normal dissipation ψn.
+    PsiN,
+    /// Tangential dissipation ψt.
+    PsiT,
+    /// Axial dissipation ψ.
+    Psi,
+    /// Spring `i` (0-5) of a general element.
+    Ki(u8),
+    /// Dissipation of spring `i` (0-5) of a general element.
+    PsiI(u8),
+}
+
+impl ParamName {
+    /// The name as written in files: `kn`, `kt`, `k`, `psi_n`, `psi_t`, `psi`, `k1`..`k6`,
+    /// `psi1`..`psi6`.
+    pub fn as_str(&self) -> String {
+        match self {
+            ParamName::Kn => "kn".into(),
+            ParamName::Kt => "kt".into(),
+            ParamName::K => "k".into(),
+            ParamName::PsiN => "psi_n".into(),
+            ParamName::PsiT => "psi_t".into(),
+            ParamName::Psi => "psi".into(),
+            ParamName::Ki(i) => format!("k{}", i + 1),
+            ParamName::PsiI(i) => format!("psi{}", i + 1),
+        }
+    }
+
+    /// Parses a name as written in files (see [`ParamName::as_str`]).
+    pub fn parse(s: &str) -> Option<ParamName> {
+        Some(match s {
+            "kn" => ParamName::Kn,
+            "kt" => ParamName::Kt,
+            "k" => ParamName::K,
+            "psi_n" => ParamName::PsiN,
+            "psi_t" => ParamName::PsiT,
+            "psi" => ParamName::Psi,
+            _ => {
+                let (prefix, digit) = if let Some(d) = s.strip_prefix("psi") {
+                    (true, d)
+                } else if let Some(d) = s.strip_prefix('k') {
+                    (false, d)
+                } else {
+                    return None;
+                };
+                let i: u8 = digit.parse().ok()?;
+                if !(1..=6).contains(&i) {
+                    return None;
+                }
+                if prefix {
+                    ParamName::PsiI(i - 1)
+                } else {
+                    ParamName::Ki(i - 1)
+                }
+            }
+        })
+    }
+
+    /// True for dissipation (ψ) parameters, false for stiffnesses.
+    pub fn is_dissipation(&self) -> bool {
+        matches!(
+            self,
+            ParamName::PsiN | ParamName::PsiT | ParamName::Psi | ParamName::PsiI(_)
+        )
+    }
+}
+
+impl SdeLaw {
+    /// The six stiffnesses in the SDE frame (N/m for 1-3, N·m/rad for 4-6).
+    pub fn stiffness(&self) -> [f64; 6] {
+        match *self {
+            SdeLaw::Contact {
+                area,
+                moments: [j1, j2, j3],
+                kn,
+                kt,
+                ..
+            } => {
+                let kt = tangential_value(kn, kt);
+                [area * kn, area * kt, area * kt, j1 * kt, j2 * kn, j3 * kn]
+            }
+            SdeLaw::Axial { k, .. } => [k, 0.0, 0.0, 0.0, 0.0, 0.0],
+            SdeLaw::Isolator { kn, kt, .. } => [kn, kt, kt, 0.0, 0.0, 0.0],
+            SdeLaw::General { k, .. } => k,
+        }
+    }
+
+    /// The six dissipation coefficients ψ = ΔW/W (-).
+    pub fn dissipation(&self) -> [f64; 6] {
+        match *self {
+            SdeLaw::Contact { psi_n, psi_t, .. } => [psi_n, psi_t, psi_t, psi_t, psi_n, psi_n],
+            SdeLaw::Axial { psi, .. } => [psi, 0.0, 0.0, 0.0, 0.0, 0.0],
+            SdeLaw::Isolator { psi_n, psi_t, .. } => [psi_n, psi_t, psi_t, 0.0, 0.0, 0.0],
+            SdeLaw::General { psi, .. } => psi,
+        }
+    }
+
+    /// The parameters this law exposes, in a fixed order.
+    pub fn params(&self) -> Vec<ParamName> {
+        match self {
+            SdeLaw::Contact { kt, .. } => match kt {
+                Tangential::Value(_) => vec![
+                    ParamName::Kn,
+                    ParamName::Kt,
+                    ParamName::PsiN,
+                    ParamName::PsiT,
+                ],
+                Tangential::Ratio(_) => vec![ParamName::Kn, ParamName::PsiN, ParamName::PsiT],
+            },
+            SdeLaw::Axial { .. } => vec![ParamName::K, ParamName::Psi],
+            SdeLaw::Isolator { .. } => vec![
+                ParamName::Kn,
+                ParamName::Kt,
+                ParamName::PsiN,
+                ParamName::PsiT,
+            ],
+            SdeLaw::General { .. } => (0..6)
+                .map(ParamName::Ki)
+                .chain((0..6).map(ParamName::PsiI))
+                .collect(),
+        }
+    }
+
+    /// The value of a parameter, or `None` if this law has no such parameter.
+    pub fn get(&self, p: ParamName) -> Option<f64> {
+        match (self, p) {
+            (SdeLaw::Contact { kn, .. }, ParamName::Kn) => Some(*kn),
+            (SdeLaw::Contact { kt: Tangential::Value(kt), .. }, ParamName::Kt) => Some(*kt),
+            (SdeLaw::Contact { psi_n, .. }, ParamName::PsiN) => Some(*psi_n),
+            (SdeLaw::Contact { psi_t, .. }, ParamName::PsiT) => Some(*psi_t),
+            (SdeLaw::Axial { k, .. }, ParamName::K) => Some(*k),
+            (SdeLaw::Axial { psi, .. }, ParamName::Psi) => Some(*psi),
+            (SdeLaw::Isolator { kn, .. }, ParamName::Kn) => Some(*kn),
+            (SdeLaw::Isolator { kt, .. }, ParamName::Kt) => Some(*kt),
+            (SdeLaw::Isolator { psi_n, .. }, ParamName::PsiN) => Some(*psi_n),
+            (SdeLaw::Isolator { psi_t, .. }, ParamName::PsiT) => Some(*psi_t),
+            (SdeLaw::General { k, .. }, ParamName::Ki(i)) => k.get(i as usize).copied(),
+            (SdeLaw::General { psi, .. }, ParamName::PsiI(i)) => psi.get(i as usize).copied(),
+            _ => None,
+        }
+    }
+
+    /// Sets a parameter; returns `false` (and changes nothing) if this law has no such parameter.
+    pub fn set(&mut self, p: ParamName, value: f64) -> bool {
+        let slot: &mut f64 = match (self, p) {
+            (SdeLaw::Contact { kn, .. }, ParamName::Kn) => kn,
+            (SdeLaw::Contact { kt: Tangential::Value(kt), .. }, ParamName::Kt) => kt,
+            (SdeLaw::Contact { psi_n, .. }, ParamName::PsiN) => psi_n,
+            (SdeLaw::Contact { psi_t, .. }, ParamName::PsiT) => psi_t,
+            (SdeLaw::Axial { k, .. }, ParamName::K) => k,
+            (SdeLaw::Axial { psi, .. }, ParamName::Psi) => psi,
+            (SdeLaw::Isolator { kn, .. }, ParamName::Kn) => kn,
+            (SdeLaw::Isolator { kt, .. }, ParamName::Kt) => kt,
+            (SdeLaw::Isolator { psi_n, .. }, ParamName::PsiN) => psi_n,
+            (SdeLaw::Isolator { psi_t, .. }, ParamName::PsiT) => psi_t,
+            (SdeLaw::General { k, .. }, ParamName::Ki(i)) if i < 6 => &mut k[i as usize],
+            (SdeLaw::General { psi, .. }, ParamName::PsiI(i)) if i < 6 => &mut psi[i as usize],
+            _ => return false,
+        };
+        *slot = value;
+        true
+    }
+
+    /// Derivatives of the six stiffnesses and six dissipations with respect to parameter `p`.
+    /// Every law is linear in its parameters, so these do not depend on the parameter values.
+    pub fn derivative(&self, p: ParamName) -> Option<([f64; 6], [f64; 6])> {
+        let z = [0.0; 6];
+        Some(match (*self, p) {
+            (SdeLaw::Contact { area, moments: [j1, j2, j3], kt, .. }, ParamName::Kn) => {
+                let r = match kt {
+                    Tangential::Ratio(r) => 1.0 / r,
+                    Tangential::Value(_) => 0.0,
+                };
+                ([area, area * r, area * r, j1 * r, j2, j3], z)
+            }
+            (
+                SdeLaw::Contact { area, moments: [j1, ..], kt: Tangential::Value(_), .. },
+                ParamName::Kt,
+            ) => ([0.0, area, area, j1, 0.0, 0.0], z),
+            (SdeLaw::Contact { .. }, ParamName::PsiN) => (z, [1.0, 0.0, 0.0, 0.0, 1.0, 1.0]),
+            (SdeLaw::Contact { .. }, ParamName::PsiT) => (z, [0.0, 1.0, 1.0, 1.0, 0.0, 0.0]),
+            (SdeLaw::Axial { .. }, ParamName::K) => ([1.0, 0.0, 0.0, 0.0, 0.0, 0.0], z),
+            (SdeLaw::Axial { .. }, ParamName::Psi) => (z, [1.0, 0.0, 0.0, 0.0, 0.0, 0.0]),
+            (SdeLaw::Isolator { .. }, ParamName::Kn) => ([1.0, 0.0, 0.0, 0.0, 0.0, 0.0], z),
+            (SdeLaw::Isolator { .. }, ParamName::Kt) => ([0.0, 1.0, 1.0, 0.0, 0.0, 0.0], z),
+            (SdeLaw::Isolator { .. }, ParamName::PsiN) => (z, [1.0, 0.0, 0.0, 0.0, 0.0, 0.0]),
+            (SdeLaw::Isolator { .. }, ParamName::PsiT) => (z, [0.0, 1.0, 1.0, 0.0, 0.0, 0.0]),
+            (SdeLaw::General { .. }, ParamName::Ki(i)) if i < 6 => {
+                let mut d = z;
+                d[i as usize] = 1.0;
+                (d, z)
+            }
+            (SdeLaw::General { .. }, ParamName::PsiI(i)) if i < 6 => {
+                let mut d = z;
+                d[i as usize] = 1.0;
+                (z, d)
+            }
+            _ => return None,
+        })
+    }
+
+    /// SI unit of a parameter of this law, for reports.
+    pub fn unit(&self, p: ParamName) -> &'static str {
+        match (self, p) {
+            (_, p) if p.is_dissipation() => "-",
+            (SdeLaw::Contact { .. }, _) => "Pa/m",
+            (SdeLaw::General { .. }, ParamName::Ki(i)) if i >= 3 => "N·m/rad",
+            _ => "N/m",
+        }
+    }
+}
+
+fn tangential_value(kn: f64, kt: Tangential) -> f64 {
+    match kt {
+        Tangential::Value(v) => v,
+        Tangential::Ratio(r) => kn / r,
+    }
+}
+
+/// What an SDE models, kept for display and for writing model files back.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum SdeKind {
+    /// Slideway joint (contact law).
+    Slideway,
+    /// Rotary joint / turntable (contact law over an annulus).
+    Rotary,
+    /// Lead screw (axial law).
+    Screw,
+    /// Single axial spring, e.g. an exciter (axial law).
+    Spring,
+    /// Vibration isolator.
+    Isolator,
+    /// Six independent springs.
+    General,
+}
+
+impl SdeKind {
+    /// The name used in model files.
+    pub fn as_str(&self) -> &'static str {
+        match self {
+            SdeKind::Slideway => "slideway",
+            SdeKind::Rotary => "rotary",
+            SdeKind::Screw => "screw",
+            SdeKind::Spring => "spring",
+            SdeKind::Isolator => "isolator",
+            SdeKind::General => "general",
+        }
+    }
+}
+
+/// A spring-damping element between two bodies, or between a body and the fixed ground.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Sde {
+    /// Unique name (the paper's global SDE number for the FWD-32J model, e.g. `"34"`).
+    pub name: String,
+    /// What it models.
+    pub kind: SdeKind,
+    /// `[p, r]`: indices into [`Model::bodies`], `None` for the fixed ground. The deformation is
+    /// the motion of `r` relative to `p` at `point`.
+    pub bodies: [Option<usize>; 2],
+    /// Where it acts on both bodies, global frame (m).
+    pub point: Vector3<f64>,
+    /// `global_from_sde`: columns are the SDE's axes 1, 2, 3 in the global frame; axis 1 is the
+    /// normal / screw axis.
+    pub rotation: Matrix3<f64>,
+    /// Stiffness/damping law and its parameters.
+    pub law: SdeLaw,
+    /// Disabled elements stay in the file (and can be switched on) but contribute nothing.
+    pub enabled: bool,
+}
+
+/// A harmonic force (and optional moment) applied at a point of a body.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PointForce {
+    /// Index into [`Model::bodies`].
+    pub body: usize,
+    /// Point of application, global frame (m).
+    pub point: Vector3<f64>,
+    /// Force amplitude, global frame (N).
+    pub force: Vector3<f64>,
+    /// Moment amplitude, global frame (N·m).
+    pub moment: Vector3<f64>,
+}
+
+/// Which derivative of the generalized coordinate a characteristic reports.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum Quantity {
+    /// m or rad.
+    Displacement,
+    /// m/s or rad/s (jω times displacement).
+    Velocity,
+    /// m/s² or rad/s² (−ω² times displacement).
+    Acceleration,
+}
+
+impl Quantity {
+    /// The name used in files: `displacement`, `velocity`, `acceleration`.
+    pub fn as_str(&self) -> &'static str {
+        match self {
+            Quantity::Displacement => "displacement",
+            Quantity::Velocity => "velocity",
+            Quantity::Acceleration => "acceleration",
+        }
+    }
+
+    /// Parses a file name of a quantity.
+    pub fn parse(s: &str) -> Option<Quantity> {
+        match s {
+            "displacement" => Some(Quantity::Displacement),
+            "velocity" => Some(Quantity::Velocity),
+            "acceleration" => Some(Quantity::Acceleration),
+            _ => None,
+        }
+    }
+
+    /// The factor `(jω)^n` that turns a displacement into this quantity at `omega` (rad/s).
+    pub fn factor(&self, omega: f64) -> num_complex::Complex<f64> {
+        use num_complex::Complex;
+        match self {
+            Quantity::Displacement => Complex::new(1.0, 0.0),
+            Quantity::Velocity => Complex::new(0.0, omega),
+            Quantity::Acceleration => Complex::new(-omega * omega, 0.0),
+        }
+    }
+}
+
+/// One output characteristic: `q_body[dof]` in the body's principal central axes, as a quantity.
+///
+/// This is the one meaning of "characteristic" across the project: model outputs, processed
+/// measurements, identification data and reports all use it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub struct Characteristic {
+    /// Index into [`Model::bodies`].
+    pub body: usize,
+    /// 0-2 translations u1..u3, 3-5 rotations r1..r3, along/about the principal axes.
+    pub dof: u8,
+    /// Displacement, velocity or acceleration.
+    pub quantity: Quantity,
+}
+
+/// Names of the six DOFs as written in files and reports.
+pub const DOF_NAMES: [&str; 6] = ["u1", "u2", "u3", "r1", "r2", "r3"];
+
+/// A complete, resolved model.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Model {
+    /// Free-text name.
+    pub name: String,
+    /// Rigid finite elements.
+    pub bodies: Vec<Body>,
+    /// Spring-damping elements.
+    pub sdes: Vec<Sde>,
+    /// Excitation: forces at points.
+    pub forces: Vec<PointForce>,
+    /// Output characteristics.
+    pub outputs: Vec<Characteristic>,
+}
+
+/// A reference to one parameter of one SDE.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub struct ParamRef {
+    /// Index into [`Model::sdes`].
+    pub sde: usize,
+    /// Which parameter of that SDE's law.
+    pub name: ParamName,
+}
+
+impl Model {
+    /// Number of degrees of freedom (6 per body).
+    pub fn dof_count(&self) -> usize {
+        6 * self.bodies.len()
+    }
+
+    /// Index of the body with this name.
+    pub fn body_index(&self, name: &str) -> Option<usize> {
+        self.bodies.iter().position(|b| b.name == name)
+    }
+
+    /// Index of the SDE with this name.
+    pub fn sde_index(&self, name: &str) -> Option<usize> {
+        self.sdes.iter().position(|s| s.name == name)
+    }
+
+    /// Every parameter of every enabled SDE, in model order.
+    pub fn all_params(&self) -> Vec<ParamRef> {
+        self.sdes
+            .iter()
+            .enumerate()
+            .filter(|(_, s)| s.enabled)
+            .flat_map(|(i, s)| s.law.params().into_iter().map(move |name| ParamRef { sde: i, name }))
+            .collect()
+    }
+
+    /// Value of a parameter (SI), `None` if the SDE has no such parameter.
+    pub fn param(&self, p: ParamRef) -> Option<f64> {
+        self.sdes.get(p.sde)?.law.get(p.name)
+    }
+
+    /// Sets a parameter (SI); returns `false` if the SDE has no such parameter.
+    pub fn set_param(&mut self, p: ParamRef, value: f64) -> bool {
+        match self.sdes.get_mut(p.sde) {
+            Some(s) => s.law.set(p.name, value),
+            None => false,
+        }
+    }
+
+    /// Human label of a parameter: `"sde 17 kn"`.
+    pub fn param_label(&self, p: ParamRef) -> String {
+        match self.sdes.get(p.sde) {
+            Some(s) => format!("sde {} {}", s.name, p.name.as_str()),
+            None => format!("sde #{} {}", p.sde, p.name.as_str()),
+        }
+    }
+
+    /// Human label of a characteristic: `"table u1 displacement"`.
+    pub fn characteristic_label(&self, c: Characteristic) -> String {
+        let body = self
+            .bodies
+            .get(c.body)
+            .map(|b| b.name.as_str())
+            .unwrap_or("?");
+        let dof = DOF_NAMES.get(c.dof as usize).copied().unwrap_or("?");
+        format!("{body} {dof} {}", c.quantity.as_str())
+    }
+}

@@ -1,0 +1,203 @@
+//! Assembly of the equations of motion `(K + jD − ω²M) q = P` (paper eq. 3.1-3.12, 4.1).
+//!
+//! Each SDE κ maps the coordinates of its two bodies to its deformation in its own frame,
+//! `δ = G_r q_r − G_p q_p`, where for body `b` with arm `a = R_bᵀ(x − c_b)` (the attachment point in
+//! body axes) and `R_sb = R_sᵀ R_b` (sde_from_body):
+//!
+//! ```text
+//! G_b = | R_sb   −R_sb [a]× |
+//!       |  0       R_sb     |
+//! ```
+//!
+//! so `K = Σ Tκᵀ Kκ Tκ` and `D = Σ Tκᵀ diag(ψ/2π) Kκ Tκ` touch only the 6×6 blocks of the two bodies
+//! an SDE joins. `G_b` is the product `S_pκ Θ_pκ` of the paper's eq. 3.3.
+
+use nalgebra::{Matrix3, Matrix6, Vector3, Vector6};
+
+use crate::model::{Model, ParamRef};
+use crate::C64;
+
+/// The SDE deformation map of one body: `G_b` above (sde_from_body coordinates).
+pub fn sde_from_body(
+    body_position: &Vector3<f64>,
+    global_from_body: &Matrix3<f64>,
+    point: &Vector3<f64>,
+    global_from_sde: &Matrix3<f64>,
+) -> Matrix6<f64> {
+    let a = global_from_body.transpose() * (point - body_position);
+    let r_sb = global_from_sde.transpose() * global_from_body;
+    let skew = a.cross_matrix();
+    let mut g = Matrix6::zeros();
+    g.fixed_view_mut::<3, 3>(0, 0).copy_from(&r_sb);
+    g.fixed_view_mut::<3, 3>(0, 3).copy_from(&(-r_sb * skew));
+    g.fixed_view_mut::<3, 3>(3, 3).copy_from(&r_sb);
+    g
+}
+
+/// Generalized force on a body from a force `f` and moment `m` (global frame) applied at `point`:
+/// `[R_bᵀ f, a × R_bᵀ f + R_bᵀ m]` with `a` the arm in body axes. Dual of [`sde_from_body`].
+pub fn generalized_force(
+    body_position: &Vector3<f64>,
+    global_from_body: &Matrix3<f64>,
+    point: &Vector3<f64>,
+    force: &Vector3<f64>,
+    moment: &Vector3<f64>,
+) -> Vector6<f64> {
+    let rt = global_from_body.transpose();
+    let a = rt * (point - body_position);
+    let f = rt * force;
+    let m = a.cross(&f) + rt * moment;
+    Vector6::new(f.x, f.y, f.z, m.x, m.y, m.z)
+}
+
+/// One enabled SDE as the solver sees it.
+#[derive(Debug, Clone)]
+pub struct SdeBlock {
+    /// Index into [`Model::sdes`].
+    pub sde: usize,
+    /// `[p, r]` body indices (`None` = ground).
+    pub bodies: [Option<usize>; 2],
+    /// `G_p`, `G_r` (sde_from_body of each side; unused for ground).
+    pub g: [Matrix6<f64>; 2],
+    /// The six stiffnesses.
+    pub k: [f64; 6],
+    /// The six dissipation coefficients.
+    pub psi: [f64; 6],
+}
+
+impl SdeBlock {
+    /// Deformation `δ = G_r q_r − G_p q_p` of this SDE for a full coordinate vector `q`.
+    pub fn deformation(&self, q: impl Fn(usize) -> C64) -> [C64; 6] {
+        let mut d = [C64::new(0.0, 0.0); 6];
+        for (side, sign) in [(0usize, -1.0), (1, 1.0)] {
+            if let Some(b) = self.bodies[side] {
+                let g = &self.g[side];
+                for (i, di) in d.iter_mut().enumerate() {
+                    let mut acc = C64::new(0.0, 0.0);
+                    for j in 0..6 {
+                        acc += q(6 * b + j) * g[(i, j)];
+                    }
+                    *di += acc * sign;
+                }
+            }
+        }
+        d
+    }
+}
+
+/// How one parameter enters the dynamic stiffness: `∂(K + jD)/∂p = Tᵀ diag(c) T` with
+/// `c_i = ∂k_i(1 + jψ_i/2π) + j k_i ∂ψ_i/2π`.
+#[derive(Debug, Clone)]
+pub struct ParamBlock {
+    /// Index into [`System::sdes`] (not the model's SDE index).
+    pub block: usize,
+    /// `c_i` above.
+    pub coeff: [C64; 6],
+}
+
+/// The assembled system of a model, in SI units.
+#[derive(Debug, Clone)]
+pub struct System {
+    /// Number of DOFs (6 per body).
+    pub n: usize,
+    /// Diagonal of M: `[m, m, m, J1, J2, J3]` per body.
+    pub mass: Vec<f64>,
+    /// Stiffness matrix K (n×n, row-major), symmetric positive semi-definite.
+    pub k: Vec<f64>,
+    /// Hysteretic damping matrix D (n×n, row-major), symmetric.
+    pub d: Vec<f64>,
+    /// Generalized force vector P (n).
+    pub load: Vec<f64>,
+    /// Enabled SDEs.
+    pub sdes: Vec<SdeBlock>,
+    /// Global DOF index of each output characteristic.
+    pub output_dofs: Vec<usize>,
+}
+
+impl System {
+    /// Assembles M, K, D and P from a model. The model must be valid (see the loader).
+    pub fn assemble(model: &Model) -> System {
+        let n = model.dof_count();
+        let mass: Vec<f64> = model.bodies.iter().flat_map(|b| b.inertia_diagonal()).collect();
+        let mut k = vec![0.0; n * n];
+        let mut d = vec![0.0; n * n];
+        let mut sdes = Vec::new();
+        for (idx, sde) in model.sdes.iter().enumerate().filter(|(_, s)| s.enabled) {
+            let g = [0, 1].map(|side| match sde.bodies[side] {
+                Some(b) => {
+                    let body = &model.bodies[b];
+                    sde_from_body(&body.position, &body.rotation, &sde.point, &sde.rotation)
+                }
+                None => Matrix6::zeros(),
+            });
+            let block = SdeBlock {
+                sde: idx,
+                bodies: sde.bodies,
+                g,
+                k: sde.law.stiffness(),
+                psi: sde.law.dissipation(),
+            };
+            let kd = Vector6::from(block.k);
+            let dd = Vector6::from(std::array::from_fn::<f64, 6, _>(|i| {
+                block.psi[i] / (2.0 * std::f64::consts::PI) * block.k[i]
+            }));
+            for (sa, sign_a) in [(0usize, -1.0), (1, 1.0)] {
+                let Some(ba) = block.bodies[sa] else { continue };
+                for (sb, sign_b) in [(0usize, -1.0), (1, 1.0)] {
+                    let Some(bb) = block.bodies[sb] else { continue };
+                    let ga = &block.g[sa];
+                    let gb = &block.g[sb];
+                    let kab = ga.transpose() * Matrix6::from_diagonal(&kd) * gb * (sign_a * sign_b);
+                    let dab = ga.transpose() * Matrix6::from_diagonal(&dd) * gb * (sign_a * sign_b);
+                    for i in 0..6 {
+                        for j in 0..6 {
+                            k[(6 * ba + i) * n + 6 * bb + j] += kab[(i, j)];
+                            d[(6 * ba + i) * n + 6 * bb + j] += dab[(i, j)];
+                        }
+                    }
+                }
+            }
+            sdes.push(block);
+        }
+        let mut load = vec![0.0; n];
+        for f in &model.forces {
+            let body = &model.bodies[f.body];
+            let p = generalized_force(&body.position, &body.rotation, &f.point, &f.force, &f.moment);
+            for i in 0..6 {
+                load[6 * f.body + i] += p[i];
+            }
+        }
+        let output_dofs = model
+            .outputs
+            .iter()
+            .map(|c| 6 * c.body + c.dof as usize)
+            .collect();
+        System {
+            n,
+            mass,
+            k,
+            d,
+            load,
+            sdes,
+            output_dofs,
+        }
+    }
+
+    /// The blocks through which each parameter enters; `None` for a parameter of a disabled SDE
+    /// or one its law does not have.
+    pub fn param_blocks(&self, model: &Model, params: &[ParamRef]) -> Vec<Option<ParamBlock>> {
+        params
+            .iter()
+            .map(|p| {
+                let block = self.sdes.iter().position(|b| b.sde == p.sde)?;
+                let (dk, dpsi) = model.sdes[p.sde].law.derivative(p.name)?;
+                let b = &self.sdes[block];
+                let two_pi = 2.0 * std::f64::consts::PI;
+                let coeff = std::array::from_fn(|i| {
+                    C64::new(dk[i], dk[i] * b.psi[i] / two_pi + b.k[i] * dpsi[i] / two_pi)
+                });
+                Some(ParamBlock { block, coeff })
+            })
+            .collect()
+    }
+}
