@@ -15,8 +15,12 @@
 pub mod can;
 pub mod daq;
 pub mod device;
+pub mod rig;
+pub mod session;
 pub mod shaker;
+pub mod sim;
 pub mod stand;
+pub mod sweep;
 pub mod transport;
 pub mod units;
 

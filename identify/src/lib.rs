@@ -8,6 +8,8 @@
 //! - [`model`]: the resolved model (SI units, global frame) every computation takes;
 //! - [`system`]: assembly of M, K, D and P;
 //! - [`frf`]: frequency response and analytic Jacobian, direct and modal paths;
+//! - [`modes`]: natural frequencies, mode shapes (undamped and complex), loss factors;
+//! - [`sensitivity`]: band sensitivity MI (eq. 4.16) to pick decision variables;
 //! - [`measured`]: measured characteristics, as processing produces them;
 //! - [`modelfile`], [`contract`], [`units`], [`check`]: model files (TOML with units, resolved
 //!   JSON) and their validation;
@@ -27,10 +29,13 @@
 pub mod check;
 pub mod contract;
 pub mod frf;
+pub mod identification;
 pub mod measured;
 pub mod model;
 pub mod modelfile;
+pub mod modes;
 pub mod system;
+pub mod sensitivity;
 pub mod textbook;
 pub mod units;
 

@@ -138,6 +138,12 @@ pub struct Welch {
     max_abs: Vec<f64>,
 }
 
+impl std::fmt::Debug for Welch {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Welch").field("config", &self.config).field("channels", &self.names).field("segments", &self.segments).finish_non_exhaustive()
+    }
+}
+
 impl Welch {
     /// Sets up an estimator for channels named `reference_names` (forces) and `response_names`.
     pub fn new(config: WelchConfig, reference_names: &[&str], response_names: &[&str]) -> Result<Welch> {

@@ -4,7 +4,7 @@
 use std::time::Duration;
 
 use socketcan::{
-    CanAnyFrame, CanDataFrame, CanFdFrame, CanFilter, EmbeddedFrame, ErrorCause, ExtendedId, Frame, Id,
+    CanAnyFrame, CanDataFrame, CanFdFrame, CanFilter, EmbeddedFrame, ErrorCause, ExtendedId, Id,
     SocketOptions, StandardId,
 };
 

@@ -750,8 +750,15 @@ mod tests {
         Message::Start.encode(&mut body).unwrap();
         let f = frames_for(FrameKind::Classic, &[body]);
         assert_eq!(f.len(), 1);
-        let crc = CRC16.checksum(&[0x01, 0x00, 0x03]);
-        assert_eq!(f[0].data(), &[0x80, 0x01, 0x00, 0x03, crc as u8, (crc >> 8) as u8]);
+        // Bytes and CRC as in the spec (CRC computed independently with a bitwise implementation).
+        assert_eq!(f[0].data(), &[0x80, 0x01, 0x00, 0x03, 0xCF, 0xCB]);
+        let mut ack = Vec::new();
+        Message::Ack { command: kind::START }.encode(&mut ack).unwrap();
+        let mut s = Segmenter::new(ID, FrameKind::Classic);
+        let mut out = Vec::new();
+        s.segment(&[], &mut out).unwrap(); // counter 0: an empty message
+        s.segment(&ack, &mut out).unwrap();
+        assert_eq!(out[1].data(), &[0x81, 0x02, 0x00, 0x83, 0x03, 0x00, 0x17]);
         // CRC-16/IBM-3740 check value.
         assert_eq!(CRC16.checksum(b"123456789"), 0x29B1);
     }
@@ -876,7 +883,7 @@ mod tests {
                         if j < d.len() { d[j] ^= 1 << (x % 8); }
                         frames[i] = WireFrame::from_parts(ID, kind, &d);
                     }
-                    _ => { frames.swap(i, (i + 1) % frames.len()); }
+                    _ => { let n = frames.len(); frames.swap(i, (i + 1) % n); }
                 }
             }
             let mut r = Reassembler::new();

@@ -198,21 +198,19 @@ impl CanDaq {
     }
 
     fn accept_block(&mut self, b: WireBlock) {
-        let Some(info) = &self.info else {
+        let Some((channels, samples_per_block)) = self.info.as_ref().map(|i| (i.channels.len(), i.samples_per_block)) else {
             self.fault(FaultKind::Framing, None, format!("block {} before any announcement; ignored", b.seq));
             return;
         };
         if !self.streaming {
             return; // in flight after STOP: discarded by contract
         }
-        let channels = info.channels.len();
-        if b.channel_count as usize != channels || b.samples_per_channel() != info.samples_per_block as usize {
+        if b.channel_count as usize != channels || b.samples_per_channel() != samples_per_block as usize {
             let detail = format!(
-                "block {} has {} channel(s) × {} samples, the announcement says {channels} × {}; block dropped",
+                "block {} has {} channel(s) × {} samples, the announcement says {channels} × {samples_per_block}; block dropped",
                 b.seq,
                 b.channel_count,
                 b.samples_per_channel(),
-                info.samples_per_block
             );
             self.fault(FaultKind::Framing, Some(self.next_seq), detail);
             return;
@@ -237,10 +235,12 @@ impl CanDaq {
             );
         }
         let seq = self.next_seq + ahead as u64;
-        let spb = info.samples_per_block as u64;
+        let spb = samples_per_block as u64;
         let mut volts = Vec::with_capacity(b.counts.len());
-        for (i, &c) in b.counts.iter().enumerate() {
-            volts.push((c as f64 * info.channels[i % channels].volts_per_count) as f32);
+        if let Some(info) = &self.info {
+            for (i, &c) in b.counts.iter().enumerate() {
+                volts.push((c as f64 * info.channels[i % channels].volts_per_count) as f32);
+            }
         }
         self.pending.push_back(DaqEvent::Block(SampleBlock {
             seq,

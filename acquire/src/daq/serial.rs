@@ -202,7 +202,7 @@ impl StreamState {
     }
 
     fn data(&mut self, raw_seq: u32, counts: Vec<i32>) {
-        let Some(info) = &self.info else {
+        let Some(info) = self.info.clone() else {
             self.fault(FaultKind::Framing, None, "data frame before any stream announcement".into());
             return;
         };

@@ -520,7 +520,7 @@ mod tests {
         #[test]
         fn canonical_form_round_trips(c in any_command()) {
             let line = c.to_string();
-            let back = parse_command(&line).map_err(|e| e.to_string())?;
+            let back = parse_command(&line).map_err(|e| TestCaseError::fail(e.to_string()))?;
             match (&c, &back) {
                 (Command::SetDutyCycle(a), Command::SetDutyCycle(b)) => prop_assert!((a - b).abs() < 1e-12),
                 _ => prop_assert_eq!(&back, &c),
@@ -539,7 +539,7 @@ mod tests {
         fn parser_never_panics_on_scpi_like_garbage(s in "[:*?A-Za-z0-9 .eE+-]{0,40}") {
             if let Ok(c) = parse_command(&s) {
                 // Anything accepted re-formats to something that parses to the same command.
-                let again = parse_command(&c.to_string()).map_err(|e| e.to_string())?;
+                let again = parse_command(&c.to_string()).map_err(|e| TestCaseError::fail(e.to_string()))?;
                 match (&c, &again) {
                     (Command::SetDutyCycle(a), Command::SetDutyCycle(b)) => prop_assert!((a - b).abs() <= 1e-9 * a.abs().max(1.0)),
                     _ => prop_assert_eq!(again, c),

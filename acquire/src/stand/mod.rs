@@ -538,9 +538,7 @@ fn vec3(cx: &Ctx<'_>, p: &Spanned<Vec<Value>>, name: &str) -> Result<[f64; 3], S
 fn truth(cx: &Ctx<'_>, st: &Spanned<RawTruth>, channels: &[Channel]) -> Result<Truth, StandError> {
     let t = st.get_ref();
     let model = match (&t.model, &t.sdof) {
-        (Some(_), Some(s)) | (None, Some(s)) if t.model.is_some() => {
-            return Err(cx.at(s.span(), "[truth] has both `model` and `sdof`; keep one"))
-        }
+        (Some(_), Some(s)) => return Err(cx.at(s.span(), "[truth] has both `model` and `sdof`; keep one")),
         (None, Some(s)) => {
             let r = s.get_ref();
             let eta = *r.loss_factor.get_ref();

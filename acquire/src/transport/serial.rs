@@ -124,6 +124,16 @@ pub struct PtyDevice {
     _keep_open: SerialStream,
 }
 
+/// Keeps the host end of a pseudo-terminal open; dropping it closes the port.
+pub struct PtyGuard(#[allow(dead_code)] SerialStream);
+
+impl PtyDevice {
+    /// Splits into the device-side transport and the guard that keeps the host end open.
+    pub fn into_parts(self) -> (SerialTransport, PtyGuard) {
+        (self.device, PtyGuard(self._keep_open))
+    }
+}
+
 /// Creates a pseudo-terminal pair for a simulated `role` ("shaker", "daq"). Must be called inside a
 /// tokio runtime.
 pub fn pty_pair(role: &str) -> Result<PtyDevice, TransportError> {

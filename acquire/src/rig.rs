@@ -1,0 +1,125 @@
+//! A connected stand: the shaker controller and DAQ named by a stand file, opened, identified
+//! (checked against the stand file), configured, and recorded in the session.
+
+use std::sync::Arc;
+
+use serde_json::json;
+
+use crate::daq::{Daq, DaqError, DaqOptions, SerialDaq, StreamInfo};
+use crate::device::DeviceIdentity;
+use crate::session::{SessionError, SessionHandle, Topic};
+use crate::shaker::{ScpiShaker, Shaker, ShakerError, ShakerOptions};
+use crate::stand::{PortSpec, Stand};
+use crate::transport::{open_serial, ByteTap, SerialSettings, Tapped, Transport};
+
+/// Why a stand could not be brought up.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum RigError {
+    /// A port is still `"sim"`.
+    #[error("{file}: {role} port is \"sim\"; start the simulated stand (acquire::sim::SimStand / `ident sim`) or give a device path")]
+    Unbound {
+        /// Stand file.
+        file: String,
+        /// `shaker` or `daq`.
+        role: &'static str,
+    },
+    /// Shaker controller problem.
+    #[error(transparent)]
+    Shaker(#[from] ShakerError),
+    /// DAQ problem.
+    #[error(transparent)]
+    Daq(#[from] DaqError),
+    /// Session problem.
+    #[error(transparent)]
+    Session(#[from] SessionError),
+}
+
+/// A connected stand.
+pub struct Rig {
+    /// The stand file.
+    pub stand: Stand,
+    /// The shaker controller.
+    pub shaker: Box<dyn Shaker>,
+    /// The DAQ.
+    pub daq: Box<dyn Daq>,
+    /// What the DAQ announced.
+    pub stream: StreamInfo,
+    /// Shaker identity.
+    pub shaker_identity: DeviceIdentity,
+    /// DAQ identity.
+    pub daq_identity: DeviceIdentity,
+}
+
+fn tapped(t: impl Transport + 'static, session: Option<&SessionHandle>) -> Box<dyn Transport> {
+    match session {
+        Some(s) => Box::new(Tapped::new(t, Arc::new(s.clone()) as Arc<dyn ByteTap>)),
+        None => Box::new(t),
+    }
+}
+
+impl Rig {
+    /// Opens the stand's serial ports (every byte tapped into `session`), then [`Rig::from_devices`].
+    pub async fn connect(stand: &Stand, session: Option<&SessionHandle>) -> Result<Rig, RigError> {
+        let path = |p: &PortSpec, role| match p {
+            PortSpec::Path(p) => Ok(p.clone()),
+            PortSpec::Sim => Err(RigError::Unbound { file: stand.file.clone(), role }),
+        };
+        let sp = path(&stand.shaker.port, "shaker")?;
+        let dp = path(&stand.daq.port, "daq")?;
+        let s_io = open_serial(&sp, &SerialSettings { baud: stand.shaker.baud }).map_err(ShakerError::from)?;
+        let d_io = open_serial(&dp, &SerialSettings { baud: stand.daq.baud }).map_err(DaqError::from)?;
+        let shaker = ScpiShaker::new(
+            tapped(s_io, session),
+            ShakerOptions { timeout: stand.shaker.timeout, retries: stand.shaker.retries },
+        );
+        let daq = SerialDaq::new(
+            tapped(d_io, session),
+            DaqOptions { command_timeout: stand.daq.timeout, retries: stand.daq.retries, ..DaqOptions::default() },
+        );
+        Rig::from_devices(stand, Box::new(shaker), Box::new(daq), session).await
+    }
+
+    /// Identifies both devices (checking the stand file's expected identities), resets the
+    /// shaker (output off), configures the DAQ, and records stand, identities and stream.
+    pub async fn from_devices(
+        stand: &Stand,
+        mut shaker: Box<dyn Shaker>,
+        mut daq: Box<dyn Daq>,
+        session: Option<&SessionHandle>,
+    ) -> Result<Rig, RigError> {
+        if let Some(s) = session {
+            s.log(Topic::Stand, &json!({"name": stand.name, "file": stand.file, "text": stand.text, "channels": stand.channels}))?;
+        }
+        let shaker_identity = shaker.identify().await?;
+        if !shaker_identity.matches(&stand.shaker.identity) {
+            return Err(ShakerError::WrongIdentity {
+                port: shaker.port().to_string(),
+                got: shaker_identity.to_idn(),
+                expected: stand.shaker.identity.clone(),
+            }
+            .into());
+        }
+        let daq_identity = daq.identify().await?;
+        if !daq_identity.matches(&stand.daq.identity) {
+            return Err(DaqError::WrongIdentity {
+                port: daq.port().to_string(),
+                got: daq_identity.to_idn(),
+                expected: stand.daq.identity.clone(),
+            }
+            .into());
+        }
+        if let Some(s) = session {
+            for (role, port, id) in [("shaker", shaker.port(), &shaker_identity), ("daq", daq.port(), &daq_identity)] {
+                s.log(Topic::Identity, &json!({"role": role, "port": port, "manufacturer": id.manufacturer, "model": id.model, "serial": id.serial, "firmware": id.firmware}))?;
+            }
+        }
+        shaker.reset().await?;
+        let stream = daq.configure(&stand.daq_config()).await?;
+        if let Some(s) = session {
+            let names: Vec<&str> = stand.channels.iter().map(|c| c.name.as_str()).collect();
+            s.log(Topic::DaqStream, &json!({"port": daq.port(), "sample_rate_hz": stream.sample_rate_hz, "samples_per_block": stream.samples_per_block, "channels": stream.channels, "names": names}))?;
+        }
+        Ok(Rig { stand: stand.clone(), shaker, daq, stream, shaker_identity, daq_identity })
+    }
+}

@@ -1,0 +1,543 @@
+//! The simulated stand: a shaker controller and a DAQ that serve the real protocols (SCPI and the
+//! COBS/CRC stream) over pseudo-terminals — or any [`Transport`] — driven by a truth
+//! [`Plant`](plant::Plant), with sensor noise and configurable faults. Every injected fault is
+//! logged so tests can check that the host detected each one.
+
+pub mod plant;
+pub mod signal;
+
+use std::sync::{Arc, Mutex};
+use std::time::Duration;
+
+use rand::{Rng, SeedableRng};
+use serde::Serialize;
+use tokio::io::{AsyncReadExt, AsyncWriteExt};
+use tokio::task::JoinHandle;
+
+use crate::daq::frame::{self, kind, FrameDecoder, Message};
+use crate::daq::{ChannelInfo, DaqConfig, StreamInfo};
+use crate::device::DeviceIdentity;
+use crate::shaker::scpi::{self, Command, Function, Line, LineBuffer, ScpiError};
+use crate::stand::{ChannelKind, Faults, PortSpec, Stand};
+use crate::transport::{pty_pair, Transport, TransportError};
+use plant::{Interaction, Plant, PlantError};
+use signal::{Excitation, SignalGenerator, SimChannel, Source, VOLTS_PER_COUNT};
+
+/// A fault the simulator injected.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize)]
+pub struct InjectedFault {
+    /// `drop`, `corrupt`, `duplicate`, `delay`, `daq_silent`, `shaker_silent`, `cable_pull`.
+    pub kind: &'static str,
+    /// DAQ block number (or shaker command count).
+    pub seq: u64,
+}
+
+/// Why the simulated stand could not start.
+#[derive(Debug, thiserror::Error)]
+pub enum SimError {
+    /// A pseudo-terminal could not be created.
+    #[error(transparent)]
+    Transport(#[from] TransportError),
+    /// The truth cannot be evaluated.
+    #[error(transparent)]
+    Plant(#[from] PlantError),
+    /// The stand file has no truth section.
+    #[error("{0}: the simulated stand needs a [truth] section")]
+    NoTruth(String),
+}
+
+/// Identity strings the simulated devices answer with (override to test identity checks).
+#[derive(Debug, Clone)]
+pub struct SimIdentities {
+    /// Shaker `*IDN?` answer.
+    pub shaker: DeviceIdentity,
+    /// DAQ HELLO answer.
+    pub daq: DeviceIdentity,
+}
+
+impl Default for SimIdentities {
+    fn default() -> Self {
+        let id = |m: &str, s: &str| DeviceIdentity {
+            manufacturer: "IDENT-SIM".into(),
+            model: m.into(),
+            serial: s.into(),
+            firmware: env!("CARGO_PKG_VERSION").into(),
+        };
+        SimIdentities { shaker: id("SHAKER-4K", "S0001"), daq: id("DAQ-8", "D0001") }
+    }
+}
+
+/// Everything a simulated device pair needs.
+pub struct SimSetup {
+    /// Truth.
+    pub plant: Arc<dyn Plant>,
+    /// Shaker-structure interaction.
+    pub interaction: Interaction,
+    /// DAQ inputs (device channel numbers, sources, sensitivities, noise).
+    pub channels: Vec<SimChannel>,
+    /// Native sample rate (Hz); CONFIGURE may ask for another one, which is granted.
+    pub sample_rate_hz: f64,
+    /// Simulated time per wall-clock time.
+    pub speed: f64,
+    /// Noise seed.
+    pub seed: u64,
+    /// Faults to inject.
+    pub faults: Faults,
+    /// Largest force the controller accepts (N).
+    pub max_force_n: f64,
+    /// Identities.
+    pub identities: SimIdentities,
+}
+
+impl SimSetup {
+    /// The setup described by a stand file's `[truth]` and `[faults]`.
+    pub fn from_stand(stand: &Stand) -> Result<SimSetup, SimError> {
+        let truth = stand.truth.as_ref().ok_or_else(|| SimError::NoTruth(stand.file.clone()))?;
+        let plant: Arc<dyn Plant> = Arc::from(plant::plant_for(truth, &stand.channels)?);
+        let mut sensor = 0;
+        let channels = stand
+            .channels
+            .iter()
+            .map(|c| {
+                let (source, noise_rms) = match c.kind {
+                    ChannelKind::Force => (Source::Force, truth.noise_force),
+                    ChannelKind::Acceleration => {
+                        sensor += 1;
+                        (Source::Sensor(sensor - 1), truth.noise_acceleration)
+                    }
+                };
+                SimChannel { device_channel: c.device_channel, source, sensitivity: c.sensitivity, noise_rms }
+            })
+            .collect();
+        Ok(SimSetup {
+            plant,
+            interaction: Interaction { gain: truth.shaker_gain, cutoff_hz: truth.shaker_cutoff_hz },
+            channels,
+            sample_rate_hz: stand.daq.sample_rate_hz,
+            speed: truth.speed,
+            seed: truth.seed,
+            faults: stand.faults.clone(),
+            max_force_n: stand.shaker.max_force_n * 1.25,
+            identities: SimIdentities::default(),
+        })
+    }
+}
+
+#[derive(Default)]
+struct Shared {
+    excitation: Excitation,
+    injected: Vec<InjectedFault>,
+    cable_pulled: bool,
+}
+
+type SharedRef = Arc<Mutex<Shared>>;
+
+fn lock(s: &SharedRef) -> std::sync::MutexGuard<'_, Shared> {
+    s.lock().unwrap_or_else(|p| p.into_inner())
+}
+
+/// A running simulated stand.
+pub struct SimStand {
+    /// Path of the shaker controller's port (a pty, or `mem:` for in-memory transports).
+    pub shaker_port: String,
+    /// Path of the DAQ's port.
+    pub daq_port: String,
+    shared: SharedRef,
+    tasks: Vec<JoinHandle<()>>,
+}
+
+impl SimStand {
+    /// Serves the stand's simulated devices on two new pseudo-terminals. Call inside a tokio
+    /// runtime; the devices run until [`SimStand::shutdown`] or drop.
+    pub fn start(stand: &Stand) -> Result<SimStand, SimError> {
+        Self::start_with(SimSetup::from_stand(stand)?)
+    }
+
+    /// Like [`SimStand::start`] with an explicit setup.
+    pub fn start_with(setup: SimSetup) -> Result<SimStand, SimError> {
+        let shaker = pty_pair("shaker")?;
+        let daq = pty_pair("daq")?;
+        let (shaker_port, daq_port) = (shaker.path.clone(), daq.path.clone());
+        let (s_io, s_guard) = shaker.into_parts();
+        let (d_io, d_guard) = daq.into_parts();
+        let mut st = Self::serve(setup, s_io, d_io, shaker_port, daq_port);
+        // The guards keep the host ends open until the device tasks end (cable pulled or shutdown).
+        let shared = st.shared.clone();
+        st.tasks.push(tokio::spawn(async move {
+            let _g = (s_guard, d_guard);
+            loop {
+                if lock(&shared).cable_pulled {
+                    return;
+                }
+                tokio::time::sleep(Duration::from_millis(5)).await;
+            }
+        }));
+        Ok(st)
+    }
+
+    /// Serves the devices over given transports (e.g. [`crate::transport::MemoryTransport`]).
+    pub fn serve<S: Transport + 'static, D: Transport + 'static>(
+        setup: SimSetup,
+        shaker_io: S,
+        daq_io: D,
+        shaker_port: String,
+        daq_port: String,
+    ) -> SimStand {
+        let shared: SharedRef = Arc::new(Mutex::new(Shared::default()));
+        let s1 = shared.clone();
+        let s2 = shared.clone();
+        let ids = setup.identities.clone();
+        let faults = setup.faults.clone();
+        let max_force = setup.max_force_n;
+        let interaction = setup.interaction;
+        let t1 = tokio::spawn(async move { serve_shaker(shaker_io, s1, ids.shaker, faults, max_force, interaction).await });
+        let t2 = tokio::spawn(async move { serve_daq(daq_io, s2, setup).await });
+        SimStand { shaker_port, daq_port, shared, tasks: vec![t1, t2] }
+    }
+
+    /// The stand with `port = "sim"` replaced by this simulator's ports.
+    pub fn bind(&self, stand: &Stand) -> Stand {
+        let mut s = stand.clone();
+        if s.shaker.port == PortSpec::Sim {
+            s.shaker.port = PortSpec::Path(self.shaker_port.clone());
+        }
+        if s.daq.port == PortSpec::Sim {
+            s.daq.port = PortSpec::Path(self.daq_port.clone());
+        }
+        s
+    }
+
+    /// Faults injected so far.
+    pub fn injected(&self) -> Vec<InjectedFault> {
+        lock(&self.shared).injected.clone()
+    }
+
+    /// What the simulated controller currently drives.
+    pub fn excitation(&self) -> Excitation {
+        lock(&self.shared).excitation.clone()
+    }
+
+    /// Stops the devices and closes their ports.
+    pub fn shutdown(self) {
+        for t in &self.tasks {
+            t.abort();
+        }
+    }
+}
+
+impl Drop for SimStand {
+    fn drop(&mut self) {
+        for t in &self.tasks {
+            t.abort();
+        }
+    }
+}
+
+async fn serve_shaker<T: Transport>(
+    mut io: T,
+    shared: SharedRef,
+    identity: DeviceIdentity,
+    faults: Faults,
+    max_force: f64,
+    interaction: Interaction,
+) {
+    let mut lines = LineBuffer::new();
+    let mut buf = vec![0u8; 512];
+    let mut errors: std::collections::VecDeque<ScpiError> = Default::default();
+    let mut count: u64 = 0;
+    let mut silent = false;
+    loop {
+        if lock(&shared).cable_pulled {
+            return;
+        }
+        let n = match tokio::time::timeout(Duration::from_millis(20), io.read(&mut buf)).await {
+            Err(_) => continue,
+            Ok(Ok(0)) | Ok(Err(_)) => return,
+            Ok(Ok(n)) => n,
+        };
+        let mut got = Vec::new();
+        lines.feed(&buf[..n], |l| got.push(l));
+        for line in got {
+            count += 1;
+            if !silent && faults.shaker_silent_after_commands.is_some_and(|k| count > k) {
+                silent = true;
+                lock(&shared).injected.push(InjectedFault { kind: "shaker_silent", seq: count });
+            }
+            if silent {
+                continue;
+            }
+            let text = match line {
+                Line::Text(t) => t,
+                Line::Garbage(_) => {
+                    push_error(&mut errors, ScpiError { code: scpi::codes::COMMAND_ERROR, message: "Command error;not text".into() });
+                    continue;
+                }
+            };
+            let answer = match scpi::parse_command(&text) {
+                Err(e) => {
+                    push_error(&mut errors, e);
+                    None
+                }
+                Ok(cmd) => {
+                    let mut sh = lock(&shared);
+                    let exc = &mut sh.excitation;
+                    match apply(cmd, exc, &identity, &mut errors, max_force, interaction) {
+                        Ok(a) => a,
+                        Err(e) => {
+                            push_error(&mut errors, e);
+                            None
+                        }
+                    }
+                }
+            };
+            if let Some(mut a) = answer {
+                a.push('\n');
+                if io.write_all(a.as_bytes()).await.is_err() {
+                    return;
+                }
+            }
+        }
+    }
+}
+
+fn push_error(q: &mut std::collections::VecDeque<ScpiError>, e: ScpiError) {
+    if q.len() >= 10 {
+        q.pop_back();
+        q.push_back(ScpiError { code: scpi::codes::QUEUE_OVERFLOW, message: "Queue overflow".into() });
+    } else {
+        q.push_back(e);
+    }
+}
+
+fn apply(
+    cmd: Command,
+    exc: &mut Excitation,
+    id: &DeviceIdentity,
+    errors: &mut std::collections::VecDeque<ScpiError>,
+    max_force: f64,
+    interaction: Interaction,
+) -> Result<Option<String>, ScpiError> {
+    let range = |x: f64, lo: f64, hi: f64, what: &str| {
+        if (lo..=hi).contains(&x) {
+            Ok(x)
+        } else {
+            Err(ScpiError::out_of_range(&format!("{what} {x} outside {lo}..{hi}")))
+        }
+    };
+    Ok(match cmd {
+        Command::Identify => Some(id.to_idn()),
+        Command::Reset => {
+            *exc = Excitation::default();
+            None
+        }
+        Command::ClearStatus => {
+            errors.clear();
+            None
+        }
+        Command::OperationComplete => Some("1".into()),
+        Command::SetFunction(f) => {
+            exc.function = f;
+            None
+        }
+        Command::QueryFunction => Some(exc.function.short().into()),
+        Command::SetFrequency(f) => {
+            exc.freq_hz = range(f, 0.1, 10_000.0, "frequency")?;
+            None
+        }
+        Command::QueryFrequency => Some(format!("{}", exc.freq_hz)),
+        Command::SetBandStart(f) => {
+            exc.band_hz.0 = range(f, 0.0, 10_000.0, "band start")?;
+            None
+        }
+        Command::SetBandStop(f) => {
+            exc.band_hz.1 = range(f, 0.0, 10_000.0, "band stop")?;
+            None
+        }
+        Command::SetDutyCycle(d) => {
+            exc.duty = range(d, 0.01, 1.0, "duty cycle")?;
+            None
+        }
+        Command::SetPeriod(p) => {
+            exc.period_s = range(p, 0.01, 100.0, "period")?;
+            None
+        }
+        Command::SetForce(f) => {
+            exc.force_n = range(f, 0.0, max_force, "force")?;
+            None
+        }
+        Command::QueryForce => Some(format!("{}", exc.force_n)),
+        Command::SetOutput(on) => {
+            exc.output_on = on;
+            None
+        }
+        Command::QueryOutput => Some(if exc.output_on { "1" } else { "0" }.into()),
+        Command::MeasureForce => {
+            let f = if exc.function == Function::Sine { exc.freq_hz } else { 0.5 * (exc.band_hz.0 + exc.band_hz.1) };
+            let v = if exc.output_on { exc.force_n * interaction.at(f).norm() } else { 0.0 };
+            Some(format!("{v:.3}"))
+        }
+        Command::QuestionableCondition => Some("0".into()),
+        Command::NextError => Some(match errors.pop_front() {
+            Some(e) => scpi::format_error_entry(&e),
+            None => "0,\"No error\"".into(),
+        }),
+    })
+}
+
+async fn serve_daq<T: Transport>(mut io: T, shared: SharedRef, setup: SimSetup) {
+    let faults = setup.faults.clone();
+    let mut frng = rand::rngs::StdRng::seed_from_u64(faults.seed);
+    let mut gen = SignalGenerator::new(setup.sample_rate_hz, setup.plant.clone(), setup.interaction, setup.channels.clone(), setup.seed);
+    let all = setup.channels.clone();
+    let mut dec = FrameDecoder::new();
+    let mut rx = vec![0u8; 4096];
+    let (mut p1, mut p2, mut tx) = (Vec::new(), Vec::new(), Vec::with_capacity(8192));
+    let mut counts = Vec::new();
+    let mut stream: Option<(StreamInfo, Vec<usize>)> = None;
+    let mut streaming = false;
+    let mut seq: u32 = 0;
+    let mut blocks: u64 = 0;
+    let mut silent = false;
+    let mut rate = setup.sample_rate_hz;
+    let mut next_tick = tokio::time::Instant::now();
+    loop {
+        let period = stream
+            .as_ref()
+            .map(|(i, _)| Duration::from_secs_f64(i.samples_per_block as f64 / rate / setup.speed.max(1e-6)))
+            .unwrap_or(Duration::from_millis(50));
+        let read = tokio::select! {
+            r = io.read(&mut rx) => Some(r),
+            _ = tokio::time::sleep_until(next_tick), if streaming => None,
+            _ = tokio::time::sleep(Duration::from_millis(50)), if !streaming => { if lock(&shared).cable_pulled { return; } continue }
+        };
+        tx.clear();
+        match read {
+            Some(Ok(0)) | Some(Err(_)) => return,
+            Some(Ok(n)) => {
+                let mut msgs = Vec::new();
+                dec.feed(&rx[..n], |f| {
+                    if let Ok(f) = f {
+                        msgs.push((f.seq, Message::parse(&f)));
+                    }
+                });
+                if silent {
+                    continue;
+                }
+                for (id, m) in msgs {
+                    let reply = match m {
+                        Err(e) => Message::Nak { command: 0, code: -100, message: e.to_string() },
+                        Ok(Message::Hello) => Message::Identity(setup.identities.daq.to_idn()),
+                        Ok(Message::Configure(c)) => match configure(&c, &all) {
+                            Ok((info, idx)) => {
+                                streaming = false;
+                                rate = info.sample_rate_hz;
+                                gen = SignalGenerator::new(rate, setup.plant.clone(), setup.interaction, idx.iter().map(|&i| all[i].clone()).collect(), setup.seed);
+                                stream = Some((info.clone(), idx));
+                                Message::Announce(info)
+                            }
+                            Err((code, message)) => Message::Nak { command: kind::CONFIGURE, code, message },
+                        },
+                        Ok(Message::Start) => {
+                            if stream.is_some() {
+                                streaming = true;
+                                seq = 0;
+                                gen.restart();
+                                next_tick = tokio::time::Instant::now();
+                                Message::Ack(kind::START)
+                            } else {
+                                Message::Nak { command: kind::START, code: -221, message: "not configured".into() }
+                            }
+                        }
+                        Ok(Message::Stop) => {
+                            streaming = false;
+                            Message::Ack(kind::STOP)
+                        }
+                        Ok(other) => Message::Nak { command: other.kind(), code: -113, message: "not a host command".into() },
+                    };
+                    reply.encode(id, &mut p1, &mut p2, &mut tx);
+                }
+            }
+            None => {
+                // Time for the next block.
+                next_tick += period;
+                let Some((info, _)) = &stream else { continue };
+                let exc = lock(&shared).excitation.clone();
+                counts.clear();
+                if gen.block(&exc, info.samples_per_block as usize, &mut counts).is_err() {
+                    return;
+                }
+                blocks += 1;
+                let this = seq;
+                seq = seq.wrapping_add(1);
+                if faults.cable_pull_after_blocks.is_some_and(|k| blocks > k) {
+                    let mut sh = lock(&shared);
+                    sh.injected.push(InjectedFault { kind: "cable_pull", seq: this as u64 });
+                    sh.cable_pulled = true;
+                    return;
+                }
+                if !silent && faults.daq_silent_after_blocks.is_some_and(|k| blocks > k) {
+                    silent = true;
+                    lock(&shared).injected.push(InjectedFault { kind: "daq_silent", seq: this as u64 });
+                }
+                if silent {
+                    continue;
+                }
+                let mut frame_bytes = Vec::new();
+                Message::Data(std::mem::take(&mut counts)).encode(this, &mut p1, &mut p2, &mut frame_bytes);
+                let u: f64 = frng.random();
+                let f = &faults;
+                let note = |k: &'static str| lock(&shared).injected.push(InjectedFault { kind: k, seq: this as u64 });
+                if u < f.drop {
+                    note("drop");
+                } else if u < f.drop + f.corrupt {
+                    note("corrupt");
+                    let i = frng.random_range(1..frame_bytes.len() - 1);
+                    let mut b = frame_bytes[i] ^ 0x5A;
+                    if b == 0 {
+                        b = frame_bytes[i] ^ 0x3C;
+                    }
+                    frame_bytes[i] = b;
+                    tx.extend_from_slice(&frame_bytes);
+                } else if u < f.drop + f.corrupt + f.duplicate {
+                    note("duplicate");
+                    tx.extend_from_slice(&frame_bytes);
+                    tx.extend_from_slice(&frame_bytes);
+                } else if u < f.drop + f.corrupt + f.duplicate + f.delay {
+                    note("delay");
+                    tokio::time::sleep(f.delay_time).await;
+                    tx.extend_from_slice(&frame_bytes);
+                } else {
+                    tx.extend_from_slice(&frame_bytes);
+                }
+            }
+        }
+        if !tx.is_empty() && io.write_all(&tx).await.is_err() {
+            return;
+        }
+    }
+}
+
+fn configure(c: &DaqConfig, all: &[SimChannel]) -> Result<(StreamInfo, Vec<usize>), (i16, String)> {
+    if !(1.0..=200_000.0).contains(&c.sample_rate_hz) {
+        return Err((-222, format!("sample rate {} Hz outside 1..200000", c.sample_rate_hz)));
+    }
+    if c.samples_per_block == 0 || c.channels.is_empty() {
+        return Err((-109, "need ≥ 1 channel and ≥ 1 sample per block".into()));
+    }
+    if c.channels.len() * c.samples_per_block as usize * 4 + frame::HEADER + frame::TRAILER > frame::MAX_FRAME {
+        return Err((-222, "block does not fit a frame".into()));
+    }
+    let mut idx = Vec::new();
+    for ch in &c.channels {
+        match all.iter().position(|a| a.device_channel == *ch) {
+            Some(i) => idx.push(i),
+            None => return Err((-224, format!("no input {ch} (this unit has inputs {:?})", all.iter().map(|a| a.device_channel).collect::<Vec<_>>()))),
+        }
+    }
+    let info = StreamInfo {
+        sample_rate_hz: c.sample_rate_hz,
+        samples_per_block: c.samples_per_block,
+        channels: c.channels.iter().map(|&d| ChannelInfo { device_channel: d, volts_per_count: VOLTS_PER_COUNT }).collect(),
+    };
+    Ok((info, idx))
+}

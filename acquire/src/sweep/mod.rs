@@ -1,0 +1,702 @@
+//! Sweeps: stepped sine with closed-loop force control and a live per-step amplitude/phase
+//! estimate, broadband (random / burst random / chirp) with averages, a progress display, a clean
+//! stop on Ctrl-C and resuming from the last completed step. Every block, fault and decision is
+//! recorded in the session; the sweep drives `dyn Shaker` and `dyn Daq` and does not know which.
+
+pub mod fit;
+mod progress;
+
+pub use progress::{IndicatifProgress, NoProgress, SweepProgress};
+
+use std::collections::BTreeSet;
+use std::path::Path;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+
+use num_complex::Complex;
+use serde::{Deserialize, Serialize};
+use serde_json::json;
+
+use crate::daq::{DaqError, DaqEvent, SampleBlock};
+use crate::rig::Rig;
+use crate::session::{self, SessionError, SessionHandle, Topic};
+use crate::shaker::{ShakerError, Waveform};
+use fit::SineFit;
+
+/// Sweep errors. Device errors keep their port and advice.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum SweepError {
+    /// Shaker controller.
+    #[error(transparent)]
+    Shaker(#[from] ShakerError),
+    /// DAQ.
+    #[error(transparent)]
+    Daq(#[from] DaqError),
+    /// Session file.
+    #[error(transparent)]
+    Session(#[from] SessionError),
+    /// The plan is unusable.
+    #[error("sweep plan: {0}")]
+    Plan(String),
+    /// The previous session cannot be resumed.
+    #[error("cannot resume from {path}: {detail}")]
+    Resume {
+        /// Previous session file.
+        path: String,
+        /// Why.
+        detail: String,
+    },
+}
+
+/// How the frequencies of a stepped sine are chosen (Hz).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "snake_case")]
+pub enum FrequencyList {
+    /// `n` equally spaced frequencies from `start` to `stop`.
+    Linear {
+        /// First (Hz).
+        start: f64,
+        /// Last (Hz).
+        stop: f64,
+        /// Count.
+        n: usize,
+    },
+    /// `n` logarithmically spaced frequencies.
+    Log {
+        /// First (Hz).
+        start: f64,
+        /// Last (Hz).
+        stop: f64,
+        /// Count.
+        n: usize,
+    },
+    /// `per_resonance` frequencies within ±`relative_span` around each expected resonance.
+    AroundResonances {
+        /// Expected resonances (Hz).
+        resonances: Vec<f64>,
+        /// Half-width relative to the resonance (e.g. 0.2 = ±20 %).
+        relative_span: f64,
+        /// Frequencies per resonance.
+        per_resonance: usize,
+    },
+    /// Explicit list.
+    Explicit {
+        /// Frequencies (Hz).
+        freqs: Vec<f64>,
+    },
+}
+
+impl FrequencyList {
+    /// The frequencies, sorted ascending, duplicates removed.
+    pub fn frequencies(&self) -> Result<Vec<f64>, SweepError> {
+        let bad = |m: &str| Err(SweepError::Plan(m.to_string()));
+        let mut v: Vec<f64> = match self {
+            FrequencyList::Linear { start, stop, n } | FrequencyList::Log { start, stop, n } => {
+                if *n == 0 || !(*start > 0.0) || !(stop >= start) {
+                    return bad("need n ≥ 1 and 0 < start ≤ stop");
+                }
+                let n = *n;
+                let log = matches!(self, FrequencyList::Log { .. });
+                (0..n)
+                    .map(|i| {
+                        let u = if n == 1 { 0.0 } else { i as f64 / (n - 1) as f64 };
+                        if log {
+                            start * (stop / start).powf(u)
+                        } else {
+                            start + (stop - start) * u
+                        }
+                    })
+                    .collect()
+            }
+            FrequencyList::AroundResonances { resonances, relative_span, per_resonance } => {
+                if resonances.is_empty() || *per_resonance == 0 || !(*relative_span > 0.0 && *relative_span < 1.0) {
+                    return bad("need resonances, per_resonance ≥ 1 and 0 < relative_span < 1");
+                }
+                let mut v = Vec::new();
+                for &r in resonances {
+                    if !(r > 0.0) {
+                        return bad("resonances must be > 0 Hz");
+                    }
+                    let (a, b) = (r * (1.0 - relative_span), r * (1.0 + relative_span));
+                    // Denser near the resonance: a sine-spaced grid.
+                    for i in 0..*per_resonance {
+                        let u = if *per_resonance == 1 { 0.5 } else { i as f64 / (*per_resonance - 1) as f64 };
+                        let w = 0.5 - 0.5 * (std::f64::consts::PI * u).cos();
+                        v.push(a + (b - a) * w);
+                    }
+                }
+                v
+            }
+            FrequencyList::Explicit { freqs } => {
+                if freqs.iter().any(|f| !(*f > 0.0) || !f.is_finite()) || freqs.is_empty() {
+                    return bad("explicit frequencies must be finite and > 0");
+                }
+                freqs.clone()
+            }
+        };
+        v.sort_by(|a, b| a.total_cmp(b));
+        v.dedup_by(|a, b| (*a - *b).abs() <= 1e-9 * b.abs());
+        Ok(v)
+    }
+}
+
+/// A stepped-sine sweep.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct SteppedSine {
+    /// Frequencies.
+    pub frequencies: FrequencyList,
+    /// Wait after each change before measuring (s).
+    pub settle_s: f64,
+    /// Cycles of the excitation in each measurement window (at least `min_window_s` long).
+    pub cycles: f64,
+    /// Shortest measurement window (s).
+    pub min_window_s: f64,
+    /// Force amplitude to hold (N, peak).
+    pub target_force_n: f64,
+    /// Accepted relative deviation from the target (e.g. 0.03).
+    pub force_tolerance: f64,
+    /// Closed-loop corrections per step before measuring anyway (recorded as a warning).
+    pub max_iterations: u32,
+    /// Re-measurements of a step whose window was hit by a stream fault, before giving up.
+    pub max_retries: u32,
+}
+
+impl Default for SteppedSine {
+    fn default() -> Self {
+        SteppedSine {
+            frequencies: FrequencyList::Log { start: 20.0, stop: 400.0, n: 30 },
+            settle_s: 0.2,
+            cycles: 20.0,
+            min_window_s: 0.25,
+            target_force_n: 4000.0,
+            force_tolerance: 0.03,
+            max_iterations: 6,
+            max_retries: 3,
+        }
+    }
+}
+
+/// A request to stop a sweep, shared with a Ctrl-C handler.
+#[derive(Debug, Clone, Default)]
+pub struct StopSignal(Arc<AtomicBool>);
+
+impl StopSignal {
+    /// A signal that is not set.
+    pub fn new() -> Self {
+        Self::default()
+    }
+    /// A signal set when the process receives Ctrl-C (SIGINT). Call inside a tokio runtime.
+    pub fn on_ctrl_c() -> Self {
+        let s = Self::new();
+        let t = s.clone();
+        tokio::spawn(async move {
+            if tokio::signal::ctrl_c().await.is_ok() {
+                t.set();
+            }
+        });
+        s
+    }
+    /// Requests a stop.
+    pub fn set(&self) {
+        self.0.store(true, Ordering::SeqCst);
+    }
+    /// True once a stop was requested.
+    pub fn is_set(&self) -> bool {
+        self.0.load(Ordering::SeqCst)
+    }
+}
+
+/// One channel's result at a step.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ChannelResult {
+    /// Channel name.
+    pub name: String,
+    /// Peak amplitude (N or m/s²).
+    pub amplitude: f64,
+    /// Phase relative to the force channel (rad).
+    pub phase_rad: f64,
+    /// FRF real part (per N).
+    pub frf_re: f64,
+    /// FRF imaginary part (per N).
+    pub frf_im: f64,
+    /// Sine-fit quality (0-1).
+    pub fit_quality: f64,
+}
+
+/// The record of one completed step (topic `/sweep/step`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct StepResult {
+    /// Step index in the plan.
+    pub step: usize,
+    /// Frequency (Hz).
+    pub frequency_hz: f64,
+    /// Drive amplitude commanded (N).
+    pub drive_n: f64,
+    /// Measured force amplitude (N).
+    pub force_amplitude_n: f64,
+    /// First sample of the measurement window.
+    pub first_sample: u64,
+    /// Samples in the window.
+    pub samples: u64,
+    /// Closed-loop iterations used.
+    pub iterations: u32,
+    /// Per channel.
+    pub channels: Vec<ChannelResult>,
+}
+
+impl StepResult {
+    /// The FRF of channel `name` (per N).
+    pub fn frf(&self, name: &str) -> Option<Complex<f64>> {
+        self.channels.iter().find(|c| c.name == name).map(|c| Complex::new(c.frf_re, c.frf_im))
+    }
+}
+
+/// How a sweep ended.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct SweepOutcome {
+    /// Steps measured in this run.
+    pub steps: Vec<StepResult>,
+    /// Steps skipped because a previous session completed them.
+    pub skipped: Vec<usize>,
+    /// True if stopped by the operator before the end.
+    pub stopped: bool,
+    /// Stream faults seen (all recorded).
+    pub faults: u64,
+}
+
+fn event(s: &SessionHandle, kind: &str, step: Option<usize>, f: Option<f64>, detail: impl Into<String>) -> Result<(), SessionError> {
+    s.log(Topic::SweepEvent, &json!({"kind": kind, "step": step, "frequency_hz": f, "detail": detail.into()}))
+}
+
+/// Pulls blocks from the DAQ, records every block and fault.
+struct Pump<'a> {
+    rig: &'a mut Rig,
+    session: &'a SessionHandle,
+    faults: u64,
+    last_fault_sample: Option<u64>,
+    next_sample: u64,
+}
+
+impl Pump<'_> {
+    /// The next good block; faults are recorded and flagged in `fault_seen`.
+    async fn next(&mut self, fault_seen: &mut bool) -> Result<SampleBlock, SweepError> {
+        loop {
+            match self.rig.daq.next_event().await? {
+                DaqEvent::Block(b) => {
+                    let n = b.len() as u64;
+                    let volts: Vec<Vec<f32>> = (0..b.channel_count as usize).map(|c| b.channel(c).collect()).collect();
+                    self.session.log(
+                        Topic::DaqBlock,
+                        &json!({"seq": b.seq, "first_sample": b.first_sample, "sample_rate_hz": self.rig.stream.sample_rate_hz, "volts": volts}),
+                    )?;
+                    if b.first_sample != self.next_sample {
+                        *fault_seen = true;
+                    }
+                    self.next_sample = b.first_sample + n;
+                    return Ok(b);
+                }
+                DaqEvent::Fault(f) => {
+                    self.faults += 1;
+                    *fault_seen = true;
+                    self.last_fault_sample = Some(self.next_sample);
+                    self.session.log(
+                        Topic::DaqFault,
+                        &json!({"port": self.rig.daq.port(), "kind": f.kind.as_str(), "seq": f.seq, "detail": f.detail}),
+                    )?;
+                }
+            }
+        }
+    }
+}
+
+/// Reads the steps a previous session completed (complete or truncated file), checking that it
+/// ran the same plan.
+pub fn completed_steps(previous: &Path, plan: &SteppedSine) -> Result<BTreeSet<usize>, SweepError> {
+    let p = previous.display().to_string();
+    let rep = session::read(previous).map_err(|e| SweepError::Resume { path: p.clone(), detail: e.to_string() })?;
+    let want = serde_json::to_value(plan).map_err(|e| SweepError::Plan(e.to_string()))?;
+    let planned = rep.records.iter().find(|r| r.topic == Topic::Session.name()).map(|r| r.value["plan"].clone());
+    match planned {
+        None => return Err(SweepError::Resume { path: p, detail: "no /session record (not a sweep session?)".into() }),
+        Some(v) if v != want => {
+            return Err(SweepError::Resume { path: p, detail: "it ran a different plan; resume with the same plan or start afresh".into() })
+        }
+        _ => {}
+    }
+    let mut done: BTreeSet<usize> = rep
+        .records
+        .iter()
+        .filter(|r| r.topic == Topic::SweepStep.name())
+        .filter_map(|r| r.value["step"].as_u64().map(|s| s as usize))
+        .collect();
+    // Steps completed before that session (chained resumes).
+    for r in rep.records.iter().filter(|r| r.topic == Topic::Session.name()) {
+        if let Some(a) = r.value["completed_steps_before"].as_array() {
+            done.extend(a.iter().filter_map(|x| x.as_u64().map(|s| s as usize)));
+        }
+    }
+    Ok(done)
+}
+
+/// Writes the `/session` record that starts a sweep session.
+pub fn log_session_start(
+    s: &SessionHandle,
+    stand_file: &str,
+    plan: &impl Serialize,
+    resumed_from: Option<&Path>,
+    done: &BTreeSet<usize>,
+) -> Result<(), SessionError> {
+    s.log(
+        Topic::Session,
+        &json!({
+            "software": concat!("ident-acquire ", env!("CARGO_PKG_VERSION")),
+            "started_unix_ns": session::now_ns(),
+            "stand_file": stand_file,
+            "plan": plan,
+            "resumed_from": resumed_from.map(|p| p.display().to_string()),
+            "completed_steps_before": done.iter().collect::<Vec<_>>(),
+        }),
+    )
+}
+
+/// Runs a stepped-sine sweep on a connected rig, skipping `skip` (from [`completed_steps`]).
+/// On a device error the output is switched off (best effort), the error is recorded and
+/// returned; the caller still finishes the session so the file stays complete.
+pub async fn stepped_sine(
+    rig: &mut Rig,
+    plan: &SteppedSine,
+    session: &SessionHandle,
+    progress: &dyn SweepProgress,
+    stop: &StopSignal,
+    skip: &BTreeSet<usize>,
+) -> Result<SweepOutcome, SweepError> {
+    let freqs = plan.frequencies.frequencies()?;
+    if !(plan.target_force_n > 0.0) || plan.target_force_n > rig.stand.shaker.max_force_n {
+        return Err(SweepError::Plan(format!(
+            "target force {} N must be within 0..{} N (shaker.max_force in {})",
+            plan.target_force_n, rig.stand.shaker.max_force_n, rig.stand.file
+        )));
+    }
+    event(session, "started", None, None, format!("stepped sine, {} steps, {} already done", freqs.len(), skip.len()))?;
+    progress.start(freqs.len() as u64, skip.len() as u64);
+    let r = stepped_inner(rig, plan, &freqs, session, progress, stop, skip).await;
+    // Always try to leave the stand safe and the stream stopped.
+    let off = rig.shaker.set_output(false).await;
+    let stopped_daq = rig.daq.stop().await;
+    match &r {
+        Ok(o) if o.stopped => event(session, "stopped", None, None, "operator stop; output off; the sweep can be resumed")?,
+        Ok(_) => event(session, "completed", None, None, "all steps measured")?,
+        Err(e) => event(session, "error", None, None, e.to_string())?,
+    }
+    if let Err(e) = &off {
+        event(session, "error", None, None, format!("could not switch the shaker output off: {e}"))?;
+    }
+    if let Err(e) = &stopped_daq {
+        event(session, "warning", None, None, format!("could not stop the DAQ stream: {e}"))?;
+    }
+    progress.finish(match &r {
+        Ok(o) if o.stopped => "stopped",
+        Ok(_) => "done",
+        Err(_) => "failed",
+    });
+    let o = r?;
+    off?;
+    Ok(o)
+}
+
+async fn stepped_inner(
+    rig: &mut Rig,
+    plan: &SteppedSine,
+    freqs: &[f64],
+    session: &SessionHandle,
+    progress: &dyn SweepProgress,
+    stop: &StopSignal,
+    skip: &BTreeSet<usize>,
+) -> Result<SweepOutcome, SweepError> {
+    let fs = rig.stream.sample_rate_hz;
+    let nch = rig.stand.channels.len();
+    let force_ch = rig.stand.force_channel();
+    let sens: Vec<f64> = rig.stand.channels.iter().map(|c| c.sensitivity).collect();
+    let max_drive = rig.stand.shaker.max_force_n;
+    let first = freqs.iter().enumerate().find(|(i, _)| !skip.contains(i)).map(|(_, f)| *f);
+    let mut outcome = SweepOutcome { steps: Vec::new(), skipped: skip.iter().copied().collect(), stopped: false, faults: 0 };
+    let Some(first) = first else {
+        return Ok(outcome);
+    };
+    rig.shaker.set_waveform(&Waveform::Sine).await?;
+    rig.shaker.set_frequency(first).await?;
+    // Start gently: half the target until the loop has measured the path gain.
+    let mut gain = 1.0f64;
+    rig.shaker.set_force((0.5 * plan.target_force_n).min(max_drive)).await?;
+    rig.shaker.set_output(true).await?;
+    rig.daq.start().await?;
+    let mut pump = Pump { rig, session, faults: 0, last_fault_sample: None, next_sample: 0 };
+
+    for (step, &f) in freqs.iter().enumerate() {
+        if skip.contains(&step) {
+            continue;
+        }
+        if stop.is_set() {
+            outcome.stopped = true;
+            break;
+        }
+        pump.rig.shaker.set_frequency(f).await?;
+        let mut drive = (plan.target_force_n / gain).min(max_drive);
+        pump.rig.shaker.set_force(drive).await?;
+        event(session, "step_started", Some(step), Some(f), format!("drive {drive:.1} N"))?;
+        let settle = (plan.settle_s * fs).ceil() as u64;
+        let window = ((plan.cycles / f).max(plan.min_window_s) * fs).ceil() as u64;
+        let mut iterations = 0u32;
+        let mut retries = 0u32;
+        let result = loop {
+            if stop.is_set() {
+                break None;
+            }
+            // Settle, then measure a window; a fault inside either restarts the measurement.
+            let mut fault = false;
+            let start = pump.next_sample + settle;
+            let mut fit = SineFit::new(f, fs, nch);
+            let mut window_first = None;
+            while fit.samples() < window {
+                let b = pump.next(&mut fault).await?;
+                if stop.is_set() {
+                    break;
+                }
+                for i in 0..b.len() {
+                    let n = b.first_sample + i as u64;
+                    if n < start {
+                        continue;
+                    }
+                    window_first.get_or_insert(n);
+                    fit.push(n, (0..nch).map(|c| b.volts[i * nch + c] as f64 / sens[c]));
+                }
+                if fault && window_first.is_some() {
+                    break;
+                }
+            }
+            if stop.is_set() {
+                break None;
+            }
+            if fault {
+                retries += 1;
+                event(session, "retry", Some(step), Some(f), format!("stream fault during the measurement window; re-measuring (attempt {retries})"))?;
+                if retries > plan.max_retries {
+                    return Err(SweepError::Daq(DaqError::Protocol {
+                        port: pump.rig.daq.port().to_string(),
+                        command: "stream".into(),
+                        detail: format!("step {step} ({f:.2} Hz): {retries} measurement windows in a row hit stream faults; check the cable and the DAQ"),
+                    }));
+                }
+                continue;
+            }
+            let Some(est) = fit.solve() else {
+                return Err(SweepError::Plan(format!("step {step}: window of {window} samples is too short at {f} Hz")));
+            };
+            let force = est[force_ch].amplitude;
+            let famp = force.norm();
+            let err = (famp - plan.target_force_n).abs() / plan.target_force_n;
+            if famp > 0.0 {
+                gain = famp / drive;
+            }
+            if err <= plan.force_tolerance || iterations >= plan.max_iterations || famp <= 0.0 {
+                if err > plan.force_tolerance {
+                    event(session, "warning", Some(step), Some(f), format!("force {famp:.1} N not within {:.1} % of {} N after {iterations} corrections", plan.force_tolerance * 100.0, plan.target_force_n))?;
+                }
+                break Some((est, famp, window_first.unwrap_or(start), fit.samples()));
+            }
+            iterations += 1;
+            let new_drive = (plan.target_force_n / gain).min(max_drive);
+            event(session, "force_control", Some(step), Some(f), format!("force {famp:.1} N → drive {drive:.1} N becomes {new_drive:.1} N"))?;
+            drive = new_drive;
+            pump.rig.shaker.set_force(drive).await?;
+        };
+        let Some((est, famp, first_sample, samples)) = result else {
+            outcome.stopped = true;
+            break;
+        };
+        let force = est[force_ch].amplitude;
+        let channels = pump
+            .rig
+            .stand
+            .channels
+            .iter()
+            .zip(&est)
+            .map(|(c, e)| {
+                let h = e.amplitude / force;
+                ChannelResult { name: c.name.clone(), amplitude: e.amplitude.norm(), phase_rad: h.arg(), frf_re: h.re, frf_im: h.im, fit_quality: e.quality }
+            })
+            .collect::<Vec<_>>();
+        let quality = channels.iter().map(|c| c.fit_quality).fold(1.0, f64::min);
+        let res = StepResult { step, frequency_hz: f, drive_n: drive, force_amplitude_n: famp, first_sample, samples, iterations, channels };
+        session.log(Topic::SweepStep, &res)?;
+        event(session, "step_completed", Some(step), Some(f), format!("force {famp:.1} N, {iterations} corrections"))?;
+        session.check()?;
+        progress.step(step, f, famp, quality);
+        outcome.steps.push(res);
+    }
+    outcome.faults = pump.faults;
+    Ok(outcome)
+}
+
+/// A broadband measurement.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Broadband {
+    /// Random, burst random or chirp (a sine is refused).
+    pub waveform: Waveform,
+    /// Force: RMS for random/burst, peak for chirp (N).
+    pub force_n: f64,
+    /// Periods averaged.
+    pub averages: u32,
+    /// Periods discarded first to let the structure settle.
+    pub settle_periods: u32,
+}
+
+/// Result of a broadband run: H1 estimates over the band (per N) and their coherence.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct BroadbandResult {
+    /// Frequencies (Hz).
+    pub freqs_hz: Vec<f64>,
+    /// Per channel (stand order), H1 = S_xF / S_FF per frequency.
+    pub h1: Vec<Vec<Complex<f64>>>,
+    /// Per channel, ordinary coherence per frequency.
+    pub coherence: Vec<Vec<f64>>,
+    /// Averages used.
+    pub averages: u32,
+    /// True if stopped early.
+    pub stopped: bool,
+}
+
+/// Runs a broadband measurement: drives the waveform and averages whole periods (the simulated
+/// and most real controllers repeat it with `period_s`). Every block is recorded.
+pub async fn broadband(
+    rig: &mut Rig,
+    plan: &Broadband,
+    session: &SessionHandle,
+    progress: &dyn SweepProgress,
+    stop: &StopSignal,
+) -> Result<BroadbandResult, SweepError> {
+    let (lo, hi, period) = match plan.waveform {
+        Waveform::Random { f_lo_hz, f_hi_hz } => (f_lo_hz, f_hi_hz, 1.0),
+        Waveform::BurstRandom { f_lo_hz, f_hi_hz, period_s, .. } | Waveform::Chirp { f_lo_hz, f_hi_hz, period_s } => (f_lo_hz, f_hi_hz, period_s),
+        Waveform::Sine => return Err(SweepError::Plan("broadband needs random, burst random or chirp".into())),
+    };
+    if plan.averages == 0 || !(plan.force_n > 0.0) || plan.force_n > rig.stand.shaker.max_force_n {
+        return Err(SweepError::Plan("broadband needs ≥ 1 average and 0 < force ≤ shaker.max_force".into()));
+    }
+    event(session, "started", None, None, format!("broadband {:?}, {} averages", plan.waveform, plan.averages))?;
+    progress.start(plan.averages as u64, 0);
+    let r = broadband_inner(rig, plan, (lo, hi, period), session, progress, stop).await;
+    let off = rig.shaker.set_output(false).await;
+    let _ = rig.daq.stop().await;
+    match &r {
+        Ok(o) if o.stopped => event(session, "stopped", None, None, "operator stop")?,
+        Ok(_) => event(session, "completed", None, None, "all averages measured")?,
+        Err(e) => event(session, "error", None, None, e.to_string())?,
+    }
+    progress.finish(if r.is_ok() { "done" } else { "failed" });
+    let o = r?;
+    off?;
+    Ok(o)
+}
+
+async fn broadband_inner(
+    rig: &mut Rig,
+    plan: &Broadband,
+    (lo, hi, period): (f64, f64, f64),
+    session: &SessionHandle,
+    progress: &dyn SweepProgress,
+    stop: &StopSignal,
+) -> Result<BroadbandResult, SweepError> {
+    let fs = rig.stream.sample_rate_hz;
+    let nch = rig.stand.channels.len();
+    let fc = rig.stand.force_channel();
+    let sens: Vec<f64> = rig.stand.channels.iter().map(|c| c.sensitivity).collect();
+    let n = (period * fs).round() as usize;
+    if n < 16 {
+        return Err(SweepError::Plan("period too short for the sample rate".into()));
+    }
+    rig.shaker.set_waveform(&plan.waveform).await?;
+    rig.shaker.set_force(plan.force_n).await?;
+    rig.shaker.set_output(true).await?;
+    rig.daq.start().await?;
+    let fft = rustfft::FftPlanner::<f64>::new().plan_fft_forward(n);
+    let df = fs / n as f64;
+    let bins: Vec<usize> = (1..n / 2).filter(|k| (*k as f64 * df) >= lo && (*k as f64 * df) <= hi).collect();
+    let mut sxf = vec![vec![Complex::new(0.0, 0.0); bins.len()]; nch];
+    let mut sxx = vec![vec![0.0; bins.len()]; nch];
+    let mut bufs = vec![vec![Complex::new(0.0, 0.0); n]; nch];
+    let mut pump = Pump { rig, session, faults: 0, last_fault_sample: None, next_sample: 0 };
+    let mut done = 0u32;
+    let mut stopped = false;
+    // Periods are aligned to the waveform's period in samples from START.
+    let mut period_index = 0u64;
+    let mut filled = 0usize;
+    let mut fault = false;
+    while done < plan.averages {
+        if stop.is_set() {
+            stopped = true;
+            break;
+        }
+        let b = pump.next(&mut fault).await?;
+        for i in 0..b.len() {
+            let s = b.first_sample + i as u64;
+            let p = s / n as u64;
+            if p != period_index {
+                period_index = p;
+                filled = 0;
+                fault = false;
+            }
+            if p < plan.settle_periods as u64 {
+                continue;
+            }
+            let k = (s % n as u64) as usize;
+            if k != filled {
+                continue; // a gap: this period is incomplete
+            }
+            for c in 0..nch {
+                bufs[c][k] = Complex::new(b.volts[i * nch + c] as f64 / sens[c], 0.0);
+            }
+            filled += 1;
+            if filled == n && !fault {
+                for buf in bufs.iter_mut() {
+                    fft.process(buf);
+                }
+                for c in 0..nch {
+                    for (j, &k) in bins.iter().enumerate() {
+                        sxf[c][j] += bufs[c][k] * bufs[fc][k].conj();
+                        sxx[c][j] += bufs[c][k].norm_sqr();
+                    }
+                }
+                done += 1;
+                let coh = mean_coherence(&sxf, &sxx, fc);
+                event(session, "average", Some(done as usize), None, format!("mean coherence {coh:.3}"))?;
+                progress.step(done as usize - 1, hi, plan.force_n, coh);
+                if done >= plan.averages {
+                    break;
+                }
+            }
+        }
+    }
+    let h1 = (0..nch).map(|c| (0..bins.len()).map(|j| sxf[c][j] / sxx[fc][j]).collect()).collect();
+    let coherence = (0..nch)
+        .map(|c| (0..bins.len()).map(|j| sxf[c][j].norm_sqr() / (sxx[c][j] * sxx[fc][j]).max(f64::MIN_POSITIVE)).collect())
+        .collect();
+    Ok(BroadbandResult { freqs_hz: bins.iter().map(|k| *k as f64 * df).collect(), h1, coherence, averages: done, stopped })
+}
+
+fn mean_coherence(sxf: &[Vec<Complex<f64>>], sxx: &[Vec<f64>], fc: usize) -> f64 {
+    let mut sum = 0.0;
+    let mut k = 0usize;
+    for c in (0..sxf.len()).filter(|c| *c != fc) {
+        for j in 0..sxf[c].len() {
+            sum += sxf[c][j].norm_sqr() / (sxx[c][j] * sxx[fc][j]).max(f64::MIN_POSITIVE);
+            k += 1;
+        }
+    }
+    if k == 0 {
+        0.0
+    } else {
+        sum / k as f64
+    }
+}

@@ -1,0 +1,444 @@
+//! Measured data for identification: reading [`MeasuredData`] from JSON or CSV (format in
+//! `docs/identification.md`), and validating it against a model into [`Observations`].
+//!
+//! Parsing is I/O-free (`parse_json`, `parse_csv` take the text and its origin for messages);
+//! [`load`] reads a file and picks the form (JSON when the text starts with `{`).
+
+use std::collections::BTreeMap;
+use std::path::Path;
+
+use crate::measured::{MeasuredData, Measurement, QuantityName};
+use crate::model::{Characteristic, Model, Quantity, DOF_NAMES};
+
+/// Why measured data could not be read or used.
+#[derive(Debug, thiserror::Error)]
+pub enum DataError {
+    /// The file could not be read.
+    #[error("{path}: cannot read the data file: {source}")]
+    Io {
+        /// File.
+        path: String,
+        /// Cause.
+        source: std::io::Error,
+    },
+    /// A JSON syntax or structure error.
+    #[error("{origin}: at {path}: {message}")]
+    Json {
+        /// File.
+        origin: String,
+        /// JSON path, e.g. `$.characteristics[0].amplitude`.
+        path: String,
+        /// What is wrong and how to fix it.
+        message: String,
+    },
+    /// A CSV error at a line.
+    #[error("{origin}:{line}: {message}")]
+    Csv {
+        /// File.
+        origin: String,
+        /// 1-based line.
+        line: usize,
+        /// What is wrong and how to fix it.
+        message: String,
+    },
+    /// A value that cannot be used, located by item (JSON path or characteristic and point).
+    #[error("{origin}: {item}: {message}")]
+    Invalid {
+        /// File.
+        origin: String,
+        /// e.g. `$.characteristics[1] (table u2 displacement), point 7 (112.5 Hz)`.
+        item: String,
+        /// What is wrong and how to fix it.
+        message: String,
+    },
+}
+
+/// Reads a data file: JSON ([`MeasuredData`]) when the text starts with `{`, CSV otherwise.
+pub fn load(path: &Path) -> Result<MeasuredData, DataError> {
+    let text = std::fs::read_to_string(path).map_err(|source| DataError::Io {
+        path: path.display().to_string(),
+        source,
+    })?;
+    let origin = path.display().to_string();
+    if text.trim_start().starts_with('{') {
+        parse_json(&text, &origin)
+    } else {
+        parse_csv(&text, &origin)
+    }
+}
+
+/// Parses the JSON form (the [`MeasuredData`] serialization).
+pub fn parse_json(text: &str, origin: &str) -> Result<MeasuredData, DataError> {
+    let de = &mut serde_json::Deserializer::from_str(text);
+    serde_path_to_error::deserialize(de).map_err(|e| {
+        let inner = e.inner();
+        DataError::Json {
+            origin: origin.into(),
+            path: format!("$.{}", e.path()).replace("$.?", "$").replace(".[", "["),
+            message: format!(
+                "{inner} (line {}, column {}); see docs/identification.md for the format",
+                inner.line(),
+                inner.column()
+            ),
+        }
+    })
+}
+
+/// Columns of the CSV form, in the order [`to_csv`] writes them.
+pub const CSV_COLUMNS: [&str; 9] = [
+    "body",
+    "dof",
+    "quantity",
+    "freq_hz",
+    "amplitude",
+    "phase_rad",
+    "variance",
+    "coherence",
+    "averages",
+];
+
+/// Parses the CSV form: a header naming the columns (any order; `body`, `dof`, `freq_hz`,
+/// `amplitude` required; `quantity` defaults to displacement; `phase_rad`, `variance`,
+/// `coherence`, `averages` optional), one row per point. Lines starting with `#` and empty
+/// lines are skipped. Rows of a characteristic may come in any order; they are sorted by
+/// frequency, and a repeated frequency is an error naming both lines.
+pub fn parse_csv(text: &str, origin: &str) -> Result<MeasuredData, DataError> {
+    let err = |line: usize, message: String| DataError::Csv { origin: origin.into(), line, message };
+    let mut lines = text
+        .lines()
+        .enumerate()
+        .map(|(i, l)| (i + 1, l.trim()))
+        .filter(|(_, l)| !l.is_empty() && !l.starts_with('#'));
+    let Some((hline, header)) = lines.next() else {
+        return Err(err(1, "empty file: expected a header line, e.g. `body,dof,quantity,freq_hz,amplitude`".into()));
+    };
+    let names: Vec<String> = header.split(',').map(|s| s.trim().to_ascii_lowercase()).collect();
+    let mut col: BTreeMap<&str, usize> = BTreeMap::new();
+    for (i, n) in names.iter().enumerate() {
+        let Some(known) = CSV_COLUMNS.iter().find(|c| **c == n.as_str()) else {
+            return Err(err(hline, format!("unknown column \"{n}\"; known columns: {}", CSV_COLUMNS.join(", "))));
+        };
+        if col.insert(known, i).is_some() {
+            return Err(err(hline, format!("column \"{n}\" appears twice")));
+        }
+    }
+    for required in ["body", "dof", "freq_hz", "amplitude"] {
+        if !col.contains_key(required) {
+            return Err(err(hline, format!("missing column \"{required}\"; the header needs at least body, dof, freq_hz, amplitude")));
+        }
+    }
+    struct Row {
+        line: usize,
+        freq: f64,
+        amp: f64,
+        phase: Option<f64>,
+        var: Option<f64>,
+        coh: Option<f64>,
+        avg: Option<u32>,
+    }
+    // Characteristics in order of first appearance.
+    let mut order: Vec<(String, u8, QuantityName)> = Vec::new();
+    let mut rows: Vec<Vec<Row>> = Vec::new();
+    for (ln, l) in lines {
+        let cells: Vec<&str> = l.split(',').map(str::trim).collect();
+        if cells.len() != names.len() {
+            return Err(err(ln, format!("{} cells, but the header has {} columns", cells.len(), names.len())));
+        }
+        let cell = |name: &str| col.get(name).map(|&i| cells[i]).filter(|c| !c.is_empty());
+        let number = |name: &str| -> Result<Option<f64>, DataError> {
+            match cell(name) {
+                None => Ok(None),
+                Some(c) => c.parse::<f64>().map(Some).map_err(|_| {
+                    err(ln, format!("column {name}: \"{c}\" is not a number"))
+                }),
+            }
+        };
+        let body = cell("body").ok_or_else(|| err(ln, "empty body name".into()))?.to_string();
+        let dof_text = cell("dof").ok_or_else(|| err(ln, "empty dof; use u1, u2, u3, r1, r2, r3".into()))?;
+        let dof = parse_dof(dof_text).ok_or_else(|| {
+            err(ln, format!("unknown dof \"{dof_text}\"; use u1, u2, u3 (translations) or r1, r2, r3 (rotations), or 0-5"))
+        })?;
+        let quantity = match cell("quantity") {
+            None => QuantityName::Displacement,
+            Some(q) => Quantity::parse(q).map(QuantityName::from).ok_or_else(|| {
+                err(ln, format!("unknown quantity \"{q}\"; use displacement, velocity or acceleration"))
+            })?,
+        };
+        let freq = number("freq_hz")?.ok_or_else(|| err(ln, "empty freq_hz".into()))?;
+        let amp = number("amplitude")?.ok_or_else(|| err(ln, "empty amplitude".into()))?;
+        let avg = match cell("averages") {
+            None => None,
+            Some(c) => Some(c.parse::<u32>().map_err(|_| {
+                err(ln, format!("column averages: \"{c}\" is not a whole number"))
+            })?),
+        };
+        let row = Row {
+            line: ln,
+            freq,
+            amp,
+            phase: number("phase_rad")?,
+            var: number("variance")?,
+            coh: number("coherence")?,
+            avg,
+        };
+        let key = (body, dof, quantity);
+        match order.iter().position(|k| *k == key) {
+            Some(i) => rows[i].push(row),
+            None => {
+                order.push(key);
+                rows.push(vec![row]);
+            }
+        }
+    }
+    if order.is_empty() {
+        return Err(err(hline, "no data rows after the header".into()));
+    }
+    let mut characteristics = Vec::new();
+    for ((body, dof, quantity), mut pts) in order.into_iter().zip(rows) {
+        pts.sort_by(|a, b| a.freq.total_cmp(&b.freq));
+        for w in pts.windows(2) {
+            if w[0].freq == w[1].freq {
+                return Err(err(w[1].line, format!(
+                    "{body} {}: frequency {} Hz repeats line {}; each characteristic needs distinct frequencies (average or drop the repeat)",
+                    DOF_NAMES[dof as usize], w[1].freq, w[0].line
+                )));
+            }
+        }
+        let all_or_none = |what: &str, has: &dyn Fn(&Row) -> bool| -> Result<bool, DataError> {
+            let n = pts.iter().filter(|r| has(r)).count();
+            if n != 0 && n != pts.len() {
+                let missing = pts.iter().find(|r| !has(r)).map(|r| r.line).unwrap_or(hline);
+                return Err(err(missing, format!(
+                    "{body} {}: column {what} is given for some points of this characteristic but not this one; give it for every point or none",
+                    DOF_NAMES[dof as usize]
+                )));
+            }
+            Ok(n > 0)
+        };
+        let has_phase = all_or_none("phase_rad", &|r| r.phase.is_some())?;
+        let has_var = all_or_none("variance", &|r| r.var.is_some())?;
+        let has_coh = all_or_none("coherence", &|r| r.coh.is_some())?;
+        let has_avg = all_or_none("averages", &|r| r.avg.is_some())?;
+        let averages = if has_avg {
+            let a = pts[0].avg;
+            if let Some(r) = pts.iter().find(|r| r.avg != a) {
+                return Err(err(r.line, format!(
+                    "{body} {}: averages differ between points of one characteristic ({:?} vs {:?}); one number of averages per characteristic",
+                    DOF_NAMES[dof as usize], r.avg.unwrap_or(0), a.unwrap_or(0)
+                )));
+            }
+            a
+        } else {
+            None
+        };
+        characteristics.push(Measurement {
+            body,
+            dof,
+            quantity,
+            freqs_hz: pts.iter().map(|r| r.freq).collect(),
+            amplitude: pts.iter().map(|r| r.amp).collect(),
+            phase_rad: has_phase.then(|| pts.iter().map(|r| r.phase.unwrap_or(f64::NAN)).collect()),
+            variance: has_var.then(|| pts.iter().map(|r| r.var.unwrap_or(f64::NAN)).collect()),
+            coherence: has_coh.then(|| pts.iter().map(|r| r.coh.unwrap_or(f64::NAN)).collect()),
+            averages,
+        });
+    }
+    Ok(MeasuredData { source: origin.to_string(), characteristics })
+}
+
+fn parse_dof(s: &str) -> Option<u8> {
+    if let Some(i) = DOF_NAMES.iter().position(|n| *n == s) {
+        return Some(i as u8);
+    }
+    s.parse::<u8>().ok().filter(|d| *d < 6)
+}
+
+/// Writes the CSV form (every column of [`CSV_COLUMNS`]; empty cells where a value is absent).
+/// `parse_csv(&to_csv(d))` gives `d` back (up to the `source` text).
+pub fn to_csv(data: &MeasuredData) -> String {
+    let mut s = String::new();
+    s.push_str(&CSV_COLUMNS.join(","));
+    s.push('\n');
+    let opt = |v: &Option<Vec<f64>>, k: usize| v.as_ref().map(|v| format!("{:?}", v[k])).unwrap_or_default();
+    for m in &data.characteristics {
+        for k in 0..m.freqs_hz.len() {
+            let dof = DOF_NAMES.get(m.dof as usize).copied().unwrap_or("?");
+            s.push_str(&format!(
+                "{},{},{},{:?},{:?},{},{},{},{}\n",
+                m.body,
+                dof,
+                Quantity::from(m.quantity).as_str(),
+                m.freqs_hz[k],
+                m.amplitude.get(k).copied().unwrap_or(f64::NAN),
+                opt(&m.phase_rad, k),
+                opt(&m.variance, k),
+                opt(&m.coherence, k),
+                m.averages.map(|a| a.to_string()).unwrap_or_default()
+            ));
+        }
+    }
+    s
+}
+
+/// One validated characteristic, ready for fitting.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Observed {
+    /// The characteristic (body index resolved in the model).
+    pub characteristic: Characteristic,
+    /// Index among the model's output characteristics.
+    pub output: usize,
+    /// `"table u1 displacement"`.
+    pub label: String,
+    /// Frequencies (Hz), strictly increasing.
+    pub freqs_hz: Vec<f64>,
+    /// Measured amplitudes |z| (SI), ≥ 0.
+    pub amplitude: Vec<f64>,
+    /// Measured phases (rad), if any.
+    pub phase_rad: Option<Vec<f64>>,
+    /// Complex variances E|z − z_true|² (SI²), if any.
+    pub variance: Option<Vec<f64>>,
+    /// Coherence γ² per point, if any.
+    pub coherence: Option<Vec<f64>>,
+    /// Number of averages, if known.
+    pub averages: Option<u32>,
+}
+
+/// Measured data validated against a model.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Observations {
+    /// Where the data came from (file name), for messages.
+    pub origin: String,
+    /// The characteristics, in file order.
+    pub characteristics: Vec<Observed>,
+}
+
+impl Observations {
+    /// Number of measured points over all characteristics.
+    pub fn points(&self) -> usize {
+        self.characteristics.iter().map(|c| c.freqs_hz.len()).sum()
+    }
+}
+
+/// Validates measured data against a model: every characteristic must be one of the model's
+/// outputs (the body known), appear once, and have equally long, finite arrays with strictly
+/// increasing non-negative frequencies, non-negative amplitudes, positive variances, coherences
+/// in (0, 1] and at least one average. Errors name `origin`, the characteristic and the point.
+pub fn validate(data: &MeasuredData, model: &Model, origin: &str) -> Result<Observations, DataError> {
+    let mut out = Vec::new();
+    if data.characteristics.is_empty() {
+        return Err(DataError::Invalid {
+            origin: origin.into(),
+            item: "$.characteristics".into(),
+            message: "no characteristics; the data file must hold at least one".into(),
+        });
+    }
+    for (i, m) in data.characteristics.iter().enumerate() {
+        let dof_name = DOF_NAMES.get(m.dof as usize).copied().unwrap_or("?");
+        let item = format!("$.characteristics[{i}] ({} {dof_name} {})", m.body, Quantity::from(m.quantity).as_str());
+        let bad = |message: String| DataError::Invalid { origin: origin.into(), item: item.clone(), message };
+        let bad_point = |k: usize, message: String| DataError::Invalid {
+            origin: origin.into(),
+            item: format!("{item}, point {k} ({} Hz)", m.freqs_hz.get(k).copied().unwrap_or(f64::NAN)),
+            message,
+        };
+        if model.body_index(&m.body).is_none() {
+            let known: Vec<&str> = model.bodies.iter().map(|b| b.name.as_str()).collect();
+            return Err(bad(format!("unknown body \"{}\"; the model's bodies: {}", m.body, known.join(", "))));
+        }
+        let Some(c) = m.resolve(model) else {
+            return Err(bad(format!("dof {} is out of range; use 0-5 (u1 u2 u3 r1 r2 r3)", m.dof)));
+        };
+        let Some(output) = model.outputs.iter().position(|o| *o == c) else {
+            let outs: Vec<String> = model.outputs.iter().map(|o| model.characteristic_label(*o)).collect();
+            return Err(bad(format!(
+                "this characteristic is not among the model's outputs ({}); add it as an [[output]] of the model or drop it from the data",
+                if outs.is_empty() { "none".to_string() } else { outs.join(", ") }
+            )));
+        };
+        if out.iter().any(|o: &Observed| o.characteristic == c) {
+            return Err(bad("this characteristic appears twice; merge the two entries".into()));
+        }
+        let n = m.freqs_hz.len();
+        if n == 0 {
+            return Err(bad("no points".into()));
+        }
+        let lens: [(&str, Option<usize>); 4] = [
+            ("amplitude", Some(m.amplitude.len())),
+            ("phase_rad", m.phase_rad.as_ref().map(Vec::len)),
+            ("variance", m.variance.as_ref().map(Vec::len)),
+            ("coherence", m.coherence.as_ref().map(Vec::len)),
+        ];
+        for (name, len) in lens {
+            if let Some(len) = len {
+                if len != n {
+                    return Err(bad(format!("{name} has {len} values but freqs_hz has {n}; one value per frequency")));
+                }
+            }
+        }
+        for k in 0..n {
+            let f = m.freqs_hz[k];
+            if !f.is_finite() || f < 0.0 {
+                return Err(bad_point(k, format!("frequency {f} is not a finite, non-negative number")));
+            }
+            if k > 0 {
+                let prev = m.freqs_hz[k - 1];
+                if f == prev {
+                    return Err(bad_point(k, format!("frequency {f} Hz repeats point {}; frequencies must be distinct", k - 1)));
+                }
+                if f < prev {
+                    return Err(bad_point(k, format!("frequency {f} Hz is below the previous one ({prev} Hz); frequencies must increase")));
+                }
+            }
+            let a = m.amplitude[k];
+            if !a.is_finite() {
+                return Err(bad_point(k, format!("amplitude is {a}; every amplitude must be a finite number")));
+            }
+            if a < 0.0 {
+                return Err(bad_point(k, format!("amplitude {a} is negative; amplitudes are moduli |z| ≥ 0 (put the sign into phase_rad)")));
+            }
+            if let Some(p) = &m.phase_rad {
+                if !p[k].is_finite() {
+                    return Err(bad_point(k, format!("phase_rad is {}; must be finite", p[k])));
+                }
+            }
+            if let Some(v) = &m.variance {
+                if !(v[k].is_finite() && v[k] > 0.0) {
+                    return Err(bad_point(k, format!("variance {} must be a finite number > 0", v[k])));
+                }
+            }
+            if let Some(g) = &m.coherence {
+                if !(g[k] > 0.0 && g[k] <= 1.0) {
+                    return Err(bad_point(k, format!("coherence {} must lie in (0, 1]", g[k])));
+                }
+            }
+        }
+        if m.averages == Some(0) {
+            return Err(bad("averages is 0; at least one average".into()));
+        }
+        out.push(Observed {
+            characteristic: c,
+            output,
+            label: model.characteristic_label(c),
+            freqs_hz: m.freqs_hz.clone(),
+            amplitude: m.amplitude.clone(),
+            phase_rad: m.phase_rad.clone(),
+            variance: m.variance.clone(),
+            coherence: m.coherence.clone(),
+            averages: m.averages,
+        });
+    }
+    Ok(Observations { origin: origin.into(), characteristics: out })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn csv_dof_names_and_indices() {
+        assert_eq!(parse_dof("u2"), Some(1));
+        assert_eq!(parse_dof("5"), Some(5));
+        assert_eq!(parse_dof("6"), None);
+        assert_eq!(parse_dof("x"), None);
+    }
+}

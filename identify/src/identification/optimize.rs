@@ -1,0 +1,662 @@
+//! Bounded minimizers of `J(u) = ½‖e(u)‖²` over a box, in scaled variables `u = x / x_scale`:
+//!
+//! - [`Optimizer::LevenbergMarquardt`] (default): a damped Gauss-Newton (trust-region) step on the
+//!   free variables, projected onto the bounds, accepted when the actual decrease is a fair share
+//!   of the predicted one (Nielsen's damping update, Marquardt's diagonal scaling);
+//! - [`Optimizer::GaussNewton`]: the paper's eq. 4.12-4.13, `d = (HᵀR⁻¹H)⁻¹HᵀR⁻¹(z − q)` (solved
+//!   by SVD, so a rank-deficient `H` still gives a step) with a backtracking (Armijo) line search
+//!   along the projected path;
+//! - [`Optimizer::Bfgs`]: variable metric (BFGS update of the inverse Hessian, the paper's
+//!   Wolfe-Broyden-Davidon family) with a strong-Wolfe line search, bounded by an active set.
+//!
+//! A variable at a bound whose gradient pushes it outward is held there (it is "active"); the
+//! others are free. Every method stops on the gradient test (the largest cosine between the
+//! residual and a free Jacobian column, as MINPACK), a small step, a small relative decrease, or
+//! the iteration limit, and says which.
+
+use nalgebra::{DMatrix, DVector};
+
+/// The minimizer.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Optimizer {
+    /// Bounded Levenberg-Marquardt (robust default).
+    #[default]
+    LevenbergMarquardt,
+    /// Gauss-Newton with line search (paper eq. 4.12-4.13).
+    GaussNewton,
+    /// BFGS variable metric with a Wolfe line search.
+    Bfgs,
+}
+
+impl Optimizer {
+    /// Name for reports.
+    pub fn as_str(&self) -> &'static str {
+        match self {
+            Optimizer::LevenbergMarquardt => "levenberg-marquardt",
+            Optimizer::GaussNewton => "gauss-newton",
+            Optimizer::Bfgs => "bfgs",
+        }
+    }
+}
+
+/// Stopping tolerances.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Settings {
+    /// Maximum number of iterations.
+    pub max_iterations: usize,
+    /// Step test: `‖Δu‖ ≤ step_tol (‖u‖ + step_tol)`.
+    pub step_tol: f64,
+    /// Gradient test: `max_i |J_iᵀe| / (‖J_i‖ ‖e‖) ≤ gradient_tol` over free variables.
+    pub gradient_tol: f64,
+    /// Criterion test: `J_old − J_new ≤ criterion_tol · J_old` on an accepted step.
+    pub criterion_tol: f64,
+}
+
+impl Default for Settings {
+    fn default() -> Settings {
+        Settings { max_iterations: 100, step_tol: 1e-9, gradient_tol: 1e-8, criterion_tol: 1e-12 }
+    }
+}
+
+/// Why the minimizer stopped.
+#[derive(Debug, Clone, PartialEq)]
+pub enum StopReason {
+    /// The gradient test passed: converged.
+    GradientTolerance,
+    /// The step became negligible: converged.
+    StepTolerance,
+    /// The relative decrease of J became negligible: converged.
+    CriterionTolerance,
+    /// No step along the search direction decreases J any more (at the limit of precision):
+    /// the best point is kept, treated as converged.
+    NoFurtherDecrease,
+    /// The iteration limit was reached before convergence.
+    IterationLimit,
+    /// The model could not be evaluated (e.g. it became singular) or J is not finite.
+    Diverged(String),
+}
+
+impl StopReason {
+    /// True for the converged outcomes.
+    pub fn converged(&self) -> bool {
+        matches!(
+            self,
+            StopReason::GradientTolerance
+                | StopReason::StepTolerance
+                | StopReason::CriterionTolerance
+                | StopReason::NoFurtherDecrease
+        )
+    }
+
+    /// A sentence for reports.
+    pub fn describe(&self) -> String {
+        match self {
+            StopReason::GradientTolerance => "converged: gradient tolerance".into(),
+            StopReason::StepTolerance => "converged: step tolerance".into(),
+            StopReason::CriterionTolerance => "converged: criterion change tolerance".into(),
+            StopReason::NoFurtherDecrease => {
+                "converged: no further decrease possible along the search direction".into()
+            }
+            StopReason::IterationLimit => {
+                "NOT converged: iteration limit reached (the best point is kept; raise --max-iterations or start closer)".into()
+            }
+            StopReason::Diverged(m) => format!("NOT converged: diverged ({m}); the best point is kept"),
+        }
+    }
+}
+
+/// One progress line.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Progress {
+    /// Iteration number (1-based).
+    pub iteration: usize,
+    /// Criterion J after the iteration.
+    pub criterion: f64,
+    /// Norm of the step in scaled variables.
+    pub step_norm: f64,
+    /// Norm of the projected gradient of J in scaled variables.
+    pub gradient_norm: f64,
+}
+
+/// What a minimizer needs: whitened residuals and, on request, their Jacobian in scaled
+/// variables. An `Err` means the model cannot be evaluated at that point.
+pub trait Residuals {
+    /// `e(u)` and `∂e/∂u` if `jacobian`.
+    fn eval(&mut self, u: &DVector<f64>, jacobian: bool) -> Result<(DVector<f64>, Option<DMatrix<f64>>), String>;
+    /// True when the Jacobian costs little more than the residuals (analytic): trial points are
+    /// then evaluated with it.
+    fn cheap_jacobian(&self) -> bool;
+}
+
+/// The result of one minimization.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Outcome {
+    /// Best point (scaled).
+    pub u: DVector<f64>,
+    /// J at `u`.
+    pub criterion: f64,
+    /// Iterations done.
+    pub iterations: usize,
+    /// Why it stopped.
+    pub stop: StopReason,
+}
+
+struct State {
+    u: DVector<f64>,
+    e: DVector<f64>,
+    jac: DMatrix<f64>,
+    cost: f64,
+    g: DVector<f64>,
+}
+
+fn state(obj: &mut dyn Residuals, u: DVector<f64>) -> Result<State, String> {
+    let (e, jac) = obj.eval(&u, true)?;
+    let jac = jac.ok_or("the Jacobian was not computed")?;
+    let cost = 0.5 * e.norm_squared();
+    if !cost.is_finite() || jac.iter().any(|v| !v.is_finite()) {
+        return Err("the criterion or its Jacobian is not finite".into());
+    }
+    let g = jac.tr_mul(&e);
+    Ok(State { u, e, jac, cost, g })
+}
+
+fn clamp(u: &DVector<f64>, lo: &DVector<f64>, hi: &DVector<f64>) -> DVector<f64> {
+    DVector::from_fn(u.len(), |i, _| u[i].max(lo[i]).min(hi[i]))
+}
+
+/// Free variables: not at a bound that the gradient pushes against.
+fn free_set(u: &DVector<f64>, g: &DVector<f64>, lo: &DVector<f64>, hi: &DVector<f64>) -> Vec<bool> {
+    (0..u.len()).map(|i| !((u[i] <= lo[i] && g[i] > 0.0) || (u[i] >= hi[i] && g[i] < 0.0))).collect()
+}
+
+fn projected_norm(g: &DVector<f64>, free: &[bool]) -> f64 {
+    g.iter().zip(free).filter(|(_, f)| **f).map(|(x, _)| x * x).sum::<f64>().sqrt()
+}
+
+fn gradient_converged(s: &State, free: &[bool], tol: f64) -> bool {
+    let en = s.e.norm();
+    if en == 0.0 {
+        return true;
+    }
+    (0..s.u.len()).filter(|&i| free[i]).all(|i| {
+        let cn = s.jac.column(i).norm();
+        cn == 0.0 || s.g[i].abs() / (cn * en) <= tol
+    })
+}
+
+fn step_small(step: f64, u: &DVector<f64>, tol: f64) -> bool {
+    step <= tol * (u.norm() + tol)
+}
+
+/// Minimizes from `u0` (clamped into the box) with the chosen method. `Err` only when the model
+/// cannot be evaluated at the starting point.
+pub fn minimize(
+    method: Optimizer,
+    obj: &mut dyn Residuals,
+    u0: &DVector<f64>,
+    lo: &DVector<f64>,
+    hi: &DVector<f64>,
+    settings: &Settings,
+    progress: &mut dyn FnMut(&Progress),
+) -> Result<Outcome, String> {
+    let s0 = state(obj, clamp(u0, lo, hi))?;
+    Ok(match method {
+        Optimizer::LevenbergMarquardt => levenberg_marquardt(obj, s0, lo, hi, settings, progress),
+        Optimizer::GaussNewton => gauss_newton(obj, s0, lo, hi, settings, progress),
+        Optimizer::Bfgs => bfgs(obj, s0, lo, hi, settings, progress),
+    })
+}
+
+fn outcome(s: &State, iterations: usize, stop: StopReason) -> Outcome {
+    Outcome { u: s.u.clone(), criterion: s.cost, iterations, stop }
+}
+
+/// Evaluates a trial point: the full state if the Jacobian is cheap, residuals only otherwise.
+fn trial(obj: &mut dyn Residuals, u: DVector<f64>) -> Result<(f64, Option<State>, DVector<f64>), String> {
+    if obj.cheap_jacobian() {
+        let s = state(obj, u.clone())?;
+        Ok((s.cost, Some(s), u))
+    } else {
+        let (e, _) = obj.eval(&u, false)?;
+        let cost = 0.5 * e.norm_squared();
+        if !cost.is_finite() {
+            return Err("the criterion is not finite".into());
+        }
+        Ok((cost, None, u))
+    }
+}
+
+fn complete(obj: &mut dyn Residuals, t: (f64, Option<State>, DVector<f64>)) -> Result<State, String> {
+    match t.1 {
+        Some(s) => Ok(s),
+        None => state(obj, t.2),
+    }
+}
+
+fn levenberg_marquardt(
+    obj: &mut dyn Residuals,
+    mut s: State,
+    lo: &DVector<f64>,
+    hi: &DVector<f64>,
+    set: &Settings,
+    progress: &mut dyn FnMut(&Progress),
+) -> Outcome {
+    let n = s.u.len();
+    let mut diag = vec![0.0f64; n];
+    let mut lambda: Option<f64> = None;
+    let mut nu = 2.0;
+    for it in 1..=set.max_iterations {
+        let a = s.jac.tr_mul(&s.jac);
+        let free = free_set(&s.u, &s.g, lo, hi);
+        if gradient_converged(&s, &free, set.gradient_tol) {
+            return outcome(&s, it - 1, StopReason::GradientTolerance);
+        }
+        let idx: Vec<usize> = (0..n).filter(|&i| free[i]).collect();
+        for i in 0..n {
+            diag[i] = diag[i].max(a[(i, i)]);
+        }
+        let dmax = idx.iter().map(|&i| diag[i]).fold(0.0, f64::max).max(f64::MIN_POSITIVE);
+        let mut lam = lambda.unwrap_or(1e-3 * dmax);
+        let mut tries = 0;
+        let accepted = loop {
+            tries += 1;
+            if tries > 60 || lam > 1e30 * dmax {
+                break None;
+            }
+            let k = idx.len();
+            let mut m = DMatrix::zeros(k, k);
+            let mut rhs = DVector::zeros(k);
+            for (p, &i) in idx.iter().enumerate() {
+                rhs[p] = -s.g[i];
+                for (q, &j) in idx.iter().enumerate() {
+                    m[(p, q)] = a[(i, j)];
+                }
+                m[(p, p)] += lam * diag[i].max(1e-12 * dmax);
+            }
+            let Some(ch) = m.cholesky() else {
+                lam *= nu;
+                nu *= 2.0;
+                continue;
+            };
+            let d = ch.solve(&rhs);
+            let mut un = s.u.clone();
+            for (p, &i) in idx.iter().enumerate() {
+                un[i] += d[p];
+            }
+            let un = clamp(&un, lo, hi);
+            let step = &un - &s.u;
+            let sn = step.norm();
+            if step_small(sn, &s.u, set.step_tol) {
+                return outcome(&s, it - 1, StopReason::StepTolerance);
+            }
+            let pred = -(s.g.dot(&step) + 0.5 * step.dot(&(&a * &step)));
+            match trial(obj, un) {
+                Ok(t) if t.0 < s.cost && pred > 0.0 => {
+                    let rho = (s.cost - t.0) / pred;
+                    if rho > 1e-4 {
+                        lam *= (1.0f64 / 3.0).max(1.0 - (2.0 * rho - 1.0).powi(3));
+                        nu = 2.0;
+                        break Some((t, sn));
+                    }
+                    lam *= nu;
+                    nu *= 2.0;
+                }
+                _ => {
+                    lam *= nu;
+                    nu *= 2.0;
+                }
+            }
+        };
+        lambda = Some(lam);
+        let Some((t, sn)) = accepted else {
+            return outcome(&s, it - 1, StopReason::NoFurtherDecrease);
+        };
+        let old = s.cost;
+        let new = match complete(obj, t) {
+            Ok(ns) => ns,
+            Err(m) => return outcome(&s, it, StopReason::Diverged(m)),
+        };
+        s = new;
+        let free = free_set(&s.u, &s.g, lo, hi);
+        progress(&Progress { iteration: it, criterion: s.cost, step_norm: sn, gradient_norm: projected_norm(&s.g, &free) });
+        if old - s.cost <= set.criterion_tol * old {
+            return outcome(&s, it, StopReason::CriterionTolerance);
+        }
+        if step_small(sn, &s.u, set.step_tol) {
+            return outcome(&s, it, StopReason::StepTolerance);
+        }
+    }
+    let free = free_set(&s.u, &s.g, lo, hi);
+    if gradient_converged(&s, &free, set.gradient_tol) {
+        return outcome(&s, set.max_iterations, StopReason::GradientTolerance);
+    }
+    outcome(&s, set.max_iterations, StopReason::IterationLimit)
+}
+
+/// Gauss-Newton direction on the free variables by SVD (singular values below 1e-12 of the
+/// largest are dropped).
+fn gauss_newton_direction(s: &State, free: &[bool]) -> DVector<f64> {
+    let n = s.u.len();
+    let idx: Vec<usize> = (0..n).filter(|&i| free[i]).collect();
+    let mut d = DVector::zeros(n);
+    if idx.is_empty() {
+        return d;
+    }
+    let jf = DMatrix::from_fn(s.jac.nrows(), idx.len(), |r, c| s.jac[(r, idx[c])]);
+    let svd = jf.svd(true, true);
+    let smax = svd.singular_values.max();
+    let Ok(x) = svd.solve(&(-&s.e), 1e-12 * smax) else {
+        return d;
+    };
+    for (p, &i) in idx.iter().enumerate() {
+        d[i] = x[p];
+    }
+    d
+}
+
+fn gauss_newton(
+    obj: &mut dyn Residuals,
+    mut s: State,
+    lo: &DVector<f64>,
+    hi: &DVector<f64>,
+    set: &Settings,
+    progress: &mut dyn FnMut(&Progress),
+) -> Outcome {
+    for it in 1..=set.max_iterations {
+        let free = free_set(&s.u, &s.g, lo, hi);
+        if gradient_converged(&s, &free, set.gradient_tol) {
+            return outcome(&s, it - 1, StopReason::GradientTolerance);
+        }
+        let mut d = gauss_newton_direction(&s, &free);
+        if s.g.dot(&d) >= 0.0 {
+            d = DVector::from_fn(s.u.len(), |i, _| if free[i] { -s.g[i] } else { 0.0 });
+        }
+        // Backtracking along the projected path u(α) = P(u + α d).
+        let mut alpha = 1.0;
+        let mut accepted = None;
+        for _ in 0..40 {
+            let un = clamp(&(&s.u + &d * alpha), lo, hi);
+            let step = &un - &s.u;
+            let sn = step.norm();
+            if step_small(sn, &s.u, set.step_tol) {
+                return outcome(&s, it - 1, StopReason::StepTolerance);
+            }
+            let slope = s.g.dot(&step);
+            match trial(obj, un) {
+                Ok(t) if t.0 <= s.cost + 1e-4 * slope && t.0 < s.cost => {
+                    accepted = Some((t, sn));
+                    break;
+                }
+                Ok(t) => {
+                    // Minimum of the quadratic through J(0), its slope and J(α), safeguarded.
+                    let den = 2.0 * (t.0 - s.cost - slope);
+                    let q = if den > 0.0 { -slope / den } else { 0.5 };
+                    alpha *= q.clamp(0.1, 0.5);
+                }
+                Err(_) => alpha *= 0.25,
+            }
+        }
+        let Some((t, sn)) = accepted else {
+            return outcome(&s, it - 1, StopReason::NoFurtherDecrease);
+        };
+        let old = s.cost;
+        s = match complete(obj, t) {
+            Ok(ns) => ns,
+            Err(m) => return outcome(&s, it, StopReason::Diverged(m)),
+        };
+        let free = free_set(&s.u, &s.g, lo, hi);
+        progress(&Progress { iteration: it, criterion: s.cost, step_norm: sn, gradient_norm: projected_norm(&s.g, &free) });
+        if old - s.cost <= set.criterion_tol * old {
+            return outcome(&s, it, StopReason::CriterionTolerance);
+        }
+        if step_small(sn, &s.u, set.step_tol) {
+            return outcome(&s, it, StopReason::StepTolerance);
+        }
+    }
+    let free = free_set(&s.u, &s.g, lo, hi);
+    if gradient_converged(&s, &free, set.gradient_tol) {
+        return outcome(&s, set.max_iterations, StopReason::GradientTolerance);
+    }
+    outcome(&s, set.max_iterations, StopReason::IterationLimit)
+}
+
+/// A point on the search line: the state and φ'(α) = ∇J·d there.
+struct LinePoint {
+    alpha: f64,
+    s: State,
+    slope: f64,
+}
+
+fn line_point(
+    obj: &mut dyn Residuals,
+    s: &State,
+    d: &DVector<f64>,
+    alpha: f64,
+    lo: &DVector<f64>,
+    hi: &DVector<f64>,
+) -> Option<LinePoint> {
+    let u = clamp(&(&s.u + d * alpha), lo, hi);
+    let st = state(obj, u).ok()?;
+    let slope = st.g.dot(d);
+    Some(LinePoint { alpha, s: st, slope })
+}
+
+const WOLFE_C1: f64 = 1e-4;
+const WOLFE_C2: f64 = 0.9;
+
+/// The zoom phase of the strong-Wolfe search between `lo_p` (a point satisfying sufficient
+/// decrease, or α = 0 when `None`) and `hi_a`, by safeguarded bisection.
+#[allow(clippy::too_many_arguments)]
+fn zoom(
+    obj: &mut dyn Residuals,
+    s: &State,
+    d: &DVector<f64>,
+    lo: &DVector<f64>,
+    hi: &DVector<f64>,
+    dphi0: f64,
+    mut lo_p: Option<LinePoint>,
+    mut hi_a: f64,
+) -> Option<LinePoint> {
+    let phi0 = s.cost;
+    for _ in 0..30 {
+        let (la, lphi) = lo_p.as_ref().map(|p| (p.alpha, p.s.cost)).unwrap_or((0.0, phi0));
+        let a = la + 0.5 * (hi_a - la);
+        let Some(p) = line_point(obj, s, d, a, lo, hi) else {
+            hi_a = a;
+            continue;
+        };
+        if p.s.cost > phi0 + WOLFE_C1 * a * dphi0 || p.s.cost >= lphi {
+            hi_a = a;
+        } else {
+            if p.slope.abs() <= -WOLFE_C2 * dphi0 {
+                return Some(p);
+            }
+            if p.slope * (hi_a - la) >= 0.0 {
+                hi_a = la;
+            }
+            lo_p = Some(p);
+        }
+        let la = lo_p.as_ref().map(|p| p.alpha).unwrap_or(0.0);
+        if (hi_a - la).abs() <= 1e-14 * la.abs().max(hi_a.abs()) {
+            break;
+        }
+    }
+    lo_p
+}
+
+/// Strong-Wolfe line search (Nocedal & Wright, algorithms 3.5 and 3.6) on `α ∈ (0, α_max]`;
+/// at `α_max` (a bound) the sufficient-decrease condition alone is accepted.
+fn wolfe_search(
+    obj: &mut dyn Residuals,
+    s: &State,
+    d: &DVector<f64>,
+    alpha0: f64,
+    alpha_max: f64,
+    lo: &DVector<f64>,
+    hi: &DVector<f64>,
+) -> Option<LinePoint> {
+    let phi0 = s.cost;
+    let dphi0 = s.g.dot(d);
+    let mut prev: Option<LinePoint> = None;
+    let mut alpha = alpha0.min(alpha_max);
+    for i in 0..30 {
+        let Some(p) = line_point(obj, s, d, alpha, lo, hi) else {
+            // Could not evaluate: treat as too far.
+            return zoom(obj, s, d, lo, hi, dphi0, prev, alpha);
+        };
+        let pphi = prev.as_ref().map(|q| q.s.cost).unwrap_or(phi0);
+        if p.s.cost > phi0 + WOLFE_C1 * alpha * dphi0 || (i > 0 && p.s.cost >= pphi) {
+            return zoom(obj, s, d, lo, hi, dphi0, prev, alpha);
+        }
+        if p.slope.abs() <= -WOLFE_C2 * dphi0 {
+            return Some(p);
+        }
+        if p.slope >= 0.0 {
+            let pa = prev.as_ref().map(|q| q.alpha).unwrap_or(0.0);
+            return zoom(obj, s, d, lo, hi, dphi0, Some(p), pa);
+        }
+        if alpha >= alpha_max {
+            return Some(p);
+        }
+        prev = Some(p);
+        alpha = (2.0 * alpha).min(alpha_max);
+    }
+    prev
+}
+
+fn bfgs(
+    obj: &mut dyn Residuals,
+    mut s: State,
+    lo: &DVector<f64>,
+    hi: &DVector<f64>,
+    set: &Settings,
+    progress: &mut dyn FnMut(&Progress),
+) -> Outcome {
+    let n = s.u.len();
+    let mut hinv = DMatrix::<f64>::identity(n, n);
+    let mut fresh = true;
+    let mut prev_free: Option<Vec<bool>> = None;
+    for it in 1..=set.max_iterations {
+        let free = free_set(&s.u, &s.g, lo, hi);
+        if gradient_converged(&s, &free, set.gradient_tol) {
+            return outcome(&s, it - 1, StopReason::GradientTolerance);
+        }
+        if prev_free.as_ref() != Some(&free) {
+            hinv = DMatrix::identity(n, n);
+            fresh = true;
+        }
+        prev_free = Some(free.clone());
+        let gf = DVector::from_fn(n, |i, _| if free[i] { s.g[i] } else { 0.0 });
+        let mut d = -(&hinv * &gf);
+        for i in 0..n {
+            if !free[i] {
+                d[i] = 0.0;
+            }
+        }
+        if s.g.dot(&d) >= 0.0 {
+            hinv = DMatrix::identity(n, n);
+            fresh = true;
+            d = -gf.clone();
+        }
+        let mut alpha_max = f64::INFINITY;
+        for i in 0..n {
+            if d[i] < 0.0 && lo[i].is_finite() {
+                alpha_max = alpha_max.min((lo[i] - s.u[i]) / d[i]);
+            } else if d[i] > 0.0 && hi[i].is_finite() {
+                alpha_max = alpha_max.min((hi[i] - s.u[i]) / d[i]);
+            }
+        }
+        let alpha_max = alpha_max.max(0.0);
+        let dinf = d.amax();
+        let alpha0 = if fresh { (0.1 / dinf.max(f64::MIN_POSITIVE)).min(1.0) } else { 1.0 };
+        let Some(p) = wolfe_search(obj, &s, &d, alpha0, alpha_max, lo, hi) else {
+            return outcome(&s, it - 1, StopReason::NoFurtherDecrease);
+        };
+        if p.s.cost >= s.cost {
+            return outcome(&s, it - 1, StopReason::NoFurtherDecrease);
+        }
+        let step = &p.s.u - &s.u;
+        let y = DVector::from_fn(n, |i, _| if free[i] { p.s.g[i] - s.g[i] } else { 0.0 });
+        let sy = step.dot(&y);
+        if sy > 1e-12 * step.norm() * y.norm() {
+            if fresh {
+                hinv = DMatrix::identity(n, n) * (sy / y.norm_squared());
+            }
+            let rho = 1.0 / sy;
+            let i_n = DMatrix::<f64>::identity(n, n);
+            let left = &i_n - (&step * y.transpose()) * rho;
+            let right = &i_n - (&y * step.transpose()) * rho;
+            hinv = &left * &hinv * &right + (&step * step.transpose()) * rho;
+            fresh = false;
+        }
+        let old = s.cost;
+        let sn = step.norm();
+        s = p.s;
+        let free = free_set(&s.u, &s.g, lo, hi);
+        progress(&Progress { iteration: it, criterion: s.cost, step_norm: sn, gradient_norm: projected_norm(&s.g, &free) });
+        if old - s.cost <= set.criterion_tol * old {
+            return outcome(&s, it, StopReason::CriterionTolerance);
+        }
+        if step_small(sn, &s.u, set.step_tol) {
+            return outcome(&s, it, StopReason::StepTolerance);
+        }
+    }
+    let free = free_set(&s.u, &s.g, lo, hi);
+    if gradient_converged(&s, &free, set.gradient_tol) {
+        return outcome(&s, set.max_iterations, StopReason::GradientTolerance);
+    }
+    outcome(&s, set.max_iterations, StopReason::IterationLimit)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Rosenbrock as residuals: e = [10 (u1 − u0²), 1 − u0].
+    struct Rosen;
+    impl Residuals for Rosen {
+        fn eval(&mut self, u: &DVector<f64>, jacobian: bool) -> Result<(DVector<f64>, Option<DMatrix<f64>>), String> {
+            let e = DVector::from_vec(vec![10.0 * (u[1] - u[0] * u[0]), 1.0 - u[0]]);
+            let j = jacobian.then(|| DMatrix::from_row_slice(2, 2, &[-20.0 * u[0], 10.0, -1.0, 0.0]));
+            Ok((e, j))
+        }
+        fn cheap_jacobian(&self) -> bool {
+            true
+        }
+    }
+
+    #[test]
+    fn every_method_solves_rosenbrock() {
+        let lo = DVector::from_element(2, -10.0);
+        let hi = DVector::from_element(2, 10.0);
+        for m in [Optimizer::LevenbergMarquardt, Optimizer::GaussNewton, Optimizer::Bfgs] {
+            let set = Settings { max_iterations: 500, ..Settings::default() };
+            let o = minimize(m, &mut Rosen, &DVector::from_vec(vec![-1.2, 1.0]), &lo, &hi, &set, &mut |_| {}).unwrap();
+            assert!(o.stop.converged(), "{m:?}: {:?}", o.stop);
+            assert!((o.u[0] - 1.0).abs() < 1e-5 && (o.u[1] - 1.0).abs() < 1e-5, "{m:?}: {:?}", o.u);
+        }
+    }
+
+    #[test]
+    fn a_bound_is_respected_and_reported_by_position() {
+        // Minimum at (1, 1) lies outside u0 ≤ 0.5: the solution is on the bound.
+        let lo = DVector::from_element(2, -10.0);
+        let hi = DVector::from_vec(vec![0.5, 10.0]);
+        for m in [Optimizer::LevenbergMarquardt, Optimizer::GaussNewton, Optimizer::Bfgs] {
+            let set = Settings { max_iterations: 500, ..Settings::default() };
+            let o = minimize(m, &mut Rosen, &DVector::from_vec(vec![-1.2, 1.0]), &lo, &hi, &set, &mut |_| {}).unwrap();
+            assert_eq!(o.u[0], 0.5, "{m:?}");
+            assert!((o.u[1] - 0.25).abs() < 1e-5, "{m:?}: {:?}", o.u);
+        }
+    }
+
+    #[test]
+    fn the_iteration_limit_is_reported() {
+        let lo = DVector::from_element(2, -10.0);
+        let hi = DVector::from_element(2, 10.0);
+        let set = Settings { max_iterations: 2, ..Settings::default() };
+        let o = minimize(Optimizer::Bfgs, &mut Rosen, &DVector::from_vec(vec![-1.2, 1.0]), &lo, &hi, &set, &mut |_| {}).unwrap();
+        assert_eq!(o.stop, StopReason::IterationLimit);
+        assert!(!o.stop.converged());
+    }
+}

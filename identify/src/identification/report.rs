@@ -1,0 +1,395 @@
+//! Reports of an identification: the Table-1-like table (variable, SDEs, unit, initial,
+//! identified, standard error) as text, JSON and CSV, and the updated model written back into
+//! the original TOML text (comments and layout kept, via `toml_edit`).
+
+use serde::Serialize;
+use toml_edit::{DocumentMut, Item, Value};
+
+use super::uncertainty::AtBound;
+use super::variables::Tie;
+use super::Identification;
+use crate::model::{ParamName, SdeLaw};
+use crate::units::{parse_quantity, Dim};
+
+/// One row of the table, in the variable's display unit.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Row {
+    /// Variable name.
+    pub variable: String,
+    /// SDE names (`"2-10, 13-17"`).
+    pub sdes: String,
+    /// Parameter name (`kn`, `psi_n`, ...).
+    pub parameter: String,
+    /// Display unit (`MPa/um`, `N/um`, `-`).
+    pub unit: String,
+    /// Initial value.
+    pub initial: f64,
+    /// Identified value.
+    pub identified: f64,
+    /// Standard error (Cramér-Rao), `null` when undetermined.
+    pub std_error: Option<f64>,
+    /// Standard error / |identified| (`null` when identified = 0 or undetermined).
+    pub variability: Option<f64>,
+    /// `"lower"` / `"upper"` when the estimate is at a bound.
+    pub at_bound: Option<String>,
+}
+
+/// The table rows.
+pub fn rows(id: &Identification) -> Vec<Row> {
+    id.variables
+        .vars
+        .iter()
+        .enumerate()
+        .map(|(i, v)| {
+            let f = v.unit.factor;
+            let se = id.uncertainty.std_error[i];
+            let vf = id.uncertainty.variability[i];
+            Row {
+                variable: v.name.clone(),
+                sdes: v.sdes.clone(),
+                parameter: if v.tie == Tie::Scale { format!("{} (factor)", v.parameter) } else { v.parameter.clone() },
+                unit: v.unit.symbol.clone(),
+                initial: id.initial[i] / f,
+                identified: id.estimate[i] / f,
+                std_error: se.is_finite().then_some(se / f),
+                variability: vf.is_finite().then_some(vf),
+                at_bound: id.uncertainty.at_bound[i].map(|b| match b {
+                    AtBound::Lower => "lower".into(),
+                    AtBound::Upper => "upper".into(),
+                }),
+            }
+        })
+        .collect()
+}
+
+fn num(x: f64) -> String {
+    if x == 0.0 {
+        "0".into()
+    } else if x.abs() >= 1e-3 && x.abs() < 1e5 {
+        let digits = (4 - x.abs().log10().floor() as i32).max(0) as usize;
+        format!("{x:.digits$}")
+    } else {
+        format!("{x:.4e}")
+    }
+}
+
+/// The whole report as text: set-up, convergence, criterion before and after, the table, RMS
+/// errors per characteristic, identifiability warnings and strong correlations.
+pub fn text(id: &Identification) -> String {
+    let mut s = String::new();
+    let u = &id.uncertainty;
+    s.push_str(&format!(
+        "identification: {} variables, {} observations ({} fit), optimizer {}\n",
+        id.variables.len(),
+        id.observations,
+        match id.fit {
+            super::FitKind::Amplitude => "amplitude",
+            super::FitKind::Complex => "complex",
+        },
+        id.optimizer.as_str()
+    ));
+    s.push_str(&format!("noise model: {}\n", id.noise.describe()));
+    s.push_str(&format!(
+        "stopped: {} after {} iterations; {} model evaluations ({} with Jacobian)\n",
+        id.stop.describe(),
+        id.iterations,
+        id.evaluations.model,
+        id.evaluations.with_jacobian
+    ));
+    if id.starts.len() > 1 {
+        for (k, st) in id.starts.iter().enumerate() {
+            s.push_str(&format!("  start {k}: J = {} ({})\n", num(st.criterion), st.stop.describe()));
+        }
+    }
+    s.push_str(&format!(
+        "criterion J: initial {} -> identified {}; reduced chi^2 {:.3}{}\n",
+        num(id.criterion_initial),
+        num(id.criterion),
+        u.reduced_chi2,
+        if id.noise.scale_unknown() {
+            format!(" (covariance scaled by the residual variance {:.3})", u.covariance_scale)
+        } else {
+            String::new()
+        }
+    ));
+    let rows = rows(id);
+    let w = rows.iter().map(|r| r.variable.len()).max().unwrap_or(8).max(8);
+    let ws = rows.iter().map(|r| r.sdes.len()).max().unwrap_or(4).max(4);
+    s.push_str(&format!(
+        "\n{:<w$}  {:<ws$}  {:<8}  {:>12}  {:>12}  {:>12}  {:>8}\n",
+        "variable", "sdes", "unit", "initial", "identified", "std error", "sigma/x"
+    ));
+    for r in &rows {
+        s.push_str(&format!(
+            "{:<w$}  {:<ws$}  {:<8}  {:>12}  {:>12}  {:>12}  {:>8}{}\n",
+            r.variable,
+            r.sdes,
+            r.unit,
+            num(r.initial),
+            num(r.identified),
+            r.std_error.map(num).unwrap_or_else(|| "undetermined".into()),
+            r.variability.map(|v| format!("{v:.3}")).unwrap_or_else(|| "-".into()),
+            r.at_bound.as_ref().map(|b| format!("  at {b} bound")).unwrap_or_default()
+        ));
+    }
+    s.push_str("\nRMS relative amplitude error per characteristic (initial -> identified):\n");
+    for ((label, a), (_, b)) in id.rms_initial.iter().zip(&id.rms) {
+        s.push_str(&format!("  {label}: {:.2} % -> {:.2} %\n", 100.0 * a, 100.0 * b));
+    }
+    if !u.weak.is_empty() {
+        s.push_str(&format!(
+            "\npoorly identifiable combinations (relative sigma > threshold; condition number {:.3e}):\n",
+            u.condition
+        ));
+        for d in &u.weak {
+            let rel = if d.relative_std.is_finite() { format!("±{:.0} %", 100.0 * d.relative_std) } else { "no information".into() };
+            s.push_str(&format!("  {} ({rel})\n", d.combination()));
+        }
+        s.push_str("  (relative changes along these directions barely change the characteristics: group these variables or add measurements)\n");
+    }
+    let n = id.variables.len();
+    let mut strong = Vec::new();
+    for a in 0..n {
+        for b in a + 1..n {
+            let c = u.correlation[(a, b)];
+            if c.abs() > 0.9 {
+                strong.push(format!("  {} ~ {}: {c:+.3}", id.variables.vars[a].name, id.variables.vars[b].name));
+            }
+        }
+    }
+    if !strong.is_empty() {
+        s.push_str("\nstrongly correlated estimates (|rho| > 0.9):\n");
+        s.push_str(&strong.join("\n"));
+        s.push('\n');
+    }
+    s
+}
+
+/// The JSON report.
+#[derive(Debug, Clone, Serialize)]
+pub struct ReportJson {
+    /// Optimizer name.
+    pub optimizer: String,
+    /// Converged or not.
+    pub converged: bool,
+    /// Why it stopped.
+    pub stop: String,
+    /// Iterations.
+    pub iterations: usize,
+    /// Model evaluations (FRF solves).
+    pub model_evaluations: usize,
+    /// Of those with the analytic Jacobian.
+    pub jacobian_evaluations: usize,
+    /// `amplitude` or `complex`.
+    pub fit: String,
+    /// Noise model sentence.
+    pub noise: String,
+    /// Scalar observations.
+    pub observations: usize,
+    /// J at the initial values.
+    pub criterion_initial: f64,
+    /// J at the estimate.
+    pub criterion: f64,
+    /// 2J/(m − n_free).
+    pub reduced_chi2: f64,
+    /// Factor applied to the covariance.
+    pub covariance_scale: f64,
+    /// The table.
+    pub table: Vec<Row>,
+    /// Correlation matrix, rows in table order.
+    pub correlation: Vec<Vec<Option<f64>>>,
+    /// RMS relative amplitude errors: `[label, initial, identified]`.
+    pub rms_relative_error: Vec<(String, f64, f64)>,
+    /// Poorly identifiable combinations: `[combination, relative σ]`.
+    pub weak_directions: Vec<(String, Option<f64>)>,
+    /// Criterion per start.
+    pub starts: Vec<(f64, String)>,
+}
+
+/// The JSON report of an identification.
+pub fn json(id: &Identification) -> ReportJson {
+    let n = id.variables.len();
+    let c = &id.uncertainty.correlation;
+    ReportJson {
+        optimizer: id.optimizer.as_str().into(),
+        converged: id.stop.converged(),
+        stop: id.stop.describe(),
+        iterations: id.iterations,
+        model_evaluations: id.evaluations.model,
+        jacobian_evaluations: id.evaluations.with_jacobian,
+        fit: match id.fit {
+            super::FitKind::Amplitude => "amplitude".into(),
+            super::FitKind::Complex => "complex".into(),
+        },
+        noise: id.noise.describe(),
+        observations: id.observations,
+        criterion_initial: id.criterion_initial,
+        criterion: id.criterion,
+        reduced_chi2: id.uncertainty.reduced_chi2,
+        covariance_scale: id.uncertainty.covariance_scale,
+        table: rows(id),
+        correlation: (0..n).map(|a| (0..n).map(|b| Some(c[(a, b)]).filter(|v| v.is_finite())).collect()).collect(),
+        rms_relative_error: id.rms_initial.iter().zip(&id.rms).map(|((l, a), (_, b))| (l.clone(), *a, *b)).collect(),
+        weak_directions: id
+            .uncertainty
+            .weak
+            .iter()
+            .map(|d| (d.combination(), Some(d.relative_std).filter(|v| v.is_finite())))
+            .collect(),
+        starts: id.starts.iter().map(|s| (s.criterion, s.stop.describe())).collect(),
+    }
+}
+
+/// The table as CSV: `variable,sdes,parameter,unit,initial,identified,std_error,variability,at_bound`.
+pub fn csv(id: &Identification) -> String {
+    let mut s = String::from("variable,sdes,parameter,unit,initial,identified,std_error,variability,at_bound\n");
+    let q = |t: &str| if t.contains(',') || t.contains('"') { format!("\"{}\"", t.replace('"', "\"\"")) } else { t.to_string() };
+    for r in rows(id) {
+        s.push_str(&format!(
+            "{},{},{},{},{:?},{:?},{},{},{}\n",
+            q(&r.variable),
+            q(&r.sdes),
+            q(&r.parameter),
+            q(&r.unit),
+            r.initial,
+            r.identified,
+            r.std_error.map(|v| format!("{v:?}")).unwrap_or_default(),
+            r.variability.map(|v| format!("{v:?}")).unwrap_or_default(),
+            r.at_bound.unwrap_or_default()
+        ));
+    }
+    s
+}
+
+/// Why the TOML write-back failed.
+#[derive(Debug, thiserror::Error)]
+pub enum WriteBackError {
+    /// The original text is not valid TOML (it loaded before, so this means it changed).
+    #[error("{origin}: cannot re-read the model TOML for writing back: {message}")]
+    Parse {
+        /// File.
+        origin: String,
+        /// Parser message.
+        message: String,
+    },
+    /// An SDE of the model is not found in the TOML text.
+    #[error("{origin}: no [[sde]] named \"{sde}\" in the file; write the resolved JSON instead")]
+    MissingSde {
+        /// File.
+        origin: String,
+        /// SDE name.
+        sde: String,
+    },
+}
+
+/// Rounds to 10 significant digits so that written values read cleanly.
+fn round_sig(x: f64) -> f64 {
+    format!("{x:.9e}").parse().unwrap_or(x)
+}
+
+/// `"0.05 MPa/um"` → `Some("MPa/um")`.
+fn unit_of(text: &str) -> Option<String> {
+    let t = text.trim();
+    let end = t
+        .char_indices()
+        .find(|(_, c)| !(c.is_ascii_digit() || matches!(c, '.' | '-' | '+' | 'e' | 'E')))
+        .map(|(i, _)| i)
+        .unwrap_or(t.len());
+    let unit = t[end..].trim();
+    (!unit.is_empty()).then(|| unit.to_string())
+}
+
+fn param_dim(law: &SdeLaw, p: ParamName) -> Dim {
+    match (law, p) {
+        (_, p) if p.is_dissipation() => Dim::NONE,
+        (SdeLaw::Contact { .. }, _) => Dim::CONTACT_STIFFNESS,
+        _ => Dim::STIFFNESS,
+    }
+}
+
+/// The new value for a key, in the convention of the old one: the same unit if it was a string
+/// with a unit, SI otherwise; decoration (comments) kept.
+fn set_value(item: &mut Item, si: f64, dim: Dim) {
+    let old = item.as_value().cloned();
+    let mut new: Value = match old.as_ref().and_then(|v| v.as_str()).and_then(unit_of) {
+        Some(unit) => match parse_quantity(&format!("1 {unit}"), dim) {
+            Ok(f) => Value::from(format!("{} {unit}", round_sig(si / f))),
+            Err(_) => Value::from(round_sig(si)),
+        },
+        None => Value::from(round_sig(si)),
+    };
+    if let Some(old) = old {
+        *new.decor_mut() = old.decor().clone();
+    }
+    *item = Item::Value(new);
+}
+
+/// Writes the identified values into the model's TOML text (`[[sde]]` tables matched by name),
+/// keeping comments and layout. An isolator given one `psi` whose `psi_n` or `psi_t` was
+/// identified gets both keys; a general element's `k`/`psi` arrays are rewritten in SI.
+pub fn update_toml(text: &str, origin: &str, id: &Identification) -> Result<String, WriteBackError> {
+    let mut doc: DocumentMut = text
+        .parse()
+        .map_err(|e: toml_edit::TomlError| WriteBackError::Parse { origin: origin.into(), message: e.to_string() })?;
+    let model = &id.model;
+    let mut touched: Vec<usize> = id.variables.params().iter().map(|p| p.sde).collect();
+    touched.sort_unstable();
+    touched.dedup();
+    let Some(sdes) = doc.get_mut("sde").and_then(Item::as_array_of_tables_mut) else {
+        let sde = touched.first().map(|&i| model.sdes[i].name.clone()).unwrap_or_default();
+        return Err(WriteBackError::MissingSde { origin: origin.into(), sde });
+    };
+    for &si in &touched {
+        let sde = &model.sdes[si];
+        let table = sdes.iter_mut().find(|t| match t.get("name").and_then(Item::as_value) {
+            Some(Value::Integer(i)) => i.value().to_string() == sde.name,
+            Some(Value::String(s)) => s.value().trim() == sde.name,
+            _ => false,
+        });
+        let Some(table) = table else {
+            return Err(WriteBackError::MissingSde { origin: origin.into(), sde: sde.name.clone() });
+        };
+        let params: Vec<ParamName> = id.variables.params().iter().filter(|p| p.sde == si).map(|p| p.name).collect();
+        for p in params {
+            let value = sde.law.get(p).unwrap_or(0.0);
+            match (&sde.law, p) {
+                (SdeLaw::General { k, psi }, ParamName::Ki(_) | ParamName::PsiI(_)) => {
+                    let (key, vals) = if matches!(p, ParamName::Ki(_)) { ("k", k) } else { ("psi", psi) };
+                    let arr: toml_edit::Array = vals.iter().map(|v| round_sig(*v)).collect();
+                    table.insert(key, Item::Value(Value::Array(arr)));
+                }
+                (SdeLaw::Isolator { psi_n, psi_t, .. }, ParamName::PsiN | ParamName::PsiT) if table.contains_key("psi") => {
+                    let mut old = table.remove("psi").unwrap_or(Item::None);
+                    let mut other = old.clone();
+                    set_value(&mut old, *psi_n, Dim::NONE);
+                    set_value(&mut other, *psi_t, Dim::NONE);
+                    table.insert("psi_n", old);
+                    table.insert("psi_t", other);
+                }
+                _ => {
+                    let key = p.as_str();
+                    let dim = param_dim(&sde.law, p);
+                    match table.get_mut(&key) {
+                        Some(item) => set_value(item, value, dim),
+                        None => {
+                            table.insert(&key, Item::Value(Value::from(round_sig(value))));
+                        }
+                    }
+                }
+            }
+        }
+    }
+    Ok(doc.to_string())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn units_are_split_from_values() {
+        assert_eq!(unit_of("0.05 MPa/um").as_deref(), Some("MPa/um"));
+        assert_eq!(unit_of("1e-3"), None);
+        assert_eq!(unit_of("10N/um").as_deref(), Some("N/um"));
+    }
+}
