@@ -400,6 +400,9 @@ pub fn parse_toml(text: &str, origin: &str) -> Result<Loaded, LoadError> {
         if name.is_empty() || name == "ground" {
             return Err(cx.at(b.name.span(), "body name must be non-empty and not \"ground\" (reserved for the fixed ground)"));
         }
+        if let Some(j) = bodies.iter().position(|o: &Body| o.name == name) {
+            return Err(cx.at(b.name.span(), format!("body name \"{name}\" is used twice (bodies {} and {}); names must be unique", j + 1, i + 1)));
+        }
         spans.push((Item::Body(i, "name"), b.name.span()));
         spans.push((Item::Body(i, "mass"), b.mass.span()));
         spans.push((Item::Body(i, "position"), b.position.span()));

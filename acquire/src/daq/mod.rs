@@ -11,7 +11,7 @@
 pub mod frame;
 pub mod serial;
 
-pub use serial::SerialDaq;
+pub use serial::{DaqOptions, SerialDaq};
 
 use std::time::Duration;
 
