@@ -4,12 +4,13 @@
 #   .ci/vcan/run-in-vm.sh [--env NAME=VALUE]... [--timeout SECONDS] BINARY [ARGS...]
 #
 # BINARY runs as root inside the VM (working directory /payload, PATH has busybox (whose `ip`
-# handles `type vcan`), candump, cansend and cangen). Its output appears on the console, which this script prints. The VM reports back
-# through a marker line `VCAN-RESULT: ok` or `VCAN-RESULT: fail ...`; the exit code is 0 only on
+# handles `type vcan`), candump, cansend and cangen). Its output appears on the console, which
+# this script prints. The VM reports back through a marker line `VCAN-RESULT: ok` or `VCAN-RESULT: fail ...`; the exit code is 0 only on
 # `ok`. A missing marker (crash, hang, timeout) is a failure too.
 #
-# Prerequisites (installed by .ci/setup): qemu-system-x86, busybox-static, can-utils, cpio, and a Debian kernel unpacked by .ci/vcan/fetch-kernel.sh under $IDENT_VCAN_KERNEL_DIR
-# (default /var/cache/ident-vcan). The VM uses TCG (KVM hangs on this kind of host).
+# Prerequisites (installed by .ci/setup): qemu-system-x86, busybox-static, can-utils, cpio, and a
+# Debian kernel unpacked by .ci/vcan/fetch-kernel.sh under $IDENT_VCAN_KERNEL_DIR
+# (default /var/cache/ident-vcan). Exit code 3 = a prerequisite is missing. The VM uses TCG (KVM hangs on this kind of host).
 # The base initramfs (busybox, modules, can-utils) is cached under $IDENT_VCAN_CACHE (default
 # ${TMPDIR:-/tmp}/ident-vcan-$UID), keyed by a hash of its inputs; the payload is rebuilt each run.
 set -euo pipefail
@@ -37,7 +38,9 @@ missing=()
 for tool in qemu-system-x86_64 cpio candump cansend cangen ldd; do
   command -v "$tool" >/dev/null || missing+=("$tool")
 done
-[ -x /bin/busybox ] || missing+=("/bin/busybox (busybox-static)")
+if [ ! -x /bin/busybox ] || ldd /bin/busybox >/dev/null 2>&1; then
+  missing+=("a statically linked /bin/busybox (busybox-static)")
+fi
 vmlinuz=$(ls "$kdir"/*/boot/vmlinuz-* 2>/dev/null | sort | tail -n1 || true)
 [ -n "$vmlinuz" ] || missing+=("a Debian kernel in $kdir (.ci/vcan/fetch-kernel.sh)")
 if [ ${#missing[@]} -gt 0 ]; then
@@ -101,8 +104,9 @@ poweroff -f
 sleep 5
 INIT
   chmod +x "$stage/init"
-  (cd "$stage" && find . | sort | cpio -o -H newc --quiet) > "$base.tmp"
-  mv "$base.tmp" "$base"
+  (cd "$stage" && find . | sort | cpio -o -H newc --quiet) > "$stage.cpio"
+  find "$cache" -maxdepth 1 -name 'base-*.cpio' -mmin +60 -delete  # stale keys
+  mv "$stage.cpio" "$base"  # atomic: concurrent runs never see a partial archive
   rm -rf "$stage"
 fi
 
@@ -112,6 +116,8 @@ trap 'rm -rf "$run"' EXIT
 pstage="$run/payload-root"
 mkdir -p "$pstage/payload"
 copy_with_libs "$pstage" "$bin" "/payload/$(basename "$bin")"
+# Debug info is most of a test binary's size and slows the VM's initramfs unpacking; symbols stay.
+if command -v strip >/dev/null; then strip --strip-debug "$pstage/payload/$(basename "$bin")" 2>/dev/null || true; fi
 {
   echo "cd /payload"
   for e in "${envs[@]}"; do printf 'export %q\n' "$e"; done

@@ -3,13 +3,24 @@
 //! Commands a shaker controller, streams an accelerometer DAQ (force channel included), runs
 //! excitation sweeps and records every byte, block and event in one MCAP session file. Devices sit
 //! behind narrow object-safe traits — [`shaker::Shaker`], [`daq::Daq`], [`transport::Transport`] —
-//! with real drivers (SCPI over serial, a COBS/CRC binary stream over serial) and a simulated stand
-//! ([`sim`]) that serves the same protocols over pseudo-terminals.
+//! with real drivers (SCPI over serial, a COBS/CRC binary stream over serial, CAN) and a simulated
+//! stand ([`sim`]) that serves the same protocols over pseudo-terminals.
+//!
+//! Data flow: [`stand::Stand`] (stand file) → [`rig::Rig`] (devices opened, identified,
+//! configured; every byte tapped into the [`session`]) → [`sweep`] (stepped sine with closed-loop
+//! force control, broadband) → `session.mcap` (docs/mcap-session.md) → the `process` crate.
+//! Protocol specs: docs/shaker-scpi.md, docs/daq-serial.md, docs/daq-can.md.
 //!
 //! ```
 //! use acquire::shaker::scpi::{parse_command, Command};
-//! // The SCPI parser is I/O free: the simulated controller and firmware benches share it.
+//! use acquire::daq::frame::{FrameDecoder, Message};
+//! // Parsers and decoders are I/O free: host drivers, simulators and firmware benches share them.
 //! assert_eq!(parse_command("SOUR:FORC 4 kN").unwrap(), Command::SetForce(4000.0));
+//! let mut wire = Vec::new();
+//! Message::Start.encode(7, &mut Vec::new(), &mut Vec::new(), &mut wire);
+//! let mut seen = Vec::new();
+//! FrameDecoder::new().feed(&wire, |f| seen.push(f.map(|f| (f.kind, f.seq))));
+//! assert_eq!(seen, vec![Ok((0x03, 7))]);
 //! ```
 
 pub mod can;

@@ -12,9 +12,10 @@ use std::process::Command;
 use std::time::{Duration, Instant};
 
 use acquire::can::codec::{Message, Reassembler, SampleFormat, Segmenter, WireBlock};
-use acquire::can::sim::{self, SimCanDaqSettings, SimFaults, SimStats};
+use acquire::can::sim::{SimCanDaq, SimCanDaqSettings, SimFaults, SimStats};
 use acquire::can::{BusEvent, CanBus, CanDaq, CanDaqSettings, CanError, CanId, FrameKind, WireFrame};
 use acquire::daq::{Daq, DaqConfig, DaqError, DaqEvent, FaultKind, SampleBlock};
+use acquire::transport::{ByteTap, Direction};
 
 const IFACE: &str = "vcan0";
 const INSIDE: &str = "IDENT_VCAN_INSIDE";
@@ -34,7 +35,9 @@ fn vcan0_is_up() -> bool {
 fn vcan_suite() {
     let exe = std::env::current_exe().expect("path of this test binary");
     let test_args = ["--ignored", "--test-threads=1", "--nocapture"];
-    let status = if vcan0_is_up() {
+    // IDENT_VCAN_FORCE_VM=1 uses the VM even where vcan0 exists (e.g. when not root: one test
+    // creates and deletes its own interface).
+    let status = if vcan0_is_up() && std::env::var_os("IDENT_VCAN_FORCE_VM").is_none() {
         eprintln!("vcan_suite: {IFACE} is up on this host; running the CAN tests directly");
         Command::new(&exe).args(test_args).env(INSIDE, "host").status().expect("run this test binary")
     } else {
@@ -62,6 +65,18 @@ fn vcan_suite() {
 
 // ---------------------------------------------------------------------------------------------
 // Inside (VM or a host with vcan0): the real tests.
+
+/// Collects what a [`ByteTap`] receives, one entry per frame line.
+#[derive(Default)]
+struct LineTap(std::sync::Mutex<Vec<(Direction, String)>>);
+
+impl ByteTap for LineTap {
+    fn bytes(&self, port: &str, direction: Direction, data: &[u8]) {
+        assert_eq!(port, IFACE);
+        let line = String::from_utf8(data.to_vec()).expect("tap lines are text");
+        self.0.lock().expect("tap lock").push((direction, line.trim_end().to_string()));
+    }
+}
 
 fn require_vcan() {
     assert!(
@@ -103,7 +118,9 @@ type SimTask = (tokio::task::JoinHandle<Result<SimStats, CanError>>, tokio::sync
 
 fn spawn_sim(dev: SimCanDaqSettings) -> SimTask {
     let (stop_tx, stop_rx) = tokio::sync::oneshot::channel();
-    let task = tokio::spawn(async move { sim::serve(IFACE, dev, Box::new(pattern), None, stop_rx).await });
+    // Bound before returning: the host's first command cannot race the simulator's socket.
+    let sim = SimCanDaq::bind(IFACE, dev).expect("simulated DAQ binds to vcan0");
+    let task = tokio::spawn(sim.serve(Box::new(pattern), None, stop_rx));
     (task, stop_tx)
 }
 
@@ -135,7 +152,10 @@ async fn acquire_clean(base: u16, frames: FrameKind, channels: Vec<u16>, spb: u1
     let vpc = dev.volts_per_count as f64;
     let identity = dev.identity.clone();
     let sim = spawn_sim(dev);
-    let mut daq = CanDaq::open(IFACE, host).expect("open CAN DAQ on vcan0");
+    let tap = std::sync::Arc::new(LineTap::default());
+    let command_prefix = format!("{}#", host.command_id);
+    let data_prefix = format!("{}#", host.data_id);
+    let mut daq = CanDaq::open(IFACE, host).expect("open CAN DAQ on vcan0").with_tap(tap.clone());
     assert_eq!(daq.identify().await.expect("identify"), identity);
     let config = DaqConfig { sample_rate_hz: rate, channels: channels.clone(), samples_per_block: spb };
     let info = daq.configure(&config).await.expect("configure");
@@ -154,6 +174,12 @@ async fn acquire_clean(base: u16, frames: FrameKind, channels: Vec<u16>, spb: u1
     daq.stop().await.expect("stop");
     let stats = stop_sim(sim).await;
     assert!(stats.blocks >= blocks);
+    // The tap saw every frame: our 4 commands out, and at least the data frames of the blocks in.
+    let lines = tap.0.lock().expect("tap lock");
+    let tx: Vec<&String> = lines.iter().filter(|(d, _)| *d == Direction::Tx).map(|(_, l)| l).collect();
+    assert!(tx.len() >= 4 && tx.iter().all(|l| l.starts_with(&command_prefix)), "{tx:?}");
+    let rx_data = lines.iter().filter(|(d, l)| *d == Direction::Rx && l.starts_with(&data_prefix)).count() as u64;
+    assert!(rx_data >= blocks, "{rx_data} data frames recorded for {blocks} blocks");
     assert_eq!((stats.dropped, stats.duplicated, stats.corrupted), (0, 0, 0));
 }
 
@@ -289,10 +315,10 @@ fn candump_sees_the_frames_our_sender_emits() {
     runtime().block_on(async {
         for (kind, id) in [(FrameKind::Classic, CanId::Standard(0x152)), (FrameKind::Fd, CanId::Standard(0x153))] {
             let (block, frames) = block_frames(id, kind, 7, 4, 10);
-            let mut dump = tokio::process::Command::new("candump")
-                .args(["-L", "-n", &frames.len().to_string(), &format!("{IFACE},{:03X}:7FF", id.raw())])
+            // -T: candump gives up after 10 s without frames, so this can never hang.
+            let dump = Command::new("candump")
+                .args(["-L", "-T", "10000", "-n", &frames.len().to_string(), &format!("{IFACE},{:03X}:7FF", id.raw())])
                 .stdout(std::process::Stdio::piped())
-                .kill_on_drop(true)
                 .spawn()
                 .expect("run candump (can-utils)");
             tokio::time::sleep(Duration::from_millis(500)).await; // candump binds its socket
@@ -300,13 +326,26 @@ fn candump_sees_the_frames_our_sender_emits() {
             for f in &frames {
                 bus.send(f).await.expect("send");
             }
-            let out = tokio::time::timeout(Duration::from_secs(10), dump.wait_with_output())
+            let out = tokio::task::spawn_blocking(move || dump.wait_with_output())
                 .await
-                .expect("candump saw every frame within 10 s")
+                .expect("candump task")
                 .expect("candump output");
             let text = String::from_utf8_lossy(&out.stdout);
-            // `(1700000000.123456) vcan0 152#80...` — the third field is the frame.
-            let seen: Vec<&str> = text.lines().filter_map(|l| l.split_whitespace().nth(2)).collect();
+            // `(1700000000.123456) vcan0 152#80...` — the third field is the frame. FD frames are
+            // `153##F…` with F the FD flags nibble (kernels ≥ 6.x set CANFD_FDF = 4; BRS = 1 and
+            // ESI = 2 must be clear): normalise it to our `##0`.
+            let seen: Vec<String> = text
+                .lines()
+                .filter_map(|l| l.split_whitespace().nth(2))
+                .map(|f| match f.split_once("##") {
+                    Some((id, rest)) => {
+                        let flags = u8::from_str_radix(&rest[..1], 16).expect("FD flags nibble");
+                        assert_eq!(flags & 0x3, 0, "no BRS/ESI in {f}");
+                        format!("{id}##0{}", &rest[1..])
+                    }
+                    None => f.to_string(),
+                })
+                .collect();
             let sent: Vec<String> = frames.iter().map(WireFrame::to_cansend).collect();
             assert_eq!(seen, sent, "{kind:?}: candump -L output:\n{text}");
             // Decode what candump printed, independently of our receive path.
@@ -380,7 +419,10 @@ fn bad_interfaces_give_errors_naming_them() {
 
         let ip = |args: &str| {
             let st = Command::new("ip").args(args.split_whitespace()).status().expect("run ip");
-            assert!(st.success(), "ip {args}");
+            assert!(
+                st.success(),
+                "ip {args} failed: this test creates vcan9 and needs root (in the VM it is); run with IDENT_VCAN_FORCE_VM=1 to use the VM"
+            );
         };
         // Classic-only interface (MTU 16): FD frames are refused with advice.
         ip("link add dev vcan9 type vcan");
@@ -405,6 +447,36 @@ fn bad_interfaces_give_errors_naming_them() {
     });
 }
 
+#[test]
+#[ignore = "needs vcan0: run by vcan_suite (in the qemu VM when the host has no CAN)"]
+fn device_refusals_and_misuse_are_clear_errors() {
+    require_vcan();
+    runtime().block_on(async {
+        tokio::time::timeout(Duration::from_secs(30), async {
+            let (host, dev) = settings_pair(0x180, FrameKind::Classic);
+            let sim = spawn_sim(dev);
+            let mut daq = CanDaq::open(IFACE, host).expect("open");
+            let e = daq.start().await.expect_err("start before configure");
+            assert!(matches!(e, DaqError::State { .. }) && e.to_string().contains("configure"), "{e}");
+            let e = daq.next_event().await.expect_err("next_event before start");
+            assert!(matches!(e, DaqError::State { .. }), "{e}");
+            // The simulated DAQ has channels 0–7: it refuses channel 9 with a NAK.
+            let bad = DaqConfig { sample_rate_hz: 1000.0, channels: vec![0, 9], samples_per_block: 8 };
+            let e = daq.configure(&bad).await.expect_err("channel 9 refused");
+            let msg = e.to_string();
+            assert!(matches!(e, DaqError::Rejected { code: 2, .. }) && msg.contains("no channel 9") && msg.contains(IFACE), "{msg}");
+            // Refused locally, before the bus: a rate DAQ-over-CAN cannot carry.
+            let e = daq.configure(&DaqConfig { sample_rate_hz: 1.0e7, ..bad.clone() }).await.expect_err("rate too high for u32 mHz");
+            assert!(e.to_string().contains("sample rate"), "{e}");
+            // And the device still works afterwards.
+            daq.configure(&DaqConfig { channels: vec![0, 7], ..bad }).await.expect("configure");
+            stop_sim(sim).await;
+        })
+        .await
+        .expect("finishes within 30 s");
+    });
+}
+
 /// Reads this thread's CPU time (user + system) from /proc (clock ticks of 10 ms).
 fn thread_cpu() -> Duration {
     let stat = std::fs::read_to_string("/proc/thread-self/stat").expect("/proc/thread-self/stat");
@@ -424,15 +496,24 @@ fn throughput_benchmark() {
     require_vcan();
     let secs: f64 = std::env::var("IDENT_VCAN_BENCH_SECS").ok().and_then(|s| s.parse().ok()).unwrap_or(2.0);
     let rt = runtime();
-    let steps = [(FrameKind::Fd, 10_000.0), (FrameKind::Fd, 20_000.0), (FrameKind::Fd, 40_000.0), (FrameKind::Classic, 20_000.0)];
-    for (n, (kind, target_fps)) in steps.into_iter().enumerate() {
+    // (frame kind, target frames/s); `None` = the simulator sends as fast as it can (no pacing).
+    let steps = [
+        (FrameKind::Fd, Some(10_000.0)),
+        (FrameKind::Fd, Some(20_000.0)),
+        (FrameKind::Classic, Some(20_000.0)),
+        (FrameKind::Fd, None),
+        (FrameKind::Classic, None),
+    ];
+    for (n, (kind, target)) in steps.into_iter().enumerate() {
         let base = 0x200 + 0x10 * n as u16;
-        let (host, dev) = settings_pair(base, kind);
+        let (host, mut dev) = settings_pair(base, kind);
+        dev.real_time = target.is_some();
+        let target_fps = target.unwrap_or(50_000.0);
         let vpc = dev.volts_per_count as f64;
         let channels = vec![0u16, 1, 2, 3];
         let spb = 64u16;
         // Frames per block: 9-byte header + 4 × 64 × 3 bytes, +4 bytes length/CRC.
-        let bytes = 9 + 4 * 64 * 3 + 4;
+        let bytes: usize = 9 + 4 * 64 * 3 + 4;
         let per_frame = kind.max_data() - 1;
         let frames_per_block = bytes.div_ceil(per_frame);
         let rate = target_fps / frames_per_block as f64 * spb as f64;
@@ -467,7 +548,11 @@ fn throughput_benchmark() {
         let stats = rt.block_on(stop_sim(sim));
         let fps = (blocks * frames_per_block as u64) as f64 / wall.as_secs_f64();
         println!(
-            "VCAN-BENCH: {kind:?} target {target_fps:.0} frames/s ({frames_per_block} frames/block, {rate:.0} Hz × 4 ch): received {fps:.0} frames/s ({blocks} blocks in {:.2} s), faults {}, receiver CPU {:.1} % of a core",
+            "VCAN-BENCH: {kind:?} {} ({frames_per_block} frames/block, 4 ch × 64 samples i24): received {fps:.0} frames/s ({blocks} blocks in {:.2} s), faults {}, receiver CPU {:.1} % of a core",
+            match target {
+                Some(t) => format!("paced at {t:.0} frames/s ({rate:.0} Hz)"),
+                None => "unpaced (sender flat out)".to_string(),
+            },
             wall.as_secs_f64(),
             faults.len(),
             100.0 * cpu.as_secs_f64() / wall.as_secs_f64()

@@ -189,6 +189,14 @@ fn jacobian_line(
     }
 }
 
+/// The distinct SDE blocks the parameters live in (several parameters share one SDE).
+fn distinct_blocks(blocks: &[ParamBlock]) -> Vec<usize> {
+    let mut used: Vec<usize> = blocks.iter().map(|b| b.block).collect();
+    used.sort_unstable();
+    used.dedup();
+    used
+}
+
 /// Per-frequency LU, with buffers sized once.
 struct DirectSolver {
     a: Mat<C64>,
@@ -275,6 +283,7 @@ impl DirectSolver {
         let mut dq = vec![[C64::new(0.0, 0.0); 6]; s.sdes.len()];
         let mut dw = vec![vec![[C64::new(0.0, 0.0); 6]; s.sdes.len()]; outputs];
         let mut fac = vec![C64::new(0.0, 0.0); outputs];
+        let used = distinct_blocks(blocks);
         for (k, &f) in out.freqs_hz.clone().iter().enumerate() {
             self.factor(s, f)?;
             let omega = TWO_PI * f;
@@ -290,11 +299,11 @@ impl DirectSolver {
                 continue;
             }
             let rhs = &self.rhs;
-            for pb in blocks {
-                let b = &s.sdes[pb.block];
-                dq[pb.block] = b.deformation(|i| rhs[(i, 0)]);
+            for &blk in &used {
+                let b = &s.sdes[blk];
+                dq[blk] = b.deformation(|i| rhs[(i, 0)]);
                 for (o, dwo) in dw.iter_mut().enumerate() {
-                    dwo[pb.block] = b.deformation(|i| rhs[(i, o + 1)]);
+                    dwo[blk] = b.deformation(|i| rhs[(i, o + 1)]);
                 }
             }
             jacobian_line(blocks, &dq, &dw, &fac, lines, k, &mut out.jacobian);
@@ -361,24 +370,22 @@ impl ModalSolver {
             .iter()
             .map(|&d| (0..n).map(|m| self.x[(d, m)]).collect())
             .collect();
-        // E_κ = T_κ X for every SDE that carries a parameter: 6×n each, row-major.
-        let mut e: Vec<Vec<C64>> = vec![Vec::new(); s.sdes.len()];
-        for pb in blocks {
-            if e[pb.block].is_empty() {
-                let blk = &s.sdes[pb.block];
-                let mut em = vec![C64::new(0.0, 0.0); 6 * n];
-                for m in 0..n {
-                    let d = blk.deformation(|i| self.x[(i, m)]);
-                    for r in 0..6 {
-                        em[r * n + m] = d[r];
-                    }
+        // E = [T_κ X] stacked for every distinct SDE that carries a parameter (6·B × n), so that
+        // one matrix product per line gives every such SDE's deformation under the load and
+        // under each output's unit load: [δq, δw_1, …] = E · [η, ζ_1, …].
+        let used = distinct_blocks(blocks);
+        let mut e = Mat::<C64>::zeros(6 * used.len(), n);
+        for (u, &blk) in used.iter().enumerate() {
+            let b = &s.sdes[blk];
+            for m in 0..n {
+                let d = b.deformation(|i| self.x[(i, m)]);
+                for r in 0..6 {
+                    e[(6 * u + r, m)] = d[r];
                 }
-                e[pb.block] = em;
             }
         }
-        let mut eta = vec![C64::new(0.0, 0.0); n];
-        let mut inv = vec![C64::new(0.0, 0.0); n];
-        let mut zeta = vec![vec![C64::new(0.0, 0.0); n]; outputs];
+        let mut rhs = Mat::<C64>::zeros(n, 1 + outputs);
+        let mut deform = Mat::<C64>::zeros(6 * used.len(), 1 + outputs);
         let mut dq = vec![[C64::new(0.0, 0.0); 6]; s.sdes.len()];
         let mut dw = vec![vec![[C64::new(0.0, 0.0); 6]; s.sdes.len()]; outputs];
         let mut fac = vec![C64::new(0.0, 0.0); outputs];
@@ -391,31 +398,32 @@ impl ModalSolver {
                 if den.norm() <= 1e-13 * lambda_scale {
                     return Err(SolveError::Singular { freq_hz: f });
                 }
-                inv[m] = den.inv();
-                eta[m] = b[m] * inv[m];
+                let inv = den.inv();
+                rhs[(m, 0)] = b[m] * inv;
+                for o in 0..outputs {
+                    rhs[(m, o + 1)] = yo[o][m] * inv;
+                }
             }
             for (o, q) in quantities.iter().enumerate() {
                 fac[o] = q.factor(omega);
-                let v: C64 = xo[o].iter().zip(&eta).map(|(x, e)| x * e).sum();
+                let v: C64 = (0..n).map(|m| xo[o][m] * rhs[(m, 0)]).sum();
                 out.values[o * lines + k] = v * fac[o];
             }
             if blocks.is_empty() {
                 continue;
             }
-            for (o, z) in zeta.iter_mut().enumerate() {
-                for m in 0..n {
-                    z[m] = yo[o][m] * inv[m];
-                }
-            }
-            for pb in blocks {
-                let em = &e[pb.block];
-                dq[pb.block] = std::array::from_fn(|r| {
-                    em[r * n..(r + 1) * n].iter().zip(&eta).map(|(a, b)| a * b).sum()
-                });
-                for (o, z) in zeta.iter().enumerate() {
-                    dw[o][pb.block] = std::array::from_fn(|r| {
-                        em[r * n..(r + 1) * n].iter().zip(z).map(|(a, b)| a * b).sum()
-                    });
+            faer::linalg::matmul::matmul(
+                deform.as_mut(),
+                faer::Accum::Replace,
+                e.as_ref(),
+                rhs.as_ref(),
+                C64::new(1.0, 0.0),
+                Par::Seq,
+            );
+            for (u, &blk) in used.iter().enumerate() {
+                dq[blk] = std::array::from_fn(|r| deform[(6 * u + r, 0)]);
+                for (o, dwo) in dw.iter_mut().enumerate() {
+                    dwo[blk] = std::array::from_fn(|r| deform[(6 * u + r, o + 1)]);
                 }
             }
             jacobian_line(blocks, &dq, &dw, &fac, lines, k, &mut out.jacobian);

@@ -150,16 +150,16 @@ fn fwd32j_has_the_papers_structure() {
         }
         let total: f64 = m.bodies.iter().map(|b| b.mass).sum();
         assert!((2500.0..=3000.0).contains(&total), "{file}: total mass {total} kg");
-        let column = m.bodies[m.body_index("column").unwrap()].mass;
+        let column = m.bodies[m.body_index("column").expect("column")].mass;
         assert!(m.bodies.iter().all(|b| b.mass <= column), "{file}: the column is the heaviest body");
-        let table = m.bodies[m.body_index("table").unwrap()].mass;
+        let table = m.bodies[m.body_index("table").expect("table")].mass;
         assert!((150.0..=600.0).contains(&table), "{file}: table {table} kg");
 
         let names: BTreeSet<String> = m.sdes.iter().map(|s| s.name.clone()).collect();
         let expected: BTreeSet<String> = (1..=34).map(|i| i.to_string()).collect();
         assert_eq!(names, expected, "{file}: SDE names");
         for s in &m.sdes {
-            let n: u32 = s.name.parse().unwrap();
+            let n: u32 = s.name.parse().expect("SDE names are the paper's numbers");
             let kind = match n {
                 1 | 13 => SdeKind::Rotary,
                 12 | 22 | 29 => SdeKind::Screw,
@@ -186,13 +186,13 @@ fn fwd32j_has_the_papers_structure() {
             }
         }
         assert_eq!(body_pair(&m, "34"), ["spindle head".to_string(), "table".to_string()]);
-        let t = m.body_index("table").unwrap();
+        let t = m.body_index("table").expect("table");
         let outs: Vec<(usize, u8)> = m.outputs.iter().map(|c| (c.body, c.dof)).collect();
         assert_eq!(outs, vec![(t, 0), (t, 1), (t, 2)], "{file}: outputs = table u1, u2, u3");
         // 4 kN pair, alpha = 60 deg, beta = 81 deg: equal and opposite, on spindle head and table.
         assert_eq!(m.forces.len(), 2, "{file}: one force pair");
         let (a, b) = (&m.forces[0], &m.forces[1]);
-        assert_eq!(a.body, m.body_index("spindle head").unwrap());
+        assert_eq!(a.body, m.body_index("spindle head").expect("spindle head"));
         assert_eq!(b.body, t);
         let (al, be) = (60f64.to_radians(), 81f64.to_radians());
         let d = nalgebra::Vector3::new(be.sin() * al.cos(), be.sin() * al.sin(), be.cos());
@@ -327,7 +327,7 @@ fn textbook_files_match_the_code_built_models_and_closed_forms() {
     let file = load_model("textbook-two-mass.toml");
     assert_same_system("textbook-two-mass.toml", &file, &textbook::two_in_series(m1, m2, k1, k2, psi));
     let freqs: Vec<f64> = (1..300).map(|i| 0.37 * f64::from(i)).collect();
-    let r = response(&file, &freqs, &[], Method::Direct).unwrap();
+    let r = response(&file, &freqs, &[], Method::Direct).expect("FRF of a textbook file");
     for (i, &f) in freqs.iter().enumerate() {
         let w2 = (TWO_PI * f).powi(2);
         let (c1, c2) = (hyst(k1, psi), hyst(k2, psi));
@@ -350,7 +350,7 @@ fn textbook_files_match_the_code_built_models_and_closed_forms() {
     let (m, k, psi) = (250.0, 3.0e6, 0.3);
     let file = load_model("textbook-single.toml");
     assert_same_system("textbook-single.toml", &file, &textbook::single_body(m, k, psi));
-    let r = response(&file, &freqs, &[], Method::Direct).unwrap();
+    let r = response(&file, &freqs, &[], Method::Direct).expect("FRF of a textbook file");
     for (i, &f) in freqs.iter().enumerate() {
         let exact = C64::new(1.0, 0.0) / (hyst(k, psi) - (TWO_PI * f).powi(2) * m);
         let e = (r.output(0)[i] - exact).norm() / exact.norm();

@@ -5,6 +5,7 @@
 //! Run: `CARGO_TARGET_DIR=... cargo bench -p process --bench welch`. Prints the time of each side,
 //! the ratio, and peak memory (VmHWM of this process; ru_maxrss of the Python process).
 //! Data: both sides generate identical signals from splitmix64 (seeded by channel and index).
+#![allow(clippy::unwrap_used, missing_docs)]
 
 use criterion::{criterion_group, criterion_main, Criterion};
 use process::{estimate, spectra::Welch, Estimator, Window, WelchConfig};

@@ -37,7 +37,7 @@ impl Calibration {
 
     /// Converts raw samples to SI in place.
     pub fn apply(&self, raw: &mut [f64]) -> Result<()> {
-        if !(self.sensitivity.is_finite() && self.sensitivity != 0.0) || !self.offset.is_finite() {
+        if !(self.sensitivity.is_finite() && self.sensitivity != 0.0 && self.offset.is_finite()) {
             return Err(invalid("sensitivity", format!("{} (channel '{}')", self.sensitivity, self.name), "must be finite and nonzero: take it from the sensor's calibration sheet"));
         }
         let inv = 1.0 / self.sensitivity;
@@ -78,6 +78,7 @@ pub fn convert(freqs_hz: &[f64], h: &mut [C64], from: Quantity, to: Quantity) ->
 }
 
 #[cfg(test)]
+#[allow(clippy::unwrap_used)]
 mod tests {
     use super::*;
 

@@ -218,6 +218,7 @@ fn solve_in_place(a: &mut [C64], b: &mut [C64], perm: &mut [usize], n: usize) ->
 }
 
 #[cfg(test)]
+#[allow(clippy::unwrap_used)]
 mod tests {
     use super::*;
 

@@ -6,8 +6,9 @@
 //! 1. [`spectra`]: streaming Welch auto/cross-spectral matrices (rustfft planned once, buffers
 //!    reused, bounded memory), with the windows of [`window`] (rectangular, Hann, Hamming,
 //!    Blackman-Harris, flat-top, force, exponential).
-//! 2. [`estimate`]: H1 / H2 / Hv, ordinary and multiple coherence, MIMO H1, the variance of each
-//!    FRF point. [`sine`]: stepped-sine least-squares fits instead, for sine excitation.
+//! 2. [`estimate`](mod@estimate): H1 / H2 / Hv, ordinary and multiple coherence, MIMO H1, the variance of each
+//!    FRF point. [`sine`]: stepped-sine least-squares fits instead, for sine excitation (with
+//!    distortion, noise level and FRF variance per step).
 //! 3. [`calibration`]: sensitivities, accelerance ↔ mobility ↔ receptance.
 //! 4. [`principal`]: per frequency, the least-squares 6-DOF rigid-body motion of a solid at its
 //!    centre of mass in its principal axes, with a rigidity indicator.

@@ -113,6 +113,7 @@ pub fn parse(bytes: &[u8], file: &str) -> Result<NpyArray> {
 }
 
 #[cfg(test)]
+#[allow(clippy::unwrap_used)]
 mod tests {
     use super::*;
     use proptest::prelude::*;

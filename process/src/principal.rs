@@ -63,6 +63,9 @@ pub struct PrincipalResponse {
     pub q: Vec<[C64; 6]>,
     /// Rigidity indicator `‖y − A q‖/‖y‖` at line k (0 = rigid).
     pub residual: Vec<f64>,
+    /// Variance of each fitted DOF at line k (E|q̂−q|², propagated from the channels' FRF
+    /// variances), when the input carried them.
+    pub variance: Option<Vec<[f64; 6]>>,
     /// Number of fitted DOFs (6 or 3).
     pub dofs: usize,
 }
@@ -86,7 +89,7 @@ impl RigidFit {
         let mut lever: f64 = 0.0;
         for (i, s) in sensors.iter().enumerate() {
             let norm = s.direction.norm();
-            if !(norm.is_finite() && norm > 0.0) || !s.position.iter().all(|v| v.is_finite()) {
+            if !(norm.is_finite() && norm > 0.0 && s.position.iter().all(|v| v.is_finite())) {
                 return Err(degenerate(format!("sensor '{}' has a zero or non-finite direction/position; give a unit measuring direction", s.name)));
             }
             let e = rt * (s.direction / norm);
@@ -158,6 +161,21 @@ impl RigidFit {
         Ok(if tot > 0.0 { (res / tot).sqrt() } else { 0.0 })
     }
 
+    /// Variance of each fitted DOF from the variances of the channels (assumed independent):
+    /// `var(q_d) = Σ_i P_di² var(y_i)` with `P` the pseudo-inverse. Rotations are 0 when only
+    /// translations are fitted.
+    pub fn variance(&self, channel_variance: &[f64]) -> Result<[f64; 6]> {
+        let n = self.a.nrows();
+        if channel_variance.len() != n {
+            return Err(ProcessError::ChannelCount { what: "channel variances", expected: n, got: channel_variance.len() });
+        }
+        let mut out = [0.0; 6];
+        for (d, o) in out.iter_mut().enumerate().take(self.dofs) {
+            *o = (0..n).map(|i| self.pinv[(d, i)].powi(2) * channel_variance[i]).sum();
+        }
+        Ok(out)
+    }
+
     /// Fits every line: `channels[i][k]` is channel i's FRF at `freqs_hz[k]`.
     pub fn transform(&self, freqs_hz: &[f64], channels: &[Vec<C64>]) -> Result<PrincipalResponse> {
         let n = self.a.nrows();
@@ -170,7 +188,7 @@ impl RigidFit {
             }
         }
         let mut y = vec![C64::default(); n];
-        let mut out = PrincipalResponse { freqs_hz: freqs_hz.to_vec(), q: Vec::with_capacity(freqs_hz.len()), residual: Vec::with_capacity(freqs_hz.len()), dofs: self.dofs };
+        let mut out = PrincipalResponse { freqs_hz: freqs_hz.to_vec(), q: Vec::with_capacity(freqs_hz.len()), residual: Vec::with_capacity(freqs_hz.len()), variance: None, dofs: self.dofs };
         for k in 0..freqs_hz.len() {
             for (yi, c) in y.iter_mut().zip(channels) {
                 *yi = c[k];
@@ -182,6 +200,61 @@ impl RigidFit {
         }
         Ok(out)
     }
+}
+
+impl RigidFit {
+    /// Transforms the FRFs of `frf` to the principal axes: `sensor_responses[i]` is the response
+    /// index in `frf` of sensor i, `reference` the force. Carries each line's variance through.
+    pub fn transform_frf(&self, frf: &crate::Frf, reference: usize, sensor_responses: &[usize]) -> Result<PrincipalResponse> {
+        let n = self.a.nrows();
+        if sensor_responses.len() != n {
+            return Err(ProcessError::ChannelCount { what: "sensor-to-response indices", expected: n, got: sensor_responses.len() });
+        }
+        if reference >= frf.references {
+            return Err(ProcessError::ChannelCount { what: "references in the FRF (reference index out of range)", expected: reference + 1, got: frf.references });
+        }
+        if let Some(&bad) = sensor_responses.iter().find(|&&j| j >= frf.responses) {
+            return Err(ProcessError::ChannelCount { what: "responses in the FRF (sensor index out of range)", expected: bad + 1, got: frf.responses });
+        }
+        let channels: Vec<Vec<C64>> = sensor_responses.iter().map(|&j| frf.line(j, reference)).collect();
+        let mut out = self.transform(&frf.freqs_hz, &channels)?;
+        let mut var = Vec::with_capacity(frf.freqs_hz.len());
+        let mut cv = vec![0.0; n];
+        for k in 0..frf.freqs_hz.len() {
+            for (v, &j) in cv.iter_mut().zip(sensor_responses) {
+                *v = frf.variance(k, j, reference);
+            }
+            var.push(self.variance(&cv)?);
+        }
+        out.variance = Some(var);
+        Ok(out)
+    }
+}
+
+/// Builds a [`Body`] from mass properties given as a full inertia tensor about the centre of mass
+/// (kg·m², global axes): its eigen-decomposition gives the principal moments (ascending) and the
+/// principal axes (columns of `rotation`, right-handed).
+pub fn body_from_inertia_tensor(name: &str, mass: f64, centre_of_mass: Vector3<f64>, tensor: &nalgebra::Matrix3<f64>) -> Result<Body> {
+    let bad = |what: String| ProcessError::InvalidSetting { field: "inertia tensor", value: name.to_string(), reason: what };
+    if !(mass.is_finite() && mass > 0.0) {
+        return Err(bad(format!("mass {mass} kg must be > 0")));
+    }
+    if !tensor.iter().all(|v| v.is_finite()) || (tensor - tensor.transpose()).abs().max() > 1e-9 * tensor.abs().max() {
+        return Err(bad("the tensor must be finite and symmetric".into()));
+    }
+    let eig = nalgebra::SymmetricEigen::new(*tensor);
+    let mut order = [0usize, 1, 2];
+    order.sort_by(|&a, &b| eig.eigenvalues[a].total_cmp(&eig.eigenvalues[b]));
+    let inertia = order.map(|i| eig.eigenvalues[i]);
+    if inertia[0] <= 0.0 {
+        return Err(bad(format!("principal moments {inertia:?} must all be > 0")));
+    }
+    let (a, b, c) = (order[0], order[1], order[2]);
+    let mut rotation = nalgebra::Matrix3::from_columns(&[eig.eigenvectors.column(a), eig.eigenvectors.column(b), eig.eigenvectors.column(c)]);
+    if rotation.determinant() < 0.0 {
+        rotation.column_mut(2).neg_mut();
+    }
+    Ok(Body { name: name.to_string(), mass, inertia, position: centre_of_mass, rotation })
 }
 
 /// Ok if `a` has full column rank; otherwise a description of the unobserved motions.
@@ -205,7 +278,7 @@ fn null_motions(a: &DMatrix<f64>, lever: f64) -> std::result::Result<(), String>
     let smax = svd.singular_values.max();
     let mut missing = Vec::new();
     for (i, s) in svd.singular_values.iter().enumerate() {
-        if !(smax > 0.0) || *s <= 1e-9 * smax {
+        if smax.is_nan() || smax <= 0.0 || *s <= 1e-9 * smax {
             let v = vt.row(i);
             let big = v.iter().map(|x| x.abs()).fold(0.0, f64::max);
             let terms: Vec<String> = v

@@ -49,7 +49,7 @@ pub fn select_points(name: &str, freqs_hz: &[f64], magnitude: &[f64], coherence:
     if config.count == 0 {
         return Err(invalid("count", 0, "select at least one point"));
     }
-    if !(config.resonance_width > 0.0) || !(config.resonance_weight >= 0.0) {
+    if config.resonance_width.is_nan() || config.resonance_width <= 0.0 || config.resonance_weight.is_nan() || config.resonance_weight < 0.0 {
         return Err(invalid("resonance_width/weight", format!("{}/{}", config.resonance_width, config.resonance_weight), "width > 0 and weight ≥ 0"));
     }
     let (lo, hi) = config.band_hz;

@@ -68,6 +68,18 @@ pub struct Step {
     pub samples: usize,
 }
 
+impl Step {
+    /// Variance of the complex FRF estimate of response `j` (E|Ĥ−H|², (unit/N)²), from the fit
+    /// residuals: each complex amplitude fitted from N samples with white noise σ² has
+    /// E|X̂−X|² = 4σ²/N, so `var(H) ≈ 4(σ_y² + |H|² σ_f²) / (N |F|²)` (first order).
+    pub fn variance(&self, j: usize) -> Option<f64> {
+        let r = self.responses.get(j)?;
+        let h = self.frf.get(j)?;
+        let n = self.samples as f64;
+        Some(4.0 * (r.noise_rms.powi(2) + h.norm_sqr() * self.force.noise_rms.powi(2)) / (n * self.force.fundamental.norm_sqr()))
+    }
+}
+
 /// Reusable least-squares sine fitter (basis and normal-equation buffers are kept between steps).
 #[derive(Debug, Default)]
 pub struct SineFitter {
@@ -143,8 +155,8 @@ impl SineFitter {
             self.rhs.resize(m, 0.0);
             for (i, xi) in x.iter().enumerate() {
                 let row = &self.basis[i * m..(i + 1) * m];
-                for a in 0..m {
-                    self.rhs[a] += row[a] * xi;
+                for (r, b) in self.rhs.iter_mut().zip(row) {
+                    *r += b * xi;
                 }
             }
             cholesky_solve(&self.gram, &mut self.rhs, m);
@@ -176,6 +188,42 @@ impl SineFitter {
     }
 }
 
+/// Where one step of a stepped-sine record lies.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct StepSpec {
+    /// Excitation frequency (Hz).
+    pub freq_hz: f64,
+    /// First sample of the step in the record.
+    pub start: usize,
+    /// Samples in the step (settling included).
+    pub len: usize,
+}
+
+impl SineFitter {
+    /// Fits every step of a continuous stepped-sine record (force and responses sampled
+    /// together). Each step's phases are referred to its own first sample; FRFs are unaffected.
+    pub fn fit_sweep(&mut self, config: &SineConfig, steps: &[StepSpec], force: &[f64], responses: &[&[f64]]) -> Result<Vec<Step>> {
+        for (j, r) in responses.iter().enumerate() {
+            if r.len() != force.len() {
+                return Err(ProcessError::LengthMismatch { channel: format!("response {j}"), samples: r.len(), first: "force".into(), expected: force.len() });
+            }
+        }
+        let mut out = Vec::with_capacity(steps.len());
+        let mut slices: Vec<&[f64]> = Vec::with_capacity(responses.len());
+        for (i, s) in steps.iter().enumerate() {
+            let end = s.start.checked_add(s.len).filter(|e| *e <= force.len()).ok_or_else(|| ProcessError::TooShort {
+                channel: format!("record (step {i} at {} Hz ends at sample {})", s.freq_hz, s.start.saturating_add(s.len)),
+                samples: force.len(),
+                needed: s.start.saturating_add(s.len),
+            })?;
+            slices.clear();
+            slices.extend(responses.iter().map(|r| &r[s.start..end]));
+            out.push(self.fit_step(config, s.freq_hz, &force[s.start..end], &slices)?);
+        }
+        Ok(out)
+    }
+}
+
 /// In-place lower Cholesky of a symmetric positive definite m×m matrix (lower triangle used).
 fn cholesky(a: &mut [f64], m: usize) -> bool {
     let scale = (0..m).map(|i| a[i * m + i]).fold(0.0, f64::max);
@@ -184,7 +232,7 @@ fn cholesky(a: &mut [f64], m: usize) -> bool {
         for k in 0..j {
             d -= a[j * m + k] * a[j * m + k];
         }
-        if !(d > 1e-12 * scale) {
+        if d.is_nan() || d <= 1e-12 * scale {
             return false;
         }
         let d = d.sqrt();

@@ -22,6 +22,24 @@ pub enum Detrend {
     /// Subtract the segment mean (scipy's default `'constant'`).
     #[default]
     Constant,
+    /// Subtract the least-squares straight line of the segment (scipy `'linear'`).
+    Linear,
+}
+
+/// `(mean, slope per sample)` of a segment's trend, the line centred at `(n−1)/2`.
+fn trend(x: &[f64], detrend: Detrend) -> (f64, f64) {
+    let n = x.len() as f64;
+    match detrend {
+        Detrend::None => (0.0, 0.0),
+        Detrend::Constant => (x.iter().sum::<f64>() / n, 0.0),
+        Detrend::Linear => {
+            let mean = x.iter().sum::<f64>() / n;
+            let c = (n - 1.0) / 2.0;
+            let sxy: f64 = x.iter().enumerate().map(|(i, v)| (i as f64 - c) * (v - mean)).sum();
+            let sxx = n * (n * n - 1.0) / 12.0;
+            (mean, if sxx > 0.0 { sxy / sxx } else { 0.0 })
+        }
+    }
 }
 
 /// Settings of a Welch estimate.
@@ -94,9 +112,19 @@ pub struct CrossSpectra {
     pub gyy: Vec<f64>,
     /// Overloaded samples per channel (references first), when full scales were given.
     pub overloads: Vec<u64>,
+    /// Per channel, samples (after the first of each sign) that sit exactly on the channel's
+    /// largest positive or most negative value: a clipped channel piles samples up on its rails,
+    /// an analog signal practically never repeats its extreme. See [`CrossSpectra::clipping_suspected`].
+    pub peak_hits: Vec<u64>,
 }
 
 impl CrossSpectra {
+    /// True if channel `c` (references first) looks clipped although no full scale was given:
+    /// more than 4 samples repeat its extreme values exactly.
+    pub fn clipping_suspected(&self, c: usize) -> bool {
+        self.peak_hits.get(c).is_some_and(|h| *h > 4)
+    }
+
     /// `G_xx[k][i][l]`.
     pub fn gxx(&self, k: usize, i: usize, l: usize) -> C64 {
         self.gxx[(k * self.references + i) * self.references + l]
@@ -136,6 +164,8 @@ pub struct Welch {
     acc_gyy: Vec<f64>,
     overloads: Vec<u64>,
     max_abs: Vec<f64>,
+    /// Per channel: (largest value, repeats of it, smallest value, repeats of it).
+    extremes: Vec<(f64, u64, f64, u64)>,
 }
 
 impl std::fmt::Debug for Welch {
@@ -195,6 +225,7 @@ impl Welch {
             acc_gyy: vec![0.0; nf * p],
             overloads: vec![0; channels],
             max_abs: vec![0.0; channels],
+            extremes: vec![(f64::NEG_INFINITY, 0, f64::INFINITY, 0); channels],
             config,
         })
     }
@@ -239,6 +270,19 @@ impl Welch {
             }
             let m = ch.iter().fold(0.0f64, |m, v| m.max(v.abs()));
             self.max_abs[c] = self.max_abs[c].max(m);
+            let e = &mut self.extremes[c];
+            for &v in ch.iter() {
+                if v > e.0 {
+                    *e = (v, 0, e.2, e.3);
+                } else if v == e.0 {
+                    e.1 += 1;
+                }
+                if v < e.2 {
+                    *e = (e.0, e.1, v, 0);
+                } else if v == e.2 {
+                    e.3 += 1;
+                }
+            }
         }
         let n = self.config.segment_len;
         let step = n - self.config.overlap;
@@ -273,26 +317,45 @@ impl Welch {
             let pair = c + 1 < channels;
             let wa = if c < r { &self.ref_window } else { &self.resp_window };
             let wb = if c + 1 < r { &self.ref_window } else { &self.resp_window };
-            let (ma, mb) = match self.config.detrend {
-                Detrend::None => (0.0, 0.0),
-                Detrend::Constant => {
-                    let ma = self.pending[c].iter().sum::<f64>() / n as f64;
-                    let mb = if pair { self.pending[c + 1].iter().sum::<f64>() / n as f64 } else { 0.0 };
-                    (ma, mb)
-                }
-            };
+            let (ma, sa) = trend(&self.pending[c], self.config.detrend);
+            let (mb, sb) = if pair { trend(&self.pending[c + 1], self.config.detrend) } else { (0.0, 0.0) };
+            let centre = (n as f64 - 1.0) / 2.0;
             if pair {
                 let (a, b) = (&self.pending[c], &self.pending[c + 1]);
-                for i in 0..n {
-                    self.work[i] = C64::new((a[i] - ma) * wa[i], (b[i] - mb) * wb[i]);
+                if sa == 0.0 && sb == 0.0 {
+                    for i in 0..n {
+                        self.work[i] = C64::new((a[i] - ma) * wa[i], (b[i] - mb) * wb[i]);
+                    }
+                } else {
+                    for i in 0..n {
+                        let t = i as f64 - centre;
+                        self.work[i] = C64::new((a[i] - ma - sa * t) * wa[i], (b[i] - mb - sb * t) * wb[i]);
+                    }
                 }
             } else {
                 let a = &self.pending[c];
                 for i in 0..n {
-                    self.work[i] = C64::new((a[i] - ma) * wa[i], 0.0);
+                    let t = i as f64 - centre;
+                    self.work[i] = C64::new((a[i] - ma - sa * t) * wa[i], 0.0);
+                }
+            }
+            // Bring both packed channels to a similar magnitude by exact powers of two, so the
+            // round-off of a strong channel does not swamp a weak one sharing the FFT.
+            let (mut pa, mut pb) = (0.0f64, 0.0f64);
+            for z in &self.work {
+                pa = pa.max(z.re.abs());
+                pb = pb.max(z.im.abs());
+            }
+            let exponent = |m: f64| if m > 0.0 && m.is_finite() { m.log2().round().clamp(-1000.0, 1000.0) as i32 } else { 0 };
+            let (ea, eb) = (exponent(pa), exponent(pb));
+            if ea != eb {
+                let (sa, sb) = (2f64.powi(-ea), 2f64.powi(-eb));
+                for z in &mut self.work {
+                    *z = C64::new(z.re * sa, z.im * sb);
                 }
             }
             self.fft.process_with_scratch(&mut self.work, &mut self.scratch);
+            let (ua, ub) = if ea != eb { (2f64.powi(ea) * 0.5, 2f64.powi(eb) * 0.5) } else { (0.5, 0.5) };
             let (head, tail) = self.spectra.split_at_mut((c + 1) * nf);
             let sa = &mut head[c * nf..];
             if pair {
@@ -300,12 +363,15 @@ impl Welch {
                 for k in 0..nf {
                     let z = self.work[k];
                     let zc = self.work[(n - k) % n].conj();
-                    sa[k] = (z + zc) * 0.5;
+                    sa[k] = (z + zc) * ua;
                     let d = z - zc;
-                    sb[k] = C64::new(d.im * 0.5, -d.re * 0.5);
+                    sb[k] = C64::new(d.im * ub, -d.re * ub);
                 }
             } else {
-                sa.copy_from_slice(&self.work[..nf]);
+                let u = ua * 2.0;
+                for (s, z) in sa.iter_mut().zip(&self.work[..nf]) {
+                    *s = z * u;
+                }
             }
             c += 2;
         }
@@ -352,7 +418,7 @@ impl Welch {
         let fs = self.config.sample_rate_hz;
         let power: f64 = self.resp_window.iter().map(|w| w * w).sum();
         let base = 1.0 / (fs * power * self.segments as f64);
-        let scale = |k: usize| if k == 0 || (n % 2 == 0 && k == n / 2) { base } else { 2.0 * base };
+        let scale = |k: usize| if k == 0 || (n.is_multiple_of(2) && k == n / 2) { base } else { 2.0 * base };
         let (r, p) = (self.references, self.responses);
         let mut gxx = self.acc_gxx;
         let mut gxy = self.acc_gxy;
@@ -372,6 +438,7 @@ impl Welch {
             gxy,
             gyy,
             overloads: self.overloads,
+            peak_hits: self.extremes.iter().map(|e| e.1 + e.3).collect(),
         })
     }
 }

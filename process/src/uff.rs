@@ -175,6 +175,29 @@ impl Function {
         }
     }
 
+    /// This function as a recorded [`crate::Signal`]: it must be a real, evenly sampled time
+    /// response (function type 1). Named after record 1 (or `fallback_name` if that is empty or
+    /// "NONE").
+    pub fn to_signal(&self, fallback_name: &str) -> Result<crate::Signal> {
+        let name = match self.ids[0].trim() {
+            "" | "NONE" => fallback_name.to_string(),
+            s => s.to_string(),
+        };
+        let fail = |m: String| ProcessError::Format { file: name.clone(), location: "dataset 58".into(), message: m };
+        if self.func_type != function_type::TIME_RESPONSE {
+            return Err(fail(format!("function type {} is not a time response (1)", self.func_type)));
+        }
+        let increment = match self.abscissa {
+            Abscissa::Even { increment, .. } if increment.is_finite() && increment > 0.0 => increment,
+            Abscissa::Even { increment, .. } => return Err(fail(format!("time increment {increment} s must be > 0"))),
+            Abscissa::Uneven(_) => return Err(fail("unevenly sampled time history: resample it first".into())),
+        };
+        match &self.data {
+            Ordinate::Real(v) => Ok(crate::Signal { name, sample_rate_hz: 1.0 / increment, samples: v.clone() }),
+            Ordinate::Complex(_) => Err(fail("complex time history: expected real samples".into())),
+        }
+    }
+
     fn ord_type(&self) -> i64 {
         match (&self.data, self.double) {
             (Ordinate::Real(_), false) => 2,

@@ -1,4 +1,5 @@
 //! Bad input to the spectral chain: clear errors naming the channel, never panics.
+#![allow(clippy::unwrap_used, missing_docs)]
 
 mod common;
 
@@ -55,6 +56,9 @@ fn nan_samples_zero_force_and_overloads() {
     w.push(&[&y], &[&clipped]).unwrap();
     let s = w.finish().unwrap();
     assert_eq!(s.overloads, vec![0, expected]);
+    // Without a full scale the clipping still shows: samples pile up on the rails.
+    assert!(!s.clipping_suspected(0) && s.clipping_suspected(1), "peak hits {:?}", s.peak_hits);
+    assert_eq!(s.peak_hits[1], expected - 2);
 }
 
 #[test]

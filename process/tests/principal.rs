@@ -1,6 +1,7 @@
 //! Principal-axes transformation: exact recovery of synthetic rigid-body motion from any
 //! non-degenerate layout, a raised rigidity indicator for a flexible solid, clear errors for
 //! degenerate layouts.
+#![allow(clippy::unwrap_used, clippy::needless_range_loop, missing_docs)]
 
 use identify::Body;
 use nalgebra::{Matrix3, Rotation3, Vector3};
@@ -139,4 +140,42 @@ fn degenerate_layouts_name_what_is_missing() {
     assert!(RigidFit::new(&b, &bad, Dofs::Auto).unwrap_err().to_string().contains("'t0'"));
     // Wrong channel count at fit time.
     assert!(auto.fit_line(&y[..2], &mut out).is_err());
+}
+
+#[test]
+fn principal_axes_from_an_inertia_tensor_and_variance_propagation() {
+    let mut rng = rand::rngs::StdRng::seed_from_u64(11);
+    let b = body(&mut rng);
+    let tensor = b.rotation * Matrix3::from_diagonal(&Vector3::new(40.0, 55.0, 80.0)) * b.rotation.transpose();
+    let got = process::principal::body_from_inertia_tensor("table", 850.0, b.position, &tensor).unwrap();
+    for i in 0..3 {
+        assert!((got.inertia[i] - b.inertia[i]).abs() < 1e-9);
+        // Same axis up to sign.
+        assert!((got.rotation.column(i).dot(&b.rotation.column(i)).abs() - 1.0).abs() < 1e-9);
+    }
+    assert!((got.rotation.determinant() - 1.0).abs() < 1e-12);
+    let asym = tensor + Matrix3::new(0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0);
+    assert!(process::principal::body_from_inertia_tensor("t", 850.0, b.position, &asym).is_err());
+
+    // Variance of the fitted DOFs: Monte-Carlo check of var(q) = Σ P² var(y).
+    let sensors: Vec<Sensor> = (0..9)
+        .map(|i| Sensor { name: format!("a{i}"), position: b.position + Vector3::new(rng.random_range(-0.8..0.8), rng.random_range(-0.5..0.5), rng.random_range(-0.3..0.3)), direction: unit(&mut rng) })
+        .collect();
+    let fit = RigidFit::new(&b, &sensors, Dofs::Six).unwrap();
+    let sd = 1e-3;
+    let pred = fit.variance(&[sd * sd; 9]).unwrap();
+    let normal = rand_distr::Normal::new(0.0, sd).unwrap();
+    let trials = 4000;
+    let mut acc = [0.0; 6];
+    let mut q = [C64::default(); 6];
+    for _ in 0..trials {
+        let y: Vec<C64> = (0..9).map(|_| C64::new(rng.sample(normal), 0.0)).collect();
+        fit.fit_line(&y, &mut q).unwrap();
+        for d in 0..6 {
+            acc[d] += q[d].norm_sqr() / trials as f64;
+        }
+    }
+    for d in 0..6 {
+        assert!((acc[d] / pred[d] - 1.0).abs() < 0.1, "dof {d}: MC {} vs predicted {}", acc[d], pred[d]);
+    }
 }

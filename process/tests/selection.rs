@@ -1,4 +1,5 @@
 //! Selection of identification points and assembly of `identify::Measurement`.
+#![allow(clippy::unwrap_used, missing_docs)]
 
 mod common;
 

@@ -1,5 +1,6 @@
 //! Stepped-sine least-squares fit: exact recovery on noise-free signals (≤ 1e-9), distortion and
 //! noise level reporting.
+#![allow(clippy::unwrap_used, missing_docs)]
 
 mod common;
 
@@ -70,6 +71,52 @@ fn noise_level_is_reported() {
     assert!((r.noise_rms - 0.01).abs() < 0.0005, "noise {}", r.noise_rms);
     assert!((r.amplitude() - 1.0).abs() < 4.0 * 0.01 * (2.0 / n as f64).sqrt() * 3.0);
     assert!(r.snr() > 60.0 && r.snr() < 80.0);
+}
+
+#[test]
+fn predicted_frf_variance_matches_monte_carlo() {
+    let (fs, n, f) = (1000.0, 2000, 37.0);
+    let force = tone(fs, n, f, 0.0, &[(1, 10.0, 0.2)], None);
+    let resp = tone(fs, n, f, 0.0, &[(1, 0.5, -0.7)], None);
+    let cfg = SineConfig { sample_rate_hz: fs, settle_s: 0.0, harmonics: 1 };
+    let truth = C64::from_polar(0.05, -0.9);
+    let mut fit = SineFitter::new();
+    let (mut mse, mut pred) = (0.0, 0.0);
+    let trials = 400;
+    for t in 0..trials {
+        let fm: Vec<f64> = force.iter().zip(common::noise(1000 + t, n, 0.3)).map(|(a, e)| a + e).collect();
+        let rm: Vec<f64> = resp.iter().zip(common::noise(5000 + t, n, 0.05)).map(|(a, e)| a + e).collect();
+        let s = fit.fit_step(&cfg, f, &fm, &[&rm]).unwrap();
+        mse += (s.frf[0] - truth).norm_sqr() / trials as f64;
+        pred += s.variance(0).unwrap() / trials as f64;
+    }
+    assert!((mse / pred - 1.0).abs() < 0.2, "Monte-Carlo {mse:e} vs predicted {pred:e}");
+}
+
+#[test]
+fn a_continuous_sweep_is_split_into_steps() {
+    use process::sine::StepSpec;
+    let fs = 4096.0;
+    let freqs = [20.0, 45.5, 130.25];
+    let mut force = Vec::new();
+    let mut resp = Vec::new();
+    let mut steps = Vec::new();
+    for (i, &f) in freqs.iter().enumerate() {
+        let len = 4096 + 100 * i;
+        steps.push(StepSpec { freq_hz: f, start: force.len(), len });
+        force.extend(tone(fs, len, f, 0.0, &[(1, 50.0, 0.1 * i as f64)], None));
+        resp.extend(tone(fs, len, f, 0.0, &[(1, 0.5 * (i + 1) as f64, 0.1 * i as f64 - 0.4)], None));
+    }
+    let cfg = SineConfig { sample_rate_hz: fs, settle_s: 0.1, harmonics: 0 };
+    let out = SineFitter::new().fit_sweep(&cfg, &steps, &force, &[&resp]).unwrap();
+    for (i, s) in out.iter().enumerate() {
+        let want = C64::from_polar(0.01 * (i + 1) as f64, -0.4);
+        assert!((s.frf[0] - want).norm() < 1e-9 * want.norm(), "step {i}: {}", s.frf[0]);
+    }
+    let mut bad = steps.clone();
+    bad[2].len += 1;
+    let e = SineFitter::new().fit_sweep(&cfg, &bad, &force, &[&resp]).unwrap_err().to_string();
+    assert!(e.contains("step 2"), "{e}");
 }
 
 #[test]

@@ -1,4 +1,5 @@
 //! UFF dataset 58/58b: round trips (ours and against pyuff), malformed files, fuzzing.
+#![allow(clippy::unwrap_used, missing_docs)]
 
 mod common;
 
@@ -121,6 +122,18 @@ fn we_read_what_pyuff_writes() {
 
 fn ascii_reference() -> String {
     String::from_utf8(uff::to_bytes(&reference(), Encoding::Ascii).unwrap()).unwrap()
+}
+
+#[test]
+fn time_histories_become_signals_for_welch() {
+    let x: Vec<f64> = (0..1000).map(|i| (i as f64 * 0.1).sin()).collect();
+    let f = Function::time_history("hammer", 25600.0, x.clone());
+    let back = uff::parse(&uff::to_bytes(&[f], Encoding::Binary).unwrap(), "m").unwrap();
+    let s = back[0].to_signal("ch1").unwrap();
+    assert_eq!((s.name.as_str(), s.samples.as_slice()), ("hammer", x.as_slice()));
+    assert!((s.sample_rate_hz - 25600.0).abs() < 1e-9);
+    let frf = Function::frf("h", 0.0, 1.0, vec![C64::new(1.0, 0.0)]);
+    assert!(frf.to_signal("x").unwrap_err().to_string().contains("not a time response"));
 }
 
 #[test]

@@ -1,15 +1,188 @@
-//! `ident identify MODEL --data DATA --vars VARS`: maximum-likelihood identification.
+//! `ident identify MODEL --data DATA --vars VARS`: maximum-likelihood identification of SDE
+//! parameters with Cramér-Rao errors (docs/identification.md).
 
+use std::path::PathBuf;
 use std::process::ExitCode;
+
+use anyhow::Context;
+use identify::identification::{
+    self as idn, data, report, variables, FitKind, JacobianMode, NoiseChoice, Optimizer, Options, Settings,
+};
+
+use super::{emit, load_model, MethodArg};
+
+/// `--method`.
+#[derive(clap::ValueEnum, Clone, Copy, Debug, Default)]
+pub enum OptimizerArg {
+    /// Bounded Levenberg-Marquardt (default).
+    #[default]
+    Lm,
+    /// Gauss-Newton with line search (paper eq. 4.12-4.13).
+    Gn,
+    /// BFGS variable metric with a Wolfe line search.
+    Bfgs,
+}
+
+/// `--fit`.
+#[derive(clap::ValueEnum, Clone, Copy, Debug, Default)]
+pub enum FitArg {
+    /// Amplitudes only (the paper's A-F characteristics).
+    #[default]
+    Amplitude,
+    /// Real and imaginary parts (needs phases).
+    Complex,
+}
+
+/// `--noise`.
+#[derive(clap::ValueEnum, Clone, Copy, Debug, Default)]
+pub enum NoiseArg {
+    /// Variances if given, else coherence + averages, else relative.
+    #[default]
+    Auto,
+    /// The data's variances.
+    Variance,
+    /// H1 variance from coherence and averages.
+    Coherence,
+    /// σ = ε·|z| (--relative-error).
+    Relative,
+}
+
+/// `--format`.
+#[derive(clap::ValueEnum, Clone, Copy, Debug, Default)]
+pub enum FormatArg {
+    /// Human-readable report.
+    #[default]
+    Text,
+    /// JSON report.
+    Json,
+    /// The table as CSV.
+    Csv,
+}
 
 /// Arguments of `ident identify`.
 #[derive(clap::Args)]
 pub struct IdentifyArgs {
     /// Model file (TOML or resolved JSON).
-    pub model: std::path::PathBuf,
+    pub model: PathBuf,
+    /// Measured characteristics (JSON `MeasuredData` or CSV; docs/identification.md).
+    #[arg(long)]
+    pub data: PathBuf,
+    /// Decision variables (TOML; docs/identification.md).
+    #[arg(long)]
+    pub vars: PathBuf,
+    /// Minimizer.
+    #[arg(long, value_enum, default_value_t = OptimizerArg::Lm)]
+    pub method: OptimizerArg,
+    /// Amplitude-only or complex fit.
+    #[arg(long, value_enum, default_value_t = FitArg::Amplitude)]
+    pub fit: FitArg,
+    /// Where the observation covariance R comes from.
+    #[arg(long, value_enum, default_value_t = NoiseArg::Auto)]
+    pub noise: NoiseArg,
+    /// ε of the relative-error model σ = ε·|z|.
+    #[arg(long, default_value_t = 0.01)]
+    pub relative_error: f64,
+    /// Iteration limit (per start).
+    #[arg(long, default_value_t = 100)]
+    pub max_iterations: usize,
+    /// Number of starts (extra ones spread over the bounds).
+    #[arg(long, default_value_t = 1)]
+    pub starts: usize,
+    /// Seed of the extra starts.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Use forward-difference Jacobians (for comparison; slower).
+    #[arg(long)]
+    pub finite_difference: bool,
+    /// FRF solution path.
+    #[arg(long = "frf-method", value_enum, default_value_t = MethodArg::Auto)]
+    pub frf_method: MethodArg,
+    /// Output format on stdout.
+    #[arg(long, value_enum, default_value_t = FormatArg::Text)]
+    pub format: FormatArg,
+    /// Also write report.txt, table.json, table.csv, model.json (and model.toml for a TOML model)
+    /// into this directory.
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// No progress lines on stderr.
+    #[arg(long, short)]
+    pub quiet: bool,
 }
 
-/// Runs the identification.
-pub fn run(_args: IdentifyArgs) -> anyhow::Result<ExitCode> {
-    anyhow::bail!("identification is not built yet (issue 3)")
+/// Runs the identification. Exit 0: converged; 1: iteration limit or divergence (the best point
+/// is still reported and written).
+pub fn run(a: IdentifyArgs) -> anyhow::Result<ExitCode> {
+    let model = load_model(&a.model)?;
+    let measured = data::load(&a.data)?;
+    let obs = data::validate(&measured, &model, &a.data.display().to_string())?;
+    let vars = variables::load(&a.vars, &model)?;
+    anyhow::ensure!(
+        a.relative_error.is_finite() && a.relative_error > 0.0,
+        "--relative-error {} must be a number > 0 (e.g. 0.02 for 2 %)",
+        a.relative_error
+    );
+    anyhow::ensure!(a.max_iterations > 0, "--max-iterations must be at least 1");
+    anyhow::ensure!(a.starts > 0, "--starts must be at least 1");
+    let opts = Options {
+        fit: match a.fit {
+            FitArg::Amplitude => FitKind::Amplitude,
+            FitArg::Complex => FitKind::Complex,
+        },
+        noise: match a.noise {
+            NoiseArg::Auto => NoiseChoice::Auto,
+            NoiseArg::Variance => NoiseChoice::Variance,
+            NoiseArg::Coherence => NoiseChoice::Coherence,
+            NoiseArg::Relative => NoiseChoice::Relative(a.relative_error),
+        },
+        optimizer: match a.method {
+            OptimizerArg::Lm => Optimizer::LevenbergMarquardt,
+            OptimizerArg::Gn => Optimizer::GaussNewton,
+            OptimizerArg::Bfgs => Optimizer::Bfgs,
+        },
+        settings: Settings { max_iterations: a.max_iterations, ..Settings::default() },
+        jacobian: if a.finite_difference { JacobianMode::ForwardDifference } else { JacobianMode::Analytic },
+        frf_method: a.frf_method.into(),
+        starts: a.starts,
+        seed: a.seed,
+        ..Options::default()
+    };
+    let quiet = a.quiet;
+    let multi = a.starts > 1;
+    let id = idn::identify(&model, &obs, &vars, &opts, &mut |start, p| {
+        if !quiet {
+            let prefix = if multi { format!("start {start} ") } else { String::new() };
+            eprintln!(
+                "{prefix}iteration {:>3}  J = {:.6e}  step = {:.3e}  gradient = {:.3e}",
+                p.iteration, p.criterion, p.step_norm, p.gradient_norm
+            );
+        }
+    })?;
+    let text = report::text(&id);
+    let json = serde_json::to_string_pretty(&report::json(&id))? + "\n";
+    let csv = report::csv(&id);
+    match a.format {
+        FormatArg::Text => emit(None, &text)?,
+        FormatArg::Json => emit(None, &json)?,
+        FormatArg::Csv => emit(None, &csv)?,
+    }
+    if let Some(dir) = &a.out {
+        std::fs::create_dir_all(dir).with_context(|| format!("cannot create the output directory {}", dir.display()))?;
+        emit(Some(&dir.join("report.txt")), &text)?;
+        emit(Some(&dir.join("table.json")), &json)?;
+        emit(Some(&dir.join("table.csv")), &csv)?;
+        let resolved = serde_json::to_string_pretty(&identify::contract::to_json(&id.model))? + "\n";
+        emit(Some(&dir.join("model.json")), &resolved)?;
+        let original = std::fs::read_to_string(&a.model)
+            .with_context(|| format!("cannot re-read {}", a.model.display()))?;
+        if !original.trim_start().starts_with('{') {
+            let updated = report::update_toml(&original, &a.model.display().to_string(), &id)?;
+            emit(Some(&dir.join("model.toml")), &updated)?;
+        }
+    }
+    if id.stop.converged() {
+        Ok(ExitCode::SUCCESS)
+    } else {
+        eprintln!("{}", id.stop.describe());
+        Ok(ExitCode::from(1))
+    }
 }

@@ -33,7 +33,7 @@ pub fn run(a: ModesArgs) -> anyhow::Result<ExitCode> {
                 serde_json::json!({
                     "freq_hz": m.freq_hz,
                     "loss_factor": m.loss_factor,
-                    "energy": model.bodies.iter().zip(&m.energy).map(|(b, e)| (b.name.clone(), *e)).collect::<serde_json::Map<_, _>>(),
+                    "energy": model.bodies.iter().zip(&m.energy).map(|(b, e)| (b.name.clone(), serde_json::json!(e))).collect::<serde_json::Map<_, _>>(),
                     "shape_re": m.shape.iter().map(|v| v.re).collect::<Vec<_>>(),
                     "shape_im": m.shape.iter().map(|v| v.im).collect::<Vec<_>>(),
                 })

@@ -219,3 +219,32 @@ fn from_socketcan_id(id: Id) -> CanId {
         Id::Extended(e) => CanId::Extended(e.as_raw()),
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn open_errors_name_the_interface_and_say_what_to_check() {
+        let e = open_error("can7", std::io::Error::from_raw_os_error(ENODEV));
+        let msg = e.to_string();
+        assert!(matches!(e, CanError::UnknownInterface { .. }), "{e:?}");
+        assert!(msg.contains("`can7`") && msg.contains("ip link show can7"), "{msg}");
+        let e = open_error("can7", std::io::Error::from_raw_os_error(EAFNOSUPPORT));
+        assert!(matches!(e, CanError::NoKernelSupport { .. }) && e.to_string().contains("modprobe can-raw"), "{e}");
+        let e = open_error("can7", std::io::Error::from_raw_os_error(ENETDOWN));
+        assert!(e.to_string().contains("ip link set can7 up"), "{e}");
+        let e = open_error("can7", std::io::Error::from_raw_os_error(13));
+        assert!(matches!(e, CanError::Io { op: "open", .. }) && e.to_string().contains("can7"), "{e}");
+    }
+
+    #[test]
+    fn identifiers_convert_both_ways_and_out_of_range_ones_are_refused() {
+        for id in [CanId::Standard(0), CanId::Standard(0x7FF), CanId::Extended(0x1FFF_FFFF)] {
+            assert_eq!(to_socketcan_id(id).map(from_socketcan_id), Ok(id));
+        }
+        assert!(to_socketcan_id(CanId::Standard(0x800)).is_err());
+        assert!(to_socketcan_id(CanId::Extended(0x2000_0000)).is_err());
+        assert!(CanId::Standard(0x800).validate("data").is_err_and(|e| e.to_string().contains("data identifier 800")));
+    }
+}

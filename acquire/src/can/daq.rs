@@ -9,6 +9,7 @@ use crate::can::codec::{kind, Message, Reassembler, SegmentFault, Segmenter, Wir
 use crate::can::{BusEvent, CanBus, CanError, CanId, FrameKind, WireFrame};
 use crate::daq::{ChannelInfo, Daq, DaqConfig, DaqError, DaqEvent, FaultKind, SampleBlock, StreamFault, StreamInfo};
 use crate::device::DeviceIdentity;
+use crate::transport::{ByteTap, Direction};
 
 /// Identifiers, frame kind and timeouts of a CAN DAQ (the stand file's `can` section).
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -79,6 +80,7 @@ pub struct CanDaq {
     last_raw_seq: Option<u32>,
     frames: Vec<WireFrame>,
     body: Vec<u8>,
+    tap: Option<std::sync::Arc<dyn ByteTap>>,
 }
 
 impl CanDaq {
@@ -101,7 +103,23 @@ impl CanDaq {
             last_raw_seq: None,
             frames: Vec::new(),
             body: Vec::new(),
+            tap: None,
         })
+    }
+
+    /// Copies every frame sent and received (command, status and data identifiers) to `tap`, one
+    /// line per frame in `cansend`/`candump -L` notation (`102#80010003CFCB\n`, FD `102##0…`).
+    pub fn with_tap(mut self, tap: std::sync::Arc<dyn ByteTap>) -> CanDaq {
+        self.tap = Some(tap);
+        self
+    }
+
+    fn record(&self, direction: Direction, f: &WireFrame) {
+        if let Some(tap) = &self.tap {
+            let mut line = f.to_cansend();
+            line.push('\n');
+            tap.bytes(self.bus.interface(), direction, line.as_bytes());
+        }
     }
 
     /// The announced stream, once configured.
@@ -129,6 +147,7 @@ impl CanDaq {
         for i in 0..self.frames.len() {
             let f = self.frames[i];
             self.bus.send(&f).await.map_err(|e| self.can_err(e))?;
+            self.record(Direction::Tx, &f);
         }
         Ok(())
     }
@@ -145,6 +164,9 @@ impl CanDaq {
             }
             Ok(r) => r.map_err(|e| self.can_err(e))?,
         };
+        if let BusEvent::Frame(f) = &ev {
+            self.record(Direction::Rx, f);
+        }
         match ev {
             BusEvent::Frame(f) if f.id() == self.settings.data_id => {
                 let p = self.rx_data.push(f.data());

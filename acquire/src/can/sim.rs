@@ -94,16 +94,41 @@ struct Stream {
     sample_rate_hz: f64,
 }
 
-/// Serves the DAQ-over-CAN protocol on `interface` until `stop` resolves (or `max_blocks` blocks
-/// were sent, if given). Returns what it did.
-pub async fn serve(
-    interface: &str,
+/// A simulated DAQ bound to its interface (listening for commands), ready to [`serve`](Self::serve).
+pub struct SimCanDaq {
+    bus: CanBus,
+    settings: SimCanDaqSettings,
+}
+
+impl SimCanDaq {
+    /// Opens `interface` and starts listening for commands (call inside a tokio runtime). Commands
+    /// sent after this returns are received.
+    pub fn bind(interface: &str, settings: SimCanDaqSettings) -> Result<SimCanDaq, CanError> {
+        let bus = CanBus::open_filtered(interface, &[settings.command_id])?;
+        Ok(SimCanDaq { bus, settings })
+    }
+
+    /// Serves the DAQ-over-CAN protocol until `stop` resolves (or `max_blocks` blocks were sent,
+    /// if given). Returns what it did.
+    pub async fn serve(
+        self,
+        signal: Signal,
+        max_blocks: Option<u64>,
+        stop: tokio::sync::oneshot::Receiver<()>,
+    ) -> Result<SimStats, CanError> {
+        serve_on(self.bus, self.settings, signal, max_blocks, stop).await
+    }
+}
+
+async fn serve_on(
+    bus: CanBus,
     settings: SimCanDaqSettings,
     mut signal: Signal,
     max_blocks: Option<u64>,
     stop: tokio::sync::oneshot::Receiver<()>,
 ) -> Result<SimStats, CanError> {
-    let bus = CanBus::open_filtered(interface, &[settings.command_id])?;
+    let interface = bus.interface().to_string();
+    let interface = interface.as_str();
     let mut rx = Reassembler::new();
     let mut tx_status = Segmenter::new(settings.status_id, settings.frames);
     let mut tx_data = Segmenter::new(settings.data_id, settings.frames);
@@ -173,11 +198,11 @@ pub async fn serve(
                     bus.send(f).await?;
                 }
             }
-            _ = ticker.tick(), if streaming => {
+            // Real time: one block per period. Otherwise flat out, yielding so commands still get in.
+            _ = async {
+                if settings.real_time { ticker.tick().await; } else { tokio::task::yield_now().await; }
+            }, if streaming => {
                 let Some(s) = &stream else { continue };
-                if !settings.real_time {
-                    tokio::task::yield_now().await;
-                }
                 let spb = s.samples_per_block as u64;
                 let first = block_seq as u64 * spb;
                 counts.clear();
@@ -216,9 +241,6 @@ pub async fn serve(
                 }
                 stats.blocks += 1;
                 block_seq = block_seq.wrapping_add(1);
-                if !settings.real_time {
-                    ticker.reset_immediately();
-                }
             }
         }
     }

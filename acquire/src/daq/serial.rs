@@ -87,8 +87,9 @@ impl<T: Transport> SerialDaq<T> {
     async fn fill(&mut self, deadline: Instant, what: &str) -> Result<(), DaqError> {
         let n = match tokio::time::timeout_at(deadline, self.io.read(&mut self.rx)).await {
             Err(_) => {
-                let extra = if self.state.undecodable > 0 {
-                    format!(" (received {} bytes that are not DAQ frames: wrong device or baud rate?)", self.state.undecodable)
+                let junk = self.state.undecodable + self.dec.pending();
+                let extra = if junk > 0 {
+                    format!(" (received {junk} bytes that are not DAQ frames: wrong device or baud rate?)")
                 } else {
                     String::new()
                 };

@@ -158,21 +158,7 @@ impl SimStand {
         let shaker = pty_pair("shaker")?;
         let daq = pty_pair("daq")?;
         let (shaker_port, daq_port) = (shaker.path.clone(), daq.path.clone());
-        let (s_io, s_guard) = shaker.into_parts();
-        let (d_io, d_guard) = daq.into_parts();
-        let mut st = Self::serve(setup, s_io, d_io, shaker_port, daq_port);
-        // The guards keep the host ends open until the device tasks end (cable pulled or shutdown).
-        let shared = st.shared.clone();
-        st.tasks.push(tokio::spawn(async move {
-            let _g = (s_guard, d_guard);
-            loop {
-                if lock(&shared).cable_pulled {
-                    return;
-                }
-                tokio::time::sleep(Duration::from_millis(5)).await;
-            }
-        }));
-        Ok(st)
+        Ok(Self::serve(setup, shaker.device, daq.device, shaker_port, daq_port))
     }
 
     /// Serves the devices over given transports (e.g. [`crate::transport::MemoryTransport`]).
@@ -252,7 +238,11 @@ async fn serve_shaker<T: Transport>(
         }
         let n = match tokio::time::timeout(Duration::from_millis(20), io.read(&mut buf)).await {
             Err(_) => continue,
-            Ok(Ok(0)) | Ok(Err(_)) => return,
+            // No host has the port open (pty master reads EIO): wait for one.
+            Ok(Ok(0)) | Ok(Err(_)) => {
+                tokio::time::sleep(Duration::from_millis(10)).await;
+                continue;
+            }
             Ok(Ok(n)) => n,
         };
         let mut got = Vec::new();
@@ -412,7 +402,13 @@ async fn serve_daq<T: Transport>(mut io: T, shared: SharedRef, setup: SimSetup) 
         };
         tx.clear();
         match read {
-            Some(Ok(0)) | Some(Err(_)) => return,
+            Some(Ok(0)) | Some(Err(_)) => {
+                if lock(&shared).cable_pulled {
+                    return;
+                }
+                tokio::time::sleep(Duration::from_millis(10)).await;
+                continue;
+            }
             Some(Ok(n)) => {
                 let mut msgs = Vec::new();
                 dec.feed(&rx[..n], |f| {
@@ -512,7 +508,8 @@ async fn serve_daq<T: Transport>(mut io: T, shared: SharedRef, setup: SimSetup) 
             }
         }
         if !tx.is_empty() && io.write_all(&tx).await.is_err() {
-            return;
+            // The host closed the port mid-stream; keep serving (it may reopen).
+            streaming = false;
         }
     }
 }

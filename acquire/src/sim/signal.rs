@@ -254,7 +254,7 @@ impl SignalGenerator {
                 let g = self.interaction.at(freqs[k]);
                 let coef = match ch.source {
                     Source::Force => g,
-                    Source::Sensor(i) => g * h[k].get(i).copied().unwrap_or_default(),
+                    Source::Sensor(i) => g * h.get(k).and_then(|v| v.get(i)).copied().unwrap_or_default(),
                 };
                 y[k] = u[k] * coef;
                 if k > 0 && k < n - k {

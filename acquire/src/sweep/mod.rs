@@ -284,6 +284,19 @@ impl Pump<'_> {
         loop {
             match self.rig.daq.next_event().await? {
                 DaqEvent::Block(b) => {
+                    if b.channel_count as usize != self.rig.stand.channels.len() || b.volts.len() % b.channel_count.max(1) as usize != 0 {
+                        return Err(SweepError::Daq(DaqError::Protocol {
+                            port: self.rig.daq.port().to_string(),
+                            command: "stream".into(),
+                            detail: format!(
+                                "block of {} values in {} channels; the stand file ({}) has {} channels",
+                                b.volts.len(),
+                                b.channel_count,
+                                self.rig.stand.file,
+                                self.rig.stand.channels.len()
+                            ),
+                        }));
+                    }
                     let n = b.len() as u64;
                     let volts: Vec<Vec<f32>> = (0..b.channel_count as usize).map(|c| b.channel(c).collect()).collect();
                     self.session.log(
@@ -384,6 +397,7 @@ pub async fn stepped_sine(
     // Always try to leave the stand safe and the stream stopped.
     let off = rig.shaker.set_output(false).await;
     let stopped_daq = rig.daq.stop().await;
+    drain_faults(rig, session).await?;
     match &r {
         Ok(o) if o.stopped => event(session, "stopped", None, None, "operator stop; output off; the sweep can be resumed")?,
         Ok(_) => event(session, "completed", None, None, "all steps measured")?,
@@ -539,6 +553,21 @@ async fn stepped_inner(
     Ok(outcome)
 }
 
+/// Records the faults a DAQ still holds after STOP (decoded while waiting for its answer).
+async fn drain_faults(rig: &mut Rig, session: &SessionHandle) -> Result<(), SweepError> {
+    for _ in 0..10_000 {
+        match tokio::time::timeout(std::time::Duration::from_millis(200), rig.daq.next_event()).await {
+            Ok(Ok(DaqEvent::Fault(f))) => session.log(
+                Topic::DaqFault,
+                &json!({"port": rig.daq.port(), "kind": f.kind.as_str(), "seq": f.seq, "detail": f.detail}),
+            )?,
+            Ok(Ok(DaqEvent::Block(_))) => continue,
+            _ => break,
+        }
+    }
+    Ok(())
+}
+
 /// A broadband measurement.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Broadband {
@@ -589,6 +618,7 @@ pub async fn broadband(
     let r = broadband_inner(rig, plan, (lo, hi, period), session, progress, stop).await;
     let off = rig.shaker.set_output(false).await;
     let _ = rig.daq.stop().await;
+    drain_faults(rig, session).await?;
     match &r {
         Ok(o) if o.stopped => event(session, "stopped", None, None, "operator stop")?,
         Ok(_) => event(session, "completed", None, None, "all averages measured")?,

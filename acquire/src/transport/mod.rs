@@ -4,7 +4,7 @@
 mod serial;
 mod tap;
 
-pub use serial::{open_serial, pty_pair, PtyDevice, PtyGuard, SerialSettings, SerialTransport};
+pub use serial::{open_serial, pty_pair, PtyDevice, SerialSettings, SerialTransport};
 pub use tap::{ByteTap, Direction, Tapped};
 
 use tokio::io::{AsyncRead, AsyncWrite};

@@ -113,41 +113,27 @@ impl AsyncWrite for SerialTransport {
 }
 
 /// A pseudo-terminal: the device side (served by a simulator) and the path a host program opens
-/// like a real serial port.
+/// like a real serial port. Dropping the device end closes the port ("cable pulled").
 pub struct PtyDevice {
     /// The simulator's end (the pty master).
     pub device: SerialTransport,
     /// Path of the host end (`/dev/pts/N`), to put in a stand file or pass to [`open_serial`].
     pub path: String,
-    /// The host end, held open by the simulator so the master never sees a hang-up while no host
-    /// program has it open. Dropping the [`PtyDevice`] closes both ends ("cable pulled").
-    _keep_open: SerialStream,
-}
-
-/// Keeps the host end of a pseudo-terminal open; dropping it closes the port.
-pub struct PtyGuard(#[allow(dead_code)] SerialStream);
-
-impl PtyDevice {
-    /// Splits into the device-side transport and the guard that keeps the host end open.
-    pub fn into_parts(self) -> (SerialTransport, PtyGuard) {
-        (self.device, PtyGuard(self._keep_open))
-    }
 }
 
 /// Creates a pseudo-terminal pair for a simulated `role` ("shaker", "daq"). Must be called inside a
 /// tokio runtime.
+///
+/// The host end is closed again at once: the host program opens it by path, exclusively, like a
+/// real port. While no host program has it open, reads of the device end fail with `EIO`; device
+/// simulators treat that as "nobody connected" and retry.
 pub fn pty_pair(role: &str) -> Result<PtyDevice, TransportError> {
     let err = |e: tokio_serial::Error| TransportError::Pty { role: role.to_string(), detail: e.description };
-    let (master, mut slave) = SerialStream::pair().map_err(err)?;
-    // Let the host program open the same path even when it does not run as root.
-    slave.set_exclusive(false).map_err(err)?;
+    let (master, slave) = SerialStream::pair().map_err(err)?;
     let path = slave.name().ok_or_else(|| TransportError::Pty {
         role: role.to_string(),
         detail: "the pseudo-terminal has no name".into(),
     })?;
-    Ok(PtyDevice {
-        device: SerialTransport { name: format!("sim-{role}:{path}"), inner: master },
-        path,
-        _keep_open: slave,
-    })
+    drop(slave);
+    Ok(PtyDevice { device: SerialTransport { name: format!("sim-{role}:{path}"), inner: master }, path })
 }

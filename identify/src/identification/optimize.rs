@@ -547,16 +547,24 @@ fn bfgs(
         }
         prev_free = Some(free.clone());
         let gf = DVector::from_fn(n, |i, _| if free[i] { s.g[i] } else { 0.0 });
+        // Components that would leave the box at once are dropped (the quasi-Newton direction
+        // can point outward where the gradient points inward).
+        let blocked = |i: usize, di: f64| !free[i] || (s.u[i] >= hi[i] && di > 0.0) || (s.u[i] <= lo[i] && di < 0.0);
         let mut d = -(&hinv * &gf);
         for i in 0..n {
-            if !free[i] {
+            if blocked(i, d[i]) {
                 d[i] = 0.0;
             }
         }
-        if s.g.dot(&d) >= 0.0 {
+        if s.g.dot(&d) >= 0.0 || d.amax() == 0.0 {
             hinv = DMatrix::identity(n, n);
             fresh = true;
             d = -gf.clone();
+            for i in 0..n {
+                if blocked(i, d[i]) {
+                    d[i] = 0.0;
+                }
+            }
         }
         let mut alpha_max = f64::INFINITY;
         for i in 0..n {
@@ -576,6 +584,7 @@ fn bfgs(
             return outcome(&s, it - 1, StopReason::NoFurtherDecrease);
         }
         let step = &p.s.u - &s.u;
+        let was_fresh = fresh;
         let y = DVector::from_fn(n, |i, _| if free[i] { p.s.g[i] - s.g[i] } else { 0.0 });
         let sy = step.dot(&y);
         if sy > 1e-12 * step.norm() * y.norm() {
@@ -594,10 +603,11 @@ fn bfgs(
         s = p.s;
         let free = free_set(&s.u, &s.g, lo, hi);
         progress(&Progress { iteration: it, criterion: s.cost, step_norm: sn, gradient_norm: projected_norm(&s.g, &free) });
-        if old - s.cost <= set.criterion_tol * old {
+        // A (short) steepest-descent step after a restart says little about convergence.
+        if !was_fresh && old - s.cost <= set.criterion_tol * old {
             return outcome(&s, it, StopReason::CriterionTolerance);
         }
-        if step_small(sn, &s.u, set.step_tol) {
+        if !was_fresh && step_small(sn, &s.u, set.step_tol) {
             return outcome(&s, it, StopReason::StepTolerance);
         }
     }

@@ -3,10 +3,12 @@
 //! the correlation matrix, and identifiability (the near-singular directions of the information
 //! matrix, named as combinations of variables).
 //!
-//! Variables held at a bound are treated as known when computing the other variables' errors
-//! (their covariance is the inverse of the information matrix over the free variables); for a
-//! variable at a bound the unconstrained bound `sqrt([F⁻¹]_ii)` of the full information matrix is
-//! reported, flagged as at its bound (its estimate is not normally distributed).
+//! Variables that end at a bound are flagged: their estimate is not normally distributed, and
+//! their standard error is the unconstrained bound `sqrt([F⁻¹]_ii)` of the full information
+//! matrix F, as for every other variable. The covariance is not conditioned on the active bounds:
+//! a bound reached because of noise (a weakly determined variable pushed to 0) says nothing
+//! certain about the truth, and conditioning on it would understate the errors of the variables
+//! correlated with it.
 
 use nalgebra::{DMatrix, SymmetricEigen};
 
@@ -131,25 +133,7 @@ pub fn uncertainty(
         let s = (covariance[(a, a)] * covariance[(b, b)]).sqrt();
         if s > 0.0 { covariance[(a, b)] / s } else { f64::NAN }
     });
-    // Free-set covariance.
     let mut std_error: Vec<f64> = (0..n).map(|i| covariance[(i, i)].max(0.0).sqrt()).collect();
-    if !free.is_empty() && free.len() < n {
-        let k = free.len();
-        let ff = DMatrix::from_fn(k, k, |a, b| ft[(free[a], free[b])]);
-        let e2 = SymmetricEigen::new(ff);
-        let lm = e2.eigenvalues.iter().copied().fold(0.0, f64::max);
-        let mut p2 = DMatrix::zeros(k, k);
-        for q in 0..k {
-            let l = e2.eigenvalues[q];
-            if l > 1e-14 * lm {
-                let v = e2.eigenvectors.column(q);
-                p2 += (v * v.transpose()) / l;
-            }
-        }
-        for (a, &i) in free.iter().enumerate() {
-            std_error[i] = (p2[(a, a)] * covariance_scale).max(0.0).sqrt() * d[i];
-        }
-    }
     for k in 0..n {
         if eig.eigenvalues[k] <= cutoff {
             // Directions with no information at all: the variables in them are undetermined.

@@ -1,4 +1,5 @@
 //! Helpers shared by the integration tests that cross-check against Python.
+#![allow(clippy::unwrap_used, missing_docs)]
 #![allow(dead_code)]
 
 use std::path::{Path, PathBuf};

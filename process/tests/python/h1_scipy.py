@@ -53,9 +53,12 @@ def write(out, gxx, gxy, gyy):
 def impact_mode(args):
     out, width, end, files = args[0], float(args[1]), float(args[2]), args[3:]
     sxx = sxy = syy = 0
+    fs = None
     for f in files:
         d = np.load(f)
-        fs = 1.0 / (d[0, 1] - d[0, 0])
+        # One sample rate for all records (the time rows differ in the last bits from file to
+        # file; a per-file rate would weight the averages unequally by ~1e-10).
+        fs = fs or 1.0 / (d[0, 1] - d[0, 0])
         n = d.shape[1]
         force_w = (np.arange(n) < int(round(width * n))).astype(float)
         exp_w = np.exp(np.log(end) * np.arange(n) / (n - 1))

@@ -1,0 +1,482 @@
+//! End-to-end checks of the acquisition over pseudo-terminals against the simulated stand:
+//! a stepped-sine sweep recovers the truth FRF from the session file, injected faults are all
+//! detected and recorded, device failures end the sweep cleanly, stop/resume, bad input.
+
+mod util;
+
+use std::collections::BTreeSet;
+
+use acquire::daq::{Daq, DaqError, DaqOptions, SerialDaq};
+use acquire::rig::{Rig, RigError};
+use acquire::session::{Session, SessionOptions};
+use acquire::shaker::{ScpiShaker, Shaker, ShakerError, ShakerOptions};
+use acquire::sim::plant::{Interaction, SdofPlant, C64};
+use acquire::sim::{SimSetup, SimStand};
+use acquire::stand::{Stand, TruthModel};
+use acquire::sweep::fit::SineFit;
+use acquire::sweep::{self, FrequencyList, NoProgress, StopSignal, SteppedSine, SweepError, SweepProgress};
+use acquire::transport::{open_serial, pty_pair, SerialSettings, TransportError};
+use serde_json::Value;
+use util::*;
+
+fn quick_plan(n: usize) -> SteppedSine {
+    SteppedSine {
+        frequencies: FrequencyList::Log { start: 40.0, stop: 250.0, n },
+        settle_s: 0.05,
+        cycles: 10.0,
+        min_window_s: 0.15,
+        max_retries: 8,
+        ..SteppedSine::default()
+    }
+}
+
+/// The truth accelerance of each acceleration channel (stand order) at `f`.
+fn truth(stand: &Stand, f: f64) -> Vec<C64> {
+    let t = stand.truth.as_ref().unwrap();
+    let TruthModel::Sdof { mass, stiffness, loss_factor, direction, .. } = &t.model else { panic!("sdof truth expected") };
+    let p = SdofPlant { mass: *mass, stiffness: *stiffness, loss_factor: *loss_factor, gains: vec![] };
+    stand
+        .channels
+        .iter()
+        .filter(|c| c.kind == acquire::stand::ChannelKind::Acceleration)
+        .map(|c| p.accelerance(f) * c.direction.iter().zip(direction).map(|(a, b)| a * b).sum::<f64>())
+        .collect()
+}
+
+async fn run_sweep(stand: &Stand, plan: &SteppedSine, path: &std::path::Path, stop: &StopSignal, skip: &BTreeSet<usize>, progress: &dyn SweepProgress) -> (Result<sweep::SweepOutcome, SweepError>, SimStand) {
+    let sim = SimStand::start(stand).unwrap();
+    let bound = sim.bind(stand);
+    let session = Session::create(path, SessionOptions::default()).unwrap();
+    let h = session.handle();
+    sweep::log_session_start(&h, &stand.file, plan, None, skip).unwrap();
+    let r = async {
+        let mut rig = Rig::connect(&bound, Some(&h)).await.map_err(|e| SweepError::Plan(e.to_string()))?;
+        sweep::stepped_sine(&mut rig, plan, &h, progress, stop, skip).await
+    }
+    .await;
+    session.finish().unwrap();
+    (r, sim)
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn stepped_sine_over_ptys_recovers_the_truth_frf_from_the_session_file() {
+    bounded(120, async {
+        let stand = sim_stand(8.0);
+        let plan = SteppedSine {
+            frequencies: FrequencyList::AroundResonances { resonances: vec![95.1], relative_span: 0.5, per_resonance: 9 },
+            // At 8× real time the blocks queued during a shaker command exchange amount to
+            // ~10 ms × 8; settle well beyond that.
+            settle_s: 0.25,
+            ..quick_plan(0)
+        };
+        let (_d, path) = temp_file("e2e.mcap");
+        let (r, _sim) = run_sweep(&stand, &plan, &path, &StopSignal::new(), &BTreeSet::new(), &NoProgress).await;
+        let outcome = r.unwrap();
+        assert_eq!(outcome.steps.len(), 9);
+        assert_eq!(outcome.faults, 0);
+
+        let rs = records(&path);
+        let stream = topic(&rs, "/daq/stream")[0].value.clone();
+        let fs = stream["sample_rate_hz"].as_f64().unwrap();
+        let blocks = topic(&rs, "/daq/block");
+        let steps = topic(&rs, "/sweep/step");
+        assert_eq!(steps.len(), 9);
+        assert_eq!(topic(&rs, "/device/identity").len(), 2);
+        assert!(!topic(&rs, "/raw").is_empty());
+        let nch = stand.channels.len();
+        let t = stand.truth.as_ref().unwrap();
+        for s in steps {
+            let v = &s.value;
+            let f = v["frequency_hz"].as_f64().unwrap();
+            let first = v["first_sample"].as_u64().unwrap();
+            let n = v["samples"].as_u64().unwrap();
+            // Closed loop held the target force.
+            let famp = v["force_amplitude_n"].as_f64().unwrap();
+            assert!((famp - 4000.0).abs() <= 0.03 * 4000.0 + 1.0, "{f} Hz: force {famp}");
+            // Recompute the step from the recorded blocks alone.
+            let mut fit = SineFit::new(f, fs, nch);
+            for b in &blocks {
+                let b0 = b.value["first_sample"].as_u64().unwrap();
+                let volts = b.value["volts"].as_array().unwrap();
+                let len = volts[0].as_array().unwrap().len() as u64;
+                for i in 0..len {
+                    let k = b0 + i;
+                    if k >= first && k < first + n {
+                        fit.push(k, (0..nch).map(|c| volts[c][i as usize].as_f64().unwrap() / stand.channels[c].sensitivity));
+                    }
+                }
+            }
+            assert_eq!(fit.samples(), n, "window of step at {f} Hz not fully in the file");
+            let est = fit.solve().unwrap();
+            let force = est[0].amplitude;
+            let want = truth(&stand, f);
+            for (c, w) in want.iter().enumerate() {
+                let ch = c + 1;
+                let h = est[ch].amplitude / force;
+                // Noise bound: σ(H)/|F| ≈ sqrt(2/N)(σ_a + |H| σ_F)/|F|; 6 σ plus 0.2 % for
+                // quantisation and f32 rounding.
+                let sigma = (2.0 / n as f64).sqrt() * (t.noise_acceleration + w.norm() * t.noise_force) / force.norm();
+                let tol = 6.0 * sigma + 2e-3 * w.norm();
+                assert!((h - w).norm() < tol, "{f:.2} Hz channel {}: H = {h}, truth {w}, tol {tol:e}", stand.channels[ch].name);
+                // And the live estimate recorded by the sweep agrees with the recomputation.
+                let live = C64::new(v["channels"][ch]["frf_re"].as_f64().unwrap(), v["channels"][ch]["frf_im"].as_f64().unwrap());
+                assert!((live - h).norm() < 1e-6 * h.norm().max(1e-12), "{live} vs {h}");
+            }
+        }
+        // The Python reader decodes every channel.
+        let (n, topics) = python_read(&path);
+        assert_eq!(n, rs.len() as u64);
+        assert!(topics.contains(&"/sweep/step".to_string()));
+    })
+    .await
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn every_injected_stream_fault_is_detected_and_recorded() {
+    bounded(120, async {
+        let mut stand = sim_stand(10.0);
+        stand.faults.drop = 0.01;
+        stand.faults.corrupt = 0.01;
+        stand.faults.duplicate = 0.01;
+        stand.faults.seed = 42;
+        let plan = quick_plan(5);
+        let (_d, path) = temp_file("faults.mcap");
+        let (r, sim) = run_sweep(&stand, &plan, &path, &StopSignal::new(), &BTreeSet::new(), &NoProgress).await;
+        let outcome = r.unwrap();
+        assert_eq!(outcome.steps.len(), 5, "the sweep re-measures windows hit by faults");
+        let rs = records(&path);
+        // Stream order: faults and blocks are recorded in the order they were decoded.
+        let last_block = rs.iter().rposition(|r| r.topic == "/daq/block").unwrap();
+        let last_seq = rs[last_block].value["seq"].as_u64().unwrap();
+        let injected = sim.injected();
+        let count = |k: &str| injected.iter().filter(|f| f.kind == k && f.seq < last_seq).count() as u64;
+        let (drops, corrupts, dups) = (count("drop"), count("corrupt"), count("duplicate"));
+        assert!(drops + corrupts + dups >= 3, "seeded faults should fire: {injected:?}");
+        let faults: Vec<&Value> = rs[..last_block].iter().filter(|r| r.topic == "/daq/fault").map(|r| &r.value).collect();
+        let kind = |k: &str| faults.iter().filter(|f| f["kind"] == k).count() as u64;
+        assert_eq!(kind("crc") + kind("framing"), corrupts, "every corrupted frame is a CRC/framing fault: {faults:?}");
+        assert_eq!(kind("duplicate"), dups, "every duplicate is reported");
+        let missing: u64 = faults
+            .iter()
+            .filter(|f| f["kind"] == "gap")
+            .map(|f| f["detail"].as_str().unwrap().split('(').nth(1).unwrap().split(' ').next().unwrap().parse::<u64>().unwrap())
+            .sum();
+        assert_eq!(missing, drops + corrupts, "every dropped or corrupted block shows up in a gap");
+        // No block is accepted twice or out of order.
+        let seqs: Vec<u64> = topic(&rs, "/daq/block").iter().map(|b| b.value["seq"].as_u64().unwrap()).collect();
+        assert!(seqs.windows(2).all(|w| w[1] > w[0]));
+        assert_eq!(seqs.len() as u64 + missing, last_seq + 1, "blocks + missing account for every sequence number");
+        // Windows hit by faults were re-measured, and that is recorded.
+        assert!(topic(&rs, "/sweep/event").iter().any(|e| e.value["kind"] == "retry"));
+    })
+    .await
+}
+
+async fn expect_sweep_error(mut stand: Stand, set: impl FnOnce(&mut acquire::stand::Faults)) -> (SweepError, Vec<acquire::session::Record>) {
+    set(&mut stand.faults);
+    let (_d, path) = temp_file("fail.mcap");
+    let (r, _sim) = run_sweep(&stand, &quick_plan(6), &path, &StopSignal::new(), &BTreeSet::new(), &NoProgress).await;
+    let e = r.expect_err("the sweep must fail");
+    let rs = records(&path); // the file is still complete
+    assert!(topic(&rs, "/sweep/event").iter().any(|x| x.value["kind"] == "error" && x.value["detail"].as_str().unwrap() == e.to_string()), "error recorded");
+    (e, rs)
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn silent_daq_is_a_timeout_naming_the_port() {
+    bounded(60, async {
+        let (e, _) = expect_sweep_error(sim_stand(10.0), |f| f.daq_silent_after_blocks = Some(60)).await;
+        let SweepError::Daq(DaqError::Timeout { port, .. }) = &e else { panic!("{e}") };
+        assert!(port.starts_with("/dev/pts/"), "{e}");
+        assert!(e.to_string().contains("check that the device is powered"), "{e}");
+    })
+    .await
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn pulled_cable_mid_sweep_ends_the_sweep_cleanly() {
+    bounded(60, async {
+        let (e, rs) = expect_sweep_error(sim_stand(10.0), |f| f.cable_pull_after_blocks = Some(60)).await;
+        assert!(
+            matches!(e, SweepError::Daq(DaqError::Disconnected { .. } | DaqError::Timeout { .. }) | SweepError::Shaker(ShakerError::Disconnected { .. } | ShakerError::Timeout { .. })),
+            "{e}"
+        );
+        assert!(e.to_string().contains("/dev/pts/"), "{e}");
+        // Blocks before the pull are in the file, in order and without holes (blocks still in
+        // the port's buffer when the cable goes are lost with it, as on real hardware).
+        let seqs: Vec<u64> = topic(&rs, "/daq/block").iter().map(|b| b.value["seq"].as_u64().unwrap()).collect();
+        assert!(seqs.len() >= 20 && seqs.len() <= 61, "{} blocks", seqs.len());
+        assert!(seqs.iter().enumerate().all(|(i, s)| *s == i as u64));
+    })
+    .await
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn silent_shaker_controller_is_a_timeout_naming_the_command() {
+    bounded(60, async {
+        let (e, _) = expect_sweep_error(sim_stand(10.0), |f| f.shaker_silent_after_commands = Some(14)).await;
+        let SweepError::Shaker(ShakerError::Timeout { command, attempts, .. }) = &e else { panic!("{e}") };
+        assert_eq!(*attempts, 3);
+        assert!(!command.is_empty());
+    })
+    .await
+}
+
+struct StopAfter(usize, StopSignal);
+impl SweepProgress for StopAfter {
+    fn start(&self, _: u64, _: u64) {}
+    fn step(&self, step: usize, _: f64, _: f64, _: f64) {
+        if step + 1 >= self.0 {
+            self.1.set();
+        }
+    }
+    fn finish(&self, _: &str) {}
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn stop_leaves_a_complete_file_and_the_sweep_resumes_from_it() {
+    bounded(120, async {
+        let stand = sim_stand(10.0);
+        let plan = quick_plan(6);
+        let (_d, first) = temp_file("first.mcap");
+        let stop = StopSignal::new();
+        let (r, _sim) = run_sweep(&stand, &plan, &first, &stop, &BTreeSet::new(), &StopAfter(2, stop.clone())).await;
+        let o = r.unwrap();
+        assert!(o.stopped);
+        assert_eq!(o.steps.len(), 2);
+        let rs = records(&first);
+        assert!(topic(&rs, "/sweep/event").iter().any(|e| e.value["kind"] == "stopped"));
+
+        let done = sweep::completed_steps(&first, &plan).unwrap();
+        assert_eq!(done, [0, 1].into_iter().collect());
+        let other = quick_plan(7);
+        assert!(matches!(sweep::completed_steps(&first, &other), Err(SweepError::Resume { .. })));
+
+        let second = first.with_file_name("second.mcap");
+        let (r, _sim) = run_sweep(&stand, &plan, &second, &StopSignal::new(), &done, &NoProgress).await;
+        let o = r.unwrap();
+        assert!(!o.stopped);
+        let measured: Vec<usize> = o.steps.iter().map(|s| s.step).collect();
+        assert_eq!(measured, vec![2, 3, 4, 5]);
+        assert_eq!(o.skipped, vec![0, 1]);
+        // Chained resume sees all six as done.
+        assert_eq!(sweep::completed_steps(&second, &plan).unwrap().len(), 6);
+    })
+    .await
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn bad_ports_give_errors_that_name_the_port() {
+    bounded(30, async {
+        let e = open_serial("/dev/ttyDOESNOTEXIST9", &SerialSettings::default()).unwrap_err();
+        assert!(matches!(e, TransportError::NotFound { .. }), "{e}");
+        assert!(e.to_string().contains("/dev/ttyDOESNOTEXIST9") && e.to_string().contains("plugged in"), "{e}");
+
+        let e = open_serial("/dev/null", &SerialSettings::default()).unwrap_err();
+        assert!(matches!(e, TransportError::NotSerial { .. }), "{e}");
+        let e = open_serial("/tmp", &SerialSettings::default()).unwrap_err();
+        assert!(matches!(e, TransportError::NotSerial { .. }), "{e}");
+
+        // A port already opened by another program is refused (flock), even for root.
+        let pty = pty_pair("daq").unwrap();
+        let first = open_serial(&pty.path, &SerialSettings::default()).unwrap();
+        let e = open_serial(&pty.path, &SerialSettings::default()).unwrap_err();
+        assert!(matches!(e, TransportError::Busy { .. }), "{e}");
+        assert!(e.to_string().contains(&pty.path) && e.to_string().contains("already in use"), "{e}");
+        drop(first);
+        open_serial(&pty.path, &SerialSettings::default()).expect("free again after close");
+    })
+    .await
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn wrong_identities_are_refused() {
+    bounded(30, async {
+        let stand = sim_stand(10.0);
+        let mut setup = SimSetup::from_stand(&stand).unwrap();
+        setup.identities.shaker.manufacturer = "ACME".into();
+        let sim = SimStand::start_with(setup).unwrap();
+        let e = Rig::connect(&sim.bind(&stand), None).await.err().unwrap();
+        assert!(matches!(e, RigError::Shaker(ShakerError::WrongIdentity { .. })), "{e}");
+        assert!(e.to_string().contains("ACME,SHAKER-4K") && e.to_string().contains(&sim.shaker_port), "{e}");
+
+        let mut setup = SimSetup::from_stand(&stand).unwrap();
+        setup.identities.daq.model = "SCOPE".into();
+        let sim = SimStand::start_with(setup).unwrap();
+        let e = Rig::connect(&sim.bind(&stand), None).await.err().unwrap();
+        assert!(matches!(e, RigError::Daq(DaqError::WrongIdentity { .. })) || e.to_string().contains("identifies as `IDENT-SIM,SCOPE"), "{e}");
+    })
+    .await
+}
+
+/// A "device" that answers every line with noise.
+async fn garbage_device(mut io: acquire::transport::SerialTransport, junk: &'static [u8]) {
+    use tokio::io::{AsyncReadExt, AsyncWriteExt};
+    let mut buf = [0u8; 256];
+    let deadline = tokio::time::Instant::now() + std::time::Duration::from_secs(20);
+    while tokio::time::Instant::now() < deadline {
+        match tokio::time::timeout(std::time::Duration::from_millis(50), io.read(&mut buf)).await {
+            Ok(Ok(n)) if n > 0 => {
+                let _ = io.write_all(junk).await;
+            }
+            // EIO until the host opens the port.
+            Ok(_) => tokio::time::sleep(std::time::Duration::from_millis(10)).await,
+            Err(_) => {}
+        }
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn devices_answering_garbage_are_reported() {
+    bounded(30, async {
+        let opts = ShakerOptions { timeout: std::time::Duration::from_millis(150), retries: 1 };
+        // Text without line ends (wrong baud rate): timeout with a hint.
+        let pty = pty_pair("shaker").unwrap();
+        let path = pty.path.clone();
+        let io = pty.device;
+        tokio::spawn(garbage_device(io, b"\xfe\x13\x88garbage"));
+        let mut sh = ScpiShaker::new(open_serial(&path, &SerialSettings::default()).unwrap(), opts.clone());
+        let e = sh.identify().await.unwrap_err();
+        assert!(matches!(e, ShakerError::Timeout { .. }), "{e}");
+        assert!(e.to_string().contains("without a line end"), "{e}");
+        // A line that is not an identity.
+        let pty = pty_pair("shaker").unwrap();
+        let path = pty.path.clone();
+        let io = pty.device;
+        tokio::spawn(garbage_device(io, b"hello world\n"));
+        let mut sh = ScpiShaker::new(open_serial(&path, &SerialSettings::default()).unwrap(), opts);
+        let e = sh.identify().await.unwrap_err();
+        assert!(matches!(e, ShakerError::Garbled { .. }), "{e}");
+        assert!(e.to_string().contains("hello world"), "{e}");
+        // A DAQ port with a text device on it.
+        let pty = pty_pair("daq").unwrap();
+        let path = pty.path.clone();
+        let io = pty.device;
+        tokio::spawn(garbage_device(io, b"OK\r\n>"));
+        let mut daq = SerialDaq::new(
+            open_serial(&path, &SerialSettings::default()).unwrap(),
+            DaqOptions { command_timeout: std::time::Duration::from_millis(150), retries: 1, ..Default::default() },
+        );
+        let e = daq.identify().await.unwrap_err();
+        assert!(matches!(e, DaqError::Timeout { .. }), "{e}");
+        assert!(e.to_string().contains("not DAQ frames") && e.to_string().contains(&path), "{e}");
+    })
+    .await
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn controller_errors_reach_the_operator() {
+    bounded(30, async {
+        let stand = sim_stand(10.0);
+        let sim = SimStand::start(&stand).unwrap();
+        let mut sh = ScpiShaker::new(open_serial(&sim.shaker_port, &SerialSettings::default()).unwrap(), ShakerOptions::default());
+        sh.reset().await.unwrap();
+        let e = sh.set_force(99_000.0).await.unwrap_err();
+        let ShakerError::Device { code, message, .. } = &e else { panic!("{e}") };
+        assert_eq!(*code, -222);
+        assert!(message.contains("force"), "{e}");
+        // The queue is drained: the next command succeeds.
+        sh.set_force(100.0).await.unwrap();
+        let e = sh.query(&acquire::shaker::scpi::Command::QueryForce).await.unwrap();
+        assert_eq!(e.trim(), "100");
+        assert!(matches!(sh.set_frequency(f64::NAN).await, Err(ShakerError::InvalidValue { .. })));
+        let st = sh.status().await.unwrap();
+        assert!(!st.output_on);
+        let _ = Interaction { gain: 1.0, cutoff_hz: 1.0 };
+    })
+    .await
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn broadband_random_and_chirp_recover_the_truth_frf() {
+    bounded(120, async {
+        let stand = sim_stand(10.0);
+        for waveform in [
+            acquire::shaker::Waveform::Random { f_lo_hz: 20.0, f_hi_hz: 400.0 },
+            acquire::shaker::Waveform::Chirp { f_lo_hz: 20.0, f_hi_hz: 400.0, period_s: 0.5 },
+            acquire::shaker::Waveform::BurstRandom { f_lo_hz: 20.0, f_hi_hz: 400.0, duty: 0.5, period_s: 0.5 },
+        ] {
+            let sim = SimStand::start(&stand).unwrap();
+            let (_d, path) = temp_file("bb.mcap");
+            let session = Session::create(&path, SessionOptions::default()).unwrap();
+            let h = session.handle();
+            let plan = sweep::Broadband { waveform: waveform.clone(), force_n: 1000.0, averages: 4, settle_periods: 1 };
+            sweep::log_session_start(&h, &stand.file, &plan, None, &BTreeSet::new()).unwrap();
+            let mut rig = Rig::connect(&sim.bind(&stand), Some(&h)).await.unwrap();
+            let r = sweep::broadband(&mut rig, &plan, &h, &NoProgress, &StopSignal::new()).await.unwrap();
+            session.finish().unwrap();
+            assert_eq!(r.averages, 4);
+            let mut checked = 0;
+            for (j, &f) in r.freqs_hz.iter().enumerate() {
+                let want = truth(&stand, f);
+                for (c, w) in want.iter().enumerate() {
+                    let got = r.h1[c + 1][j];
+                    // Noise is small against the periodic excitation: 2 % (chirp ends are weak).
+                    assert!((got - w).norm() < 0.02 * w.norm() + 1e-3, "{waveform:?} {f} Hz ch {c}: {got} vs {w}");
+                    checked += 1;
+                }
+                // Low-frequency bins carry little acceleration against the sensor noise.
+                assert!(r.coherence[1][j] > 0.8, "{waveform:?} {f} Hz coherence {}", r.coherence[1][j]);
+            }
+            let mean = r.coherence[1].iter().sum::<f64>() / r.coherence[1].len() as f64;
+            assert!(mean > 0.98, "{waveform:?}: mean coherence {mean}");
+            assert!(checked > 100);
+            let rs = records(&path);
+            assert_eq!(topic(&rs, "/sweep/event").iter().filter(|e| e.value["kind"] == "average").count(), 4);
+        }
+    })
+    .await
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn rfe_model_truth_is_recovered_by_a_stepped_sine() {
+    bounded(120, async {
+        let p = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../configs/stands/fwd32j-model-sim.toml");
+        let mut stand = Stand::load(&p).unwrap_or_else(|e| panic!("{e}"));
+        stand.truth.as_mut().unwrap().speed = 10.0;
+        let plan = SteppedSine { frequencies: FrequencyList::Explicit { freqs: vec![25.0, 60.0, 140.0] }, settle_s: 0.25, ..quick_plan(0) };
+        let (_d, path) = temp_file("rfe.mcap");
+        let (r, _sim) = run_sweep(&stand, &plan, &path, &StopSignal::new(), &BTreeSet::new(), &NoProgress).await;
+        let o = r.unwrap();
+        let t = stand.truth.as_ref().unwrap();
+        let plant = acquire::sim::plant::plant_for(t, &stand.channels).unwrap();
+        for s in &o.steps {
+            let want = plant.response(&[s.frequency_hz]).unwrap().remove(0);
+            for (c, w) in want.iter().enumerate() {
+                let ch = &stand.channels[c + 1];
+                let got = s.frf(&ch.name).unwrap();
+                let sigma = (2.0 / s.samples as f64).sqrt() * (t.noise_acceleration + w.norm() * t.noise_force) / s.force_amplitude_n;
+                assert!((got - w).norm() < 6.0 * sigma + 2e-3 * w.norm(), "{} Hz {}: {got} vs {w}", s.frequency_hz, ch.name);
+            }
+        }
+    })
+    .await
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn in_memory_stand_runs_the_same_sweep_without_any_device() {
+    use acquire::transport::MemoryTransport;
+    bounded(60, async {
+        let stand = sim_stand(10.0);
+        let (s_host, s_dev) = MemoryTransport::pair("shaker", "shaker-sim", 1 << 16);
+        let (d_host, d_dev) = MemoryTransport::pair("daq", "daq-sim", 1 << 20);
+        let _sim = SimStand::serve(SimSetup::from_stand(&stand).unwrap(), s_dev, d_dev, "mem:shaker".into(), "mem:daq".into());
+        let (_d, path) = temp_file("mem.mcap");
+        let session = Session::create(&path, SessionOptions::default()).unwrap();
+        let h = session.handle();
+        let shaker: Box<dyn Shaker> = Box::new(ScpiShaker::new(s_host, ShakerOptions::default()));
+        let daq: Box<dyn Daq> = Box::new(SerialDaq::new(d_host, DaqOptions::default()));
+        let mut rig = Rig::from_devices(&stand, shaker, daq, Some(&h)).await.unwrap();
+        assert_eq!(rig.daq_identity.model, "DAQ-8");
+        let plan = SteppedSine { settle_s: 0.25, ..quick_plan(3) };
+        let o = sweep::stepped_sine(&mut rig, &plan, &h, &NoProgress, &StopSignal::new(), &BTreeSet::new()).await.unwrap();
+        session.finish().unwrap();
+        assert_eq!(o.steps.len(), 3);
+        for s in &o.steps {
+            let w = truth(&stand, s.frequency_hz)[0];
+            let got = s.frf("table-x").unwrap();
+            assert!((got - w).norm() < 0.01 * w.norm(), "{} Hz: {got} vs {w}", s.frequency_hz);
+        }
+    })
+    .await
+}

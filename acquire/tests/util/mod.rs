@@ -1,0 +1,87 @@
+//! Shared helpers of the acquire integration tests.
+#![allow(dead_code)]
+
+use std::path::{Path, PathBuf};
+use std::time::Duration;
+
+use acquire::session::{self, Record};
+use acquire::stand::Stand;
+
+/// The repository's simulated stand, made faster than real time.
+pub fn sim_stand(speed: f64) -> Stand {
+    let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("../configs/stands/fwd32j-sim.toml");
+    let mut s = Stand::load(&p).unwrap_or_else(|e| panic!("{e}"));
+    if let Some(t) = s.truth.as_mut() {
+        t.speed = speed;
+    }
+    s
+}
+
+/// Runs a future with a hard time limit so no test can hang.
+pub async fn bounded<F: std::future::Future>(secs: u64, f: F) -> F::Output {
+    match tokio::time::timeout(Duration::from_secs(secs), f).await {
+        Ok(v) => v,
+        Err(_) => panic!("test exceeded its {secs} s limit"),
+    }
+}
+
+/// All records of a session file, which must be complete.
+pub fn records(path: &Path) -> Vec<Record> {
+    let r = session::read(path).unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(r.truncated, None, "session file {} is not complete", path.display());
+    r.records
+}
+
+/// Records on one topic.
+pub fn topic<'a>(rs: &'a [Record], name: &str) -> Vec<&'a Record> {
+    rs.iter().filter(|r| r.topic == name).collect()
+}
+
+/// A fresh path in a temporary directory (kept alive by the returned guard).
+pub fn temp_file(name: &str) -> (tempfile::TempDir, PathBuf) {
+    let d = tempfile::tempdir().expect("temp dir");
+    let p = d.path().join(name);
+    (d, p)
+}
+
+/// Reads an MCAP file with the Python `mcap` reader (indexed, default options) and returns
+/// (message count, topics). Fails with a setup hint if Python or `mcap` is missing.
+pub fn python_read(path: &Path) -> (u64, Vec<String>) {
+    let script = r#"
+import json, sys
+try:
+    from mcap.reader import make_reader
+except ImportError:
+    print("MISSING-MCAP"); sys.exit(3)
+with open(sys.argv[1], "rb") as f:
+    r = make_reader(f)
+    summ = r.get_summary()
+    assert summ is not None, "no summary"
+    n = 0
+    topics = set()
+    for schema, channel, message in r.iter_messages():
+        assert schema.encoding == "jsonschema", schema.encoding
+        assert channel.message_encoding == "json"
+        json.loads(message.data)
+        json.loads(schema.data)
+        topics.add(channel.topic)
+        n += 1
+    assert n == sum(summ.statistics.channel_message_counts.values()), "statistics disagree"
+print(n)
+print(",".join(sorted(topics)))
+"#;
+    let out = std::process::Command::new("python3").arg("-c").arg(script).arg(path).output();
+    let out = match out {
+        Ok(o) => o,
+        Err(e) => panic!("python3 is not available ({e}); run .ci/setup to install the test prerequisites"),
+    };
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    if stdout.contains("MISSING-MCAP") {
+        panic!("the Python `mcap` package is missing; run .ci/setup (it installs .ci/requirements.txt)");
+    }
+    assert!(out.status.success(), "python mcap reader failed on {}:\n{}\n{}", path.display(), stdout, String::from_utf8_lossy(&out.stderr));
+    let mut lines = stdout.lines();
+    let n = lines.next().and_then(|l| l.trim().parse().ok()).expect("count");
+    let topics = lines.next().unwrap_or("").split(',').map(str::to_string).collect();
+    (n, topics)
+}

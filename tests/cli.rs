@@ -1,0 +1,118 @@
+//! End-to-end tests of the `ident` command line: model export, the FRF JSON contract against an
+//! independent numpy implementation of docs/model-json.md, error messages, exit codes.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn ident(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_ident")).args(args).output().expect("run ident")
+}
+
+fn root() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+}
+
+fn python_with_numpy() -> &'static str {
+    let ok = Command::new("python3").args(["-c", "import numpy"]).output().map(|o| o.status.success()).unwrap_or(false);
+    assert!(ok, "python3 with numpy is needed for this cross-check: run `.ci/setup` (installs .ci/requirements.txt)");
+    "python3"
+}
+
+fn frf_values(v: &serde_json::Value) -> Vec<(f64, f64)> {
+    v["outputs"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .flat_map(|o| {
+            let re = o["re"].as_array().unwrap().iter().map(|x| x.as_f64().unwrap()).collect::<Vec<_>>();
+            let im = o["im"].as_array().unwrap().iter().map(|x| x.as_f64().unwrap()).collect::<Vec<_>>();
+            re.into_iter().zip(im)
+        })
+        .collect()
+}
+
+/// Exports `model` to resolved JSON, computes its FRF with ident and with the independent numpy
+/// implementation, and returns the largest relative difference.
+fn compare_with_numpy(model: &Path, freqs: &str) -> f64 {
+    let dir = tempfile::tempdir().unwrap();
+    let json = dir.path().join("model.json");
+    let out = ident(&["model", "export", model.to_str().unwrap(), "--json", "-o", json.to_str().unwrap()]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let ours = ident(&["frf", json.to_str().unwrap(), "--hz", freqs, "--json"]);
+    assert!(ours.status.success(), "{}", String::from_utf8_lossy(&ours.stderr));
+    let theirs = Command::new(python_with_numpy())
+        .arg(root().join("tests/python/contract_frf.py"))
+        .args([json.to_str().unwrap(), freqs])
+        .output()
+        .unwrap();
+    assert!(theirs.status.success(), "{}", String::from_utf8_lossy(&theirs.stderr));
+    let a: serde_json::Value = serde_json::from_slice(&ours.stdout).unwrap();
+    let b: serde_json::Value = serde_json::from_slice(&theirs.stdout).unwrap();
+    assert_eq!(a["freqs_hz"], b["freqs_hz"]);
+    let (va, vb) = (frf_values(&a), frf_values(&b));
+    assert_eq!(va.len(), vb.len());
+    va.iter()
+        .zip(&vb)
+        .map(|(x, y)| ((x.0 - y.0).hypot(x.1 - y.1)) / y.0.hypot(y.1).max(1e-300))
+        .fold(0.0, f64::max)
+}
+
+#[test]
+fn frf_agrees_with_an_independent_implementation_of_the_contract() {
+    let freqs = "0.5,3,7.25,12,20,33,50,75,110,160,240";
+    let models: Vec<PathBuf> = std::fs::read_dir(root().join("configs/models"))
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|e| e == "toml"))
+        .collect();
+    assert!(models.len() >= 2, "configs/models should hold the FWD-32J and textbook models");
+    for m in models {
+        let err = compare_with_numpy(&m, freqs);
+        assert!(err <= 1e-8, "{}: ident vs numpy max relative difference {err:e}", m.display());
+    }
+}
+
+#[test]
+fn frf_csv_and_json_forms() {
+    let m = root().join("configs/models/textbook-two-mass.toml");
+    let csv = ident(&["frf", m.to_str().unwrap(), "--from", "1", "--to", "100", "--points", "5", "--log"]);
+    assert!(csv.status.success(), "{}", String::from_utf8_lossy(&csv.stderr));
+    let text = String::from_utf8(csv.stdout).unwrap();
+    let lines: Vec<&str> = text.lines().collect();
+    assert_eq!(lines.len(), 6, "{text}");
+    assert!(lines[0].starts_with("freq_hz,"));
+    let f: Vec<f64> = lines[1..].iter().map(|l| l.split(',').next().unwrap().parse().unwrap()).collect();
+    assert!((f[0] - 1.0).abs() < 1e-12 && (f[4] - 100.0).abs() < 1e-9 && (f[2] - 10.0).abs() < 1e-9, "{f:?}");
+    let json = ident(&["frf", m.to_str().unwrap(), "--hz", "10,20", "--json"]);
+    let v: serde_json::Value = serde_json::from_slice(&json.stdout).unwrap();
+    assert_eq!(v["freqs_hz"], serde_json::json!([10.0, 20.0]));
+    let o = &v["outputs"][0];
+    for key in ["body", "dof", "quantity", "re", "im"] {
+        assert!(o.get(key).is_some(), "missing {key} in {o}");
+    }
+}
+
+#[test]
+fn bad_model_exits_2_with_location() {
+    let dir = tempfile::tempdir().unwrap();
+    let bad = dir.path().join("bad.toml");
+    std::fs::write(&bad, "[[body]]\nname = \"a\"\nmass = \"3 furlong\"\nposition = [0,0,0]\ninertia = [1,1,1]\n").unwrap();
+    let out = ident(&["frf", bad.to_str().unwrap(), "--hz", "1"]);
+    assert_eq!(out.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("bad.toml:3:8") && err.contains("unknown unit \"furlong\""), "{err}");
+    let missing = ident(&["model", "check", "/nonexistent/model.toml"]);
+    assert_eq!(missing.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&missing.stderr).contains("cannot read the model file"));
+}
+
+#[test]
+fn modes_and_sensitivity_run_on_the_textbook_model() {
+    let m = root().join("configs/models/textbook-two-mass.toml");
+    let out = ident(&["modes", m.to_str().unwrap()]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let out = ident(&["sensitivity", m.to_str().unwrap(), "--from", "1", "--to", "100", "--json"]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert!(!v["params"].as_array().unwrap().is_empty());
+}
