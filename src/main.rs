@@ -26,6 +26,8 @@ enum Command {
     Sensitivity(commands::sensitivity::SensitivityArgs),
     /// Identify SDE parameters from measured characteristics (maximum likelihood).
     Identify(commands::identify::IdentifyArgs),
+    /// The whole method on the built-in simulated FWD-32J stand, end to end.
+    Demo(commands::demo::DemoArgs),
 }
 
 fn main() -> ExitCode {
@@ -43,6 +45,7 @@ fn main() -> ExitCode {
         Command::Modes(a) => commands::modes::run(a),
         Command::Sensitivity(a) => commands::sensitivity::run(a),
         Command::Identify(a) => commands::identify::run(a),
+        Command::Demo(a) => commands::demo::run(a),
     };
     match result {
         Ok(code) => code,

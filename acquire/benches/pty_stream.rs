@@ -42,10 +42,12 @@ fn transfer(data: &[u8], decode: bool, bytes_per_s: Option<f64>) -> (u64, u64, D
     let pty = rt.block_on(async { pty_pair("daq").unwrap() });
     let path = pty.path.clone();
     let expect = data.len();
+    let (opened_tx, opened_rx) = std::sync::mpsc::channel::<()>();
     let recv = std::thread::spawn(move || {
         let rt = tokio::runtime::Builder::new_current_thread().enable_all().build().unwrap();
         rt.block_on(async move {
             let mut io = open_serial(&path, &SerialSettings { baud: 3_000_000 }).unwrap();
+            let _ = opened_tx.send(());
             let mut dec = FrameDecoder::new();
             let mut buf = vec![0u8; 65536];
             let (mut got, mut blocks, mut faults, mut next) = (0usize, 0u64, 0u64, 0u32);
@@ -71,7 +73,7 @@ fn transfer(data: &[u8], decode: bool, bytes_per_s: Option<f64>) -> (u64, u64, D
         })
     });
     rt.block_on(async {
-        std::thread::sleep(Duration::from_millis(50)); // let the receiver open the port
+        opened_rx.recv_timeout(Duration::from_secs(5)).expect("receiver opened the port");
         let mut dev = pty.device;
         let chunk = 4096;
         let t0 = Instant::now();

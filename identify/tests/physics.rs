@@ -307,3 +307,46 @@ fn jacobian_of_single_body_matches_closed_form_derivatives() {
 }
 
 
+
+#[test]
+fn modes_of_the_single_body_are_closed_form() {
+    let (m, k, psi) = (250.0, 3.0e6, 0.3);
+    let model = textbook::single_body(m, k, psi);
+    // translations: sqrt(k/m); rotations: sqrt(0.01 k / J) with J = 0.1 m, 0.2 m, 0.3 m
+    let mut want: Vec<f64> = vec![(k / m).sqrt(); 3];
+    for f in [0.1, 0.2, 0.3] {
+        want.push((0.01 * k / (f * m)).sqrt());
+    }
+    want.sort_by(f64::total_cmp);
+    for modes in [identify::modes::undamped(&model).unwrap(), identify::modes::complex(&model).unwrap()] {
+        let mut got: Vec<f64> = modes.iter().map(|md| md.freq_hz * TWO_PI).collect();
+        got.sort_by(f64::total_cmp);
+        for (g, w) in got.iter().zip(&want) {
+            assert!((g - w).abs() < 1e-9 * w, "{got:?} vs {want:?}");
+        }
+    }
+    for md in identify::modes::complex(&model).unwrap() {
+        // hysteretic: λ = ω²(1 + jψ/2π), so the loss factor is ψ/2π for every mode
+        assert!((md.loss_factor - psi / TWO_PI).abs() < 1e-12, "{}", md.loss_factor);
+        assert!((md.energy.iter().sum::<f64>() - 1.0).abs() < 1e-12);
+    }
+}
+
+#[test]
+fn band_sensitivity_of_the_single_body_is_closed_form() {
+    let (m, k, psi) = (80.0, 2.0e6, 0.4);
+    let model = textbook::single_body(m, k, psi);
+    let freqs: Vec<f64> = (1..60).map(|i| i as f64).collect();
+    let p = ParamRef { sde: 0, name: ParamName::Ki(2) };
+    let s = identify::sensitivity::band_sensitivity(&model, &freqs, &[p], Method::Direct).unwrap();
+    // |q| = 1/|den|, ∂|q|/∂k = −Re(conj(den)(1 + jψ/2π))/|den|³
+    let (mut num, mut den_sum) = (0.0, 0.0);
+    for f in &freqs {
+        let d = hyst(k, psi) - (TWO_PI * f).powi(2) * m;
+        num += ((d.conj() * C64::new(1.0, psi / TWO_PI)).re / d.norm().powi(3)).abs();
+        den_sum += 1.0 / d.norm();
+    }
+    let mi = num / den_sum;
+    assert!((s.mi[0] - mi).abs() < 1e-10 * mi, "{} vs {mi}", s.mi[0]);
+    assert!((s.relative[0] - mi * k).abs() < 1e-10 * mi * k);
+}

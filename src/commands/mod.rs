@@ -1,5 +1,6 @@
 //! One module per subcommand; each has an `Args` struct (clap) and a `run` returning the exit code.
 
+pub mod demo;
 pub mod frf;
 pub mod identify;
 pub mod model;

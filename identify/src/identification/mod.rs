@@ -14,10 +14,10 @@
 //! ```
 //! use identify::identification::{identify, variables, data::Observations, Options};
 //! use identify::{frf, textbook};
-//! // Truth: k1 = 2 N/µm, k2 = 1 N/µm, ψ = 0.3; measure both outputs at 30 lines, then fit
-//! // k1 and k2 from 1.5 and 1.5 N/µm.
-//! let truth = textbook::two_in_series(50.0, 20.0, 2.0e6, 1.0e6, 0.3);
-//! let freqs: Vec<f64> = (1..=30).map(|i| 5.0 * i as f64).collect();
+//! // Truth: k1 = 20 N/µm, k2 = 5 N/µm, ψ = 0.5; measure both outputs at 40 lines over
+//! // 10-60 Hz, then fit k1 and k2 from 14 and 7 N/µm.
+//! let truth = textbook::two_in_series(400.0, 120.0, 2.0e7, 5.0e6, 0.5);
+//! let freqs: Vec<f64> = (0..40).map(|i| 10.0 + 50.0 * i as f64 / 39.0).collect();
 //! let r = frf::response(&truth, &freqs, &[], frf::Method::Direct).unwrap();
 //! let data = identify::MeasuredData {
 //!     source: "synthetic".into(),
@@ -32,16 +32,16 @@
 //!     [[variable]]
 //!     sdes = "k1"
 //!     parameter = "k"
-//!     initial = "1.5 N/um"
+//!     initial = "14 N/um"
 //!     [[variable]]
 //!     sdes = "k2"
 //!     parameter = "k"
-//!     initial = "1.5 N/um"
+//!     initial = "7 N/um"
 //! "#, "vars.toml", &truth).unwrap();
 //! let id = identify(&truth, &obs, &vars, &Options::default(), &mut |_, _| {}).unwrap();
 //! assert!(id.stop.converged());
-//! assert!((id.estimate[0] / 2.0e6 - 1.0).abs() < 1e-6);
-//! assert!((id.estimate[1] / 1.0e6 - 1.0).abs() < 1e-6);
+//! assert!((id.estimate[0] / 2.0e7 - 1.0).abs() < 1e-6);
+//! assert!((id.estimate[1] / 5.0e6 - 1.0).abs() < 1e-6);
 //! ```
 
 pub mod criterion;
