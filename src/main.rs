@@ -28,6 +28,8 @@ enum Command {
     Identify(commands::identify::IdentifyArgs),
     /// The whole method on the built-in simulated FWD-32J stand, end to end.
     Demo(commands::demo::DemoArgs),
+    /// Session files: recover a truncated recording.
+    Mcap(commands::mcap::McapArgs),
 }
 
 fn main() -> ExitCode {
@@ -46,6 +48,7 @@ fn main() -> ExitCode {
         Command::Sensitivity(a) => commands::sensitivity::run(a),
         Command::Identify(a) => commands::identify::run(a),
         Command::Demo(a) => commands::demo::run(a),
+        Command::Mcap(a) => commands::mcap::run(a),
     };
     match result {
         Ok(code) => code,

@@ -3,6 +3,7 @@
 pub mod demo;
 pub mod frf;
 pub mod identify;
+pub mod mcap;
 pub mod model;
 pub mod modes;
 pub mod sensitivity;
