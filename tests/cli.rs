@@ -116,3 +116,24 @@ fn modes_and_sensitivity_run_on_the_textbook_model() {
     let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     assert!(!v["params"].as_array().unwrap().is_empty());
 }
+
+#[test]
+fn demo_identifies_the_simulated_stand_to_the_noise_floor() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = ident(&["demo", "--out", dir.path().to_str().unwrap()]);
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "{stdout}\n{}", String::from_utf8_lossy(&out.stderr));
+    // RMS relative amplitude error after identification, per characteristic: "a % -> b %"
+    let after: Vec<f64> = stdout
+        .lines()
+        .filter(|l| l.contains(" % -> "))
+        .map(|l| l.rsplit("-> ").next().unwrap().trim_end_matches('%').trim().parse().unwrap())
+        .collect();
+    assert_eq!(after.len(), 3, "{stdout}");
+    // 1 % simulated noise: the identified model explains the data to about that level
+    assert!(after.iter().all(|e| *e < 2.0), "{after:?}\n{stdout}");
+    let report = stdout.lines().find_map(|l| l.strip_prefix("report: ")).expect("report path");
+    for f in ["measured.json", "identification.json", "identification.csv", "identified-model.json"] {
+        assert!(Path::new(report).join(f).is_file(), "missing {f} in {report}");
+    }
+}

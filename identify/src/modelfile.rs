@@ -370,8 +370,12 @@ pub fn frame_from_axis(a: &Vector3<f64>) -> Matrix3<f64> {
     Matrix3::from_columns(&[e1, e2, e3])
 }
 
-fn line_col(text: &str, offset: usize) -> (usize, usize) {
-    let offset = offset.min(text.len());
+/// 1-based line and column (in characters) of a byte offset into `text`.
+pub(crate) fn line_col(text: &str, offset: usize) -> (usize, usize) {
+    let mut offset = offset.min(text.len());
+    while !text.is_char_boundary(offset) {
+        offset -= 1;
+    }
     let before = &text[..offset];
     let line = before.matches('\n').count() + 1;
     let col = before.rsplit('\n').next().map(|l| l.chars().count()).unwrap_or(0) + 1;

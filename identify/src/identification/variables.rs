@@ -13,6 +13,7 @@ use std::path::Path;
 use serde::Deserialize;
 use serde_spanned::Spanned;
 
+use crate::modelfile::line_col;
 use crate::model::{Model, ParamName, ParamRef, SdeLaw};
 use crate::units::{parse_quantity, Dim};
 
@@ -206,13 +207,6 @@ impl Ctx<'_> {
         }
         Ok(x)
     }
-}
-
-fn line_col(text: &str, offset: usize) -> (usize, usize) {
-    let before = &text[..offset.min(text.len())];
-    let line = before.matches('\n').count() + 1;
-    let col = before.rsplit('\n').next().map(|s| s.chars().count()).unwrap_or(0) + 1;
-    (line, col)
 }
 
 /// Dimension of a parameter of a law.
