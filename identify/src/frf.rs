@@ -154,11 +154,10 @@ pub fn dof_response(model: &Model, freqs_hz: &[f64]) -> Result<Vec<Vec<C64>>, So
                 return Err(SolveError::BadFrequency { freq_hz: f });
             }
             solver.factor(&system, f)?;
-            let mut q = solver.solve_load(&system);
+            let q = solver.solve_load(&system);
             if q.iter().any(|v| !v.is_finite()) {
                 return Err(SolveError::Singular { freq_hz: f });
             }
-            q.truncate(system.n);
             Ok(q)
         })
         .collect()
@@ -284,7 +283,8 @@ impl DirectSolver {
         let mut dw = vec![vec![[C64::new(0.0, 0.0); 6]; s.sdes.len()]; outputs];
         let mut fac = vec![C64::new(0.0, 0.0); outputs];
         let used = distinct_blocks(blocks);
-        for (k, &f) in out.freqs_hz.clone().iter().enumerate() {
+        for k in 0..lines {
+            let f = out.freqs_hz[k];
             self.factor(s, f)?;
             let omega = TWO_PI * f;
             for (o, q) in quantities.iter().enumerate() {

@@ -211,6 +211,43 @@ fn outcome(s: &State, iterations: usize, stop: StopReason) -> Outcome {
     Outcome { u: s.u.clone(), criterion: s.cost, iterations, stop }
 }
 
+/// After an accepted step of iteration `it` (criterion `old` before it, step norm `sn`): reports
+/// progress, then stops on the criterion or step tolerance when `test_tolerances`.
+#[allow(clippy::too_many_arguments)]
+fn after_step(
+    s: &State,
+    old: f64,
+    sn: f64,
+    it: usize,
+    lo: &DVector<f64>,
+    hi: &DVector<f64>,
+    set: &Settings,
+    test_tolerances: bool,
+    progress: &mut dyn FnMut(&Progress),
+) -> Option<Outcome> {
+    let free = free_set(&s.u, &s.g, lo, hi);
+    progress(&Progress { iteration: it, criterion: s.cost, step_norm: sn, gradient_norm: projected_norm(&s.g, &free) });
+    if !test_tolerances {
+        return None;
+    }
+    if old - s.cost <= set.criterion_tol * old {
+        return Some(outcome(s, it, StopReason::CriterionTolerance));
+    }
+    if step_small(sn, &s.u, set.step_tol) {
+        return Some(outcome(s, it, StopReason::StepTolerance));
+    }
+    None
+}
+
+/// The outcome at the iteration limit: converged after all if the projected gradient is small.
+fn at_limit(s: &State, lo: &DVector<f64>, hi: &DVector<f64>, set: &Settings) -> Outcome {
+    let free = free_set(&s.u, &s.g, lo, hi);
+    if gradient_converged(s, &free, set.gradient_tol) {
+        return outcome(s, set.max_iterations, StopReason::GradientTolerance);
+    }
+    outcome(s, set.max_iterations, StopReason::IterationLimit)
+}
+
 /// Evaluates a trial point: the full state if the Jacobian is cheap, residuals only otherwise.
 fn trial(obj: &mut dyn Residuals, u: DVector<f64>) -> Result<(f64, Option<State>, DVector<f64>), String> {
     if obj.cheap_jacobian() {
@@ -317,20 +354,11 @@ fn levenberg_marquardt(
             Err(m) => return outcome(&s, it, StopReason::Diverged(m)),
         };
         s = new;
-        let free = free_set(&s.u, &s.g, lo, hi);
-        progress(&Progress { iteration: it, criterion: s.cost, step_norm: sn, gradient_norm: projected_norm(&s.g, &free) });
-        if old - s.cost <= set.criterion_tol * old {
-            return outcome(&s, it, StopReason::CriterionTolerance);
-        }
-        if step_small(sn, &s.u, set.step_tol) {
-            return outcome(&s, it, StopReason::StepTolerance);
+        if let Some(o) = after_step(&s, old, sn, it, lo, hi, set, true, progress) {
+            return o;
         }
     }
-    let free = free_set(&s.u, &s.g, lo, hi);
-    if gradient_converged(&s, &free, set.gradient_tol) {
-        return outcome(&s, set.max_iterations, StopReason::GradientTolerance);
-    }
-    outcome(&s, set.max_iterations, StopReason::IterationLimit)
+    at_limit(&s, lo, hi, set)
 }
 
 /// Gauss-Newton direction on the free variables by SVD (singular values below 1e-12 of the
@@ -404,20 +432,11 @@ fn gauss_newton(
             Ok(ns) => ns,
             Err(m) => return outcome(&s, it, StopReason::Diverged(m)),
         };
-        let free = free_set(&s.u, &s.g, lo, hi);
-        progress(&Progress { iteration: it, criterion: s.cost, step_norm: sn, gradient_norm: projected_norm(&s.g, &free) });
-        if old - s.cost <= set.criterion_tol * old {
-            return outcome(&s, it, StopReason::CriterionTolerance);
-        }
-        if step_small(sn, &s.u, set.step_tol) {
-            return outcome(&s, it, StopReason::StepTolerance);
+        if let Some(o) = after_step(&s, old, sn, it, lo, hi, set, true, progress) {
+            return o;
         }
     }
-    let free = free_set(&s.u, &s.g, lo, hi);
-    if gradient_converged(&s, &free, set.gradient_tol) {
-        return outcome(&s, set.max_iterations, StopReason::GradientTolerance);
-    }
-    outcome(&s, set.max_iterations, StopReason::IterationLimit)
+    at_limit(&s, lo, hi, set)
 }
 
 /// A point on the search line: the state and φ'(α) = ∇J·d there.
@@ -601,21 +620,12 @@ fn bfgs(
         let old = s.cost;
         let sn = step.norm();
         s = p.s;
-        let free = free_set(&s.u, &s.g, lo, hi);
-        progress(&Progress { iteration: it, criterion: s.cost, step_norm: sn, gradient_norm: projected_norm(&s.g, &free) });
         // A (short) steepest-descent step after a restart says little about convergence.
-        if !was_fresh && old - s.cost <= set.criterion_tol * old {
-            return outcome(&s, it, StopReason::CriterionTolerance);
-        }
-        if !was_fresh && step_small(sn, &s.u, set.step_tol) {
-            return outcome(&s, it, StopReason::StepTolerance);
+        if let Some(o) = after_step(&s, old, sn, it, lo, hi, set, !was_fresh, progress) {
+            return o;
         }
     }
-    let free = free_set(&s.u, &s.g, lo, hi);
-    if gradient_converged(&s, &free, set.gradient_tol) {
-        return outcome(&s, set.max_iterations, StopReason::GradientTolerance);
-    }
-    outcome(&s, set.max_iterations, StopReason::IterationLimit)
+    at_limit(&s, lo, hi, set)
 }
 
 #[cfg(test)]
