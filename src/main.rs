@@ -6,10 +6,14 @@ use std::process::ExitCode;
 use clap::{Parser, Subcommand};
 
 mod commands;
+mod pipeline;
 
 #[derive(Parser)]
 #[command(name = "ident", version, about = "Identify stiffness and damping of machine tool RFE models from measured frequency responses")]
 struct Cli {
+    /// Log progress (level info; `IDENT_LOG` overrides, e.g. `IDENT_LOG=debug`).
+    #[arg(short, long, global = true)]
+    verbose: bool,
     #[command(subcommand)]
     command: Command,
 }
@@ -26,29 +30,49 @@ enum Command {
     Sensitivity(commands::sensitivity::SensitivityArgs),
     /// Identify SDE parameters from measured characteristics (maximum likelihood).
     Identify(commands::identify::IdentifyArgs),
+    /// Identify, then trace the residual to effects the model lacks and add them (closing the loop).
+    Diagnose(commands::diagnose::DiagnoseArgs),
     /// The whole method on the built-in simulated FWD-32J stand, end to end.
     Demo(commands::demo::DemoArgs),
+    /// Re-run processing, identification and diagnosis from a session recording.
+    Replay(commands::replay::ReplayArgs),
+    /// Unattended identification of a stand (cron/systemd): exit 0 ok, 1 drift alarm, 2 failure.
+    Nightly(commands::nightly::NightlyArgs),
     /// Session files: recover a truncated recording.
     Mcap(commands::mcap::McapArgs),
+    /// Serve a stand's simulated shaker controller and DAQ (pseudo-terminals or CAN) until Ctrl-C.
+    Sim(commands::sim::SimArgs),
+    /// Stepped-sine sweep of a stand into a new session file.
+    Sweep(commands::sweep::SweepArgs),
+    /// Measured characteristics of a session file (for `ident identify --data`).
+    Process(commands::process::ProcessArgs),
 }
 
 fn main() -> ExitCode {
+    let cli = Cli::parse();
+    let level = if cli.verbose { "info" } else { "warn" };
     tracing_subscriber::fmt()
         .with_env_filter(
             tracing_subscriber::EnvFilter::try_from_env("IDENT_LOG")
-                .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("warn")),
+                .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new(level)),
         )
         .with_writer(std::io::stderr)
+        .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr()))
         .init();
-    let cli = Cli::parse();
     let result = match cli.command {
         Command::Model(a) => commands::model::run(a),
         Command::Frf(a) => commands::frf::run(a),
         Command::Modes(a) => commands::modes::run(a),
         Command::Sensitivity(a) => commands::sensitivity::run(a),
         Command::Identify(a) => commands::identify::run(a),
+        Command::Diagnose(a) => commands::diagnose::run(a),
         Command::Demo(a) => commands::demo::run(a),
         Command::Mcap(a) => commands::mcap::run(a),
+        Command::Replay(a) => commands::replay::run(a),
+        Command::Nightly(a) => commands::nightly::run(a),
+        Command::Sim(a) => commands::sim::run(a),
+        Command::Sweep(a) => commands::sweep::run(a),
+        Command::Process(a) => commands::process::run(a),
     };
     match result {
         Ok(code) => code,

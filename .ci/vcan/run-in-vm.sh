@@ -86,6 +86,7 @@ if [ ! -s "$base" ]; then
 /bin/busybox --install -s /bin
 export PATH=/usr/bin:/usr/sbin:/bin:/sbin
 mount -t proc proc /proc; mount -t sysfs sys /sys; mount -t devtmpfs dev /dev
+mkdir -p /dev/pts && mount -t devpts -o ptmxmode=0666 devpts /dev/pts  # pseudo-terminals (simulated shaker)
 mount -t tmpfs tmp /tmp
 fail() { echo "VCAN-RESULT: fail ($*)"; sync; poweroff -f; sleep 5; }
 for m in can can-raw can-dev vcan; do

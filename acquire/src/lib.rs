@@ -23,6 +23,7 @@
 //! assert_eq!(seen, vec![Ok((0x03, 7))]);
 //! ```
 
+pub mod analysis;
 pub mod can;
 pub mod daq;
 pub mod device;

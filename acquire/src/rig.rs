@@ -33,6 +33,9 @@ pub enum RigError {
     /// Session problem.
     #[error(transparent)]
     Session(#[from] SessionError),
+    /// The DAQ's CAN interface could not be opened.
+    #[error(transparent)]
+    Can(#[from] crate::can::CanError),
 }
 
 /// A connected stand.
@@ -61,23 +64,34 @@ fn tapped(t: impl Transport + 'static, session: Option<&SessionHandle>) -> Box<d
 impl Rig {
     /// Opens the stand's serial ports (every byte tapped into `session`), then [`Rig::from_devices`].
     pub async fn connect(stand: &Stand, session: Option<&SessionHandle>) -> Result<Rig, RigError> {
-        let path = |p: &PortSpec, role| match p {
-            PortSpec::Path(p) => Ok(p.clone()),
-            PortSpec::Sim => Err(RigError::Unbound { file: stand.file.clone(), role }),
+        let unbound = |role| RigError::Unbound { file: stand.file.clone(), role };
+        let sp = match &stand.shaker.port {
+            PortSpec::Path(p) => p.clone(),
+            PortSpec::Sim | PortSpec::Can(_) => return Err(unbound("shaker")),
         };
-        let sp = path(&stand.shaker.port, "shaker")?;
-        let dp = path(&stand.daq.port, "daq")?;
         let s_io = open_serial(&sp, &SerialSettings { baud: stand.shaker.baud }).map_err(ShakerError::from)?;
-        let d_io = open_serial(&dp, &SerialSettings { baud: stand.daq.baud }).map_err(DaqError::from)?;
         let shaker = ScpiShaker::new(
             tapped(s_io, session),
             ShakerOptions { timeout: stand.shaker.timeout, retries: stand.shaker.retries },
         );
-        let daq = SerialDaq::new(
-            tapped(d_io, session),
-            DaqOptions { command_timeout: stand.daq.timeout, retries: stand.daq.retries, ..DaqOptions::default() },
-        );
-        Rig::from_devices(stand, Box::new(shaker), Box::new(daq), session).await
+        let daq: Box<dyn Daq> = match &stand.daq.port {
+            PortSpec::Sim => return Err(unbound("daq")),
+            PortSpec::Path(dp) => {
+                let d_io = open_serial(dp, &SerialSettings { baud: stand.daq.baud }).map_err(DaqError::from)?;
+                Box::new(SerialDaq::new(
+                    tapped(d_io, session),
+                    DaqOptions { command_timeout: stand.daq.timeout, retries: stand.daq.retries, ..DaqOptions::default() },
+                ))
+            }
+            PortSpec::Can(iface) => {
+                let d = crate::can::CanDaq::open(iface, stand.daq.can.clone())?;
+                Box::new(match session {
+                    Some(s) => d.with_tap(Arc::new(s.clone()) as Arc<dyn ByteTap>),
+                    None => d,
+                })
+            }
+        };
+        Rig::from_devices(stand, Box::new(shaker), daq, session).await
     }
 
     /// Identifies both devices (checking the stand file's expected identities), resets the
@@ -89,7 +103,10 @@ impl Rig {
         session: Option<&SessionHandle>,
     ) -> Result<Rig, RigError> {
         if let Some(s) = session {
-            s.log(Topic::Stand, &json!({"name": stand.name, "file": stand.file, "text": stand.text, "channels": stand.channels}))?;
+            s.log(
+                Topic::Stand,
+                &json!({"name": stand.name, "file": stand.file, "text": stand.text, "channels": stand.channels, "geometry": stand.geometry}),
+            )?;
         }
         let shaker_identity = shaker.identify().await?;
         if !shaker_identity.matches(&stand.shaker.identity) {

@@ -13,7 +13,7 @@ use acquire::shaker::{ScpiShaker, Shaker, ShakerError, ShakerOptions};
 use acquire::sim::plant::{Interaction, SdofPlant, C64};
 use acquire::sim::{SimSetup, SimStand};
 use acquire::stand::{Stand, TruthModel};
-use acquire::sweep::fit::SineFit;
+use acquire::sweep::estimate::StepEstimator;
 use acquire::sweep::{self, FrequencyList, NoProgress, StopSignal, SteppedSine, SweepError, SweepProgress};
 use acquire::transport::{open_serial, pty_pair, SerialSettings, TransportError};
 use serde_json::Value;
@@ -73,6 +73,7 @@ async fn stepped_sine_over_ptys_recovers_the_truth_frf_from_the_session_file() {
         let (r, _sim) = run_sweep(&stand, &plan, &path, &StopSignal::new(), &BTreeSet::new(), &NoProgress).await;
         let outcome = r.unwrap();
         assert_eq!(outcome.steps.len(), 9);
+        assert_eq!(stand.force_channel(), 0);
         assert_eq!(outcome.faults, 0);
 
         let rs = records(&path);
@@ -93,8 +94,10 @@ async fn stepped_sine_over_ptys_recovers_the_truth_frf_from_the_session_file() {
             // Closed loop held the target force.
             let famp = v["force_amplitude_n"].as_f64().unwrap();
             assert!((famp - 4000.0).abs() <= 0.03 * 4000.0 + 1.0, "{f} Hz: force {famp}");
-            // Recompute the step from the recorded blocks alone.
-            let mut fit = SineFit::new(f, fs, nch);
+            // Recompute the step from the recorded blocks alone (an independent walk over the
+            // blocks; acquire::analysis is checked against this in tests/pipeline.rs).
+            let sens: Vec<f64> = stand.channels.iter().map(|c| c.sensitivity).collect();
+            let mut est = StepEstimator::new(fs, &sens, stand.force_channel());
             for b in &blocks {
                 let b0 = b.value["first_sample"].as_u64().unwrap();
                 let volts = b.value["volts"].as_array().unwrap();
@@ -102,25 +105,26 @@ async fn stepped_sine_over_ptys_recovers_the_truth_frf_from_the_session_file() {
                 for i in 0..len {
                     let k = b0 + i;
                     if k >= first && k < first + n {
-                        fit.push(k, (0..nch).map(|c| volts[c][i as usize].as_f64().unwrap() / stand.channels[c].sensitivity));
+                        let row: Vec<f32> = (0..nch).map(|c| volts[c][i as usize].as_f64().unwrap() as f32).collect();
+                        est.push_row(&row);
                     }
                 }
             }
-            assert_eq!(fit.samples(), n, "window of step at {f} Hz not fully in the file");
-            let est = fit.solve().unwrap();
-            let force = est[0].amplitude;
+            assert_eq!(est.len() as u64, n, "window of step at {f} Hz not fully in the file");
+            let fit = est.estimate(f).unwrap();
+            let force = fit.force.fundamental;
             let want = truth(&stand, f);
             for (c, w) in want.iter().enumerate() {
                 let ch = c + 1;
-                let h = est[ch].amplitude / force;
+                let h = fit.frf[c];
                 // Noise bound: σ(H)/|F| ≈ sqrt(2/N)(σ_a + |H| σ_F)/|F|; 6 σ plus 0.2 % for
                 // quantisation and f32 rounding.
                 let sigma = (2.0 / n as f64).sqrt() * (t.noise_acceleration + w.norm() * t.noise_force) / force.norm();
                 let tol = 6.0 * sigma + 2e-3 * w.norm();
                 assert!((h - w).norm() < tol, "{f:.2} Hz channel {}: H = {h}, truth {w}, tol {tol:e}", stand.channels[ch].name);
-                // And the live estimate recorded by the sweep agrees with the recomputation.
+                // The live estimate recorded by the sweep is the recomputation, bit for bit.
                 let live = C64::new(v["channels"][ch]["frf_re"].as_f64().unwrap(), v["channels"][ch]["frf_im"].as_f64().unwrap());
-                assert!((live - h).norm() < 1e-6 * h.norm().max(1e-12), "{live} vs {h}");
+                assert_eq!((live.re.to_bits(), live.im.to_bits()), (h.re.to_bits(), h.im.to_bits()), "{live} vs {h}");
             }
         }
         // The Python reader decodes every channel.
@@ -474,7 +478,7 @@ async fn in_memory_stand_runs_the_same_sweep_without_any_device() {
         assert_eq!(o.steps.len(), 3);
         for s in &o.steps {
             let w = truth(&stand, s.frequency_hz)[0];
-            let got = s.frf("table-x").unwrap();
+            let got = s.frf("table-a-x").unwrap();
             assert!((got - w).norm() < 0.01 * w.norm(), "{} Hz: {got} vs {w}", s.frequency_hz);
         }
     })

@@ -163,6 +163,130 @@ pub fn dof_response(model: &Model, freqs_hz: &[f64]) -> Result<Vec<Vec<C64>>, So
         .collect()
 }
 
+/// Every line's full solution under the model's load and under each output's unit load: what a
+/// perturbation of `A(ω)` needs for its first-order effect on the outputs
+/// (`∂q_o = −w_oᵀ ΔA q`), whatever the perturbation is — an SDE that is not in the model, an added
+/// mass, a resonator. Computing it costs one FRF evaluation; each perturbation then costs
+/// O(its support) per line. See [`States::first_order`].
+#[derive(Debug, Clone)]
+pub struct States {
+    /// DOFs.
+    pub n: usize,
+    /// Output characteristics.
+    pub outputs: usize,
+    /// Frequencies (Hz).
+    pub freqs_hz: Vec<f64>,
+    /// `load[k * n + i]`: DOF `i` under the load at line `k` (m, rad per N).
+    pub load: Vec<C64>,
+    /// `unit[(k * outputs + o) * n + i]`: DOF `i` under a unit load on output `o`'s DOF.
+    pub unit: Vec<C64>,
+    /// `factor[k * outputs + o]`: displacement → output quantity (1, jω or −ω²).
+    pub factor: Vec<C64>,
+}
+
+/// One term of a perturbation `ΔA(ω) = Σ c(ω) t tᵀ`: a row `t` over a few DOFs and its
+/// coefficient at one line.
+pub type Row = [(usize, f64)];
+
+impl States {
+    /// First-order change of output `o` at line `k` per unit of a parameter γ entering as
+    /// `∂A/∂γ = Σ_t c_t t_tᵀ t_t` (terms `(row, c)`): `−factor · Σ c (t·w_o)(t·q)`.
+    pub fn first_order<'a>(&self, k: usize, o: usize, terms: impl IntoIterator<Item = (&'a Row, C64)>) -> C64 {
+        let q = &self.load[k * self.n..(k + 1) * self.n];
+        let w = &self.unit[(k * self.outputs + o) * self.n..(k * self.outputs + o + 1) * self.n];
+        let mut acc = C64::new(0.0, 0.0);
+        for (row, c) in terms {
+            let (mut tq, mut tw) = (C64::new(0.0, 0.0), C64::new(0.0, 0.0));
+            for &(i, v) in row {
+                tq += q[i] * v;
+                tw += w[i] * v;
+            }
+            acc += c * tq * tw;
+        }
+        -acc * self.factor[k * self.outputs + o]
+    }
+
+    /// The DOF vector under the load at line `k`.
+    pub fn load_at(&self, k: usize) -> &[C64] {
+        &self.load[k * self.n..(k + 1) * self.n]
+    }
+}
+
+/// The [`States`] of `model` at `freqs_hz`.
+pub fn states(model: &Model, freqs_hz: &[f64], method: Method) -> Result<States, SolveError> {
+    let system = System::assemble(model);
+    let n = system.n;
+    let outputs = system.output_dofs.len();
+    let lines = freqs_hz.len();
+    for &f in freqs_hz {
+        if !f.is_finite() || f < 0.0 {
+            return Err(SolveError::BadFrequency { freq_hz: f });
+        }
+    }
+    let mut st = States {
+        n,
+        outputs,
+        freqs_hz: freqs_hz.to_vec(),
+        load: vec![C64::new(0.0, 0.0); lines * n],
+        unit: vec![C64::new(0.0, 0.0); lines * outputs * n],
+        factor: vec![C64::new(0.0, 0.0); lines * outputs],
+    };
+    let quantities: Vec<Quantity> = model.outputs.iter().map(|c| c.quantity).collect();
+    match method.resolve(n, lines) {
+        Method::Modal => {
+            let modal = ModalSolver::new(&system)?;
+            let b: Vec<C64> = (0..n).map(|m| (0..n).map(|i| modal.y[(m, i)] * system.load[i]).sum()).collect();
+            let lambda_scale = modal.lambda.iter().map(|l| l.norm()).fold(0.0, f64::max).max(1.0);
+            let mut eta = vec![C64::new(0.0, 0.0); n];
+            let mut inv = vec![C64::new(0.0, 0.0); n];
+            for (k, &f) in freqs_hz.iter().enumerate() {
+                let w2 = (TWO_PI * f).powi(2);
+                for m in 0..n {
+                    let den = modal.lambda[m] - w2;
+                    if den.norm() <= 1e-13 * lambda_scale {
+                        return Err(SolveError::Singular { freq_hz: f });
+                    }
+                    inv[m] = den.inv();
+                }
+                for col in 0..=outputs {
+                    for m in 0..n {
+                        eta[m] = inv[m] * if col == 0 { b[m] } else { modal.y[(m, system.output_dofs[col - 1])] };
+                    }
+                    let dst = if col == 0 {
+                        &mut st.load[k * n..(k + 1) * n]
+                    } else {
+                        &mut st.unit[(k * outputs + col - 1) * n..(k * outputs + col) * n]
+                    };
+                    for (i, d) in dst.iter_mut().enumerate() {
+                        *d = (0..n).map(|m| modal.x[(i, m)] * eta[m]).sum();
+                    }
+                }
+            }
+        }
+        _ => {
+            let mut solver = DirectSolver::new(&system);
+            for (k, &f) in freqs_hz.iter().enumerate() {
+                solver.factor(&system, f)?;
+                for i in 0..n {
+                    st.load[k * n + i] = solver.rhs[(i, 0)];
+                    for o in 0..outputs {
+                        st.unit[(k * outputs + o) * n + i] = solver.rhs[(i, o + 1)];
+                    }
+                }
+            }
+        }
+    }
+    for (k, &f) in freqs_hz.iter().enumerate() {
+        for (o, q) in quantities.iter().enumerate() {
+            st.factor[k * outputs + o] = q.factor(TWO_PI * f);
+        }
+    }
+    if st.load.iter().chain(&st.unit).any(|v| !v.is_finite()) {
+        return Err(SolveError::Singular { freq_hz: f64::NAN });
+    }
+    Ok(st)
+}
+
 /// Accumulates `∂q_o/∂p` for every parameter given the SDE deformations under the load (`dq`)
 /// and under each output's unit load (`dw[o]`).
 fn jacobian_line(

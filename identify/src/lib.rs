@@ -13,6 +13,7 @@
 //! - [`measured`]: measured characteristics, as processing produces them;
 //! - [`modelfile`], [`contract`], [`units`], [`check`]: model files (TOML with units, resolved
 //!   JSON) and their validation;
+//! - [`diagnose`]: after a fit, residual analysis and the search for effects the model lacks;
 //! - [`textbook`]: small models with closed-form answers.
 //!
 //! ```
@@ -28,6 +29,7 @@
 
 pub mod check;
 pub mod contract;
+pub mod diagnose;
 pub mod frf;
 pub mod identification;
 pub mod measured;

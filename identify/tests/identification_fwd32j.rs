@@ -5,10 +5,9 @@
 
 use std::path::PathBuf;
 
-use identify::frf::{self, Method};
 use identify::identification::{self as idn, data, variables, Optimizer, Options, Settings};
-use identify::measured::{MeasuredData, Measurement, QuantityName};
-use identify::model::{Model, DOF_NAMES};
+use identify::measured::MeasuredData;
+use identify::model::Model;
 use rand::rngs::StdRng;
 use rand::SeedableRng;
 use rand_distr::{Distribution, StandardNormal};
@@ -24,45 +23,12 @@ fn load_model(name: &str) -> Model {
         .model
 }
 
-/// 38 log-spaced lines over the band of the table's characteristics.
-fn lines() -> Vec<f64> {
-    let (f0, f1) = (20.0f64, 400.0f64);
-    (0..38).map(|i| f0 * (f1 / f0).powf(i as f64 / 37.0)).collect()
-}
-
-/// Amplitude data of the model's outputs with multiplicative Gaussian noise of relative σ
-/// `rel` (its variance stated in the data: variance = 2 (rel |q|)², i.e. σ_amplitude = rel |q|).
+/// The synthetic FWD-32J measurement (`identification::synthetic`): 38 log-spaced lines over
+/// 20-400 Hz per characteristic, multiplicative Gaussian noise of relative σ `rel`, variances
+/// stated.
 fn synthetic(truth: &Model, rel: f64, rng: &mut StdRng) -> MeasuredData {
-    let f = lines();
-    let r = frf::response(truth, &f, &[], Method::Auto).expect("truth model solves");
-    MeasuredData {
-        source: "synthetic FWD-32J".into(),
-        characteristics: truth
-            .outputs
-            .iter()
-            .enumerate()
-            .map(|(o, c)| {
-                let q: Vec<f64> = r.output(o).iter().map(|v| v.norm()).collect();
-                Measurement {
-                    body: truth.bodies[c.body].name.clone(),
-                    dof: c.dof,
-                    quantity: QuantityName::from(c.quantity),
-                    freqs_hz: f.clone(),
-                    amplitude: q
-                        .iter()
-                        .map(|a| {
-                            let n: f64 = StandardNormal.sample(rng);
-                            a * (1.0 + rel * n)
-                        })
-                        .collect(),
-                    phase_rad: None,
-                    variance: Some(q.iter().map(|a| 2.0 * (rel * a).powi(2)).collect()),
-                    coherence: None,
-                    averages: None,
-                }
-            })
-            .collect(),
-    }
+    idn::synthetic::amplitude_data(truth, &idn::synthetic::fwd32j_lines(), rel, || StandardNormal.sample(&mut *rng))
+        .expect("truth model solves")
 }
 
 fn vars_for(model: &Model) -> variables::Variables {
@@ -136,7 +102,6 @@ fn fwd32j_synthetic_recovery_from_the_initial_values() {
             assert!((a - b).abs() <= 1e-9 * b.abs().max(v.scale), "{}: {a} vs {b}", v.name);
         }
     }
-    let _ = DOF_NAMES;
 }
 
 /// Over 200 noise realizations, the fraction of estimates within ±1.96 reported standard errors

@@ -104,14 +104,27 @@ pub struct IdentifyArgs {
     /// into this directory.
     #[arg(long)]
     pub out: Option<PathBuf>,
-    /// No progress lines on stderr.
-    #[arg(long, short)]
-    pub quiet: bool,
+    /// Relative standard error above which a direction of the information matrix is reported as
+    /// poorly identifiable (0.5 = 50 %).
+    #[arg(long, default_value_t = 0.5)]
+    pub weak_threshold: f64,
+    /// A plain progress line per iteration on stderr (iteration, criterion J, step norm,
+    /// projected gradient norm). The same lines are always logged at level info (`-v` or
+    /// `IDENT_LOG=info`).
+    #[arg(long)]
+    pub progress: bool,
+    /// Write the fit problem (resolved model at the initial values, observations with σ,
+    /// variables as linear maps onto SDE stiffness and ψ) as JSON to this file and exit without
+    /// fitting: for external tools such as bench/python/ident_baseline.py.
+    #[arg(long)]
+    pub export_problem: Option<PathBuf>,
 }
 
 /// Runs the identification. Exit 0: converged; 1: iteration limit or divergence (the best point
 /// is still reported and written).
-pub fn run(a: IdentifyArgs) -> anyhow::Result<ExitCode> {
+/// Loads and checks the model, data and variables, and the options, of `a` (shared by
+/// `ident identify` and `ident diagnose`).
+pub fn setup(a: &IdentifyArgs) -> anyhow::Result<(identify::Model, idn::Observations, idn::Variables, Options)> {
     let model = load_model(&a.model)?;
     let measured = data::load(&a.data)?;
     let obs = data::validate(&measured, &model, &a.data.display().to_string())?;
@@ -123,6 +136,11 @@ pub fn run(a: IdentifyArgs) -> anyhow::Result<ExitCode> {
     );
     anyhow::ensure!(a.max_iterations > 0, "--max-iterations must be at least 1");
     anyhow::ensure!(a.starts > 0, "--starts must be at least 1");
+    anyhow::ensure!(
+        a.weak_threshold.is_finite() && a.weak_threshold > 0.0,
+        "--weak-threshold {} must be a relative standard error > 0 (e.g. 0.5 for 50 %)",
+        a.weak_threshold
+    );
     let opts = Options {
         fit: match a.fit {
             FitArg::Amplitude => FitKind::Amplitude,
@@ -144,12 +162,31 @@ pub fn run(a: IdentifyArgs) -> anyhow::Result<ExitCode> {
         frf_method: a.frf_method.into(),
         starts: a.starts,
         seed: a.seed,
-        ..Options::default()
+        weak_threshold: a.weak_threshold,
     };
-    let quiet = a.quiet;
+    Ok((model, obs, vars, opts))
+}
+
+pub fn run(a: IdentifyArgs) -> anyhow::Result<ExitCode> {
+    let (model, obs, vars, opts) = setup(&a)?;
+    if let Some(path) = &a.export_problem {
+        let problem = idn::problem::to_json(&model, &obs, &vars, &opts)?;
+        emit(Some(path), &(serde_json::to_string(&problem)? + "\n"))?;
+        return Ok(ExitCode::SUCCESS);
+    }
+    let plain = a.progress;
     let multi = a.starts > 1;
+    let started = std::time::Instant::now();
     let id = idn::identify(&model, &obs, &vars, &opts, &mut |start, p| {
-        if !quiet {
+        tracing::info!(
+            start,
+            iteration = p.iteration,
+            criterion = p.criterion,
+            step = p.step_norm,
+            gradient = p.gradient_norm,
+            "identify"
+        );
+        if plain {
             let prefix = if multi { format!("start {start} ") } else { String::new() };
             eprintln!(
                 "{prefix}iteration {:>3}  J = {:.6e}  step = {:.3e}  gradient = {:.3e}",
@@ -157,6 +194,13 @@ pub fn run(a: IdentifyArgs) -> anyhow::Result<ExitCode> {
             );
         }
     })?;
+    tracing::info!(
+        seconds = started.elapsed().as_secs_f64(),
+        iterations = id.iterations,
+        model_evaluations = id.evaluations.model,
+        "identify: {}",
+        id.stop.describe()
+    );
     let text = report::text(&id);
     let json = serde_json::to_string_pretty(&report::json(&id))? + "\n";
     let csv = report::csv(&id);

@@ -1,12 +1,18 @@
 //! One module per subcommand; each has an `Args` struct (clap) and a `run` returning the exit code.
 
 pub mod demo;
+pub mod diagnose;
 pub mod frf;
 pub mod identify;
 pub mod mcap;
 pub mod model;
 pub mod modes;
+pub mod nightly;
+pub mod process;
+pub mod replay;
 pub mod sensitivity;
+pub mod sim;
+pub mod sweep;
 
 use std::path::Path;
 

@@ -41,6 +41,8 @@ pub struct SimCanDaqSettings {
     pub max_sample_rate_hz: f64,
     /// Send blocks at the configured sample rate (true) or as fast as the bus takes them (false).
     pub real_time: bool,
+    /// With `real_time`: simulated time per wall-clock time (1 = real time; 4 = four times faster).
+    pub speed: f64,
     /// Injected faults.
     pub faults: SimFaults,
 }
@@ -63,6 +65,7 @@ impl Default for SimCanDaqSettings {
             channel_count: 8,
             max_sample_rate_hz: 1.0e6,
             real_time: true,
+            speed: 1.0,
             faults: SimFaults::default(),
         }
     }
@@ -178,7 +181,7 @@ async fn serve_on(
                         Some(s) => {
                             streaming = true;
                             block_seq = 0;
-                            let period = Duration::from_secs_f64(s.samples_per_block as f64 / s.sample_rate_hz);
+                            let period = Duration::from_secs_f64(s.samples_per_block as f64 / s.sample_rate_hz / settings.speed.max(1e-6));
                             ticker = tokio::time::interval(period.max(Duration::from_micros(1)));
                             ticker.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Burst);
                             Message::Ack { command: kind::START }

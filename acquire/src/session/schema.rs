@@ -24,10 +24,12 @@ pub enum Topic {
     SweepEvent,
     /// `/sweep/step`: per-step amplitude/phase estimates.
     SweepStep,
+    /// `/sweep/broadband`: H1 estimates and coherence of a broadband measurement.
+    SweepBroadband,
 }
 
 /// All topics, in channel-registration order.
-pub const ALL: [Topic; 9] = [
+pub const ALL: [Topic; 10] = [
     Topic::Session,
     Topic::Stand,
     Topic::Identity,
@@ -37,6 +39,7 @@ pub const ALL: [Topic; 9] = [
     Topic::DaqFault,
     Topic::SweepEvent,
     Topic::SweepStep,
+    Topic::SweepBroadband,
 ];
 
 impl Topic {
@@ -52,6 +55,7 @@ impl Topic {
             Topic::DaqFault => "/daq/fault",
             Topic::SweepEvent => "/sweep/event",
             Topic::SweepStep => "/sweep/step",
+            Topic::SweepBroadband => "/sweep/broadband",
         }
     }
 
@@ -67,6 +71,7 @@ impl Topic {
             Topic::DaqFault => "ident.StreamFault",
             Topic::SweepEvent => "ident.SweepEvent",
             Topic::SweepStep => "ident.SweepStep",
+            Topic::SweepBroadband => "ident.SweepBroadband",
         }
     }
 
@@ -93,6 +98,7 @@ impl Topic {
             Topic::Stand => json!({
                 "properties": {
                     "name": s, "file": s, "text": s,
+                    "geometry": {"type": ["object", "null"], "description": "bodies the sensors are on (mass, inertia, position, rotation) and nominal_force_n, from the stand's [geometry] model"},
                     "channels": {"type": "array", "items": {"type": "object", "properties": {
                         "name": s, "device_channel": int, "kind": {"enum": ["force", "acceleration"]},
                         "sensitivity": {"type": "number", "description": "V/N or V/(m/s^2)"},
@@ -140,9 +146,22 @@ impl Topic {
                     "first_sample": int, "samples": int, "iterations": int,
                     "channels": {"type": "array", "items": {"type": "object", "properties": {
                         "name": s, "amplitude": num, "phase_rad": num,
-                        "frf_re": num, "frf_im": num, "fit_quality": num}}}
+                        "frf_re": num, "frf_im": num, "fit_quality": num,
+                        "noise_rms": num, "frf_variance": num}}}
                 },
                 "required": ["step", "frequency_hz", "force_amplitude_n", "channels"]
+            }),
+            Topic::SweepBroadband => json!({
+                "properties": {
+                    "waveform": {"type": "object"}, "force_n": num, "averages": int, "stopped": {"type": "boolean"},
+                    "freqs_hz": {"type": "array", "items": num},
+                    "channels": {"type": "array", "items": {"type": "object", "properties": {
+                        "name": s,
+                        "h1_re": {"type": "array", "items": num, "description": "per N"},
+                        "h1_im": {"type": "array", "items": num},
+                        "coherence": {"type": "array", "items": num}}}}
+                },
+                "required": ["freqs_hz", "channels", "averages"]
             }),
         };
         let mut v = body;

@@ -41,6 +41,9 @@ pub enum SimError {
     /// The truth cannot be evaluated.
     #[error(transparent)]
     Plant(#[from] PlantError),
+    /// The CAN interface could not be used.
+    #[error(transparent)]
+    Can(#[from] crate::can::CanError),
     /// The stand file has no truth section.
     #[error("{0}: the simulated stand needs a [truth] section")]
     NoTruth(String),
@@ -188,7 +191,10 @@ impl SimStand {
             s.shaker.port = PortSpec::Path(self.shaker_port.clone());
         }
         if s.daq.port == PortSpec::Sim {
-            s.daq.port = PortSpec::Path(self.daq_port.clone());
+            s.daq.port = match self.daq_port.strip_prefix("can:") {
+                Some(iface) => PortSpec::Can(iface.to_string()),
+                None => PortSpec::Path(self.daq_port.clone()),
+            };
         }
         s
     }
@@ -201,6 +207,49 @@ impl SimStand {
     /// What the simulated controller currently drives.
     pub fn excitation(&self) -> Excitation {
         lock(&self.shared).excitation.clone()
+    }
+
+    /// Serves the stand's simulated shaker controller on a pseudo-terminal and its DAQ on the CAN
+    /// interface `iface` (docs/daq-can.md, identifiers and frames from the stand's `[daq.can]`),
+    /// both driven by the same truth. The DAQ's signals are those of [`SimStand::start`]; the
+    /// stand's serial-stream faults do not apply (the CAN simulator has its own,
+    /// [`crate::can::sim::SimFaults`]).
+    pub fn start_can(stand: &Stand, iface: &str) -> Result<SimStand, SimError> {
+        use crate::can::sim::{SimCanDaq, SimCanDaqSettings};
+        let setup = SimSetup::from_stand(stand)?;
+        let shaker = pty_pair("shaker")?;
+        let shared: SharedRef = Arc::new(Mutex::new(Shared::default()));
+        let can = &stand.daq.can;
+        let mut dev = SimCanDaqSettings {
+            command_id: can.command_id,
+            status_id: can.status_id,
+            data_id: can.data_id,
+            frames: can.frames,
+            volts_per_count: VOLTS_PER_COUNT as f32,
+            real_time: true,
+            speed: setup.speed,
+            ..SimCanDaqSettings::default()
+        };
+        dev.identity = setup.identities.daq.clone();
+        dev.channel_count = setup.channels.iter().map(|c| c.device_channel + 1).max().unwrap_or(1);
+        let sim = SimCanDaq::bind(iface, dev)?;
+        let signal = can_signal(&setup, shared.clone());
+        let (stop_tx, stop_rx) = tokio::sync::oneshot::channel::<()>();
+        let t2 = tokio::spawn(async move {
+            let _ = sim.serve(signal, None, stop_rx).await;
+        });
+        let s1 = shared.clone();
+        let ids = setup.identities.clone();
+        let (faults, max_force, interaction) = (setup.faults.clone(), setup.max_force_n, setup.interaction);
+        let shaker_port = shaker.path.clone();
+        let io = shaker.device;
+        let t1 = tokio::spawn(async move { serve_shaker(io, s1, ids.shaker, faults, max_force, interaction).await });
+        // Dropping the sender stops the CAN simulator with the tasks.
+        let keep = tokio::spawn(async move {
+            std::future::pending::<()>().await;
+            drop(stop_tx);
+        });
+        Ok(SimStand { shaker_port, daq_port: format!("can:{iface}"), shared, tasks: vec![t1, t2, keep] })
     }
 
     /// Stops the devices and closes their ports.
@@ -537,4 +586,36 @@ fn configure(c: &DaqConfig, all: &[SimChannel]) -> Result<(StreamInfo, Vec<usize
         channels: c.channels.iter().map(|&d| ChannelInfo { device_channel: d, volts_per_count: VOLTS_PER_COUNT }).collect(),
     };
     Ok((info, idx))
+}
+
+/// The CAN simulator's signal: ADC counts of the truth driven by what the simulated shaker
+/// controller currently commands, generated in chunks of 64 samples.
+fn can_signal(setup: &SimSetup, shared: SharedRef) -> crate::can::sim::Signal {
+    const CHUNK: u64 = 64;
+    let mut gen = SignalGenerator::new(setup.sample_rate_hz, setup.plant.clone(), setup.interaction, setup.channels.clone(), setup.seed);
+    let position: Vec<(u16, usize)> = setup.channels.iter().enumerate().map(|(i, c)| (c.device_channel, i)).collect();
+    let nch = setup.channels.len();
+    let mut chunk: Vec<i32> = Vec::with_capacity(CHUNK as usize * nch);
+    let mut chunk_start: Option<u64> = None;
+    Box::new(move |device_channel: u16, index: u64| {
+        let fresh = match chunk_start {
+            Some(s) => index < s || index >= s + CHUNK,
+            None => true,
+        };
+        if fresh {
+            let start = index - index % CHUNK;
+            if chunk_start.is_none_or(|s| start < s) {
+                gen.restart();
+            }
+            let exc = lock(&shared).excitation.clone();
+            chunk.clear();
+            if gen.block(&exc, CHUNK as usize, &mut chunk).is_err() {
+                chunk.resize(CHUNK as usize * nch, 0);
+            }
+            chunk_start = Some(start);
+        }
+        let Some(&(_, c)) = position.iter().find(|(d, _)| *d == device_channel) else { return 0 };
+        let i = (index - chunk_start.unwrap_or(0)) as usize;
+        chunk.get(i * nch + c).copied().unwrap_or(0)
+    })
 }

@@ -11,6 +11,9 @@ use serde_spanned::Spanned;
 
 use crate::units::{Dimension, Value};
 
+/// How far (m) outside its body's equivalent box a sensor may sit (mounting blocks, rounding).
+pub const SENSOR_MOUNT_TOLERANCE_M: f64 = 0.005;
+
 /// A resolved, validated stand (SI units throughout).
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct Stand {
@@ -30,6 +33,98 @@ pub struct Stand {
     pub truth: Option<Truth>,
     /// Faults the simulated stand injects.
     pub faults: Faults,
+    /// `[geometry] model`: the model file whose bodies give the sensors' bodies their mass
+    /// properties (centre of mass, principal axes) and whose excitation gives the nominal force.
+    /// Never the truth: use the identification model. Resolved relative to the stand file by
+    /// [`Stand::load`].
+    pub geometry_model: Option<PathBuf>,
+    /// The geometry read from `geometry_model` by [`Stand::load`] (recorded in every session).
+    pub geometry: Option<Geometry>,
+}
+
+/// Mass properties of the bodies the accelerometers are on, and the nominal excitation: what
+/// processing needs to turn sensor FRFs into principal-axis characteristics. Truth independent.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Geometry {
+    /// The model file it was read from.
+    pub source: String,
+    /// Bodies that carry accelerometers, in first-use order.
+    pub bodies: Vec<BodyGeometry>,
+    /// Amplitude of the model's declared excitation force (N): characteristics are the response
+    /// to it (`identify::MeasuredData` convention).
+    pub nominal_force_n: f64,
+    /// The model's declared output characteristics on these bodies (what identification uses).
+    #[serde(default)]
+    pub outputs: Vec<GeometryOutput>,
+}
+
+/// A characteristic the geometry model declares as an output.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct GeometryOutput {
+    /// Body name.
+    pub body: String,
+    /// 0-2 translations, 3-5 rotations along the principal axes.
+    pub dof: u8,
+    /// `displacement`, `velocity` or `acceleration`.
+    pub quantity: String,
+}
+
+/// One body's mass properties (the `identify` model's body, SI).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct BodyGeometry {
+    /// Body name.
+    pub name: String,
+    /// Mass (kg).
+    pub mass: f64,
+    /// Principal central moments of inertia (kg·m²).
+    pub inertia: [f64; 3],
+    /// Centre of mass, global frame (m).
+    pub position: [f64; 3],
+    /// `global_from_body`, row-major: its columns are the principal axes in the global frame.
+    pub rotation: [[f64; 3]; 3],
+}
+
+impl BodyGeometry {
+    /// From an `identify` body.
+    pub fn from_body(b: &identify::Body) -> BodyGeometry {
+        let r = &b.rotation;
+        BodyGeometry {
+            name: b.name.clone(),
+            mass: b.mass,
+            inertia: b.inertia,
+            position: [b.position.x, b.position.y, b.position.z],
+            rotation: [[r[(0, 0)], r[(0, 1)], r[(0, 2)]], [r[(1, 0)], r[(1, 1)], r[(1, 2)]], [r[(2, 0)], r[(2, 1)], r[(2, 2)]]],
+        }
+    }
+
+    /// As an `identify` body.
+    pub fn to_body(&self) -> identify::Body {
+        let r = &self.rotation;
+        identify::Body {
+            name: self.name.clone(),
+            mass: self.mass,
+            inertia: self.inertia,
+            position: nalgebra::Vector3::from(self.position),
+            rotation: nalgebra::Matrix3::new(r[0][0], r[0][1], r[0][2], r[1][0], r[1][1], r[1][2], r[2][0], r[2][1], r[2][2]),
+        }
+    }
+
+    /// Half extents (m) along the principal axes of the homogeneous box with this mass and these
+    /// principal moments (`J1 = m(b² + c²)/12`, ...): where a sensor on the body can sit.
+    pub fn equivalent_box_half_extents(&self) -> [f64; 3] {
+        let [j1, j2, j3] = self.inertia;
+        let m = self.mass;
+        let half = |x: f64| 0.5 * (6.0 * x / m).max(0.0).sqrt();
+        [half(j2 + j3 - j1), half(j1 + j3 - j2), half(j1 + j2 - j3)]
+    }
+
+    /// Where a global point lies in body axes, relative to the centre of mass (m).
+    pub fn body_from_global(&self, x: [f64; 3]) -> [f64; 3] {
+        let d = [x[0] - self.position[0], x[1] - self.position[1], x[2] - self.position[2]];
+        let r = &self.rotation;
+        // Rᵀ d: column k of R is principal axis k.
+        [0, 1, 2].map(|k| r[0][k] * d[0] + r[1][k] * d[1] + r[2][k] * d[2])
+    }
 }
 
 /// Where a device is.
@@ -40,6 +135,8 @@ pub enum PortSpec {
     Sim,
     /// A device path such as `/dev/ttyUSB0`.
     Path(String),
+    /// `"can:IFACE"`: the DAQ on a SocketCAN interface (docs/daq-can.md).
+    Can(String),
 }
 
 /// Shaker-controller settings.
@@ -76,6 +173,8 @@ pub struct DaqPort {
     pub timeout: Duration,
     /// Retries after a timeout.
     pub retries: u32,
+    /// Identifiers and frames when the DAQ is on CAN (`[daq.can]`).
+    pub can: crate::can::CanDaqSettings,
 }
 
 /// What a channel measures.
@@ -196,6 +295,23 @@ struct RawStand {
     channel: Vec<Spanned<RawChannel>>,
     truth: Option<Spanned<RawTruth>>,
     faults: Option<RawFaults>,
+    geometry: Option<Spanned<RawGeometry>>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawGeometry {
+    model: Spanned<String>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawCan {
+    frames: Option<Spanned<String>>,
+    command_id: Option<Spanned<u32>>,
+    status_id: Option<Spanned<u32>>,
+    data_id: Option<Spanned<u32>>,
+    extended_ids: Option<bool>,
 }
 
 #[derive(Deserialize)]
@@ -219,6 +335,7 @@ struct RawDaq {
     samples_per_block: Option<Spanned<u16>>,
     timeout: Option<Spanned<Value>>,
     retries: Option<u32>,
+    can: Option<Spanned<RawCan>>,
 }
 
 #[derive(Deserialize)]
@@ -325,9 +442,38 @@ impl Ctx<'_> {
 fn port_spec(p: &str) -> PortSpec {
     if p == "sim" {
         PortSpec::Sim
+    } else if let Some(iface) = p.strip_prefix("can:") {
+        PortSpec::Can(iface.to_string())
     } else {
         PortSpec::Path(p.to_string())
     }
+}
+
+fn can_settings(cx: &Ctx<'_>, raw: Option<&Spanned<RawCan>>) -> Result<crate::can::CanDaqSettings, StandError> {
+    use crate::can::{CanDaqSettings, CanId, FrameKind};
+    let mut s = CanDaqSettings::default();
+    let Some(rc) = raw else { return Ok(s) };
+    let r = rc.get_ref();
+    if let Some(f) = &r.frames {
+        s.frames = match f.get_ref().as_str() {
+            "classic" => FrameKind::Classic,
+            "fd" => FrameKind::Fd,
+            other => return Err(cx.at(f.span(), format!("daq.can.frames = {other:?}: write \"classic\" (8-byte frames) or \"fd\" (CAN FD, 64 bytes)"))),
+        };
+    }
+    let ext = r.extended_ids.unwrap_or(false);
+    let id = |v: &Option<Spanned<u32>>, dflt: CanId, what: &str| -> Result<CanId, StandError> {
+        let Some(v) = v else { return Ok(dflt) };
+        let x = *v.get_ref();
+        let id = if ext { CanId::Extended(x) } else { CanId::Standard(u16::try_from(x).unwrap_or(u16::MAX)) };
+        id.validate(what).map_err(|e| cx.at(v.span(), format!("daq.can.{what}_id: {e}")))?;
+        Ok(id)
+    };
+    s.command_id = id(&r.command_id, s.command_id, "command")?;
+    s.status_id = id(&r.status_id, s.status_id, "status")?;
+    s.data_id = id(&r.data_id, s.data_id, "data")?;
+    s.validate().map_err(|e| cx.at(rc.span(), format!("daq.can: {e}")))?;
+    Ok(s)
 }
 
 impl Stand {
@@ -341,11 +487,18 @@ impl Stand {
             message: format!("cannot read the stand file: {e}"),
         })?;
         let mut stand = Stand::parse(&text, &file)?;
+        let dir = path.parent().unwrap_or(Path::new("."));
         if let Some(Truth { model: TruthModel::ModelFile(p), .. }) = &mut stand.truth {
             if p.is_relative() {
-                *p = path.parent().unwrap_or(Path::new(".")).join(&*p);
+                *p = dir.join(&*p);
             }
         }
+        if let Some(p) = &mut stand.geometry_model {
+            if p.is_relative() {
+                *p = dir.join(&*p);
+            }
+        }
+        stand.resolve_geometry(SENSOR_MOUNT_TOLERANCE_M)?;
         Ok(stand)
     }
 
@@ -388,7 +541,16 @@ impl Stand {
                 None => Duration::from_millis(500),
             },
             retries: rd.retries.unwrap_or(2),
+            can: can_settings(&cx, rd.can.as_ref())?,
         };
+        if matches!(shaker.port, PortSpec::Can(_)) {
+            return Err(cx.at(rs.port.span(), "shaker.port: the shaker controller speaks SCPI over serial; give a device path (or \"sim\"), not a CAN interface"));
+        }
+        if let PortSpec::Can(iface) = &daq.port {
+            if iface.is_empty() {
+                return Err(cx.at(rd.port.span(), "daq.port = \"can:\" needs an interface name, e.g. \"can:can0\" or \"can:vcan0\""));
+            }
+        }
         if let (PortSpec::Path(a), PortSpec::Path(b)) = (&shaker.port, &daq.port) {
             if a == b {
                 return Err(cx.at(rd.port.span(), format!("daq.port {b} is also the shaker's port; each device needs its own port")));
@@ -492,6 +654,7 @@ impl Stand {
                 cable_pull_after_blocks: f.cable_pull_after_blocks,
             },
         };
+        let geometry_model = raw.geometry.as_ref().map(|g| PathBuf::from(g.get_ref().model.get_ref()));
         let uses_sim = shaker.port == PortSpec::Sim || daq.port == PortSpec::Sim;
         if uses_sim && truth.is_none() {
             return Err(cx.at(raw.shaker.span(), "port = \"sim\" needs a [truth] section (the simulated structure)"));
@@ -505,7 +668,75 @@ impl Stand {
             channels,
             truth,
             faults,
+            geometry_model,
+            geometry: None,
         })
+    }
+
+    /// Reads the `[geometry] model` (already resolved to a path) and checks that every
+    /// accelerometer sits on the body it names: inside the homogeneous box with that body's mass
+    /// and principal moments, within `tolerance_m`.
+    pub fn resolve_geometry(&mut self, tolerance_m: f64) -> Result<(), StandError> {
+        let Some(path) = self.geometry_model.clone() else { return Ok(()) };
+        let text = self.text.clone();
+        let span_of = |key: &str| text.find(key).unwrap_or(0);
+        let cx = Ctx { file: &self.file, text: &text };
+        let at_geometry = |msg: String| cx.at(span_of("[geometry]")..span_of("[geometry]"), msg);
+        let loaded = identify::modelfile::load(&path)
+            .map_err(|e| at_geometry(format!("geometry.model {}: {e}", path.display())))?;
+        let model = loaded.model;
+        let nominal_force_n = model.forces.first().map(|f| f.force.norm()).unwrap_or(0.0);
+        if !(nominal_force_n > 0.0) {
+            return Err(at_geometry(format!(
+                "geometry.model {} declares no excitation force; the characteristics are scaled to the model's excitation, so give the identification model",
+                path.display()
+            )));
+        }
+        let mut bodies: Vec<BodyGeometry> = Vec::new();
+        for c in self.channels.iter().filter(|c| c.kind == ChannelKind::Acceleration) {
+            let name = c.body.as_deref().unwrap_or("");
+            let Some(b) = model.bodies.iter().find(|b| b.name == name) else {
+                let names: Vec<&str> = model.bodies.iter().map(|b| b.name.as_str()).collect();
+                return Err(StandError {
+                    file: self.file.clone(),
+                    line: c.line,
+                    column: 1,
+                    message: format!("channel `{}`: body `{name}` is not in the geometry model {} (bodies: {})", c.name, path.display(), names.join(", ")),
+                });
+            };
+            let g = BodyGeometry::from_body(b);
+            let s = g.body_from_global(c.position_m);
+            let h = g.equivalent_box_half_extents();
+            if (0..3).any(|k| s[k].abs() > h[k] + tolerance_m) {
+                let lo = |k: usize| g.position[k] - h[k];
+                return Err(StandError {
+                    file: self.file.clone(),
+                    line: c.line,
+                    column: 1,
+                    message: format!(
+                        "channel `{}`: position [{:.0}, {:.0}, {:.0}] mm is not on body `{name}`: in its principal axes the point is at [{:.0}, {:.0}, {:.0}] mm from the centre of mass, but the body (a {:.0} × {:.0} × {:.0} mm box of its mass and inertia in {}) reaches only ±[{:.0}, {:.0}, {:.0}] mm; put the sensor on the body (e.g. x {:.0}..{:.0}, y {:.0}..{:.0}, z {:.0}..{:.0} mm for axis-aligned bodies) or name the body it is on",
+                        c.name,
+                        c.position_m[0] * 1e3, c.position_m[1] * 1e3, c.position_m[2] * 1e3,
+                        s[0] * 1e3, s[1] * 1e3, s[2] * 1e3,
+                        2e3 * h[0], 2e3 * h[1], 2e3 * h[2],
+                        path.display(),
+                        h[0] * 1e3, h[1] * 1e3, h[2] * 1e3,
+                        lo(0) * 1e3, (lo(0) + 2.0 * h[0]) * 1e3, lo(1) * 1e3, (lo(1) + 2.0 * h[1]) * 1e3, lo(2) * 1e3, (lo(2) + 2.0 * h[2]) * 1e3,
+                    ),
+                });
+            }
+            if !bodies.iter().any(|x| x.name == g.name) {
+                bodies.push(g);
+            }
+        }
+        let outputs = model
+            .outputs
+            .iter()
+            .filter(|o| bodies.iter().any(|b| b.name == model.bodies[o.body].name))
+            .map(|o| GeometryOutput { body: model.bodies[o.body].name.clone(), dof: o.dof, quantity: o.quantity.as_str().to_string() })
+            .collect();
+        self.geometry = Some(Geometry { source: path.display().to_string(), bodies, nominal_force_n, outputs });
+        Ok(())
     }
 
     /// The force channel's index in stream order (validated to exist exactly once).

@@ -99,3 +99,57 @@ fn repository_stand_files_load() {
     }
     assert!(n >= 1, "no stand files in {}", dir.display());
 }
+
+#[test]
+fn can_ports_and_identifiers_are_read_and_checked() {
+    let t = GOOD.replace("port = \"sim\"\nsample_rate", "port = \"can:can0\"\nsample_rate")
+        + "\n[daq.can]\nframes = \"fd\"\ncommand_id = 0x310\nstatus_id = 0x311\ndata_id = 0x312\n";
+    // `[daq.can]` after `[truth]` is still the daq table's sub-table.
+    let s = Stand::parse(&t, "can.toml").unwrap();
+    assert_eq!(s.daq.port, PortSpec::Can("can0".into()));
+    assert_eq!(s.daq.can.frames, crate::can::FrameKind::Fd);
+    assert_eq!(s.daq.can.data_id, crate::can::CanId::Standard(0x312));
+    let e = err(&t.replace("frames = \"fd\"", "frames = \"flexible\""));
+    assert!(e.message.contains("daq.can.frames = \"flexible\": write \"classic\""), "{e}");
+    assert_eq!(e.line, line_of(&t, "frames = \"fd\""), "{e}");
+    let e = err(&t.replace("status_id = 0x311", "status_id = 0x310"));
+    assert!(e.message.contains("must all differ"), "{e}");
+    let e = err(&t.replace("data_id = 0x312", "data_id = 0x912"));
+    assert!(e.message.contains("daq.can.data_id") && e.message.contains("out of range"), "{e}");
+    let e = err(&GOOD.replace("port = \"sim\"\nidentity = \"IDENT-SIM,SHAKER-4K\"", "port = \"can:can0\"\nidentity = \"x\""));
+    assert!(e.message.contains("shaker controller speaks SCPI over serial"), "{e}");
+}
+
+#[test]
+fn sensors_must_sit_on_the_body_they_name() {
+    let dir = tempfile::tempdir().unwrap();
+    let models = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../configs/models/fwd32j-no-actuator.toml");
+    let with = |pos: &str| {
+        GOOD.replace("position = [\"320 mm\", \"0 mm\", \"45 mm\"]", pos)
+            .replace("[truth]", &format!("[geometry]\nmodel = \"{}\"\n[truth]", models.display()))
+    };
+    // On the table's top surface (x -625..625, y 740..1060, z up to 950 mm): accepted, geometry recorded.
+    let p = dir.path().join("ok.toml");
+    std::fs::write(&p, with("position = [\"600 mm\", \"1050 mm\", \"950 mm\"]")).unwrap();
+    let s = Stand::load(&p).unwrap_or_else(|e| panic!("{e}"));
+    let g = s.geometry.as_ref().unwrap();
+    assert_eq!(g.bodies.len(), 1);
+    assert_eq!(g.bodies[0].name, "table");
+    assert!((g.nominal_force_n - 4000.0).abs() < 1e-9);
+    let h = g.bodies[0].equivalent_box_half_extents();
+    assert!((h[0] - 0.625).abs() < 1e-3 && (h[1] - 0.16).abs() < 1e-3 && (h[2] - 0.06).abs() < 1e-3, "{h:?}");
+    assert_eq!(g.outputs.iter().map(|o| o.dof).collect::<Vec<_>>(), vec![0, 1, 2]);
+    // 250 mm beyond the table's side (yesterday's stand file): refused, naming file, line and fix.
+    let t = with("position = [\"0 mm\", \"1150 mm\", \"950 mm\"]");
+    let p = dir.path().join("off.toml");
+    std::fs::write(&p, &t).unwrap();
+    let e = Stand::load(&p).unwrap_err();
+    assert_eq!(e.line, line_of(&t, "name = \"table-x\"") - 1, "{e}");
+    assert!(e.message.starts_with("channel `table-x`: position [0, 1150, 950] mm is not on body `table`"), "{e}");
+    assert!(e.message.contains("reaches only ±[625, 160, 60] mm") && e.message.contains("y 740..1060"), "{e}");
+    // A body the geometry model does not have.
+    let t = with("position = [\"0 mm\", \"900 mm\", \"950 mm\"]").replace("body = \"table\"\nposition", "body = \"tabel\"\nposition").replace("sdof = { body = \"table\"", "sdof = { body = \"tabel\"");
+    std::fs::write(&p, &t).unwrap();
+    let e = Stand::load(&p).unwrap_err();
+    assert!(e.message.contains("body `tabel` is not in the geometry model") && e.message.contains("table"), "{e}");
+}

@@ -3,7 +3,7 @@
 //! stop on Ctrl-C and resuming from the last completed step. Every block, fault and decision is
 //! recorded in the session; the sweep drives `dyn Shaker` and `dyn Daq` and does not know which.
 
-pub mod fit;
+pub mod estimate;
 mod progress;
 
 pub use progress::{IndicatifProgress, NoProgress, SweepProgress};
@@ -21,7 +21,7 @@ use crate::daq::{DaqError, DaqEvent, SampleBlock};
 use crate::rig::Rig;
 use crate::session::{self, SessionError, SessionHandle, Topic};
 use crate::shaker::{ShakerError, Waveform};
-use fit::SineFit;
+use estimate::StepEstimator;
 
 /// Sweep errors. Device errors keep their port and advice.
 #[derive(Debug, thiserror::Error)]
@@ -39,6 +39,16 @@ pub enum SweepError {
     /// The plan is unusable.
     #[error("sweep plan: {0}")]
     Plan(String),
+    /// A step's window could not be fitted.
+    #[error("step {step} ({frequency_hz:.2} Hz): {source}")]
+    Estimate {
+        /// Step index.
+        step: usize,
+        /// Frequency (Hz).
+        frequency_hz: f64,
+        /// Why.
+        source: process::ProcessError,
+    },
     /// The previous session cannot be resumed.
     #[error("cannot resume from {path}: {detail}")]
     Resume {
@@ -220,8 +230,14 @@ pub struct ChannelResult {
     pub frf_re: f64,
     /// FRF imaginary part (per N).
     pub frf_im: f64,
-    /// Sine-fit quality (0-1).
+    /// Fraction of the window's power in the fitted sine, `(|X|²/2) / (|X|²/2 + noise²)` (0-1).
     pub fit_quality: f64,
+    /// RMS of the fit residual (N or m/s²): the step's noise level on this channel.
+    #[serde(default)]
+    pub noise_rms: f64,
+    /// Variance of the FRF estimate, E|Ĥ−H|² ((m/s²/N)²; 0 for the force channel).
+    #[serde(default)]
+    pub frf_variance: f64,
 }
 
 /// The record of one completed step (topic `/sweep/step`).
@@ -276,6 +292,26 @@ struct Pump<'a> {
     faults: u64,
     last_fault_sample: Option<u64>,
     next_sample: u64,
+    /// When the stream started, and how many samples the DAQ produces per wall-clock second.
+    started: std::time::Instant,
+    samples_per_wall_s: f64,
+}
+
+impl<'a> Pump<'a> {
+    fn new(rig: &'a mut Rig, session: &'a SessionHandle) -> Self {
+        // The simulated stand runs `speed` times faster than real time; real devices at 1.
+        let speed = rig.stand.truth.as_ref().map(|t| t.speed).unwrap_or(1.0);
+        let samples_per_wall_s = rig.stream.sample_rate_hz * speed;
+        Pump { rig, session, faults: 0, last_fault_sample: None, next_sample: 0, started: std::time::Instant::now(), samples_per_wall_s }
+    }
+
+    /// The sample the DAQ is producing now: samples it has sent but the host has not read yet
+    /// (queued in the port or socket while the host was busy) were taken before the last command
+    /// and must not count as settling time.
+    fn position_now(&self) -> u64 {
+        let produced = (self.started.elapsed().as_secs_f64() * self.samples_per_wall_s) as u64;
+        self.next_sample.max(produced)
+    }
 }
 
 impl Pump<'_> {
@@ -429,9 +465,10 @@ async fn stepped_inner(
     skip: &BTreeSet<usize>,
 ) -> Result<SweepOutcome, SweepError> {
     let fs = rig.stream.sample_rate_hz;
-    let nch = rig.stand.channels.len();
     let force_ch = rig.stand.force_channel();
     let sens: Vec<f64> = rig.stand.channels.iter().map(|c| c.sensitivity).collect();
+    let names: Vec<String> = rig.stand.channels.iter().map(|c| c.name.clone()).collect();
+    let mut estimator = StepEstimator::new(fs, &sens, force_ch);
     let max_drive = rig.stand.shaker.max_force_n;
     let first = freqs.iter().enumerate().find(|(i, _)| !skip.contains(i)).map(|(_, f)| *f);
     let mut outcome = SweepOutcome { steps: Vec::new(), skipped: skip.iter().copied().collect(), stopped: false, faults: 0 };
@@ -445,7 +482,7 @@ async fn stepped_inner(
     rig.shaker.set_force((0.5 * plan.target_force_n).min(max_drive)).await?;
     rig.shaker.set_output(true).await?;
     rig.daq.start().await?;
-    let mut pump = Pump { rig, session, faults: 0, last_fault_sample: None, next_sample: 0 };
+    let mut pump = Pump::new(rig, session);
 
     for (step, &f) in freqs.iter().enumerate() {
         if skip.contains(&step) {
@@ -469,21 +506,22 @@ async fn stepped_inner(
             }
             // Settle, then measure a window; a fault inside either restarts the measurement.
             let mut fault = false;
-            let start = pump.next_sample + settle;
-            let mut fit = SineFit::new(f, fs, nch);
+            let start = pump.position_now() + settle;
+            estimator.clear();
             let mut window_first = None;
-            while fit.samples() < window {
+            while (estimator.len() as u64) < window {
                 let b = pump.next(&mut fault).await?;
                 if stop.is_set() {
                     break;
                 }
+                let nch = b.channel_count as usize;
                 for i in 0..b.len() {
                     let n = b.first_sample + i as u64;
-                    if n < start {
+                    if n < start || estimator.len() as u64 >= window {
                         continue;
                     }
                     window_first.get_or_insert(n);
-                    fit.push(n, (0..nch).map(|c| b.volts[i * nch + c] as f64 / sens[c]));
+                    estimator.push_row(&b.volts[i * nch..(i + 1) * nch]);
                 }
                 if fault && window_first.is_some() {
                     break;
@@ -504,11 +542,8 @@ async fn stepped_inner(
                 }
                 continue;
             }
-            let Some(est) = fit.solve() else {
-                return Err(SweepError::Plan(format!("step {step}: window of {window} samples is too short at {f} Hz")));
-            };
-            let force = est[force_ch].amplitude;
-            let famp = force.norm();
+            let est = estimator.estimate(f).map_err(|source| SweepError::Estimate { step, frequency_hz: f, source })?;
+            let famp = est.force.amplitude();
             let err = (famp - plan.target_force_n).abs() / plan.target_force_n;
             if famp > 0.0 {
                 gain = famp / drive;
@@ -517,7 +552,7 @@ async fn stepped_inner(
                 if err > plan.force_tolerance {
                     event(session, "warning", Some(step), Some(f), format!("force {famp:.1} N not within {:.1} % of {} N after {iterations} corrections", plan.force_tolerance * 100.0, plan.target_force_n))?;
                 }
-                break Some((est, famp, window_first.unwrap_or(start), fit.samples()));
+                break Some((est, famp, window_first.unwrap_or(start), estimator.len() as u64));
             }
             iterations += 1;
             let new_drive = (plan.target_force_n / gain).min(max_drive);
@@ -529,18 +564,7 @@ async fn stepped_inner(
             outcome.stopped = true;
             break;
         };
-        let force = est[force_ch].amplitude;
-        let channels = pump
-            .rig
-            .stand
-            .channels
-            .iter()
-            .zip(&est)
-            .map(|(c, e)| {
-                let h = e.amplitude / force;
-                ChannelResult { name: c.name.clone(), amplitude: e.amplitude.norm(), phase_rad: h.arg(), frf_re: h.re, frf_im: h.im, fit_quality: e.quality }
-            })
-            .collect::<Vec<_>>();
+        let channels = estimator.channel_results(&est, &names);
         let quality = channels.iter().map(|c| c.fit_quality).fold(1.0, f64::min);
         let res = StepResult { step, frequency_hz: f, drive_n: drive, force_amplitude_n: famp, first_sample, samples, iterations, channels };
         session.log(Topic::SweepStep, &res)?;
@@ -616,6 +640,24 @@ pub async fn broadband(
     event(session, "started", None, None, format!("broadband {:?}, {} averages", plan.waveform, plan.averages))?;
     progress.start(plan.averages as u64, 0);
     let r = broadband_inner(rig, plan, (lo, hi, period), session, progress, stop).await;
+    if let Ok(o) = &r {
+        let channels: Vec<serde_json::Value> = rig
+            .stand
+            .channels
+            .iter()
+            .enumerate()
+            .map(|(c, ch)| {
+                json!({"name": ch.name,
+                    "h1_re": o.h1[c].iter().map(|h| h.re).collect::<Vec<_>>(),
+                    "h1_im": o.h1[c].iter().map(|h| h.im).collect::<Vec<_>>(),
+                    "coherence": o.coherence[c]})
+            })
+            .collect();
+        session.log(
+            Topic::SweepBroadband,
+            &json!({"waveform": plan.waveform, "force_n": plan.force_n, "averages": o.averages, "stopped": o.stopped, "freqs_hz": o.freqs_hz, "channels": channels}),
+        )?;
+    }
     let off = rig.shaker.set_output(false).await;
     let _ = rig.daq.stop().await;
     drain_faults(rig, session).await?;
@@ -656,7 +698,7 @@ async fn broadband_inner(
     let mut sxf = vec![vec![Complex::new(0.0, 0.0); bins.len()]; nch];
     let mut sxx = vec![vec![0.0; bins.len()]; nch];
     let mut bufs = vec![vec![Complex::new(0.0, 0.0); n]; nch];
-    let mut pump = Pump { rig, session, faults: 0, last_fault_sample: None, next_sample: 0 };
+    let mut pump = Pump::new(rig, session);
     let mut done = 0u32;
     let mut stopped = false;
     // Periods are aligned to the waveform's period in samples from START.

@@ -85,3 +85,55 @@ print(",".join(sorted(topics)))
     let topics = lines.next().unwrap_or("").split(',').map(str::to_string).collect();
     (n, topics)
 }
+
+/// The FWD-32J stand with the RFE model as truth, written with its two model files into `dir`
+/// (from texts compiled into the test binary, so it also works inside the vcan VM) and loaded.
+pub fn model_sim_stand_in(dir: &Path, speed: Option<f64>) -> Stand {
+    let stands = dir.join("stands");
+    let models = dir.join("models");
+    std::fs::create_dir_all(&stands).expect("stands dir");
+    std::fs::create_dir_all(&models).expect("models dir");
+    std::fs::write(stands.join("fwd32j-model-sim.toml"), include_str!("../../../configs/stands/fwd32j-model-sim.toml")).expect("write stand");
+    std::fs::write(models.join("fwd32j.toml"), include_str!("../../../configs/models/fwd32j.toml")).expect("write truth");
+    std::fs::write(models.join("fwd32j-no-actuator.toml"), include_str!("../../../configs/models/fwd32j-no-actuator.toml")).expect("write geometry");
+    let mut s = Stand::load(&stands.join("fwd32j-model-sim.toml")).unwrap_or_else(|e| panic!("{e}"));
+    if let (Some(t), Some(x)) = (s.truth.as_mut(), speed) {
+        t.speed = x;
+    }
+    s
+}
+
+/// Checks the measured characteristics of a session against the truth model's FRF at the swept
+/// lines: every point within 4.5 standard deviations of its own stated variance (a complex
+/// Gaussian error exceeds that with probability e^-20) plus 0.1 % for ADC quantisation, and the
+/// stated noise is not absurdly pessimistic (the median error is at least 1/20 σ).
+/// Returns the number of points checked.
+pub fn assert_matches_truth(a: &acquire::analysis::SessionAnalysis, truth_model: &Path) {
+    let truth = identify::modelfile::load(truth_model).unwrap_or_else(|e| panic!("{e}")).model;
+    let mut ratios = Vec::new();
+    for m in &a.measured.characteristics {
+        let c = m.resolve(&truth).expect("characteristic of a truth body");
+        let o = truth.outputs.iter().position(|x| *x == c).expect("a declared output of the truth model");
+        let r = identify::frf::response(&truth, &m.freqs_hz, &[], identify::frf::Method::Auto).expect("truth FRF");
+        let phase = m.phase_rad.as_ref().expect("phases measured");
+        let var = m.variance.as_ref().expect("variances stated");
+        for (k, f) in m.freqs_hz.iter().enumerate() {
+            let want = r.output(o)[k];
+            let got = num_complex::Complex::from_polar(m.amplitude[k], phase[k]);
+            let sigma = var[k].sqrt();
+            let err = (got - want).norm();
+            assert!(
+                err <= 4.5 * sigma + 1e-3 * want.norm(),
+                "{} dof {} at {f:.2} Hz: measured {got:.4e}, truth {want:.4e}, error {err:.3e} > 4.5 σ = {:.3e}",
+                m.body,
+                m.dof,
+                4.5 * sigma
+            );
+            ratios.push(err / sigma);
+        }
+    }
+    ratios.sort_by(f64::total_cmp);
+    let median = ratios[ratios.len() / 2];
+    assert!(median > 0.05 && median < 3.0, "median error / σ = {median}: the stated variances do not describe the errors");
+    eprintln!("truth check: {} points, median |error|/σ = {median:.2}, max {:.2}", ratios.len(), ratios[ratios.len() - 1]);
+}

@@ -362,6 +362,48 @@ impl Criterion {
         Ok((e, jac))
     }
 
+    /// The frequency grid (Hz): the union of the measured frequencies.
+    pub fn lines(&self) -> &[f64] {
+        &self.freqs
+    }
+
+    /// Amplitude-only or complex.
+    pub fn fit(&self) -> FitKind {
+        self.fit
+    }
+
+    /// Per observation, in residual order: (characteristic index, line index, σ of one
+    /// component).
+    pub fn points(&self) -> Vec<(usize, usize, f64)> {
+        self.obs.iter().map(|o| (o.output, o.line, o.sigma)).collect()
+    }
+
+    /// `∂e/∂γ` for a direction γ in which the model's outputs change by `dq(characteristic,
+    /// line)` from `q(characteristic, line)`: how an effect the model does not have would move
+    /// the whitened residuals (used by diagnosis).
+    pub fn whitened_derivative(
+        &self,
+        q: impl Fn(usize, usize) -> C64,
+        dq: impl Fn(usize, usize) -> C64,
+    ) -> DVector<f64> {
+        let np = self.obs.len();
+        let mut col = DVector::zeros(self.residual_count());
+        for (i, o) in self.obs.iter().enumerate() {
+            let (qv, d) = (q(o.output, o.line), dq(o.output, o.line));
+            match self.fit {
+                FitKind::Amplitude => {
+                    let qa = qv.norm();
+                    col[i] = if qa > 0.0 { -(qv.conj() * d).re / qa / o.sigma } else { 0.0 };
+                }
+                FitKind::Complex => {
+                    col[i] = -d.re / o.sigma;
+                    col[np + i] = -d.im / o.sigma;
+                }
+            }
+        }
+        col
+    }
+
     /// RMS relative amplitude error `sqrt(mean(((|q| − |z|)/|z|)²))` per characteristic at `x`
     /// (points with |z| = 0 are skipped).
     pub fn rms_relative_error(&mut self, x: &[f64]) -> Result<Vec<(String, f64)>, frf::SolveError> {

@@ -14,7 +14,7 @@ use crate::model::{Characteristic, Model, Quantity, DOF_NAMES};
 #[derive(Debug, thiserror::Error)]
 pub enum DataError {
     /// The file could not be read.
-    #[error("{path}: cannot read the data file: {source}")]
+    #[error("{path}: cannot read the data file")]
     Io {
         /// File.
         path: String,

@@ -9,7 +9,9 @@
 //! - [`optimize`]: bounded Levenberg-Marquardt, Gauss-Newton with line search (eq. 4.12-4.13),
 //!   BFGS with a Wolfe line search;
 //! - [`uncertainty`]: Cramér-Rao bound (eq. 4.15), correlations, identifiability;
-//! - [`report`]: the Table-1-like table (text, JSON, CSV) and the updated model (TOML, JSON).
+//! - [`report`]: the Table-1-like table (text, JSON, CSV) and the updated model (TOML, JSON);
+//! - [`problem`]: the fit problem as JSON for external tools (the Python baseline);
+//! - [`synthetic`]: synthetic measured data from a model (tests, benchmarks).
 //!
 //! ```
 //! use identify::identification::{identify, variables, data::Observations, Options};
@@ -47,7 +49,9 @@
 pub mod criterion;
 pub mod data;
 pub mod optimize;
+pub mod problem;
 pub mod report;
+pub mod synthetic;
 pub mod uncertainty;
 pub mod variables;
 

@@ -21,7 +21,7 @@ use crate::units::{parse_quantity, Dim};
 #[derive(Debug, thiserror::Error)]
 pub enum VarsError {
     /// The file could not be read.
-    #[error("{path}: cannot read the variables file: {source}")]
+    #[error("{path}: cannot read the variables file")]
     Io {
         /// File.
         path: String,

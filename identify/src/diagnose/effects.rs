@@ -1,0 +1,428 @@
+//! The structural changes a model can lack ("effects"), generated from the model's own geometry,
+//! each nested: its parameters at their nested values give back the current model exactly.
+//!
+//! | effect | parameters (SI) | nested at |
+//! |---|---|---|
+//! | spring-damper between two bodies or a body and the ground, at a point along a direction | k (N/m), ψ | k = 0 |
+//! | point mass on a body (accelerometer, fixture, workpiece) | m (kg) | m = 0 |
+//! | local resonator (mass on an isotropic spring) at a point | m (kg), f (Hz) | m = 0 |
+//! | a body that is not rigid: three RFEs along a principal axis joined by two SDEs | compliance c (m/N) | c = 0 |
+//! | a sensor gain error of one characteristic | g (-) | g = 0 |
+//! | a separate ψ for one joint of a ψ group | ψ of that joint | the group's ψ |
+//!
+//! Each effect gives its first-order action on `A(ω) = K + jD − ω²M` as rows and coefficients
+//! ([`Effect::terms`]), so that its score needs no new solve; the flexible body, whose DOFs differ,
+//! is the exception (one extra solve, see `score`).
+
+use nalgebra::{Matrix3, Vector3};
+
+use crate::identification::variables::Variables;
+use crate::model::{Body, Model, ParamName, ParamRef, Sde, SdeKind, SdeLaw};
+use crate::modelfile::frame_from_axis;
+use crate::system::generalized_force;
+use crate::C64;
+
+const TWO_PI: f64 = 2.0 * std::f64::consts::PI;
+
+/// A point mass is realized as a small body on a stiff mount whose own resonance sits this many
+/// times above the highest measured frequency, so that in the band it acts as a rigid mass.
+const MOUNT_ABOVE_BAND: f64 = 30.0;
+/// Radius of gyration (m) of an added point mass or resonator body (its rotary inertia is
+/// negligible but must be positive).
+const POINT_RADIUS: f64 = 0.01;
+/// Loss ψ of the stiff mounts and of a flexible body's internal joints (structural steel/cast
+/// iron, loss factor ≈ 1 %).
+const STRUCTURAL_PSI: f64 = 0.06;
+
+/// One candidate effect.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Effect {
+    /// A spring-damper (axial law) between `bodies` (None = ground) at `point` along `direction`.
+    Spring {
+        /// Body names `[p, r]`.
+        bodies: [Option<String>; 2],
+        /// Global point (m).
+        point: Vector3<f64>,
+        /// Unit direction (global).
+        direction: Vector3<f64>,
+        /// ψ used for the score (the refit frees it).
+        psi: f64,
+    },
+    /// A point mass at `point` on `body`.
+    Mass {
+        /// Host body.
+        body: String,
+        /// Global point (m).
+        point: Vector3<f64>,
+        /// Typical size of the effect (kg), the parameter's scale.
+        scale: f64,
+    },
+    /// A mass on an isotropic spring with natural frequency `freq_hz` at `point` on `body`.
+    Resonator {
+        /// Host body.
+        body: String,
+        /// Global point (m).
+        point: Vector3<f64>,
+        /// Natural frequency of the mass on its spring (Hz), the start of the refit.
+        freq_hz: f64,
+        /// Typical size of the mass (kg).
+        scale: f64,
+    },
+    /// `body` is three RFEs along its principal axis `axis` (0-2), joined by two SDEs of compliance c.
+    Flexible {
+        /// The body.
+        body: String,
+        /// Principal axis index.
+        axis: usize,
+        /// Typical compliance (m/N): the model's softest SDE's.
+        scale: f64,
+    },
+    /// The amplitude of characteristic `output` is off by a factor `1 + g`.
+    Gain {
+        /// Characteristic index (data order).
+        output: usize,
+        /// Its label.
+        label: String,
+    },
+    /// The SDEs `sdes` (one joint) get their own `parameter` instead of variable `variable`'s.
+    Damping {
+        /// Index of the group variable.
+        variable: usize,
+        /// Its name.
+        variable_name: String,
+        /// The split-off SDE names.
+        sdes: Vec<String>,
+        /// The ψ parameter.
+        parameter: ParamName,
+        /// The group's current value (the nested value).
+        value: f64,
+    },
+}
+
+/// One parameter of an effect.
+#[derive(Debug, Clone, PartialEq)]
+pub struct EffectParam {
+    /// Name for reports (`k`, `psi`, `m`, `f`, `c`, `g`).
+    pub name: &'static str,
+    /// SI unit.
+    pub unit: &'static str,
+    /// The nested value (the current model).
+    pub nested: f64,
+    /// Start of the refit (replaced by the score step where that is better).
+    pub initial: f64,
+    /// Bounds.
+    pub lower: f64,
+    /// Upper bound.
+    pub upper: f64,
+    /// Scale for the optimizer.
+    pub scale: f64,
+}
+
+/// The result of applying effects: the model, the variables (a split ψ group loses members) and
+/// the sensor gains (per characteristic, 0 = none).
+#[derive(Debug, Clone)]
+pub struct Realized {
+    /// The model with the effects.
+    pub model: Model,
+    /// The variables of the model.
+    pub vars: Variables,
+    /// `1 + g` per characteristic.
+    pub gains: Vec<f64>,
+}
+
+impl Effect {
+    /// Short kind name: spring, mass, resonator, flexible body, sensor gain, joint damping.
+    pub fn kind(&self) -> &'static str {
+        match self {
+            Effect::Spring { .. } => "spring",
+            Effect::Mass { .. } => "mass",
+            Effect::Resonator { .. } => "resonator",
+            Effect::Flexible { .. } => "flexible body",
+            Effect::Gain { .. } => "sensor gain",
+            Effect::Damping { .. } => "joint damping",
+        }
+    }
+
+    /// What and where, for reports (mm at the edge).
+    pub fn describe(&self) -> String {
+        let mm = |p: &Vector3<f64>| format!("({:.0}, {:.0}, {:.0}) mm", 1e3 * p.x, 1e3 * p.y, 1e3 * p.z);
+        let name = |b: &Option<String>| b.clone().unwrap_or_else(|| "ground".into());
+        match self {
+            Effect::Spring { bodies, point, direction, .. } => format!(
+                "spring {}–{} at {} along ({:.3}, {:.3}, {:.3})",
+                name(&bodies[0]),
+                name(&bodies[1]),
+                mm(point),
+                direction.x,
+                direction.y,
+                direction.z
+            ),
+            Effect::Mass { body, point, .. } => format!("point mass on {body} at {}", mm(point)),
+            Effect::Resonator { body, point, freq_hz, .. } => {
+                format!("resonator (≈{freq_hz:.0} Hz) on {body} at {}", mm(point))
+            }
+            Effect::Flexible { body, axis, .. } => {
+                format!("{body} not rigid: three RFEs along its principal axis {}", axis + 1)
+            }
+            Effect::Gain { label, .. } => format!("gain error of {label}"),
+            Effect::Damping { variable_name, sdes, parameter, .. } => format!(
+                "own {} for SDE {} (split from \"{variable_name}\")",
+                parameter.as_str(),
+                sdes.join(", ")
+            ),
+        }
+    }
+
+    /// The effect's parameters.
+    pub fn params(&self, f_max: f64) -> Vec<EffectParam> {
+        let p = |name, unit, nested, initial, lower, upper, scale| EffectParam { name, unit, nested, initial, lower, upper, scale };
+        match self {
+            Effect::Spring { psi, .. } => vec![
+                p("k", "N/m", 0.0, 0.0, 0.0, f64::INFINITY, 1e6),
+                p("psi", "-", *psi, *psi, 0.0, 2.0 * TWO_PI, 0.5),
+            ],
+            Effect::Mass { scale, .. } => vec![p("m", "kg", 0.0, 0.0, 0.0, f64::INFINITY, *scale)],
+            Effect::Resonator { freq_hz, scale, .. } => vec![
+                p("m", "kg", 0.0, 0.0, 0.0, f64::INFINITY, *scale),
+                p("f", "Hz", *freq_hz, *freq_hz, 0.2 * freq_hz, (5.0 * freq_hz).min(MOUNT_ABOVE_BAND * f_max / 3.0), *freq_hz),
+            ],
+            Effect::Flexible { scale, .. } => vec![p("c", "m/N", 0.0, 0.0, 0.0, f64::INFINITY, *scale)],
+            Effect::Gain { .. } => vec![p("g", "-", 0.0, 0.0, -0.5, 0.5, 0.01)],
+            Effect::Damping { value, .. } => {
+                vec![p("psi", "-", *value, *value, 0.0, 2.0 * TWO_PI, value.abs().max(0.05))]
+            }
+        }
+    }
+
+    /// The first-order action of the effect's first parameter on `A(ω)`: `∂A/∂γ = c(ω) Σ tᵀt`
+    /// over the rows `t` returned here (each over the model's DOFs), with `c` from
+    /// [`Effect::coefficient`]. `None` for effects that do not act through `A` (gain, damping:
+    /// their scores come from the outputs and the existing Jacobian) or that change the DOFs
+    /// (flexible body).
+    pub fn rows(&self, model: &Model) -> Option<Vec<Vec<(usize, f64)>>> {
+        match self {
+            Effect::Spring { bodies, point, direction, .. } => {
+                let mut row = Vec::with_capacity(12);
+                for (side, sign) in [(0usize, -1.0), (1, 1.0)] {
+                    if let Some(name) = &bodies[side] {
+                        let b = model.body_index(name)?;
+                        row.extend(point_row(model, b, point, direction).map(|(i, v)| (i, sign * v)));
+                    }
+                }
+                Some(vec![row])
+            }
+            Effect::Mass { body, point, .. } | Effect::Resonator { body, point, .. } => {
+                let b = model.body_index(body)?;
+                Some(axes().iter().map(|u| point_row(model, b, point, u).to_vec()).collect())
+            }
+            _ => None,
+        }
+    }
+
+    /// The coefficient `c(ω)` of [`Effect::rows`] at `omega` (rad/s).
+    pub fn coefficient(&self, omega: f64) -> C64 {
+        match self {
+            Effect::Spring { psi, .. } => C64::new(1.0, psi / TWO_PI),
+            Effect::Mass { .. } => C64::new(-omega * omega, 0.0),
+            Effect::Resonator { freq_hz, .. } => {
+                // Dynamic stiffness of a mass m on a spring tuned to ωr, per unit m, at m → 0.
+                let wr2 = C64::new(1.0, STRUCTURAL_PSI / TWO_PI) * (TWO_PI * freq_hz).powi(2);
+                -omega * omega * wr2 / (wr2 - omega * omega)
+            }
+            _ => C64::new(0.0, 0.0),
+        }
+    }
+
+    /// Applies the effect with parameters `gamma` to `r`. At the nested values the model is
+    /// unchanged (for the mass-like effects and the flexible body, nothing is added at all).
+    pub fn apply(&self, r: &mut Realized, gamma: &[f64], f_max: f64) -> Result<(), String> {
+        let model = &mut r.model;
+        match self {
+            Effect::Spring { bodies, point, direction, .. } => {
+                let idx = |b: &Option<String>| -> Result<Option<usize>, String> {
+                    b.as_ref().map(|n| model.body_index(n).ok_or_else(|| format!("no body \"{n}\""))).transpose()
+                };
+                let bodies = [idx(&bodies[0])?, idx(&bodies[1])?];
+                let name = fresh_name(model, "diagnosed spring");
+                model.sdes.push(Sde {
+                    name,
+                    kind: SdeKind::Spring,
+                    bodies,
+                    point: *point,
+                    rotation: frame_from_axis(direction),
+                    law: SdeLaw::Axial { k: gamma[0].max(0.0), psi: gamma[1].max(0.0) },
+                    enabled: true,
+                });
+            }
+            Effect::Mass { body, point, .. } => {
+                if gamma[0] > 0.0 {
+                    attach_mass(model, body, point, gamma[0], MOUNT_ABOVE_BAND * f_max, STRUCTURAL_PSI, "diagnosed mass")?;
+                }
+            }
+            Effect::Resonator { body, point, .. } => {
+                if gamma[0] > 0.0 {
+                    attach_mass(model, body, point, gamma[0], gamma[1], STRUCTURAL_PSI, "diagnosed resonator")?;
+                }
+            }
+            Effect::Flexible { body, axis, .. } => {
+                if gamma[0] > 0.0 {
+                    split_body(model, body, *axis, gamma[0])?;
+                }
+            }
+            Effect::Gain { output, .. } => {
+                let g = r.gains.get_mut(*output).ok_or("no such characteristic")?;
+                *g *= 1.0 + gamma[0];
+            }
+            Effect::Damping { variable, sdes, parameter, .. } => {
+                let var = r.vars.vars.get_mut(*variable).ok_or("no such variable")?;
+                let mut moved = Vec::new();
+                var.targets.retain(|t| {
+                    let hit = sdes.contains(&model.sdes[t.param.sde].name);
+                    if hit {
+                        moved.push(t.param);
+                    }
+                    !hit
+                });
+                if var.targets.is_empty() {
+                    return Err("the split would leave the group variable without parameters".into());
+                }
+                for p in moved {
+                    model.set_param(ParamRef { sde: p.sde, name: *parameter }, gamma[0]);
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+fn axes() -> [Vector3<f64>; 3] {
+    [Vector3::x(), Vector3::y(), Vector3::z()]
+}
+
+/// Displacement of `point` (global) of body `b` along unit `u` as a row over the model's DOFs.
+pub fn point_row(model: &Model, b: usize, point: &Vector3<f64>, u: &Vector3<f64>) -> [(usize, f64); 6] {
+    let body = &model.bodies[b];
+    let g = generalized_force(&body.position, &body.rotation, point, u, &Vector3::zeros());
+    std::array::from_fn(|i| (6 * b + i, g[i]))
+}
+
+fn fresh_name(model: &Model, stem: &str) -> String {
+    let mut i = 1;
+    loop {
+        let name = format!("{stem} {i}");
+        if !model.sdes.iter().any(|s| s.name == name) && !model.bodies.iter().any(|b| b.name == name) {
+            return name;
+        }
+        i += 1;
+    }
+}
+
+/// A body of mass `m` at `point`, on an isotropic General SDE to `host` tuned to `freq_hz`.
+fn attach_mass(model: &mut Model, host: &str, point: &Vector3<f64>, m: f64, freq_hz: f64, psi: f64, stem: &str) -> Result<(), String> {
+    let h = model.body_index(host).ok_or_else(|| format!("no body \"{host}\""))?;
+    if !(freq_hz.is_finite() && freq_hz > 0.0) {
+        return Err(format!("resonator frequency {freq_hz} Hz is not > 0"));
+    }
+    let j = m * POINT_RADIUS * POINT_RADIUS;
+    let name = fresh_name(model, stem);
+    let b = model.bodies.len();
+    model.bodies.push(Body { name: name.clone(), mass: m, inertia: [j; 3], position: *point, rotation: Matrix3::identity() });
+    let w2 = (TWO_PI * freq_hz).powi(2);
+    let (kt, kr) = (m * w2, j * w2);
+    model.sdes.push(Sde {
+        name: format!("{name} mount"),
+        kind: SdeKind::General,
+        bodies: [Some(h), Some(b)],
+        point: *point,
+        rotation: Matrix3::identity(),
+        law: SdeLaw::General { k: [kt, kt, kt, kr, kr, kr], psi: [psi; 6] },
+        enabled: true,
+    });
+    Ok(())
+}
+
+/// Full side lengths (m) of the uniform box with the body's mass and principal inertias.
+pub fn box_sides(body: &Body) -> [f64; 3] {
+    let [j1, j2, j3] = body.inertia;
+    let m = body.mass;
+    let side = |a: f64, b: f64, c: f64| (6.0 * (b + c - a) / m).max(0.0).sqrt();
+    [side(j1, j2, j3), side(j2, j3, j1), side(j3, j1, j2)]
+}
+
+/// Splits `name` into three equal thirds along its principal axis `axis`, joined at the two cuts
+/// by General SDEs of translational compliance `c` (rotational stiffness: the translational one
+/// times the cut section's squared radius of gyration). The centre third keeps the name (and the
+/// output characteristics: same centre, same axes); SDEs and forces move to the third they act on.
+pub fn split_body(model: &mut Model, name: &str, axis: usize, c: f64) -> Result<(), String> {
+    let b = model.body_index(name).ok_or_else(|| format!("no body \"{name}\""))?;
+    let body = model.bodies[b].clone();
+    let sides = box_sides(&body);
+    let len = sides[axis];
+    if !(len > 0.0) {
+        return Err(format!("{name}: its inertias give no length along axis {}", axis + 1));
+    }
+    let piece_sides = {
+        let mut s = sides;
+        s[axis] = len / 3.0;
+        s
+    };
+    let m = body.mass / 3.0;
+    let inertia = [0, 1, 2].map(|i| {
+        let (a, bb) = (piece_sides[(i + 1) % 3], piece_sides[(i + 2) % 3]);
+        m * (a * a + bb * bb) / 12.0
+    });
+    let u = body.rotation.column(axis).into_owned();
+    let ends = [(-1.0, "−"), (1.0, "+")].map(|(s, sign)| {
+        let pos = body.position + u * (s * len / 3.0);
+        (s, Body { name: format!("{name} ({sign}{} third)", axis + 1), mass: m, inertia, position: pos, rotation: body.rotation })
+    });
+    model.bodies[b].mass = m;
+    model.bodies[b].inertia = inertia;
+    let first = model.bodies.len();
+    for (_, e) in &ends {
+        if model.bodies.iter().any(|x| x.name == e.name) {
+            return Err(format!("{name} is already split along axis {}", axis + 1));
+        }
+        model.bodies.push(e.clone());
+    }
+    // Which third a point belongs to.
+    let third = |p: &Vector3<f64>| -> usize {
+        let s = (p - body.position).dot(&u);
+        if s < -len / 6.0 {
+            first
+        } else if s > len / 6.0 {
+            first + 1
+        } else {
+            b
+        }
+    };
+    for sde in model.sdes.iter_mut() {
+        for side in 0..2 {
+            if sde.bodies[side] == Some(b) {
+                sde.bodies[side] = Some(third(&sde.point));
+            }
+        }
+    }
+    for f in model.forces.iter_mut().filter(|f| f.body == b) {
+        f.body = third(&f.point);
+    }
+    // The joints: cross-section of the other two sides.
+    let (a1, a2) = (sides[(axis + 1) % 3], sides[(axis + 2) % 3]);
+    let kt = 1.0 / c;
+    let r2 = [(a1 * a1 + a2 * a2) / 12.0, a2 * a2 / 12.0, a1 * a1 / 12.0];
+    let frame = Matrix3::from_columns(&[u, body.rotation.column((axis + 1) % 3).into_owned(), body.rotation.column((axis + 2) % 3).into_owned()]);
+    for (k, (s, _)) in ends.iter().enumerate() {
+        let point = body.position + u * (s * len / 6.0);
+        let jn = format!("{name} joint {}{}", if *s < 0.0 { "−" } else { "+" }, axis + 1);
+        model.sdes.push(Sde {
+            name: jn,
+            kind: SdeKind::General,
+            bodies: [Some(b), Some(first + k)],
+            point,
+            rotation: frame,
+            law: SdeLaw::General { k: [kt, kt, kt, kt * r2[0], kt * r2[1], kt * r2[2]], psi: [STRUCTURAL_PSI; 6] },
+            enabled: true,
+        });
+    }
+    Ok(())
+}

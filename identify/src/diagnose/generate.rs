@@ -1,0 +1,160 @@
+//! The candidate list, generated from the model's geometry: hundreds of placements for a
+//! machine-tool model.
+//!
+//! - springs: between every pair of bodies and between every body and the ground, at the points
+//!   where something already acts on them (SDE attachment points, excitation points, the bodies'
+//!   centres, the midpoint between two centres) along the global axes and the excitation
+//!   directions;
+//! - point masses and resonators: at each body's centre, the corners of its equivalent box and
+//!   the excitation points on it (resonators at log-spaced frequencies across the band);
+//! - flexible bodies: every body along each principal axis;
+//! - sensor gains: every characteristic;
+//! - joint damping: for each ψ group, each joint (the group's SDEs between one pair of bodies).
+
+use nalgebra::Vector3;
+
+use super::effects::{box_sides, Effect};
+use crate::identification::variables::Tie;
+use crate::identification::Variables;
+use crate::model::Model;
+
+/// Resonator frequencies per decade of the band.
+const RESONATORS_PER_DECADE: f64 = 6.0;
+
+fn push_unique(points: &mut Vec<Vector3<f64>>, p: Vector3<f64>) {
+    if !points.iter().any(|q| (q - p).norm() < 1e-3) {
+        points.push(p);
+    }
+}
+
+/// Candidates for `model` (identified values `x` of `vars`), measured characteristics labelled
+/// `labels`, band `f_lo..f_hi` (Hz).
+pub fn candidates(model: &Model, vars: &Variables, x: &[f64], labels: &[String], f_lo: f64, f_hi: f64) -> Vec<Effect> {
+    let nb = model.bodies.len();
+    let mut out = Vec::new();
+    let mut directions = vec![Vector3::x(), Vector3::y(), Vector3::z()];
+    for f in &model.forces {
+        if f.force.norm() > 0.0 {
+            let d = f.force.normalize();
+            if !directions.iter().any(|e| e.dot(&d).abs() > 0.999) {
+                directions.push(d);
+            }
+        }
+    }
+    let psi = typical_psi(model);
+    let force_points = |b: usize| model.forces.iter().filter(move |f| f.body == b).map(|f| f.point);
+    // Springs.
+    for a in 0..nb {
+        for b in (a + 1)..nb {
+            let mut points = Vec::new();
+            for s in model.sdes.iter().filter(|s| s.enabled) {
+                if (s.bodies == [Some(a), Some(b)]) || (s.bodies == [Some(b), Some(a)]) {
+                    push_unique(&mut points, s.point);
+                }
+            }
+            force_points(a).chain(force_points(b)).for_each(|p| push_unique(&mut points, p));
+            push_unique(&mut points, 0.5 * (model.bodies[a].position + model.bodies[b].position));
+            for p in points {
+                for d in &directions {
+                    out.push(Effect::Spring {
+                        bodies: [Some(model.bodies[a].name.clone()), Some(model.bodies[b].name.clone())],
+                        point: p,
+                        direction: *d,
+                        psi,
+                    });
+                }
+            }
+        }
+        let mut points = Vec::new();
+        for s in model.sdes.iter().filter(|s| s.enabled) {
+            if s.bodies.contains(&Some(a)) && s.bodies.contains(&None) {
+                push_unique(&mut points, s.point);
+            }
+        }
+        push_unique(&mut points, model.bodies[a].position);
+        force_points(a).for_each(|p| push_unique(&mut points, p));
+        for p in points {
+            for d in &directions {
+                out.push(Effect::Spring { bodies: [None, Some(model.bodies[a].name.clone())], point: p, direction: *d, psi });
+            }
+        }
+    }
+    // Masses and resonators.
+    let n_res = ((f_hi / f_lo).log10() * RESONATORS_PER_DECADE).ceil().max(1.0) as usize;
+    let res_freqs: Vec<f64> = (0..n_res).map(|i| f_lo * (f_hi / f_lo).powf((i as f64 + 0.5) / n_res as f64)).collect();
+    for (b, body) in model.bodies.iter().enumerate() {
+        let mut points = vec![body.position];
+        let sides = box_sides(body);
+        for corner in 0..8 {
+            let s = |i: usize| if corner >> i & 1 == 1 { 0.5 } else { -0.5 };
+            let local = Vector3::new(s(0) * sides[0], s(1) * sides[1], s(2) * sides[2]);
+            push_unique(&mut points, body.position + body.rotation * local);
+        }
+        force_points(b).for_each(|p| push_unique(&mut points, p));
+        let scale = 0.01 * body.mass;
+        for p in &points {
+            out.push(Effect::Mass { body: body.name.clone(), point: *p, scale });
+            for f in &res_freqs {
+                out.push(Effect::Resonator { body: body.name.clone(), point: *p, freq_hz: *f, scale });
+            }
+        }
+        let stiff = model
+            .sdes
+            .iter()
+            .filter(|s| s.enabled)
+            .flat_map(|s| s.law.stiffness()[..3].to_vec())
+            .fold(0.0, f64::max);
+        if stiff > 0.0 {
+            for axis in 0..3 {
+                if sides[axis] > 0.0 {
+                    out.push(Effect::Flexible { body: body.name.clone(), axis, scale: 1.0 / stiff });
+                }
+            }
+        }
+    }
+    for (o, label) in labels.iter().enumerate() {
+        out.push(Effect::Gain { output: o, label: label.clone() });
+    }
+    // Joint damping: split a ψ group by the pair of bodies its SDEs join.
+    for (vi, v) in vars.vars.iter().enumerate().filter(|(_, v)| v.dissipation && v.tie == Tie::Equal && v.targets.len() > 1) {
+        let mut joints: Vec<([Option<usize>; 2], Vec<String>)> = Vec::new();
+        for t in &v.targets {
+            let sde = &model.sdes[t.param.sde];
+            let mut key = sde.bodies;
+            key.sort();
+            match joints.iter_mut().find(|(k, _)| *k == key) {
+                Some((_, names)) => names.push(sde.name.clone()),
+                None => joints.push((key, vec![sde.name.clone()])),
+            }
+        }
+        if joints.len() < 2 {
+            continue;
+        }
+        for (_, sdes) in joints {
+            out.push(Effect::Damping {
+                variable: vi,
+                variable_name: v.name.clone(),
+                sdes,
+                parameter: v.targets[0].param.name,
+                value: x[vi],
+            });
+        }
+    }
+    out
+}
+
+/// The median ψ of the model's enabled SDEs (ψ of a spring candidate in its score).
+fn typical_psi(model: &Model) -> f64 {
+    let mut v: Vec<f64> = model
+        .sdes
+        .iter()
+        .filter(|s| s.enabled)
+        .flat_map(|s| {
+            let k = s.law.stiffness();
+            let p = s.law.dissipation();
+            (0..6).filter(move |&i| k[i] > 0.0).map(move |i| p[i])
+        })
+        .collect();
+    v.sort_by(f64::total_cmp);
+    v.get(v.len() / 2).copied().unwrap_or(0.3)
+}

@@ -1,0 +1,269 @@
+//! From `identify`'s results to a [`Report`]: model curves per stage at the measured lines,
+//! standardized residuals, the parameter table and the sensitivity map.
+
+use identify::identification::data::{Observations, Observed};
+use identify::identification::{report as table, Identification};
+use identify::{frf, sensitivity, Model, Quantity};
+
+use crate::document::*;
+use crate::ReportError;
+
+/// Relative σ used for standardized residuals when the data carry neither variances nor
+/// coherence (the identification's own relative-error default).
+pub const RELATIVE_SIGMA: f64 = 0.01;
+
+/// Everything a report is built from.
+pub struct Inputs<'a> {
+    /// Headline.
+    pub title: String,
+    /// UTC time stamp (ISO 8601); empty = now.
+    pub created_utc: String,
+    /// Provenance.
+    pub source: Source,
+    /// The validated measurement.
+    pub observations: &'a Observations,
+    /// The identification.
+    pub identification: &'a Identification,
+    /// The diagnosis section and the final (diagnosed and refitted) model.
+    pub diagnosis: Option<(Diagnosis, &'a Model)>,
+    /// Parameter history, when there is one ([`crate::drift::compare`]).
+    pub drift: Option<Drift>,
+    /// Compute the sensitivity map (one FRF solve with derivatives).
+    pub sensitivity: bool,
+    /// Messages for the status block (warnings, lost data).
+    pub messages: Vec<String>,
+}
+
+impl<'a> Inputs<'a> {
+    /// Inputs with defaults: now, no diagnosis, no drift, sensitivity on.
+    pub fn new(title: &str, observations: &'a Observations, identification: &'a Identification) -> Inputs<'a> {
+        Inputs {
+            title: title.into(),
+            created_utc: String::new(),
+            source: Source { software: env!("CARGO_PKG_VERSION").into(), ..Source::default() },
+            observations,
+            identification,
+            diagnosis: None,
+            drift: None,
+            sensitivity: true,
+            messages: Vec::new(),
+        }
+    }
+}
+
+/// Current UTC time as `YYYY-MM-DDTHH:MM:SSZ`.
+pub fn now_utc() -> String {
+    let secs = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map(|d| d.as_secs()).unwrap_or(0);
+    utc_from_unix(secs)
+}
+
+/// `YYYY-MM-DDTHH:MM:SSZ` of a Unix time (s), proleptic Gregorian calendar.
+pub fn utc_from_unix(secs: u64) -> String {
+    let days = (secs / 86_400) as i64;
+    let rem = secs % 86_400;
+    // Howard Hinnant's civil_from_days.
+    let z = days + 719_468;
+    let era = z.div_euclid(146_097);
+    let doe = z - era * 146_097;
+    let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365;
+    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
+    let mp = (5 * doy + 2) / 153;
+    let d = doy - (153 * mp + 2) / 5 + 1;
+    let m = if mp < 10 { mp + 3 } else { mp - 9 };
+    let y = yoe + era * 400 + i64::from(m <= 2);
+    format!("{y:04}-{m:02}-{d:02}T{:02}:{:02}:{:02}Z", rem / 3600, rem % 3600 / 60, rem % 60)
+}
+
+fn unit_of(dof: u8, q: Quantity) -> String {
+    let base = if dof < 3 { "m" } else { "rad" };
+    match q {
+        Quantity::Displacement => base.into(),
+        Quantity::Velocity => format!("{base}/s"),
+        Quantity::Acceleration => format!("{base}/s2"),
+    }
+}
+
+/// σ of each measured amplitude and where it came from.
+fn sigmas(c: &Observed) -> (Vec<f64>, &'static str) {
+    if let Some(v) = &c.variance {
+        // Complex variance E|z − z_true|² = 2σ² (σ per real component, = σ of the amplitude).
+        return (v.iter().map(|v| (v / 2.0).sqrt()).collect(), "variance");
+    }
+    if let (Some(g), Some(n)) = (&c.coherence, c.averages) {
+        let n = f64::from(n.max(1));
+        return (
+            g.iter().zip(&c.amplitude).map(|(g, a)| ((1.0 - g) / (2.0 * n * g)).sqrt() * a).collect(),
+            "coherence",
+        );
+    }
+    (c.amplitude.iter().map(|a| RELATIVE_SIGMA * a).collect(), "relative")
+}
+
+fn stage_curve(stage: &str, model: &Model, c: &Observed, sigma: &[f64]) -> Result<StageCurve, ReportError> {
+    let r = frf::response(model, &c.freqs_hz, &[], frf::Method::Auto)
+        .map_err(|source| ReportError::Model { stage: stage.into(), source })?;
+    let q: Vec<f64> = r.output(c.output).iter().map(|v| v.norm()).collect();
+    let mut s2 = 0.0;
+    let mut n = 0usize;
+    let residual = c
+        .amplitude
+        .iter()
+        .zip(&q)
+        .zip(sigma)
+        .map(|((z, q), s)| {
+            if *z > 0.0 {
+                s2 += ((q - z) / z).powi(2);
+                n += 1;
+            }
+            if *s > 0.0 { (z - q) / s } else { 0.0 }
+        })
+        .map(finite)
+        .collect();
+    Ok(StageCurve {
+        stage: stage.into(),
+        amplitude: q.into_iter().map(finite).collect(),
+        standardized_residual: residual,
+        rms_relative_error: finite(if n > 0 { (s2 / n as f64).sqrt() } else { 0.0 }),
+    })
+}
+
+/// JSON has no infinities: clamp them (a report must still be written when a model explodes).
+fn finite(x: f64) -> f64 {
+    if x.is_finite() {
+        x
+    } else if x.is_nan() {
+        0.0
+    } else {
+        x.signum() * f64::MAX
+    }
+}
+
+fn opt(x: f64) -> Option<f64> {
+    x.is_finite().then_some(x)
+}
+
+/// The identification summary and table.
+pub fn summary(id: &Identification) -> IdentificationSummary {
+    let n = id.variables.len();
+    let c = &id.uncertainty.correlation;
+    IdentificationSummary {
+        optimizer: id.optimizer.as_str().into(),
+        converged: id.stop.converged(),
+        stop: id.stop.describe(),
+        iterations: id.iterations,
+        observations: id.observations,
+        noise: id.noise.describe(),
+        criterion_initial: finite(id.criterion_initial),
+        criterion: finite(id.criterion),
+        reduced_chi2: finite(id.uncertainty.reduced_chi2),
+        parameters: table::rows(id)
+            .into_iter()
+            .map(|r| Parameter {
+                variable: r.variable,
+                sdes: r.sdes,
+                parameter: r.parameter,
+                unit: r.unit,
+                initial: finite(r.initial),
+                identified: finite(r.identified),
+                std_error: r.std_error.and_then(opt),
+                variability: r.variability.and_then(opt),
+                at_bound: r.at_bound,
+            })
+            .collect(),
+        correlation: (0..n).map(|a| (0..n).map(|b| opt(c[(a, b)])).collect()).collect(),
+        weak_directions: id
+            .uncertainty
+            .weak
+            .iter()
+            .map(|d| WeakDirection { combination: d.combination(), relative_std: opt(d.relative_std) })
+            .collect(),
+    }
+}
+
+/// The relative band sensitivity of the measured characteristics to the identified parameters,
+/// over the measured band.
+pub fn sensitivity_map(model: &Model, id: &Identification, obs: &Observations) -> Result<SensitivityMap, ReportError> {
+    let mut freqs: Vec<f64> = obs.characteristics.iter().flat_map(|c| c.freqs_hz.iter().copied()).collect();
+    freqs.sort_by(f64::total_cmp);
+    freqs.dedup();
+    let params = id.variables.params();
+    let s = sensitivity::band_sensitivity(model, &freqs, &params, frf::Method::Auto)
+        .map_err(|source| ReportError::Model { stage: "identified".into(), source })?;
+    let label = |p: &identify::ParamRef| format!("SDE {} {}", model.sdes[p.sde].name, p.name.as_str());
+    Ok(SensitivityMap {
+        band_hz: [freqs.first().copied().unwrap_or(0.0), freqs.last().copied().unwrap_or(0.0)],
+        parameters: s.params.iter().map(label).collect(),
+        characteristics: obs.characteristics.iter().map(|c| c.label.clone()).collect(),
+        relative: (0..s.params.len())
+            .map(|p| obs.characteristics.iter().map(|c| finite(s.relative[p * s.outputs + c.output])).collect())
+            .collect(),
+    })
+}
+
+/// Builds the report.
+pub fn build(inputs: Inputs<'_>) -> Result<Report, ReportError> {
+    let id = inputs.identification;
+    let mut initial = id.model.clone();
+    id.variables.apply(&mut initial, &id.initial);
+    let mut stages: Vec<(&str, &Model)> = vec![("initial", &initial), ("identified", &id.model)];
+    if let Some((_, m)) = &inputs.diagnosis {
+        stages.push(("diagnosed", m));
+    }
+    let mut characteristics = Vec::new();
+    for c in &inputs.observations.characteristics {
+        let (sigma, kind) = sigmas(c);
+        let curves = stages.iter().map(|(s, m)| stage_curve(s, m, c, &sigma)).collect::<Result<Vec<_>, _>>()?;
+        characteristics.push(CharacteristicReport {
+            label: c.label.clone(),
+            body: id.model.bodies.get(c.characteristic.body).map(|b| b.name.clone()).unwrap_or_default(),
+            dof: c.characteristic.dof,
+            quantity: c.characteristic.quantity.as_str().into(),
+            unit: unit_of(c.characteristic.dof, c.characteristic.quantity),
+            freqs_hz: c.freqs_hz.clone(),
+            measured: c.amplitude.clone(),
+            sigma: sigma.into_iter().map(finite).collect(),
+            sigma_kind: kind.into(),
+            stages: curves,
+        });
+    }
+    let sensitivity = if inputs.sensitivity {
+        let final_model = inputs.diagnosis.as_ref().map(|(_, m)| *m).unwrap_or(&id.model);
+        Some(sensitivity_map(final_model, id, inputs.observations)?)
+    } else {
+        None
+    };
+    let mut messages = inputs.messages;
+    if !id.stop.converged() {
+        messages.push(format!("the identification did not converge: {}", id.stop.describe()));
+    }
+    Ok(Report {
+        schema: SCHEMA.into(),
+        title: inputs.title,
+        created_utc: if inputs.created_utc.is_empty() { now_utc() } else { inputs.created_utc },
+        source: inputs.source,
+        status: Status { outcome: Outcome::Ok, messages },
+        characteristics,
+        identification: summary(id),
+        diagnosis: inputs.diagnosis.map(|(d, _)| d),
+        sensitivity,
+        drift: None,
+    })
+    .map(|mut r| {
+        if let Some(d) = inputs.drift {
+            crate::drift::attach(&mut r, d);
+        }
+        r
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn utc_dates_match_known_instants() {
+        assert_eq!(utc_from_unix(0), "1970-01-01T00:00:00Z");
+        assert_eq!(utc_from_unix(951_782_400), "2000-02-29T00:00:00Z");
+        assert_eq!(utc_from_unix(1_700_000_000), "2023-11-14T22:13:20Z");
+    }
+}

@@ -1,0 +1,300 @@
+//! The report as data: what the JSON file holds (schema `ident.report/1`, documented in
+//! `docs/report-json.md` and `docs/report.schema.json`) and what the HTML page draws.
+//!
+//! Units: frequencies in Hz; amplitudes in SI (m, m/s, m/s², rad, ...) for the model's declared
+//! excitation; parameter values in each variable's display unit (`unit` field, e.g. `MPa/um`).
+//! Every number is finite; values that do not exist are `null`.
+
+use serde::{Deserialize, Serialize};
+
+/// Schema identifier written into every report.
+pub const SCHEMA: &str = "ident.report/1";
+
+/// A whole report.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Report {
+    /// Always [`SCHEMA`].
+    pub schema: String,
+    /// Headline, e.g. `"FWD-32J nightly identification"`.
+    pub title: String,
+    /// When the report was made (UTC, ISO 8601 `YYYY-MM-DDTHH:MM:SSZ`).
+    pub created_utc: String,
+    /// Where the data and models came from.
+    pub source: Source,
+    /// Overall outcome and the messages behind it.
+    pub status: Status,
+    /// Per measured characteristic: measured points and model curves per stage.
+    pub characteristics: Vec<CharacteristicReport>,
+    /// The identification (Table-1-like table and fit summary).
+    pub identification: IdentificationSummary,
+    /// Closed-loop diagnosis (issue 6), when it ran.
+    pub diagnosis: Option<Diagnosis>,
+    /// Band sensitivity (relative MI, paper eq. 4.16) of the identified model.
+    pub sensitivity: Option<SensitivityMap>,
+    /// Parameter history across runs (nightly).
+    pub drift: Option<Drift>,
+}
+
+/// Provenance.
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Source {
+    /// `demo`, `replay`, `nightly` or `identify`.
+    pub workflow: String,
+    /// Session recording (MCAP) the measurement came from, if any.
+    pub session: Option<String>,
+    /// Stand file or name.
+    pub stand: Option<String>,
+    /// Identification model file.
+    pub model: String,
+    /// Decision-variables file.
+    pub variables: String,
+    /// `MeasuredData.source`: free text about the measurement.
+    pub measurement: String,
+    /// `ident` version that wrote the report.
+    pub software: String,
+}
+
+/// Outcome of the run.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Status {
+    /// `ok`, `alarm` (a drift alarm) or `failure`.
+    pub outcome: Outcome,
+    /// What happened, one sentence each (alarms, warnings, lost data).
+    pub messages: Vec<String>,
+}
+
+/// Outcome of a run; nightly exits 0, 1, 2 for these.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Outcome {
+    /// Nothing to report.
+    Ok,
+    /// A parameter drifted beyond the threshold.
+    Alarm,
+    /// The run could not complete.
+    Failure,
+}
+
+impl Outcome {
+    /// `ok` / `alarm` / `failure`.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Outcome::Ok => "ok",
+            Outcome::Alarm => "alarm",
+            Outcome::Failure => "failure",
+        }
+    }
+}
+
+/// One characteristic: measured points and model curves.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CharacteristicReport {
+    /// `"table u1 displacement"`.
+    pub label: String,
+    /// Body name.
+    pub body: String,
+    /// 0-2 translations u1..u3, 3-5 rotations r1..r3 (principal central axes).
+    pub dof: u8,
+    /// `displacement`, `velocity` or `acceleration`.
+    pub quantity: String,
+    /// SI unit of the amplitudes (`m`, `rad/s2`, ...).
+    pub unit: String,
+    /// Frequencies (Hz).
+    pub freqs_hz: Vec<f64>,
+    /// Measured amplitudes.
+    pub measured: Vec<f64>,
+    /// Standard deviation of each measured amplitude (same unit), from the data's variance,
+    /// coherence or (`sigma_kind = relative`) 1 % of the amplitude.
+    pub sigma: Vec<f64>,
+    /// `variance`, `coherence` or `relative`.
+    pub sigma_kind: String,
+    /// Model amplitude per stage (`initial`, `identified`, `diagnosed`).
+    pub stages: Vec<StageCurve>,
+}
+
+/// The model's curve at one stage.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct StageCurve {
+    /// `initial`, `identified` or `diagnosed`.
+    pub stage: String,
+    /// Model amplitudes at `freqs_hz`.
+    pub amplitude: Vec<f64>,
+    /// (measured − model) / sigma per point.
+    pub standardized_residual: Vec<f64>,
+    /// RMS of (model − measured) / measured over the points.
+    pub rms_relative_error: f64,
+}
+
+/// One row of the Table-1-like table, in the variable's display unit.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Parameter {
+    /// Variable name (unique in the variables file; the key of the drift history).
+    pub variable: String,
+    /// SDE names (`"2-10, 13-17"`).
+    pub sdes: String,
+    /// Parameter (`kn`, `psi_n`, ...).
+    pub parameter: String,
+    /// Display unit (`MPa/um`, `N/um`, `-`).
+    pub unit: String,
+    /// Initial value.
+    pub initial: f64,
+    /// Identified value.
+    pub identified: f64,
+    /// Cramér-Rao standard error; `null` when undetermined.
+    pub std_error: Option<f64>,
+    /// std_error / |identified|; `null` when undefined.
+    pub variability: Option<f64>,
+    /// `lower` / `upper` when the estimate is at a bound.
+    pub at_bound: Option<String>,
+}
+
+/// The identification's outcome.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct IdentificationSummary {
+    /// Minimizer.
+    pub optimizer: String,
+    /// Whether it converged.
+    pub converged: bool,
+    /// Why it stopped.
+    pub stop: String,
+    /// Iterations.
+    pub iterations: usize,
+    /// Scalar observations (residuals).
+    pub observations: usize,
+    /// Noise model sentence.
+    pub noise: String,
+    /// Criterion J at the initial values.
+    pub criterion_initial: f64,
+    /// Criterion J at the estimate.
+    pub criterion: f64,
+    /// 2J / (m − n).
+    pub reduced_chi2: f64,
+    /// The table.
+    pub parameters: Vec<Parameter>,
+    /// Correlation matrix in table order (`null` where undetermined).
+    pub correlation: Vec<Vec<Option<f64>>>,
+    /// Poorly identifiable combinations with their relative σ (`null`: no information).
+    pub weak_directions: Vec<WeakDirection>,
+}
+
+/// A poorly identifiable direction.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct WeakDirection {
+    /// `"0.71 kn_2 − 0.70 kn_3"`.
+    pub combination: String,
+    /// Relative σ along it.
+    pub relative_std: Option<f64>,
+}
+
+/// The diagnosis section: filled from `identify::diagnose` (issue 6) by the pipeline.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Diagnosis {
+    /// Candidate effects ranked by their score statistic, strongest first.
+    pub candidates: Vec<Candidate>,
+    /// Fit of the model before diagnosis (the identified model).
+    pub before: FitQuality,
+    /// Fit after the accepted effects were added and the model refitted.
+    pub after: FitQuality,
+    /// One line on the final model (e.g. `"fwd32j-no-actuator + spring spindle head–table"`).
+    pub final_model: String,
+}
+
+/// A candidate undeclared effect.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Candidate {
+    /// What the effect is (`"spring"`, `"joint stiffness kn"`).
+    pub name: String,
+    /// Where (`"spindle head–table"`, `"SDE 12"`).
+    pub location: String,
+    /// Score-test statistic (χ², 1 degree of freedom per added parameter).
+    pub statistic: f64,
+    /// Its p-value.
+    pub p_value: f64,
+    /// Whether diagnosis added it to the model.
+    pub accepted: bool,
+    /// Estimated value after the refit, when accepted.
+    pub estimate: Option<f64>,
+    /// Its standard error.
+    pub std_error: Option<f64>,
+    /// Unit of estimate and std_error.
+    pub unit: String,
+}
+
+/// How well a model fits the data.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct FitQuality {
+    /// Criterion J.
+    pub criterion: f64,
+    /// p-value of 2J under χ²(m − n) (small: the model does not explain the data).
+    pub chi2_p_value: f64,
+    /// RMS relative amplitude error per characteristic label.
+    pub rms_relative_error: Vec<LabelledValue>,
+}
+
+/// A label and a number.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct LabelledValue {
+    /// Label.
+    pub label: String,
+    /// Value.
+    pub value: f64,
+}
+
+/// Relative band sensitivity MIr (dimensionless) of each characteristic to each identified
+/// parameter.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SensitivityMap {
+    /// Band (Hz): the measured lines from `band_hz[0]` to `band_hz[1]`.
+    pub band_hz: [f64; 2],
+    /// Row labels: `"SDE 2 kn"`.
+    pub parameters: Vec<String>,
+    /// Column labels: characteristic labels.
+    pub characteristics: Vec<String>,
+    /// `relative[row][column]`.
+    pub relative: Vec<Vec<f64>>,
+}
+
+/// Parameter history across runs, compared with a baseline run.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Drift {
+    /// Alarm threshold in baseline standard errors.
+    pub k_sigma: f64,
+    /// `created_utc` of each run, oldest first; the last is this run.
+    pub runs: Vec<String>,
+    /// Index into `runs` of the baseline.
+    pub baseline: usize,
+    /// One series per parameter of this run.
+    pub parameters: Vec<DriftSeries>,
+}
+
+/// The history of one parameter.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct DriftSeries {
+    /// Variable name.
+    pub variable: String,
+    /// Display unit.
+    pub unit: String,
+    /// Value per run (`null` where the run did not identify it).
+    pub values: Vec<Option<f64>>,
+    /// Standard error per run.
+    pub std_errors: Vec<Option<f64>>,
+    /// (this run − baseline) / baseline standard error; `null` without a baseline value or error.
+    pub deviation_sigma: Option<f64>,
+    /// |deviation_sigma| > k_sigma.
+    pub alarm: bool,
+}

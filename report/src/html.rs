@@ -1,0 +1,228 @@
+//! The report page: one self-contained HTML file (inline CSS, inline SVG, no scripts, no external
+//! resources) that opens offline.
+
+use std::fmt::Write;
+
+use crate::document::*;
+use crate::{plot, ReportError};
+
+/// HTML-escapes text.
+pub fn escape(s: &str) -> String {
+    let mut o = String::with_capacity(s.len());
+    for c in s.chars() {
+        match c {
+            '&' => o.push_str("&amp;"),
+            '<' => o.push_str("&lt;"),
+            '>' => o.push_str("&gt;"),
+            '"' => o.push_str("&quot;"),
+            '\'' => o.push_str("&#39;"),
+            c => o.push(c),
+        }
+    }
+    o
+}
+
+fn num(x: f64) -> String {
+    if x == 0.0 {
+        "0".into()
+    } else if x.abs() >= 1e-3 && x.abs() < 1e5 {
+        let digits = (4 - x.abs().log10().floor() as i32).max(0) as usize;
+        format!("{x:.digits$}")
+    } else {
+        format!("{x:.4e}")
+    }
+}
+
+fn opt(x: Option<f64>) -> String {
+    x.map(num).unwrap_or_else(|| "—".into())
+}
+
+/// Strips plotters' XML prolog, if any, so the SVG can sit inline.
+fn inline(svg: String) -> String {
+    match svg.find("<svg") {
+        Some(i) => svg[i..].to_string(),
+        None => svg,
+    }
+}
+
+const CSS: &str = "body{font-family:sans-serif;margin:1.5em auto;max-width:1000px;color:#222;line-height:1.4}\
+h1{font-size:1.6em;margin-bottom:.2em}h2{border-bottom:1px solid #ccc;padding-bottom:.2em;margin-top:1.6em}\
+table{border-collapse:collapse;margin:.6em 0;font-size:.9em}th,td{border:1px solid #ccc;padding:.25em .5em;text-align:right}\
+th{background:#f3f3f3}td.l,th.l{text-align:left}.meta{color:#555;font-size:.9em}\
+.status{padding:.6em 1em;border-radius:4px;margin:1em 0}.ok{background:#e6f4e6;border:1px solid #7b7}\
+.alarm{background:#fff0e0;border:1px solid #e90}.failure{background:#fde8e8;border:1px solid #d55}\
+tr.alarm td{background:#fff0e0}figure{margin:.8em 0}svg{max-width:100%;height:auto;display:block}\
+.note{color:#555;font-style:italic}";
+
+/// Renders the page.
+pub fn render(r: &Report) -> Result<String, ReportError> {
+    let mut h = String::new();
+    let e = escape;
+    let _ = write!(
+        h,
+        "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\"><title>{}</title>\
+         <meta name=\"viewport\" content=\"width=device-width, initial-scale=1\">\
+         <meta name=\"generator\" content=\"ident {} ({})\"><style>{CSS}</style></head><body>\n",
+        e(&r.title),
+        e(&r.source.software),
+        e(&r.schema)
+    );
+    let _ = write!(h, "<h1>{}</h1>\n<p class=\"meta\">{} · workflow {} · model {} · variables {}",
+        e(&r.title), e(&r.created_utc), e(&r.source.workflow), e(&r.source.model), e(&r.source.variables));
+    if let Some(s) = &r.source.session {
+        let _ = write!(h, " · session {}", e(s));
+    }
+    if let Some(s) = &r.source.stand {
+        let _ = write!(h, " · stand {}", e(s));
+    }
+    let _ = write!(h, "<br>measurement: {}</p>\n", e(&r.source.measurement));
+    let o = r.status.outcome.as_str();
+    let _ = write!(h, "<div class=\"status {o}\" id=\"status\"><strong>outcome: {o}</strong>");
+    if !r.status.messages.is_empty() {
+        h.push_str("<ul>");
+        for m in &r.status.messages {
+            let _ = write!(h, "<li>{}</li>", e(m));
+        }
+        h.push_str("</ul>");
+    }
+    h.push_str("</div>\n");
+
+    // Identification summary.
+    let id = &r.identification;
+    let _ = write!(
+        h,
+        "<h2 id=\"identification\">Identification</h2>\n<p>{} variables from {} observations; optimizer {}, {} after {} iterations \
+         ({}). Criterion J {} → {}; reduced χ² {}.<br><span class=\"meta\">{}</span></p>\n",
+        id.parameters.len(),
+        id.observations,
+        e(&id.optimizer),
+        if id.converged { "converged" } else { "<strong>not converged</strong>" },
+        id.iterations,
+        e(&id.stop),
+        num(id.criterion_initial),
+        num(id.criterion),
+        num(id.reduced_chi2),
+        e(&id.noise)
+    );
+
+    // Characteristics.
+    h.push_str("<h2 id=\"characteristics\">Amplitude-frequency characteristics</h2>\n");
+    h.push_str("<p class=\"note\">Measured points with ± one standard deviation; the model before identification (initial), after it (identified) and, when diagnosis ran, after the diagnosed effects were added and refitted (diagnosed).</p>\n");
+    h.push_str("<table><tr><th class=\"l\">characteristic</th>");
+    let stages: Vec<&str> = r.characteristics.first().map(|c| c.stages.iter().map(|s| s.stage.as_str()).collect()).unwrap_or_default();
+    for s in &stages {
+        let _ = write!(h, "<th>RMS rel. error, {}</th>", e(s));
+    }
+    h.push_str("<th>points</th><th class=\"l\">σ from</th></tr>\n");
+    for c in &r.characteristics {
+        let _ = write!(h, "<tr><td class=\"l\">{}</td>", e(&c.label));
+        for s in &c.stages {
+            let _ = write!(h, "<td>{:.2} %</td>", 100.0 * s.rms_relative_error);
+        }
+        let _ = write!(h, "<td>{}</td><td class=\"l\">{}</td></tr>\n", c.freqs_hz.len(), e(&c.sigma_kind));
+    }
+    h.push_str("</table>\n");
+    for c in &r.characteristics {
+        let _ = write!(h, "<figure class=\"plot\" data-chart=\"amplitude\">{}</figure>\n", inline(plot::amplitude_chart(c)?));
+        let _ = write!(h, "<figure class=\"plot\" data-chart=\"residual\">{}</figure>\n", inline(plot::residual_chart(c)?));
+    }
+
+    // Parameter table.
+    h.push_str("<h2 id=\"parameters\">Parameters (Table-1-like)</h2>\n<table><tr><th class=\"l\">variable</th><th class=\"l\">SDEs</th><th class=\"l\">parameter</th><th class=\"l\">unit</th><th>initial</th><th>identified</th><th>std error</th><th>σ/x</th><th class=\"l\">note</th></tr>\n");
+    for p in &id.parameters {
+        let _ = write!(
+            h,
+            "<tr><td class=\"l\">{}</td><td class=\"l\">{}</td><td class=\"l\">{}</td><td class=\"l\">{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td class=\"l\">{}</td></tr>\n",
+            e(&p.variable),
+            e(&p.sdes),
+            e(&p.parameter),
+            e(&p.unit),
+            num(p.initial),
+            num(p.identified),
+            p.std_error.map(num).unwrap_or_else(|| "undetermined".into()),
+            p.variability.map(|v| format!("{v:.3}")).unwrap_or_else(|| "—".into()),
+            p.at_bound.as_ref().map(|b| format!("at {} bound", e(b))).unwrap_or_default()
+        );
+    }
+    h.push_str("</table>\n");
+    let _ = write!(h, "<figure class=\"plot\" data-chart=\"parameters\">{}</figure>\n", inline(plot::parameter_chart(&id.parameters)?));
+    if !id.weak_directions.is_empty() {
+        h.push_str("<p>Poorly identifiable combinations (group these variables or add measurements):</p><ul>");
+        for w in &id.weak_directions {
+            let _ = write!(h, "<li>{} ({})</li>", e(&w.combination), w.relative_std.map(|v| format!("±{:.0} %", 100.0 * v)).unwrap_or_else(|| "no information".into()));
+        }
+        h.push_str("</ul>\n");
+    }
+
+    // Diagnosis.
+    h.push_str("<h2 id=\"diagnosis\">Diagnosis</h2>\n");
+    match &r.diagnosis {
+        None => h.push_str("<p class=\"note\">Diagnosis did not run for this report.</p>\n"),
+        Some(d) => {
+            h.push_str("<table><tr><th class=\"l\">candidate effect</th><th class=\"l\">where</th><th>statistic</th><th>p-value</th><th class=\"l\">accepted</th><th>estimate</th><th>std error</th><th class=\"l\">unit</th></tr>\n");
+            for c in &d.candidates {
+                let _ = write!(
+                    h,
+                    "<tr><td class=\"l\">{}</td><td class=\"l\">{}</td><td>{}</td><td>{:.3e}</td><td class=\"l\">{}</td><td>{}</td><td>{}</td><td class=\"l\">{}</td></tr>\n",
+                    e(&c.name), e(&c.location), num(c.statistic), c.p_value, if c.accepted { "yes" } else { "no" },
+                    opt(c.estimate), opt(c.std_error), e(&c.unit)
+                );
+            }
+            h.push_str("</table>\n<table><tr><th class=\"l\"></th><th>criterion J</th><th>χ² p-value</th>");
+            for l in &d.before.rms_relative_error {
+                let _ = write!(h, "<th>RMS {}</th>", e(&l.label));
+            }
+            h.push_str("</tr>\n");
+            for (name, q) in [("before", &d.before), ("after", &d.after)] {
+                let _ = write!(h, "<tr><td class=\"l\">{name}</td><td>{}</td><td>{:.3e}</td>", num(q.criterion), q.chi2_p_value);
+                for l in &q.rms_relative_error {
+                    let _ = write!(h, "<td>{:.2} %</td>", 100.0 * l.value);
+                }
+                h.push_str("</tr>\n");
+            }
+            let _ = write!(h, "</table>\n<p>Final model: {}</p>\n", e(&d.final_model));
+        }
+    }
+
+    // Sensitivity.
+    h.push_str("<h2 id=\"sensitivity\">Sensitivity (MI map)</h2>\n");
+    match &r.sensitivity {
+        None => h.push_str("<p class=\"note\">Not computed for this report.</p>\n"),
+        Some(m) => {
+            let _ = write!(h, "<figure class=\"plot\" data-chart=\"sensitivity\">{}</figure>\n", inline(plot::sensitivity_chart(m)?));
+        }
+    }
+
+    // Drift.
+    h.push_str("<h2 id=\"drift\">Drift across runs</h2>\n");
+    match &r.drift {
+        None => h.push_str("<p class=\"note\">No earlier runs to compare with.</p>\n"),
+        Some(d) => {
+            let _ = write!(
+                h,
+                "<p>{} runs; baseline {}; alarm when a parameter moves more than {} standard errors of the difference.</p>\n",
+                d.runs.len(),
+                e(d.runs.get(d.baseline).map(String::as_str).unwrap_or("?")),
+                d.k_sigma
+            );
+            let _ = write!(h, "<figure class=\"plot\" data-chart=\"drift\">{}</figure>\n", inline(plot::drift_chart(d)?));
+            h.push_str("<table><tr><th class=\"l\">variable</th><th class=\"l\">unit</th><th>baseline</th><th>this run</th><th>deviation (σ)</th><th class=\"l\">alarm</th></tr>\n");
+            for p in &d.parameters {
+                let _ = write!(
+                    h,
+                    "<tr{}><td class=\"l\">{}</td><td class=\"l\">{}</td><td>{}</td><td>{}</td><td>{}</td><td class=\"l\">{}</td></tr>\n",
+                    if p.alarm { " class=\"alarm\"" } else { "" },
+                    e(&p.variable),
+                    e(&p.unit),
+                    opt(p.values.get(d.baseline).copied().flatten()),
+                    opt(p.values.last().copied().flatten()),
+                    p.deviation_sigma.map(|v| format!("{v:+.2}")).unwrap_or_else(|| "—".into()),
+                    if p.alarm { "ALARM" } else { "" }
+                );
+            }
+            h.push_str("</table>\n");
+        }
+    }
+    let _ = write!(h, "<p class=\"meta\">Machine-readable copy: report.json ({}).</p>\n</body></html>\n", e(&r.schema));
+    Ok(h)
+}

@@ -1,0 +1,102 @@
+//! The HTML report in a real browser: headless Chromium (Debian's `chromium`, installed by
+//! `.ci/setup`) loads a full report from disk with networking disabled and a probe script that
+//! records errors, rendered plots and resource loads into the DOM; the test reads the DOM back.
+
+mod common;
+
+use std::process::Command;
+
+use serde_json::Value;
+
+const PROBE: &str = r#"<script>
+window.__errors = [];
+window.addEventListener('error', e => { window.__errors.push('error: ' + (e.message || (e.target && (e.target.src || e.target.href)) || 'resource')); }, true);
+window.addEventListener('unhandledrejection', e => { window.__errors.push('rejection: ' + e.reason); });
+for (const k of ['error', 'warn']) { const f = console[k]; console[k] = (...a) => { window.__errors.push(k + ': ' + a.join(' ')); f.apply(console, a); }; }
+window.addEventListener('load', () => {
+  const svgs = [...document.querySelectorAll('figure.plot svg')];
+  const drawn = svgs.filter(s => { const b = s.getBBox(); return b.width > 50 && b.height > 50 && s.querySelectorAll('text').length > 2; });
+  const out = {
+    title: document.title,
+    plots: svgs.length,
+    drawn: drawn.length,
+    charts: svgs.map(s => s.closest('figure').dataset.chart),
+    texts: document.querySelectorAll('svg text').length,
+    rows: document.querySelectorAll('#parameters ~ table tr').length,
+    resources: performance.getEntriesByType('resource').map(r => r.name),
+    errors: window.__errors,
+  };
+  const pre = document.createElement('pre');
+  pre.id = 'probe';
+  pre.textContent = JSON.stringify(out);
+  document.body.appendChild(pre);
+});
+</script>"#;
+
+fn chromium() -> String {
+    for c in ["chromium", "chromium-browser"] {
+        if Command::new(c).arg("--version").output().is_ok_and(|o| o.status.success()) {
+            return c.to_string();
+        }
+    }
+    panic!("chromium is not installed: run .ci/setup (it installs Debian's chromium from .ci/apt-packages.txt)");
+}
+
+fn unescape(s: &str) -> String {
+    s.replace("&lt;", "<").replace("&gt;", ">").replace("&quot;", "\"").replace("&#39;", "'").replace("&amp;", "&")
+}
+
+#[test]
+fn report_renders_in_headless_chromium_with_its_plots_and_no_errors() {
+    let browser = chromium();
+    let f = common::fixture(11);
+    let r = common::full_report(&f, 5.0);
+    let dir = tempfile::tempdir().unwrap();
+    let w = report::write(&r, dir.path()).unwrap();
+    let html = std::fs::read_to_string(&w.html).unwrap();
+    let probed = html.replacen("<head>", &format!("<head>{PROBE}"), 1);
+    assert_ne!(probed, html, "the report has a <head>");
+    let page = dir.path().join("probed.html");
+    std::fs::write(&page, probed).unwrap();
+    let profile = dir.path().join("profile");
+    let out = Command::new(&browser)
+        .args([
+            "--headless",
+            "--no-sandbox",
+            "--disable-gpu",
+            "--disable-dev-shm-usage",
+            "--no-first-run",
+            "--no-default-browser-check",
+            "--disable-extensions",
+            "--proxy-server=127.0.0.1:9", // offline: any network request fails
+            "--enable-logging=stderr",
+            "--v=0",
+            "--virtual-time-budget=10000",
+            "--dump-dom",
+        ])
+        .arg(format!("--user-data-dir={}", profile.display()))
+        .arg(format!("file://{}", page.display()))
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "chromium failed: {stderr}");
+    let probe = stdout
+        .split("<pre id=\"probe\">")
+        .nth(1)
+        .and_then(|s| s.split("</pre>").next())
+        .unwrap_or_else(|| panic!("the page did not finish loading (no probe output); stderr: {stderr}"));
+    let v: Value = serde_json::from_str(&unescape(probe)).unwrap();
+    eprintln!("{v}");
+    assert_eq!(v["title"], r.title);
+    let expected = 2 * r.characteristics.len() + 3;
+    assert_eq!(v["plots"], expected as u64, "{v}");
+    assert_eq!(v["drawn"], expected as u64, "every plot is drawn with its labels: {v}");
+    assert!(v["texts"].as_u64().unwrap() > 50, "{v}");
+    assert!(v["rows"].as_u64().unwrap() > r.identification.parameters.len() as u64, "{v}");
+    assert_eq!(v["resources"], Value::Array(vec![]), "the page must load nothing: {v}");
+    assert_eq!(v["errors"], Value::Array(vec![]), "{v}");
+    // Console messages Chromium itself logs (CSP, blocked loads, uncaught errors).
+    let console: Vec<&str> = stderr.lines().filter(|l| l.contains("CONSOLE") || l.contains("Uncaught")).collect();
+    assert!(console.is_empty(), "console messages: {console:?}");
+}

@@ -1,0 +1,99 @@
+//! A real report for the tests: a two-mass textbook model measured with 1 % seeded noise,
+//! identified, with a diagnosis section and a drift history attached.
+
+#![allow(dead_code)]
+
+use identify::identification::{data, identify, variables, Identification, Observations, Options};
+use identify::{frf, textbook, MeasuredData, Measurement, Model};
+use rand::SeedableRng;
+use rand_distr::{Distribution, Normal};
+use report::document::*;
+
+pub struct Fixture {
+    pub truth: Model,
+    pub obs: Observations,
+    pub id: Identification,
+}
+
+pub fn fixture(seed: u64) -> Fixture {
+    let truth = textbook::two_in_series(400.0, 120.0, 2.0e7, 5.0e6, 0.5);
+    let freqs: Vec<f64> = (0..40).map(|i| 8.0 * (80.0f64 / 8.0).powf(i as f64 / 39.0)).collect();
+    let r = frf::response(&truth, &freqs, &[], frf::Method::Direct).unwrap();
+    let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
+    let n = Normal::new(0.0, 1.0).unwrap();
+    let eps = 0.01;
+    let measured = MeasuredData {
+        source: format!("synthetic, 1 % noise, seed {seed}"),
+        characteristics: (0..2)
+            .map(|o| Measurement {
+                body: truth.bodies[o].name.clone(),
+                dof: 2,
+                quantity: identify::measured::QuantityName::Displacement,
+                freqs_hz: freqs.clone(),
+                amplitude: r.output(o).iter().map(|v| v.norm() + eps * v.norm() * n.sample(&mut rng)).collect(),
+                phase_rad: None,
+                variance: Some(r.output(o).iter().map(|v| 2.0 * (eps * v.norm()).powi(2)).collect()),
+                coherence: None,
+                averages: None,
+            })
+            .collect(),
+    };
+    let obs = data::validate(&measured, &truth, "synthetic").unwrap();
+    let vars = variables::parse(
+        "[[variable]]\nsdes = \"k1\"\nparameter = \"k\"\ninitial = \"14 N/um\"\n[[variable]]\nsdes = \"k2\"\nparameter = \"k\"\ninitial = \"7 N/um\"\n",
+        "vars.toml",
+        &truth,
+    )
+    .unwrap();
+    let id = identify(&truth, &obs, &vars, &Options::default(), &mut |_, _| {}).unwrap();
+    Fixture { truth, obs, id }
+}
+
+/// A diagnosis section as the pipeline would pass it (values are illustrative inputs to the
+/// renderer, not a diagnosis result).
+pub fn diagnosis_section(f: &Fixture) -> Diagnosis {
+    let rms: Vec<LabelledValue> = f.id.rms.iter().map(|(l, v)| LabelledValue { label: l.clone(), value: *v }).collect();
+    Diagnosis {
+        candidates: vec![
+            Candidate { name: "spring".into(), location: "k1-body–ground".into(), statistic: 42.0, p_value: 1e-10, accepted: true, estimate: Some(0.5), std_error: Some(0.05), unit: "N/um".into() },
+            Candidate { name: "joint stiffness kn".into(), location: "SDE k2".into(), statistic: 0.3, p_value: 0.58, accepted: false, estimate: None, std_error: None, unit: "N/um".into() },
+        ],
+        before: FitQuality { criterion: f.id.criterion * 3.0, chi2_p_value: 1e-6, rms_relative_error: rms.clone() },
+        after: FitQuality { criterion: f.id.criterion, chi2_p_value: 0.4, rms_relative_error: rms },
+        final_model: "two masses + spring k1-body–ground".into(),
+    }
+}
+
+/// A full report: every optional section present, a drift history of three earlier runs of
+/// which the last moved `k1` by `shift` standard errors.
+pub fn full_report(f: &Fixture, shift: f64) -> Report {
+    let mut inputs = report::build::Inputs::new("two masses <test & check>", &f.obs, &f.id);
+    inputs.created_utc = "2025-01-04T02:00:00Z".into();
+    inputs.source.workflow = "nightly".into();
+    inputs.source.model = "textbook two_in_series".into();
+    inputs.source.variables = "vars.toml".into();
+    inputs.source.session = Some("session.mcap".into());
+    inputs.source.stand = Some("bench".into());
+    inputs.source.measurement = f.obs.origin.clone();
+    inputs.diagnosis = Some((diagnosis_section(f), &f.id.model));
+    let mut r = report::build::build(inputs).unwrap();
+    if r.identification.weak_directions.is_empty() {
+        // Well-posed fixture: add one so that every field appears.
+        r.identification.weak_directions.push(WeakDirection { combination: "0.71 k1 − 0.70 k2".into(), relative_std: Some(0.8) });
+    }
+    let history: Vec<report::drift::Run> = (0..3)
+        .map(|k| {
+            let mut params = r.identification.parameters.clone();
+            // Earlier runs: this run's values moved back by `shift` standard errors of the difference.
+            if k == 0 {
+                let p = &mut params[0];
+                let s = p.std_error.unwrap();
+                p.identified -= shift * (2.0f64).sqrt() * s;
+            }
+            report::drift::Run { created_utc: format!("2025-01-0{}T02:00:00Z", k + 1), folder: format!("run{k}").into(), parameters: params }
+        })
+        .collect();
+    let d = report::drift::compare(&history, &r, &report::drift::Baseline::First, 3.0).unwrap().unwrap();
+    report::drift::attach(&mut r, d);
+    r
+}

@@ -1,0 +1,224 @@
+//! The report's JSON against its documented schema (JSON Schema via Python `jsonschema`, and the
+//! field table of docs/report-json.md), round trips, the HTML's self-containment, the
+//! standardized residuals' scale, drift alarms, and atomic writing.
+
+mod common;
+
+use std::collections::BTreeSet;
+use std::path::PathBuf;
+use std::process::Command;
+
+use common::*;
+use serde_json::Value;
+
+fn docs() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../docs")
+}
+
+/// Every field path in a JSON value, in the docs' notation (`a.b[].c`).
+fn paths(v: &Value, prefix: &str, out: &mut BTreeSet<String>) {
+    match v {
+        Value::Object(m) => {
+            for (k, x) in m {
+                let p = if prefix.is_empty() { k.clone() } else { format!("{prefix}.{k}") };
+                out.insert(p.clone());
+                paths(x, &p, out);
+            }
+        }
+        Value::Array(a) => {
+            for x in a {
+                if x.is_object() {
+                    paths(x, &format!("{prefix}[]"), out);
+                }
+            }
+        }
+        _ => {}
+    }
+}
+
+#[test]
+fn json_report_validates_against_the_json_schema() {
+    let f = fixture(3);
+    let dir = tempfile::tempdir().unwrap();
+    // A full report, and one without the optional sections.
+    let full = full_report(&f, 5.0);
+    let mut bare_in = report::build::Inputs::new("bare", &f.obs, &f.id);
+    bare_in.sensitivity = false;
+    bare_in.source.workflow = "identify".into();
+    let bare = report::build::build(bare_in).unwrap();
+    let mut files = Vec::new();
+    for (name, r) in [("full.json", &full), ("bare.json", &bare)] {
+        let p = dir.path().join(name);
+        std::fs::write(&p, serde_json::to_string_pretty(r).unwrap()).unwrap();
+        files.push(p);
+    }
+    // A report that violates the schema must be rejected (the check can fail).
+    let mut bad: Value = serde_json::to_value(&full).unwrap();
+    bad["status"]["outcome"] = "fine".into();
+    let bad_path = dir.path().join("bad.json");
+    std::fs::write(&bad_path, bad.to_string()).unwrap();
+    let script = r#"
+import json, sys
+try:
+    import jsonschema
+except ImportError:
+    sys.exit("python3 module jsonschema missing: run .ci/setup (it installs .ci/requirements.txt)")
+schema = json.load(open(sys.argv[1]))
+jsonschema.Draft202012Validator.check_schema(schema)
+v = jsonschema.Draft202012Validator(schema)
+for f in sys.argv[2:-1]:
+    errs = list(v.iter_errors(json.load(open(f))))
+    if errs:
+        sys.exit(f + ": " + "; ".join(f"{list(e.absolute_path)}: {e.message}" for e in errs[:5]))
+if not list(v.iter_errors(json.load(open(sys.argv[-1])))):
+    sys.exit("the schema accepted an invalid report")
+print("ok")
+"#;
+    let out = Command::new("python3")
+        .arg("-c")
+        .arg(script)
+        .arg(docs().join("report.schema.json"))
+        .args(&files)
+        .arg(&bad_path)
+        .output()
+        .expect("python3 not found: run .ci/setup");
+    assert!(out.status.success(), "{}{}", String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr));
+}
+
+#[test]
+fn docs_table_lists_exactly_the_report_fields() {
+    let f = fixture(3);
+    let r = full_report(&f, 5.0);
+    let mut actual = BTreeSet::new();
+    paths(&serde_json::to_value(&r).unwrap(), "", &mut actual);
+    let md = std::fs::read_to_string(docs().join("report-json.md")).unwrap();
+    let documented: BTreeSet<String> = md
+        .lines()
+        .filter_map(|l| l.strip_prefix("| `"))
+        .filter_map(|l| l.split('`').next())
+        .map(str::to_string)
+        .collect();
+    let undocumented: Vec<_> = actual.difference(&documented).collect();
+    let stale: Vec<_> = documented.difference(&actual).collect();
+    assert!(undocumented.is_empty(), "fields missing from docs/report-json.md: {undocumented:?}");
+    assert!(stale.is_empty(), "docs/report-json.md documents fields a report does not have: {stale:?}");
+}
+
+#[test]
+fn json_round_trips_and_write_leaves_no_partial_files() {
+    let f = fixture(4);
+    let r = full_report(&f, 1.0);
+    let dir = tempfile::tempdir().unwrap();
+    let w = report::write(&r, dir.path()).unwrap();
+    let back = report::read(&w.json).unwrap();
+    assert_eq!(back, r);
+    let names: BTreeSet<String> = std::fs::read_dir(dir.path()).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().into_owned()).collect();
+    assert_eq!(names, ["report.html", "report.json"].iter().map(|s| s.to_string()).collect());
+    // Writing into a folder that does not exist fails with the path in the message, and
+    // leaves nothing behind.
+    let missing = dir.path().join("gone");
+    let e = report::write(&r, &missing).unwrap_err().to_string();
+    assert!(e.contains("gone/report.json"), "{e}");
+    assert!(!missing.exists());
+    // A malformed report file is an error naming file and line.
+    let bad = dir.path().join("bad.json");
+    std::fs::write(&bad, "{\n \"schema\": 3\n}").unwrap();
+    let e = report::read(&bad).unwrap_err().to_string();
+    assert!(e.contains("bad.json") && e.contains("line 2"), "{e}");
+}
+
+#[test]
+fn html_is_self_contained_with_every_plot() {
+    let f = fixture(5);
+    let r = full_report(&f, 5.0);
+    let html = report::html::render(&r).unwrap();
+    for banned in ["<script", "<link", "<img", "@import", "url(", "https://"] {
+        assert!(!html.contains(banned), "the page must be self-contained, found {banned}");
+    }
+    // The only URLs are XML namespace names, which are never fetched.
+    for (i, _) in html.match_indices("http://") {
+        let tail = &html[i..i + 30.min(html.len() - i)];
+        assert!(tail.starts_with("http://www.w3.org/"), "unexpected URL {tail}");
+    }
+    let svgs = html.matches("<svg").count();
+    // amplitude + residual per characteristic, parameters, sensitivity, drift
+    assert_eq!(svgs, 2 * r.characteristics.len() + 3, "plots: {svgs}");
+    assert!(html.contains("two masses &lt;test &amp; check&gt;"), "titles are escaped");
+    assert!(html.contains("ALARM") && html.contains("outcome: alarm"));
+    // Every parameter row is in the table.
+    for p in &r.identification.parameters {
+        assert!(html.contains(&format!("<td class=\"l\">{}</td>", p.variable)));
+    }
+}
+
+#[test]
+fn standardized_residuals_have_unit_scale_at_the_estimate() {
+    // Data with 1 % noise and stated variances: at the identified model the residuals are
+    // draws of N(0, 1); at the initial model they are far larger.
+    let f = fixture(6);
+    let r = report::build::build(report::build::Inputs::new("t", &f.obs, &f.id)).unwrap();
+    let rms = |stage: &str| {
+        let v: Vec<f64> = r
+            .characteristics
+            .iter()
+            .flat_map(|c| c.stages.iter().filter(|s| s.stage == stage).flat_map(|s| s.standardized_residual.iter().copied()))
+            .collect();
+        (v.iter().map(|x| x * x).sum::<f64>() / v.len() as f64).sqrt()
+    };
+    let (ini, ide) = (rms("initial"), rms("identified"));
+    assert!((0.75..1.3).contains(&ide), "RMS standardized residual at the estimate {ide}");
+    assert!(ini > 5.0 * ide, "initial {ini} vs identified {ide}");
+    for c in &r.characteristics {
+        assert_eq!(c.sigma_kind, "variance");
+        // The report's RMS relative error equals identification's own.
+        let own = f.id.rms.iter().find(|(l, _)| *l == c.label).unwrap().1;
+        let mine = c.stages.iter().find(|s| s.stage == "identified").unwrap().rms_relative_error;
+        assert!((own - mine).abs() <= 1e-9 * own.max(1e-30), "{}: {own} vs {mine}", c.label);
+    }
+    // The sensitivity map covers every decision parameter and characteristic, all positive.
+    let s = r.sensitivity.as_ref().unwrap();
+    assert_eq!(s.parameters, vec!["SDE k1 k", "SDE k2 k"]);
+    assert!(s.relative.iter().flatten().all(|v| *v > 0.0));
+}
+
+#[test]
+fn drift_alarms_beyond_k_standard_errors_only() {
+    let f = fixture(7);
+    let quiet = full_report(&f, 2.5);
+    let d = quiet.drift.as_ref().unwrap();
+    assert_eq!(d.runs.len(), 4);
+    assert!((d.parameters[0].deviation_sigma.unwrap() - 2.5).abs() < 1e-9);
+    assert!(d.parameters.iter().all(|p| !p.alarm));
+    assert_eq!(quiet.status.outcome, report::Outcome::Ok);
+    let loud = full_report(&f, -3.5);
+    let d = loud.drift.as_ref().unwrap();
+    assert!(d.parameters[0].alarm && !d.parameters[1].alarm);
+    assert_eq!(loud.status.outcome, report::Outcome::Alarm);
+    assert!(loud.status.messages.iter().any(|m| m.contains("drift alarm") && m.contains(&d.parameters[0].variable)), "{:?}", loud.status.messages);
+}
+
+#[test]
+fn history_is_read_oldest_first_skipping_failures_and_naming_bad_files() {
+    let f = fixture(8);
+    let dir = tempfile::tempdir().unwrap();
+    let base = report::build::build(report::build::Inputs::new("t", &f.obs, &f.id)).unwrap();
+    for (folder, stamp, outcome) in [("b", "2025-01-02T00:00:00Z", report::Outcome::Ok), ("a", "2025-01-01T00:00:00Z", report::Outcome::Alarm), ("c", "2025-01-03T00:00:00Z", report::Outcome::Failure)] {
+        let mut r = base.clone();
+        r.created_utc = stamp.into();
+        r.status.outcome = outcome;
+        std::fs::create_dir(dir.path().join(folder)).unwrap();
+        report::write(&r, &dir.path().join(folder)).unwrap();
+    }
+    std::fs::create_dir(dir.path().join("d")).unwrap();
+    std::fs::write(dir.path().join("d/report.json"), "{ not json").unwrap();
+    let (runs, msgs) = report::drift::read_history(dir.path());
+    let stamps: Vec<&str> = runs.iter().map(|r| r.created_utc.as_str()).collect();
+    assert_eq!(stamps, ["2025-01-01T00:00:00Z", "2025-01-02T00:00:00Z"]);
+    assert_eq!(msgs.len(), 1);
+    assert!(msgs[0].contains("d/report.json") && msgs[0].contains("line 1"), "{msgs:?}");
+    // A named baseline that is not there is an error that says what to set.
+    let e = report::drift::compare(&runs, &base, &report::drift::Baseline::Folder("zz".into()), 3.0).unwrap_err();
+    assert!(e.contains("\"zz\"") && e.contains("baseline"), "{e}");
+    let d = report::drift::compare(&runs, &base, &report::drift::Baseline::Folder("b".into()), 3.0).unwrap().unwrap();
+    assert_eq!(d.baseline, 1);
+}

@@ -1,0 +1,387 @@
+//! `ident nightly CONFIG`: unattended identification of one stand (cron / systemd timer).
+//!
+//! Takes a lock (a second run exits 2; a lock left by a dead process is taken over), runs the sweep
+//! (or takes the newest session), processes, identifies, diagnoses, compares every parameter with
+//! its history (drift beyond k standard errors from the baseline run is an alarm) and writes a
+//! dated report folder (HTML, JSON, identification files, `status.json`). Logs to a file and to
+//! stderr; never prompts. Exit status: 0 ok, 1 alarm, 2 failure. On failure the partial session is
+//! kept and `status.json` says what happened.
+
+use std::fs::{File, OpenOptions};
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+
+use acquire::stand::Stand;
+use acquire::sweep::{FrequencyList, NoProgress, SteppedSine, StopSignal};
+use anyhow::Context;
+use serde::Deserialize;
+use serde_json::json;
+
+use crate::pipeline::{self, ReportContext, Setup};
+
+/// Arguments of `ident nightly`.
+#[derive(clap::Args)]
+pub struct NightlyArgs {
+    /// The job file (configs/nightly.toml; keys: configs/README.md).
+    pub config: PathBuf,
+}
+
+/// The job file.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Config {
+    /// Headline of the reports.
+    pub name: String,
+    /// `sweep` or `newest-session`.
+    pub measure: Measure,
+    /// Stand file (needed for `sweep`).
+    pub stand: Option<PathBuf>,
+    /// Identification model.
+    pub model: PathBuf,
+    /// Decision variables.
+    pub variables: PathBuf,
+    /// Session folder.
+    pub sessions: PathBuf,
+    /// Report folder (one dated sub-folder per run).
+    pub reports: PathBuf,
+    /// Log file.
+    pub log: PathBuf,
+    /// Lock file.
+    pub lock: PathBuf,
+    /// Sweep plan.
+    #[serde(default)]
+    pub sweep: SweepConfig,
+    /// Drift rule.
+    #[serde(default)]
+    pub drift: DriftConfig,
+}
+
+/// What a run measures.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Measure {
+    /// Sweep the stand now.
+    Sweep,
+    /// Take the newest session in `sessions`.
+    NewestSession,
+}
+
+/// `[sweep]`.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct SweepConfig {
+    /// First line (Hz).
+    pub from_hz: f64,
+    /// Last line (Hz).
+    pub to_hz: f64,
+    /// Log-spaced lines.
+    pub points: usize,
+    /// Force amplitude (N, peak).
+    pub force_n: f64,
+    /// Simulated stands: simulated time per wall-clock time.
+    pub speed: Option<f64>,
+}
+
+impl Default for SweepConfig {
+    fn default() -> Self {
+        SweepConfig { from_hz: 20.0, to_hz: 400.0, points: 38, force_n: 4000.0, speed: None }
+    }
+}
+
+/// `[drift]`.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct DriftConfig {
+    /// Alarm threshold in standard errors.
+    pub k_sigma: f64,
+    /// `first` or a run folder name.
+    pub baseline: String,
+}
+
+impl Default for DriftConfig {
+    fn default() -> Self {
+        DriftConfig { k_sigma: 3.0, baseline: "first".into() }
+    }
+}
+
+fn line_col(text: &str, offset: usize) -> (usize, usize) {
+    let mut offset = offset.min(text.len());
+    while !text.is_char_boundary(offset) {
+        offset -= 1;
+    }
+    let before = &text[..offset];
+    (before.matches('\n').count() + 1, before.rsplit('\n').next().map(|l| l.chars().count()).unwrap_or(0) + 1)
+}
+
+impl Config {
+    /// Loads a job file; relative paths become relative to its folder. Errors name file:line:column.
+    pub fn load(path: &Path) -> anyhow::Result<Config> {
+        let text = std::fs::read_to_string(path).with_context(|| format!("cannot read the nightly job file {}", path.display()))?;
+        let mut c: Config = toml::from_str(&text).map_err(|e| {
+            let (l, col) = line_col(&text, e.span().map(|s| s.start).unwrap_or(0));
+            anyhow::anyhow!("{}:{l}:{col}: {} (keys: configs/README.md#nightly)", path.display(), e.message().trim())
+        })?;
+        let at = |key: &str| {
+            let (l, _) = text.lines().enumerate().find(|(_, s)| s.trim_start().starts_with(key)).map(|(i, _)| (i + 1, 0)).unwrap_or((0, 0));
+            format!("{}:{l}", path.display())
+        };
+        let dir = path.parent().unwrap_or(Path::new("."));
+        for p in [&mut c.model, &mut c.variables, &mut c.sessions, &mut c.reports, &mut c.log, &mut c.lock] {
+            if p.is_relative() {
+                *p = dir.join(&*p);
+            }
+        }
+        if let Some(p) = c.stand.as_mut().filter(|p| p.is_relative()) {
+            *p = dir.join(&*p);
+        }
+        anyhow::ensure!(c.measure != Measure::Sweep || c.stand.is_some(), "{}: measure = \"sweep\" needs `stand = \"stands/NAME.toml\"`", at("measure"));
+        let s = &c.sweep;
+        anyhow::ensure!(s.from_hz > 0.0 && s.to_hz > s.from_hz && s.to_hz.is_finite(), "{}: [sweep] needs 0 < from_hz < to_hz (Hz)", at("from_hz"));
+        anyhow::ensure!((2..=1000).contains(&s.points), "{}: [sweep] points = {}: give 2 to 1000 lines", at("points"), s.points);
+        anyhow::ensure!(s.force_n > 0.0 && s.force_n.is_finite(), "{}: [sweep] force_n must be > 0 N", at("force_n"));
+        anyhow::ensure!(s.speed.is_none_or(|v| v > 0.0 && v.is_finite()), "{}: [sweep] speed must be > 0", at("speed"));
+        anyhow::ensure!(c.drift.k_sigma > 0.0 && c.drift.k_sigma.is_finite(), "{}: [drift] k_sigma must be > 0", at("k_sigma"));
+        Ok(c)
+    }
+
+    fn plan(&self) -> SteppedSine {
+        let s = &self.sweep;
+        SteppedSine {
+            frequencies: FrequencyList::Log { start: s.from_hz, stop: s.to_hz, n: s.points },
+            target_force_n: s.force_n,
+            ..super::demo::plan(s.points)
+        }
+    }
+
+    fn baseline(&self) -> report::drift::Baseline {
+        if self.drift.baseline == "first" { report::drift::Baseline::First } else { report::drift::Baseline::Folder(self.drift.baseline.clone()) }
+    }
+}
+
+/// The job lock: a file holding the owner's PID, removed on drop.
+pub struct Lock {
+    path: PathBuf,
+}
+
+/// Whether a process with this PID exists (Linux: /proc; elsewhere assume it does).
+fn alive(pid: u32) -> bool {
+    if cfg!(target_os = "linux") {
+        Path::new(&format!("/proc/{pid}")).exists()
+    } else {
+        true
+    }
+}
+
+impl Lock {
+    /// Takes the lock. `Ok(Err(message))` when another live run holds it; a stale lock (dead
+    /// PID, or unreadable) is taken over and reported in `notes`.
+    pub fn take(path: &Path, notes: &mut Vec<String>) -> anyhow::Result<Result<Lock, String>> {
+        if let Some(parent) = path.parent() {
+            std::fs::create_dir_all(parent).with_context(|| format!("cannot create the lock folder {}", parent.display()))?;
+        }
+        for _ in 0..2 {
+            match OpenOptions::new().write(true).create_new(true).open(path) {
+                Ok(mut f) => {
+                    writeln!(f, "{}", std::process::id()).with_context(|| format!("cannot write the lock file {}", path.display()))?;
+                    return Ok(Ok(Lock { path: path.to_path_buf() }));
+                }
+                Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => {
+                    let text = std::fs::read_to_string(path).unwrap_or_default();
+                    match text.trim().parse::<u32>() {
+                        Ok(pid) if alive(pid) => {
+                            return Ok(Err(format!(
+                                "another ident nightly is running (pid {pid}, lock {}); this run exits without doing anything. \
+                                 If no such job runs, delete the lock file.",
+                                path.display()
+                            )))
+                        }
+                        other => {
+                            notes.push(match other {
+                                Ok(pid) => format!("stale lock {} from pid {pid}, which no longer exists: taken over", path.display()),
+                                Err(_) => format!("lock file {} held no PID ({:?}): taken over", path.display(), text.trim()),
+                            });
+                            std::fs::remove_file(path).with_context(|| format!("cannot remove the stale lock {}", path.display()))?;
+                        }
+                    }
+                }
+                Err(e) => return Err(e).with_context(|| format!("cannot create the lock file {}", path.display())),
+            }
+        }
+        Ok(Err(format!("the lock {} was taken by another run while this one started; this run exits", path.display())))
+    }
+}
+
+impl Drop for Lock {
+    fn drop(&mut self) {
+        if let Err(e) = std::fs::remove_file(&self.path) {
+            eprintln!("warning: cannot remove the lock file {}: {e}", self.path.display());
+        }
+    }
+}
+
+/// Log lines to a file (appended) and stderr; a log that cannot be written (disk full) does not
+/// stop the job — stderr still has everything.
+struct Log {
+    file: Option<File>,
+}
+
+impl Log {
+    fn open(path: &Path) -> (Log, Option<String>) {
+        let r = path.parent().map(std::fs::create_dir_all).unwrap_or(Ok(())).and_then(|_| OpenOptions::new().create(true).append(true).open(path));
+        match r {
+            Ok(f) => (Log { file: Some(f) }, None),
+            Err(e) => (Log { file: None }, Some(format!("cannot open the log file {}: {e}; logging to stderr only", path.display()))),
+        }
+    }
+
+    fn line(&mut self, msg: &str) {
+        let l = format!("{} ident nightly: {msg}", report::build::now_utc());
+        eprintln!("{l}");
+        if let Some(f) = &mut self.file {
+            if writeln!(f, "{l}").and_then(|_| f.flush()).is_err() {
+                eprintln!("warning: the log file can no longer be written (disk full?); logging to stderr only");
+                self.file = None;
+            }
+        }
+    }
+}
+
+/// The newest `*.mcap` in `dir` by modification time.
+fn newest_session(dir: &Path) -> anyhow::Result<PathBuf> {
+    let entries = std::fs::read_dir(dir).with_context(|| format!("cannot read the session folder {}", dir.display()))?;
+    let mut best: Option<(std::time::SystemTime, PathBuf)> = None;
+    for e in entries.flatten() {
+        let p = e.path();
+        if p.extension().is_some_and(|x| x == "mcap") {
+            let t = e.metadata().and_then(|m| m.modified()).unwrap_or(std::time::UNIX_EPOCH);
+            if best.as_ref().is_none_or(|(b, bp)| (t, &p) > (*b, bp)) {
+                best = Some((t, p));
+            }
+        }
+    }
+    best.map(|(_, p)| p).with_context(|| format!("no *.mcap session in {}; record one with `ident sweep` or set measure = \"sweep\"", dir.display()))
+}
+
+/// Runs the job.
+pub fn run(a: NightlyArgs) -> anyhow::Result<ExitCode> {
+    let cfg = Config::load(&a.config)?;
+    let mut notes = Vec::new();
+    let lock = match Lock::take(&cfg.lock, &mut notes)? {
+        Ok(l) => l,
+        Err(busy) => {
+            eprintln!("ident nightly: {busy}");
+            return Ok(ExitCode::from(2));
+        }
+    };
+    let (mut log, log_err) = Log::open(&cfg.log);
+    if let Some(e) = log_err {
+        eprintln!("warning: {e}");
+    }
+    log.line(&format!("start: {} ({})", cfg.name, a.config.display()));
+    for n in &notes {
+        log.line(n);
+    }
+    let dir = match pipeline::dated_folder(&cfg.reports, "") {
+        Ok(d) => d,
+        Err(e) => {
+            log.line(&format!("FAILURE: {e:#}"));
+            drop(lock);
+            return Ok(ExitCode::from(2));
+        }
+    };
+    log.line(&format!("report folder {}", dir.display()));
+    let mut session: Option<PathBuf> = None;
+    let result = job(&cfg, &dir, &mut log, &mut session, notes);
+    let code = match result {
+        Ok(code) => code,
+        Err(e) => {
+            let msg = format!("{e:#}");
+            log.line(&format!("FAILURE: {msg}"));
+            if let Some(s) = &session {
+                log.line(&format!("the session is kept: {}", s.display()));
+            }
+            let status = json!({"outcome": "failure", "error": msg, "session": session.as_ref().map(|s| s.display().to_string()), "created_utc": report::build::now_utc()});
+            if let Err(e) = report::write_atomic(&dir.join("status.json"), status.to_string().as_bytes()) {
+                log.line(&format!("cannot write status.json: {e}"));
+            }
+            2
+        }
+    };
+    log.line(&format!("end: exit {code}"));
+    drop(lock);
+    Ok(ExitCode::from(code))
+}
+
+fn job(cfg: &Config, dir: &Path, log: &mut Log, session: &mut Option<PathBuf>, notes: Vec<String>) -> anyhow::Result<u8> {
+    let setup = Setup::load(&cfg.model, &cfg.variables)?;
+    let mut stand_name = None;
+    let path = match cfg.measure {
+        Measure::NewestSession => {
+            let p = newest_session(&cfg.sessions)?;
+            log.line(&format!("newest session: {}", p.display()));
+            p
+        }
+        Measure::Sweep => {
+            let stand_file = cfg.stand.as_deref().context("no stand")?;
+            let mut stand = Stand::load(stand_file)?;
+            if let (Some(t), Some(s)) = (stand.truth.as_mut(), cfg.sweep.speed) {
+                t.speed = s;
+            }
+            stand_name = Some(stand.name.clone());
+            std::fs::create_dir_all(&cfg.sessions).with_context(|| format!("cannot create the session folder {}", cfg.sessions.display()))?;
+            let stem = stand_file.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_else(|| "stand".into());
+            let p = cfg.sessions.join(format!("{stem}-{}.mcap", dir.file_name().map(|f| f.to_string_lossy().into_owned()).unwrap_or_default()));
+            log.line(&format!("sweep of {} into {}", stand.name, p.display()));
+            let swept = pipeline::sweep(&stand, &cfg.plan(), &p, &NoProgress, &StopSignal::new())?;
+            *session = Some(p.clone());
+            if let Some(e) = &swept.finish_error {
+                log.line(&format!("the session file could not be completed: {e}; its flushed part is readable (ident mcap recover)"));
+            }
+            let o = swept.outcome.map_err(|e| anyhow::anyhow!("the sweep failed: {e}"))?;
+            anyhow::ensure!(swept.finish_error.is_none(), "the session file {} could not be completed (disk full?)", p.display());
+            log.line(&format!("sweep done: {} of {} steps, {} stream faults", o.steps.len(), swept.planned, o.faults));
+            p
+        }
+    };
+    *session = Some(path.clone());
+    let analysis = pipeline::analyse(&path, &setup, &identify::identification::Options::default())?;
+    for m in &analysis.messages {
+        log.line(m);
+    }
+    log.line(&format!(
+        "identified {} variables: J {:.4e} -> {:.4e}, {}",
+        analysis.identification.variables.len(),
+        analysis.identification.criterion_initial,
+        analysis.identification.criterion,
+        analysis.identification.stop.describe()
+    ));
+    // History: earlier runs' reports (this run's folder has none yet).
+    let (history, hist_msgs) = report::drift::read_history(&cfg.reports);
+    for m in &hist_msgs {
+        log.line(m);
+    }
+    // The drift needs this run's table and time: build once without, compare, then write with it.
+    let probe = report::build::build({
+        let mut i = report::build::Inputs::new(&cfg.name, &analysis.observations, &analysis.identification);
+        i.sensitivity = false;
+        i
+    })?;
+    let drift = report::drift::compare(&history, &probe, &cfg.baseline(), cfg.drift.k_sigma).map_err(|e| anyhow::anyhow!("[drift] baseline: {e}"))?;
+    let ctx = ReportContext { title: &cfg.name, workflow: "nightly", stand: stand_name, drift, messages: notes.into_iter().chain(hist_msgs).collect(), created_utc: probe.created_utc.clone() };
+    let (r, written) = pipeline::write_report(dir, ctx, &setup, &analysis)?;
+    for m in r.status.messages.iter().filter(|m| m.starts_with("drift alarm")) {
+        log.line(&format!("ALARM: {m}"));
+    }
+    let status = json!({"outcome": r.status.outcome.as_str(), "created_utc": r.created_utc, "session": path.display().to_string(), "report": written.html.display().to_string(), "messages": r.status.messages});
+    report::write_atomic(&dir.join("status.json"), status.to_string().as_bytes())?;
+    log.line(&format!("report: {}", written.html.display()));
+    println!("{}", pipeline::summary_text(&analysis));
+    println!("outcome: {}", r.status.outcome.as_str());
+    println!("report: {}", dir.display());
+    Ok(match r.status.outcome {
+        report::Outcome::Ok => 0,
+        report::Outcome::Alarm => 1,
+        report::Outcome::Failure => 2,
+    })
+}

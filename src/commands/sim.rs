@@ -1,0 +1,57 @@
+//! `ident sim --stand FILE [--can IFACE]`: serve a stand's simulated shaker controller and DAQ
+//! (SCPI and the COBS/CRC stream over pseudo-terminals; the DAQ on a CAN interface with `--can`)
+//! until Ctrl-C, printing where they are. Their signals come from the stand's `[truth]`.
+
+use std::io::Write;
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use anyhow::Context;
+use acquire::sim::SimStand;
+use acquire::stand::Stand;
+
+/// Arguments of `ident sim`.
+#[derive(clap::Args)]
+pub struct SimArgs {
+    /// Stand file with a `[truth]` section (e.g. configs/stands/fwd32j-model-sim.toml).
+    #[arg(long)]
+    pub stand: PathBuf,
+    /// Serve the DAQ on this CAN interface (e.g. vcan0) instead of a pseudo-terminal.
+    #[arg(long)]
+    pub can: Option<String>,
+    /// Simulated time per wall-clock time (overrides the stand's `truth.speed`).
+    #[arg(long)]
+    pub speed: Option<f64>,
+}
+
+/// Runs `ident sim`.
+pub fn run(a: SimArgs) -> anyhow::Result<ExitCode> {
+    let mut stand = Stand::load(&a.stand)?;
+    let truth = stand.truth.as_mut().with_context(|| format!("{}: `ident sim` needs a [truth] section (the simulated structure)", a.stand.display()))?;
+    if let Some(s) = a.speed {
+        anyhow::ensure!(s.is_finite() && s > 0.0, "--speed {s}: give a factor > 0 (1 = real time)");
+        truth.speed = s;
+    }
+    let speed = truth.speed;
+    let rt = tokio::runtime::Builder::new_multi_thread().worker_threads(2).enable_all().build().context("cannot start the async runtime")?;
+    rt.block_on(async {
+        let sim = match &a.can {
+            Some(iface) => SimStand::start_can(&stand, iface)?,
+            None => SimStand::start(&stand)?,
+        };
+        let mut out = std::io::stdout().lock();
+        writeln!(out, "shaker {}", sim.shaker_port)?;
+        writeln!(out, "daq {}", sim.daq_port)?;
+        out.flush()?;
+        drop(out);
+        eprintln!(
+            "ident sim: {} at {speed}× real time; set the stand file's ports to these (shaker.port, daq.port = \"{}\") and run `ident sweep`; Ctrl-C stops",
+            stand.name,
+            sim.daq_port
+        );
+        tokio::signal::ctrl_c().await.context("cannot wait for Ctrl-C")?;
+        sim.shutdown();
+        eprintln!("ident sim: stopped");
+        Ok(ExitCode::SUCCESS)
+    })
+}

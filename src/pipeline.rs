@@ -1,0 +1,214 @@
+//! The operator workflows' steps, shared by `ident demo`, `ident replay` and `ident nightly`:
+//!
+//! ```text
+//! sweep (stand → session.mcap) → process (session → characteristics) → identify → diagnose → report
+//! ```
+//!
+//! Everything after the sweep reads only the session file ([`analyse`]), so a replay of a
+//! recording recomputes the live run's results bit for bit.
+
+use std::collections::BTreeSet;
+use std::path::{Path, PathBuf};
+
+use acquire::analysis::{characteristics, AnalysisOptions, SessionAnalysis};
+use acquire::rig::Rig;
+use acquire::session::{Session, SessionOptions};
+use acquire::sim::SimStand;
+use acquire::stand::{PortSpec, Stand};
+use acquire::sweep::{self, SteppedSine, StopSignal, SweepOutcome, SweepProgress};
+use anyhow::Context;
+use identify::identification::{self, data, report as table, variables, Identification, Observations, Variables};
+use identify::Model;
+
+/// The identification set-up: the model to identify (never the truth) and its decision variables.
+#[derive(Debug, Clone)]
+pub struct Setup {
+    /// Model file (for messages and the report).
+    pub model_file: String,
+    /// Its text, for writing the identified values back (TOML models only).
+    pub model_text: Option<String>,
+    /// The model.
+    pub model: Model,
+    /// Variables file.
+    pub vars_file: String,
+    /// The decision variables.
+    pub vars: Variables,
+}
+
+impl Setup {
+    /// Loads a model (TOML or resolved JSON) and a variables file.
+    pub fn load(model: &Path, vars: &Path) -> anyhow::Result<Setup> {
+        let m = crate::commands::load_model(model)?;
+        let v = variables::load(vars, &m)?;
+        let text = std::fs::read_to_string(model).ok().filter(|_| model.extension().is_some_and(|e| e == "toml"));
+        Ok(Setup { model_file: model.display().to_string(), model_text: text, model: m, vars_file: vars.display().to_string(), vars: v })
+    }
+}
+
+/// A sweep that ended, completely or not.
+#[derive(Debug)]
+pub struct Swept {
+    /// The session file (complete and readable even when the sweep failed).
+    pub session: PathBuf,
+    /// Steps planned.
+    pub planned: usize,
+    /// The sweep's outcome, or why it failed (device, plan, disk).
+    pub outcome: Result<SweepOutcome, String>,
+    /// Why the session file could not be completed (its flushed chunks are still readable:
+    /// `ident mcap recover`).
+    pub finish_error: Option<String>,
+}
+
+/// Runs a stepped-sine sweep of `stand` into a new session file at `session`. Ports given as
+/// `"sim"` are served by the simulated stand. The session file is kept whatever happens; only
+/// failures before it exists are `Err`.
+pub fn sweep(stand: &Stand, plan: &SteppedSine, session: &Path, progress: &dyn SweepProgress, stop: &StopSignal) -> anyhow::Result<Swept> {
+    let planned = plan.frequencies.frequencies()?.len();
+    let rt = tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(2)
+        .enable_all()
+        .build()
+        .context("cannot start the async runtime")?;
+    rt.block_on(async {
+        let uses_sim = stand.shaker.port == PortSpec::Sim || stand.daq.port == PortSpec::Sim;
+        let sim = if uses_sim { Some(SimStand::start(stand)?) } else { None };
+        let bound = sim.as_ref().map(|s| s.bind(stand)).unwrap_or_else(|| stand.clone());
+        let file = Session::create(session, SessionOptions::default())
+            .with_context(|| format!("cannot create the session file {}", session.display()))?;
+        let h = file.handle();
+        let done = BTreeSet::new();
+        let outcome = async {
+            sweep::log_session_start(&h, &stand.file, plan, None, &done)?;
+            let mut rig = Rig::connect(&bound, Some(&h)).await?;
+            Ok::<_, anyhow::Error>(sweep::stepped_sine(&mut rig, plan, &h, progress, stop, &done).await?)
+        }
+        .await
+        .map_err(|e| format!("{e:#}"));
+        let finish_error = file.finish().err().map(|e| e.to_string());
+        if let Some(s) = sim {
+            s.shutdown();
+        }
+        Ok(Swept { session: session.to_path_buf(), planned, outcome, finish_error })
+    })
+}
+
+/// Results of processing, identification and diagnosis of one session.
+#[derive(Debug)]
+pub struct Analysis {
+    /// The session's characteristics, steps, dropped steps and faults.
+    pub session: SessionAnalysis,
+    /// The characteristics validated against the identification model.
+    pub observations: Observations,
+    /// The identification.
+    pub identification: Identification,
+    /// The diagnosis (report section and final model), when it ran.
+    pub diagnosis: Option<(report::Diagnosis, Model)>,
+    /// What the operator should know: data not used, faults, truncation, non-convergence.
+    pub messages: Vec<String>,
+}
+
+/// Process → identify → diagnose, from the session file alone (deterministic: a replay of the same
+/// file gives bit-identical results).
+pub fn analyse(session: &Path, setup: &Setup, opts: &identification::Options) -> anyhow::Result<Analysis> {
+    let a = characteristics(session, &AnalysisOptions::default())?;
+    let mut messages = Vec::new();
+    if let Some(t) = &a.truncated {
+        messages.push(format!(
+            "the session file is truncated ({t}); every complete step before the cut is used, {} step(s) are lost",
+            a.dropped.len()
+        ));
+    }
+    for d in &a.dropped {
+        messages.push(format!("step {} ({:.2} Hz) not used: {}", d.step, d.frequency_hz, d.reason));
+    }
+    if !a.faults.is_empty() {
+        messages.push(format!("{} stream fault(s) recorded; the steps they hit were re-measured", a.faults.len()));
+    }
+    let differ: Vec<usize> = a.steps.iter().filter(|s| !s.matches_live).map(|s| s.step).collect();
+    if !differ.is_empty() {
+        messages.push(format!("steps {differ:?}: the recomputation differs from the live estimate recorded in the session"));
+    }
+    messages.extend(a.notes.iter().cloned());
+    let obs = data::validate(&a.measured, &setup.model, &session.display().to_string())?;
+    let id = identification::identify(&setup.model, &obs, &setup.vars, opts, &mut |_, p| tracing::info!(?p, "iteration"))?;
+    // diagnosis: issue 6 — `identify::diagnose::diagnose(&setup.model, &obs, &setup.vars, &id, ..)`
+    // goes here, mapped into `report::Diagnosis` (ranked candidates, before/after fit) plus the final
+    // model; until then no diagnosis section is produced (the report says so).
+    let diagnosis = None;
+    Ok(Analysis { session: a, observations: obs, identification: id, diagnosis, messages })
+}
+
+/// Provenance and context of a report.
+pub struct ReportContext<'a> {
+    /// Headline.
+    pub title: &'a str,
+    /// `demo`, `replay`, `nightly`.
+    pub workflow: &'a str,
+    /// Stand name or file.
+    pub stand: Option<String>,
+    /// Drift history, when there is one.
+    pub drift: Option<report::Drift>,
+    /// Extra status messages.
+    pub messages: Vec<String>,
+    /// Time stamp (UTC, ISO 8601); empty = now.
+    pub created_utc: String,
+}
+
+/// Builds the report and writes the report folder: `report.html`, `report.json`,
+/// `measured.json`, `identification.json`, `identification.csv`, `identified-model.json` and,
+/// for TOML models, `identified-model.toml`.
+pub fn write_report(dir: &Path, ctx: ReportContext<'_>, setup: &Setup, a: &Analysis) -> anyhow::Result<(report::Report, report::Written)> {
+    let id = &a.identification;
+    let mut inputs = report::build::Inputs::new(ctx.title, &a.observations, id);
+    inputs.source.workflow = ctx.workflow.into();
+    inputs.source.session = Some(a.session.session.clone());
+    inputs.source.stand = ctx.stand.or_else(|| Some(a.session.stand.clone()));
+    inputs.source.model = setup.model_file.clone();
+    inputs.source.variables = setup.vars_file.clone();
+    inputs.source.measurement = a.session.measured.source.clone();
+    inputs.diagnosis = a.diagnosis.as_ref().map(|(d, m)| (d.clone(), m));
+    inputs.drift = ctx.drift;
+    inputs.created_utc = ctx.created_utc;
+    inputs.messages = a.messages.iter().cloned().chain(ctx.messages).collect();
+    let r = report::build::build(inputs)?;
+    let w = |name: &str, text: &str| report::write_atomic(&dir.join(name), text.as_bytes());
+    w("measured.json", &serde_json::to_string_pretty(&a.session.measured)?)?;
+    w("identification.json", &serde_json::to_string_pretty(&table::json(id))?)?;
+    w("identification.csv", &table::csv(id))?;
+    let final_model = a.diagnosis.as_ref().map(|(_, m)| m).unwrap_or(&id.model);
+    w("identified-model.json", &serde_json::to_string_pretty(&identify::contract::to_json(final_model))?)?;
+    if let Some(text) = &setup.model_text {
+        match table::update_toml(text, &setup.model_file, id) {
+            Ok(updated) => w("identified-model.toml", &updated)?,
+            Err(e) => tracing::warn!("identified-model.toml not written: {e}"),
+        }
+    }
+    let written = report::write(&r, dir)?;
+    Ok((r, written))
+}
+
+/// The Table-1-like summary printed by the workflows.
+pub fn summary_text(a: &Analysis) -> String {
+    let mut s = table::text(&a.identification);
+    match &a.diagnosis {
+        Some((d, _)) => s.push_str(&format!("\ndiagnosis: final model {}\n", d.final_model)),
+        None => s.push_str("\ndiagnosis: not run (issue 6)\n"),
+    }
+    s
+}
+
+/// A folder name for a run: `PREFIX-YYYY-mm-ddTHHMMSSZ` (UTC), made unique with `-2`, `-3`...
+pub fn dated_folder(parent: &Path, prefix: &str) -> anyhow::Result<PathBuf> {
+    let stamp = report::build::now_utc().replace(':', "");
+    let base = if prefix.is_empty() { stamp } else { format!("{prefix}-{stamp}") };
+    std::fs::create_dir_all(parent).with_context(|| format!("cannot create {}", parent.display()))?;
+    let mut k = 1;
+    loop {
+        let p = if k == 1 { parent.join(&base) } else { parent.join(format!("{base}-{k}")) };
+        match std::fs::create_dir(&p) {
+            Ok(()) => return Ok(p),
+            Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => k += 1,
+            Err(e) => return Err(e).with_context(|| format!("cannot create the report folder {}", p.display())),
+        }
+    }
+}

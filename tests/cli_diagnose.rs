@@ -1,0 +1,84 @@
+//! `ident diagnose` end to end: the paper's case (the hydraulic actuator missing from the model)
+//! from a data file, and bad options.
+
+use std::path::PathBuf;
+use std::process::Command;
+
+use identify::frf::{self, Method};
+use identify::measured::{MeasuredData, Measurement};
+use rand::SeedableRng;
+use rand_distr::{Distribution, StandardNormal};
+
+fn root() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+}
+
+fn ident() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_ident"))
+}
+
+/// Table characteristics of the full FWD-32J model (with its actuator), 1 % noise, stated variances.
+fn write_data(path: &std::path::Path) {
+    let truth = identify::modelfile::load(&root().join("configs/models/fwd32j.toml")).expect("model").model;
+    let freqs: Vec<f64> = (0..38).map(|i| 20.0 * 20.0f64.powf(i as f64 / 37.0)).collect();
+    let r = frf::response(&truth, &freqs, &[], Method::Auto).expect("FRF");
+    let mut rng = rand::rngs::StdRng::seed_from_u64(3);
+    let data = MeasuredData {
+        source: "cli_diagnose test".into(),
+        characteristics: truth
+            .outputs
+            .iter()
+            .enumerate()
+            .map(|(o, c)| Measurement {
+                body: truth.bodies[c.body].name.clone(),
+                dof: c.dof,
+                quantity: c.quantity.into(),
+                freqs_hz: freqs.clone(),
+                amplitude: r.output(o).iter().map(|v| v.norm() * (1.0 + 0.01 * Distribution::<f64>::sample(&StandardNormal, &mut rng))).collect(),
+                phase_rad: None,
+                variance: Some(r.output(o).iter().map(|v| 2.0 * (0.01 * v.norm()).powi(2)).collect()),
+                coherence: None,
+                averages: None,
+            })
+            .collect(),
+    };
+    std::fs::write(path, serde_json::to_string(&data).expect("json")).expect("write data");
+}
+
+#[test]
+fn diagnose_finds_the_missing_actuator_from_files() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let data = dir.path().join("measured.json");
+    write_data(&data);
+    let json = dir.path().join("diagnosis.json");
+    let out = ident()
+        .current_dir(root())
+        .args(["diagnose", "configs/models/fwd32j-no-actuator.toml", "--vars", "configs/identification/fwd32j-no-actuator.toml"])
+        .arg("--data")
+        .arg(&data)
+        .arg("--json")
+        .arg(&json)
+        .output()
+        .expect("run ident");
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert_eq!(out.status.code(), Some(0), "stdout:\n{stdout}\nstderr:\n{}", String::from_utf8_lossy(&out.stderr));
+    assert!(stdout.contains("added: spring spindle head–"), "{stdout}");
+    assert!(stdout.contains("error before → after"), "{stdout}");
+    let d: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&json).expect("json written")).expect("valid JSON");
+    assert_eq!(d["accepted"][0]["kind"], "spring");
+    assert_eq!(d["before"]["explained"], false);
+    assert_eq!(d["after"]["explained"], true);
+    assert!(d["rounds"][0]["candidates"].as_u64().unwrap_or(0) > 500, "hundreds of candidates: {}", d["rounds"][0]["candidates"]);
+}
+
+#[test]
+fn diagnose_rejects_a_bad_significance_level() {
+    let out = ident()
+        .current_dir(root())
+        .args(["diagnose", "configs/models/fwd32j.toml", "--data", "nope.json", "--vars", "configs/identification/fwd32j.toml", "--alpha", "2"])
+        .output()
+        .expect("run ident");
+    assert_eq!(out.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("--alpha 2"), "{err}");
+}

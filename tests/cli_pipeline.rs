@@ -1,0 +1,185 @@
+//! End-to-end tests of the operator workflows: `ident demo` over the simulated serial devices,
+//! `ident replay` (bit-identical to the live run, truncated recordings), and `ident nightly`
+//! (lock, drift alarm, unreachable stand, full disk, bad config).
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn ident(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_ident")).args(args).output().expect("run ident")
+}
+
+fn text(o: &Output) -> String {
+    format!("{}\n{}", String::from_utf8_lossy(&o.stdout), String::from_utf8_lossy(&o.stderr))
+}
+
+fn report_dir(o: &Output) -> PathBuf {
+    PathBuf::from(String::from_utf8_lossy(&o.stdout).lines().find_map(|l| l.strip_prefix("report: ")).unwrap_or_else(|| panic!("no report path: {}", text(o))))
+}
+
+fn json(p: &Path) -> serde_json::Value {
+    serde_json::from_str(&std::fs::read_to_string(p).unwrap_or_else(|e| panic!("{}: {e}", p.display()))).unwrap()
+}
+
+/// A short demo (10 lines, 8x real time): the live run that records a session.
+fn short_demo(out: &Path) -> PathBuf {
+    let o = ident(&["demo", "--out", out.to_str().unwrap(), "--points", "10", "--speed", "8", "--quiet"]);
+    assert!(o.status.success(), "{}", text(&o));
+    report_dir(&o)
+}
+
+#[test]
+fn replay_reproduces_the_live_run_bit_for_bit_and_reports_truncation() {
+    let dir = tempfile::tempdir().unwrap();
+    let live = short_demo(dir.path());
+    let session = live.join("session.mcap");
+    let (model, vars) = (live.join("configs/models/fwd32j-no-actuator.toml"), live.join("configs/identification/fwd32j-no-actuator.toml"));
+    let o = ident(&["replay", session.to_str().unwrap(), "--model", model.to_str().unwrap(), "--vars", vars.to_str().unwrap(), "--out", dir.path().join("replays").to_str().unwrap()]);
+    assert!(o.status.success(), "{}", text(&o));
+    let replay = report_dir(&o);
+    // Floats are written shortest-round-trip, so equal text means equal bits.
+    for f in ["measured.json", "identification.json", "identification.csv", "identified-model.json", "identified-model.toml"] {
+        let (a, b) = (std::fs::read(live.join(f)).unwrap(), std::fs::read(replay.join(f)).unwrap());
+        assert!(a == b, "{f} differs between the live run and the replay");
+    }
+    let (a, b) = (json(&live.join("report.json")), json(&replay.join("report.json")));
+    for k in ["characteristics", "identification", "sensitivity"] {
+        assert_eq!(a[k], b[k], "report.json {k}");
+    }
+    assert_eq!(a["source"]["workflow"], "demo");
+    assert_eq!(b["source"]["workflow"], "replay");
+
+    // A recording cut short (the writer killed mid-sweep): the complete steps are used and the
+    // report says precisely what is lost.
+    let bytes = std::fs::read(&session).unwrap();
+    let cut = dir.path().join("cut.mcap");
+    std::fs::write(&cut, &bytes[..bytes.len() * 2 / 3]).unwrap();
+    let o = ident(&["replay", cut.to_str().unwrap(), "--model", model.to_str().unwrap(), "--vars", vars.to_str().unwrap(), "--out", dir.path().join("replays").to_str().unwrap()]);
+    let t = text(&o);
+    assert!(o.status.success(), "{t}");
+    assert!(t.contains("truncated") && t.contains("lost"), "{t}");
+    let r = json(&report_dir(&o).join("report.json"));
+    let steps = r["characteristics"][0]["freqs_hz"].as_array().unwrap().len();
+    assert!((1..10).contains(&steps), "{steps} of 10 steps survive the cut");
+    assert!(r["status"]["messages"].as_array().unwrap().iter().any(|m| m.as_str().unwrap().contains("truncated")));
+}
+
+fn write_job(dir: &Path, live: &Path, extra: &str) -> PathBuf {
+    let cfg = dir.join("nightly.toml");
+    let c = live.join("configs");
+    std::fs::write(
+        &cfg,
+        format!(
+            "name = \"test job\"\nmeasure = \"newest-session\"\nstand = \"{}\"\nmodel = \"{}\"\nvariables = \"{}\"\nsessions = \"{}\"\nreports = \"reports\"\nlog = \"nightly.log\"\nlock = \"nightly.lock\"\n{extra}",
+            c.join("stands/fwd32j-model-sim.toml").display(),
+            c.join("models/fwd32j-no-actuator.toml").display(),
+            c.join("identification/fwd32j-no-actuator.toml").display(),
+            live.display()
+        ),
+    )
+    .unwrap();
+    cfg
+}
+
+#[test]
+fn nightly_locks_compares_with_history_and_alarms_on_drift() {
+    let dir = tempfile::tempdir().unwrap();
+    let live = short_demo(dir.path());
+    let cfg = write_job(dir.path(), &live, "[drift]\nk_sigma = 3.0\n");
+    let cfg_s = cfg.to_str().unwrap();
+
+    // A live process holds the lock: the second run exits 2 and says so, touching nothing.
+    let mut holder = Command::new("sleep").arg("30").spawn().unwrap();
+    std::fs::write(dir.path().join("nightly.lock"), format!("{}\n", holder.id())).unwrap();
+    let o = ident(&["nightly", cfg_s]);
+    assert_eq!(o.status.code(), Some(2), "{}", text(&o));
+    assert!(text(&o).contains("another ident nightly is running"), "{}", text(&o));
+    assert!(!dir.path().join("reports").exists(), "a locked-out run writes nothing");
+    holder.kill().unwrap();
+    holder.wait().unwrap();
+    // Now the lock is stale (its PID is gone): taken over, logged, and the first run is ok.
+    let o = ident(&["nightly", cfg_s]);
+    assert_eq!(o.status.code(), Some(0), "{}", text(&o));
+    let log = std::fs::read_to_string(dir.path().join("nightly.log")).unwrap();
+    assert!(log.contains("stale lock"), "{log}");
+    assert!(!dir.path().join("nightly.lock").exists(), "the lock is released");
+    let first = report_dir(&o);
+    let r = json(&first.join("report.json"));
+    assert_eq!(r["status"]["outcome"], "ok");
+    assert!(r["drift"].is_null(), "no history on the first night");
+    assert_eq!(json(&first.join("status.json"))["outcome"], "ok");
+
+    // Second night, same session: no drift.
+    let o = ident(&["nightly", cfg_s]);
+    assert_eq!(o.status.code(), Some(0), "{}", text(&o));
+    let r = json(&report_dir(&o).join("report.json"));
+    let d = &r["drift"];
+    assert_eq!(d["runs"].as_array().unwrap().len(), 2);
+    assert!(d["parameters"].as_array().unwrap().iter().all(|p| p["deviation_sigma"].as_f64().is_none_or(|v| v == 0.0) && p["alarm"] == false), "{d}");
+
+    // The baseline night's joint was much stiffer (edit its report): tonight is an alarm.
+    let mut base = json(&first.join("report.json"));
+    let p0 = &mut base["identification"]["parameters"][0];
+    let name = p0["variable"].as_str().unwrap().to_string();
+    let v = p0["identified"].as_f64().unwrap();
+    let s = p0["std_error"].as_f64().unwrap();
+    p0["identified"] = (v + 20.0 * s).into();
+    std::fs::write(first.join("report.json"), serde_json::to_string(&base).unwrap()).unwrap();
+    let o = ident(&["nightly", cfg_s]);
+    assert_eq!(o.status.code(), Some(1), "{}", text(&o));
+    let r = json(&report_dir(&o).join("report.json"));
+    assert_eq!(r["status"]["outcome"], "alarm");
+    let alarmed: Vec<&str> = r["drift"]["parameters"].as_array().unwrap().iter().filter(|p| p["alarm"] == true).map(|p| p["variable"].as_str().unwrap()).collect();
+    assert_eq!(alarmed, vec![name.as_str()]);
+    let log = std::fs::read_to_string(dir.path().join("nightly.log")).unwrap();
+    assert!(log.contains("ALARM") && log.contains(&name), "{log}");
+    let html = std::fs::read_to_string(report_dir(&o).join("report.html")).unwrap();
+    assert!(html.contains("ALARM"));
+}
+
+#[test]
+fn nightly_with_an_unreachable_stand_fails_with_exit_2_and_keeps_the_session() {
+    let dir = tempfile::tempdir().unwrap();
+    let configs = dir.path().join("configs");
+    for (rel, src) in [("stands/s.toml", "configs/stands/fwd32j-model-sim.toml"), ("models/fwd32j-no-actuator.toml", "configs/models/fwd32j-no-actuator.toml"), ("models/fwd32j.toml", "configs/models/fwd32j.toml"), ("identification/v.toml", "configs/identification/fwd32j-no-actuator.toml")] {
+        let p = configs.join(rel);
+        std::fs::create_dir_all(p.parent().unwrap()).unwrap();
+        let mut t = std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join(src)).unwrap();
+        if rel.starts_with("stands") {
+            // A real stand whose shaker controller is not plugged in.
+            t = t.replacen("port = \"sim\"", "port = \"/dev/ttyIDENT-NOT-THERE\"", 1);
+        }
+        std::fs::write(p, t).unwrap();
+    }
+    let cfg = configs.join("nightly.toml");
+    std::fs::write(&cfg, "name = \"t\"\nmeasure = \"sweep\"\nstand = \"stands/s.toml\"\nmodel = \"models/fwd32j-no-actuator.toml\"\nvariables = \"identification/v.toml\"\nsessions = \"../sessions\"\nreports = \"../reports\"\nlog = \"../n.log\"\nlock = \"../n.lock\"\n").unwrap();
+    let o = ident(&["nightly", cfg.to_str().unwrap()]);
+    let t = text(&o);
+    assert_eq!(o.status.code(), Some(2), "{t}");
+    assert!(t.contains("/dev/ttyIDENT-NOT-THERE"), "the failure names the port: {t}");
+    let sessions: Vec<PathBuf> = std::fs::read_dir(dir.path().join("sessions")).unwrap().map(|e| e.unwrap().path()).collect();
+    assert_eq!(sessions.len(), 1, "the partial session is kept");
+    let runs: Vec<PathBuf> = std::fs::read_dir(dir.path().join("reports")).unwrap().map(|e| e.unwrap().path()).collect();
+    let status = json(&runs[0].join("status.json"));
+    assert_eq!(status["outcome"], "failure");
+    assert!(status["error"].as_str().unwrap().contains("ttyIDENT-NOT-THERE"));
+    assert!(std::fs::read_to_string(dir.path().join("n.log")).unwrap().contains("FAILURE"));
+}
+
+#[test]
+fn nightly_config_errors_point_at_file_and_line() {
+    let dir = tempfile::tempdir().unwrap();
+    let cfg = dir.path().join("nightly.toml");
+    std::fs::write(&cfg, "name = \"t\"\nmeasure = \"sweep\"\nstand = \"s.toml\"\nmodel = \"m.toml\"\nvariables = \"v.toml\"\nsessions = \"s\"\nreports = \"r\"\nlog = \"l\"\nlock = \"k\"\n[drift]\nk_sigma = \"three\"\n").unwrap();
+    let o = ident(&["nightly", cfg.to_str().unwrap()]);
+    assert_eq!(o.status.code(), Some(2));
+    let t = text(&o);
+    assert!(t.contains("nightly.toml:11:"), "{t}");
+    std::fs::write(&cfg, "name = \"t\"\nmeasure = \"sweeep\"\n").unwrap();
+    let t = text(&ident(&["nightly", cfg.to_str().unwrap()]));
+    assert!(t.contains("nightly.toml:2:") && t.contains("newest-session"), "{t}");
+    // The shipped job file loads (its paths are checked when it runs).
+    let shipped = Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/nightly.toml");
+    let text = std::fs::read_to_string(&shipped).unwrap();
+    let _: toml::Table = toml::from_str(&text).unwrap();
+}
