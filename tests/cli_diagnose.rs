@@ -4,8 +4,7 @@
 use std::path::PathBuf;
 use std::process::Command;
 
-use identify::frf::{self, Method};
-use identify::measured::{MeasuredData, Measurement};
+use identify::identification::synthetic;
 use rand::SeedableRng;
 use rand_distr::{Distribution, StandardNormal};
 
@@ -20,28 +19,8 @@ fn ident() -> Command {
 /// Table characteristics of the full FWD-32J model (with its actuator), 1 % noise, stated variances.
 fn write_data(path: &std::path::Path) {
     let truth = identify::modelfile::load(&root().join("configs/models/fwd32j.toml")).expect("model").model;
-    let freqs: Vec<f64> = (0..38).map(|i| 20.0 * 20.0f64.powf(i as f64 / 37.0)).collect();
-    let r = frf::response(&truth, &freqs, &[], Method::Auto).expect("FRF");
     let mut rng = rand::rngs::StdRng::seed_from_u64(3);
-    let data = MeasuredData {
-        source: "cli_diagnose test".into(),
-        characteristics: truth
-            .outputs
-            .iter()
-            .enumerate()
-            .map(|(o, c)| Measurement {
-                body: truth.bodies[c.body].name.clone(),
-                dof: c.dof,
-                quantity: c.quantity.into(),
-                freqs_hz: freqs.clone(),
-                amplitude: r.output(o).iter().map(|v| v.norm() * (1.0 + 0.01 * Distribution::<f64>::sample(&StandardNormal, &mut rng))).collect(),
-                phase_rad: None,
-                variance: Some(r.output(o).iter().map(|v| 2.0 * (0.01 * v.norm()).powi(2)).collect()),
-                coherence: None,
-                averages: None,
-            })
-            .collect(),
-    };
+    let data = synthetic::amplitude_data(&truth, &synthetic::fwd32j_lines(), 0.01, || StandardNormal.sample(&mut rng)).expect("FRF");
     std::fs::write(path, serde_json::to_string(&data).expect("json")).expect("write data");
 }
 

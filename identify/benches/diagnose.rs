@@ -7,35 +7,12 @@
 
 use criterion::{criterion_group, criterion_main, Criterion};
 use identify::diagnose::{generate, problem::Problem, score};
-use identify::frf::{self, Method};
-use identify::identification::{self as idn, data, variables, JacobianMode, Options};
-use identify::measured::{MeasuredData, Measurement};
-use nalgebra::DVector;
+use identify::identification::{self as idn, data, synthetic, variables, JacobianMode, Options};
 
 fn setup() -> (identify::Model, idn::Observations, idn::Variables, Vec<f64>) {
     let root = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..");
     let truth = identify::modelfile::load(&root.join("configs/models/fwd32j.toml")).expect("model").model;
-    let freqs: Vec<f64> = (0..38).map(|i| 20.0 * 20.0f64.powf(i as f64 / 37.0)).collect();
-    let r = frf::response(&truth, &freqs, &[], Method::Auto).expect("FRF");
-    let data = MeasuredData {
-        source: "bench".into(),
-        characteristics: truth
-            .outputs
-            .iter()
-            .enumerate()
-            .map(|(o, c)| Measurement {
-                body: truth.bodies[c.body].name.clone(),
-                dof: c.dof,
-                quantity: c.quantity.into(),
-                freqs_hz: freqs.clone(),
-                amplitude: r.output(o).iter().map(|v| v.norm()).collect(),
-                phase_rad: None,
-                variance: Some(r.output(o).iter().map(|v| 2.0 * (0.01 * v.norm()).powi(2)).collect()),
-                coherence: None,
-                averages: None,
-            })
-            .collect(),
-    };
+    let data = synthetic::amplitude_data(&truth, &synthetic::fwd32j_lines(), 0.01, || 0.0).expect("FRF");
     let vars = variables::load(&root.join("configs/identification/fwd32j.toml"), &truth).expect("vars");
     let obs = data::validate(&data, &truth, "bench").expect("data");
     let x: Vec<f64> = vars.vars.iter().map(|v| truth.param(v.targets[0].param).unwrap_or(v.initial) / v.targets[0].ratio).collect();
@@ -73,7 +50,6 @@ fn bench(c: &mut Criterion) {
         })
     });
     g.finish();
-    let _ = DVector::<f64>::zeros(0);
 }
 
 criterion_group!(benches, bench);

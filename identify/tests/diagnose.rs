@@ -7,8 +7,8 @@ use std::path::PathBuf;
 
 use identify::diagnose::{self, diagnose, Effect};
 use identify::frf::{self, Method};
-use identify::identification::{self as idn, data, variables, Options};
-use identify::measured::{MeasuredData, Measurement};
+use identify::identification::{self as idn, data, synthetic, variables, Options};
+use identify::measured::MeasuredData;
 use identify::model::Model;
 use rand::rngs::StdRng;
 use rand::SeedableRng;
@@ -23,36 +23,11 @@ fn load_model(name: &str) -> Model {
     identify::modelfile::load(&p).unwrap_or_else(|e| panic!("{}: {e}", p.display())).model
 }
 
-/// 38 log-spaced lines, 20-400 Hz, amplitude with relative noise `rel` and its stated variance.
+/// The FWD-32J measurement (38 log-spaced lines, 20-400 Hz, per table characteristic), amplitude
+/// with relative noise `rel` and its stated variance.
 fn measure(truth: &Model, rel: f64, seed: u64) -> MeasuredData {
-    let freqs: Vec<f64> = (0..38).map(|i| 20.0 * 20.0f64.powf(i as f64 / 37.0)).collect();
-    let r = frf::response(truth, &freqs, &[], Method::Auto).expect("truth FRF");
     let mut rng = StdRng::seed_from_u64(seed);
-    MeasuredData {
-        source: format!("synthetic, seed {seed}"),
-        characteristics: truth
-            .outputs
-            .iter()
-            .enumerate()
-            .map(|(o, c)| {
-                let amp = r.output(o).iter().map(|v| {
-                    let n: f64 = StandardNormal.sample(&mut rng);
-                    v.norm() * (1.0 + rel * n)
-                });
-                Measurement {
-                    body: truth.bodies[c.body].name.clone(),
-                    dof: c.dof,
-                    quantity: c.quantity.into(),
-                    freqs_hz: freqs.clone(),
-                    amplitude: amp.collect(),
-                    phase_rad: None,
-                    variance: Some(r.output(o).iter().map(|v| 2.0 * (rel * v.norm()).powi(2)).collect()),
-                    coherence: None,
-                    averages: None,
-                }
-            })
-            .collect(),
-    }
+    synthetic::amplitude_data(truth, &synthetic::fwd32j_lines(), rel, || StandardNormal.sample(&mut rng)).expect("truth FRF")
 }
 
 struct Case {
@@ -214,7 +189,6 @@ fn a_body_split_at_vanishing_compliance_is_the_rigid_body() {
     let freqs: Vec<f64> = (0..30).map(|i| 20.0 + 13.0 * i as f64).collect();
     let rigid = frf::response(&m, &freqs, &[], Method::Direct).unwrap();
     for axis in 0..3 {
-        let mut split = m.clone();
         // The difference shrinks in proportion to the compliance (c · stiffness of the model).
         let diff = |c: f64| {
             let mut split = m.clone();

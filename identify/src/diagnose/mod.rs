@@ -237,8 +237,7 @@ pub fn diagnose(
         let (x, gamma) = pc.split(&cur.u);
         let realized = pc.realize(&gamma).map_err(DiagnoseError::Model)?;
         let crit = pc.criterion(&realized).map_err(DiagnoseError::Model)?;
-        let (lo, hi) = pc.bounds();
-        let free: Vec<usize> = (0..cur.u.len()).filter(|&i| cur.u[i] > lo[i] + 1e-12 && cur.u[i] < hi[i] - 1e-12).collect();
+        let free = free_columns(&pc, &cur.u);
         let jfree = DMatrix::from_fn(cur.jac.nrows(), free.len(), |r, c| cur.jac[(r, free[c])]);
         let m = cur.e.len();
         let sigma2 = if crit.noise.scale_unknown() { cur.e.norm_squared() / (m.saturating_sub(free.len()).max(1)) as f64 } else { 1.0 };
@@ -340,13 +339,17 @@ fn families(ranked: &[score::Scored], n: usize) -> Vec<Vec<usize>> {
     out
 }
 
+/// The parameters of `p` not at a bound at `u`: the fit's free columns.
+fn free_columns(p: &Problem, u: &DVector<f64>) -> Vec<usize> {
+    let (lo, hi) = p.bounds();
+    (0..u.len()).filter(|&i| u[i] > lo[i] + 1e-12 && u[i] < hi[i] - 1e-12).collect()
+}
+
 fn analysis(p: &Problem, cur: &Current, opts: &Options) -> Result<ResidualAnalysis, DiagnoseError> {
     let (x, gamma) = p.split(&cur.u);
     let r = p.realize(&gamma).map_err(DiagnoseError::Model)?;
     let crit = p.criterion(&r).map_err(DiagnoseError::Model)?;
-    let (lo, hi) = p.bounds();
-    let free = (0..cur.u.len()).filter(|&i| cur.u[i] > lo[i] + 1e-12 && cur.u[i] < hi[i] - 1e-12).count();
-    Ok(residuals::analyze(&crit, &cur.e, free, &crit.model_at(&x), opts.alpha))
+    Ok(residuals::analyze(&crit, &cur.e, free_columns(p, &cur.u).len(), &crit.model_at(&x), opts.alpha))
 }
 
 /// Refits the current effects plus `cand` with every parameter free.
