@@ -327,11 +327,9 @@ pub fn characteristics(session_path: &Path, opts: &AnalysisOptions) -> Result<Se
                     detail: r.value["detail"].as_str().unwrap_or("").to_string(),
                 });
             }
-            t if t == Topic::SweepEvent.name() => {
-                if r.value["kind"] == "retry" {
-                    if let Some(s) = r.value["step"].as_u64() {
-                        *retries.entry(s as usize).or_default() += 1;
-                    }
+            t if t == Topic::SweepEvent.name() && r.value["kind"] == "retry" => {
+                if let Some(s) = r.value["step"].as_u64() {
+                    *retries.entry(s as usize).or_default() += 1;
                 }
             }
             t if t == Topic::SweepStep.name() => {

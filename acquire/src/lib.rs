@@ -8,7 +8,8 @@
 //!
 //! Data flow: [`stand::Stand`] (stand file) → [`rig::Rig`] (devices opened, identified,
 //! configured; every byte tapped into the [`session`]) → [`sweep`] (stepped sine with closed-loop
-//! force control, broadband) → `session.mcap` (docs/mcap-session.md) → the `process` crate.
+//! force control, broadband) → `session.mcap` (docs/mcap-session.md) → [`analysis`] (the
+//! session's measured characteristics, recomputed from its raw blocks with the `process` crate).
 //! Protocol specs: docs/shaker-scpi.md, docs/daq-serial.md, docs/daq-can.md.
 //!
 //! ```

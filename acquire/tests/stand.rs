@@ -427,6 +427,13 @@ async fn broadband_random_and_chirp_recover_the_truth_frf() {
             assert!(checked > 100);
             let rs = records(&path);
             assert_eq!(topic(&rs, "/sweep/event").iter().filter(|e| e.value["kind"] == "average").count(), 4);
+            // The H1 estimates are in the session, exactly as returned.
+            let bb = topic(&rs, "/sweep/broadband");
+            assert_eq!(bb.len(), 1);
+            let ch1 = &bb[0].value["channels"][1];
+            assert_eq!(ch1["name"], stand.channels[1].name.as_str());
+            let re: Vec<f64> = ch1["h1_re"].as_array().unwrap().iter().map(|x| x.as_f64().unwrap()).collect();
+            assert_eq!(re, r.h1[1].iter().map(|h| h.re).collect::<Vec<_>>());
         }
     })
     .await

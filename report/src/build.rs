@@ -3,7 +3,7 @@
 
 use identify::identification::data::{Observations, Observed};
 use identify::identification::{report as table, Identification};
-use identify::{frf, sensitivity, Model, Quantity};
+use identify::{diagnose, frf, sensitivity, Model, Quantity};
 
 use crate::document::*;
 use crate::ReportError;
@@ -198,6 +198,60 @@ pub fn sensitivity_map(model: &Model, id: &Identification, obs: &Observations) -
             .map(|p| obs.characteristics.iter().map(|c| finite(s.relative[p * s.outputs + c.output])).collect())
             .collect(),
     })
+}
+
+/// The diagnosis section from `identify::diagnose`'s result: every round's ranked candidates
+/// (strongest first), the accepted ones with their principal parameter in report units, the fit
+/// before and after, and what was not tried. `base` names the identified model.
+pub fn diagnosis(d: &diagnose::Diagnosis, base: &str) -> Diagnosis {
+    let mut candidates = Vec::new();
+    let removed_in = |effect: &str| d.rounds.iter().position(|r| r.removed.iter().any(|x| x.effect == effect));
+    for (i, round) in d.rounds.iter().enumerate() {
+        let accepted = round.accepted.and_then(|k| round.refits.get(k));
+        for c in &round.ranked {
+            let refit = accepted.filter(|a| a.effect == c.effect);
+            // Values at the final fit; none for an effect a later round removed.
+            let principal = refit
+                .and_then(|a| d.accepted.iter().find(|f| f.effect == a.effect))
+                .and_then(|a| a.params.first())
+                .map(|p| p.display());
+            candidates.push(Candidate {
+                round: i + 1,
+                name: c.kind.clone(),
+                location: match removed_in(&c.effect).filter(|_| refit.is_some()) {
+                    Some(k) => format!("{} (removed in round {}: not needed once later effects were added)", c.effect, k + 1),
+                    None => c.effect.clone(),
+                },
+                statistic: finite(c.statistic),
+                p_value: c.p_value.clamp(0.0, 1.0),
+                accepted: refit.is_some(),
+                estimate: principal.map(|(v, _, _)| finite(v)),
+                std_error: principal.map(|(_, s, _)| finite(s)),
+                unit: principal.map(|(_, _, u)| u.to_string()).unwrap_or_default(),
+            });
+        }
+    }
+    let fit = |r: &diagnose::residuals::ResidualAnalysis| FitQuality {
+        criterion: finite(r.criterion),
+        chi2_p_value: r.chi2_p.map(finite),
+        reduced_chi2: finite(r.reduced_chi2),
+        rms_relative_error: r.characteristics.iter().map(|c| LabelledValue { label: c.label.clone(), value: finite(c.rms_relative) }).collect(),
+    };
+    let added: Vec<String> = d
+        .accepted
+        .iter()
+        .map(|a| format!("{} ({})", a.effect, a.params.iter().map(diagnose::ParamEstimate::describe).collect::<Vec<_>>().join(", ")))
+        .collect();
+    let final_model = if added.is_empty() { format!("{base} (no effect added)") } else { format!("{base} + {}", added.join(" + ")) };
+    Diagnosis {
+        candidates,
+        before: fit(&d.before),
+        after: fit(&d.after),
+        final_model,
+        explained: d.after.explained,
+        verdict: d.after.verdict.clone(),
+        not_tried: d.not_tried.iter().map(|n| NotTried { effect: n.effect.clone(), reason: n.reason.clone() }).collect(),
+    }
 }
 
 /// Builds the report.

@@ -28,7 +28,7 @@ pub struct Report {
     pub characteristics: Vec<CharacteristicReport>,
     /// The identification (Table-1-like table and fit summary).
     pub identification: IdentificationSummary,
-    /// Closed-loop diagnosis (issue 6), when it ran.
+    /// Closed-loop diagnosis (docs/diagnosis.md), when it ran.
     pub diagnosis: Option<Diagnosis>,
     /// Band sensitivity (relative MI, paper eq. 4.16) of the identified model.
     pub sensitivity: Option<SensitivityMap>,
@@ -194,7 +194,7 @@ pub struct WeakDirection {
     pub relative_std: Option<f64>,
 }
 
-/// The diagnosis section: filled from `identify::diagnose` (issue 6) by the pipeline.
+/// The diagnosis section: filled from `identify::diagnose` by [`crate::build::diagnosis`].
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Diagnosis {
@@ -206,12 +206,31 @@ pub struct Diagnosis {
     pub after: FitQuality,
     /// One line on the final model (e.g. `"fwd32j-no-actuator + spring spindle head–table"`).
     pub final_model: String,
+    /// Whether the final model explains the data to the noise level.
+    pub explained: bool,
+    /// The verdict on the final model in words.
+    pub verdict: String,
+    /// Effects and refits that could not be evaluated, and why.
+    pub not_tried: Vec<NotTried>,
+}
+
+/// A candidate effect or refit diagnosis could not evaluate.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct NotTried {
+    /// What.
+    pub effect: String,
+    /// Why.
+    pub reason: String,
 }
 
 /// A candidate undeclared effect.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Candidate {
+    /// Diagnosis round (1-based): each round ranks the candidates at the current fit and adds at
+    /// most one.
+    pub round: usize,
     /// What the effect is (`"spring"`, `"joint stiffness kn"`).
     pub name: String,
     /// Where (`"spindle head–table"`, `"SDE 12"`).
@@ -236,8 +255,11 @@ pub struct Candidate {
 pub struct FitQuality {
     /// Criterion J.
     pub criterion: f64,
-    /// p-value of 2J under χ²(m − n) (small: the model does not explain the data).
-    pub chi2_p_value: f64,
+    /// p-value of 2J under χ²(m − n) (small: the model does not explain the data); `null` when
+    /// the noise level is known only up to scale.
+    pub chi2_p_value: Option<f64>,
+    /// 2J / (m − n): ≈ 1 at the noise level.
+    pub reduced_chi2: f64,
     /// RMS relative amplitude error per characteristic label.
     pub rms_relative_error: Vec<LabelledValue>,
 }

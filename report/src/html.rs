@@ -51,7 +51,7 @@ table{border-collapse:collapse;margin:.6em 0;font-size:.9em}th,td{border:1px sol
 th{background:#f3f3f3}td.l,th.l{text-align:left}.meta{color:#555;font-size:.9em}\
 .status{padding:.6em 1em;border-radius:4px;margin:1em 0}.ok{background:#e6f4e6;border:1px solid #7b7}\
 .alarm{background:#fff0e0;border:1px solid #e90}.failure{background:#fde8e8;border:1px solid #d55}\
-tr.alarm td{background:#fff0e0}figure{margin:.8em 0}svg{max-width:100%;height:auto;display:block}\
+tr.alarm td{background:#fff0e0}tr.accepted td{background:#e8f6e8}figure{margin:.8em 0}svg{max-width:100%;height:auto;display:block}\
 .note{color:#555;font-style:italic}";
 
 /// Renders the page.
@@ -75,7 +75,7 @@ pub fn render(r: &Report) -> Result<String, ReportError> {
     if let Some(s) = &r.source.stand {
         let _ = write!(h, " · stand {}", e(s));
     }
-    let _ = write!(h, "<br>measurement: {}</p>\n", e(&r.source.measurement));
+    let _ = writeln!(h, "<br>measurement: {}</p>", e(&r.source.measurement));
     let o = r.status.outcome.as_str();
     let _ = write!(h, "<div class=\"status {o}\" id=\"status\"><strong>outcome: {o}</strong>");
     if !r.status.messages.is_empty() {
@@ -119,20 +119,20 @@ pub fn render(r: &Report) -> Result<String, ReportError> {
         for s in &c.stages {
             let _ = write!(h, "<td>{:.2} %</td>", 100.0 * s.rms_relative_error);
         }
-        let _ = write!(h, "<td>{}</td><td class=\"l\">{}</td></tr>\n", c.freqs_hz.len(), e(&c.sigma_kind));
+        let _ = writeln!(h, "<td>{}</td><td class=\"l\">{}</td></tr>", c.freqs_hz.len(), e(&c.sigma_kind));
     }
     h.push_str("</table>\n");
     for c in &r.characteristics {
-        let _ = write!(h, "<figure class=\"plot\" data-chart=\"amplitude\">{}</figure>\n", inline(plot::amplitude_chart(c)?));
-        let _ = write!(h, "<figure class=\"plot\" data-chart=\"residual\">{}</figure>\n", inline(plot::residual_chart(c)?));
+        let _ = writeln!(h, "<figure class=\"plot\" data-chart=\"amplitude\">{}</figure>", inline(plot::amplitude_chart(c)?));
+        let _ = writeln!(h, "<figure class=\"plot\" data-chart=\"residual\">{}</figure>", inline(plot::residual_chart(c)?));
     }
 
     // Parameter table.
     h.push_str("<h2 id=\"parameters\">Parameters (Table-1-like)</h2>\n<table><tr><th class=\"l\">variable</th><th class=\"l\">SDEs</th><th class=\"l\">parameter</th><th class=\"l\">unit</th><th>initial</th><th>identified</th><th>std error</th><th>σ/x</th><th class=\"l\">note</th></tr>\n");
     for p in &id.parameters {
-        let _ = write!(
+        let _ = writeln!(
             h,
-            "<tr><td class=\"l\">{}</td><td class=\"l\">{}</td><td class=\"l\">{}</td><td class=\"l\">{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td class=\"l\">{}</td></tr>\n",
+            "<tr><td class=\"l\">{}</td><td class=\"l\">{}</td><td class=\"l\">{}</td><td class=\"l\">{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td class=\"l\">{}</td></tr>",
             e(&p.variable),
             e(&p.sdes),
             e(&p.parameter),
@@ -145,7 +145,7 @@ pub fn render(r: &Report) -> Result<String, ReportError> {
         );
     }
     h.push_str("</table>\n");
-    let _ = write!(h, "<figure class=\"plot\" data-chart=\"parameters\">{}</figure>\n", inline(plot::parameter_chart(&id.parameters)?));
+    let _ = writeln!(h, "<figure class=\"plot\" data-chart=\"parameters\">{}</figure>", inline(plot::parameter_chart(&id.parameters)?));
     if !id.weak_directions.is_empty() {
         h.push_str("<p>Poorly identifiable combinations (group these variables or add measurements):</p><ul>");
         for w in &id.weak_directions {
@@ -159,28 +159,38 @@ pub fn render(r: &Report) -> Result<String, ReportError> {
     match &r.diagnosis {
         None => h.push_str("<p class=\"note\">Diagnosis did not run for this report.</p>\n"),
         Some(d) => {
-            h.push_str("<table><tr><th class=\"l\">candidate effect</th><th class=\"l\">where</th><th>statistic</th><th>p-value</th><th class=\"l\">accepted</th><th>estimate</th><th>std error</th><th class=\"l\">unit</th></tr>\n");
+            let _ = writeln!(h, "<p class=\"verdict\">{}: {}</p>", if d.explained { "Explained" } else { "Not explained" }, e(&d.verdict));
+            h.push_str("<table><tr><th>round</th><th class=\"l\">candidate effect</th><th class=\"l\">what and where</th><th>score statistic</th><th>p-value</th><th class=\"l\">accepted</th><th>estimate</th><th>std error</th><th class=\"l\">unit</th></tr>\n");
             for c in &d.candidates {
-                let _ = write!(
+                let _ = writeln!(
                     h,
-                    "<tr><td class=\"l\">{}</td><td class=\"l\">{}</td><td>{}</td><td>{:.3e}</td><td class=\"l\">{}</td><td>{}</td><td>{}</td><td class=\"l\">{}</td></tr>\n",
-                    e(&c.name), e(&c.location), num(c.statistic), c.p_value, if c.accepted { "yes" } else { "no" },
+                    "<tr{}><td>{}</td><td class=\"l\">{}</td><td class=\"l\">{}</td><td>{}</td><td>{:.3e}</td><td class=\"l\">{}</td><td>{}</td><td>{}</td><td class=\"l\">{}</td></tr>",
+                    if c.accepted { " class=\"accepted\"" } else { "" },
+                    c.round, e(&c.name), e(&c.location), num(c.statistic), c.p_value, if c.accepted { "yes" } else { "no" },
                     opt(c.estimate), opt(c.std_error), e(&c.unit)
                 );
             }
-            h.push_str("</table>\n<table><tr><th class=\"l\"></th><th>criterion J</th><th>χ² p-value</th>");
+            h.push_str("</table>\n<table><tr><th class=\"l\"></th><th>criterion J</th><th>reduced χ²</th><th>χ² p-value</th>");
             for l in &d.before.rms_relative_error {
                 let _ = write!(h, "<th>RMS {}</th>", e(&l.label));
             }
             h.push_str("</tr>\n");
             for (name, q) in [("before", &d.before), ("after", &d.after)] {
-                let _ = write!(h, "<tr><td class=\"l\">{name}</td><td>{}</td><td>{:.3e}</td>", num(q.criterion), q.chi2_p_value);
+                let p = q.chi2_p_value.map(|p| format!("{p:.3e}")).unwrap_or_else(|| "— (noise level unknown)".into());
+                let _ = write!(h, "<tr><td class=\"l\">{name}</td><td>{}</td><td>{:.3}</td><td>{p}</td>", num(q.criterion), q.reduced_chi2);
                 for l in &q.rms_relative_error {
                     let _ = write!(h, "<td>{:.2} %</td>", 100.0 * l.value);
                 }
                 h.push_str("</tr>\n");
             }
-            let _ = write!(h, "</table>\n<p>Final model: {}</p>\n", e(&d.final_model));
+            let _ = writeln!(h, "</table>\n<p>Final model: {}</p>", e(&d.final_model));
+            if !d.not_tried.is_empty() {
+                h.push_str("<p>Not tried:</p><ul>");
+                for n in &d.not_tried {
+                    let _ = write!(h, "<li>{}: {}</li>", e(&n.effect), e(&n.reason));
+                }
+                h.push_str("</ul>\n");
+            }
         }
     }
 
@@ -189,7 +199,7 @@ pub fn render(r: &Report) -> Result<String, ReportError> {
     match &r.sensitivity {
         None => h.push_str("<p class=\"note\">Not computed for this report.</p>\n"),
         Some(m) => {
-            let _ = write!(h, "<figure class=\"plot\" data-chart=\"sensitivity\">{}</figure>\n", inline(plot::sensitivity_chart(m)?));
+            let _ = writeln!(h, "<figure class=\"plot\" data-chart=\"sensitivity\">{}</figure>", inline(plot::sensitivity_chart(m)?));
         }
     }
 
@@ -198,19 +208,19 @@ pub fn render(r: &Report) -> Result<String, ReportError> {
     match &r.drift {
         None => h.push_str("<p class=\"note\">No earlier runs to compare with.</p>\n"),
         Some(d) => {
-            let _ = write!(
+            let _ = writeln!(
                 h,
-                "<p>{} runs; baseline {}; alarm when a parameter moves more than {} standard errors of the difference.</p>\n",
+                "<p>{} runs; baseline {}; alarm when a parameter moves more than {} standard errors of the difference.</p>",
                 d.runs.len(),
                 e(d.runs.get(d.baseline).map(String::as_str).unwrap_or("?")),
                 d.k_sigma
             );
-            let _ = write!(h, "<figure class=\"plot\" data-chart=\"drift\">{}</figure>\n", inline(plot::drift_chart(d)?));
+            let _ = writeln!(h, "<figure class=\"plot\" data-chart=\"drift\">{}</figure>", inline(plot::drift_chart(d)?));
             h.push_str("<table><tr><th class=\"l\">variable</th><th class=\"l\">unit</th><th>baseline</th><th>this run</th><th>deviation (σ)</th><th class=\"l\">alarm</th></tr>\n");
             for p in &d.parameters {
-                let _ = write!(
+                let _ = writeln!(
                     h,
-                    "<tr{}><td class=\"l\">{}</td><td class=\"l\">{}</td><td>{}</td><td>{}</td><td>{}</td><td class=\"l\">{}</td></tr>\n",
+                    "<tr{}><td class=\"l\">{}</td><td class=\"l\">{}</td><td>{}</td><td>{}</td><td>{}</td><td class=\"l\">{}</td></tr>",
                     if p.alarm { " class=\"alarm\"" } else { "" },
                     e(&p.variable),
                     e(&p.unit),
@@ -223,6 +233,6 @@ pub fn render(r: &Report) -> Result<String, ReportError> {
             h.push_str("</table>\n");
         }
     }
-    let _ = write!(h, "<p class=\"meta\">Machine-readable copy: report.json ({}).</p>\n</body></html>\n", e(&r.schema));
+    let _ = writeln!(h, "<p class=\"meta\">Machine-readable copy: report.json ({}).</p>\n</body></html>", e(&r.schema));
     Ok(h)
 }

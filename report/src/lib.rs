@@ -2,7 +2,7 @@
 //!
 //! One run (demo, replay, nightly) becomes a [`Report`]: measured versus model amplitude-frequency
 //! characteristics at each stage (initial, identified, diagnosed), standardized residuals, the
-//! Table-1-like parameter table with Cramér-Rao errors, the diagnosis (issue 6), the band
+//! Table-1-like parameter table with Cramér-Rao errors, the diagnosis (ranked candidate effects, error before and after), the band
 //! sensitivity (MI) map and the drift of every parameter across nights. It is written twice:
 //!
 //! - [`html::render`]: one self-contained HTML file — inline CSS, inline SVG drawn with

@@ -6,7 +6,8 @@
 //! loop) is recorded into a session file; processing turns it into the table's principal-axis
 //! characteristics; identification fits the paper's decision variables from Table 1's initial
 //! values on `configs/models/fwd32j-no-actuator.toml` — a model that lacks the actuator, the
-//! undeclared effect that diagnosis (issue 6) has to find. The Table-1-like summary is printed and
+//! undeclared effect that diagnosis finds and adds. The Table-1-like summary, the diagnosis (ranked
+//! candidate effects, the accepted one, the error before and after) are printed and
 //! the report folder (HTML, JSON, the session and the configs that ran) is written.
 //!
 //! The configs are built in and written into the report folder, so the demo runs from anywhere
@@ -37,9 +38,10 @@ pub struct DemoArgs {
     /// Folder for the report (a dated sub-folder is made in it).
     #[arg(long, default_value = "reports")]
     pub out: PathBuf,
-    /// Simulated time per wall-clock time of the simulated stand (1 = real time).
-    #[arg(long, default_value_t = 2.0)]
-    pub speed: f64,
+    /// Simulated time per wall-clock time of the simulated stand (1 = real time; default: the
+    /// stand file's `truth.speed`).
+    #[arg(long)]
+    pub speed: Option<f64>,
     /// Number of log-spaced lines of the sweep, 20-400 Hz (the paper measured 38).
     #[arg(long, default_value_t = 38)]
     pub points: usize,
@@ -80,13 +82,19 @@ fn materialize(dir: &Path) -> anyhow::Result<PathBuf> {
 
 /// Runs the demo.
 pub fn run(a: DemoArgs) -> anyhow::Result<ExitCode> {
-    anyhow::ensure!(a.speed.is_finite() && a.speed > 0.0 && a.speed <= 50.0, "--speed {}: give a factor in (0, 50] (1 = real time)", a.speed);
+    if let Some(s) = a.speed {
+        anyhow::ensure!(s.is_finite() && s > 0.0 && s <= 50.0, "--speed {s}: give a factor in (0, 50] (1 = real time)");
+    }
     anyhow::ensure!((4..=400).contains(&a.points), "--points {}: give 4 to 400 lines", a.points);
     let dir = pipeline::dated_folder(&a.out, "demo")?;
     let configs = materialize(&dir)?;
     let mut stand = Stand::load(&configs.join("stands/fwd32j-model-sim.toml"))?;
+    let mut speed = 1.0;
     if let Some(t) = stand.truth.as_mut() {
-        t.speed = a.speed;
+        if let Some(s) = a.speed {
+            t.speed = s;
+        }
+        speed = t.speed;
         if let Some(s) = a.seed {
             t.seed = s;
         }
@@ -101,7 +109,7 @@ pub fn run(a: DemoArgs) -> anyhow::Result<ExitCode> {
         setup.model.sdes.len(),
         setup.vars.len()
     );
-    println!("  sweep: {} log-spaced lines 20-400 Hz at 4 kN, simulated stand at {}x real time", a.points, a.speed);
+    println!("  sweep: {} log-spaced lines 20-400 Hz at 4 kN, simulated stand at {speed}x real time", a.points);
 
     let started = Instant::now();
     let progress: Box<dyn SweepProgress> = if a.quiet { Box::new(NoProgress) } else { Box::new(IndicatifProgress::new()) };
@@ -113,7 +121,7 @@ pub fn run(a: DemoArgs) -> anyhow::Result<ExitCode> {
     let t_sweep = started.elapsed().as_secs_f64();
     println!("  session: {} ({} steps, {} stream faults) in {t_sweep:.1} s", swept.session.display(), outcome.steps.len(), outcome.faults);
 
-    let analysis = pipeline::analyse(&swept.session, &setup, &identify::identification::Options::default())?;
+    let analysis = pipeline::analyse(&swept.session, &setup, &pipeline::identification_options())?;
     let t_all = started.elapsed().as_secs_f64();
     println!();
     print!("{}", pipeline::summary_text(&analysis));
@@ -122,7 +130,7 @@ pub fn run(a: DemoArgs) -> anyhow::Result<ExitCode> {
     }
     let ctx = ReportContext { title: "ident demo: simulated FWD-32J stand", workflow: "demo", stand: Some(stand.name.clone()), drift: None, messages: Vec::new(), created_utc: String::new() };
     let (_, written) = pipeline::write_report(&dir, ctx, &setup, &analysis)?;
-    println!("\nsweep {t_sweep:.1} s, processing and identification {:.1} s", t_all - t_sweep);
+    println!("\nsweep {t_sweep:.1} s, processing, identification and diagnosis {:.1} s", t_all - t_sweep);
     println!("report: {}", dir.display());
     println!("open: {}", written.html.display());
     Ok(ExitCode::SUCCESS)

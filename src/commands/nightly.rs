@@ -345,7 +345,7 @@ fn job(cfg: &Config, dir: &Path, log: &mut Log, session: &mut Option<PathBuf>, n
         }
     };
     *session = Some(path.clone());
-    let analysis = pipeline::analyse(&path, &setup, &identify::identification::Options::default())?;
+    let analysis = pipeline::analyse(&path, &setup, &pipeline::identification_options())?;
     for m in &analysis.messages {
         log.line(m);
     }

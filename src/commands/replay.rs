@@ -28,7 +28,7 @@ pub struct ReplayArgs {
 pub fn run(a: ReplayArgs) -> anyhow::Result<ExitCode> {
     anyhow::ensure!(a.session.is_file(), "{}: no such session file", a.session.display());
     let setup = Setup::load(&a.model, &a.vars)?;
-    let analysis = pipeline::analyse(&a.session, &setup, &identify::identification::Options::default())?;
+    let analysis = pipeline::analyse(&a.session, &setup, &pipeline::identification_options())?;
     println!("ident replay: {} ({} steps used, {} dropped)", a.session.display(), analysis.session.steps.len(), analysis.session.dropped.len());
     print!("{}", pipeline::summary_text(&analysis));
     for m in &analysis.messages {

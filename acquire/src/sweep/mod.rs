@@ -305,12 +305,27 @@ impl<'a> Pump<'a> {
         Pump { rig, session, faults: 0, last_fault_sample: None, next_sample: 0, started: std::time::Instant::now(), samples_per_wall_s }
     }
 
-    /// The sample the DAQ is producing now: samples it has sent but the host has not read yet
-    /// (queued in the port or socket while the host was busy) were taken before the last command
-    /// and must not count as settling time.
-    fn position_now(&self) -> u64 {
-        let produced = (self.started.elapsed().as_secs_f64() * self.samples_per_wall_s) as u64;
-        self.next_sample.max(produced)
+    /// Reads (and records) the blocks the port or socket already holds, so that the next block
+    /// read was produced after the last command: settling is counted from there. Blocks queued
+    /// while the host was busy (a slow host, an emulated machine) must not count as settled
+    /// data. Caught up = a read has to wait, or the host has read as many samples as the DAQ can
+    /// have produced since START (wall-clock time × sample rate × the simulated stand's speed).
+    async fn catch_up(&mut self, fault: &mut bool) -> Result<(), SweepError> {
+        let block_s = f64::from(self.rig.stream.samples_per_block) / self.samples_per_wall_s;
+        let wait = std::time::Duration::from_secs_f64((0.5 * block_s).max(5e-4));
+        let cap = self.next_sample + (2.0 * self.samples_per_wall_s) as u64;
+        loop {
+            let produced = (self.started.elapsed().as_secs_f64() * self.samples_per_wall_s) as u64;
+            if self.next_sample >= produced || self.next_sample >= cap {
+                return Ok(());
+            }
+            match tokio::time::timeout(wait, self.next(fault)).await {
+                Err(_) => return Ok(()),
+                Ok(r) => {
+                    r?;
+                }
+            }
+        }
     }
 }
 
@@ -504,9 +519,11 @@ async fn stepped_inner(
             if stop.is_set() {
                 break None;
             }
-            // Settle, then measure a window; a fault inside either restarts the measurement.
+            // Catch up with the stream, settle, then measure a window; a fault inside the window
+            // restarts the measurement.
             let mut fault = false;
-            let start = pump.position_now() + settle;
+            pump.catch_up(&mut fault).await?;
+            let start = pump.next_sample + settle;
             estimator.clear();
             let mut window_first = None;
             while (estimator.len() as u64) < window {
@@ -520,7 +537,11 @@ async fn stepped_inner(
                     if n < start || estimator.len() as u64 >= window {
                         continue;
                     }
-                    window_first.get_or_insert(n);
+                    if window_first.is_none() {
+                        // Faults while settling do not touch the window: it starts here, after them.
+                        window_first = Some(n);
+                        fault = false;
+                    }
                     estimator.push_row(&b.volts[i * nch..(i + 1) * nch]);
                 }
                 if fault && window_first.is_some() {

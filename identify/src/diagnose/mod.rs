@@ -73,6 +73,26 @@ pub struct ParamEstimate {
     pub std_error: f64,
 }
 
+impl ParamEstimate {
+    /// Value, standard error and unit in the units of reports (the paper's N/µm for stiffness,
+    /// µm/N for compliance; others as SI).
+    pub fn display(&self) -> (f64, f64, &str) {
+        match self.unit.as_str() {
+            "N/m" => (self.value * 1e-6, self.std_error * 1e-6, "N/µm"),
+            "m/N" => (self.value * 1e6, self.std_error * 1e6, "µm/N"),
+            u => (self.value, self.std_error, u),
+        }
+    }
+
+    /// `k = 0.5635 ± 0.0005 N/µm`, in report units.
+    pub fn describe(&self) -> String {
+        let (v, s, u) = self.display();
+        let u = if u == "-" { String::new() } else { format!(" {u}") };
+        let v = if (0.01..1e5).contains(&v.abs()) { format!("{v:.4}") } else { format!("{v:.4e}") };
+        format!("{} = {v} ± {s:.2e}{u}", self.name)
+    }
+}
+
 /// One candidate's full refit.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct Refit {
@@ -136,6 +156,19 @@ pub struct Round {
     pub threshold: f64,
     /// Index into `refits` of the accepted effect.
     pub accepted: Option<usize>,
+    /// Earlier effects dropped after this round's was added: the data no longer need them.
+    pub removed: Vec<Removed>,
+}
+
+/// An effect accepted in an earlier round and dropped by the backward check.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Removed {
+    /// What and where.
+    pub effect: String,
+    /// Likelihood-ratio statistic for keeping it, given the later effects.
+    pub lr: f64,
+    /// Its p-value (not below the round's threshold: not needed).
+    pub p_value: f64,
 }
 
 /// A candidate or refit that could not be evaluated.
@@ -294,14 +327,22 @@ pub fn diagnose(
             }
         }
         let chosen = best.as_ref().map(|(i, _)| *i);
-        rounds.push(Round { candidates: ok.len(), ranked, refits: refits.clone(), threshold, accepted: chosen });
+        let mut round = Round { candidates: ok.len(), ranked, refits: refits.clone(), threshold, accepted: chosen, removed: Vec::new() };
         match best {
             Some((i, next)) => {
                 progress(&format!("accepted: {}", refits[i].effect));
                 accepted.push(refits[i].clone());
                 cur = next;
+                while let Some((k, r, next)) = backward(model, vars, obs, opts, &cur, f_hi, sigma2, threshold) {
+                    progress(&format!("removed: {} (no longer needed: LR = {:.1}, p = {:.2e})", r.effect, r.lr, r.p_value));
+                    accepted.remove(k);
+                    round.removed.push(r);
+                    cur = next;
+                }
+                rounds.push(round);
             }
             None => {
+                rounds.push(round);
                 progress("nothing significant left");
                 break;
             }
@@ -310,11 +351,84 @@ pub fn diagnose(
     let pf = Problem::new(model, vars, obs, iopts, cur.effects.clone(), f_hi);
     let after = analysis(&pf, &cur, opts)?;
     progress(&format!("after: {}", after.verdict));
+    // Effects refitted after their own round (a later effect, a removal) moved: report their
+    // values and errors at the final fit.
+    if !cur.effects.is_empty() {
+        let m = cur.e.len();
+        let free = free_columns(&pf, &cur.u).len();
+        let crit_scale = if after.chi2_p.is_none() { cur.e.norm_squared() / (m.saturating_sub(free).max(1)) as f64 } else { 1.0 };
+        for (a, params) in accepted.iter_mut().zip(estimates(&pf, &cur, f_hi, crit_scale)) {
+            a.params = params;
+        }
+    }
     let (x, gamma) = pf.split(&cur.u);
     let realized = pf.realize(&gamma).map_err(DiagnoseError::Model)?;
     let mut final_model = realized.model;
     realized.vars.apply(&mut final_model, &x);
     Ok(Diagnosis { before, after, rounds, accepted, not_tried, estimate: x, model: final_model, effects: cur.effects })
+}
+
+/// The backward check after an effect was added: an earlier effect may only have compensated for
+/// what the new one explains (a first identification in a poor local minimum, a placement next to
+/// the true one). Refits without each earlier effect and returns the first one the data no longer
+/// need (LR p-value not below `threshold`), with the fit without it.
+#[allow(clippy::too_many_arguments)]
+fn backward(
+    model: &Model,
+    vars: &Variables,
+    obs: &Observations,
+    opts: &Options,
+    cur: &Current,
+    f_hi: f64,
+    sigma2: f64,
+    threshold: f64,
+) -> Option<(usize, Removed, Current)> {
+    let n = cur.effects.len();
+    let nx = cur.u.len() - cur.effects.iter().map(|e| e.params(f_hi).len()).sum::<usize>();
+    let mut offset = nx;
+    for k in 0..n.saturating_sub(1) {
+        let q = cur.effects[k].params(f_hi).len();
+        let effects: Vec<Effect> = cur.effects.iter().enumerate().filter(|(j, _)| *j != k).map(|(_, e)| e.clone()).collect();
+        let u0 = DVector::from_iterator(cur.u.len() - q, cur.u.iter().enumerate().filter(|(i, _)| *i < offset || *i >= offset + q).map(|(_, v)| *v));
+        offset += q;
+        let mut p = Problem::new(model, vars, obs, &opts.identification, effects.clone(), f_hi);
+        let (lo, hi) = p.bounds();
+        let Ok(out) = optimize::minimize(opts.identification.optimizer, &mut p, &u0, &lo, &hi, &opts.identification.settings, &mut |_| {}) else {
+            continue;
+        };
+        let Ok((e, Some(jac))) = p.eval(&out.u, true) else { continue };
+        let lr = ((e.norm_squared() - cur.e.norm_squared()) / sigma2).max(0.0);
+        let p_value = ChiSquared::new(q as f64).map(|c| 1.0 - c.cdf(lr)).unwrap_or(0.0);
+        if p_value >= threshold {
+            let r = Removed { effect: cur.effects[k].describe(), lr, p_value };
+            return Some((k, r, Current { effects, u: out.u, e, jac }));
+        }
+    }
+    None
+}
+
+/// The effects' parameter estimates and Cramér-Rao errors at the fit `cur` of `p`.
+fn estimates(p: &Problem, cur: &Current, f_hi: f64, sigma2: f64) -> Vec<Vec<ParamEstimate>> {
+    let info = cur.jac.tr_mul(&cur.jac);
+    let cov = info.clone().try_inverse().or_else(|| info.pseudo_inverse(1e-12).ok());
+    let (_, gamma) = p.split(&cur.u);
+    let nx = cur.u.len() - gamma.len();
+    let mut idx = 0;
+    cur.effects
+        .iter()
+        .map(|eff| {
+            eff.params(f_hi)
+                .iter()
+                .map(|np| {
+                    let i = nx + idx;
+                    let se = cov.as_ref().map(|c| (c[(i, i)] * sigma2).max(0.0).sqrt() * np.scale).unwrap_or(f64::NAN);
+                    let v = ParamEstimate { name: np.name.into(), unit: np.unit.into(), value: gamma[idx], std_error: se };
+                    idx += 1;
+                    v
+                })
+                .collect()
+        })
+        .collect()
 }
 
 /// How far a refit's LR exceeds the critical value of its test at `threshold`.
@@ -449,13 +563,16 @@ pub fn text(d: &Diagnosis) -> String {
                 f.effect, f.criterion_before, f.criterion_after, f.lr, f.dof, f.p_value, f.bic_change
             );
         }
+        for x in &r.removed {
+            let _ = writeln!(s, "    removed: {} (not needed once this round's effect is in: LR {:.1}, p {:.2e})", x.effect, x.lr, x.p_value);
+        }
     }
     let _ = writeln!(s);
     if d.accepted.is_empty() {
         let _ = writeln!(s, "  no effect added: nothing significant at the chosen level");
     }
     for a in &d.accepted {
-        let ps: Vec<String> = a.params.iter().map(|p| format!("{} = {:.4e} ± {:.2e} {}", p.name, p.value, p.std_error, p.unit)).collect();
+        let ps: Vec<String> = a.params.iter().map(ParamEstimate::describe).collect();
         let _ = writeln!(s, "  added: {} ({})", a.effect, ps.join(", "));
     }
     let _ = writeln!(s, "\n  error before → after:");

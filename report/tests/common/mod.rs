@@ -55,12 +55,15 @@ pub fn diagnosis_section(f: &Fixture) -> Diagnosis {
     let rms: Vec<LabelledValue> = f.id.rms.iter().map(|(l, v)| LabelledValue { label: l.clone(), value: *v }).collect();
     Diagnosis {
         candidates: vec![
-            Candidate { name: "spring".into(), location: "k1-body–ground".into(), statistic: 42.0, p_value: 1e-10, accepted: true, estimate: Some(0.5), std_error: Some(0.05), unit: "N/um".into() },
-            Candidate { name: "joint stiffness kn".into(), location: "SDE k2".into(), statistic: 0.3, p_value: 0.58, accepted: false, estimate: None, std_error: None, unit: "N/um".into() },
+            Candidate { round: 1, name: "spring".into(), location: "k1-body–ground".into(), statistic: 42.0, p_value: 1e-10, accepted: true, estimate: Some(0.5), std_error: Some(0.05), unit: "N/um".into() },
+            Candidate { round: 1, name: "joint stiffness kn".into(), location: "SDE k2".into(), statistic: 0.3, p_value: 0.58, accepted: false, estimate: None, std_error: None, unit: "N/um".into() },
         ],
-        before: FitQuality { criterion: f.id.criterion * 3.0, chi2_p_value: 1e-6, rms_relative_error: rms.clone() },
-        after: FitQuality { criterion: f.id.criterion, chi2_p_value: 0.4, rms_relative_error: rms },
+        before: FitQuality { criterion: f.id.criterion * 3.0, chi2_p_value: Some(1e-6), reduced_chi2: 3.0, rms_relative_error: rms.clone() },
+        after: FitQuality { criterion: f.id.criterion, chi2_p_value: None, reduced_chi2: 1.0, rms_relative_error: rms },
         final_model: "two masses + spring k1-body–ground".into(),
+        explained: true,
+        verdict: "the model explains the data to the noise level".into(),
+        not_tried: vec![NotTried { effect: "point mass on k2-body".into(), reason: "the model becomes singular".into() }],
     }
 }
 
