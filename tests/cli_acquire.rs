@@ -207,3 +207,45 @@ fn bad_input_gets_messages_naming_what_to_fix() {
     assert_eq!(o.status.code(), Some(2));
     assert!(text(&o).contains(bogus.to_str().unwrap()), "{}", text(&o));
 }
+
+/// A disk that fills up mid-sweep: the sweep stops with exit 2 and a message naming the file and
+/// the cause, and everything flushed before the disk filled is recoverable and usable. The full
+/// disk is a 3 MiB tmpfs mounted in a private user and mount namespace (`unshare` from
+/// util-linux; no root needed where user namespaces are allowed, as on CI).
+#[test]
+fn a_disk_that_fills_up_stops_the_sweep_cleanly_and_keeps_what_was_written() {
+    let dir = tempfile::tempdir().unwrap();
+    let disk = dir.path().join("disk");
+    let out = dir.path().join("out");
+    std::fs::create_dir_all(&disk).unwrap();
+    std::fs::create_dir_all(&out).unwrap();
+    // The tmpfs lives only as long as the namespace: copy the session out before leaving it.
+    let script = r#"mount -t tmpfs -o size=3m tmpfs "$1" || exit 97
+"$2" sweep --stand "$3" --out "$1" >"$4/sweep.txt" 2>&1
+echo $? >"$4/rc"
+cp "$1"/*.mcap "$4/kept.mcap""#;
+    let o = Command::new("unshare")
+        .args(["--user", "--map-root-user", "--mount", "sh", "-c", script, "sh"])
+        .args([disk.to_str().unwrap(), env!("CARGO_BIN_EXE_ident"), &stand(), out.to_str().unwrap()])
+        .output()
+        .expect("run unshare (util-linux)");
+    assert!(o.status.success(), "the namespace with a small tmpfs could not be set up (user namespaces disabled?): {}", text(&o));
+    let sweep = std::fs::read_to_string(out.join("sweep.txt")).unwrap();
+    assert_eq!(std::fs::read_to_string(out.join("rc")).unwrap().trim(), "2", "{sweep}");
+    assert!(sweep.contains("could not be completed") && sweep.contains("disk space"), "the error names the cause: {sweep}");
+    assert!(!sweep.contains("panicked"), "{sweep}");
+    // What was flushed before the disk filled is there: recover it, then process it.
+    let kept = out.join("kept.mcap");
+    let recovered = out.join("recovered.mcap");
+    let r = ident(&["mcap", "recover", kept.to_str().unwrap(), "--output", recovered.to_str().unwrap()]);
+    assert!(r.status.success(), "{}", text(&r));
+    let p = ident(&["process", recovered.to_str().unwrap(), "--out", out.to_str().unwrap()]);
+    let t = text(&p);
+    assert!(p.status.success(), "{t}");
+    let points: usize = t
+        .lines()
+        .filter(|l| l.contains("table u1"))
+        .find_map(|l| l.split(": ").nth(1)?.split(' ').next()?.parse().ok())
+        .unwrap_or_else(|| panic!("no table u1 line: {t}"));
+    assert!(points >= 2, "steps measured before the disk filled are usable: {t}");
+}

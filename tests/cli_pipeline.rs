@@ -1,6 +1,6 @@
 //! End-to-end tests of the operator workflows: `ident demo` over the simulated serial devices,
 //! `ident replay` (bit-identical to the live run, truncated recordings), and `ident nightly`
-//! (lock, drift alarm, unreachable stand, full disk, bad config).
+//! (lock, drift alarm, unreachable stand, bad config). The full disk is in `cli_acquire.rs`.
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
@@ -163,6 +163,9 @@ fn nightly_with_an_unreachable_stand_fails_with_exit_2_and_keeps_the_session() {
     let status = json(&runs[0].join("status.json"));
     assert_eq!(status["outcome"], "failure");
     assert!(status["error"].as_str().unwrap().contains("ttyIDENT-NOT-THERE"));
+    // The operator's page says the same.
+    let html = std::fs::read_to_string(runs[0].join("report.html")).unwrap();
+    assert!(html.contains("outcome: failure") && html.contains("ttyIDENT-NOT-THERE") && html.contains("the session is kept"), "{html}");
     assert!(std::fs::read_to_string(dir.path().join("n.log")).unwrap().contains("FAILURE"));
 }
 

@@ -54,6 +54,30 @@ th{background:#f3f3f3}td.l,th.l{text-align:left}.meta{color:#555;font-size:.9em}
 tr.alarm td{background:#fff0e0}tr.accepted td{background:#e8f6e8}figure{margin:.8em 0}svg{max-width:100%;height:auto;display:block}\
 .note{color:#555;font-style:italic}";
 
+/// The page of a run that failed before it had results (stand unreachable, disk full, bad
+/// config): what went wrong, what was kept, where the log is. `lines` are shown as a list.
+pub fn failure_page(title: &str, created_utc: &str, error: &str, lines: &[String]) -> String {
+    let e = escape;
+    let mut h = format!(
+        "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\"><title>{}</title>\
+         <meta name=\"viewport\" content=\"width=device-width, initial-scale=1\"><style>{CSS}</style></head><body>\n\
+         <h1>{}</h1>\n<p class=\"meta\">{}</p>\n<div class=\"status failure\" id=\"status\"><strong>outcome: failure</strong><p>{}</p>",
+        e(title),
+        e(title),
+        e(created_utc),
+        e(error)
+    );
+    if !lines.is_empty() {
+        h.push_str("<ul>");
+        for l in lines {
+            let _ = write!(h, "<li>{}</li>", e(l));
+        }
+        h.push_str("</ul>");
+    }
+    h.push_str("</div>\n<p class=\"note\">No results: the run stopped before identification. Fix the cause above and run again; a kept session can be analysed with <code>ident replay</code>.</p>\n</body></html>\n");
+    h
+}
+
 /// Renders the page.
 pub fn render(r: &Report) -> Result<String, ReportError> {
     let mut h = String::new();

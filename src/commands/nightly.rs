@@ -301,9 +301,20 @@ pub fn run(a: NightlyArgs) -> anyhow::Result<ExitCode> {
             if let Some(s) = &session {
                 log.line(&format!("the session is kept: {}", s.display()));
             }
-            let status = json!({"outcome": "failure", "error": msg, "session": session.as_ref().map(|s| s.display().to_string()), "created_utc": report::build::now_utc()});
+            let now = report::build::now_utc();
+            let status = json!({"outcome": "failure", "error": msg, "session": session.as_ref().map(|s| s.display().to_string()), "created_utc": now});
             if let Err(e) = report::write_atomic(&dir.join("status.json"), status.to_string().as_bytes()) {
                 log.line(&format!("cannot write status.json: {e}"));
+            }
+            let mut lines = Vec::new();
+            if let Some(s) = &session {
+                lines.push(format!("the session is kept: {}", s.display()));
+            }
+            lines.push(format!("log: {}", cfg.log.display()));
+            lines.push(format!("configuration: {}", a.config.display()));
+            let page = report::html::failure_page(&cfg.name, &now, &msg, &lines);
+            if let Err(e) = report::write_atomic(&dir.join("report.html"), page.as_bytes()) {
+                log.line(&format!("cannot write report.html: {e}"));
             }
             2
         }
