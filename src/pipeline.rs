@@ -60,15 +60,30 @@ pub struct Swept {
     pub planned: usize,
     /// The sweep's outcome, or why it failed (device, plan, disk).
     pub outcome: Result<SweepOutcome, String>,
+    /// Messages in the completed session file.
+    pub messages: u64,
     /// Why the session file could not be completed (its flushed chunks are still readable:
     /// `ident mcap recover`).
     pub finish_error: Option<String>,
 }
 
+/// Where a sweep goes beyond its plan.
+#[derive(Debug, Default)]
+pub struct SweepOptions<'a> {
+    /// Serve the simulated DAQ on this CAN interface instead of a pseudo-terminal.
+    pub can: Option<&'a str>,
+    /// The earlier session this one continues (recorded in the session start).
+    pub resume: Option<&'a Path>,
+    /// Steps the earlier session completed (skipped here).
+    pub done: BTreeSet<usize>,
+    /// Ctrl-C stops the sweep after the current step (the file is still completed).
+    pub ctrl_c: bool,
+}
+
 /// Runs a stepped-sine sweep of `stand` into a new session file at `session`. Ports given as
-/// `"sim"` are served by the simulated stand. The session file is kept whatever happens; only
-/// failures before it exists are `Err`.
-pub fn sweep(stand: &Stand, plan: &SteppedSine, session: &Path, progress: &dyn SweepProgress, stop: &StopSignal) -> anyhow::Result<Swept> {
+/// `"sim"` are served by the simulated stand (announced on stderr). The session file is kept
+/// whatever happens; only failures before it exists are `Err`.
+pub fn sweep(stand: &Stand, plan: &SteppedSine, session: &Path, opts: &SweepOptions<'_>, progress: &dyn SweepProgress) -> anyhow::Result<Swept> {
     let planned = plan.frequencies.frequencies()?.len();
     let rt = tokio::runtime::Builder::new_multi_thread()
         .worker_threads(2)
@@ -76,25 +91,45 @@ pub fn sweep(stand: &Stand, plan: &SteppedSine, session: &Path, progress: &dyn S
         .build()
         .context("cannot start the async runtime")?;
     rt.block_on(async {
+        // The Ctrl-C handler needs the runtime.
+        let stop = if opts.ctrl_c { StopSignal::on_ctrl_c() } else { StopSignal::new() };
         let uses_sim = stand.shaker.port == PortSpec::Sim || stand.daq.port == PortSpec::Sim;
-        let sim = if uses_sim { Some(SimStand::start(stand)?) } else { None };
-        let bound = sim.as_ref().map(|s| s.bind(stand)).unwrap_or_else(|| stand.clone());
+        let sim = match (uses_sim, opts.can) {
+            (true, Some(iface)) => Some(SimStand::start_can(stand, iface)?),
+            (true, None) => Some(SimStand::start(stand)?),
+            (false, Some(_)) => anyhow::bail!(
+                "the CAN interface serves the simulated DAQ; {} has no port = \"sim\" (give daq.port = \"can:IFACE\" for a real CAN DAQ)",
+                stand.file
+            ),
+            (false, None) => None,
+        };
+        let bound = match &sim {
+            Some(s) => {
+                let speed = stand.truth.as_ref().map(|t| t.speed).unwrap_or(1.0);
+                eprintln!("simulated stand at {speed}× real time: shaker {}, daq {}", s.shaker_port, s.daq_port);
+                s.bind(stand)
+            }
+            None => stand.clone(),
+        };
         let file = Session::create(session, SessionOptions::default())
             .with_context(|| format!("cannot create the session file {}", session.display()))?;
+        eprintln!("recording {}", session.display());
         let h = file.handle();
-        let done = BTreeSet::new();
         let outcome = async {
-            sweep::log_session_start(&h, &stand.file, plan, None, &done)?;
+            sweep::log_session_start(&h, &stand.file, plan, opts.resume, &opts.done)?;
             let mut rig = Rig::connect(&bound, Some(&h)).await?;
-            Ok::<_, anyhow::Error>(sweep::stepped_sine(&mut rig, plan, &h, progress, stop, &done).await?)
+            Ok::<_, anyhow::Error>(sweep::stepped_sine(&mut rig, plan, &h, progress, &stop, &opts.done).await?)
         }
         .await
         .map_err(|e| format!("{e:#}"));
-        let finish_error = file.finish().err().map(|e| e.to_string());
+        let (messages, finish_error) = match file.finish() {
+            Ok(summary) => (summary.total(), None),
+            Err(e) => (0, Some(e.to_string())),
+        };
         if let Some(s) = sim {
             s.shutdown();
         }
-        Ok(Swept { session: session.to_path_buf(), planned, outcome, finish_error })
+        Ok(Swept { session: session.to_path_buf(), planned, outcome, messages, finish_error })
     })
 }
 

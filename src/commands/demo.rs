@@ -18,7 +18,7 @@ use std::process::ExitCode;
 use std::time::Instant;
 
 use acquire::stand::Stand;
-use acquire::sweep::{FrequencyList, IndicatifProgress, NoProgress, SteppedSine, StopSignal, SweepProgress};
+use acquire::sweep::{FrequencyList, IndicatifProgress, NoProgress, SteppedSine, SweepProgress};
 use anyhow::Context;
 
 use crate::pipeline::{self, ReportContext, Setup};
@@ -113,7 +113,7 @@ pub fn run(a: DemoArgs) -> anyhow::Result<ExitCode> {
 
     let started = Instant::now();
     let progress: Box<dyn SweepProgress> = if a.quiet { Box::new(NoProgress) } else { Box::new(IndicatifProgress::new()) };
-    let swept = pipeline::sweep(&stand, &plan, &dir.join("session.mcap"), progress.as_ref(), &StopSignal::new())?;
+    let swept = pipeline::sweep(&stand, &plan, &dir.join("session.mcap"), &Default::default(), progress.as_ref())?;
     let outcome = swept.outcome.map_err(|e| anyhow::anyhow!("the sweep failed: {e} (session kept: {})", swept.session.display()))?;
     if let Some(e) = &swept.finish_error {
         anyhow::bail!("the session file {} could not be completed: {e}", swept.session.display());

@@ -13,7 +13,7 @@ use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 use acquire::stand::Stand;
-use acquire::sweep::{FrequencyList, NoProgress, SteppedSine, StopSignal};
+use acquire::sweep::{FrequencyList, NoProgress, SteppedSine};
 use anyhow::Context;
 use serde::Deserialize;
 use serde_json::json;
@@ -344,7 +344,7 @@ fn job(cfg: &Config, dir: &Path, log: &mut Log, session: &mut Option<PathBuf>, n
             let stem = stand_file.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_else(|| "stand".into());
             let p = cfg.sessions.join(format!("{stem}-{}.mcap", dir.file_name().map(|f| f.to_string_lossy().into_owned()).unwrap_or_default()));
             log.line(&format!("sweep of {} into {}", stand.name, p.display()));
-            let swept = pipeline::sweep(&stand, &cfg.plan(), &p, &NoProgress, &StopSignal::new())?;
+            let swept = pipeline::sweep(&stand, &cfg.plan(), &p, &Default::default(), &NoProgress)?;
             *session = Some(p.clone());
             if let Some(e) = &swept.finish_error {
                 log.line(&format!("the session file could not be completed: {e}; its flushed part is readable (ident mcap recover)"));

@@ -12,12 +12,11 @@ use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::time::Instant;
 
-use acquire::rig::Rig;
-use acquire::session::{Session, SessionOptions};
-use acquire::sim::SimStand;
-use acquire::stand::{PortSpec, Stand};
-use acquire::sweep::{self, FrequencyList, IndicatifProgress, SteppedSine, StopSignal};
+use acquire::stand::Stand;
+use acquire::sweep::{self, FrequencyList, IndicatifProgress, SteppedSine};
 use anyhow::Context;
+
+use crate::pipeline;
 
 /// Arguments of `ident sweep`.
 #[derive(clap::Args)]
@@ -66,27 +65,10 @@ pub fn plan(a: &SweepArgs) -> SteppedSine {
     }
 }
 
-/// `YYYYmmddTHHMMSSZ` for a Unix time (s), UTC.
-fn utc_stamp(secs: u64) -> String {
-    let days = (secs / 86_400) as i64;
-    let rem = secs % 86_400;
-    // Civil date from days since 1970-01-01 (H. Hinnant's algorithm).
-    let z = days + 719_468;
-    let era = z.div_euclid(146_097);
-    let doe = z - era * 146_097;
-    let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365;
-    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
-    let mp = (5 * doy + 2) / 153;
-    let d = doy - (153 * mp + 2) / 5 + 1;
-    let m = if mp < 10 { mp + 3 } else { mp - 9 };
-    let y = yoe + era * 400 + i64::from(m <= 2);
-    format!("{y:04}{m:02}{d:02}T{:02}{:02}{:02}Z", rem / 3600, rem % 3600 / 60, rem % 60)
-}
-
 fn session_path(dir: &Path, stand_file: &Path) -> PathBuf {
     let stem = stand_file.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_else(|| "stand".into());
-    let secs = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map(|d| d.as_secs()).unwrap_or(0);
-    let base = format!("{stem}-{}", utc_stamp(secs));
+    // `YYYYmmddTHHMMSSZ`: sortable, and valid in file names everywhere.
+    let base = format!("{stem}-{}", report::build::now_utc().replace(['-', ':'], ""));
     let mut p = dir.join(format!("{base}.mcap"));
     let mut k = 1;
     while p.exists() {
@@ -112,75 +94,37 @@ pub fn run(a: SweepArgs) -> anyhow::Result<ExitCode> {
     };
     std::fs::create_dir_all(&a.out).with_context(|| format!("cannot create the session folder {}", a.out.display()))?;
     let path = session_path(&a.out, &a.stand);
-    let rt = tokio::runtime::Builder::new_multi_thread().worker_threads(2).enable_all().build().context("cannot start the async runtime")?;
-    rt.block_on(async move {
-        let uses_sim = stand.shaker.port == PortSpec::Sim || stand.daq.port == PortSpec::Sim;
-        let sim = match (uses_sim, &a.can) {
-            (true, Some(iface)) => Some(SimStand::start_can(&stand, iface)?),
-            (true, None) => Some(SimStand::start(&stand)?),
-            (false, Some(_)) => anyhow::bail!("--can serves the simulated DAQ; {} has no port = \"sim\" (give daq.port = \"can:IFACE\" for a real CAN DAQ)", a.stand.display()),
-            (false, None) => None,
-        };
-        let bound = match &sim {
-            Some(s) => {
-                eprintln!("ident sweep: simulated stand at {}× real time: shaker {}, daq {}", stand.truth.as_ref().map(|t| t.speed).unwrap_or(1.0), s.shaker_port, s.daq_port);
-                s.bind(&stand)
-            }
-            None => stand.clone(),
-        };
-        let session = Session::create(&path, SessionOptions::default())?;
-        let h = session.handle();
-        eprintln!("ident sweep: recording {}", path.display());
-        let stop = StopSignal::on_ctrl_c();
-        let progress = IndicatifProgress::new();
-        let started = Instant::now();
-        let result = async {
-            sweep::log_session_start(&h, &stand.file, &plan, a.resume.as_deref(), &done)?;
-            let mut rig = Rig::connect(&bound, Some(&h)).await?;
-            Ok::<_, anyhow::Error>(sweep::stepped_sine(&mut rig, &plan, &h, &progress, &stop, &done).await?)
-        }
-        .await;
-        let finished = session.finish();
-        let elapsed = started.elapsed().as_secs_f64();
-        if let Some(s) = sim {
-            s.shutdown();
-        }
-        let summary = finished.with_context(|| format!("the session file {} could not be completed", path.display()))?;
-        match result {
-            Ok(o) => {
-                let measured = o.steps.len() + o.skipped.len();
-                println!("session: {}", path.display());
-                println!(
-                    "{} of {} steps measured in {elapsed:.1} s ({} in this run, {} from {}), {} stream faults recorded, {} messages",
-                    measured,
-                    freqs.len(),
-                    o.steps.len(),
-                    o.skipped.len(),
-                    a.resume.as_ref().map(|p| p.display().to_string()).unwrap_or_else(|| "earlier sessions".into()),
-                    o.faults,
-                    summary.total()
-                );
-                if o.stopped || measured < freqs.len() {
-                    println!("the sweep is incomplete; continue it with: ident sweep --stand {} --resume {}", a.stand.display(), path.display());
-                    Ok(ExitCode::from(1))
-                } else {
-                    Ok(ExitCode::SUCCESS)
-                }
-            }
-            Err(e) => {
-                eprintln!("session (complete, records the failure): {}", path.display());
-                Err(e)
+    let opts = pipeline::SweepOptions { can: a.can.as_deref(), resume: a.resume.as_deref(), done, ctrl_c: true };
+    let started = Instant::now();
+    let swept = pipeline::sweep(&stand, &plan, &path, &opts, &IndicatifProgress::new())?;
+    let elapsed = started.elapsed().as_secs_f64();
+    if let Some(e) = &swept.finish_error {
+        anyhow::bail!("the session file {} could not be completed: {e}", path.display());
+    }
+    match swept.outcome {
+        Ok(o) => {
+            let measured = o.steps.len() + o.skipped.len();
+            println!("session: {}", path.display());
+            println!(
+                "{} of {} steps measured in {elapsed:.1} s ({} in this run, {} from {}), {} stream faults recorded, {} messages",
+                measured,
+                freqs.len(),
+                o.steps.len(),
+                o.skipped.len(),
+                a.resume.as_ref().map(|p| p.display().to_string()).unwrap_or_else(|| "earlier sessions".into()),
+                o.faults,
+                swept.messages
+            );
+            if o.stopped || measured < freqs.len() {
+                println!("the sweep is incomplete; continue it with: ident sweep --stand {} --resume {}", a.stand.display(), path.display());
+                Ok(ExitCode::from(1))
+            } else {
+                Ok(ExitCode::SUCCESS)
             }
         }
-    })
-}
-
-#[cfg(test)]
-mod tests {
-    #[test]
-    fn utc_stamps_are_civil_dates() {
-        assert_eq!(super::utc_stamp(0), "19700101T000000Z");
-        assert_eq!(super::utc_stamp(951_782_400), "20000229T000000Z");
-        assert_eq!(super::utc_stamp(1_700_000_000), "20231114T221320Z");
+        Err(e) => {
+            eprintln!("session (complete, records the failure): {}", path.display());
+            Err(anyhow::anyhow!(e))
+        }
     }
 }
