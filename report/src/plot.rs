@@ -78,6 +78,26 @@ fn sci(v: f64) -> String {
     }
 }
 
+/// Frequency ticks 1-2-5 per decade within `[lo, hi]` (plotters' own log ticks are decades only,
+/// which leaves a 20-400 Hz axis one label below 100 Hz).
+fn log_ticks(lo: f64, hi: f64) -> Vec<f64> {
+    let mut out = Vec::new();
+    if !(lo > 0.0 && hi > lo) {
+        return out;
+    }
+    let mut decade = 10f64.powf(lo.log10().floor());
+    while decade <= hi {
+        for m in [1.0, 2.0, 5.0] {
+            let v = m * decade;
+            if v >= lo && v <= hi {
+                out.push(v);
+            }
+        }
+        decade *= 10.0;
+    }
+    out
+}
+
 /// Measured amplitudes (with ±σ bars) and the model at each stage, log-log.
 pub fn amplitude_chart(c: &CharacteristicReport) -> Result<String, ReportError> {
     svg("amplitude", (760, 380), |root| {
@@ -88,7 +108,7 @@ pub fn amplitude_chart(c: &CharacteristicReport) -> Result<String, ReportError> 
             .margin(10)
             .x_label_area_size(40)
             .y_label_area_size(80)
-            .build_cartesian_2d((f0..f1).log_scale(), (a0..a1).log_scale())
+            .build_cartesian_2d((f0..f1).log_scale().with_key_points(log_ticks(f0, f1)), (a0..a1).log_scale())
             .map_err(|e| e.to_string())?;
         chart
             .configure_mesh()
@@ -156,7 +176,7 @@ pub fn residual_chart(c: &CharacteristicReport) -> Result<String, ReportError> {
             .margin(10)
             .x_label_area_size(35)
             .y_label_area_size(80)
-            .build_cartesian_2d((f0..f1).log_scale(), -m..m)
+            .build_cartesian_2d((f0..f1).log_scale().with_key_points(log_ticks(f0, f1)), -m..m)
             .map_err(|e| e.to_string())?;
         chart
             .configure_mesh()
@@ -355,4 +375,14 @@ pub fn drift_chart(d: &Drift) -> Result<String, ReportError> {
         }
         Ok(())
     })
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn frequency_ticks_are_1_2_5_per_decade_inside_the_range() {
+        assert_eq!(super::log_ticks(18.0, 450.0), vec![20.0, 50.0, 100.0, 200.0]);
+        assert_eq!(super::log_ticks(1.0, 10.0), vec![1.0, 2.0, 5.0, 10.0]);
+        assert!(super::log_ticks(0.0, 10.0).is_empty());
+    }
 }
