@@ -28,6 +28,7 @@ pub mod analysis;
 pub mod can;
 pub mod daq;
 pub mod device;
+pub mod replay;
 pub mod rig;
 pub mod session;
 pub mod shaker;

@@ -2,9 +2,17 @@
 //! with the same code the live run used ([`crate::pipeline::analyse`]); the results are
 //! bit-identical to the live run's (tests/cli_pipeline.rs checks it). A truncated recording is
 //! read up to the cut and the report says which steps are lost.
+//!
+//! `ident replay --serve SESSION.mcap`: serve the session through the simulated devices instead
+//! ([`acquire::replay`]): its recorded stand, identities, measured response and noise level, on two
+//! new pseudo-terminals, until Ctrl-C — so `ident sweep` exercises the live path on a real
+//! session's structure.
 
+use std::io::Write;
 use std::path::PathBuf;
 use std::process::ExitCode;
+
+use anyhow::Context;
 
 use crate::pipeline::{self, ReportContext, Setup};
 
@@ -22,11 +30,22 @@ pub struct ReplayArgs {
     /// Folder for the report (a dated sub-folder is made in it).
     #[arg(long, default_value = "reports")]
     pub out: PathBuf,
+    /// Serve the session's devices (recorded stand, identities and measured response) on
+    /// pseudo-terminals until Ctrl-C, instead of re-running the analysis.
+    #[arg(long)]
+    pub serve: bool,
+    /// With --serve: simulated time per wall-clock time (default: the recorded simulated stand's
+    /// speed, or 1 = real time).
+    #[arg(long, requires = "serve")]
+    pub speed: Option<f64>,
 }
 
 /// Runs the replay.
 pub fn run(a: ReplayArgs) -> anyhow::Result<ExitCode> {
     anyhow::ensure!(a.session.is_file(), "{}: no such session file", a.session.display());
+    if a.serve {
+        return serve(&a);
+    }
     let setup = Setup::load(&a.model, &a.vars)?;
     let analysis = pipeline::analyse(&a.session, &setup, &pipeline::identification_options())?;
     println!("ident replay: {} ({} steps used, {} dropped)", a.session.display(), analysis.session.steps.len(), analysis.session.dropped.len());
@@ -40,4 +59,29 @@ pub fn run(a: ReplayArgs) -> anyhow::Result<ExitCode> {
     println!("report: {}", dir.display());
     println!("open: {}", written.html.display());
     Ok(ExitCode::SUCCESS)
+}
+
+/// `--serve`: the session's devices on pseudo-terminals until Ctrl-C.
+fn serve(a: &ReplayArgs) -> anyhow::Result<ExitCode> {
+    let served = acquire::replay::prepare(&a.session, a.speed)?;
+    let (name, speed, lines) = (served.stand.name.clone(), served.setup.speed, served.plant.frequencies().len());
+    let (lo, hi) = (served.plant.frequencies()[0], served.plant.frequencies()[lines - 1]);
+    let rt = tokio::runtime::Builder::new_multi_thread().worker_threads(2).enable_all().build().context("cannot start the async runtime")?;
+    rt.block_on(async {
+        let sim = acquire::sim::SimStand::start_with(served.setup)?;
+        let mut out = std::io::stdout().lock();
+        writeln!(out, "shaker {}", sim.shaker_port)?;
+        writeln!(out, "daq {}", sim.daq_port)?;
+        out.flush()?;
+        drop(out);
+        eprintln!(
+            "ident replay --serve: {name} as recorded in {} ({lines} measured lines, {lo:.1}-{hi:.1} Hz) at {speed}× real time; \
+             point the stand file's shaker.port and daq.port at these and run `ident sweep`; Ctrl-C stops",
+            a.session.display()
+        );
+        tokio::signal::ctrl_c().await.context("cannot wait for Ctrl-C")?;
+        sim.shutdown();
+        eprintln!("ident replay --serve: stopped");
+        Ok(ExitCode::SUCCESS)
+    })
 }
