@@ -8,7 +8,6 @@
 //! new pseudo-terminals, until Ctrl-C — so `ident sweep` exercises the live path on a real
 //! session's structure.
 
-use std::io::Write;
 use std::path::PathBuf;
 use std::process::ExitCode;
 
@@ -69,19 +68,11 @@ fn serve(a: &ReplayArgs) -> anyhow::Result<ExitCode> {
     let rt = tokio::runtime::Builder::new_multi_thread().worker_threads(2).enable_all().build().context("cannot start the async runtime")?;
     rt.block_on(async {
         let sim = acquire::sim::SimStand::start_with(served.setup)?;
-        let mut out = std::io::stdout().lock();
-        writeln!(out, "shaker {}", sim.shaker_port)?;
-        writeln!(out, "daq {}", sim.daq_port)?;
-        out.flush()?;
-        drop(out);
-        eprintln!(
-            "ident replay --serve: {name} as recorded in {} ({lines} measured lines, {lo:.1}-{hi:.1} Hz) at {speed}× real time; \
+        let hint = format!(
+            "{name} as recorded in {} ({lines} measured lines, {lo:.1}-{hi:.1} Hz) at {speed}× real time; \
              point the stand file's shaker.port and daq.port at these and run `ident sweep`; Ctrl-C stops",
             a.session.display()
         );
-        tokio::signal::ctrl_c().await.context("cannot wait for Ctrl-C")?;
-        sim.shutdown();
-        eprintln!("ident replay --serve: stopped");
-        Ok(ExitCode::SUCCESS)
+        super::sim::serve_until_ctrl_c(sim, "ident replay --serve", &hint).await
     })
 }

@@ -39,19 +39,25 @@ pub fn run(a: SimArgs) -> anyhow::Result<ExitCode> {
             Some(iface) => SimStand::start_can(&stand, iface)?,
             None => SimStand::start(&stand)?,
         };
-        let mut out = std::io::stdout().lock();
-        writeln!(out, "shaker {}", sim.shaker_port)?;
-        writeln!(out, "daq {}", sim.daq_port)?;
-        out.flush()?;
-        drop(out);
-        eprintln!(
-            "ident sim: {} at {speed}× real time; set the stand file's ports to these (shaker.port, daq.port = \"{}\") and run `ident sweep`; Ctrl-C stops",
-            stand.name,
-            sim.daq_port
+        let hint = format!(
+            "{} at {speed}× real time; set the stand file's ports to these (shaker.port, daq.port = \"{}\") and run `ident sweep`; Ctrl-C stops",
+            stand.name, sim.daq_port
         );
-        tokio::signal::ctrl_c().await.context("cannot wait for Ctrl-C")?;
-        sim.shutdown();
-        eprintln!("ident sim: stopped");
-        Ok(ExitCode::SUCCESS)
+        serve_until_ctrl_c(sim, "ident sim", &hint).await
     })
+}
+
+/// Prints the served ports on stdout (`shaker PATH`, `daq PATH`: scripts read them), `hint` on
+/// stderr, and serves until Ctrl-C.
+pub async fn serve_until_ctrl_c(sim: SimStand, who: &str, hint: &str) -> anyhow::Result<ExitCode> {
+    let mut out = std::io::stdout().lock();
+    writeln!(out, "shaker {}", sim.shaker_port)?;
+    writeln!(out, "daq {}", sim.daq_port)?;
+    out.flush()?;
+    drop(out);
+    eprintln!("{who}: {hint}");
+    tokio::signal::ctrl_c().await.context("cannot wait for Ctrl-C")?;
+    sim.shutdown();
+    eprintln!("{who}: stopped");
+    Ok(ExitCode::SUCCESS)
 }
