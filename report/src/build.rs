@@ -211,8 +211,10 @@ pub fn diagnosis(d: &diagnose::Diagnosis, base: &str) -> Diagnosis {
         for c in &round.ranked {
             let refit = accepted.filter(|a| a.effect == c.effect);
             // Values at the final fit; none for an effect a later round removed.
-            let principal = refit
-                .and_then(|a| d.accepted.iter().find(|f| f.effect == a.effect))
+            // An accepted mass whose position was then fitted is in the final model as placed.
+            let final_effect = refit.map(|a| round.placed.as_ref().map_or(a.effect.as_str(), |p| p.effect.as_str()));
+            let principal = final_effect
+                .and_then(|e| d.accepted.iter().find(|f| f.effect == e))
                 .and_then(|a| a.params.first())
                 .map(|p| p.display());
             candidates.push(Candidate {

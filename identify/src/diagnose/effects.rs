@@ -57,6 +57,18 @@ pub enum Effect {
         /// Typical size of the effect (kg), the parameter's scale.
         scale: f64,
     },
+    /// A point mass on `body` near `point` whose position is fitted too: the refinement of an
+    /// accepted [`Effect::Mass`] when the true place lies between the candidate points.
+    PlacedMass {
+        /// Host body.
+        body: String,
+        /// Starting point (global, m): the accepted candidate's.
+        point: Vector3<f64>,
+        /// Typical size of the mass (kg).
+        scale: f64,
+        /// The offset from `point` is bounded to ±`reach` (m) along each global axis.
+        reach: f64,
+    },
     /// A mass on an isotropic spring with natural frequency `freq_hz` at `point` on `body`.
     Resonator {
         /// Host body.
@@ -135,7 +147,7 @@ impl Effect {
     pub fn kind(&self) -> &'static str {
         match self {
             Effect::Spring { .. } => "spring",
-            Effect::Mass { .. } => "mass",
+            Effect::Mass { .. } | Effect::PlacedMass { .. } => "mass",
             Effect::Resonator { .. } => "resonator",
             Effect::Flexible { .. } => "flexible body",
             Effect::Gain { .. } => "sensor gain",
@@ -158,6 +170,7 @@ impl Effect {
                 direction.z
             ),
             Effect::Mass { body, point, .. } => format!("point mass on {body} at {}", mm(point)),
+            Effect::PlacedMass { body, point, .. } => format!("point mass on {body} near {} (position fitted: dx, dy, dz)", mm(point)),
             Effect::Resonator { body, point, freq_hz, .. } => {
                 format!("resonator (≈{freq_hz:.0} Hz) on {body} at {}", mm(point))
             }
@@ -182,6 +195,13 @@ impl Effect {
                 p("psi", "-", *psi, *psi, 0.0, 2.0 * TWO_PI, 0.5),
             ],
             Effect::Mass { scale, .. } => vec![p("m", "kg", 0.0, 0.0, 0.0, f64::INFINITY, *scale)],
+            Effect::PlacedMass { scale, reach, .. } => {
+                let mut v = vec![p("m", "kg", 0.0, 0.0, 0.0, f64::INFINITY, *scale)];
+                for name in ["dx", "dy", "dz"] {
+                    v.push(p(name, "m", 0.0, 0.0, -reach, *reach, 0.05));
+                }
+                v
+            }
             Effect::Resonator { freq_hz, scale, .. } => vec![
                 p("m", "kg", 0.0, 0.0, 0.0, f64::INFINITY, *scale),
                 p("f", "Hz", *freq_hz, *freq_hz, 0.2 * freq_hz, (5.0 * freq_hz).min(MOUNT_ABOVE_BAND * f_max / 3.0), *freq_hz),
@@ -257,6 +277,12 @@ impl Effect {
             Effect::Mass { body, point, .. } => {
                 if gamma[0] > 0.0 {
                     attach_mass(model, body, point, gamma[0], MOUNT_ABOVE_BAND * f_max, STRUCTURAL_PSI, "diagnosed mass")?;
+                }
+            }
+            Effect::PlacedMass { body, point, .. } => {
+                if gamma[0] > 0.0 {
+                    let at = point + Vector3::new(gamma[1], gamma[2], gamma[3]);
+                    attach_mass(model, body, &at, gamma[0], MOUNT_ABOVE_BAND * f_max, STRUCTURAL_PSI, "diagnosed mass")?;
                 }
             }
             Effect::Resonator { body, point, .. } => {

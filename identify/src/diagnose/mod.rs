@@ -80,6 +80,7 @@ impl ParamEstimate {
         match self.unit.as_str() {
             "N/m" => (self.value * 1e-6, self.std_error * 1e-6, "N/µm"),
             "m/N" => (self.value * 1e6, self.std_error * 1e6, "µm/N"),
+            "m" => (self.value * 1e3, self.std_error * 1e3, "mm"),
             u => (self.value, self.std_error, u),
         }
     }
@@ -158,6 +159,9 @@ pub struct Round {
     pub accepted: Option<usize>,
     /// Earlier effects dropped after this round's was added: the data no longer need them.
     pub removed: Vec<Removed>,
+    /// An accepted point mass refitted with its position free, when the data prefer the fitted
+    /// position (it then replaces the candidate placement).
+    pub placed: Option<Refit>,
 }
 
 /// An effect accepted in an earlier round and dropped by the backward check.
@@ -311,7 +315,10 @@ pub fn diagnose(
         for (f, family) in families.iter().enumerate().take(opts.refit).filter(|(_, f)| ok[f[0]].p_value < (1000.0 * threshold).min(1.0)) {
             let s = &ok[family[0]];
             let cand = &cands[s.candidate];
-            match refit(model, vars, obs, opts, &cur, cand, s, f_hi, sigma2) {
+            // The first parameter starts at the score's Gauss-Newton step, the others at their
+            // initial values.
+            let start: Vec<f64> = cand.params(f_hi).iter().enumerate().map(|(j, np)| if j == 0 { np.nested + s.step } else { np.initial }).collect();
+            match refit(model, vars, obs, opts, &cur, cand, &start, f_hi, sigma2) {
                 Ok((mut r, next)) => {
                     r.equivalent = ranked[f].equivalent.clone();
                     progress(&format!("refit {}: ΔJ = {:.1}, LR = {:.1}, p = {:.2e}", r.effect, r.criterion_before - r.criterion_after, r.lr, r.p_value));
@@ -327,11 +334,18 @@ pub fn diagnose(
             }
         }
         let chosen = best.as_ref().map(|(i, _)| *i);
-        let mut round = Round { candidates: ok.len(), ranked, refits: refits.clone(), threshold, accepted: chosen, removed: Vec::new() };
+        let mut round = Round { candidates: ok.len(), ranked, refits: refits.clone(), threshold, accepted: chosen, removed: Vec::new(), placed: None };
         match best {
-            Some((i, next)) => {
+            Some((i, mut next)) => {
                 progress(&format!("accepted: {}", refits[i].effect));
-                accepted.push(refits[i].clone());
+                let mut chosen = refits[i].clone();
+                if let Some((placed, better)) = place_mass(model, vars, obs, opts, &cur, &next, &chosen, f_hi, sigma2, threshold) {
+                    progress(&format!("placed: {}", placed.params.iter().map(ParamEstimate::describe).collect::<Vec<_>>().join(", ")));
+                    round.placed = Some(placed.clone());
+                    chosen = placed;
+                    next = better;
+                }
+                accepted.push(chosen);
                 cur = next;
                 while let Some((k, r, next)) = backward(model, vars, obs, opts, &cur, f_hi, sigma2, threshold) {
                     progress(&format!("removed: {} (no longer needed: LR = {:.1}, p = {:.2e})", r.effect, r.lr, r.p_value));
@@ -407,6 +421,34 @@ fn backward(
     None
 }
 
+/// An accepted point mass sits at the nearest candidate point, not where the mass is: refit it
+/// with its position free (±half the host body's largest side), from `base` (the fit before it
+/// was added). Kept when the three position parameters beat the round's threshold against the
+/// candidate placement `fixed` (LR, 3 dof).
+#[allow(clippy::too_many_arguments)]
+fn place_mass(
+    model: &Model,
+    vars: &Variables,
+    obs: &Observations,
+    opts: &Options,
+    base: &Current,
+    fixed: &Current,
+    accepted: &Refit,
+    f_hi: f64,
+    sigma2: f64,
+    threshold: f64,
+) -> Option<(Refit, Current)> {
+    let Some(Effect::Mass { body, point, scale }) = fixed.effects.last() else { return None };
+    let host = model.bodies.iter().find(|b| &b.name == body)?;
+    let reach = 0.5 * effects::box_sides(host).into_iter().fold(0.0, f64::max);
+    let cand = Effect::PlacedMass { body: body.clone(), point: *point, scale: *scale, reach };
+    let m = accepted.params.first()?.value;
+    let (r, next) = refit(model, vars, obs, opts, base, &cand, &[m, 0.0, 0.0, 0.0], f_hi, sigma2).ok()?;
+    let lr = ((fixed.e.norm_squared() - next.e.norm_squared()) / sigma2).max(0.0);
+    let p = ChiSquared::new(3.0).map(|c| 1.0 - c.cdf(lr)).unwrap_or(1.0);
+    (p < threshold).then_some((r, next))
+}
+
 /// The effects' parameter estimates and Cramér-Rao errors at the fit `cur` of `p`.
 fn estimates(p: &Problem, cur: &Current, f_hi: f64, sigma2: f64) -> Vec<Vec<ParamEstimate>> {
     let info = cur.jac.tr_mul(&cur.jac);
@@ -475,7 +517,7 @@ fn refit(
     opts: &Options,
     cur: &Current,
     cand: &Effect,
-    scored: &score::Scored,
+    start: &[f64],
     f_hi: f64,
     sigma2: f64,
 ) -> Result<(Refit, Current), String> {
@@ -488,10 +530,9 @@ fn refit(
     if m <= p.scale.len() + 1 {
         return Err(format!("too few observations ({m}) for {} parameters", p.scale.len()));
     }
-    // Start: the current point, the new parameters at the score's Gauss-Newton step.
+    // Start: the current point, the new parameters at `start`.
     let mut u0: Vec<f64> = cur.u.iter().copied().collect();
-    for (j, np) in new_params.iter().enumerate() {
-        let v = if j == 0 { np.nested + scored.step } else { np.initial };
+    for (np, v) in new_params.iter().zip(start) {
         u0.push(v.clamp(np.lower, np.upper) / np.scale);
     }
     let (lo, hi) = p.bounds();
@@ -562,6 +603,10 @@ pub fn text(d: &Diagnosis) -> String {
                 "    refit: {}: J {:.1} → {:.1}, LR {:.1} ({} dof), p {:.1e}, ΔBIC {:.1} {mark}",
                 f.effect, f.criterion_before, f.criterion_after, f.lr, f.dof, f.p_value, f.bic_change
             );
+        }
+        if let Some(p) = &r.placed {
+            let ps: Vec<String> = p.params.iter().map(ParamEstimate::describe).collect();
+            let _ = writeln!(s, "    placed: {} ({}): its position fitted, LR {:.1} against no mass", p.effect, ps.join(", "), p.lr);
         }
         for x in &r.removed {
             let _ = writeln!(s, "    removed: {} (not needed once this round's effect is in: LR {:.1}, p {:.2e})", x.effect, x.lr, x.p_value);
