@@ -54,7 +54,7 @@ fn run(c: &Case) -> diagnose::Diagnosis {
 #[test]
 fn the_missing_hydraulic_actuator_is_found_added_and_the_fit_reaches_the_noise_floor() {
     let truth = load_model("fwd32j.toml");
-    let data = measure(&truth, 0.01, 11);
+    let data = measure(&truth, 0.01, std::env::var("IDENT_SUPPORT_SEED").map(|v| v.parse().unwrap()).unwrap_or(11));
     let case = fit("fwd32j-no-actuator.toml", "fwd32j-no-actuator.toml", &data);
     let d = run(&case);
     assert!(!d.before.explained, "the model without the actuator should not explain the data");
@@ -75,6 +75,48 @@ fn the_missing_hydraulic_actuator_is_found_added_and_the_fit_reaches_the_noise_f
         assert!(a.rms_relative < 0.02 && a.rms_relative < b.rms_relative, "{}: {} → {}", a.label, b.rms_relative, a.rms_relative);
     }
     assert!(matches!(d.effects[0], Effect::Spring { .. }));
+}
+
+/// A support under the table the model lacks: a vertical spring (2 N/µm, ψ 0.3) from the ground
+/// to the table's underside near its end, at (570, 980, 830) mm — not a candidate point.
+fn with_support(mut m: Model) -> Model {
+    use identify::model::{Sde, SdeKind, SdeLaw};
+    use identify::modelfile::frame_from_axis;
+    use nalgebra::Vector3;
+    let table = m.body_index("table").unwrap();
+    m.sdes.push(Sde {
+        name: "support".into(),
+        kind: SdeKind::Spring,
+        bodies: [None, Some(table)],
+        point: Vector3::new(0.57, 0.98, 0.83),
+        rotation: frame_from_axis(&Vector3::z()),
+        law: SdeLaw::Axial { k: 2.0e6, psi: 0.3 },
+        enabled: true,
+    });
+    m
+}
+
+#[test]
+fn an_unmodelled_support_under_the_table_is_found_and_the_refit_reaches_the_noise_floor() {
+    let truth = with_support(load_model("fwd32j.toml"));
+    let case = fit("fwd32j.toml", "fwd32j.toml", &measure(&truth, 0.01, std::env::var("IDENT_SUPPORT_SEED").map(|v| v.parse().unwrap()).unwrap_or(11)));
+    let d = run(&case);
+    assert!(!d.before.explained);
+    // One effect: a vertical spring from the ground, to the table or to a saddle it rests on (the
+    // table's joints to the saddles are stiff: the data hardly tell those apart), at the nearest
+    // candidate and then with its line of action fitted. (The place is poorly determined by the
+    // table's three translations, σ ≈ 0.1-0.15 m; on the table, k agrees with the truth within
+    // 4σ: the uncertain place biases it a little.) Seeds 1-7 and 11 pass
+    // (`IDENT_SUPPORT_SEED=N`).
+    assert_eq!(d.accepted.len(), 1, "{}", diagnose::text(&d));
+    let a = &d.accepted[0];
+    let host_ok = ["spring ground–table", "spring ground–lower saddle", "spring ground–upper saddle"].iter().any(|h| a.effect.starts_with(h));
+    assert!(host_ok && a.effect.contains("along (0.000, 0.000, 1.000)"), "{}", a.effect);
+    if a.effect.starts_with("spring ground–table") {
+        let k = &a.params[0];
+        assert!((k.value - 2.0e6).abs() < 4.0 * k.std_error, "k = {} ± {} N/m, truth 2e6", k.value, k.std_error);
+    }
+    assert!(d.after.chi2_p.expect("R known") > 0.001, "after: {}", d.after.verdict);
 }
 
 /// A 20 kg fixture bolted to a corner of the table: a body on a mount stiff enough to be rigid

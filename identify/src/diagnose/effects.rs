@@ -48,6 +48,19 @@ pub enum Effect {
         /// ψ used for the score (the refit frees it).
         psi: f64,
     },
+    /// A spring like [`Effect::Spring`] whose line of action is fitted too: offsets `s1`, `s2`
+    /// from `point` across `direction` (along it the place is unobservable). The refinement of an
+    /// accepted spring when the true contact lies between the candidate points.
+    PlacedSpring {
+        /// Body names `[p, r]`.
+        bodies: [Option<String>; 2],
+        /// Starting point (global, m): the accepted candidate's.
+        point: Vector3<f64>,
+        /// Unit direction (global).
+        direction: Vector3<f64>,
+        /// The offsets are bounded to ±`reach` (m).
+        reach: f64,
+    },
     /// A point mass at `point` on `body`.
     Mass {
         /// Host body.
@@ -146,7 +159,7 @@ impl Effect {
     /// Short kind name: spring, mass, resonator, flexible body, sensor gain, joint damping.
     pub fn kind(&self) -> &'static str {
         match self {
-            Effect::Spring { .. } => "spring",
+            Effect::Spring { .. } | Effect::PlacedSpring { .. } => "spring",
             Effect::Mass { .. } | Effect::PlacedMass { .. } => "mass",
             Effect::Resonator { .. } => "resonator",
             Effect::Flexible { .. } => "flexible body",
@@ -162,6 +175,15 @@ impl Effect {
         match self {
             Effect::Spring { bodies, point, direction, .. } => format!(
                 "spring {}–{} at {} along ({:.3}, {:.3}, {:.3})",
+                name(&bodies[0]),
+                name(&bodies[1]),
+                mm(point),
+                direction.x,
+                direction.y,
+                direction.z
+            ),
+            Effect::PlacedSpring { bodies, point, direction, .. } => format!(
+                "spring {}–{} near {} along ({:.3}, {:.3}, {:.3}) (line of action fitted: s1, s2 across it)",
                 name(&bodies[0]),
                 name(&bodies[1]),
                 mm(point),
@@ -193,6 +215,12 @@ impl Effect {
             Effect::Spring { psi, .. } => vec![
                 p("k", "N/m", 0.0, 0.0, 0.0, f64::INFINITY, 1e6),
                 p("psi", "-", *psi, *psi, 0.0, 2.0 * TWO_PI, 0.5),
+            ],
+            Effect::PlacedSpring { reach, .. } => vec![
+                p("k", "N/m", 0.0, 0.0, 0.0, f64::INFINITY, 1e6),
+                p("psi", "-", 0.0, 0.0, 0.0, 2.0 * TWO_PI, 0.5),
+                p("s1", "m", 0.0, 0.0, -reach, *reach, 0.05),
+                p("s2", "m", 0.0, 0.0, -reach, *reach, 0.05),
             ],
             Effect::Mass { scale, .. } => vec![p("m", "kg", 0.0, 0.0, 0.0, f64::INFINITY, *scale)],
             Effect::PlacedMass { scale, reach, .. } => {
@@ -258,21 +286,11 @@ impl Effect {
     pub fn apply(&self, r: &mut Realized, gamma: &[f64], f_max: f64) -> Result<(), String> {
         let model = &mut r.model;
         match self {
-            Effect::Spring { bodies, point, direction, .. } => {
-                let idx = |b: &Option<String>| -> Result<Option<usize>, String> {
-                    b.as_ref().map(|n| model.body_index(n).ok_or_else(|| format!("no body \"{n}\""))).transpose()
-                };
-                let bodies = [idx(&bodies[0])?, idx(&bodies[1])?];
-                let name = fresh_name(model, "diagnosed spring");
-                model.sdes.push(Sde {
-                    name,
-                    kind: SdeKind::Spring,
-                    bodies,
-                    point: *point,
-                    rotation: frame_from_axis(direction),
-                    law: SdeLaw::Axial { k: gamma[0].max(0.0), psi: gamma[1].max(0.0) },
-                    enabled: true,
-                });
+            Effect::Spring { bodies, point, direction, .. } => add_spring(model, bodies, point, direction, gamma[0], gamma[1])?,
+            Effect::PlacedSpring { bodies, point, direction, .. } => {
+                let frame = frame_from_axis(direction);
+                let at = point + frame.column(1) * gamma[2] + frame.column(2) * gamma[3];
+                add_spring(model, bodies, &at, direction, gamma[0], gamma[1])?;
             }
             Effect::Mass { body, point, .. } => {
                 if gamma[0] > 0.0 {
@@ -341,6 +359,25 @@ fn fresh_name(model: &Model, stem: &str) -> String {
         }
         i += 1;
     }
+}
+
+/// An axial spring-damper `k`, `psi` between `bodies` (None = ground) at `point` along `direction`.
+fn add_spring(model: &mut Model, bodies: &[Option<String>; 2], point: &Vector3<f64>, direction: &Vector3<f64>, k: f64, psi: f64) -> Result<(), String> {
+    let idx = |b: &Option<String>| -> Result<Option<usize>, String> {
+        b.as_ref().map(|n| model.body_index(n).ok_or_else(|| format!("no body \"{n}\""))).transpose()
+    };
+    let bodies = [idx(&bodies[0])?, idx(&bodies[1])?];
+    let name = fresh_name(model, "diagnosed spring");
+    model.sdes.push(Sde {
+        name,
+        kind: SdeKind::Spring,
+        bodies,
+        point: *point,
+        rotation: frame_from_axis(direction),
+        law: SdeLaw::Axial { k: k.max(0.0), psi: psi.max(0.0) },
+        enabled: true,
+    });
+    Ok(())
 }
 
 /// A body of mass `m` at `point`, on an isotropic General SDE to `host` tuned to `freq_hz`.

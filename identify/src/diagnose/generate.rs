@@ -3,8 +3,8 @@
 //!
 //! - springs: between every pair of bodies and between every body and the ground, at the points
 //!   where something already acts on them (SDE attachment points, excitation points, the bodies'
-//!   centres, the midpoint between two centres) along the global axes and the excitation
-//!   directions;
+//!   centres, the midpoint between two centres; to the ground also the centres of the body's
+//!   equivalent-box faces) along the global axes and the excitation directions;
 //! - point masses and resonators: at each body's centre, the corners of its equivalent box and
 //!   the excitation points on it (resonators at log-spaced frequencies across the band);
 //! - flexible bodies: every body along each principal axis;
@@ -73,6 +73,15 @@ pub fn candidates(model: &Model, vars: &Variables, x: &[f64], labels: &[String],
         }
         push_unique(&mut points, model.bodies[a].position);
         force_points(a).for_each(|p| push_unique(&mut points, p));
+        // A support or contact from outside (a jack, a hose, a cover) acts on a face: the centres
+        // of the equivalent box's faces.
+        let body = &model.bodies[a];
+        let sides = box_sides(body);
+        for axis in 0..3 {
+            for sign in [-1.0, 1.0] {
+                push_unique(&mut points, body.position + body.rotation.column(axis) * (sign * 0.5 * sides[axis]));
+            }
+        }
         for p in points {
             for d in &directions {
                 out.push(Effect::Spring { bodies: [None, Some(model.bodies[a].name.clone())], point: p, direction: *d, psi });

@@ -159,8 +159,8 @@ pub struct Round {
     pub accepted: Option<usize>,
     /// Earlier effects dropped after this round's was added: the data no longer need them.
     pub removed: Vec<Removed>,
-    /// An accepted point mass refitted with its position free, when the data prefer the fitted
-    /// position (it then replaces the candidate placement).
+    /// The accepted point mass or spring refitted with its place free, when the data prefer the
+    /// fitted place (it then replaces the candidate placement).
     pub placed: Option<Refit>,
 }
 
@@ -339,7 +339,7 @@ pub fn diagnose(
             Some((i, mut next)) => {
                 progress(&format!("accepted: {}", refits[i].effect));
                 let mut chosen = refits[i].clone();
-                if let Some((placed, better)) = place_mass(model, vars, obs, opts, &cur, &next, &chosen, f_hi, sigma2, threshold) {
+                if let Some((placed, better)) = place(model, vars, obs, opts, &cur, &next, &chosen, f_hi, sigma2, threshold) {
                     progress(&format!("placed: {}", placed.params.iter().map(ParamEstimate::describe).collect::<Vec<_>>().join(", ")));
                     round.placed = Some(placed.clone());
                     chosen = placed;
@@ -421,12 +421,13 @@ fn backward(
     None
 }
 
-/// An accepted point mass sits at the nearest candidate point, not where the mass is: refit it
-/// with its position free (±half the host body's largest side), from `base` (the fit before it
-/// was added). Kept when the three position parameters beat the round's threshold against the
-/// candidate placement `fixed` (LR, 3 dof).
+/// An accepted point mass or spring sits at the nearest candidate point, not where the effect
+/// is: refit it with its place free too — a mass's position (±half the host body's largest
+/// side), a spring's line of action across its direction (±half the largest side of the bodies
+/// it joins) — from `base` (the fit before it was added), from several starting places. Kept when the place parameters beat the
+/// round's threshold against the candidate placement `fixed` (LR test).
 #[allow(clippy::too_many_arguments)]
-fn place_mass(
+fn place(
     model: &Model,
     vars: &Variables,
     obs: &Observations,
@@ -438,14 +439,55 @@ fn place_mass(
     sigma2: f64,
     threshold: f64,
 ) -> Option<(Refit, Current)> {
-    let Some(Effect::Mass { body, point, scale }) = fixed.effects.last() else { return None };
-    let host = model.bodies.iter().find(|b| &b.name == body)?;
-    let reach = 0.5 * effects::box_sides(host).into_iter().fold(0.0, f64::max);
-    let cand = Effect::PlacedMass { body: body.clone(), point: *point, scale: *scale, reach };
-    let m = accepted.params.first()?.value;
-    let (r, next) = refit(model, vars, obs, opts, base, &cand, &[m, 0.0, 0.0, 0.0], f_hi, sigma2).ok()?;
+    let half_side = |name: &str| model.bodies.iter().find(|b| b.name == name).map(|b| 0.5 * effects::box_sides(b).into_iter().fold(0.0, f64::max));
+    let values: Vec<f64> = accepted.params.iter().map(|p| p.value).collect();
+    let (cand, start, dof) = match fixed.effects.last()? {
+        Effect::Mass { body, point, scale } => {
+            let reach = half_side(body)?;
+            (Effect::PlacedMass { body: body.clone(), point: *point, scale: *scale, reach }, vec![values[0], 0.0, 0.0, 0.0], 3.0)
+        }
+        Effect::Spring { bodies, point, direction, .. } => {
+            let reach = bodies.iter().flatten().filter_map(|b| half_side(b)).fold(0.0, f64::max);
+            if !(reach > 0.0) {
+                return None;
+            }
+            (Effect::PlacedSpring { bodies: bodies.clone(), point: *point, direction: *direction, reach }, vec![values[0], values[1], 0.0, 0.0], 2.0)
+        }
+        _ => return None,
+    };
+    // The place is a nonlinear parameter with local minima: start from the candidate's point and
+    // from points half a reach away (a 3×3 grid across a spring's line of action; ± along each
+    // axis for a mass), keep the best.
+    let reach = match &cand {
+        Effect::PlacedMass { reach, .. } | Effect::PlacedSpring { reach, .. } => *reach,
+        _ => return None,
+    };
+    let h = 0.5 * reach;
+    let offsets: Vec<Vec<f64>> = if dof == 2.0 {
+        [-h, 0.0, h].iter().flat_map(|&a| [-h, 0.0, h].map(|b| vec![a, b])).collect()
+    } else {
+        let mut v = vec![vec![0.0; 3]];
+        for i in 0..3 {
+            for sign in [-h, h] {
+                let mut o = vec![0.0; 3];
+                o[i] = sign;
+                v.push(o);
+            }
+        }
+        v
+    };
+    let n_place = offsets[0].len();
+    let (r, next) = offsets
+        .iter()
+        .filter_map(|o| {
+            let mut st = start.clone();
+            let k = st.len() - n_place;
+            st[k..].copy_from_slice(o);
+            refit(model, vars, obs, opts, base, &cand, &st, f_hi, sigma2).ok()
+        })
+        .min_by(|a, b| a.1.e.norm_squared().total_cmp(&b.1.e.norm_squared()))?;
     let lr = ((fixed.e.norm_squared() - next.e.norm_squared()) / sigma2).max(0.0);
-    let p = ChiSquared::new(3.0).map(|c| 1.0 - c.cdf(lr)).unwrap_or(1.0);
+    let p = ChiSquared::new(dof).map(|c| 1.0 - c.cdf(lr)).unwrap_or(1.0);
     (p < threshold).then_some((r, next))
 }
 
@@ -606,7 +648,7 @@ pub fn text(d: &Diagnosis) -> String {
         }
         if let Some(p) = &r.placed {
             let ps: Vec<String> = p.params.iter().map(ParamEstimate::describe).collect();
-            let _ = writeln!(s, "    placed: {} ({}): its position fitted, LR {:.1} against no mass", p.effect, ps.join(", "), p.lr);
+            let _ = writeln!(s, "    placed: {} ({}): its place fitted, LR {:.1} against the model without it", p.effect, ps.join(", "), p.lr);
         }
         for x in &r.removed {
             let _ = writeln!(s, "    removed: {} (not needed once this round's effect is in: LR {:.1}, p {:.2e})", x.effect, x.lr, x.p_value);
