@@ -172,25 +172,14 @@ impl Effect {
     pub fn describe(&self) -> String {
         let mm = |p: &Vector3<f64>| format!("({:.0}, {:.0}, {:.0}) mm", 1e3 * p.x, 1e3 * p.y, 1e3 * p.z);
         let name = |b: &Option<String>| b.clone().unwrap_or_else(|| "ground".into());
+        let spring = |bodies: &[Option<String>; 2], at: &str, point: &Vector3<f64>, d: &Vector3<f64>, tail: &str| {
+            format!("spring {}–{} {at} {} along ({:.3}, {:.3}, {:.3}){tail}", name(&bodies[0]), name(&bodies[1]), mm(point), d.x, d.y, d.z)
+        };
         match self {
-            Effect::Spring { bodies, point, direction, .. } => format!(
-                "spring {}–{} at {} along ({:.3}, {:.3}, {:.3})",
-                name(&bodies[0]),
-                name(&bodies[1]),
-                mm(point),
-                direction.x,
-                direction.y,
-                direction.z
-            ),
-            Effect::PlacedSpring { bodies, point, direction, .. } => format!(
-                "spring {}–{} near {} along ({:.3}, {:.3}, {:.3}) (line of action fitted: s1, s2 across it)",
-                name(&bodies[0]),
-                name(&bodies[1]),
-                mm(point),
-                direction.x,
-                direction.y,
-                direction.z
-            ),
+            Effect::Spring { bodies, point, direction, .. } => spring(bodies, "at", point, direction, ""),
+            Effect::PlacedSpring { bodies, point, direction, .. } => {
+                spring(bodies, "near", point, direction, " (line of action fitted: s1, s2 across it)")
+            }
             Effect::Mass { body, point, .. } => format!("point mass on {body} at {}", mm(point)),
             Effect::PlacedMass { body, point, .. } => format!("point mass on {body} near {} (position fitted: dx, dy, dz)", mm(point)),
             Effect::Resonator { body, point, freq_hz, .. } => {
