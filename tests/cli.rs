@@ -1,6 +1,9 @@
 //! End-to-end tests of the `ident` command line: model export, the FRF JSON contract against an
 //! independent numpy implementation of docs/model-json.md, error messages, exit codes.
 
+// Test and benchmark helpers unwrap: a panic with its message is the failure report.
+#![allow(clippy::unwrap_used)]
+
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 

@@ -3,6 +3,9 @@
 //! leaving a complete file that `--resume` finishes, the simulator serving ports until Ctrl-C,
 //! exit codes, and the operator-facing messages for bad input.
 
+// Test and benchmark helpers unwrap: a panic with its message is the failure report.
+#![allow(clippy::unwrap_used)]
+
 use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output, Stdio};
@@ -97,7 +100,7 @@ fn ctrl_c_leaves_a_complete_session_and_resume_finishes_the_sweep() {
     resume.extend(["--resume", first.to_str().unwrap()]);
     let o = ident(&resume);
     assert_eq!(o.status.code(), Some(0), "{}", text(&o));
-    assert!(text(&o).contains(&format!("12 of 12 steps measured in")), "{}", text(&o));
+    assert!(text(&o).contains(&"12 of 12 steps measured in".to_string()), "{}", text(&o));
     assert!(text(&o).contains(&format!("({} in this run, {done} from", 12 - done)), "{}", text(&o));
 }
 

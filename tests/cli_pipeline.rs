@@ -2,6 +2,9 @@
 //! `ident replay` (bit-identical to the live run, truncated recordings), and `ident nightly`
 //! (lock, drift alarm, unreachable stand, bad config). The full disk is in `cli_acquire.rs`.
 
+// Test and benchmark helpers unwrap: a panic with its message is the failure report.
+#![allow(clippy::unwrap_used)]
+
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 

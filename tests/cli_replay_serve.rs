@@ -3,6 +3,9 @@
 //! against the served ports — the whole live path — must measure the recorded characteristics
 //! again, within their measurement noise.
 
+// Test and benchmark helpers unwrap: a panic with its message is the failure report.
+#![allow(clippy::unwrap_used)]
+
 use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Output, Stdio};

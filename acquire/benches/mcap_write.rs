@@ -3,6 +3,9 @@
 //!
 //! Run: `cargo bench -p acquire --bench mcap_write`.
 
+// Test and benchmark helpers unwrap: a panic with its message is the failure report.
+#![allow(clippy::unwrap_used)]
+
 use std::collections::BTreeMap;
 use std::time::Duration;
 

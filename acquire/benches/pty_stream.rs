@@ -4,6 +4,9 @@
 //! Run: `cargo bench -p acquire --bench pty_stream`. Before criterion, a paced run at the
 //! 3 Mbaud line rate (300 kB/s) prints the receiving thread's CPU share of one core.
 
+// Test and benchmark helpers unwrap: a panic with its message is the failure report.
+#![allow(clippy::unwrap_used)]
+
 use std::time::{Duration, Instant};
 
 use acquire::daq::frame::{FrameDecoder, Message};

@@ -2,6 +2,9 @@
 //! a stepped-sine sweep recovers the truth FRF from the session file, injected faults are all
 //! detected and recorded, device failures end the sweep cleanly, stop/resume, bad input.
 
+// Test and benchmark helpers unwrap: a panic with its message is the failure report.
+#![allow(clippy::unwrap_used)]
+
 mod util;
 
 use std::collections::BTreeSet;

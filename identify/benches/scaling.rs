@@ -6,6 +6,9 @@
 //!
 //! `cargo bench -p identify --bench scaling`
 
+// Test and benchmark helpers unwrap: a panic with its message is the failure report.
+#![allow(clippy::unwrap_used)]
+
 use std::time::Instant;
 
 use identify::frf::{response, Method};

@@ -241,12 +241,12 @@ pub fn states(model: &Model, freqs_hz: &[f64], method: Method) -> Result<States,
             let mut inv = vec![C64::new(0.0, 0.0); n];
             for (k, &f) in freqs_hz.iter().enumerate() {
                 let w2 = (TWO_PI * f).powi(2);
-                for m in 0..n {
-                    let den = modal.lambda[m] - w2;
+                for (v, l) in inv.iter_mut().zip(&modal.lambda) {
+                    let den = l - w2;
                     if den.norm() <= 1e-13 * lambda_scale {
                         return Err(SolveError::Singular { freq_hz: f });
                     }
-                    inv[m] = den.inv();
+                    *v = den.inv();
                 }
                 for col in 0..=outputs {
                     for m in 0..n {

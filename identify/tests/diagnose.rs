@@ -3,6 +3,9 @@
 //! table, a table that is not rigid) must be diagnosed — the true effect ranked first, added, and
 //! the refit at the noise floor; data without such an effect must get nothing added. Seeded.
 
+// Test and benchmark helpers unwrap: a panic with its message is the failure report.
+#![allow(clippy::unwrap_used)]
+
 use std::path::PathBuf;
 
 use identify::diagnose::{self, diagnose, Effect};

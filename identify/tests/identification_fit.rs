@@ -2,6 +2,9 @@
 //! finite differences, recovery by every optimizer, complex fits, noise models, bounds, the
 //! iteration limit, multi-start, and the TOML write-back. Seeded.
 
+// Test and benchmark helpers unwrap: a panic with its message is the failure report.
+#![allow(clippy::unwrap_used)]
+
 use identify::frf::{self, Method};
 use identify::identification::{
     self as idn, data, report, variables, AtBound, Criterion, FitKind, JacobianMode, NoiseChoice, NoiseSource,
@@ -101,7 +104,7 @@ fn the_criterion_jacobian_matches_finite_differences() {
             let (em, _) = c.evaluate(&xp, None).unwrap();
             let fd = (ep - em) / (2.0 * h);
             let col = ja.column(v);
-            let err = (&fd - &col).norm() / col.norm();
+            let err = (&fd - col).norm() / col.norm();
             assert!(err < 1e-6, "{fit:?}, variable {v}: relative error {err:e}");
         }
     }

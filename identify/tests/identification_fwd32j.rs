@@ -3,6 +3,9 @@
 //! from `configs/models/fwd32j-initial.toml`'s values with `configs/identification/fwd32j.toml`'s
 //! 20 variables. Seeded.
 
+// Test and benchmark helpers unwrap: a panic with its message is the failure report.
+#![allow(clippy::unwrap_used)]
+
 use std::path::PathBuf;
 
 use identify::identification::{self as idn, data, variables, Optimizer, Options, Settings};

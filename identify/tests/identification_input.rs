@@ -1,6 +1,9 @@
 //! Bad and good input of identification: measured data (JSON, CSV: round trips, located errors,
 //! fuzzing) and variables files (located errors naming the item).
 
+// Test and benchmark helpers unwrap: a panic with its message is the failure report.
+#![allow(clippy::unwrap_used)]
+
 use identify::identification::{data, variables};
 use identify::measured::{MeasuredData, Measurement, QuantityName};
 use identify::textbook;

@@ -1,6 +1,9 @@
 //! Model files: TOML with units, the resolved JSON contract, errors that point at the problem, and
 //! a fuzzed loader that never panics.
 
+// Test and benchmark helpers unwrap: a panic with its message is the failure report.
+#![allow(clippy::unwrap_used)]
+
 use identify::contract::{to_json, ModelJson};
 use identify::frf::{response, Method};
 use identify::modelfile::{parse_json, parse_toml, LoadError};

@@ -2,6 +2,9 @@
 //! `.ci/setup`) loads a full report from disk with networking disabled and a probe script that
 //! records errors, rendered plots and resource loads into the DOM; the test reads the DOM back.
 
+// Test and benchmark helpers unwrap: a panic with its message is the failure report.
+#![allow(clippy::unwrap_used)]
+
 mod common;
 
 use std::process::Command;

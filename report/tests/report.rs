@@ -2,6 +2,9 @@
 //! field table of docs/report-json.md), round trips, the HTML's self-containment, the
 //! standardized residuals' scale, drift alarms, and atomic writing.
 
+// Test and benchmark helpers unwrap: a panic with its message is the failure report.
+#![allow(clippy::unwrap_used)]
+
 mod common;
 
 use std::collections::BTreeSet;

@@ -366,7 +366,7 @@ impl Message {
                 Message::Nak { command, code, message: c.text()? }
             }
             kind::DATA => {
-                if frame.payload.len() % 4 != 0 {
+                if !frame.payload.len().is_multiple_of(4) {
                     return Err(PayloadError {
                         kind: frame.kind,
                         detail: format!("data payload of {} bytes is not a whole number of 32-bit samples", frame.payload.len()),

@@ -367,7 +367,10 @@ pub struct ReadReport {
     pub truncated: Option<String>,
 }
 
-fn linear_messages(path: &Path) -> Result<(Vec<(Arc<mcap::Channel<'static>>, u32, u64, Vec<u8>)>, Option<String>), SessionError> {
+/// One message read linearly: its channel, sequence, log time (ns) and payload.
+type RawMessage = (Arc<mcap::Channel<'static>>, u32, u64, Vec<u8>);
+
+fn linear_messages(path: &Path) -> Result<(Vec<RawMessage>, Option<String>), SessionError> {
     let file = File::open(path).map_err(|e| SessionError::Read { path: path.display().to_string(), detail: format!("cannot open: {e}") })?;
     let opts = mcap::sans_io::LinearReaderOptions::default().with_skip_end_magic(true);
     let mut out = Vec::new();

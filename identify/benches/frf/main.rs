@@ -3,6 +3,9 @@
 //!
 //! `cargo bench -p identify --bench frf`
 
+// Test and benchmark helpers unwrap: a panic with its message is the failure report.
+#![allow(clippy::unwrap_used)]
+
 use criterion::{criterion_group, criterion_main, Criterion};
 use identify::frf::{response, Method};
 

@@ -77,9 +77,9 @@ pub fn candidates(model: &Model, vars: &Variables, x: &[f64], labels: &[String],
         // of the equivalent box's faces.
         let body = &model.bodies[a];
         let sides = box_sides(body);
-        for axis in 0..3 {
+        for (axis, side) in sides.iter().enumerate() {
             for sign in [-1.0, 1.0] {
-                push_unique(&mut points, body.position + body.rotation.column(axis) * (sign * 0.5 * sides[axis]));
+                push_unique(&mut points, body.position + body.rotation.column(axis) * (sign * 0.5 * side));
             }
         }
         for p in points {
@@ -114,8 +114,8 @@ pub fn candidates(model: &Model, vars: &Variables, x: &[f64], labels: &[String],
             .flat_map(|s| s.law.stiffness()[..3].to_vec())
             .fold(0.0, f64::max);
         if stiff > 0.0 {
-            for axis in 0..3 {
-                if sides[axis] > 0.0 {
+            for (axis, side) in sides.iter().enumerate() {
+                if *side > 0.0 {
                     out.push(Effect::Flexible { body: body.name.clone(), axis, scale: 1.0 / stiff });
                 }
             }
