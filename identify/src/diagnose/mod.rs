@@ -441,48 +441,40 @@ fn place(
 ) -> Option<(Refit, Current)> {
     let half_side = |name: &str| model.bodies.iter().find(|b| b.name == name).map(|b| 0.5 * effects::box_sides(b).into_iter().fold(0.0, f64::max));
     let values: Vec<f64> = accepted.params.iter().map(|p| p.value).collect();
-    let (cand, start, dof) = match fixed.effects.last()? {
+    // The place is a nonlinear parameter with local minima: start from the candidate's point and
+    // from points half a reach away (a 3×3 grid across a spring's line of action; ± along each
+    // axis for a mass), keep the best. `start` holds the accepted estimates; the place offsets
+    // are appended per start.
+    let (cand, start, offsets) = match fixed.effects.last()? {
         Effect::Mass { body, point, scale } => {
             let reach = half_side(body)?;
-            (Effect::PlacedMass { body: body.clone(), point: *point, scale: *scale, reach }, vec![values[0], 0.0, 0.0, 0.0], 3.0)
+            let h = 0.5 * reach;
+            let mut offsets = vec![vec![0.0; 3]];
+            for i in 0..3 {
+                for sign in [-h, h] {
+                    let mut o = vec![0.0; 3];
+                    o[i] = sign;
+                    offsets.push(o);
+                }
+            }
+            (Effect::PlacedMass { body: body.clone(), point: *point, scale: *scale, reach }, vec![values[0]], offsets)
         }
         Effect::Spring { bodies, point, direction, .. } => {
             let reach = bodies.iter().flatten().filter_map(|b| half_side(b)).fold(0.0, f64::max);
             if !(reach > 0.0) {
                 return None;
             }
-            (Effect::PlacedSpring { bodies: bodies.clone(), point: *point, direction: *direction, reach }, vec![values[0], values[1], 0.0, 0.0], 2.0)
+            let h = 0.5 * reach;
+            let offsets = [-h, 0.0, h].iter().flat_map(|&a| [-h, 0.0, h].map(|b| vec![a, b])).collect();
+            (Effect::PlacedSpring { bodies: bodies.clone(), point: *point, direction: *direction, reach }, vec![values[0], values[1]], offsets)
         }
         _ => return None,
     };
-    // The place is a nonlinear parameter with local minima: start from the candidate's point and
-    // from points half a reach away (a 3×3 grid across a spring's line of action; ± along each
-    // axis for a mass), keep the best.
-    let reach = match &cand {
-        Effect::PlacedMass { reach, .. } | Effect::PlacedSpring { reach, .. } => *reach,
-        _ => return None,
-    };
-    let h = 0.5 * reach;
-    let offsets: Vec<Vec<f64>> = if dof == 2.0 {
-        [-h, 0.0, h].iter().flat_map(|&a| [-h, 0.0, h].map(|b| vec![a, b])).collect()
-    } else {
-        let mut v = vec![vec![0.0; 3]];
-        for i in 0..3 {
-            for sign in [-h, h] {
-                let mut o = vec![0.0; 3];
-                o[i] = sign;
-                v.push(o);
-            }
-        }
-        v
-    };
-    let n_place = offsets[0].len();
+    let dof = offsets[0].len() as f64;
     let (r, next) = offsets
         .iter()
         .filter_map(|o| {
-            let mut st = start.clone();
-            let k = st.len() - n_place;
-            st[k..].copy_from_slice(o);
+            let st: Vec<f64> = start.iter().chain(o).copied().collect();
             refit(model, vars, obs, opts, base, &cand, &st, f_hi, sigma2).ok()
         })
         .min_by(|a, b| a.1.e.norm_squared().total_cmp(&b.1.e.norm_squared()))?;
