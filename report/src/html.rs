@@ -3,6 +3,8 @@
 
 use std::fmt::Write;
 
+use identify::identification::report::num;
+
 use crate::document::*;
 use crate::{plot, ReportError};
 
@@ -20,17 +22,6 @@ pub fn escape(s: &str) -> String {
         }
     }
     o
-}
-
-fn num(x: f64) -> String {
-    if x == 0.0 {
-        "0".into()
-    } else if x.abs() >= 1e-3 && x.abs() < 1e5 {
-        let digits = (4 - x.abs().log10().floor() as i32).max(0) as usize;
-        format!("{x:.digits$}")
-    } else {
-        format!("{x:.4e}")
-    }
 }
 
 fn opt(x: Option<f64>) -> String {

@@ -78,6 +78,18 @@ fn sci(v: f64) -> String {
     }
 }
 
+/// The series legend, upper right, on a translucent box.
+fn legend<'a, DB: DrawingBackend + 'a, CT: CoordTranslate>(chart: &mut ChartContext<'a, DB, CT>) -> Result<(), String> {
+    chart
+        .configure_series_labels()
+        .position(SeriesLabelPosition::UpperRight)
+        .label_font((FONT, 12))
+        .background_style(WHITE.mix(0.85))
+        .border_style(BLACK)
+        .draw()
+        .map_err(|e| e.to_string())
+}
+
 /// Frequency ticks 1-2-5 per decade within `[lo, hi]` (plotters' own log ticks are decades only,
 /// which leaves a 20-400 Hz axis one label below 100 Hz).
 fn log_ticks(lo: f64, hi: f64) -> Vec<f64> {
@@ -147,15 +159,7 @@ pub fn amplitude_chart(c: &CharacteristicReport) -> Result<String, ReportError> 
             .map_err(|e| e.to_string())?
             .label("measured ± σ")
             .legend(|(x, y)| Circle::new((x + 10, y), 3, BLACK.filled()));
-        chart
-            .configure_series_labels()
-            .position(SeriesLabelPosition::UpperRight)
-            .label_font((FONT, 12))
-            .background_style(WHITE.mix(0.85))
-            .border_style(BLACK)
-            .draw()
-            .map_err(|e| e.to_string())?;
-        Ok(())
+        legend(&mut chart)
     })
 }
 
@@ -204,15 +208,7 @@ pub fn residual_chart(c: &CharacteristicReport) -> Result<String, ReportError> {
                 .label(s.stage.clone())
                 .legend(move |(x, y)| Circle::new((x + 10, y), 3, col.filled()));
         }
-        chart
-            .configure_series_labels()
-            .position(SeriesLabelPosition::UpperRight)
-            .label_font((FONT, 12))
-            .background_style(WHITE.mix(0.85))
-            .border_style(BLACK)
-            .draw()
-            .map_err(|e| e.to_string())?;
-        Ok(())
+        legend(&mut chart)
     })
 }
 

@@ -18,7 +18,7 @@ use std::process::ExitCode;
 use std::time::Instant;
 
 use acquire::stand::Stand;
-use acquire::sweep::{FrequencyList, IndicatifProgress, NoProgress, SteppedSine, SweepProgress};
+use acquire::sweep::{IndicatifProgress, NoProgress, SteppedSine, SweepProgress};
 use anyhow::Context;
 
 use crate::pipeline::{self, ReportContext, Setup};
@@ -55,16 +55,7 @@ pub struct DemoArgs {
 
 /// The demo's sweep plan.
 pub fn plan(points: usize) -> SteppedSine {
-    SteppedSine {
-        frequencies: FrequencyList::Log { start: 20.0, stop: 400.0, n: points },
-        settle_s: 0.25,
-        cycles: 20.0,
-        min_window_s: 0.25,
-        target_force_n: 4000.0,
-        force_tolerance: 0.03,
-        max_iterations: 6,
-        max_retries: 3,
-    }
+    SteppedSine::log(20.0, 400.0, points, 4000.0)
 }
 
 /// Writes the built-in configs under `dir` and returns it.

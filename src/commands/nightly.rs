@@ -13,7 +13,7 @@ use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 use acquire::stand::Stand;
-use acquire::sweep::{FrequencyList, NoProgress, SteppedSine};
+use acquire::sweep::{NoProgress, SteppedSine};
 use anyhow::Context;
 use serde::Deserialize;
 use serde_json::json;
@@ -147,11 +147,7 @@ impl Config {
 
     fn plan(&self) -> SteppedSine {
         let s = &self.sweep;
-        SteppedSine {
-            frequencies: FrequencyList::Log { start: s.from_hz, stop: s.to_hz, n: s.points },
-            target_force_n: s.force_n,
-            ..super::demo::plan(s.points)
-        }
+        SteppedSine::log(s.from_hz, s.to_hz, s.points, s.force_n)
     }
 
     fn baseline(&self) -> report::drift::Baseline {

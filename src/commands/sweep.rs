@@ -13,7 +13,7 @@ use std::process::ExitCode;
 use std::time::Instant;
 
 use acquire::stand::Stand;
-use acquire::sweep::{self, FrequencyList, IndicatifProgress, SteppedSine};
+use acquire::sweep::{self, IndicatifProgress, SteppedSine};
 use anyhow::Context;
 
 use crate::pipeline;
@@ -53,16 +53,7 @@ pub struct SweepArgs {
 
 /// The plan `ident sweep` runs (also what `--resume` checks against).
 pub fn plan(a: &SweepArgs) -> SteppedSine {
-    SteppedSine {
-        frequencies: FrequencyList::Log { start: a.from, stop: a.to, n: a.points },
-        settle_s: 0.25,
-        cycles: 20.0,
-        min_window_s: 0.25,
-        target_force_n: a.force,
-        force_tolerance: 0.03,
-        max_iterations: 6,
-        max_retries: 3,
-    }
+    SteppedSine::log(a.from, a.to, a.points, a.force)
 }
 
 fn session_path(dir: &Path, stand_file: &Path) -> PathBuf {

@@ -172,6 +172,25 @@ pub struct SteppedSine {
     pub max_retries: u32,
 }
 
+impl SteppedSine {
+    /// The operator workflows' plan (`ident sweep`, `ident demo`, `ident nightly`): `n`
+    /// log-spaced lines from `start` to `stop` Hz at `force_n` N peak, settling 0.25 s and
+    /// measuring 20 cycles (at least 0.25 s) per line, force held within 3 % in up to 6 corrections,
+    /// up to 3 re-measurements of a faulted window.
+    pub fn log(start: f64, stop: f64, n: usize, force_n: f64) -> SteppedSine {
+        SteppedSine {
+            frequencies: FrequencyList::Log { start, stop, n },
+            settle_s: 0.25,
+            cycles: 20.0,
+            min_window_s: 0.25,
+            target_force_n: force_n,
+            force_tolerance: 0.03,
+            max_iterations: 6,
+            max_retries: 3,
+        }
+    }
+}
+
 impl Default for SteppedSine {
     fn default() -> Self {
         SteppedSine {

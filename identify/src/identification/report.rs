@@ -62,7 +62,8 @@ pub fn rows(id: &Identification) -> Vec<Row> {
         .collect()
 }
 
-fn num(x: f64) -> String {
+/// A number for tables: five significant digits between 1e-3 and 1e5, else scientific.
+pub fn num(x: f64) -> String {
     if x == 0.0 {
         "0".into()
     } else if x.abs() >= 1e-3 && x.abs() < 1e5 {
