@@ -31,6 +31,7 @@ pub mod check;
 pub mod contract;
 pub mod diagnose;
 pub mod frf;
+pub mod lines;
 pub mod identification;
 pub mod measured;
 pub mod model;

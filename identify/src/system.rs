@@ -63,25 +63,51 @@ pub struct SdeBlock {
     pub k: [f64; 6],
     /// The six dissipation coefficients.
     pub psi: [f64; 6],
+    /// The nonzero entries of `[−G_p, G_r]` as (deformation row, global DOF, value): what
+    /// [`SdeBlock::deformation`] sums, sorted by row. SDE axes often align with body axes, so
+    /// much of G is zero.
+    pub taps: Vec<(usize, usize, f64)>,
+    /// Row `r`'s taps are `taps[tap_rows[r]..tap_rows[r + 1]]`.
+    pub tap_rows: [usize; 7],
 }
 
 impl SdeBlock {
     /// Deformation `δ = G_r q_r − G_p q_p` of this SDE for a full coordinate vector `q`.
     pub fn deformation(&self, q: impl Fn(usize) -> C64) -> [C64; 6] {
         let mut d = [C64::new(0.0, 0.0); 6];
-        for (side, sign) in [(0usize, -1.0), (1, 1.0)] {
-            if let Some(b) = self.bodies[side] {
-                let g = &self.g[side];
-                for (i, di) in d.iter_mut().enumerate() {
-                    let mut acc = C64::new(0.0, 0.0);
+        for &(row, dof, v) in &self.taps {
+            d[row] += q(dof) * v;
+        }
+        d
+    }
+
+    /// [`SdeBlock::deformation`] of several coordinate vectors at once: `out[c]` for the vector
+    /// `cols[c * n..(c + 1) * n]` (`n` = DOFs), reading each tap once.
+    pub fn deformations(&self, cols: &[C64], n: usize, out: &mut [[C64; 6]]) {
+        for d in out.iter_mut() {
+            *d = [C64::new(0.0, 0.0); 6];
+        }
+        for &(row, dof, v) in &self.taps {
+            for (c, d) in out.iter_mut().enumerate() {
+                d[row] += cols[c * n + dof] * v;
+            }
+        }
+    }
+
+    fn taps(bodies: &[Option<usize>; 2], g: &[Matrix6<f64>; 2]) -> Vec<(usize, usize, f64)> {
+        let mut taps = Vec::new();
+        for row in 0..6 {
+            for (side, sign) in [(0usize, -1.0), (1, 1.0)] {
+                if let Some(b) = bodies[side] {
                     for j in 0..6 {
-                        acc += q(6 * b + j) * g[(i, j)];
+                        if g[side][(row, j)] != 0.0 {
+                            taps.push((row, 6 * b + j, sign * g[side][(row, j)]));
+                        }
                     }
-                    *di += acc * sign;
                 }
             }
         }
-        d
+        taps
     }
 }
 
@@ -130,9 +156,21 @@ impl System {
                 }
                 None => Matrix6::zeros(),
             });
+            let taps = SdeBlock::taps(&sde.bodies, &g);
             let block = SdeBlock {
                 sde: idx,
                 bodies: sde.bodies,
+                tap_rows: {
+                    let mut rows = [0; 7];
+                    for &(r, _, _) in &taps {
+                        rows[r + 1] += 1;
+                    }
+                    for r in 0..6 {
+                        rows[r + 1] += rows[r];
+                    }
+                    rows
+                },
+                taps,
                 g,
                 k: sde.law.stiffness(),
                 psi: sde.law.dissipation(),

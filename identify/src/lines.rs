@@ -1,0 +1,504 @@
+//! Solves `A(ω) q = b` at [`LANES`] frequency lines at once: the direct path's kernel.
+//!
+//! `A(ω) = K + jD − ω²M` is complex symmetric (K, D, M are real symmetric), so it factors as
+//! `A = L Δ Lᵀ` with `L` unit lower triangular and `Δ` diagonal: half the work of an LU, and no
+//! pivoting, so every line does the same operations in the same order. That lets one SIMD lane
+//! carry one line: entry `(i, j)` of every line of a batch sits side by side
+//! (`re[i * n + j][lane]`), the loops run over the lanes innermost, and the compiler vectorises
+//! them (dispatched at run time by `pulp` to the widest instruction set the machine has).
+//!
+//! **Why no pivoting is safe here, and when it is not.** Where the damping matrix `D` is positive
+//! definite every leading principal submatrix of `A` is nonsingular (its imaginary part is), so the
+//! factorisation exists; but nothing bounds its element growth in general. So each line's growth
+//! is measured: the backward error of `L Δ Lᵀ` is bounded by `n u ‖ |L| |Δ| |Lᵀ| ‖` (Higham,
+//! *Accuracy and Stability of Numerical Algorithms*, §10.4), whose largest entry is at most
+//! `max_i Σ_k |l_ik|² |δ_k|` (Cauchy–Schwarz). A line whose bound exceeds [`GROWTH_LIMIT`] times
+//! `max |a_ij|`, or with a zero or non-finite pivot, is marked [`Batch::accurate`]` = false`, and
+//! the caller solves it again with partial pivoting.
+//!
+//! Invariants: buffers are sized once per system size ([`Batch::new`]); [`Batch::factor`] and
+//! [`Batch::solve`] allocate nothing.
+
+use crate::system::{ParamBlock, System};
+use crate::C64;
+
+/// Lines per batch: 8 `f64` lanes fill two AVX2 registers or one AVX-512 register.
+pub const LANES: usize = 8;
+
+/// Largest accepted growth `max_i Σ_k |l_ik|² |δ_k| / max |a_ij|`. A partial-pivoting LU
+/// typically grows by 1–10; 1e3 keeps the backward error within about 1e-12 relative.
+pub const GROWTH_LIMIT: f64 = 1.0e3;
+
+type Lane = [f64; LANES];
+
+const ZERO: Lane = [0.0; LANES];
+
+/// Per-lane derivative sums of one batch ([`Batch::derivatives`]), with their scratch.
+pub struct Derivatives {
+    outputs: usize,
+    /// `(p * outputs + o)`: the sum for parameter `p`, output `o`.
+    re: Vec<Lane>,
+    im: Vec<Lane>,
+    /// Deformation of one SDE under each right-hand side: `[c][row]`.
+    def_re: Vec<[Lane; 6]>,
+    def_im: Vec<[Lane; 6]>,
+    /// `(T w_o)_i (T q)_i` per SDE block and output: `[block * outputs + o][i]`.
+    prod_re: Vec<[Lane; 6]>,
+    prod_im: Vec<[Lane; 6]>,
+}
+
+impl Derivatives {
+    /// Buffers for `params` parameters of `system`.
+    pub fn new(system: &System, params: usize) -> Derivatives {
+        let outputs = system.output_dofs.len();
+        let blocks = system.sdes.len();
+        Derivatives {
+            outputs,
+            re: vec![ZERO; params * outputs],
+            im: vec![ZERO; params * outputs],
+            def_re: vec![[ZERO; 6]; 1 + outputs],
+            def_im: vec![[ZERO; 6]; 1 + outputs],
+            prod_re: vec![[ZERO; 6]; blocks * outputs],
+            prod_im: vec![[ZERO; 6]; blocks * outputs],
+        }
+    }
+
+    /// The sum for parameter `p`, output `o` in lane `l`.
+    #[inline]
+    pub fn at(&self, p: usize, o: usize, l: usize) -> C64 {
+        let at = p * self.outputs + o;
+        C64::new(self.re[at][l], self.im[at][l])
+    }
+}
+
+struct DerivativeWork<'a> {
+    batch: &'a Batch,
+    s: &'a System,
+    blocks: &'a [ParamBlock],
+    used: &'a [usize],
+    out: &'a mut Derivatives,
+}
+
+impl pulp::WithSimd for DerivativeWork<'_> {
+    type Output = ();
+
+    #[inline(always)]
+    fn with_simd<S: pulp::Simd>(self, _simd: S) {
+        let (b, d) = (self.batch, self.out);
+        let (n, outputs) = (b.n, d.outputs);
+        for &blk in self.used {
+            for c in 0..=outputs {
+                // Local sums: the compiler then knows they alias nothing and vectorises the taps.
+                let (mut ar, mut ai) = ([ZERO; 6], [ZERO; 6]);
+                let (xr, xi) = (&b.x_re[c * n..(c + 1) * n], &b.x_im[c * n..(c + 1) * n]);
+                let sde = &self.s.sdes[blk];
+                for row in 0..6 {
+                    let (mut sr, mut si) = (ZERO, ZERO);
+                    for &(_, dof, v) in &sde.taps[sde.tap_rows[row]..sde.tap_rows[row + 1]] {
+                        let (r, i) = (&xr[dof], &xi[dof]);
+                        for l in 0..LANES {
+                            sr[l] = v.mul_add(r[l], sr[l]);
+                            si[l] = v.mul_add(i[l], si[l]);
+                        }
+                    }
+                    ar[row] = sr;
+                    ai[row] = si;
+                }
+                d.def_re[c] = ar;
+                d.def_im[c] = ai;
+            }
+            for o in 0..outputs {
+                let (qr, qi) = (&d.def_re[0], &d.def_im[0]);
+                let (wr, wi) = (&d.def_re[o + 1], &d.def_im[o + 1]);
+                let (pr, pi) = (&mut d.prod_re[blk * outputs + o], &mut d.prod_im[blk * outputs + o]);
+                for i in 0..6 {
+                    for l in 0..LANES {
+                        pr[i][l] = wr[i][l] * qr[i][l] - wi[i][l] * qi[i][l];
+                        pi[i][l] = wr[i][l] * qi[i][l] + wi[i][l] * qr[i][l];
+                    }
+                }
+            }
+        }
+        for (p, pb) in self.blocks.iter().enumerate() {
+            for o in 0..outputs {
+                let (pr, pi) = (&d.prod_re[pb.block * outputs + o], &d.prod_im[pb.block * outputs + o]);
+                let (mut ar, mut ai) = (ZERO, ZERO);
+                for (i, c) in pb.coeff.iter().enumerate() {
+                    // Most parameters touch one or three of the six directions (kn, ψn, …).
+                    if *c == C64::new(0.0, 0.0) {
+                        continue;
+                    }
+                    for l in 0..LANES {
+                        ar[l] += c.re * pr[i][l] - c.im * pi[i][l];
+                        ai[l] += c.re * pi[i][l] + c.im * pr[i][l];
+                    }
+                }
+                d.re[p * outputs + o] = ar;
+                d.im[p * outputs + o] = ai;
+            }
+        }
+    }
+}
+
+/// One batch's work, run by `pulp` inside a function compiled for the machine's SIMD level (the
+/// `inline(always)` chain below is what lets those loops be vectorised with it).
+struct Work<'a> {
+    batch: &'a mut Batch,
+    s: &'a System,
+    w2: Lane,
+}
+
+impl pulp::WithSimd for Work<'_> {
+    type Output = ();
+
+    #[inline(always)]
+    fn with_simd<S: pulp::Simd>(self, _simd: S) {
+        let b = self.batch;
+        let amax = b.fill(self.s, &self.w2);
+        let growth = b.factor();
+        for l in 0..LANES {
+            let ok = growth[l].is_finite() && growth[l] <= GROWTH_LIMIT * amax[l];
+            b.accurate[l] = ok && b.inv_re.iter().chain(&b.inv_im).all(|v| v[l].is_finite());
+        }
+        b.solve(self.s);
+    }
+}
+
+/// Factors and solves a batch of up to [`LANES`] lines of one system.
+pub struct Batch {
+    n: usize,
+    cols: usize,
+    /// Lower triangle: `A` after filling, then `L` below the diagonal and `Δ` on it.
+    re: Vec<Lane>,
+    im: Vec<Lane>,
+    /// `1/δ_j`.
+    inv_re: Vec<Lane>,
+    inv_im: Vec<Lane>,
+    /// Row `j` of `L Δ` while column `j` is computed.
+    v_re: Vec<Lane>,
+    v_im: Vec<Lane>,
+    /// Right-hand sides, then solutions: column `c`, DOF `i` at `c * n + i`.
+    x_re: Vec<Lane>,
+    x_im: Vec<Lane>,
+    /// Per lane: the factorisation is usable (finite nonzero pivots, growth within the limit).
+    accurate: [bool; LANES],
+}
+
+impl Batch {
+    /// Buffers for `system`'s size, with the load and one unit load per output as right-hand
+    /// sides (columns 0 and 1..=outputs, as in the per-line solver).
+    pub fn new(system: &System) -> Batch {
+        let n = system.n;
+        let cols = 1 + system.output_dofs.len();
+        Batch {
+            n,
+            cols,
+            re: vec![ZERO; n * n],
+            im: vec![ZERO; n * n],
+            inv_re: vec![ZERO; n],
+            inv_im: vec![ZERO; n],
+            v_re: vec![ZERO; n],
+            v_im: vec![ZERO; n],
+            x_re: vec![ZERO; cols * n],
+            x_im: vec![ZERO; cols * n],
+            accurate: [false; LANES],
+        }
+    }
+
+    /// Factors `A(ω)` and solves for every right-hand side at `freqs_hz` (at most [`LANES`]; unused
+    /// lanes repeat the last line). Afterwards [`Batch::accurate`] says which lanes to trust.
+    pub fn factor_and_solve(&mut self, s: &System, freqs_hz: &[f64]) {
+        debug_assert!(!freqs_hz.is_empty() && freqs_hz.len() <= LANES && s.n == self.n);
+        let mut w2 = ZERO;
+        for (l, w) in w2.iter_mut().enumerate() {
+            let f = freqs_hz[l.min(freqs_hz.len() - 1)];
+            *w = (2.0 * std::f64::consts::PI * f).powi(2);
+        }
+        pulp::Arch::new().dispatch(Work { batch: self, s, w2 });
+    }
+
+    /// True when lane `l`'s solution can be used (otherwise solve that line with pivoting).
+    pub fn accurate(&self, l: usize) -> bool {
+        self.accurate[l]
+    }
+
+    /// Solution for right-hand side `col` at DOF `i` in lane `l`.
+    #[inline]
+    pub fn x(&self, l: usize, col: usize, i: usize) -> C64 {
+        let at = col * self.n + i;
+        C64::new(self.x_re[at][l], self.x_im[at][l])
+    }
+
+    /// Replaces lane `l`'s solutions (same layout as [`Batch::solution`]): for a line solved
+    /// again with pivoting.
+    pub fn set_solution(&mut self, l: usize, sol: &[C64]) {
+        for ((v, re), im) in sol.iter().zip(&mut self.x_re).zip(&mut self.x_im) {
+            re[l] = v.re;
+            im[l] = v.im;
+        }
+    }
+
+    /// `Σ_i c_pi (T w_o)_i (T q)_i` for every parameter `p` and output `o`, in every lane: the
+    /// adjoint-form derivative of the frf module (times `−factor_o`), with `T` the SDE's
+    /// deformation taps, `q` the load's solution and `w_o` output `o`'s unit-load solution.
+    pub fn derivatives(&self, s: &System, blocks: &[ParamBlock], used: &[usize], out: &mut Derivatives) {
+        pulp::Arch::new().dispatch(DerivativeWork { batch: self, s, blocks, used, out });
+    }
+
+    /// Lane `l`'s solutions: `out[c * n + i]` is DOF `i` of right-hand side `c`.
+    pub fn solution(&self, l: usize, out: &mut [C64]) {
+        for ((o, re), im) in out.iter_mut().zip(&self.x_re).zip(&self.x_im) {
+            *o = C64::new(re[l], im[l]);
+        }
+    }
+
+    /// Lower triangle of `A(ω)` per lane; returns `max |a_ij|` per lane (max of |re|, |im|).
+    #[inline(always)]
+    fn fill(&mut self, s: &System, w2: &Lane) -> Lane {
+        let n = self.n;
+        let mut amax = ZERO;
+        for i in 0..n {
+            for j in 0..=i {
+                let (k, d) = (s.k[i * n + j], s.d[i * n + j]);
+                let (re, im) = (&mut self.re[i * n + j], &mut self.im[i * n + j]);
+                for l in 0..LANES {
+                    re[l] = if i == j { k - w2[l] * s.mass[i] } else { k };
+                    im[l] = d;
+                    amax[l] = amax[l].max(re[l].abs()).max(d.abs());
+                }
+            }
+        }
+        amax
+    }
+
+    /// Left-looking `L Δ Lᵀ` in place; returns the growth bound `max_i Σ_k |l_ik|² |δ_k|` per lane.
+    #[inline(always)]
+    fn factor(&mut self) -> Lane {
+        let n = self.n;
+        let mut growth = ZERO;
+        for j in 0..n {
+            // v_k = l_jk δ_k (k < j); row j of L is read once here.
+            for k in 0..j {
+                let (lr, li) = (&self.re[j * n + k], &self.im[j * n + k]);
+                let (dr, di) = (&self.re[k * n + k], &self.im[k * n + k]);
+                let (vr, vi) = (&mut self.v_re[k], &mut self.v_im[k]);
+                for l in 0..LANES {
+                    vr[l] = lr[l] * dr[l] - li[l] * di[l];
+                    vi[l] = lr[l] * di[l] + li[l] * dr[l];
+                }
+            }
+            // δ_j and the rest of column j: a_ij − Σ_k l_ik v_k for i ≥ j.
+            for i in j..n {
+                let (mut ar, mut ai) = (self.re[i * n + j], self.im[i * n + j]);
+                let (row_re, row_im) = (&self.re[i * n..i * n + j], &self.im[i * n..i * n + j]);
+                let (v_re, v_im) = (&self.v_re[..j], &self.v_im[..j]);
+                dot_sub(&mut ar, &mut ai, j, |k| (&row_re[k], &row_im[k]), |k| (&v_re[k], &v_im[k]));
+                if i == j {
+                    let (mut inr, mut ini) = (ZERO, ZERO);
+                    for l in 0..LANES {
+                        let m = ar[l] * ar[l] + ai[l] * ai[l];
+                        inr[l] = ar[l] / m;
+                        ini[l] = -ai[l] / m;
+                    }
+                    self.inv_re[j] = inr;
+                    self.inv_im[j] = ini;
+                    self.re[j * n + j] = ar;
+                    self.im[j * n + j] = ai;
+                } else {
+                    let (inr, ini) = (&self.inv_re[j], &self.inv_im[j]);
+                    let (dst_re, dst_im) = (&mut self.re[i * n + j], &mut self.im[i * n + j]);
+                    for l in 0..LANES {
+                        dst_re[l] = ar[l] * inr[l] - ai[l] * ini[l];
+                        dst_im[l] = ar[l] * ini[l] + ai[l] * inr[l];
+                    }
+                }
+            }
+        }
+        // Growth bound, row by row: Σ_k |l_ik|² |δ_k| with l_ii = 1.
+        for i in 0..n {
+            let mut acc = ZERO;
+            for k in 0..=i {
+                let (dr, di) = (&self.re[k * n + k], &self.im[k * n + k]);
+                let (lr, li) = (&self.re[i * n + k], &self.im[i * n + k]);
+                for l in 0..LANES {
+                    let dabs = (dr[l] * dr[l] + di[l] * di[l]).sqrt();
+                    let l2 = if k == i { 1.0 } else { lr[l] * lr[l] + li[l] * li[l] };
+                    acc[l] += l2 * dabs;
+                }
+            }
+            for l in 0..LANES {
+                // NaN-propagating max: a NaN pivot must fail the growth test.
+                growth[l] = if acc[l].is_nan() || growth[l].is_nan() { f64::NAN } else { growth[l].max(acc[l]) };
+            }
+        }
+        growth
+    }
+
+    /// Right-hand sides (the load, then unit loads on the output DOFs) and
+    /// `x = L⁻ᵀ Δ⁻¹ L⁻¹ b` for each of them.
+    #[inline(always)]
+    fn solve(&mut self, s: &System) {
+        let n = self.n;
+        self.x_re.fill(ZERO);
+        self.x_im.fill(ZERO);
+        for i in 0..n {
+            self.x_re[i] = [s.load[i]; LANES];
+        }
+        for (o, &d) in s.output_dofs.iter().enumerate() {
+            self.x_re[(o + 1) * n + d] = [1.0; LANES];
+        }
+        for c in 0..self.cols {
+            let (xr, xi) = (&mut self.x_re[c * n..(c + 1) * n], &mut self.x_im[c * n..(c + 1) * n]);
+            // L y = b, row by row.
+            for i in 1..n {
+                let (mut ar, mut ai) = (xr[i], xi[i]);
+                let (row_re, row_im) = (&self.re[i * n..i * n + i], &self.im[i * n..i * n + i]);
+                let (yr, yi) = (&xr[..i], &xi[..i]);
+                dot_sub(&mut ar, &mut ai, i, |k| (&row_re[k], &row_im[k]), |k| (&yr[k], &yi[k]));
+                xr[i] = ar;
+                xi[i] = ai;
+            }
+            // z = Δ⁻¹ y, then Lᵀ x = z from the bottom: x_i = z_i − Σ_{k>i} l_ki x_k.
+            for i in (0..n).rev() {
+                let (mut ar, mut ai) = (ZERO, ZERO);
+                let (yr, yi) = (&xr[i], &xi[i]);
+                let (inr, ini) = (&self.inv_re[i], &self.inv_im[i]);
+                for l in 0..LANES {
+                    ar[l] = yr[l] * inr[l] - yi[l] * ini[l];
+                    ai[l] = yr[l] * ini[l] + yi[l] * inr[l];
+                }
+                let (l_re, l_im) = (&self.re, &self.im);
+                let (tr, ti) = (&xr[i + 1..], &xi[i + 1..]);
+                let col = |k: usize| (&l_re[(i + 1 + k) * n + i], &l_im[(i + 1 + k) * n + i]);
+                dot_sub(&mut ar, &mut ai, n - i - 1, col, |k| (&tr[k], &ti[k]));
+                xr[i] = ar;
+                xi[i] = ai;
+            }
+        }
+    }
+}
+
+/// `acc −= Σ_k a_k b_k` per lane (complex), `k < len`. Two sets of partial sums, so that the
+/// fused multiply-adds of consecutive `k` do not wait on each other.
+#[inline(always)]
+fn dot_sub<'a, 'b>(
+    acc_re: &mut Lane,
+    acc_im: &mut Lane,
+    len: usize,
+    a: impl Fn(usize) -> (&'a Lane, &'a Lane),
+    b: impl Fn(usize) -> (&'b Lane, &'b Lane),
+) {
+    let mut sum = [ZERO; 4];
+    let mut k = 0;
+    while k + 1 < len {
+        let ((ar, ai), (br, bi)) = (a(k), b(k));
+        let ((cr, ci), (dr, di)) = (a(k + 1), b(k + 1));
+        let [s0, s1, s2, s3] = &mut sum;
+        for l in 0..LANES {
+            s0[l] = ar[l].mul_add(br[l], (-ai[l]).mul_add(bi[l], s0[l]));
+            s1[l] = ar[l].mul_add(bi[l], ai[l].mul_add(br[l], s1[l]));
+            s2[l] = cr[l].mul_add(dr[l], (-ci[l]).mul_add(di[l], s2[l]));
+            s3[l] = cr[l].mul_add(di[l], ci[l].mul_add(dr[l], s3[l]));
+        }
+        k += 2;
+    }
+    if k < len {
+        let ((ar, ai), (br, bi)) = (a(k), b(k));
+        let [s0, s1, _, _] = &mut sum;
+        for l in 0..LANES {
+            s0[l] = ar[l].mul_add(br[l], (-ai[l]).mul_add(bi[l], s0[l]));
+            s1[l] = ar[l].mul_add(bi[l], ai[l].mul_add(br[l], s1[l]));
+        }
+    }
+    for l in 0..LANES {
+        acc_re[l] -= sum[0][l] + sum[2][l];
+        acc_im[l] -= sum[1][l] + sum[3][l];
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use faer::Mat;
+
+    /// The pivoted LU solution of every right-hand side at `f` Hz, for reference.
+    fn reference(s: &System, f: f64) -> Vec<C64> {
+        let n = s.n;
+        let w2 = (2.0 * std::f64::consts::PI * f).powi(2);
+        let a = Mat::<C64>::from_fn(n, n, |i, j| {
+            C64::new(s.k[i * n + j] - if i == j { w2 * s.mass[i] } else { 0.0 }, s.d[i * n + j])
+        });
+        let cols = 1 + s.output_dofs.len();
+        let mut b = Mat::<C64>::zeros(n, cols);
+        for i in 0..n {
+            b[(i, 0)] = C64::new(s.load[i], 0.0);
+        }
+        for (o, &d) in s.output_dofs.iter().enumerate() {
+            b[(d, o + 1)] = C64::new(1.0, 0.0);
+        }
+        let x = faer::linalg::solvers::Solve::solve(&a.partial_piv_lu(), &b);
+        (0..cols).flat_map(|c| (0..n).map(move |i| (c, i))).map(|(c, i)| x[(i, c)]).collect()
+    }
+
+    fn fwd32j() -> System {
+        let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+        System::assemble(&crate::modelfile::load(&root.join("configs/models/fwd32j.toml")).expect("model").model)
+    }
+
+    #[test]
+    fn batched_solutions_agree_with_a_pivoted_lu_on_fwd32j() {
+        let s = fwd32j();
+        // 38 log-spaced lines over 3–1000 Hz: below, through and above every resonance; the last
+        // batch is partial.
+        let freqs: Vec<f64> = (0..38).map(|k| 3.0 * (1000.0f64 / 3.0).powf(k as f64 / 37.0)).collect();
+        let mut batch = Batch::new(&s);
+        let mut sol = vec![C64::new(0.0, 0.0); (1 + s.output_dofs.len()) * s.n];
+        let mut worst = 0.0f64;
+        for chunk in freqs.chunks(LANES) {
+            batch.factor_and_solve(&s, chunk);
+            for (l, &f) in chunk.iter().enumerate() {
+                assert!(batch.accurate(l), "FWD-32J at {f} Hz needed pivoting");
+                batch.solution(l, &mut sol);
+                let r = reference(&s, f);
+                let scale = r.iter().map(|v| v.norm()).fold(0.0, f64::max);
+                let err = sol.iter().zip(&r).map(|(a, b)| (a - b).norm()).fold(0.0, f64::max) / scale;
+                worst = worst.max(err);
+            }
+        }
+        assert!(worst < 1e-10, "largest difference from the pivoted LU: {worst:e} of the largest entry");
+    }
+
+    #[test]
+    fn a_zero_pivot_is_flagged_and_the_other_lanes_are_kept() {
+        // Undamped single body whose first DOF is tuned so that a_00 = k − ω²m is exactly zero at
+        // 10 Hz: the unpivoted factorisation breaks down there (the matrix itself may not be
+        // singular, so the line must go back to a pivoted solver, not fail).
+        let mut s = System::assemble(&crate::textbook::single_body(100.0, 1.0e6, 0.0));
+        let w2 = (2.0 * std::f64::consts::PI * 10.0f64).powi(2);
+        s.k[0] = w2 * s.mass[0];
+        s.d.iter_mut().for_each(|d| *d = 0.0);
+        let mut batch = Batch::new(&s);
+        batch.factor_and_solve(&s, &[5.0, 10.0, 20.0]);
+        assert!(batch.accurate(0) && batch.accurate(2));
+        assert!(!batch.accurate(1), "a zero pivot must not be trusted");
+        let mut sol = vec![C64::new(0.0, 0.0); (1 + s.output_dofs.len()) * s.n];
+        batch.solution(2, &mut sol);
+        let r = reference(&s, 20.0);
+        let err = sol.iter().zip(&r).map(|(a, b)| (a - b).norm()).fold(0.0, f64::max);
+        assert!(err <= 1e-12 * r.iter().map(|v| v.norm()).fold(0.0, f64::max));
+    }
+
+    #[test]
+    fn large_growth_is_flagged() {
+        // a_00 tiny but nonzero: the pivot exists, yet |l|²|δ| grows by ~1/ε.
+        let mut s = System::assemble(&crate::textbook::single_body(100.0, 1.0e6, 0.0));
+        let w2 = (2.0 * std::f64::consts::PI * 10.0f64).powi(2);
+        s.k[0] = w2 * s.mass[0] * (1.0 + 1e-9);
+        s.k[1] = 1.0e5;
+        s.k[s.n] = 1.0e5;
+        s.d.iter_mut().for_each(|d| *d = 0.0);
+        let mut batch = Batch::new(&s);
+        batch.factor_and_solve(&s, &[10.0]);
+        assert!(!batch.accurate(0), "growth of ~1e9 must send the line to the pivoted solver");
+    }
+}
