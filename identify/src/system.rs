@@ -81,19 +81,6 @@ impl SdeBlock {
         d
     }
 
-    /// [`SdeBlock::deformation`] of several coordinate vectors at once: `out[c]` for the vector
-    /// `cols[c * n..(c + 1) * n]` (`n` = DOFs), reading each tap once.
-    pub fn deformations(&self, cols: &[C64], n: usize, out: &mut [[C64; 6]]) {
-        for d in out.iter_mut() {
-            *d = [C64::new(0.0, 0.0); 6];
-        }
-        for &(row, dof, v) in &self.taps {
-            for (c, d) in out.iter_mut().enumerate() {
-                d[row] += cols[c * n + dof] * v;
-            }
-        }
-    }
-
     fn taps(bodies: &[Option<usize>; 2], g: &[Matrix6<f64>; 2]) -> Vec<(usize, usize, f64)> {
         let mut taps = Vec::new();
         for row in 0..6 {
