@@ -214,7 +214,7 @@ fn injected_faults_are_all_reported_and_no_damaged_block_is_delivered() {
     runtime().block_on(async {
         tokio::time::timeout(Duration::from_secs(40), async {
             let (host, mut dev) = settings_pair(0x130, FrameKind::Classic);
-            dev.faults = SimFaults { drop_every: Some(97), duplicate_every: Some(61), corrupt_every: Some(89) };
+            dev.faults = SimFaults { drop_every: Some(97), duplicate_every: Some(61), corrupt_every: Some(89), ..SimFaults::default() };
             let vpc = dev.volts_per_count as f64;
             let sim = spawn_sim(dev);
             let mut daq = CanDaq::open(IFACE, host).expect("open");
@@ -476,6 +476,47 @@ fn device_refusals_and_misuse_are_clear_errors() {
         })
         .await
         .expect("finishes within 30 s");
+    });
+}
+
+/// A device whose answers get lost: CONFIGURE is sent again; a START whose ACK was lost (so
+/// the device is already streaming) is re-sent after a STOP, and the stream that follows is clean
+/// and exact from block 0.
+#[test]
+#[ignore = "needs vcan0: run by vcan_suite (in the qemu VM when the host has no CAN)"]
+fn lost_answers_are_asked_again_and_the_stream_starts_clean() {
+    use acquire::can::codec::kind;
+    require_vcan();
+    runtime().block_on(async {
+        tokio::time::timeout(Duration::from_secs(60), async {
+            let (host, mut dev) = settings_pair(0x190, FrameKind::Classic);
+            dev.faults.lose_answers = vec![kind::CONFIGURE, kind::START];
+            let vpc = dev.volts_per_count as f64;
+            let sim = spawn_sim(dev);
+            let tap = std::sync::Arc::new(LineTap::default());
+            let mut daq = CanDaq::open(IFACE, host).expect("open").with_tap(tap.clone());
+            daq.identify().await.expect("identify");
+            let channels = vec![1, 4];
+            let config = DaqConfig { sample_rate_hz: 2000.0, channels: channels.clone(), samples_per_block: 16 };
+            daq.configure(&config).await.expect("configure, answered the second time");
+            daq.start().await.expect("start, acknowledged after STOP and START again");
+            for want in 0..20 {
+                match daq.next_event().await.expect("next event") {
+                    DaqEvent::Block(b) => {
+                        assert_eq!(b.seq, want);
+                        check_block(&b, &channels, 16, vpc);
+                    }
+                    DaqEvent::Fault(f) => panic!("the re-sent START left a fault on the new stream: {f:?}"),
+                }
+            }
+            daq.stop().await.expect("stop");
+            let stats = stop_sim(sim).await;
+            // The device received IDENTIFY, CONFIGURE twice, START, STOP, START and STOP.
+            assert_eq!((stats.answers_lost, stats.commands), (2, 7), "{stats:?}");
+            assert!(tap.0.lock().expect("tap lock").iter().any(|(d, _)| *d == Direction::Tx), "the tap saw the commands");
+        })
+        .await
+        .expect("finishes within 60 s");
     });
 }
 

@@ -22,8 +22,13 @@ pub struct CanDaqSettings {
     pub data_id: CanId,
     /// Frames the host sends its commands in (the DAQ chooses its own for data).
     pub frames: FrameKind,
-    /// Longest wait for an answer to a command.
+    /// Longest wait for an answer to a command (the stand file's `daq.timeout`).
     pub answer_timeout: Duration,
+    /// Times a command is sent again after its answer timed out (the stand file's `daq.retries`).
+    /// IDENTIFY, CONFIGURE and STOP are idempotent; START is re-sent after a STOP, so that a START
+    /// the device did receive cannot leave two streams' block counters interleaved.
+    #[serde(default = "default_retries")]
+    pub retries: u32,
     /// Longest wait for the next data frame while streaming.
     pub data_timeout: Duration,
     /// Socket receive buffer (bytes) that absorbs bursts while the host is busy.
@@ -38,10 +43,15 @@ impl Default for CanDaqSettings {
             data_id: CanId::Standard(0x102),
             frames: FrameKind::Classic,
             answer_timeout: Duration::from_secs(1),
+            retries: default_retries(),
             data_timeout: Duration::from_secs(2),
             receive_buffer: 4 << 20,
         }
     }
+}
+
+fn default_retries() -> u32 {
+    2
 }
 
 impl CanDaqSettings {
@@ -76,6 +86,9 @@ pub struct CanDaq {
     streaming: bool,
     pending: VecDeque<DaqEvent>,
     answers: VecDeque<Message>,
+    /// Commands (type bytes) sent again after a timeout whose first answers may still arrive:
+    /// such an answer is expected, not a fault.
+    late: Vec<u8>,
     next_seq: u64,
     last_raw_seq: Option<u32>,
     frames: Vec<WireFrame>,
@@ -99,6 +112,7 @@ impl CanDaq {
             streaming: false,
             pending: VecDeque::new(),
             answers: VecDeque::new(),
+            late: Vec::new(),
             next_seq: 0,
             last_raw_seq: None,
             frames: Vec::new(),
@@ -274,44 +288,83 @@ impl CanDaq {
         self.last_raw_seq = Some(b.seq);
     }
 
-    /// Sends `m` and waits for the answer `accept` picks out (NAK → [`DaqError::Rejected`]).
+    /// Sends `m` and waits for the answer `accept` picks out (NAK → [`DaqError::Rejected`]),
+    /// sending it again up to `settings.retries` times when the answer times out.
     async fn request<T>(&mut self, m: Message, accept: impl Fn(&Message) -> Option<T>) -> Result<T, DaqError> {
         let name = m.name();
-        let command = match m.clone() {
+        let command = match m {
             Message::Identify => kind::IDENTIFY,
             Message::Configure { .. } => kind::CONFIGURE,
             Message::Start => kind::START,
             _ => kind::STOP,
         };
+        let what = format!("answer to {name} on identifier {} (command sent on {})", self.settings.status_id, self.settings.command_id);
+        let attempts = self.settings.retries + 1;
         self.answers.clear();
-        self.send(&m).await?;
-        let deadline = tokio::time::Instant::now() + self.settings.answer_timeout;
-        loop {
-            while let Some(a) = self.answers.pop_front() {
-                if let Some(t) = accept(&a) {
-                    return Ok(t);
-                }
-                match a {
-                    Message::Nak { command: c, code, message } if c == command => {
-                        return Err(DaqError::Rejected { port: self.port(), command: name.into(), code: code as i32, message })
-                    }
-                    other => {
-                        let detail = format!("{} while waiting for the answer to {name}; ignored", other.name());
-                        self.fault(FaultKind::Framing, None, detail);
-                    }
+        for attempt in 0..attempts {
+            if attempt > 0 {
+                tracing::warn!(interface = self.bus.interface(), "no {what} within {:?}; sending it again", self.settings.answer_timeout);
+                if command == kind::START {
+                    // The first START may have started a stream whose ACK is late: stop it, so
+                    // the next START's block counter is the only one on the bus.
+                    self.send(&Message::Stop).await?;
+                    self.expect_late(kind::STOP);
                 }
             }
-            let what = format!(
-                "answer to {name} on identifier {} (command sent on {})",
-                self.settings.status_id, self.settings.command_id
-            );
-            match self.pump(deadline, &what).await {
-                Err(DaqError::Timeout { port, what, .. }) => {
-                    return Err(DaqError::Timeout { port, what, waited: self.settings.answer_timeout })
+            self.send(&m).await?;
+            let deadline = tokio::time::Instant::now() + self.settings.answer_timeout;
+            loop {
+                while let Some(a) = self.answers.pop_front() {
+                    if let Some(t) = accept(&a) {
+                        // Each earlier attempt the device may have received owes an answer.
+                        (0..attempt).for_each(|_| self.expect_late(command));
+                        return Ok(t);
+                    }
+                    match a {
+                        Message::Nak { command: c, code, message } if c == command => {
+                            return Err(DaqError::Rejected { port: self.port(), command: name.into(), code: code as i32, message })
+                        }
+                        other => {
+                            let late = answered_command(&other).and_then(|k| self.late.iter().position(|&l| l == k));
+                            match late {
+                                Some(i) => {
+                                    self.late.swap_remove(i);
+                                    tracing::debug!(interface = self.bus.interface(), "late {} to a command sent again; ignored", other.name());
+                                }
+                                None => {
+                                    let detail = format!("{} while waiting for the answer to {name}; ignored", other.name());
+                                    self.fault(FaultKind::Framing, None, detail);
+                                }
+                            }
+                        }
+                    }
                 }
-                r => r?,
+                match self.pump(deadline, &what).await {
+                    Err(DaqError::Timeout { .. }) => break,
+                    r => r?,
+                }
             }
         }
+        Err(DaqError::Timeout { port: self.port(), what: format!("{what}, {attempts} attempt(s)"), waited: self.settings.answer_timeout })
+    }
+
+    /// Notes that an answer to `command` may still arrive (bounded: a device that never got the
+    /// command owes nothing, and its entry must not pile up).
+    fn expect_late(&mut self, command: u8) {
+        if self.late.len() >= 16 {
+            self.late.remove(0);
+        }
+        self.late.push(command);
+    }
+}
+
+/// The command an answer answers (type byte), if it is one.
+fn answered_command(m: &Message) -> Option<u8> {
+    match m {
+        Message::Identity(_) => Some(kind::IDENTIFY),
+        Message::Announce { .. } => Some(kind::CONFIGURE),
+        Message::Ack { command } | Message::Nak { command, .. } => Some(*command),
+        _ => None,
     }
 }
 
@@ -403,6 +456,9 @@ impl Daq for CanDaq {
         self.next_seq = 0;
         self.last_raw_seq = None;
         self.request(Message::Start, |m| matches!(m, Message::Ack { command: kind::START }).then_some(())).await?;
+        // Data frames before the ACK belong to an earlier (or a re-sent START's aborted) stream;
+        // the device sends the new stream's frames after the ACK.
+        self.rx_data.reset();
         self.streaming = true;
         Ok(())
     }

@@ -7,7 +7,8 @@ use crate::can::codec::{kind, Message, Reassembler, SampleFormat, Segmenter, Wir
 use crate::can::{BusEvent, CanBus, CanError, CanId, FrameKind, WireFrame};
 use crate::device::DeviceIdentity;
 
-/// Faults the simulator injects into its data frames (counted over all data frames sent).
+/// Faults the simulator injects: into its data frames (counted over all data frames sent), and
+/// into its answers.
 #[derive(Debug, Clone, Default, PartialEq, Eq)]
 pub struct SimFaults {
     /// Skip every n-th data frame.
@@ -16,6 +17,9 @@ pub struct SimFaults {
     pub duplicate_every: Option<u64>,
     /// Flip a payload bit in every n-th data frame (the frame counter stays intact).
     pub corrupt_every: Option<u64>,
+    /// Commands (type bytes, `codec::kind`) whose answer is lost once each: the command takes
+    /// effect, its answer never reaches the bus.
+    pub lose_answers: Vec<u8>,
 }
 
 /// How the simulated DAQ behaves.
@@ -89,6 +93,8 @@ pub struct SimStats {
     pub corrupted: u64,
     /// Commands received.
     pub commands: u64,
+    /// Answers not sent (`SimFaults::lose_answers`).
+    pub answers_lost: u64,
 }
 
 struct Stream {
@@ -125,7 +131,7 @@ impl SimCanDaq {
 
 async fn serve_on(
     bus: CanBus,
-    settings: SimCanDaqSettings,
+    mut settings: SimCanDaqSettings,
     mut signal: Signal,
     max_blocks: Option<u64>,
     stop: tokio::sync::oneshot::Receiver<()>,
@@ -194,6 +200,12 @@ async fn serve_on(
                     Ok(other) => Message::Nak { command: 0, code: 4, message: format!("unexpected {}", other.name()) },
                     Err(e) => Message::Nak { command: body_in.first().copied().unwrap_or(0), code: 5, message: e.to_string() },
                 };
+                let command = body_in.first().copied().unwrap_or(0);
+                if let Some(i) = settings.faults.lose_answers.iter().position(|&k| k == command) {
+                    settings.faults.lose_answers.remove(i);
+                    stats.answers_lost += 1;
+                    continue;
+                }
                 answer.encode(&mut body).map_err(|source| CanError::Encode { interface: interface.into(), message: "answer", source })?;
                 frames.clear();
                 tx_status.segment(&body, &mut frames).map_err(|source| CanError::Encode { interface: interface.into(), message: "answer", source })?;

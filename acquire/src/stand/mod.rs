@@ -526,7 +526,7 @@ impl Stand {
             },
         };
         let rd = raw.daq.get_ref();
-        let daq = DaqPort {
+        let mut daq = DaqPort {
             port: port_spec(rd.port.get_ref()),
             baud: rd.baud.unwrap_or(3_000_000),
             identity: rd.identity.clone().unwrap_or_default(),
@@ -543,6 +543,12 @@ impl Stand {
             retries: rd.retries.unwrap_or(2),
             can: can_settings(&cx, rd.can.as_ref())?,
         };
+        // `daq.timeout` and `daq.retries` hold for a DAQ on CAN too (when given: a CAN DAQ's own
+        // default answer timeout is 1 s).
+        if rd.timeout.is_some() {
+            daq.can.answer_timeout = daq.timeout;
+        }
+        daq.can.retries = daq.retries;
         if matches!(shaker.port, PortSpec::Can(_)) {
             return Err(cx.at(rs.port.span(), "shaker.port: the shaker controller speaks SCPI over serial; give a device path (or \"sim\"), not a CAN interface"));
         }

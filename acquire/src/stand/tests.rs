@@ -109,6 +109,11 @@ fn can_ports_and_identifiers_are_read_and_checked() {
     assert_eq!(s.daq.port, PortSpec::Can("can0".into()));
     assert_eq!(s.daq.can.frames, crate::can::FrameKind::Fd);
     assert_eq!(s.daq.can.data_id, crate::can::CanId::Standard(0x312));
+    // Without `daq.timeout` the CAN DAQ keeps its own default; with it, the stand file decides.
+    assert_eq!(s.daq.can.answer_timeout, crate::can::CanDaqSettings::default().answer_timeout);
+    let timed = t.replace("samples_per_block = 64", "samples_per_block = 64\ntimeout = \"3 s\"\nretries = 5");
+    let s = Stand::parse(&timed, "can.toml").unwrap();
+    assert_eq!((s.daq.can.answer_timeout, s.daq.can.retries), (std::time::Duration::from_secs(3), 5));
     let e = err(&t.replace("frames = \"fd\"", "frames = \"flexible\""));
     assert!(e.message.contains("daq.can.frames = \"flexible\": write \"classic\""), "{e}");
     assert_eq!(e.line, line_of(&t, "frames = \"fd\""), "{e}");
