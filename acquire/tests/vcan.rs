@@ -520,6 +520,76 @@ fn lost_answers_are_asked_again_and_the_stream_starts_clean() {
     });
 }
 
+/// The stand file's `[faults]` reach a DAQ simulated on CAN: per block, a drop loses one CAN
+/// frame, a corruption flips a bit in one, a duplicate repeats one, a delay holds the block back;
+/// then the DAQ falls silent. The host reports each, delivers none of the damaged blocks and no
+/// block twice, and ends with a timeout naming the data identifier.
+#[test]
+#[ignore = "needs vcan0: run by vcan_suite (in the qemu VM when the host has no CAN)"]
+fn stand_file_faults_reach_the_simulated_can_daq() {
+    use acquire::sim::SimStand;
+    require_vcan();
+    let dir = tempfile::tempdir().expect("temp dir");
+    let mut stand = util::model_sim_stand_in(dir.path(), Some(1.0));
+    stand.daq.sample_rate_hz = 2560.0;
+    stand.daq.samples_per_block = 32;
+    stand.daq.can.frames = FrameKind::Classic;
+    stand.daq.can.command_id = CanId::Standard(0x320);
+    stand.daq.can.status_id = CanId::Standard(0x321);
+    stand.daq.can.data_id = CanId::Standard(0x322);
+    let sent = 150;
+    stand.faults = acquire::stand::Faults {
+        seed: 5,
+        drop: 0.04,
+        corrupt: 0.04,
+        duplicate: 0.04,
+        delay: 0.04,
+        delay_time: Duration::from_millis(5),
+        daq_silent_after_blocks: Some(sent),
+        ..Default::default()
+    };
+    runtime().block_on(async {
+        tokio::time::timeout(Duration::from_secs(90), async {
+            let sim = SimStand::start_can(&stand, IFACE).expect("simulated stand with its DAQ on vcan0");
+            let mut daq = CanDaq::open(IFACE, stand.daq.can.clone()).expect("open");
+            daq.identify().await.expect("identify");
+            daq.configure(&stand.daq_config()).await.expect("configure");
+            daq.start().await.expect("start");
+            let (mut delivered, mut faults) = (Vec::new(), Vec::new());
+            let end = loop {
+                match daq.next_event().await {
+                    Ok(DaqEvent::Block(b)) => delivered.push(b.seq),
+                    Ok(DaqEvent::Fault(f)) => faults.push(f.kind),
+                    Err(e) => break e,
+                }
+            };
+            assert!(matches!(end, DaqError::Timeout { .. }) && end.to_string().contains("322"), "{end}");
+            let injected = sim.injected();
+            sim.shutdown();
+            let of = |k: &str| injected.iter().filter(|f| f.kind == k).map(|f| f.seq).collect::<Vec<u64>>();
+            let (drops, corrupt, dups) = (of("drop"), of("corrupt"), of("duplicate"));
+            eprintln!(
+                "stand faults on CAN: {} blocks delivered; injected drop {drops:?} corrupt {corrupt:?} duplicate {dups:?} delay {:?}; host faults {faults:?}",
+                delivered.len(),
+                of("delay")
+            );
+            for k in ["drop", "corrupt", "duplicate", "delay"] {
+                assert!(!of(k).is_empty(), "no {k} injected in {sent} blocks (seed 5)");
+            }
+            assert_eq!(of("daq_silent"), [sent], "silent after {sent} blocks");
+            // Exactly the undamaged blocks, each once, in order.
+            let want: Vec<u64> = (0..sent).filter(|s| !drops.contains(s) && !corrupt.contains(s)).collect();
+            assert_eq!(delivered, want);
+            let count = |k: FaultKind| faults.iter().filter(|f| **f == k).count();
+            assert!(count(FaultKind::Crc) >= corrupt.len(), "{faults:?}");
+            assert!(count(FaultKind::Gap) >= drops.len(), "{faults:?}");
+            assert!(count(FaultKind::Duplicate) >= dups.len(), "{faults:?}");
+        })
+        .await
+        .expect("finishes within 90 s");
+    });
+}
+
 /// Reads this thread's CPU time (user + system) from /proc (clock ticks of 10 ms).
 fn thread_cpu() -> Duration {
     let stat = std::fs::read_to_string("/proc/thread-self/stat").expect("/proc/thread-self/stat");

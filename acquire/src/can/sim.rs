@@ -1,7 +1,11 @@
 //! A simulated DAQ on a CAN interface: answers DAQ-over-CAN commands and streams sample blocks
-//! from a signal function, with injectable faults (dropped, duplicated, corrupted data frames).
+//! from a signal function, with injectable faults: dropped, duplicated, corrupted data frames
+//! (every n-th frame, or seeded per block as a stand file's `[faults]` asks), delayed blocks,
+//! lost answers, and a DAQ that falls silent.
 
 use std::time::Duration;
+
+use rand::{Rng, SeedableRng};
 
 use crate::can::codec::{kind, Message, Reassembler, SampleFormat, Segmenter, WireBlock, WireChannel};
 use crate::can::{BusEvent, CanBus, CanError, CanId, FrameKind, WireFrame};
@@ -9,7 +13,7 @@ use crate::device::DeviceIdentity;
 
 /// Faults the simulator injects: into its data frames (counted over all data frames sent), and
 /// into its answers.
-#[derive(Debug, Clone, Default, PartialEq, Eq)]
+#[derive(Debug, Clone, Default, PartialEq)]
 pub struct SimFaults {
     /// Skip every n-th data frame.
     pub drop_every: Option<u64>,
@@ -20,6 +24,30 @@ pub struct SimFaults {
     /// Commands (type bytes, `codec::kind`) whose answer is lost once each: the command takes
     /// effect, its answer never reaches the bus.
     pub lose_answers: Vec<u8>,
+    /// A stand file's DAQ faults, drawn per block from its seed: `drop` loses one data frame of
+    /// the block, `corrupt` flips a bit in one, `duplicate` sends one twice, `delay` holds the
+    /// block back `delay_time`; after `daq_silent_after_blocks` (or `cable_pull_after_blocks`:
+    /// on CAN the DAQ's frames simply stop) blocks it neither streams nor answers. The shaker
+    /// fields do not apply here.
+    pub per_block: Option<crate::stand::Faults>,
+}
+
+/// Told of each per-block fault injected: kind (`drop`, `corrupt`, `duplicate`, `delay`,
+/// `daq_silent`, `cable_pull`) and block number since START.
+pub type FaultNote = Box<dyn FnMut(&'static str, u64) + Send>;
+
+/// What a per-block fault does to one block.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum BlockFault {
+    None,
+    /// One of its data frames is not sent.
+    Drop,
+    /// One of its data frames has a payload bit flipped.
+    Corrupt,
+    /// One of its data frames is sent twice.
+    Duplicate,
+    /// The block is held back.
+    Delay,
 }
 
 /// How the simulated DAQ behaves.
@@ -107,6 +135,7 @@ struct Stream {
 pub struct SimCanDaq {
     bus: CanBus,
     settings: SimCanDaqSettings,
+    note: Option<FaultNote>,
 }
 
 impl SimCanDaq {
@@ -114,7 +143,13 @@ impl SimCanDaq {
     /// sent after this returns are received.
     pub fn bind(interface: &str, settings: SimCanDaqSettings) -> Result<SimCanDaq, CanError> {
         let bus = CanBus::open_filtered(interface, &[settings.command_id])?;
-        Ok(SimCanDaq { bus, settings })
+        Ok(SimCanDaq { bus, settings, note: None })
+    }
+
+    /// Calls `note` for each per-block fault injected ([`SimFaults::per_block`]).
+    pub fn on_fault(mut self, note: FaultNote) -> SimCanDaq {
+        self.note = Some(note);
+        self
     }
 
     /// Serves the DAQ-over-CAN protocol until `stop` resolves (or `max_blocks` blocks were sent,
@@ -125,7 +160,7 @@ impl SimCanDaq {
         max_blocks: Option<u64>,
         stop: tokio::sync::oneshot::Receiver<()>,
     ) -> Result<SimStats, CanError> {
-        serve_on(self.bus, self.settings, signal, max_blocks, stop).await
+        serve_on(self.bus, self.settings, signal, max_blocks, stop, self.note).await
     }
 }
 
@@ -135,7 +170,16 @@ async fn serve_on(
     mut signal: Signal,
     max_blocks: Option<u64>,
     stop: tokio::sync::oneshot::Receiver<()>,
+    mut note: Option<FaultNote>,
 ) -> Result<SimStats, CanError> {
+    let mut note = |kind: &'static str, seq: u64| {
+        if let Some(n) = note.as_mut() {
+            n(kind, seq)
+        }
+    };
+    let per_block = settings.faults.per_block.clone();
+    let mut rng = rand::rngs::StdRng::seed_from_u64(per_block.as_ref().map_or(0, |f| f.seed));
+    let mut silent = false;
     let interface = bus.interface().to_string();
     let interface = interface.as_str();
     let mut rx = Reassembler::new();
@@ -160,6 +204,9 @@ async fn serve_on(
             _ = &mut stop => return Ok(stats),
             ev = bus.recv() => {
                 let BusEvent::Frame(f) = ev? else { continue };
+                if silent {
+                    continue;
+                }
                 let p = rx.push(f.data());
                 let Some(body_in) = p.message else { continue };
                 stats.commands += 1;
@@ -227,21 +274,63 @@ async fn serve_on(
                         counts.push(signal(c, first + i).clamp(lo, hi));
                     }
                 }
+                let this = block_seq as u64;
+                let mut fault = BlockFault::None;
+                if let Some(f) = &per_block {
+                    let pulled = f.cable_pull_after_blocks.is_some_and(|k| stats.blocks >= k);
+                    if pulled || f.daq_silent_after_blocks.is_some_and(|k| stats.blocks >= k) {
+                        silent = true;
+                        streaming = false;
+                        note(if pulled { "cable_pull" } else { "daq_silent" }, this);
+                        continue;
+                    }
+                    let u: f64 = rng.random();
+                    fault = if u < f.drop {
+                        BlockFault::Drop
+                    } else if u < f.drop + f.corrupt {
+                        BlockFault::Corrupt
+                    } else if u < f.drop + f.corrupt + f.duplicate {
+                        BlockFault::Duplicate
+                    } else if u < f.drop + f.corrupt + f.duplicate + f.delay {
+                        BlockFault::Delay
+                    } else {
+                        BlockFault::None
+                    };
+                }
                 let block = Message::Block(WireBlock { seq: block_seq, format: settings.format, channel_count: s.channels.len() as u8, counts: std::mem::take(&mut counts) });
                 block.encode(&mut body).map_err(|source| CanError::Encode { interface: interface.into(), message: "block", source })?;
                 if let Message::Block(b) = block { counts = b.counts; }
                 frames.clear();
                 tx_data.segment(&body, &mut frames).map_err(|source| CanError::Encode { interface: interface.into(), message: "block", source })?;
-                for f in &frames {
+                // The frame a per-block fault hits.
+                let target = match fault {
+                    BlockFault::Drop | BlockFault::Corrupt | BlockFault::Duplicate => Some(rng.random_range(0..frames.len())),
+                    BlockFault::None | BlockFault::Delay => None,
+                };
+                match fault {
+                    BlockFault::None => {}
+                    BlockFault::Drop => note("drop", this),
+                    BlockFault::Corrupt => note("corrupt", this),
+                    BlockFault::Duplicate => note("duplicate", this),
+                    BlockFault::Delay => {
+                        note("delay", this);
+                        if let Some(f) = &per_block {
+                            tokio::time::sleep(f.delay_time).await;
+                        }
+                    }
+                }
+                for (i, f) in frames.iter().enumerate() {
+                    let here = |kind: BlockFault| target == Some(i) && fault == kind;
                     stats.data_frames += 1;
                     let n = stats.data_frames;
                     let hit = |every: Option<u64>| every.is_some_and(|e| e > 0 && n % e == 0);
-                    if hit(settings.faults.drop_every) {
+                    if hit(settings.faults.drop_every) || here(BlockFault::Drop) {
                         stats.dropped += 1;
                         continue;
                     }
                     let mut f = *f;
-                    if hit(settings.faults.corrupt_every) && f.data().len() > 1 {
+                    let corrupt = hit(settings.faults.corrupt_every) || here(BlockFault::Corrupt);
+                    if corrupt && f.data().len() > 1 {
                         let mut d = f.data().to_vec();
                         let last = d.len() - 1;
                         d[1 + n as usize % last] ^= 0x10;
@@ -249,7 +338,7 @@ async fn serve_on(
                         stats.corrupted += 1;
                     }
                     bus.send(&f).await?;
-                    if hit(settings.faults.duplicate_every) {
+                    if hit(settings.faults.duplicate_every) || here(BlockFault::Duplicate) {
                         bus.send(&f).await?;
                         stats.duplicated += 1;
                     }

@@ -211,9 +211,10 @@ impl SimStand {
 
     /// Serves the stand's simulated shaker controller on a pseudo-terminal and its DAQ on the CAN
     /// interface `iface` (docs/daq-can.md, identifiers and frames from the stand's `[daq.can]`),
-    /// both driven by the same truth. The DAQ's signals are those of [`SimStand::start`]; the
-    /// stand's serial-stream faults do not apply (the CAN simulator has its own,
-    /// [`crate::can::sim::SimFaults`]).
+    /// both driven by the same truth. The DAQ's signals are those of [`SimStand::start`], and so
+    /// are the stand's `[faults]`, per block ([`crate::can::sim::SimFaults::per_block`]: a
+    /// dropped or corrupted block loses or damages one of its CAN frames; a pulled cable closes
+    /// the shaker's pty and silences the DAQ). Every injected fault is in [`SimStand::injected`].
     pub fn start_can(stand: &Stand, iface: &str) -> Result<SimStand, SimError> {
         use crate::can::sim::{SimCanDaq, SimCanDaqSettings};
         let setup = SimSetup::from_stand(stand)?;
@@ -232,7 +233,13 @@ impl SimStand {
         };
         dev.identity = setup.identities.daq.clone();
         dev.channel_count = setup.channels.iter().map(|c| c.device_channel + 1).max().unwrap_or(1);
-        let sim = SimCanDaq::bind(iface, dev)?;
+        dev.faults.per_block = Some(setup.faults.clone());
+        let s0 = shared.clone();
+        let sim = SimCanDaq::bind(iface, dev)?.on_fault(Box::new(move |kind, seq| {
+            let mut sh = lock(&s0);
+            sh.injected.push(InjectedFault { kind, seq });
+            sh.cable_pulled |= kind == "cable_pull";
+        }));
         let signal = can_signal(&setup, shared.clone());
         let (stop_tx, stop_rx) = tokio::sync::oneshot::channel::<()>();
         let t2 = tokio::spawn(async move {
