@@ -26,23 +26,61 @@ const TWO_PI: f64 = 2.0 * std::f64::consts::PI;
 /// Which solution path to use.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum Method {
-    /// Direct for small problems or few lines, modal otherwise.
+    /// Whichever of the two a cost model expects to be cheaper ([`Method::resolve`]).
     #[default]
     Auto,
     /// Per-frequency factorisation (batched `L Δ Lᵀ`, pivoted LU where needed).
     Direct,
-    /// One eigen-decomposition, then O(n) per line.
+    /// One eigen-decomposition, then modal sums per line.
     Modal,
 }
 
+/// What an evaluation computes: it sets the modal path's cost per line.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Work {
+    /// The outputs and their derivatives with respect to `params` parameters ([`response`]).
+    Outputs {
+        /// Jacobian columns (SDE parameters, not decision variables).
+        params: usize,
+    },
+    /// Full DOF solutions for `rhs` right-hand sides ([`states`]).
+    States {
+        /// Right-hand sides: the load and one unit load per output.
+        rhs: usize,
+    },
+}
+
 impl Method {
-    /// The path [`Method::Auto`] picks for `n` DOFs and `lines` frequency lines: modal once the
-    /// per-line LUs (≈ n³/3 each) outweigh one eigen-decomposition (≈ 25 n³ complex).
-    pub fn resolve(self, n: usize, lines: usize) -> Method {
-        match self {
-            Method::Auto if lines > 75 || (n > 120 && lines > 8) => Method::Modal,
-            Method::Auto => Method::Direct,
-            m => m,
+    /// The path [`Method::Auto`] picks for `n` DOFs, `lines` frequency lines and `work`: the
+    /// cheaper by a cost model fitted to measurements (FWD-32J with 0–74 parameters and chains of
+    /// 24–240 DOFs, 20–600 lines; `cargo bench -p identify --bench frf`, group
+    /// `fwd32j_direct_vs_modal_by_lines`). Estimated seconds:
+    /// - direct: `lines · 2.4e-10 n^2.7` (one batched `L Δ Lᵀ` per line; the adjoint Jacobian
+    ///   adds little);
+    /// - modal: `1.5e-8 n^2.7` for the eigen-decomposition, plus per line
+    ///   `n (1.43e-8 + 3.6e-9 P)` for outputs and `P` parameters (each parameter's modal sum),
+    ///   or `9.6e-10 n² rhs` for full solutions.
+    ///
+    /// Only the ratio matters. Near the break-even the two are within about 1.3× of each other,
+    /// so the model need not be exact. On FWD-32J (42 DOFs) the identification's 74 parameters
+    /// keep the direct path cheaper at any number of lines; a plain FRF goes modal above about
+    /// 70 lines.
+    pub fn resolve(self, n: usize, lines: usize, work: Work) -> Method {
+        if self != Method::Auto {
+            return self;
+        }
+        let (nf, lf) = (n as f64, lines as f64);
+        let cube = nf.powf(2.7);
+        let direct = lf * 2.4e-10 * cube;
+        let per_line = match work {
+            Work::Outputs { params } => nf * (1.43e-8 + 3.6e-9 * params as f64),
+            Work::States { rhs } => 9.6e-10 * nf * nf * rhs as f64,
+        };
+        let modal = 1.5e-8 * cube + lf * per_line;
+        if modal < direct {
+            Method::Modal
+        } else {
+            Method::Direct
         }
     }
 }
@@ -138,7 +176,7 @@ pub fn response(
         values: vec![C64::new(0.0, 0.0); quantities.len() * freqs_hz.len()],
         jacobian: vec![C64::new(0.0, 0.0); params.len() * quantities.len() * freqs_hz.len()],
     };
-    match method.resolve(system.n, freqs_hz.len()) {
+    match method.resolve(system.n, freqs_hz.len(), Work::Outputs { params: blocks.len() }) {
         Method::Modal => ModalSolver::new(&system)?.fill(&system, &blocks, &quantities, &mut out)?,
         _ => DirectSolver::new(&system).fill(&system, &blocks, &quantities, &mut out)?,
     }
@@ -234,7 +272,7 @@ pub fn states(model: &Model, freqs_hz: &[f64], method: Method) -> Result<States,
         factor: vec![C64::new(0.0, 0.0); lines * outputs],
     };
     let quantities: Vec<Quantity> = model.outputs.iter().map(|c| c.quantity).collect();
-    match method.resolve(n, lines) {
+    match method.resolve(n, lines, Work::States { rhs: 1 + outputs }) {
         Method::Modal => {
             let modal = ModalSolver::new(&system)?;
             let b: Vec<C64> = (0..n).map(|m| (0..n).map(|i| modal.y[(m, i)] * system.load[i]).sum()).collect();
@@ -600,6 +638,25 @@ impl ModalSolver {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn auto_takes_the_path_the_measurements_found_cheaper() {
+        let outputs = |params| Work::Outputs { params };
+        // FWD-32J (42 DOFs): the identification's 74 parameters keep the direct path cheaper
+        // even at 600 lines (measured 0.67× the modal time); a plain FRF goes modal past ~70.
+        assert_eq!(Method::Auto.resolve(42, 600, outputs(74)), Method::Direct);
+        assert_eq!(Method::Auto.resolve(42, 20, outputs(0)), Method::Direct);
+        assert_eq!(Method::Auto.resolve(42, 400, outputs(0)), Method::Modal);
+        // Full solutions cost the modal path n² per line: direct at 42 DOFs (0.82× at 400 lines).
+        assert_eq!(Method::Auto.resolve(42, 400, Work::States { rhs: 4 }), Method::Direct);
+        // Large models: modal once the lines amortise the eigen-decomposition.
+        assert_eq!(Method::Auto.resolve(240, 20, outputs(20)), Method::Direct);
+        assert_eq!(Method::Auto.resolve(240, 100, outputs(20)), Method::Modal);
+        assert_eq!(Method::Auto.resolve(240, 400, Work::States { rhs: 4 }), Method::Modal);
+        // An explicit choice stands.
+        assert_eq!(Method::Modal.resolve(42, 1, outputs(74)), Method::Modal);
+        assert_eq!(Method::Direct.resolve(600, 5000, outputs(0)), Method::Direct);
+    }
 
     #[test]
     fn a_line_the_batch_cannot_trust_is_solved_again_with_pivoting() {
