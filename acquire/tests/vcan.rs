@@ -520,6 +520,19 @@ fn lost_answers_are_asked_again_and_the_stream_starts_clean() {
     });
 }
 
+/// The simulated FWD-32J stand (written into `dir`) with its DAQ on CAN: a small stream (2560 Hz,
+/// 32 samples per block, since the VM is emulated), identifiers `base`, `base + 1`, `base + 2`.
+fn can_stand(dir: &Path, speed: f64, base: u16, frames: FrameKind) -> acquire::stand::Stand {
+    let mut stand = util::model_sim_stand_in(dir, Some(speed));
+    stand.daq.sample_rate_hz = 2560.0;
+    stand.daq.samples_per_block = 32;
+    stand.daq.can.frames = frames;
+    stand.daq.can.command_id = CanId::Standard(base);
+    stand.daq.can.status_id = CanId::Standard(base + 1);
+    stand.daq.can.data_id = CanId::Standard(base + 2);
+    stand
+}
+
 /// The stand file's `[faults]` reach a DAQ simulated on CAN: per block, a drop loses one CAN
 /// frame, a corruption flips a bit in one, a duplicate repeats one, a delay holds the block back;
 /// then the DAQ falls silent. The host reports each, delivers none of the damaged blocks and no
@@ -530,13 +543,7 @@ fn stand_file_faults_reach_the_simulated_can_daq() {
     use acquire::sim::SimStand;
     require_vcan();
     let dir = tempfile::tempdir().expect("temp dir");
-    let mut stand = util::model_sim_stand_in(dir.path(), Some(1.0));
-    stand.daq.sample_rate_hz = 2560.0;
-    stand.daq.samples_per_block = 32;
-    stand.daq.can.frames = FrameKind::Classic;
-    stand.daq.can.command_id = CanId::Standard(0x320);
-    stand.daq.can.status_id = CanId::Standard(0x321);
-    stand.daq.can.data_id = CanId::Standard(0x322);
+    let mut stand = can_stand(dir.path(), 1.0, 0x320, FrameKind::Classic);
     let sent = 150;
     stand.faults = acquire::stand::Faults {
         seed: 5,
@@ -696,13 +703,7 @@ fn stepped_sine_over_vcan_recovers_the_truth_characteristics() {
     use acquire::sweep::{self, FrequencyList, NoProgress, SteppedSine, StopSignal};
     require_vcan();
     let dir = tempfile::tempdir().expect("temp dir");
-    let mut stand = util::model_sim_stand_in(dir.path(), Some(2.0));
-    stand.daq.sample_rate_hz = 2560.0;
-    stand.daq.samples_per_block = 32;
-    stand.daq.can.frames = FrameKind::Fd;
-    stand.daq.can.command_id = CanId::Standard(0x300);
-    stand.daq.can.status_id = CanId::Standard(0x301);
-    stand.daq.can.data_id = CanId::Standard(0x302);
+    let stand = can_stand(dir.path(), 2.0, 0x300, FrameKind::Fd);
     let plan = SteppedSine { frequencies: FrequencyList::Log { start: 20.0, stop: 400.0, n: 6 }, ..SteppedSine::default() };
     let path = dir.path().join("vcan.mcap");
     let started = Instant::now();
