@@ -490,8 +490,8 @@ impl DirectSolver {
         let outputs = quantities.len();
         let used = distinct_blocks(blocks);
         let mut derivatives = Derivatives::new(s, blocks.len());
-        let freqs = out.freqs_hz.clone();
-        self.solve_batches(s, &freqs, |first, batch| {
+        let Response { freqs_hz: freqs, values, jacobian, .. } = out;
+        self.solve_batches(s, freqs, |first, batch| {
             if !blocks.is_empty() {
                 batch.derivatives(s, blocks, &used, &mut derivatives);
             }
@@ -504,9 +504,9 @@ impl DirectSolver {
                     if !v.is_finite() {
                         return Err(SolveError::Singular { freq_hz: f });
                     }
-                    out.values[o * lines + k] = v;
+                    values[o * lines + k] = v;
                     for p in 0..blocks.len() {
-                        out.jacobian[(p * outputs + o) * lines + k] = -derivatives.at(p, o, l) * fac;
+                        jacobian[(p * outputs + o) * lines + k] = -derivatives.at(p, o, l) * fac;
                     }
                 }
             }

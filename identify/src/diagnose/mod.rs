@@ -276,8 +276,7 @@ pub fn diagnose(
         let crit = pc.criterion(&realized).map_err(DiagnoseError::Model)?;
         let free = free_columns(&pc, &cur.u);
         let jfree = DMatrix::from_fn(cur.jac.nrows(), free.len(), |r, c| cur.jac[(r, free[c])]);
-        let m = cur.e.len();
-        let sigma2 = if crit.noise.scale_unknown() { cur.e.norm_squared() / (m.saturating_sub(free.len()).max(1)) as f64 } else { 1.0 };
+        let sigma2 = residual_scale(&cur, free.len(), crit.noise.scale_unknown());
         let cands = generate::candidates(&crit.model_at(&x), &realized.vars, &x, &labels, f_lo, f_hi);
         let fit = score::FitPoint { crit: &crit, x: &x, gains: &realized.gains, e: &cur.e, jac: &jfree, sigma2 };
         let scores = score::score_all(&fit, &cands).map_err(DiagnoseError::Model)?;
@@ -368,9 +367,7 @@ pub fn diagnose(
     // Effects refitted after their own round (a later effect, a removal) moved: report their
     // values and errors at the final fit.
     if !cur.effects.is_empty() {
-        let m = cur.e.len();
-        let free = free_columns(&pf, &cur.u).len();
-        let crit_scale = if after.chi2_p.is_none() { cur.e.norm_squared() / (m.saturating_sub(free).max(1)) as f64 } else { 1.0 };
+        let crit_scale = residual_scale(&cur, free_columns(&pf, &cur.u).len(), after.chi2_p.is_none());
         for (a, params) in accepted.iter_mut().zip(estimates(&pf, &cur, f_hi, crit_scale)) {
             a.params = params;
         }
@@ -529,6 +526,17 @@ fn families(ranked: &[score::Scored], n: usize) -> Vec<Vec<usize>> {
     out
 }
 
+/// The scale of the Cramér-Rao bounds and LR statistics at `cur`: 1 when the noise model is
+/// known, else the residual variance `‖e‖² / (m − free)` (`unknown`: the noise is known only up
+/// to scale).
+fn residual_scale(cur: &Current, free: usize, unknown: bool) -> f64 {
+    if unknown {
+        cur.e.norm_squared() / (cur.e.len().saturating_sub(free).max(1)) as f64
+    } else {
+        1.0
+    }
+}
+
 /// The parameters of `p` not at a bound at `u`: the fit's free columns.
 fn free_columns(p: &Problem, u: &DVector<f64>) -> Vec<usize> {
     let (lo, hi) = p.bounds();
@@ -581,20 +589,11 @@ fn refit(
     let chi = ChiSquared::new(q as f64).map_err(|e| e.to_string())?;
     let p_value = 1.0 - chi.cdf(lr);
     let n = m as f64;
-    // Standard errors from the Fisher information at the refit (σ̂² scaled when R is unknown).
-    let info = jac.tr_mul(&jac);
-    let cov = info.clone().try_inverse().or_else(|| info.pseudo_inverse(1e-12).ok());
-    let nx = p.nx() + p.params.len() - q;
-    let (_, gamma) = p.split(&out.u);
-    let params = new_params
-        .iter()
-        .enumerate()
-        .map(|(j, np)| {
-            let idx = nx + j;
-            let se = cov.as_ref().map(|c| (c[(idx, idx)] * sigma2).max(0.0).sqrt() * np.scale).unwrap_or(f64::NAN);
-            ParamEstimate { name: np.name.into(), unit: np.unit.into(), value: gamma[gamma.len() - q + j], std_error: se }
-        })
-        .collect();
+    let stop = out.stop.describe();
+    let next = Current { effects, u: out.u, e, jac };
+    // Standard errors from the Fisher information at the refit (σ̂² scaled when R is unknown):
+    // the new effect's are the last.
+    let params = estimates(&p, &next, f_hi, sigma2).pop().unwrap_or_default();
     let r = Refit {
         effect: cand.describe(),
         kind: cand.kind().into(),
@@ -606,10 +605,10 @@ fn refit(
         aic_change: -lr + 2.0 * q as f64,
         bic_change: -lr + q as f64 * n.ln(),
         params,
-        stop: out.stop.describe(),
+        stop,
         equivalent: Vec::new(),
     };
-    Ok((r, Current { effects, u: out.u, e, jac }))
+    Ok((r, next))
 }
 
 /// The diagnosis as text: verdict before, ranking, refits, accepted effects, error before/after.
