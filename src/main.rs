@@ -9,7 +9,11 @@ mod commands;
 mod pipeline;
 
 #[derive(Parser)]
-#[command(name = "ident", version, about = "Identify stiffness and damping of machine tool RFE models from measured frequency responses")]
+#[command(
+    name = "ident",
+    version,
+    about = "Identify stiffness and damping of machine tool RFE models from measured frequency responses"
+)]
 struct Cli {
     /// Log progress (level info; `IDENT_LOG` overrides, e.g. `IDENT_LOG=debug`).
     #[arg(short, long, global = true)]

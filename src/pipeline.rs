@@ -18,7 +18,9 @@ use acquire::stand::{PortSpec, Stand};
 use acquire::sweep::{self, SteppedSine, StopSignal, SweepOutcome, SweepProgress};
 use anyhow::Context;
 use identify::diagnose;
-use identify::identification::{self, data, report as table, variables, Identification, Observations, Variables};
+use identify::identification::{
+    self, data, report as table, variables, Identification, Observations, Variables,
+};
 use identify::Model;
 
 /// The identification set-up: the model to identify (never the truth) and its decision variables.
@@ -41,13 +43,24 @@ impl Setup {
     pub fn load(model: &Path, vars: &Path) -> anyhow::Result<Setup> {
         let m = crate::commands::load_model(model)?;
         let v = variables::load(vars, &m)?;
-        let text = std::fs::read_to_string(model).ok().filter(|_| model.extension().is_some_and(|e| e == "toml"));
-        Ok(Setup { model_file: model.display().to_string(), model_text: text, model: m, vars_file: vars.display().to_string(), vars: v })
+        let text = std::fs::read_to_string(model)
+            .ok()
+            .filter(|_| model.extension().is_some_and(|e| e == "toml"));
+        Ok(Setup {
+            model_file: model.display().to_string(),
+            model_text: text,
+            model: m,
+            vars_file: vars.display().to_string(),
+            vars: v,
+        })
     }
 
     /// The model's name for reports: its file name without extension.
     pub fn model_name(&self) -> String {
-        Path::new(&self.model_file).file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_else(|| self.model_file.clone())
+        Path::new(&self.model_file)
+            .file_stem()
+            .map(|s| s.to_string_lossy().into_owned())
+            .unwrap_or_else(|| self.model_file.clone())
     }
 }
 
@@ -83,7 +96,13 @@ pub struct SweepOptions<'a> {
 /// Runs a stepped-sine sweep of `stand` into a new session file at `session`. Ports given as
 /// `"sim"` are served by the simulated stand (announced on stderr). The session file is kept
 /// whatever happens; only failures before it exists are `Err`.
-pub fn sweep(stand: &Stand, plan: &SteppedSine, session: &Path, opts: &SweepOptions<'_>, progress: &dyn SweepProgress) -> anyhow::Result<Swept> {
+pub fn sweep(
+    stand: &Stand,
+    plan: &SteppedSine,
+    session: &Path,
+    opts: &SweepOptions<'_>,
+    progress: &dyn SweepProgress,
+) -> anyhow::Result<Swept> {
     let planned = plan.frequencies.frequencies()?.len();
     let rt = tokio::runtime::Builder::new_multi_thread()
         .worker_threads(2)
@@ -139,7 +158,10 @@ pub fn sweep(stand: &Stand, plan: &SteppedSine, session: &Path, opts: &SweepOpti
 /// criterion 38× the good minimum's); three more starts spread over the bounds find the good
 /// minimum (0.24 s instead of 0.1 s in release).
 pub fn identification_options() -> identification::Options {
-    identification::Options { starts: 4, ..identification::Options::default() }
+    identification::Options {
+        starts: 4,
+        ..identification::Options::default()
+    }
 }
 
 /// Results of processing, identification and diagnosis of one session.
@@ -160,7 +182,11 @@ pub struct Analysis {
 /// Process → identify → diagnose, from the session file alone (deterministic: a replay of the same
 /// file gives bit-identical results). A diagnosis that cannot run is a message, not a failure: the
 /// identification is still reported.
-pub fn analyse(session: &Path, setup: &Setup, opts: &identification::Options) -> anyhow::Result<Analysis> {
+pub fn analyse(
+    session: &Path,
+    setup: &Setup,
+    opts: &identification::Options,
+) -> anyhow::Result<Analysis> {
     let a = characteristics(session, &AnalysisOptions::default())?;
     let mut messages = Vec::new();
     if let Some(t) = &a.truncated {
@@ -170,27 +196,48 @@ pub fn analyse(session: &Path, setup: &Setup, opts: &identification::Options) ->
         ));
     }
     for d in &a.dropped {
-        messages.push(format!("step {} ({:.2} Hz) not used: {}", d.step, d.frequency_hz, d.reason));
+        messages.push(format!(
+            "step {} ({:.2} Hz) not used: {}",
+            d.step, d.frequency_hz, d.reason
+        ));
     }
     if !a.faults.is_empty() {
-        messages.push(format!("{} stream fault(s) recorded; the steps they hit were re-measured", a.faults.len()));
+        messages.push(format!(
+            "{} stream fault(s) recorded; the steps they hit were re-measured",
+            a.faults.len()
+        ));
     }
-    let differ: Vec<usize> = a.steps.iter().filter(|s| !s.matches_live).map(|s| s.step).collect();
+    let differ: Vec<usize> = a
+        .steps
+        .iter()
+        .filter(|s| !s.matches_live)
+        .map(|s| s.step)
+        .collect();
     if !differ.is_empty() {
         messages.push(format!("steps {differ:?}: the recomputation differs from the live estimate recorded in the session"));
     }
     messages.extend(a.notes.iter().cloned());
     let obs = data::validate(&a.measured, &setup.model, &session.display().to_string())?;
-    let id = identification::identify(&setup.model, &obs, &setup.vars, opts, &mut |_, p| tracing::info!(?p, "iteration"))?;
+    let id = identification::identify(&setup.model, &obs, &setup.vars, opts, &mut |_, p| {
+        tracing::info!(?p, "iteration")
+    })?;
     // The score test projects the fit's own directions out of the residual, so it ranks candidates
     // from the best point of an identification that hit its iteration limit too; the refits then
     // free every variable again.
     if !id.stop.converged() {
-        messages.push("diagnosis started from the best point of the identification, which did not converge".into());
+        messages.push(
+            "diagnosis started from the best point of the identification, which did not converge"
+                .into(),
+        );
     }
     let diagnosis = {
-        let dopts = diagnose::Options { identification: *opts, ..diagnose::Options::default() };
-        match diagnose::diagnose(&setup.model, &obs, &setup.vars, &id, &dopts, &mut |line| tracing::info!("diagnose: {line}")) {
+        let dopts = diagnose::Options {
+            identification: *opts,
+            ..diagnose::Options::default()
+        };
+        match diagnose::diagnose(&setup.model, &obs, &setup.vars, &id, &dopts, &mut |line| {
+            tracing::info!("diagnose: {line}")
+        }) {
             Ok(d) => Some((report::build::diagnosis(&d, &setup.model_name()), d)),
             Err(e) => {
                 messages.push(format!("diagnosis not run: {e}"));
@@ -198,7 +245,13 @@ pub fn analyse(session: &Path, setup: &Setup, opts: &identification::Options) ->
             }
         }
     };
-    Ok(Analysis { session: a, observations: obs, identification: id, diagnosis, messages })
+    Ok(Analysis {
+        session: a,
+        observations: obs,
+        identification: id,
+        diagnosis,
+        messages,
+    })
 }
 
 /// Provenance and context of a report.
@@ -221,7 +274,12 @@ pub struct ReportContext<'a> {
 /// `measured.json`, `identification.json`, `identification.csv`, `identified-model.json`, for TOML
 /// models `identified-model.toml`, and when diagnosis ran `diagnosis.json` (docs/diagnosis.md) and
 /// `diagnosed-model.json` (the identified model with the accepted effects).
-pub fn write_report(dir: &Path, ctx: ReportContext<'_>, setup: &Setup, a: &Analysis) -> anyhow::Result<(report::Report, report::Written)> {
+pub fn write_report(
+    dir: &Path,
+    ctx: ReportContext<'_>,
+    setup: &Setup,
+    a: &Analysis,
+) -> anyhow::Result<(report::Report, report::Written)> {
     let id = &a.identification;
     let mut inputs = report::build::Inputs::new(ctx.title, &a.observations, id);
     inputs.source.workflow = ctx.workflow.into();
@@ -230,19 +288,34 @@ pub fn write_report(dir: &Path, ctx: ReportContext<'_>, setup: &Setup, a: &Analy
     inputs.source.model = setup.model_file.clone();
     inputs.source.variables = setup.vars_file.clone();
     inputs.source.measurement = a.session.measured.source.clone();
-    inputs.diagnosis = a.diagnosis.as_ref().map(|(d, full)| (d.clone(), &full.model));
+    inputs.diagnosis = a
+        .diagnosis
+        .as_ref()
+        .map(|(d, full)| (d.clone(), &full.model));
     inputs.drift = ctx.drift;
     inputs.created_utc = ctx.created_utc;
     inputs.messages = a.messages.iter().cloned().chain(ctx.messages).collect();
     let r = report::build::build(inputs)?;
     let w = |name: &str, text: &str| report::write_atomic(&dir.join(name), text.as_bytes());
-    w("measured.json", &serde_json::to_string_pretty(&a.session.measured)?)?;
-    w("identification.json", &serde_json::to_string_pretty(&table::json(id))?)?;
+    w(
+        "measured.json",
+        &serde_json::to_string_pretty(&a.session.measured)?,
+    )?;
+    w(
+        "identification.json",
+        &serde_json::to_string_pretty(&table::json(id))?,
+    )?;
     w("identification.csv", &table::csv(id))?;
-    w("identified-model.json", &serde_json::to_string_pretty(&identify::contract::to_json(&id.model))?)?;
+    w(
+        "identified-model.json",
+        &serde_json::to_string_pretty(&identify::contract::to_json(&id.model))?,
+    )?;
     if let Some((_, d)) = &a.diagnosis {
         w("diagnosis.json", &serde_json::to_string_pretty(d)?)?;
-        w("diagnosed-model.json", &serde_json::to_string_pretty(&identify::contract::to_json(&d.model))?)?;
+        w(
+            "diagnosed-model.json",
+            &serde_json::to_string_pretty(&identify::contract::to_json(&d.model))?,
+        )?;
     }
     if let Some(text) = &setup.model_text {
         match table::update_toml(text, &setup.model_file, id) {
@@ -270,15 +343,27 @@ pub fn summary_text(a: &Analysis) -> String {
 /// A folder name for a run: `PREFIX-YYYY-mm-ddTHHMMSSZ` (UTC), made unique with `-2`, `-3`...
 pub fn dated_folder(parent: &Path, prefix: &str) -> anyhow::Result<PathBuf> {
     let stamp = report::build::now_utc().replace(':', "");
-    let base = if prefix.is_empty() { stamp } else { format!("{prefix}-{stamp}") };
-    std::fs::create_dir_all(parent).with_context(|| format!("cannot create {}", parent.display()))?;
+    let base = if prefix.is_empty() {
+        stamp
+    } else {
+        format!("{prefix}-{stamp}")
+    };
+    std::fs::create_dir_all(parent)
+        .with_context(|| format!("cannot create {}", parent.display()))?;
     let mut k = 1;
     loop {
-        let p = if k == 1 { parent.join(&base) } else { parent.join(format!("{base}-{k}")) };
+        let p = if k == 1 {
+            parent.join(&base)
+        } else {
+            parent.join(format!("{base}-{k}"))
+        };
         match std::fs::create_dir(&p) {
             Ok(()) => return Ok(p),
             Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => k += 1,
-            Err(e) => return Err(e).with_context(|| format!("cannot create the report folder {}", p.display())),
+            Err(e) => {
+                return Err(e)
+                    .with_context(|| format!("cannot create the report folder {}", p.display()))
+            }
         }
     }
 }

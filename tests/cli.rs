@@ -8,7 +8,10 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
 fn ident(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_ident")).args(args).output().expect("run ident")
+    Command::new(env!("CARGO_BIN_EXE_ident"))
+        .args(args)
+        .output()
+        .expect("run ident")
 }
 
 fn root() -> PathBuf {
@@ -16,7 +19,11 @@ fn root() -> PathBuf {
 }
 
 fn python_with_numpy() -> &'static str {
-    let ok = Command::new("python3").args(["-c", "import numpy"]).output().map(|o| o.status.success()).unwrap_or(false);
+    let ok = Command::new("python3")
+        .args(["-c", "import numpy"])
+        .output()
+        .map(|o| o.status.success())
+        .unwrap_or(false);
     assert!(ok, "python3 with numpy is needed for this cross-check: run `.ci/setup` (installs .ci/requirements.txt)");
     "python3"
 }
@@ -27,8 +34,18 @@ fn frf_values(v: &serde_json::Value) -> Vec<(f64, f64)> {
         .unwrap()
         .iter()
         .flat_map(|o| {
-            let re = o["re"].as_array().unwrap().iter().map(|x| x.as_f64().unwrap()).collect::<Vec<_>>();
-            let im = o["im"].as_array().unwrap().iter().map(|x| x.as_f64().unwrap()).collect::<Vec<_>>();
+            let re = o["re"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .map(|x| x.as_f64().unwrap())
+                .collect::<Vec<_>>();
+            let im = o["im"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .map(|x| x.as_f64().unwrap())
+                .collect::<Vec<_>>();
             re.into_iter().zip(im)
         })
         .collect()
@@ -39,16 +56,35 @@ fn frf_values(v: &serde_json::Value) -> Vec<(f64, f64)> {
 fn compare_with_numpy(model: &Path, freqs: &str) -> f64 {
     let dir = tempfile::tempdir().unwrap();
     let json = dir.path().join("model.json");
-    let out = ident(&["model", "export", model.to_str().unwrap(), "--json", "-o", json.to_str().unwrap()]);
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let out = ident(&[
+        "model",
+        "export",
+        model.to_str().unwrap(),
+        "--json",
+        "-o",
+        json.to_str().unwrap(),
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     let ours = ident(&["frf", json.to_str().unwrap(), "--hz", freqs, "--json"]);
-    assert!(ours.status.success(), "{}", String::from_utf8_lossy(&ours.stderr));
+    assert!(
+        ours.status.success(),
+        "{}",
+        String::from_utf8_lossy(&ours.stderr)
+    );
     let theirs = Command::new(python_with_numpy())
         .arg(root().join("tests/python/contract_frf.py"))
         .args([json.to_str().unwrap(), freqs])
         .output()
         .unwrap();
-    assert!(theirs.status.success(), "{}", String::from_utf8_lossy(&theirs.stderr));
+    assert!(
+        theirs.status.success(),
+        "{}",
+        String::from_utf8_lossy(&theirs.stderr)
+    );
     let a: serde_json::Value = serde_json::from_slice(&ours.stdout).unwrap();
     let b: serde_json::Value = serde_json::from_slice(&theirs.stdout).unwrap();
     assert_eq!(a["freqs_hz"], b["freqs_hz"]);
@@ -68,24 +104,51 @@ fn frf_agrees_with_an_independent_implementation_of_the_contract() {
         .map(|e| e.unwrap().path())
         .filter(|p| p.extension().is_some_and(|e| e == "toml"))
         .collect();
-    assert!(models.len() >= 2, "configs/models should hold the FWD-32J and textbook models");
+    assert!(
+        models.len() >= 2,
+        "configs/models should hold the FWD-32J and textbook models"
+    );
     for m in models {
         let err = compare_with_numpy(&m, freqs);
-        assert!(err <= 1e-8, "{}: ident vs numpy max relative difference {err:e}", m.display());
+        assert!(
+            err <= 1e-8,
+            "{}: ident vs numpy max relative difference {err:e}",
+            m.display()
+        );
     }
 }
 
 #[test]
 fn frf_csv_and_json_forms() {
     let m = root().join("configs/models/textbook-two-mass.toml");
-    let csv = ident(&["frf", m.to_str().unwrap(), "--from", "1", "--to", "100", "--points", "5", "--log"]);
-    assert!(csv.status.success(), "{}", String::from_utf8_lossy(&csv.stderr));
+    let csv = ident(&[
+        "frf",
+        m.to_str().unwrap(),
+        "--from",
+        "1",
+        "--to",
+        "100",
+        "--points",
+        "5",
+        "--log",
+    ]);
+    assert!(
+        csv.status.success(),
+        "{}",
+        String::from_utf8_lossy(&csv.stderr)
+    );
     let text = String::from_utf8(csv.stdout).unwrap();
     let lines: Vec<&str> = text.lines().collect();
     assert_eq!(lines.len(), 6, "{text}");
     assert!(lines[0].starts_with("freq_hz,"));
-    let f: Vec<f64> = lines[1..].iter().map(|l| l.split(',').next().unwrap().parse().unwrap()).collect();
-    assert!((f[0] - 1.0).abs() < 1e-12 && (f[4] - 100.0).abs() < 1e-9 && (f[2] - 10.0).abs() < 1e-9, "{f:?}");
+    let f: Vec<f64> = lines[1..]
+        .iter()
+        .map(|l| l.split(',').next().unwrap().parse().unwrap())
+        .collect();
+    assert!(
+        (f[0] - 1.0).abs() < 1e-12 && (f[4] - 100.0).abs() < 1e-9 && (f[2] - 10.0).abs() < 1e-9,
+        "{f:?}"
+    );
     let json = ident(&["frf", m.to_str().unwrap(), "--hz", "10,20", "--json"]);
     let v: serde_json::Value = serde_json::from_slice(&json.stdout).unwrap();
     assert_eq!(v["freqs_hz"], serde_json::json!([10.0, 20.0]));
@@ -99,11 +162,18 @@ fn frf_csv_and_json_forms() {
 fn bad_model_exits_2_with_location() {
     let dir = tempfile::tempdir().unwrap();
     let bad = dir.path().join("bad.toml");
-    std::fs::write(&bad, "[[body]]\nname = \"a\"\nmass = \"3 furlong\"\nposition = [0,0,0]\ninertia = [1,1,1]\n").unwrap();
+    std::fs::write(
+        &bad,
+        "[[body]]\nname = \"a\"\nmass = \"3 furlong\"\nposition = [0,0,0]\ninertia = [1,1,1]\n",
+    )
+    .unwrap();
     let out = ident(&["frf", bad.to_str().unwrap(), "--hz", "1"]);
     assert_eq!(out.status.code(), Some(2));
     let err = String::from_utf8_lossy(&out.stderr);
-    assert!(err.contains("bad.toml:3:8") && err.contains("unknown unit \"furlong\""), "{err}");
+    assert!(
+        err.contains("bad.toml:3:8") && err.contains("unknown unit \"furlong\""),
+        "{err}"
+    );
     let missing = ident(&["model", "check", "/nonexistent/model.toml"]);
     assert_eq!(missing.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&missing.stderr).contains("cannot read the model file"));
@@ -113,9 +183,25 @@ fn bad_model_exits_2_with_location() {
 fn modes_and_sensitivity_run_on_the_textbook_model() {
     let m = root().join("configs/models/textbook-two-mass.toml");
     let out = ident(&["modes", m.to_str().unwrap()]);
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
-    let out = ident(&["sensitivity", m.to_str().unwrap(), "--from", "1", "--to", "100", "--json"]);
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let out = ident(&[
+        "sensitivity",
+        m.to_str().unwrap(),
+        "--from",
+        "1",
+        "--to",
+        "100",
+        "--json",
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     assert!(!v["params"].as_array().unwrap().is_empty());
 }
@@ -125,7 +211,11 @@ fn demo_runs_the_whole_pipeline_over_the_simulated_devices() {
     let dir = tempfile::tempdir().unwrap();
     let out = ident(&["demo", "--out", dir.path().to_str().unwrap(), "--quiet"]);
     let stdout = String::from_utf8_lossy(&out.stdout);
-    assert!(out.status.success(), "{stdout}\n{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "{stdout}\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     assert!(stdout.contains("(38 steps, 0 stream faults)"), "{stdout}");
     // RMS relative amplitude error per characteristic: "a % -> b %"
     let rms: Vec<(f64, f64)> = stdout
@@ -133,7 +223,10 @@ fn demo_runs_the_whole_pipeline_over_the_simulated_devices() {
         .filter(|l| l.contains(" % -> "))
         .map(|l| {
             let (a, b) = l.rsplit_once(": ").unwrap().1.split_once(" -> ").unwrap();
-            (a.trim_end_matches('%').trim().parse().unwrap(), b.trim_end_matches('%').trim().parse().unwrap())
+            (
+                a.trim_end_matches('%').trim().parse().unwrap(),
+                b.trim_end_matches('%').trim().parse().unwrap(),
+            )
         })
         .collect();
     assert_eq!(rms.len(), 3, "{stdout}");
@@ -149,16 +242,61 @@ fn demo_runs_the_whole_pipeline_over_the_simulated_devices() {
         .filter_map(|w| w.parse().ok())
         .collect();
     assert_eq!(reduced.len(), 2, "{stdout}");
-    assert!(reduced[0] > 100.0, "identification alone should not explain the stand: {reduced:?}");
-    assert!(reduced[1] < 1.5, "diagnosis should reach the noise floor: {reduced:?}\n{stdout}");
-    let added: Vec<&str> = stdout.lines().filter(|l| l.trim_start().starts_with("added: ")).collect();
+    assert!(
+        reduced[0] > 100.0,
+        "identification alone should not explain the stand: {reduced:?}"
+    );
+    assert!(
+        reduced[1] < 1.5,
+        "diagnosis should reach the noise floor: {reduced:?}\n{stdout}"
+    );
+    let added: Vec<&str> = stdout
+        .lines()
+        .filter(|l| l.trim_start().starts_with("added: "))
+        .collect();
     assert_eq!(added.len(), 1, "{stdout}");
-    assert!(added[0].contains("spring spindle head–table") || added[0].contains("spring spindle head–upper saddle"), "{}", added[0]);
-    let k: Vec<f64> = added[0].split("k = ").nth(1).unwrap().split(" N/µm").next().unwrap().split(" ± ").map(|v| v.parse().unwrap()).collect();
-    assert!((k[0] - 0.5639).abs() < 4.0 * k[1], "actuator stiffness {k:?} N/µm, truth 0.5639");
-    assert!(stdout.contains("after: the model explains the data to the noise level"), "{stdout}");
-    let report = stdout.lines().find_map(|l| l.strip_prefix("report: ")).expect("report path");
-    for f in ["session.mcap", "report.html", "report.json", "measured.json", "identification.json", "identification.csv", "identified-model.json", "diagnosis.json", "diagnosed-model.json"] {
-        assert!(Path::new(report).join(f).is_file(), "missing {f} in {report}");
+    assert!(
+        added[0].contains("spring spindle head–table")
+            || added[0].contains("spring spindle head–upper saddle"),
+        "{}",
+        added[0]
+    );
+    let k: Vec<f64> = added[0]
+        .split("k = ")
+        .nth(1)
+        .unwrap()
+        .split(" N/µm")
+        .next()
+        .unwrap()
+        .split(" ± ")
+        .map(|v| v.parse().unwrap())
+        .collect();
+    assert!(
+        (k[0] - 0.5639).abs() < 4.0 * k[1],
+        "actuator stiffness {k:?} N/µm, truth 0.5639"
+    );
+    assert!(
+        stdout.contains("after: the model explains the data to the noise level"),
+        "{stdout}"
+    );
+    let report = stdout
+        .lines()
+        .find_map(|l| l.strip_prefix("report: "))
+        .expect("report path");
+    for f in [
+        "session.mcap",
+        "report.html",
+        "report.json",
+        "measured.json",
+        "identification.json",
+        "identification.csv",
+        "identified-model.json",
+        "diagnosis.json",
+        "diagnosed-model.json",
+    ] {
+        assert!(
+            Path::new(report).join(f).is_file(),
+            "missing {f} in {report}"
+        );
     }
 }

@@ -12,26 +12,44 @@ use std::process::{Command, Output, Stdio};
 use std::time::{Duration, Instant};
 
 fn ident(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_ident")).args(args).output().expect("run ident")
+    Command::new(env!("CARGO_BIN_EXE_ident"))
+        .args(args)
+        .output()
+        .expect("run ident")
 }
 
 fn stand() -> String {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("configs/stands/fwd32j-model-sim.toml").display().to_string()
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("configs/stands/fwd32j-model-sim.toml")
+        .display()
+        .to_string()
 }
 
 fn text(o: &Output) -> String {
-    format!("{}{}", String::from_utf8_lossy(&o.stdout), String::from_utf8_lossy(&o.stderr))
+    format!(
+        "{}{}",
+        String::from_utf8_lossy(&o.stdout),
+        String::from_utf8_lossy(&o.stderr)
+    )
 }
 
 fn sessions(dir: &Path) -> Vec<PathBuf> {
-    let Ok(entries) = std::fs::read_dir(dir) else { return Vec::new() }; // not created yet
-    let mut v: Vec<PathBuf> = entries.map(|e| e.unwrap().path()).filter(|p| p.extension().is_some_and(|e| e == "mcap")).collect();
+    let Ok(entries) = std::fs::read_dir(dir) else {
+        return Vec::new();
+    }; // not created yet
+    let mut v: Vec<PathBuf> = entries
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|e| e == "mcap"))
+        .collect();
     v.sort();
     v
 }
 
 fn sigint(pid: u32) {
-    let st = Command::new("kill").args(["-INT", &pid.to_string()]).status().expect("run kill");
+    let st = Command::new("kill")
+        .args(["-INT", &pid.to_string()])
+        .status()
+        .expect("run kill");
     assert!(st.success());
 }
 
@@ -39,24 +57,57 @@ fn sigint(pid: u32) {
 fn sweep_then_process_gives_data_for_identify() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("s");
-    let o = ident(&["sweep", "--stand", &stand(), "--out", out.to_str().unwrap(), "--points", "8", "--from", "30", "--to", "300"]);
+    let o = ident(&[
+        "sweep",
+        "--stand",
+        &stand(),
+        "--out",
+        out.to_str().unwrap(),
+        "--points",
+        "8",
+        "--from",
+        "30",
+        "--to",
+        "300",
+    ]);
     assert_eq!(o.status.code(), Some(0), "{}", text(&o));
     assert!(text(&o).contains("8 of 8 steps measured"), "{}", text(&o));
     let s = sessions(&out);
     assert_eq!(s.len(), 1);
     let name = s[0].file_name().unwrap().to_string_lossy().into_owned();
-    assert!(name.starts_with("fwd32j-model-sim-") && name.ends_with("Z.mcap"), "session named by stand and UTC time: {name}");
+    assert!(
+        name.starts_with("fwd32j-model-sim-") && name.ends_with("Z.mcap"),
+        "session named by stand and UTC time: {name}"
+    );
 
-    let o = ident(&["process", s[0].to_str().unwrap(), "--out", dir.path().join("p").to_str().unwrap()]);
+    let o = ident(&[
+        "process",
+        s[0].to_str().unwrap(),
+        "--out",
+        dir.path().join("p").to_str().unwrap(),
+    ]);
     assert_eq!(o.status.code(), Some(0), "{}", text(&o));
-    assert!(text(&o).contains("8 of 8 steps equal the live estimate bit for bit"), "{}", text(&o));
+    assert!(
+        text(&o).contains("8 of 8 steps equal the live estimate bit for bit"),
+        "{}",
+        text(&o)
+    );
     let stem = name.trim_end_matches(".mcap");
     let measured = dir.path().join("p").join(format!("{stem}.measured.json"));
-    let m: identify::MeasuredData = serde_json::from_str(&std::fs::read_to_string(&measured).unwrap()).unwrap();
+    let m: identify::MeasuredData =
+        serde_json::from_str(&std::fs::read_to_string(&measured).unwrap()).unwrap();
     assert_eq!(m.characteristics.len(), 3);
-    assert!(m.characteristics.iter().all(|c| c.body == "table" && c.freqs_hz.len() == 8 && c.variance.is_some()));
-    let steps = std::fs::read_to_string(dir.path().join("p").join(format!("{stem}.steps.csv"))).unwrap();
-    assert_eq!(steps.lines().count(), 1 + 8 * 8, "header + 8 steps × 8 channels");
+    assert!(m
+        .characteristics
+        .iter()
+        .all(|c| c.body == "table" && c.freqs_hz.len() == 8 && c.variance.is_some()));
+    let steps =
+        std::fs::read_to_string(dir.path().join("p").join(format!("{stem}.steps.csv"))).unwrap();
+    assert_eq!(
+        steps.lines().count(),
+        1 + 8 * 8,
+        "header + 8 steps × 8 channels"
+    );
     // The CSV form reads back into the same data through identification's own loader.
     let csv = dir.path().join("p").join(format!("{stem}.measured.csv"));
     let back = identify::identification::data::load(&csv).unwrap_or_else(|e| panic!("{e}"));
@@ -68,31 +119,70 @@ fn sweep_then_process_gives_data_for_identify() {
         }
     }
     // And identification accepts it against the model (validation only: a fit is tested elsewhere).
-    let model = identify::modelfile::load(&PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("configs/models/fwd32j-initial.toml")).unwrap().model;
-    identify::identification::data::validate(&m, &model, "measured.json").unwrap_or_else(|e| panic!("{e}"));
+    let model = identify::modelfile::load(
+        &PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("configs/models/fwd32j-initial.toml"),
+    )
+    .unwrap()
+    .model;
+    identify::identification::data::validate(&m, &model, "measured.json")
+        .unwrap_or_else(|e| panic!("{e}"));
 }
 
 #[test]
 fn ctrl_c_leaves_a_complete_session_and_resume_finishes_the_sweep() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("s");
-    let args = ["--stand", &stand(), "--out", out.to_str().unwrap(), "--points", "12", "--speed", "2"];
-    let child = Command::new(env!("CARGO_BIN_EXE_ident")).arg("sweep").args(args).stdout(Stdio::piped()).stderr(Stdio::piped()).spawn().unwrap();
+    let args = [
+        "--stand",
+        &stand(),
+        "--out",
+        out.to_str().unwrap(),
+        "--points",
+        "12",
+        "--speed",
+        "2",
+    ];
+    let child = Command::new(env!("CARGO_BIN_EXE_ident"))
+        .arg("sweep")
+        .args(args)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
     // Interrupt once the session file holds a few flushed chunks.
     let t0 = Instant::now();
-    while sessions(&out).first().and_then(|p| std::fs::metadata(p).ok()).is_none_or(|m| m.len() < 200_000) {
-        assert!(t0.elapsed() < Duration::from_secs(60), "the sweep did not start recording");
+    while sessions(&out)
+        .first()
+        .and_then(|p| std::fs::metadata(p).ok())
+        .is_none_or(|m| m.len() < 200_000)
+    {
+        assert!(
+            t0.elapsed() < Duration::from_secs(60),
+            "the sweep did not start recording"
+        );
         std::thread::sleep(Duration::from_millis(50));
     }
     sigint(child.id());
     let o = child.wait_with_output().unwrap();
-    assert_eq!(o.status.code(), Some(1), "an interrupted sweep is incomplete: {}", text(&o));
+    assert_eq!(
+        o.status.code(),
+        Some(1),
+        "an interrupted sweep is incomplete: {}",
+        text(&o)
+    );
     assert!(text(&o).contains("--resume"), "{}", text(&o));
     let first = sessions(&out)[0].clone();
     let rep = acquire::session::read(&first).unwrap();
     assert_eq!(rep.truncated, None, "Ctrl-C must leave a complete file");
-    assert!(rep.records.iter().any(|r| r.topic == "/sweep/event" && r.value["kind"] == "stopped"));
-    let done = rep.records.iter().filter(|r| r.topic == "/sweep/step").count();
+    assert!(rep
+        .records
+        .iter()
+        .any(|r| r.topic == "/sweep/event" && r.value["kind"] == "stopped"));
+    let done = rep
+        .records
+        .iter()
+        .filter(|r| r.topic == "/sweep/step")
+        .count();
     assert!(done < 12, "stopped before the end ({done} steps)");
 
     let mut resume: Vec<&str> = vec!["sweep"];
@@ -100,8 +190,16 @@ fn ctrl_c_leaves_a_complete_session_and_resume_finishes_the_sweep() {
     resume.extend(["--resume", first.to_str().unwrap()]);
     let o = ident(&resume);
     assert_eq!(o.status.code(), Some(0), "{}", text(&o));
-    assert!(text(&o).contains(&"12 of 12 steps measured in".to_string()), "{}", text(&o));
-    assert!(text(&o).contains(&format!("({} in this run, {done} from", 12 - done)), "{}", text(&o));
+    assert!(
+        text(&o).contains(&"12 of 12 steps measured in".to_string()),
+        "{}",
+        text(&o)
+    );
+    assert!(
+        text(&o).contains(&format!("({} in this run, {done} from", 12 - done)),
+        "{}",
+        text(&o)
+    );
 }
 
 #[test]
@@ -116,7 +214,10 @@ fn sim_serves_ports_until_ctrl_c() {
     let shaker = lines.next().unwrap().unwrap();
     let daq = lines.next().unwrap().unwrap();
     let port = |l: &str, role: &str| {
-        let p = l.strip_prefix(&format!("{role} ")).unwrap_or_else(|| panic!("`{l}` should be `{role} PATH`")).to_string();
+        let p = l
+            .strip_prefix(&format!("{role} "))
+            .unwrap_or_else(|| panic!("`{l}` should be `{role} PATH`"))
+            .to_string();
         assert!(p.starts_with("/dev/pts/") && Path::new(&p).exists(), "{p}");
         p
     };
@@ -139,28 +240,63 @@ fn stand_with(dir: &Path, edit: impl Fn(String) -> String) -> String {
 fn bad_input_gets_messages_naming_what_to_fix() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("s");
-    let sweep = |stand: &str| ident(&["sweep", "--stand", stand, "--out", out.to_str().unwrap(), "--points", "3"]);
+    let sweep = |stand: &str| {
+        ident(&[
+            "sweep",
+            "--stand",
+            stand,
+            "--out",
+            out.to_str().unwrap(),
+            "--points",
+            "3",
+        ])
+    };
 
     // A sensor that is not on the body it names (the table is 740..1060 mm in y).
-    let s = stand_with(dir.path(), |t| t.replacen("position = [\"-450 mm\", \"1000 mm\", \"950 mm\"]", "position = [\"-450 mm\", \"1150 mm\", \"950 mm\"]", 1));
+    let s = stand_with(dir.path(), |t| {
+        t.replacen(
+            "position = [\"-450 mm\", \"1000 mm\", \"950 mm\"]",
+            "position = [\"-450 mm\", \"1150 mm\", \"950 mm\"]",
+            1,
+        )
+    });
     let o = sweep(&s);
     assert_eq!(o.status.code(), Some(2), "{}", text(&o));
-    let line = std::fs::read_to_string(&s).unwrap().lines().position(|l| l.contains("name = \"table-b-y\"")).unwrap();
+    let line = std::fs::read_to_string(&s)
+        .unwrap()
+        .lines()
+        .position(|l| l.contains("name = \"table-b-y\""))
+        .unwrap();
     assert!(
         text(&o).contains(&format!("{s}:{line}:1: channel `table-b-y`: position [-450, 1150, 950] mm is not on body `table`")),
         "{}",
         text(&o)
     );
-    assert!(text(&o).contains("reaches only ±[625, 160, 60] mm"), "{}", text(&o));
+    assert!(
+        text(&o).contains("reaches only ±[625, 160, 60] mm"),
+        "{}",
+        text(&o)
+    );
 
     // Inconsistent channel map: two channels on one DAQ input.
-    let s = stand_with(dir.path(), |t| t.replacen("device_channel = 2\n", "device_channel = 1\n", 1));
+    let s = stand_with(dir.path(), |t| {
+        t.replacen("device_channel = 2\n", "device_channel = 1\n", 1)
+    });
     let o = sweep(&s);
     assert_eq!(o.status.code(), Some(2));
-    assert!(text(&o).contains("channel `table-a-y`: device_channel 1 is already used by channel `table-a-x`"), "{}", text(&o));
+    assert!(
+        text(&o).contains(
+            "channel `table-a-y`: device_channel 1 is already used by channel `table-a-x`"
+        ),
+        "{}",
+        text(&o)
+    );
 
     // A port that does not exist.
-    let s = stand_with(dir.path(), |t| t.replacen("port = \"sim\"", "port = \"/dev/ttyUSB97\"", 1).replacen("port = \"sim\"", "port = \"/dev/ttyUSB98\"", 1));
+    let s = stand_with(dir.path(), |t| {
+        t.replacen("port = \"sim\"", "port = \"/dev/ttyUSB97\"", 1)
+            .replacen("port = \"sim\"", "port = \"/dev/ttyUSB98\"", 1)
+    });
     let o = sweep(&s);
     assert_eq!(o.status.code(), Some(2));
     assert!(
@@ -173,24 +309,56 @@ fn bad_input_gets_messages_naming_what_to_fix() {
     assert_eq!(rec.truncated, None);
 
     // A CAN interface that does not exist (or a kernel without CAN): named, with what to check.
-    let o = ident(&["sweep", "--stand", &stand(), "--out", out.to_str().unwrap(), "--can", "nocan7"]);
+    let o = ident(&[
+        "sweep",
+        "--stand",
+        &stand(),
+        "--out",
+        out.to_str().unwrap(),
+        "--can",
+        "nocan7",
+    ]);
     assert_eq!(o.status.code(), Some(2));
-    assert!(text(&o).contains("CAN interface `nocan7`") && (text(&o).contains("ip link") || text(&o).contains("modprobe can-raw")), "{}", text(&o));
+    assert!(
+        text(&o).contains("CAN interface `nocan7`")
+            && (text(&o).contains("ip link") || text(&o).contains("modprobe can-raw")),
+        "{}",
+        text(&o)
+    );
 
     // Permission denied: a device node the operator may not open (run as `nobody` when root).
     let node = dir.path().join("ttyLOCKED");
     std::fs::write(&node, b"").unwrap();
-    let s = stand_with(dir.path(), |t| t.replacen("port = \"sim\"", &format!("port = \"{}\"", node.display()), 1).replacen("port = \"sim\"", "port = \"/dev/null\"", 1));
+    let s = stand_with(dir.path(), |t| {
+        t.replacen(
+            "port = \"sim\"",
+            &format!("port = \"{}\"", node.display()),
+            1,
+        )
+        .replacen("port = \"sim\"", "port = \"/dev/null\"", 1)
+    });
     use std::os::unix::fs::PermissionsExt;
     std::fs::set_permissions(&node, std::fs::Permissions::from_mode(0o600)).unwrap();
     for p in [dir.path().to_path_buf(), out.clone()] {
         std::fs::set_permissions(&p, std::fs::Permissions::from_mode(0o777)).unwrap();
     }
     std::fs::set_permissions(&s, std::fs::Permissions::from_mode(0o644)).unwrap();
-    let root_user = String::from_utf8_lossy(&Command::new("id").arg("-u").output().unwrap().stdout).trim() == "0";
+    let root_user = String::from_utf8_lossy(&Command::new("id").arg("-u").output().unwrap().stdout)
+        .trim()
+        == "0";
     let o = if root_user {
         Command::new("setpriv")
-            .args(["--reuid=65534", "--regid=65534", "--clear-groups", env!("CARGO_BIN_EXE_ident"), "sweep", "--stand", &s, "--out", out.to_str().unwrap()])
+            .args([
+                "--reuid=65534",
+                "--regid=65534",
+                "--clear-groups",
+                env!("CARGO_BIN_EXE_ident"),
+                "sweep",
+                "--stand",
+                &s,
+                "--out",
+                out.to_str().unwrap(),
+            ])
             .output()
             .expect("setpriv (util-linux) to drop root for the permission test")
     } else {
@@ -198,7 +366,10 @@ fn bad_input_gets_messages_naming_what_to_fix() {
     };
     assert_eq!(o.status.code(), Some(2), "{}", text(&o));
     assert!(
-        text(&o).contains(&format!("serial port {}: permission denied; add your user to the `dialout` group", node.display())),
+        text(&o).contains(&format!(
+            "serial port {}: permission denied; add your user to the `dialout` group",
+            node.display()
+        )),
         "{}",
         text(&o)
     );
@@ -228,21 +399,56 @@ fn a_disk_that_fills_up_stops_the_sweep_cleanly_and_keeps_what_was_written() {
 echo $? >"$4/rc"
 cp "$1"/*.mcap "$4/kept.mcap""#;
     let o = Command::new("unshare")
-        .args(["--user", "--map-root-user", "--mount", "sh", "-c", script, "sh"])
-        .args([disk.to_str().unwrap(), env!("CARGO_BIN_EXE_ident"), &stand(), out.to_str().unwrap()])
+        .args([
+            "--user",
+            "--map-root-user",
+            "--mount",
+            "sh",
+            "-c",
+            script,
+            "sh",
+        ])
+        .args([
+            disk.to_str().unwrap(),
+            env!("CARGO_BIN_EXE_ident"),
+            &stand(),
+            out.to_str().unwrap(),
+        ])
         .output()
         .expect("run unshare (util-linux)");
-    assert!(o.status.success(), "the namespace with a small tmpfs could not be set up (user namespaces disabled?): {}", text(&o));
+    assert!(
+        o.status.success(),
+        "the namespace with a small tmpfs could not be set up (user namespaces disabled?): {}",
+        text(&o)
+    );
     let sweep = std::fs::read_to_string(out.join("sweep.txt")).unwrap();
-    assert_eq!(std::fs::read_to_string(out.join("rc")).unwrap().trim(), "2", "{sweep}");
-    assert!(sweep.contains("could not be completed") && sweep.contains("disk space"), "the error names the cause: {sweep}");
+    assert_eq!(
+        std::fs::read_to_string(out.join("rc")).unwrap().trim(),
+        "2",
+        "{sweep}"
+    );
+    assert!(
+        sweep.contains("could not be completed") && sweep.contains("disk space"),
+        "the error names the cause: {sweep}"
+    );
     assert!(!sweep.contains("panicked"), "{sweep}");
     // What was flushed before the disk filled is there: recover it, then process it.
     let kept = out.join("kept.mcap");
     let recovered = out.join("recovered.mcap");
-    let r = ident(&["mcap", "recover", kept.to_str().unwrap(), "--output", recovered.to_str().unwrap()]);
+    let r = ident(&[
+        "mcap",
+        "recover",
+        kept.to_str().unwrap(),
+        "--output",
+        recovered.to_str().unwrap(),
+    ]);
     assert!(r.status.success(), "{}", text(&r));
-    let p = ident(&["process", recovered.to_str().unwrap(), "--out", out.to_str().unwrap()]);
+    let p = ident(&[
+        "process",
+        recovered.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
     let t = text(&p);
     assert!(p.status.success(), "{t}");
     let points: usize = t
@@ -250,5 +456,8 @@ cp "$1"/*.mcap "$4/kept.mcap""#;
         .filter(|l| l.contains("table u1"))
         .find_map(|l| l.split(": ").nth(1)?.split(' ').next()?.parse().ok())
         .unwrap_or_else(|| panic!("no table u1 line: {t}"));
-    assert!(points >= 2, "steps measured before the disk filled are usable: {t}");
+    assert!(
+        points >= 2,
+        "steps measured before the disk filled are usable: {t}"
+    );
 }

@@ -18,9 +18,14 @@ fn ident() -> Command {
 
 /// Table characteristics of the full FWD-32J model (with its actuator), 1 % noise, stated variances.
 fn write_data(path: &std::path::Path) {
-    let truth = identify::modelfile::load(&root().join("configs/models/fwd32j.toml")).expect("model").model;
+    let truth = identify::modelfile::load(&root().join("configs/models/fwd32j.toml"))
+        .expect("model")
+        .model;
     let mut rng = rand::rngs::StdRng::seed_from_u64(3);
-    let data = synthetic::amplitude_data(&truth, &synthetic::fwd32j_lines(), 0.01, || StandardNormal.sample(&mut rng)).expect("FRF");
+    let data = synthetic::amplitude_data(&truth, &synthetic::fwd32j_lines(), 0.01, || {
+        StandardNormal.sample(&mut rng)
+    })
+    .expect("FRF");
     std::fs::write(path, serde_json::to_string(&data).expect("json")).expect("write data");
 }
 
@@ -32,7 +37,12 @@ fn diagnose_finds_the_missing_actuator_from_files() {
     let json = dir.path().join("diagnosis.json");
     let out = ident()
         .current_dir(root())
-        .args(["diagnose", "configs/models/fwd32j-no-actuator.toml", "--vars", "configs/identification/fwd32j-no-actuator.toml"])
+        .args([
+            "diagnose",
+            "configs/models/fwd32j-no-actuator.toml",
+            "--vars",
+            "configs/identification/fwd32j-no-actuator.toml",
+        ])
         .arg("--data")
         .arg(&data)
         .arg("--json")
@@ -40,21 +50,41 @@ fn diagnose_finds_the_missing_actuator_from_files() {
         .output()
         .expect("run ident");
     let stdout = String::from_utf8_lossy(&out.stdout);
-    assert_eq!(out.status.code(), Some(0), "stdout:\n{stdout}\nstderr:\n{}", String::from_utf8_lossy(&out.stderr));
+    assert_eq!(
+        out.status.code(),
+        Some(0),
+        "stdout:\n{stdout}\nstderr:\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     assert!(stdout.contains("added: spring spindle head–"), "{stdout}");
     assert!(stdout.contains("error before → after"), "{stdout}");
-    let d: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&json).expect("json written")).expect("valid JSON");
+    let d: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&json).expect("json written"))
+            .expect("valid JSON");
     assert_eq!(d["accepted"][0]["kind"], "spring");
     assert_eq!(d["before"]["explained"], false);
     assert_eq!(d["after"]["explained"], true);
-    assert!(d["rounds"][0]["candidates"].as_u64().unwrap_or(0) > 500, "hundreds of candidates: {}", d["rounds"][0]["candidates"]);
+    assert!(
+        d["rounds"][0]["candidates"].as_u64().unwrap_or(0) > 500,
+        "hundreds of candidates: {}",
+        d["rounds"][0]["candidates"]
+    );
 }
 
 #[test]
 fn diagnose_rejects_a_bad_significance_level() {
     let out = ident()
         .current_dir(root())
-        .args(["diagnose", "configs/models/fwd32j.toml", "--data", "nope.json", "--vars", "configs/identification/fwd32j.toml", "--alpha", "2"])
+        .args([
+            "diagnose",
+            "configs/models/fwd32j.toml",
+            "--data",
+            "nope.json",
+            "--vars",
+            "configs/identification/fwd32j.toml",
+            "--alpha",
+            "2",
+        ])
         .output()
         .expect("run ident");
     assert_eq!(out.status.code(), Some(2));

@@ -54,10 +54,14 @@ initial = "7 N/um"
 
 /// 1 % noise on both outputs of the two-mass chain, 40 lines over 10-60 Hz, seeded.
 fn two_mass_data(seed: u64) -> MeasuredData {
-    let truth = identify::modelfile::load(&root().join(TWO_MASS)).expect("two-mass model").model;
+    let truth = identify::modelfile::load(&root().join(TWO_MASS))
+        .expect("two-mass model")
+        .model;
     let mut rng = StdRng::seed_from_u64(seed);
-    synthetic::amplitude_data(&truth, &synthetic::log_lines(10.0, 60.0, 40), 0.01, || StandardNormal.sample(&mut rng))
-        .expect("truth solves")
+    synthetic::amplitude_data(&truth, &synthetic::log_lines(10.0, 60.0, 40), 0.01, || {
+        StandardNormal.sample(&mut rng)
+    })
+    .expect("truth solves")
 }
 
 struct Case {
@@ -66,7 +70,9 @@ struct Case {
 
 impl Case {
     fn new() -> Case {
-        Case { dir: tempfile::tempdir().expect("temp dir") }
+        Case {
+            dir: tempfile::tempdir().expect("temp dir"),
+        }
     }
     fn file(&self, name: &str, content: &str) -> PathBuf {
         let f = self.dir.path().join(name);
@@ -97,12 +103,21 @@ fn a_converged_fit_reports_the_table_and_writes_the_updated_model() {
     let o = ident(&args, &[]);
     assert_eq!(o.status.code(), Some(0), "{}", text(&o.stderr));
     let report = text(&o.stdout);
-    assert!(report.contains("k k1") && report.contains("k k2") && report.contains("N/um"), "{report}");
+    assert!(
+        report.contains("k k1") && report.contains("k k2") && report.contains("N/um"),
+        "{report}"
+    );
     assert!(report.contains("converged"), "{report}");
-    assert!(o.stderr.is_empty(), "no progress lines without --progress or -v: {}", text(&o.stderr));
+    assert!(
+        o.stderr.is_empty(),
+        "no progress lines without --progress or -v: {}",
+        text(&o.stderr)
+    );
 
     // table.json: the estimates within 3 standard errors of the truth, J decreased.
-    let j: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(out_dir.join("table.json")).unwrap()).unwrap();
+    let j: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out_dir.join("table.json")).unwrap())
+            .unwrap();
     assert_eq!(j["converged"], true);
     assert!(j["criterion"].as_f64().unwrap() < j["criterion_initial"].as_f64().unwrap());
     let rows = j["table"].as_array().unwrap();
@@ -112,7 +127,10 @@ fn a_converged_fit_reports_the_table_and_writes_the_updated_model() {
         assert_eq!(row["unit"], "N/um");
         let x = row["identified"].as_f64().unwrap() * 1e6;
         let se = row["std_error"].as_f64().unwrap() * 1e6;
-        assert!(se > 0.0 && (x - truth).abs() <= 3.0 * se, "{row}: truth {truth}");
+        assert!(
+            se > 0.0 && (x - truth).abs() <= 3.0 * se,
+            "{row}: truth {truth}"
+        );
         identified.push(x);
     }
     // --format json on stdout is the same report.
@@ -131,19 +149,31 @@ fn a_converged_fit_reports_the_table_and_writes_the_updated_model() {
     assert_eq!(o.status.code(), Some(0));
     assert_eq!(text(&o.stdout), csv);
     let lines: Vec<&str> = csv.lines().collect();
-    assert_eq!(lines[0], "variable,sdes,parameter,unit,initial,identified,std_error,variability,at_bound");
+    assert_eq!(
+        lines[0],
+        "variable,sdes,parameter,unit,initial,identified,std_error,variability,at_bound"
+    );
     assert_eq!(lines.len(), 3);
     for (line, x) in lines[1..].iter().zip(&identified) {
         let v: f64 = line.split(',').nth(5).unwrap().parse().unwrap();
         assert!((v * 1e6 - x).abs() <= 1e-9 * x, "{line}");
     }
-    assert!(std::fs::read_to_string(out_dir.join("report.txt")).unwrap().contains("k k1"));
+    assert!(std::fs::read_to_string(out_dir.join("report.txt"))
+        .unwrap()
+        .contains("k k1"));
 
     // The updated model: TOML (comments kept) and resolved JSON load, with the estimates in.
     let toml = std::fs::read_to_string(out_dir.join("model.toml")).unwrap();
-    assert!(toml.contains("# Textbook case: two masses in series"), "comments kept");
-    let back = identify::modelfile::parse_toml(&toml, "model.toml").unwrap().model;
-    let json = identify::modelfile::load(&out_dir.join("model.json")).unwrap().model;
+    assert!(
+        toml.contains("# Textbook case: two masses in series"),
+        "comments kept"
+    );
+    let back = identify::modelfile::parse_toml(&toml, "model.toml")
+        .unwrap()
+        .model;
+    let json = identify::modelfile::load(&out_dir.join("model.json"))
+        .unwrap()
+        .model;
     for (name, x) in ["k1", "k2"].iter().zip(&identified) {
         for m in [&back, &json] {
             let s = m.sdes.iter().find(|s| s.name == *name).unwrap();
@@ -159,33 +189,62 @@ fn a_converged_fit_reports_the_table_and_writes_the_updated_model() {
 #[test]
 fn the_fwd32j_problem_is_identified_from_the_papers_initial_values() {
     let c = Case::new();
-    let truth = identify::modelfile::load(&root().join("configs/models/fwd32j.toml")).unwrap().model;
+    let truth = identify::modelfile::load(&root().join("configs/models/fwd32j.toml"))
+        .unwrap()
+        .model;
     let mut rng = StdRng::seed_from_u64(32);
-    let d = synthetic::amplitude_data(&truth, &synthetic::fwd32j_lines(), 0.01, || StandardNormal.sample(&mut rng)).unwrap();
+    let d = synthetic::amplitude_data(&truth, &synthetic::fwd32j_lines(), 0.01, || {
+        StandardNormal.sample(&mut rng)
+    })
+    .unwrap();
     // CSV this time (data::to_csv, the documented format).
     let data = c.file("fwd32j.csv", &data::to_csv(&d));
     let model = root().join("configs/models/fwd32j-initial.toml");
     let vars = root().join("configs/identification/fwd32j.toml");
     let out_dir = c.path("out");
     let o = ident(
-        &["identify", p(&model), "--data", p(&data), "--vars", p(&vars), "--out", p(&out_dir), "--progress"],
+        &[
+            "identify",
+            p(&model),
+            "--data",
+            p(&data),
+            "--vars",
+            p(&vars),
+            "--out",
+            p(&out_dir),
+            "--progress",
+        ],
         &[],
     );
     assert_eq!(o.status.code(), Some(0), "{}", text(&o.stderr));
-    let j: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(out_dir.join("table.json")).unwrap()).unwrap();
+    let j: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out_dir.join("table.json")).unwrap())
+            .unwrap();
     // One plain progress line per iteration.
     let iterations = j["iterations"].as_u64().unwrap() as usize;
-    let progress = text(&o.stderr).lines().filter(|l| l.starts_with("iteration ")).count();
+    let progress = text(&o.stderr)
+        .lines()
+        .filter(|l| l.starts_with("iteration "))
+        .count();
     assert_eq!(progress, iterations, "{}", text(&o.stderr));
     let rows = j["table"].as_array().unwrap();
     assert_eq!(rows.len(), 20);
     let kn6 = rows.iter().find(|r| r["sdes"] == "6").unwrap();
-    assert_eq!(kn6["identified"].as_f64(), Some(0.0), "SDE 6 ends at its bound: {kn6}");
+    assert_eq!(
+        kn6["identified"].as_f64(),
+        Some(0.0),
+        "SDE 6 ends at its bound: {kn6}"
+    );
     assert_eq!(kn6["at_bound"], "lower");
     // The TOML write-back keeps the paper's units.
     let toml = std::fs::read_to_string(out_dir.join("model.toml")).unwrap();
-    assert!(toml.contains("MPa/um\""), "contact stiffness keeps its unit");
-    let back = identify::modelfile::parse_toml(&toml, "model.toml").unwrap().model;
+    assert!(
+        toml.contains("MPa/um\""),
+        "contact stiffness keeps its unit"
+    );
+    let back = identify::modelfile::parse_toml(&toml, "model.toml")
+        .unwrap()
+        .model;
     assert!(identify::modelfile::load(&out_dir.join("model.json")).is_ok());
     let s6 = back.sdes.iter().find(|s| s.name == "6").unwrap();
     assert_eq!(s6.law.stiffness()[0], 0.0);
@@ -199,22 +258,54 @@ fn the_iteration_limit_exits_1_and_keeps_the_best_point() {
     let model = root().join(TWO_MASS);
     let out_dir = c.path("out");
     let o = ident(
-        &["identify", p(&model), "--data", p(&d), "--vars", p(&v), "--max-iterations", "1", "--format", "json", "--out", p(&out_dir)],
+        &[
+            "identify",
+            p(&model),
+            "--data",
+            p(&d),
+            "--vars",
+            p(&v),
+            "--max-iterations",
+            "1",
+            "--format",
+            "json",
+            "--out",
+            p(&out_dir),
+        ],
         &[],
     );
     assert_eq!(o.status.code(), Some(1), "{}", text(&o.stderr));
     let err = text(&o.stderr);
-    assert!(err.contains("NOT converged") && err.contains("iteration limit") && err.contains("best point is kept"), "{err}");
+    assert!(
+        err.contains("NOT converged")
+            && err.contains("iteration limit")
+            && err.contains("best point is kept"),
+        "{err}"
+    );
     let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
     assert_eq!(j["converged"], false);
     assert_eq!(j["iterations"], 1);
-    assert!(j["criterion"].as_f64().unwrap() < j["criterion_initial"].as_f64().unwrap(), "the best point, not the start");
+    assert!(
+        j["criterion"].as_f64().unwrap() < j["criterion_initial"].as_f64().unwrap(),
+        "the best point, not the start"
+    );
     // The files are still written, with the best point in the model.
     let toml = std::fs::read_to_string(out_dir.join("model.toml")).unwrap();
-    let back = identify::modelfile::parse_toml(&toml, "model.toml").unwrap().model;
-    let k1 = back.sdes.iter().find(|s| s.name == "k1").unwrap().law.stiffness()[0];
+    let back = identify::modelfile::parse_toml(&toml, "model.toml")
+        .unwrap()
+        .model;
+    let k1 = back
+        .sdes
+        .iter()
+        .find(|s| s.name == "k1")
+        .unwrap()
+        .law
+        .stiffness()[0];
     let x = j["table"][0]["identified"].as_f64().unwrap() * 1e6;
-    assert!((k1 - x).abs() <= 1e-9 * x && (k1 - 1.4e7).abs() > 1.0, "k1 {k1}");
+    assert!(
+        (k1 - x).abs() <= 1e-9 * x && (k1 - 1.4e7).abs() > 1.0,
+        "k1 {k1}"
+    );
 }
 
 /// Runs `ident identify` on the two-mass model with `vars` and `data` (file names decide the
@@ -223,7 +314,17 @@ fn bad_input(vars: &str, data_name: &str, data: &str) -> (String, Case) {
     let c = Case::new();
     let d = c.file(data_name, data);
     let v = c.file("vars.toml", vars);
-    let o = ident(&["identify", p(&root().join(TWO_MASS)), "--data", p(&d), "--vars", p(&v)], &[]);
+    let o = ident(
+        &[
+            "identify",
+            p(&root().join(TWO_MASS)),
+            "--data",
+            p(&d),
+            "--vars",
+            p(&v),
+        ],
+        &[],
+    );
     let err = text(&o.stderr);
     assert_eq!(o.status.code(), Some(2), "{err}");
     assert!(o.stdout.is_empty(), "no report on bad input");
@@ -268,14 +369,21 @@ fn bad_data_exit_2_naming_the_file_characteristic_and_point() {
     let mut neg = good.clone();
     neg.characteristics[1].amplitude[4] = -1e-9;
     let (err, _c) = bad_input(TWO_MASS_VARS, "data.json", &json_data(&neg));
-    assert!(err.contains("data.json") && err.contains("$.characteristics[1] (second u3 displacement)"), "{err}");
+    assert!(
+        err.contains("data.json") && err.contains("$.characteristics[1] (second u3 displacement)"),
+        "{err}"
+    );
     assert!(err.contains("point 4") && err.contains("negative"), "{err}");
 
     // A characteristic the model does not have.
     let mut other = good.clone();
     other.characteristics[0].dof = 0;
     let (err, _c) = bad_input(TWO_MASS_VARS, "data.json", &json_data(&other));
-    assert!(err.contains("$.characteristics[0] (first u1 displacement)") && err.contains("not among the model's outputs"), "{err}");
+    assert!(
+        err.contains("$.characteristics[0] (first u1 displacement)")
+            && err.contains("not among the model's outputs"),
+        "{err}"
+    );
 
     // NaN and a repeated frequency (CSV): the line is named.
     let csv = data::to_csv(&good);
@@ -293,7 +401,11 @@ fn bad_data_exit_2_naming_the_file_characteristic_and_point() {
     rows.insert(header + 3, dup);
     let (err, _c) = bad_input(TWO_MASS_VARS, "data.csv", &(rows.join("\n") + "\n"));
     let line = header + 4; // 1-based line of the inserted copy
-    assert!(err.contains(&format!("data.csv:{line}:")) && err.contains(&format!("repeats line {}", line - 1)), "{err}");
+    assert!(
+        err.contains(&format!("data.csv:{line}:"))
+            && err.contains(&format!("repeats line {}", line - 1)),
+        "{err}"
+    );
 }
 
 #[test]
@@ -302,12 +414,29 @@ fn progress_is_logged_with_verbose_or_ident_log() {
     let d = c.file("data.json", &json_data(&two_mass_data(2)));
     let v = c.file("vars.toml", TWO_MASS_VARS);
     let model = root().join(TWO_MASS);
-    let args = ["identify", p(&model), "--data", p(&d), "--vars", p(&v), "--format", "json"];
+    let args = [
+        "identify",
+        p(&model),
+        "--data",
+        p(&d),
+        "--vars",
+        p(&v),
+        "--format",
+        "json",
+    ];
     let quiet = ident(&args, &[]);
     assert_eq!(quiet.status.code(), Some(0));
-    let iterations = serde_json::from_slice::<serde_json::Value>(&quiet.stdout).unwrap()["iterations"].as_u64().unwrap() as usize;
+    let iterations = serde_json::from_slice::<serde_json::Value>(&quiet.stdout).unwrap()
+        ["iterations"]
+        .as_u64()
+        .unwrap() as usize;
     assert!(iterations >= 2);
-    let count = |o: &Output| text(&o.stderr).lines().filter(|l| l.contains("INFO") && l.contains("gradient=")).count();
+    let count = |o: &Output| {
+        text(&o.stderr)
+            .lines()
+            .filter(|l| l.contains("INFO") && l.contains("gradient="))
+            .count()
+    };
     let mut verbose = args.to_vec();
     verbose.push("-v");
     let o = ident(&verbose, &[]);
@@ -326,17 +455,49 @@ fn the_weak_direction_threshold_is_a_flag() {
     let v = c.file("vars.toml", TWO_MASS_VARS);
     let model = root().join(TWO_MASS);
     let weak = |t: &str| {
-        let o = ident(&["identify", p(&model), "--data", p(&d), "--vars", p(&v), "--format", "json", "--weak-threshold", t], &[]);
+        let o = ident(
+            &[
+                "identify",
+                p(&model),
+                "--data",
+                p(&d),
+                "--vars",
+                p(&v),
+                "--format",
+                "json",
+                "--weak-threshold",
+                t,
+            ],
+            &[],
+        );
         assert_eq!(o.status.code(), Some(0), "{}", text(&o.stderr));
-        serde_json::from_slice::<serde_json::Value>(&o.stdout).unwrap()["weak_directions"].as_array().unwrap().len()
+        serde_json::from_slice::<serde_json::Value>(&o.stdout).unwrap()["weak_directions"]
+            .as_array()
+            .unwrap()
+            .len()
     };
     // Both variables are determined to well under 50 %; at a threshold of 1e-9 every direction
     // is "weak".
     assert_eq!(weak("0.5"), 0);
     assert_eq!(weak("1e-9"), 2);
-    let o = ident(&["identify", p(&model), "--data", p(&d), "--vars", p(&v), "--weak-threshold=-1"], &[]);
+    let o = ident(
+        &[
+            "identify",
+            p(&model),
+            "--data",
+            p(&d),
+            "--vars",
+            p(&v),
+            "--weak-threshold=-1",
+        ],
+        &[],
+    );
     assert_eq!(o.status.code(), Some(2));
-    assert!(text(&o.stderr).contains("--weak-threshold -1"), "{}", text(&o.stderr));
+    assert!(
+        text(&o.stderr).contains("--weak-threshold -1"),
+        "{}",
+        text(&o.stderr)
+    );
 }
 
 #[test]
@@ -346,10 +507,23 @@ fn the_problem_export_holds_what_an_external_fit_needs() {
     let v = c.file("vars.toml", TWO_MASS_VARS);
     let model = root().join(TWO_MASS);
     let out = c.path("problem.json");
-    let o = ident(&["identify", p(&model), "--data", p(&d), "--vars", p(&v), "--export-problem", p(&out)], &[]);
+    let o = ident(
+        &[
+            "identify",
+            p(&model),
+            "--data",
+            p(&d),
+            "--vars",
+            p(&v),
+            "--export-problem",
+            p(&out),
+        ],
+        &[],
+    );
     assert_eq!(o.status.code(), Some(0), "{}", text(&o.stderr));
     assert!(o.stdout.is_empty(), "no fit, no report");
-    let j: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
+    let j: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
     assert_eq!(j["format"], identify::identification::problem::FORMAT);
     assert_eq!(j["fit"], "amplitude");
     assert_eq!(j["lines_hz"].as_array().unwrap().len(), 40);
@@ -364,7 +538,10 @@ fn the_problem_export_holds_what_an_external_fit_needs() {
     // The model is at the initial values, and sigma is the stated amplitude σ (1 %).
     assert_eq!(j["model"]["sdes"][0]["k"][0].as_f64(), Some(1.4e7));
     for o in obs {
-        let (z, s) = (o["amplitude"].as_f64().unwrap(), o["sigma"].as_f64().unwrap());
+        let (z, s) = (
+            o["amplitude"].as_f64().unwrap(),
+            o["sigma"].as_f64().unwrap(),
+        );
         assert!(s > 0.0 && (s / z - 0.01).abs() < 0.005, "{o}");
     }
 }
@@ -374,9 +551,22 @@ fn a_missing_file_is_named_once_with_its_cause() {
     let c = Case::new();
     let v = c.file("vars.toml", TWO_MASS_VARS);
     let missing = c.path("nothere.json");
-    let o = ident(&["identify", p(&root().join(TWO_MASS)), "--data", p(&missing), "--vars", p(&v)], &[]);
+    let o = ident(
+        &[
+            "identify",
+            p(&root().join(TWO_MASS)),
+            "--data",
+            p(&missing),
+            "--vars",
+            p(&v),
+        ],
+        &[],
+    );
     assert_eq!(o.status.code(), Some(2));
     let err = text(&o.stderr);
-    assert!(err.contains("nothere.json: cannot read the data file"), "{err}");
+    assert!(
+        err.contains("nothere.json: cannot read the data file"),
+        "{err}"
+    );
     assert_eq!(err.matches("os error").count(), 1, "the cause once: {err}");
 }

@@ -9,24 +9,48 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
 fn ident(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_ident")).args(args).output().expect("run ident")
+    Command::new(env!("CARGO_BIN_EXE_ident"))
+        .args(args)
+        .output()
+        .expect("run ident")
 }
 
 fn text(o: &Output) -> String {
-    format!("{}\n{}", String::from_utf8_lossy(&o.stdout), String::from_utf8_lossy(&o.stderr))
+    format!(
+        "{}\n{}",
+        String::from_utf8_lossy(&o.stdout),
+        String::from_utf8_lossy(&o.stderr)
+    )
 }
 
 fn report_dir(o: &Output) -> PathBuf {
-    PathBuf::from(String::from_utf8_lossy(&o.stdout).lines().find_map(|l| l.strip_prefix("report: ")).unwrap_or_else(|| panic!("no report path: {}", text(o))))
+    PathBuf::from(
+        String::from_utf8_lossy(&o.stdout)
+            .lines()
+            .find_map(|l| l.strip_prefix("report: "))
+            .unwrap_or_else(|| panic!("no report path: {}", text(o))),
+    )
 }
 
 fn json(p: &Path) -> serde_json::Value {
-    serde_json::from_str(&std::fs::read_to_string(p).unwrap_or_else(|e| panic!("{}: {e}", p.display()))).unwrap()
+    serde_json::from_str(
+        &std::fs::read_to_string(p).unwrap_or_else(|e| panic!("{}: {e}", p.display())),
+    )
+    .unwrap()
 }
 
 /// A short demo (10 lines, 8x real time): the live run that records a session.
 fn short_demo(out: &Path) -> PathBuf {
-    let o = ident(&["demo", "--out", out.to_str().unwrap(), "--points", "10", "--speed", "8", "--quiet"]);
+    let o = ident(&[
+        "demo",
+        "--out",
+        out.to_str().unwrap(),
+        "--points",
+        "10",
+        "--speed",
+        "8",
+        "--quiet",
+    ]);
     assert!(o.status.success(), "{}", text(&o));
     report_dir(&o)
 }
@@ -36,16 +60,40 @@ fn replay_reproduces_the_live_run_bit_for_bit_and_reports_truncation() {
     let dir = tempfile::tempdir().unwrap();
     let live = short_demo(dir.path());
     let session = live.join("session.mcap");
-    let (model, vars) = (live.join("configs/models/fwd32j-no-actuator.toml"), live.join("configs/identification/fwd32j-no-actuator.toml"));
-    let o = ident(&["replay", session.to_str().unwrap(), "--model", model.to_str().unwrap(), "--vars", vars.to_str().unwrap(), "--out", dir.path().join("replays").to_str().unwrap()]);
+    let (model, vars) = (
+        live.join("configs/models/fwd32j-no-actuator.toml"),
+        live.join("configs/identification/fwd32j-no-actuator.toml"),
+    );
+    let o = ident(&[
+        "replay",
+        session.to_str().unwrap(),
+        "--model",
+        model.to_str().unwrap(),
+        "--vars",
+        vars.to_str().unwrap(),
+        "--out",
+        dir.path().join("replays").to_str().unwrap(),
+    ]);
     assert!(o.status.success(), "{}", text(&o));
     let replay = report_dir(&o);
     // Floats are written shortest-round-trip, so equal text means equal bits.
-    for f in ["measured.json", "identification.json", "identification.csv", "identified-model.json", "identified-model.toml"] {
-        let (a, b) = (std::fs::read(live.join(f)).unwrap(), std::fs::read(replay.join(f)).unwrap());
+    for f in [
+        "measured.json",
+        "identification.json",
+        "identification.csv",
+        "identified-model.json",
+        "identified-model.toml",
+    ] {
+        let (a, b) = (
+            std::fs::read(live.join(f)).unwrap(),
+            std::fs::read(replay.join(f)).unwrap(),
+        );
         assert!(a == b, "{f} differs between the live run and the replay");
     }
-    let (a, b) = (json(&live.join("report.json")), json(&replay.join("report.json")));
+    let (a, b) = (
+        json(&live.join("report.json")),
+        json(&replay.join("report.json")),
+    );
     for k in ["characteristics", "identification", "sensitivity"] {
         assert_eq!(a[k], b[k], "report.json {k}");
     }
@@ -57,14 +105,33 @@ fn replay_reproduces_the_live_run_bit_for_bit_and_reports_truncation() {
     let bytes = std::fs::read(&session).unwrap();
     let cut = dir.path().join("cut.mcap");
     std::fs::write(&cut, &bytes[..bytes.len() * 2 / 3]).unwrap();
-    let o = ident(&["replay", cut.to_str().unwrap(), "--model", model.to_str().unwrap(), "--vars", vars.to_str().unwrap(), "--out", dir.path().join("replays").to_str().unwrap()]);
+    let o = ident(&[
+        "replay",
+        cut.to_str().unwrap(),
+        "--model",
+        model.to_str().unwrap(),
+        "--vars",
+        vars.to_str().unwrap(),
+        "--out",
+        dir.path().join("replays").to_str().unwrap(),
+    ]);
     let t = text(&o);
     assert!(o.status.success(), "{t}");
     assert!(t.contains("truncated") && t.contains("lost"), "{t}");
     let r = json(&report_dir(&o).join("report.json"));
-    let steps = r["characteristics"][0]["freqs_hz"].as_array().unwrap().len();
-    assert!((1..10).contains(&steps), "{steps} of 10 steps survive the cut");
-    assert!(r["status"]["messages"].as_array().unwrap().iter().any(|m| m.as_str().unwrap().contains("truncated")));
+    let steps = r["characteristics"][0]["freqs_hz"]
+        .as_array()
+        .unwrap()
+        .len();
+    assert!(
+        (1..10).contains(&steps),
+        "{steps} of 10 steps survive the cut"
+    );
+    assert!(r["status"]["messages"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .any(|m| m.as_str().unwrap().contains("truncated")));
 }
 
 fn write_job(dir: &Path, live: &Path, extra: &str) -> PathBuf {
@@ -93,11 +160,22 @@ fn nightly_locks_compares_with_history_and_alarms_on_drift() {
 
     // A live process holds the lock: the second run exits 2 and says so, touching nothing.
     let mut holder = Command::new("sleep").arg("30").spawn().unwrap();
-    std::fs::write(dir.path().join("nightly.lock"), format!("{}\n", holder.id())).unwrap();
+    std::fs::write(
+        dir.path().join("nightly.lock"),
+        format!("{}\n", holder.id()),
+    )
+    .unwrap();
     let o = ident(&["nightly", cfg_s]);
     assert_eq!(o.status.code(), Some(2), "{}", text(&o));
-    assert!(text(&o).contains("another ident nightly is running"), "{}", text(&o));
-    assert!(!dir.path().join("reports").exists(), "a locked-out run writes nothing");
+    assert!(
+        text(&o).contains("another ident nightly is running"),
+        "{}",
+        text(&o)
+    );
+    assert!(
+        !dir.path().join("reports").exists(),
+        "a locked-out run writes nothing"
+    );
     holder.kill().unwrap();
     holder.wait().unwrap();
     // Now the lock is stale (its PID is gone): taken over, logged, and the first run is ok.
@@ -105,7 +183,10 @@ fn nightly_locks_compares_with_history_and_alarms_on_drift() {
     assert_eq!(o.status.code(), Some(0), "{}", text(&o));
     let log = std::fs::read_to_string(dir.path().join("nightly.log")).unwrap();
     assert!(log.contains("stale lock"), "{log}");
-    assert!(!dir.path().join("nightly.lock").exists(), "the lock is released");
+    assert!(
+        !dir.path().join("nightly.lock").exists(),
+        "the lock is released"
+    );
     let first = report_dir(&o);
     let r = json(&first.join("report.json"));
     assert_eq!(r["status"]["outcome"], "ok");
@@ -118,7 +199,14 @@ fn nightly_locks_compares_with_history_and_alarms_on_drift() {
     let r = json(&report_dir(&o).join("report.json"));
     let d = &r["drift"];
     assert_eq!(d["runs"].as_array().unwrap().len(), 2);
-    assert!(d["parameters"].as_array().unwrap().iter().all(|p| p["deviation_sigma"].as_f64().is_none_or(|v| v == 0.0) && p["alarm"] == false), "{d}");
+    assert!(
+        d["parameters"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .all(|p| p["deviation_sigma"].as_f64().is_none_or(|v| v == 0.0) && p["alarm"] == false),
+        "{d}"
+    );
 
     // The baseline night's joint was much stiffer (edit its report): tonight is an alarm.
     let mut base = json(&first.join("report.json"));
@@ -127,12 +215,22 @@ fn nightly_locks_compares_with_history_and_alarms_on_drift() {
     let v = p0["identified"].as_f64().unwrap();
     let s = p0["std_error"].as_f64().unwrap();
     p0["identified"] = (v + 20.0 * s).into();
-    std::fs::write(first.join("report.json"), serde_json::to_string(&base).unwrap()).unwrap();
+    std::fs::write(
+        first.join("report.json"),
+        serde_json::to_string(&base).unwrap(),
+    )
+    .unwrap();
     let o = ident(&["nightly", cfg_s]);
     assert_eq!(o.status.code(), Some(1), "{}", text(&o));
     let r = json(&report_dir(&o).join("report.json"));
     assert_eq!(r["status"]["outcome"], "alarm");
-    let alarmed: Vec<&str> = r["drift"]["parameters"].as_array().unwrap().iter().filter(|p| p["alarm"] == true).map(|p| p["variable"].as_str().unwrap()).collect();
+    let alarmed: Vec<&str> = r["drift"]["parameters"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|p| p["alarm"] == true)
+        .map(|p| p["variable"].as_str().unwrap())
+        .collect();
     assert_eq!(alarmed, vec![name.as_str()]);
     let log = std::fs::read_to_string(dir.path().join("nightly.log")).unwrap();
     assert!(log.contains("ALARM") && log.contains(&name), "{log}");
@@ -144,10 +242,22 @@ fn nightly_locks_compares_with_history_and_alarms_on_drift() {
 fn nightly_with_an_unreachable_stand_fails_with_exit_2_and_keeps_the_session() {
     let dir = tempfile::tempdir().unwrap();
     let configs = dir.path().join("configs");
-    for (rel, src) in [("stands/s.toml", "configs/stands/fwd32j-model-sim.toml"), ("models/fwd32j-no-actuator.toml", "configs/models/fwd32j-no-actuator.toml"), ("models/fwd32j.toml", "configs/models/fwd32j.toml"), ("identification/v.toml", "configs/identification/fwd32j-no-actuator.toml")] {
+    for (rel, src) in [
+        ("stands/s.toml", "configs/stands/fwd32j-model-sim.toml"),
+        (
+            "models/fwd32j-no-actuator.toml",
+            "configs/models/fwd32j-no-actuator.toml",
+        ),
+        ("models/fwd32j.toml", "configs/models/fwd32j.toml"),
+        (
+            "identification/v.toml",
+            "configs/identification/fwd32j-no-actuator.toml",
+        ),
+    ] {
         let p = configs.join(rel);
         std::fs::create_dir_all(p.parent().unwrap()).unwrap();
-        let mut t = std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join(src)).unwrap();
+        let mut t =
+            std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join(src)).unwrap();
         if rel.starts_with("stands") {
             // A real stand whose shaker controller is not plugged in.
             t = t.replacen("port = \"sim\"", "port = \"/dev/ttyIDENT-NOT-THERE\"", 1);
@@ -159,17 +269,36 @@ fn nightly_with_an_unreachable_stand_fails_with_exit_2_and_keeps_the_session() {
     let o = ident(&["nightly", cfg.to_str().unwrap()]);
     let t = text(&o);
     assert_eq!(o.status.code(), Some(2), "{t}");
-    assert!(t.contains("/dev/ttyIDENT-NOT-THERE"), "the failure names the port: {t}");
-    let sessions: Vec<PathBuf> = std::fs::read_dir(dir.path().join("sessions")).unwrap().map(|e| e.unwrap().path()).collect();
+    assert!(
+        t.contains("/dev/ttyIDENT-NOT-THERE"),
+        "the failure names the port: {t}"
+    );
+    let sessions: Vec<PathBuf> = std::fs::read_dir(dir.path().join("sessions"))
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .collect();
     assert_eq!(sessions.len(), 1, "the partial session is kept");
-    let runs: Vec<PathBuf> = std::fs::read_dir(dir.path().join("reports")).unwrap().map(|e| e.unwrap().path()).collect();
+    let runs: Vec<PathBuf> = std::fs::read_dir(dir.path().join("reports"))
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .collect();
     let status = json(&runs[0].join("status.json"));
     assert_eq!(status["outcome"], "failure");
-    assert!(status["error"].as_str().unwrap().contains("ttyIDENT-NOT-THERE"));
+    assert!(status["error"]
+        .as_str()
+        .unwrap()
+        .contains("ttyIDENT-NOT-THERE"));
     // The operator's page says the same.
     let html = std::fs::read_to_string(runs[0].join("report.html")).unwrap();
-    assert!(html.contains("outcome: failure") && html.contains("ttyIDENT-NOT-THERE") && html.contains("the session is kept"), "{html}");
-    assert!(std::fs::read_to_string(dir.path().join("n.log")).unwrap().contains("FAILURE"));
+    assert!(
+        html.contains("outcome: failure")
+            && html.contains("ttyIDENT-NOT-THERE")
+            && html.contains("the session is kept"),
+        "{html}"
+    );
+    assert!(std::fs::read_to_string(dir.path().join("n.log"))
+        .unwrap()
+        .contains("FAILURE"));
 }
 
 #[test]
@@ -183,7 +312,10 @@ fn nightly_config_errors_point_at_file_and_line() {
     assert!(t.contains("nightly.toml:11:"), "{t}");
     std::fs::write(&cfg, "name = \"t\"\nmeasure = \"sweeep\"\n").unwrap();
     let t = text(&ident(&["nightly", cfg.to_str().unwrap()]));
-    assert!(t.contains("nightly.toml:2:") && t.contains("newest-session"), "{t}");
+    assert!(
+        t.contains("nightly.toml:2:") && t.contains("newest-session"),
+        "{t}"
+    );
     // The shipped job file loads (its paths are checked when it runs).
     let shipped = Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/nightly.toml");
     let text = std::fs::read_to_string(&shipped).unwrap();

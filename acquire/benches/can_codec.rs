@@ -10,8 +10,15 @@ use acquire::can::codec::{Message, Reassembler, SampleFormat, Segmenter, WireBlo
 use acquire::can::{CanId, FrameKind};
 
 fn block() -> WireBlock {
-    let counts = (0..64 * 4).map(|i| (i * 7919 % 16_000_000) - 8_000_000).collect();
-    WireBlock { seq: 1, format: SampleFormat::I24, channel_count: 4, counts }
+    let counts = (0..64 * 4)
+        .map(|i| (i * 7919 % 16_000_000) - 8_000_000)
+        .collect();
+    WireBlock {
+        seq: 1,
+        format: SampleFormat::I24,
+        channel_count: 4,
+        counts,
+    }
 }
 
 fn codec(c: &mut Criterion) {

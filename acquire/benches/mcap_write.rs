@@ -25,7 +25,10 @@ fn blocks(n: usize) -> Vec<serde_json::Value> {
 
 fn bench(c: &mut Criterion) {
     let msgs = blocks(500);
-    let encoded: Vec<Vec<u8>> = msgs.iter().map(|m| serde_json::to_vec(m).unwrap()).collect();
+    let encoded: Vec<Vec<u8>> = msgs
+        .iter()
+        .map(|m| serde_json::to_vec(m).unwrap())
+        .collect();
     let bytes: usize = encoded.iter().map(|e| e.len()).sum();
     let dir = tempfile::tempdir().unwrap();
     let mut g = c.benchmark_group("mcap_write");
@@ -36,10 +39,24 @@ fn bench(c: &mut Criterion) {
         b.iter(|| {
             i += 1;
             let f = std::fs::File::create(dir.path().join(format!("raw{i}.mcap"))).unwrap();
-            let mut w = mcap::WriteOptions::new().compression(None).create(std::io::BufWriter::new(f)).unwrap();
-            let ch = w.add_channel(0, "/daq/block", "json", &BTreeMap::new()).unwrap();
+            let mut w = mcap::WriteOptions::new()
+                .compression(None)
+                .create(std::io::BufWriter::new(f))
+                .unwrap();
+            let ch = w
+                .add_channel(0, "/daq/block", "json", &BTreeMap::new())
+                .unwrap();
             for (s, e) in encoded.iter().enumerate() {
-                w.write_to_known_channel(&mcap::records::MessageHeader { channel_id: ch, sequence: s as u32, log_time: s as u64, publish_time: s as u64 }, e).unwrap();
+                w.write_to_known_channel(
+                    &mcap::records::MessageHeader {
+                        channel_id: ch,
+                        sequence: s as u32,
+                        log_time: s as u64,
+                        publish_time: s as u64,
+                    },
+                    e,
+                )
+                .unwrap();
             }
             w.finish().unwrap();
         })
@@ -47,7 +64,14 @@ fn bench(c: &mut Criterion) {
     g.bench_function("session_zstd_with_json_encoding", |b| {
         b.iter(|| {
             i += 1;
-            let s = Session::create(&dir.path().join(format!("s{i}.mcap")), SessionOptions { flush_interval: Duration::from_millis(500), ..Default::default() }).unwrap();
+            let s = Session::create(
+                &dir.path().join(format!("s{i}.mcap")),
+                SessionOptions {
+                    flush_interval: Duration::from_millis(500),
+                    ..Default::default()
+                },
+            )
+            .unwrap();
             let h = s.handle();
             for m in &msgs {
                 h.log(Topic::DaqBlock, m).unwrap();
@@ -56,9 +80,19 @@ fn bench(c: &mut Criterion) {
         })
     });
     g.finish();
-    let sizes: Vec<u64> = std::fs::read_dir(dir.path()).unwrap().filter_map(|e| e.ok()).filter(|e| e.file_name().to_string_lossy().starts_with('s')).map(|e| e.metadata().unwrap().len()).collect();
+    let sizes: Vec<u64> = std::fs::read_dir(dir.path())
+        .unwrap()
+        .filter_map(|e| e.ok())
+        .filter(|e| e.file_name().to_string_lossy().starts_with('s'))
+        .map(|e| e.metadata().unwrap().len())
+        .collect();
     if let Some(s) = sizes.first() {
-        println!("session file {} bytes for {} bytes of JSON: compression ratio {:.2}", s, bytes, bytes as f64 / *s as f64);
+        println!(
+            "session file {} bytes for {} bytes of JSON: compression ratio {:.2}",
+            s,
+            bytes,
+            bytes as f64 / *s as f64
+        );
     }
 }
 

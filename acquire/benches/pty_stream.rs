@@ -20,7 +20,9 @@ const SPB: usize = 64;
 fn frames(n: usize) -> Vec<u8> {
     let (mut a, mut b, mut out) = (Vec::new(), Vec::new(), Vec::new());
     for seq in 0..n {
-        let counts: Vec<i32> = (0..CHANNELS * SPB).map(|i| ((i * 7919 + seq * 31) % 16_000_000) as i32 - 8_000_000).collect();
+        let counts: Vec<i32> = (0..CHANNELS * SPB)
+            .map(|i| ((i * 7919 + seq * 31) % 16_000_000) as i32 - 8_000_000)
+            .collect();
         Message::Data(counts).encode(seq as u32, &mut a, &mut b, &mut out);
     }
     out
@@ -41,13 +43,20 @@ fn thread_cpu() -> Duration {
 /// Sends `data` through a pty (optionally paced to `bytes_per_s`) and decodes it on the other
 /// side in a thread of its own. Returns (blocks decoded, faults, receiver CPU, wall time).
 fn transfer(data: &[u8], decode: bool, bytes_per_s: Option<f64>) -> (u64, u64, Duration, Duration) {
-    let rt = tokio::runtime::Builder::new_multi_thread().worker_threads(1).enable_all().build().unwrap();
+    let rt = tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(1)
+        .enable_all()
+        .build()
+        .unwrap();
     let pty = rt.block_on(async { pty_pair("daq").unwrap() });
     let path = pty.path.clone();
     let expect = data.len();
     let (opened_tx, opened_rx) = std::sync::mpsc::channel::<()>();
     let recv = std::thread::spawn(move || {
-        let rt = tokio::runtime::Builder::new_current_thread().enable_all().build().unwrap();
+        let rt = tokio::runtime::Builder::new_current_thread()
+            .enable_all()
+            .build()
+            .unwrap();
         rt.block_on(async move {
             let mut io = open_serial(&path, &SerialSettings { baud: 3_000_000 }).unwrap();
             let _ = opened_tx.send(());
@@ -57,7 +66,8 @@ fn transfer(data: &[u8], decode: bool, bytes_per_s: Option<f64>) -> (u64, u64, D
             let cpu0 = thread_cpu();
             let t0 = Instant::now();
             while got < expect {
-                let n = match tokio::time::timeout(Duration::from_secs(5), io.read(&mut buf)).await {
+                let n = match tokio::time::timeout(Duration::from_secs(5), io.read(&mut buf)).await
+                {
                     Ok(Ok(n)) if n > 0 => n,
                     _ => break,
                 };
@@ -76,7 +86,9 @@ fn transfer(data: &[u8], decode: bool, bytes_per_s: Option<f64>) -> (u64, u64, D
         })
     });
     rt.block_on(async {
-        opened_rx.recv_timeout(Duration::from_secs(5)).expect("receiver opened the port");
+        opened_rx
+            .recv_timeout(Duration::from_secs(5))
+            .expect("receiver opened the port");
         let mut dev = pty.device;
         let chunk = 4096;
         let t0 = Instant::now();
@@ -119,7 +131,9 @@ fn bench(c: &mut Criterion) {
     let mut g = c.benchmark_group("pty_stream");
     g.throughput(Throughput::Bytes(data.len() as u64));
     g.sample_size(10);
-    g.bench_function("baseline_raw_copy", |b| b.iter(|| transfer(&data, false, None)));
+    g.bench_function("baseline_raw_copy", |b| {
+        b.iter(|| transfer(&data, false, None))
+    });
     g.bench_function("daq_frames_decoded", |b| {
         b.iter(|| {
             let (blocks, faults, _, _) = transfer(&data, true, None);

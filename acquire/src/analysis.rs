@@ -110,7 +110,11 @@ pub struct AnalysisOptions {
 
 impl Default for AnalysisOptions {
     fn default() -> Self {
-        AnalysisOptions { geometry_model: None, quantity: None, dofs: Dofs::Auto }
+        AnalysisOptions {
+            geometry_model: None,
+            quantity: None,
+            dofs: Dofs::Auto,
+        }
     }
 }
 
@@ -213,10 +217,20 @@ fn vec3(v: &Value) -> Option<[f64; 3]> {
 }
 
 /// Reads a session and computes its measured characteristics (see the module docs).
-pub fn characteristics(session_path: &Path, opts: &AnalysisOptions) -> Result<SessionAnalysis, AnalysisError> {
+pub fn characteristics(
+    session_path: &Path,
+    opts: &AnalysisOptions,
+) -> Result<SessionAnalysis, AnalysisError> {
     let path = session_path.display().to_string();
-    let missing = |what: &str, fix: &str| AnalysisError::Missing { path: path.clone(), what: what.into(), fix: fix.into() };
-    let inconsistent = |detail: String| AnalysisError::Inconsistent { path: path.clone(), detail };
+    let missing = |what: &str, fix: &str| AnalysisError::Missing {
+        path: path.clone(),
+        what: what.into(),
+        fix: fix.into(),
+    };
+    let inconsistent = |detail: String| AnalysisError::Inconsistent {
+        path: path.clone(),
+        detail,
+    };
     let rep = session::read(session_path)?;
 
     // ---- stand: channel map, calibration, geometry -----------------------------------------
@@ -224,19 +238,31 @@ pub fn characteristics(session_path: &Path, opts: &AnalysisOptions) -> Result<Se
         .records
         .iter()
         .find(|r| r.topic == Topic::Stand.name())
-        .ok_or_else(|| missing("no /stand record", "the session was not written by a sweep (or was cut before the stand was recorded)"))?;
+        .ok_or_else(|| {
+            missing(
+                "no /stand record",
+                "the session was not written by a sweep (or was cut before the stand was recorded)",
+            )
+        })?;
     let sv = &stand_rec.value;
     let stand_name = sv["name"].as_str().unwrap_or("").to_string();
     let mut channels = Vec::new();
     for (i, c) in sv["channels"].as_array().into_iter().flatten().enumerate() {
-        let bad = |field: &str| inconsistent(format!("/stand channel {i}: field `{field}` missing or malformed"));
+        let bad = |field: &str| {
+            inconsistent(format!(
+                "/stand channel {i}: field `{field}` missing or malformed"
+            ))
+        };
         let name = c["name"].as_str().ok_or_else(|| bad("name"))?.to_string();
         let force = match c["kind"].as_str() {
             Some("force") => true,
             Some("acceleration") => false,
             _ => return Err(bad("kind")),
         };
-        let sensitivity = c["sensitivity"].as_f64().filter(|s| s.is_finite() && *s > 0.0).ok_or_else(|| bad("sensitivity"))?;
+        let sensitivity = c["sensitivity"]
+            .as_f64()
+            .filter(|s| s.is_finite() && *s > 0.0)
+            .ok_or_else(|| bad("sensitivity"))?;
         channels.push(ChannelDef {
             name,
             force,
@@ -248,7 +274,11 @@ pub fn characteristics(session_path: &Path, opts: &AnalysisOptions) -> Result<Se
     }
     let force_channel = match channels.iter().filter(|c| c.force).count() {
         1 => channels.iter().position(|c| c.force).unwrap_or(0),
-        n => return Err(inconsistent(format!("/stand has {n} force channels; exactly one is needed as the FRFs' reference"))),
+        n => {
+            return Err(inconsistent(format!(
+                "/stand has {n} force channels; exactly one is needed as the FRFs' reference"
+            )))
+        }
     };
     let geometry = match &opts.geometry_model {
         Some(model) => {
@@ -275,13 +305,23 @@ pub fn characteristics(session_path: &Path, opts: &AnalysisOptions) -> Result<Se
         .records
         .iter()
         .find(|r| r.topic == Topic::DaqStream.name())
-        .ok_or_else(|| missing("no /daq/stream record", "the DAQ was never configured in this session; nothing was measured"))?;
-    let fs = stream.value["sample_rate_hz"].as_f64().filter(|f| *f > 0.0).ok_or_else(|| inconsistent("/daq/stream has no sample rate".into()))?;
+        .ok_or_else(|| {
+            missing(
+                "no /daq/stream record",
+                "the DAQ was never configured in this session; nothing was measured",
+            )
+        })?;
+    let fs = stream.value["sample_rate_hz"]
+        .as_f64()
+        .filter(|f| *f > 0.0)
+        .ok_or_else(|| inconsistent("/daq/stream has no sample rate".into()))?;
     if let Some(names) = stream.value["names"].as_array() {
         let got: Vec<&str> = names.iter().filter_map(Value::as_str).collect();
         let want: Vec<&str> = channels.iter().map(|c| c.name.as_str()).collect();
         if got != want {
-            return Err(inconsistent(format!("the DAQ stream's channels {got:?} are not the stand's channel map {want:?}")));
+            return Err(inconsistent(format!(
+                "the DAQ stream's channels {got:?} are not the stand's channel map {want:?}"
+            )));
         }
     }
 
@@ -301,14 +341,27 @@ pub fn characteristics(session_path: &Path, opts: &AnalysisOptions) -> Result<Se
     for r in &rep.records {
         match r.topic.as_str() {
             t if t == Topic::DaqBlock.name() => {
-                let first = r.value["first_sample"].as_u64().ok_or_else(|| inconsistent("a /daq/block has no first_sample".into()))?;
-                let volts = r.value["volts"].as_array().filter(|v| v.len() == nch).ok_or_else(|| {
-                    inconsistent(format!("/daq/block seq {} does not have the stand's {nch} channels", r.value["seq"]))
-                })?;
+                let first = r.value["first_sample"]
+                    .as_u64()
+                    .ok_or_else(|| inconsistent("a /daq/block has no first_sample".into()))?;
+                let volts = r.value["volts"]
+                    .as_array()
+                    .filter(|v| v.len() == nch)
+                    .ok_or_else(|| {
+                        inconsistent(format!(
+                            "/daq/block seq {} does not have the stand's {nch} channels",
+                            r.value["seq"]
+                        ))
+                    })?;
                 let len = volts[0].as_array().map(Vec::len).unwrap_or(0);
                 let mut data = vec![0f32; len * nch];
                 for (c, v) in volts.iter().enumerate() {
-                    let v = v.as_array().filter(|v| v.len() == len).ok_or_else(|| inconsistent(format!("/daq/block seq {}: channels differ in length", r.value["seq"])))?;
+                    let v = v.as_array().filter(|v| v.len() == len).ok_or_else(|| {
+                        inconsistent(format!(
+                            "/daq/block seq {}: channels differ in length",
+                            r.value["seq"]
+                        ))
+                    })?;
                     for (i, x) in v.iter().enumerate() {
                         // Blocks are recorded as f32: the JSON number round-trips exactly.
                         data[i * nch + c] = x.as_f64().unwrap_or(f64::NAN) as f32;
@@ -336,13 +389,19 @@ pub fn characteristics(session_path: &Path, opts: &AnalysisOptions) -> Result<Se
                 let v = &r.value;
                 let step = v["step"].as_u64().unwrap_or(u64::MAX) as usize;
                 let f = v["frequency_hz"].as_f64().unwrap_or(f64::NAN);
-                let (Some(first), Some(n)) = (v["first_sample"].as_u64(), v["samples"].as_u64()) else {
-                    dropped.push(DroppedStep { step, frequency_hz: f, reason: "the step record has no measurement window".into() });
+                let (Some(first), Some(n)) = (v["first_sample"].as_u64(), v["samples"].as_u64())
+                else {
+                    dropped.push(DroppedStep {
+                        step,
+                        frequency_hz: f,
+                        reason: "the step record has no measurement window".into(),
+                    });
                     continue;
                 };
                 estimator.clear();
                 let mut complete = true;
-                let mut k = run.partition_point(|(b0, d)| b0 + (d.len() / nch.max(1)) as u64 <= first);
+                let mut k =
+                    run.partition_point(|(b0, d)| b0 + (d.len() / nch.max(1)) as u64 <= first);
                 let mut s = first;
                 while s < first + n {
                     let Some((b0, d)) = run.get(k) else {
@@ -374,15 +433,23 @@ pub fn characteristics(session_path: &Path, opts: &AnalysisOptions) -> Result<Se
                 let est = match estimator.estimate(f) {
                     Ok(e) => e,
                     Err(e) => {
-                        dropped.push(DroppedStep { step, frequency_hz: f, reason: format!("sine fit failed: {e}") });
+                        dropped.push(DroppedStep {
+                            step,
+                            frequency_hz: f,
+                            reason: format!("sine fit failed: {e}"),
+                        });
                         continue;
                     }
                 };
                 let results = estimator.channel_results(&est, &names);
-                let live: Vec<ChannelResult> = serde_json::from_value(v["channels"].clone()).unwrap_or_default();
+                let live: Vec<ChannelResult> =
+                    serde_json::from_value(v["channels"].clone()).unwrap_or_default();
                 let matches_live = live.len() == results.len()
                     && live.iter().zip(&results).all(|(a, b)| {
-                        a.name == b.name && a.frf_re.to_bits() == b.frf_re.to_bits() && a.frf_im.to_bits() == b.frf_im.to_bits() && a.amplitude.to_bits() == b.amplitude.to_bits()
+                        a.name == b.name
+                            && a.frf_re.to_bits() == b.frf_re.to_bits()
+                            && a.frf_im.to_bits() == b.frf_im.to_bits()
+                            && a.amplitude.to_bits() == b.amplitude.to_bits()
                     });
                 steps.push(StepAnalysis {
                     step,
@@ -401,14 +468,21 @@ pub fn characteristics(session_path: &Path, opts: &AnalysisOptions) -> Result<Se
         }
     }
     // Frequency order; a frequency measured twice keeps its first measurement.
-    steps.sort_by(|a, b| a.frequency_hz.total_cmp(&b.frequency_hz).then(a.step.cmp(&b.step)));
+    steps.sort_by(|a, b| {
+        a.frequency_hz
+            .total_cmp(&b.frequency_hz)
+            .then(a.step.cmp(&b.step))
+    });
     let mut kept: Vec<StepAnalysis> = Vec::with_capacity(steps.len());
     for s in steps {
         match kept.last() {
             Some(p) if s.frequency_hz <= p.frequency_hz => dropped.push(DroppedStep {
                 step: s.step,
                 frequency_hz: s.frequency_hz,
-                reason: format!("frequency already measured by step {}; the first measurement is used", p.step),
+                reason: format!(
+                    "frequency already measured by step {}; the first measurement is used",
+                    p.step
+                ),
             }),
             _ => kept.push(s),
         }
@@ -418,7 +492,11 @@ pub fn characteristics(session_path: &Path, opts: &AnalysisOptions) -> Result<Se
     if steps.is_empty() {
         return Err(missing(
             "no usable stepped-sine step in the session",
-            if dropped.is_empty() { "run a sweep (`ident sweep`) first" } else { "see why each step was dropped (ident process prints them)" },
+            if dropped.is_empty() {
+                "run a sweep (`ident sweep`) first"
+            } else {
+                "see why each step was dropped (ident process prints them)"
+            },
         ));
     }
 
@@ -432,16 +510,26 @@ pub fn characteristics(session_path: &Path, opts: &AnalysisOptions) -> Result<Se
     let mut notes = Vec::new();
     let mut measured = Vec::new();
     for g in &geometry.bodies {
-        let idx: Vec<usize> = (0..nch).filter(|&c| !channels[c].force && channels[c].body.as_deref() == Some(g.name.as_str())).collect();
+        let idx: Vec<usize> = (0..nch)
+            .filter(|&c| !channels[c].force && channels[c].body.as_deref() == Some(g.name.as_str()))
+            .collect();
         if idx.is_empty() {
             continue;
         }
         let sensors: Vec<Sensor> = idx
             .iter()
-            .map(|&c| Sensor { name: channels[c].name.clone(), position: Vector3::from(channels[c].position), direction: Vector3::from(channels[c].direction) })
+            .map(|&c| Sensor {
+                name: channels[c].name.clone(),
+                position: Vector3::from(channels[c].position),
+                direction: Vector3::from(channels[c].direction),
+            })
             .collect();
         let body = g.to_body();
-        let process_err = |source| AnalysisError::Process { path: path.clone(), context: format!("body `{}`", g.name), source };
+        let process_err = |source| AnalysisError::Process {
+            path: path.clone(),
+            context: format!("body `{}`", g.name),
+            source,
+        };
         let fit = RigidFit::new(&body, &sensors, opts.dofs).map_err(process_err)?;
         // Rigid-body fit of the accelerances (m/s² or rad/s² per N); linear, so quantities are
         // converted afterwards.
@@ -457,17 +545,33 @@ pub fn characteristics(session_path: &Path, opts: &AnalysisOptions) -> Result<Se
             }
             let mut q = [C64::default(); 6];
             let residual = fit.fit_line(&y, &mut q).map_err(process_err)?;
-            s.rigidity.push(BodyResidual { body: g.name.clone(), residual });
+            s.rigidity.push(BodyResidual {
+                body: g.name.clone(),
+                residual,
+            });
             q_lines.push(q);
             var_lines.push(fit.variance(&yv).map_err(process_err)?);
         }
-        let declared: Vec<&crate::stand::GeometryOutput> = geometry.outputs.iter().filter(|o| o.body == g.name).collect();
+        let declared: Vec<&crate::stand::GeometryOutput> = geometry
+            .outputs
+            .iter()
+            .filter(|o| o.body == g.name)
+            .collect();
         let wanted: Vec<(u8, Quantity)> = if declared.is_empty() {
-            (0..fit.dofs() as u8).map(|d| (d, opts.quantity.unwrap_or(Quantity::Displacement))).collect()
+            (0..fit.dofs() as u8)
+                .map(|d| (d, opts.quantity.unwrap_or(Quantity::Displacement)))
+                .collect()
         } else {
             declared
                 .iter()
-                .map(|o| (o.dof, opts.quantity.or_else(|| Quantity::parse(&o.quantity)).unwrap_or(Quantity::Displacement)))
+                .map(|o| {
+                    (
+                        o.dof,
+                        opts.quantity
+                            .or_else(|| Quantity::parse(&o.quantity))
+                            .unwrap_or(Quantity::Displacement),
+                    )
+                })
                 .collect()
         };
         let points: Vec<usize> = (0..freqs.len()).collect();
@@ -487,13 +591,24 @@ pub fn characteristics(session_path: &Path, opts: &AnalysisOptions) -> Result<Se
             let mut var = Vec::with_capacity(freqs.len());
             for (k, f) in freqs.iter().enumerate() {
                 // Accelerance → quantity: divide by (jω)^(2 − order).
-                let factor = C64::new(1.0, 0.0) / C64::new(0.0, 2.0 * std::f64::consts::PI * f).powi(p);
+                let factor =
+                    C64::new(1.0, 0.0) / C64::new(0.0, 2.0 * std::f64::consts::PI * f).powi(p);
                 h.push(q_lines[k][dof as usize] * factor);
                 var.push(var_lines[k][dof as usize] * factor.norm_sqr());
             }
-            let spec = CharacteristicSpec { body: g.name.clone(), dof, quantity, nominal_force: geometry.nominal_force_n };
-            let m = to_measurement(&spec, &freqs, &h, None, Some(&var), None, &points)
-                .map_err(|source| AnalysisError::Process { path: path.clone(), context: format!("body `{}` dof {dof}", g.name), source })?;
+            let spec = CharacteristicSpec {
+                body: g.name.clone(),
+                dof,
+                quantity,
+                nominal_force: geometry.nominal_force_n,
+            };
+            let m = to_measurement(&spec, &freqs, &h, None, Some(&var), None, &points).map_err(
+                |source| AnalysisError::Process {
+                    path: path.clone(),
+                    context: format!("body `{}` dof {dof}", g.name),
+                    source,
+                },
+            )?;
             measured.push(m);
         }
     }
@@ -515,7 +630,10 @@ pub fn characteristics(session_path: &Path, opts: &AnalysisOptions) -> Result<Se
         stand: stand_name,
         sample_rate_hz: fs,
         geometry,
-        measured: MeasuredData { source, characteristics: measured },
+        measured: MeasuredData {
+            source,
+            characteristics: measured,
+        },
         steps,
         dropped,
         faults,

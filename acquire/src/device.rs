@@ -34,7 +34,10 @@ impl DeviceIdentity {
 
     /// The `*IDN?` form: `manufacturer,model,serial,firmware`.
     pub fn to_idn(&self) -> String {
-        format!("{},{},{},{}", self.manufacturer, self.model, self.serial, self.firmware)
+        format!(
+            "{},{},{},{}",
+            self.manufacturer, self.model, self.serial, self.firmware
+        )
     }
 
     /// True if this identity matches an expectation written as `manufacturer,model` (or just

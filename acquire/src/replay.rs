@@ -52,8 +52,16 @@ pub struct RecordedPlant {
 
 impl RecordedPlant {
     /// The FRFs of `analysis` for the stand's acceleration channels (stand order, by name).
-    pub fn from_analysis(analysis: &SessionAnalysis, stand: &Stand) -> Result<RecordedPlant, String> {
-        let sensors: Vec<&str> = stand.channels.iter().filter(|c| c.kind == ChannelKind::Acceleration).map(|c| c.name.as_str()).collect();
+    pub fn from_analysis(
+        analysis: &SessionAnalysis,
+        stand: &Stand,
+    ) -> Result<RecordedPlant, String> {
+        let sensors: Vec<&str> = stand
+            .channels
+            .iter()
+            .filter(|c| c.kind == ChannelKind::Acceleration)
+            .map(|c| c.name.as_str())
+            .collect();
         let mut steps: Vec<(f64, Vec<C64>)> = Vec::new();
         for s in &analysis.steps {
             if steps.iter().any(|(f, _)| *f == s.frequency_hz) {
@@ -98,7 +106,11 @@ impl RecordedPlant {
             return self.frf[i].clone();
         }
         let t = (f.ln() - fs[i].ln()) / (fs[i + 1].ln() - fs[i].ln());
-        self.frf[i].iter().zip(&self.frf[i + 1]).map(|(a, b)| a * (1.0 - t) + b * t).collect()
+        self.frf[i]
+            .iter()
+            .zip(&self.frf[i + 1])
+            .map(|(a, b)| a * (1.0 - t) + b * t)
+            .collect()
     }
 }
 
@@ -127,16 +139,22 @@ pub struct Served {
 /// recorded simulated stand's own speed, or 1 = real time).
 pub fn prepare(session: &Path, speed: Option<f64>) -> Result<Served, ReplayError> {
     let path = session.display().to_string();
-    let incomplete = |what: String| ReplayError::Incomplete { path: path.clone(), what };
+    let incomplete = |what: String| ReplayError::Incomplete {
+        path: path.clone(),
+        what,
+    };
     let rep = session::read(session).map_err(|e| ReplayError::Session(e.to_string()))?;
     let stand_rec = rep
         .records
         .iter()
         .find(|r| r.topic == Topic::Stand.name())
         .ok_or_else(|| incomplete("no /stand record: the session was not written by a sweep, or was cut before the stand was recorded".into()))?;
-    let text = stand_rec.value["text"].as_str().ok_or_else(|| incomplete("the /stand record has no stand file text".into()))?;
+    let text = stand_rec.value["text"]
+        .as_str()
+        .ok_or_else(|| incomplete("the /stand record has no stand file text".into()))?;
     let file = stand_rec.value["file"].as_str().unwrap_or("recorded stand");
-    let stand = Stand::parse(text, file).map_err(|e| incomplete(format!("the recorded stand file does not load here: {e}")))?;
+    let stand = Stand::parse(text, file)
+        .map_err(|e| incomplete(format!("the recorded stand file does not load here: {e}")))?;
     let identity = |role: &str| -> Result<DeviceIdentity, ReplayError> {
         let v = &rep
             .records
@@ -145,17 +163,40 @@ pub fn prepare(session: &Path, speed: Option<f64>) -> Result<Served, ReplayError
             .ok_or_else(|| incomplete(format!("no /device/identity record for the {role}: the rig never connected; nothing to serve")))?
             .value;
         let s = |k: &str| v[k].as_str().unwrap_or("").to_string();
-        Ok(DeviceIdentity { manufacturer: s("manufacturer"), model: s("model"), serial: s("serial"), firmware: s("firmware") })
+        Ok(DeviceIdentity {
+            manufacturer: s("manufacturer"),
+            model: s("model"),
+            serial: s("serial"),
+            firmware: s("firmware"),
+        })
     };
-    let identities = SimIdentities { shaker: identity("shaker")?, daq: identity("daq")? };
-    let analysis = characteristics(session, &AnalysisOptions::default()).map_err(|e| ReplayError::Session(e.to_string()))?;
+    let identities = SimIdentities {
+        shaker: identity("shaker")?,
+        daq: identity("daq")?,
+    };
+    let analysis = characteristics(session, &AnalysisOptions::default())
+        .map_err(|e| ReplayError::Session(e.to_string()))?;
     let plant = Arc::new(RecordedPlant::from_analysis(&analysis, &stand).map_err(incomplete)?);
-    let speed = speed.or(stand.truth.as_ref().map(|t| t.speed)).unwrap_or(1.0);
+    let speed = speed
+        .or(stand.truth.as_ref().map(|t| t.speed))
+        .unwrap_or(1.0);
     if !(speed.is_finite() && speed > 0.0) {
-        return Err(incomplete(format!("speed {speed}: give a factor > 0 (1 = real time)")));
+        return Err(incomplete(format!(
+            "speed {speed}: give a factor > 0 (1 = real time)"
+        )));
     }
     let median_noise = |name: &str| -> f64 {
-        let mut v: Vec<f64> = analysis.steps.iter().flat_map(|s| s.channels.iter().filter(|c| c.name == name).map(|c| c.noise_rms)).filter(|x| x.is_finite()).collect();
+        let mut v: Vec<f64> = analysis
+            .steps
+            .iter()
+            .flat_map(|s| {
+                s.channels
+                    .iter()
+                    .filter(|c| c.name == name)
+                    .map(|c| c.noise_rms)
+            })
+            .filter(|x| x.is_finite())
+            .collect();
         v.sort_by(f64::total_cmp);
         v.get(v.len() / 2).copied().unwrap_or(0.0)
     };
@@ -171,14 +212,25 @@ pub fn prepare(session: &Path, speed: Option<f64>) -> Result<Served, ReplayError
                     Source::Sensor(sensor - 1)
                 }
             };
-            SimChannel { device_channel: c.device_channel, source, sensitivity: c.sensitivity, noise_rms: median_noise(&c.name) }
+            SimChannel {
+                device_channel: c.device_channel,
+                source,
+                sensitivity: c.sensitivity,
+                noise_rms: median_noise(&c.name),
+            }
         })
         .collect();
     let interaction = stand
         .truth
         .as_ref()
-        .map(|t| Interaction { gain: t.shaker_gain, cutoff_hz: t.shaker_cutoff_hz })
-        .unwrap_or(Interaction { gain: 1.0, cutoff_hz: f64::INFINITY });
+        .map(|t| Interaction {
+            gain: t.shaker_gain,
+            cutoff_hz: t.shaker_cutoff_hz,
+        })
+        .unwrap_or(Interaction {
+            gain: 1.0,
+            cutoff_hz: f64::INFINITY,
+        });
     let setup = SimSetup {
         plant: plant.clone(),
         interaction,
@@ -190,7 +242,11 @@ pub fn prepare(session: &Path, speed: Option<f64>) -> Result<Served, ReplayError
         max_force_n: stand.shaker.max_force_n * 1.25,
         identities,
     };
-    Ok(Served { stand, setup, plant })
+    Ok(Served {
+        stand,
+        setup,
+        plant,
+    })
 }
 
 #[cfg(test)]
@@ -203,10 +259,16 @@ mod tests {
             freqs_hz: vec![10.0, 100.0],
             frf: vec![vec![C64::new(1.0, 0.0)], vec![C64::new(3.0, -2.0)]],
         };
-        let r = p.response(&[10.0, 100.0, 31.622776601683793, 5.0, 500.0]).unwrap();
+        let r = p
+            .response(&[10.0, 100.0, 31.622776601683793, 5.0, 500.0])
+            .unwrap();
         assert_eq!(r[0][0], C64::new(1.0, 0.0));
         assert_eq!(r[1][0], C64::new(3.0, -2.0));
-        assert!((r[2][0] - C64::new(2.0, -1.0)).norm() < 1e-12, "{}", r[2][0]);
+        assert!(
+            (r[2][0] - C64::new(2.0, -1.0)).norm() < 1e-12,
+            "{}",
+            r[2][0]
+        );
         assert_eq!(r[3][0], C64::new(1.0, 0.0));
         assert_eq!(r[4][0], C64::new(3.0, -2.0));
     }

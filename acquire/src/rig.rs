@@ -64,23 +64,45 @@ fn tapped(t: impl Transport + 'static, session: Option<&SessionHandle>) -> Box<d
 impl Rig {
     /// Opens the stand's serial ports (every byte tapped into `session`), then [`Rig::from_devices`].
     pub async fn connect(stand: &Stand, session: Option<&SessionHandle>) -> Result<Rig, RigError> {
-        let unbound = |role| RigError::Unbound { file: stand.file.clone(), role };
+        let unbound = |role| RigError::Unbound {
+            file: stand.file.clone(),
+            role,
+        };
         let sp = match &stand.shaker.port {
             PortSpec::Path(p) => p.clone(),
             PortSpec::Sim | PortSpec::Can(_) => return Err(unbound("shaker")),
         };
-        let s_io = open_serial(&sp, &SerialSettings { baud: stand.shaker.baud }).map_err(ShakerError::from)?;
+        let s_io = open_serial(
+            &sp,
+            &SerialSettings {
+                baud: stand.shaker.baud,
+            },
+        )
+        .map_err(ShakerError::from)?;
         let shaker = ScpiShaker::new(
             tapped(s_io, session),
-            ShakerOptions { timeout: stand.shaker.timeout, retries: stand.shaker.retries },
+            ShakerOptions {
+                timeout: stand.shaker.timeout,
+                retries: stand.shaker.retries,
+            },
         );
         let daq: Box<dyn Daq> = match &stand.daq.port {
             PortSpec::Sim => return Err(unbound("daq")),
             PortSpec::Path(dp) => {
-                let d_io = open_serial(dp, &SerialSettings { baud: stand.daq.baud }).map_err(DaqError::from)?;
+                let d_io = open_serial(
+                    dp,
+                    &SerialSettings {
+                        baud: stand.daq.baud,
+                    },
+                )
+                .map_err(DaqError::from)?;
                 Box::new(SerialDaq::new(
                     tapped(d_io, session),
-                    DaqOptions { command_timeout: stand.daq.timeout, retries: stand.daq.retries, ..DaqOptions::default() },
+                    DaqOptions {
+                        command_timeout: stand.daq.timeout,
+                        retries: stand.daq.retries,
+                        ..DaqOptions::default()
+                    },
                 ))
             }
             PortSpec::Can(iface) => {
@@ -127,7 +149,10 @@ impl Rig {
             .into());
         }
         if let Some(s) = session {
-            for (role, port, id) in [("shaker", shaker.port(), &shaker_identity), ("daq", daq.port(), &daq_identity)] {
+            for (role, port, id) in [
+                ("shaker", shaker.port(), &shaker_identity),
+                ("daq", daq.port(), &daq_identity),
+            ] {
                 s.log(Topic::Identity, &json!({"role": role, "port": port, "manufacturer": id.manufacturer, "model": id.model, "serial": id.serial, "firmware": id.firmware}))?;
             }
         }
@@ -137,6 +162,13 @@ impl Rig {
             let names: Vec<&str> = stand.channels.iter().map(|c| c.name.as_str()).collect();
             s.log(Topic::DaqStream, &json!({"port": daq.port(), "sample_rate_hz": stream.sample_rate_hz, "samples_per_block": stream.samples_per_block, "channels": stream.channels, "names": names}))?;
         }
-        Ok(Rig { stand: stand.clone(), shaker, daq, stream, shaker_identity, daq_identity })
+        Ok(Rig {
+            stand: stand.clone(),
+            shaker,
+            daq,
+            stream,
+            shaker_identity,
+            daq_identity,
+        })
     }
 }

@@ -111,8 +111,14 @@ pub fn parse_with_unit(s: &str, dim: Dimension) -> Result<f64, String> {
     let split = t
         .char_indices()
         .find(|&(i, c)| {
-            !(c.is_ascii_digit() || c == '.' || c == '-' || c == '+'
-                || ((c == 'e' || c == 'E') && i > 0 && t[i + 1..].starts_with(|d: char| d.is_ascii_digit() || d == '-' || d == '+')))
+            !(c.is_ascii_digit()
+                || c == '.'
+                || c == '-'
+                || c == '+'
+                || ((c == 'e' || c == 'E')
+                    && i > 0
+                    && t[i + 1..]
+                        .starts_with(|d: char| d.is_ascii_digit() || d == '-' || d == '+')))
         })
         .map(|(i, _)| i)
         .unwrap_or(t.len());
@@ -128,8 +134,15 @@ pub fn parse_with_unit(s: &str, dim: Dimension) -> Result<f64, String> {
     match UNITS.iter().find(|(u, d, _)| *u == unit && *d == dim) {
         Some((_, _, f)) => Ok(x * f),
         None => {
-            let known: Vec<&str> = UNITS.iter().filter(|(_, d, _)| *d == dim).map(|(u, _, _)| *u).collect();
-            Err(format!("unit {unit:?} in {s:?} is not a {dim:?} unit; use one of {}", known.join(", ")))
+            let known: Vec<&str> = UNITS
+                .iter()
+                .filter(|(_, d, _)| *d == dim)
+                .map(|(u, _, _)| *u)
+                .collect();
+            Err(format!(
+                "unit {unit:?} in {s:?} is not a {dim:?} unit; use one of {}",
+                known.join(", ")
+            ))
         }
     }
 }
@@ -144,8 +157,12 @@ mod tests {
         assert_eq!(parse_with_unit("4 kN", Dimension::Force), Ok(4000.0));
         assert_eq!(parse_with_unit("2e8 N/m", Dimension::Stiffness), Ok(2e8));
         assert_eq!(parse_with_unit("1.5e-3", Dimension::Length), Ok(1.5e-3));
-        assert!((parse_with_unit("100 mV/g", Dimension::Sensitivity).unwrap() - 0.1 / G0).abs() < 1e-15);
-        assert!(parse_with_unit("4 kN", Dimension::Length).unwrap_err().contains("not a Length unit"));
+        assert!(
+            (parse_with_unit("100 mV/g", Dimension::Sensitivity).unwrap() - 0.1 / G0).abs() < 1e-15
+        );
+        assert!(parse_with_unit("4 kN", Dimension::Length)
+            .unwrap_err()
+            .contains("not a Length unit"));
         assert!(parse_with_unit("abc", Dimension::Length).is_err());
         assert_eq!(Value::Number(3.0).si(Dimension::Mass), Ok(3.0));
     }

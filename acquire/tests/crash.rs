@@ -12,12 +12,21 @@ use util::*;
 #[test]
 fn killed_writer_leaves_a_recoverable_session() {
     let (_d, path) = temp_file("killed.mcap");
-    let stand = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../configs/stands/fwd32j-sim.toml");
+    let stand =
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../configs/stands/fwd32j-sim.toml");
     let mut child = Command::new(env!("CARGO_BIN_EXE_acquire-sim"))
         .arg(&stand)
         .args(["--record"])
         .arg(&path)
-        .args(["--forever", "--speed", "8", "--flush-ms", "100", "--steps", "6"])
+        .args([
+            "--forever",
+            "--speed",
+            "8",
+            "--flush-ms",
+            "100",
+            "--steps",
+            "6",
+        ])
         .stdout(Stdio::null())
         .stderr(Stdio::piped())
         .spawn()
@@ -36,7 +45,11 @@ fn killed_writer_leaves_a_recoverable_session() {
             panic!("acquire-sim exited early ({status}): {err}");
         }
         if let Ok(r) = session::read(&path) {
-            steps = r.records.iter().filter(|r| r.topic == "/sweep/step").count();
+            steps = r
+                .records
+                .iter()
+                .filter(|r| r.topic == "/sweep/step")
+                .count();
             if steps >= 3 {
                 break;
             }
@@ -48,10 +61,17 @@ fn killed_writer_leaves_a_recoverable_session() {
 
     // The killed file has no footer: readers that need the summary fail on it.
     let before = session::read(&path).unwrap();
-    assert!(before.truncated.is_some(), "file of a killed writer cannot be complete");
+    assert!(
+        before.truncated.is_some(),
+        "file of a killed writer cannot be complete"
+    );
     let out = session::recovered_path(&path);
     let rep = session::recover(&path, &out).unwrap();
-    assert_eq!(rep.messages, before.records.len() as u64, "every message of every complete chunk is kept");
+    assert_eq!(
+        rep.messages,
+        before.records.len() as u64,
+        "every message of every complete chunk is kept"
+    );
     let after = records(&out);
     assert_eq!(after, before.records);
     // Per channel, MCAP sequence numbers run without holes (nothing lost in the middle).
@@ -66,7 +86,19 @@ fn killed_writer_leaves_a_recoverable_session() {
     assert!(after.iter().filter(|r| r.topic == "/sweep/step").count() >= 3);
     let (n, topics) = python_read(&out);
     assert_eq!(n, after.len() as u64);
-    for t in ["/session", "/stand", "/device/identity", "/raw", "/daq/stream", "/daq/block", "/sweep/event", "/sweep/step"] {
-        assert!(topics.iter().any(|x| x == t), "topic {t} missing from {topics:?}");
+    for t in [
+        "/session",
+        "/stand",
+        "/device/identity",
+        "/raw",
+        "/daq/stream",
+        "/daq/block",
+        "/sweep/event",
+        "/sweep/step",
+    ] {
+        assert!(
+            topics.iter().any(|x| x == t),
+            "topic {t} missing from {topics:?}"
+        );
     }
 }

@@ -17,14 +17,20 @@ use acquire::sim::plant::{Interaction, SdofPlant, C64};
 use acquire::sim::{SimSetup, SimStand};
 use acquire::stand::{Stand, TruthModel};
 use acquire::sweep::estimate::StepEstimator;
-use acquire::sweep::{self, FrequencyList, NoProgress, StopSignal, SteppedSine, SweepError, SweepProgress};
+use acquire::sweep::{
+    self, FrequencyList, NoProgress, SteppedSine, StopSignal, SweepError, SweepProgress,
+};
 use acquire::transport::{open_serial, pty_pair, SerialSettings, TransportError};
 use serde_json::Value;
 use util::*;
 
 fn quick_plan(n: usize) -> SteppedSine {
     SteppedSine {
-        frequencies: FrequencyList::Log { start: 40.0, stop: 250.0, n },
+        frequencies: FrequencyList::Log {
+            start: 40.0,
+            stop: 250.0,
+            n,
+        },
         settle_s: 0.05,
         cycles: 10.0,
         min_window_s: 0.15,
@@ -36,24 +42,54 @@ fn quick_plan(n: usize) -> SteppedSine {
 /// The truth accelerance of each acceleration channel (stand order) at `f`.
 fn truth(stand: &Stand, f: f64) -> Vec<C64> {
     let t = stand.truth.as_ref().unwrap();
-    let TruthModel::Sdof { mass, stiffness, loss_factor, direction, .. } = &t.model else { panic!("sdof truth expected") };
-    let p = SdofPlant { mass: *mass, stiffness: *stiffness, loss_factor: *loss_factor, gains: vec![] };
+    let TruthModel::Sdof {
+        mass,
+        stiffness,
+        loss_factor,
+        direction,
+        ..
+    } = &t.model
+    else {
+        panic!("sdof truth expected")
+    };
+    let p = SdofPlant {
+        mass: *mass,
+        stiffness: *stiffness,
+        loss_factor: *loss_factor,
+        gains: vec![],
+    };
     stand
         .channels
         .iter()
         .filter(|c| c.kind == acquire::stand::ChannelKind::Acceleration)
-        .map(|c| p.accelerance(f) * c.direction.iter().zip(direction).map(|(a, b)| a * b).sum::<f64>())
+        .map(|c| {
+            p.accelerance(f)
+                * c.direction
+                    .iter()
+                    .zip(direction)
+                    .map(|(a, b)| a * b)
+                    .sum::<f64>()
+        })
         .collect()
 }
 
-async fn run_sweep(stand: &Stand, plan: &SteppedSine, path: &std::path::Path, stop: &StopSignal, skip: &BTreeSet<usize>, progress: &dyn SweepProgress) -> (Result<sweep::SweepOutcome, SweepError>, SimStand) {
+async fn run_sweep(
+    stand: &Stand,
+    plan: &SteppedSine,
+    path: &std::path::Path,
+    stop: &StopSignal,
+    skip: &BTreeSet<usize>,
+    progress: &dyn SweepProgress,
+) -> (Result<sweep::SweepOutcome, SweepError>, SimStand) {
     let sim = SimStand::start(stand).unwrap();
     let bound = sim.bind(stand);
     let session = Session::create(path, SessionOptions::default()).unwrap();
     let h = session.handle();
     sweep::log_session_start(&h, &stand.file, plan, None, skip).unwrap();
     let r = async {
-        let mut rig = Rig::connect(&bound, Some(&h)).await.map_err(|e| SweepError::Plan(e.to_string()))?;
+        let mut rig = Rig::connect(&bound, Some(&h))
+            .await
+            .map_err(|e| SweepError::Plan(e.to_string()))?;
         sweep::stepped_sine(&mut rig, plan, &h, progress, stop, skip).await
     }
     .await;
@@ -66,14 +102,26 @@ async fn stepped_sine_over_ptys_recovers_the_truth_frf_from_the_session_file() {
     bounded(120, async {
         let stand = sim_stand(8.0);
         let plan = SteppedSine {
-            frequencies: FrequencyList::AroundResonances { resonances: vec![95.1], relative_span: 0.5, per_resonance: 9 },
+            frequencies: FrequencyList::AroundResonances {
+                resonances: vec![95.1],
+                relative_span: 0.5,
+                per_resonance: 9,
+            },
             // At 8× real time the blocks queued during a shaker command exchange amount to
             // ~10 ms × 8; settle well beyond that.
             settle_s: 0.25,
             ..quick_plan(0)
         };
         let (_d, path) = temp_file("e2e.mcap");
-        let (r, _sim) = run_sweep(&stand, &plan, &path, &StopSignal::new(), &BTreeSet::new(), &NoProgress).await;
+        let (r, _sim) = run_sweep(
+            &stand,
+            &plan,
+            &path,
+            &StopSignal::new(),
+            &BTreeSet::new(),
+            &NoProgress,
+        )
+        .await;
         let outcome = r.unwrap();
         assert_eq!(outcome.steps.len(), 9);
         assert_eq!(stand.force_channel(), 0);
@@ -96,7 +144,10 @@ async fn stepped_sine_over_ptys_recovers_the_truth_frf_from_the_session_file() {
             let n = v["samples"].as_u64().unwrap();
             // Closed loop held the target force.
             let famp = v["force_amplitude_n"].as_f64().unwrap();
-            assert!((famp - 4000.0).abs() <= 0.03 * 4000.0 + 1.0, "{f} Hz: force {famp}");
+            assert!(
+                (famp - 4000.0).abs() <= 0.03 * 4000.0 + 1.0,
+                "{f} Hz: force {famp}"
+            );
             // Recompute the step from the recorded blocks alone (an independent walk over the
             // blocks; acquire::analysis is checked against this in tests/pipeline.rs).
             let sens: Vec<f64> = stand.channels.iter().map(|c| c.sensitivity).collect();
@@ -108,12 +159,18 @@ async fn stepped_sine_over_ptys_recovers_the_truth_frf_from_the_session_file() {
                 for i in 0..len {
                     let k = b0 + i;
                     if k >= first && k < first + n {
-                        let row: Vec<f32> = (0..nch).map(|c| volts[c][i as usize].as_f64().unwrap() as f32).collect();
+                        let row: Vec<f32> = (0..nch)
+                            .map(|c| volts[c][i as usize].as_f64().unwrap() as f32)
+                            .collect();
                         est.push_row(&row);
                     }
                 }
             }
-            assert_eq!(est.len() as u64, n, "window of step at {f} Hz not fully in the file");
+            assert_eq!(
+                est.len() as u64,
+                n,
+                "window of step at {f} Hz not fully in the file"
+            );
             let fit = est.estimate(f).unwrap();
             let force = fit.force.fundamental;
             let want = truth(&stand, f);
@@ -122,12 +179,25 @@ async fn stepped_sine_over_ptys_recovers_the_truth_frf_from_the_session_file() {
                 let h = fit.frf[c];
                 // Noise bound: σ(H)/|F| ≈ sqrt(2/N)(σ_a + |H| σ_F)/|F|; 6 σ plus 0.2 % for
                 // quantisation and f32 rounding.
-                let sigma = (2.0 / n as f64).sqrt() * (t.noise_acceleration + w.norm() * t.noise_force) / force.norm();
+                let sigma = (2.0 / n as f64).sqrt()
+                    * (t.noise_acceleration + w.norm() * t.noise_force)
+                    / force.norm();
                 let tol = 6.0 * sigma + 2e-3 * w.norm();
-                assert!((h - w).norm() < tol, "{f:.2} Hz channel {}: H = {h}, truth {w}, tol {tol:e}", stand.channels[ch].name);
+                assert!(
+                    (h - w).norm() < tol,
+                    "{f:.2} Hz channel {}: H = {h}, truth {w}, tol {tol:e}",
+                    stand.channels[ch].name
+                );
                 // The live estimate recorded by the sweep is the recomputation, bit for bit.
-                let live = C64::new(v["channels"][ch]["frf_re"].as_f64().unwrap(), v["channels"][ch]["frf_im"].as_f64().unwrap());
-                assert_eq!((live.re.to_bits(), live.im.to_bits()), (h.re.to_bits(), h.im.to_bits()), "{live} vs {h}");
+                let live = C64::new(
+                    v["channels"][ch]["frf_re"].as_f64().unwrap(),
+                    v["channels"][ch]["frf_im"].as_f64().unwrap(),
+                );
+                assert_eq!(
+                    (live.re.to_bits(), live.im.to_bits()),
+                    (h.re.to_bits(), h.im.to_bits()),
+                    "{live} vs {h}"
+                );
             }
         }
         // The Python reader decodes every channel.
@@ -148,54 +218,130 @@ async fn every_injected_stream_fault_is_detected_and_recorded() {
         stand.faults.seed = 42;
         let plan = quick_plan(5);
         let (_d, path) = temp_file("faults.mcap");
-        let (r, sim) = run_sweep(&stand, &plan, &path, &StopSignal::new(), &BTreeSet::new(), &NoProgress).await;
+        let (r, sim) = run_sweep(
+            &stand,
+            &plan,
+            &path,
+            &StopSignal::new(),
+            &BTreeSet::new(),
+            &NoProgress,
+        )
+        .await;
         let outcome = r.unwrap();
-        assert_eq!(outcome.steps.len(), 5, "the sweep re-measures windows hit by faults");
+        assert_eq!(
+            outcome.steps.len(),
+            5,
+            "the sweep re-measures windows hit by faults"
+        );
         let rs = records(&path);
         // Stream order: faults and blocks are recorded in the order they were decoded.
         let last_block = rs.iter().rposition(|r| r.topic == "/daq/block").unwrap();
         let last_seq = rs[last_block].value["seq"].as_u64().unwrap();
         let injected = sim.injected();
-        let count = |k: &str| injected.iter().filter(|f| f.kind == k && f.seq < last_seq).count() as u64;
+        let count = |k: &str| {
+            injected
+                .iter()
+                .filter(|f| f.kind == k && f.seq < last_seq)
+                .count() as u64
+        };
         let (drops, corrupts, dups) = (count("drop"), count("corrupt"), count("duplicate"));
-        assert!(drops + corrupts + dups >= 3, "seeded faults should fire: {injected:?}");
-        let faults: Vec<&Value> = rs[..last_block].iter().filter(|r| r.topic == "/daq/fault").map(|r| &r.value).collect();
+        assert!(
+            drops + corrupts + dups >= 3,
+            "seeded faults should fire: {injected:?}"
+        );
+        let faults: Vec<&Value> = rs[..last_block]
+            .iter()
+            .filter(|r| r.topic == "/daq/fault")
+            .map(|r| &r.value)
+            .collect();
         let kind = |k: &str| faults.iter().filter(|f| f["kind"] == k).count() as u64;
-        assert_eq!(kind("crc") + kind("framing"), corrupts, "every corrupted frame is a CRC/framing fault: {faults:?}");
+        assert_eq!(
+            kind("crc") + kind("framing"),
+            corrupts,
+            "every corrupted frame is a CRC/framing fault: {faults:?}"
+        );
         assert_eq!(kind("duplicate"), dups, "every duplicate is reported");
         let missing: u64 = faults
             .iter()
             .filter(|f| f["kind"] == "gap")
-            .map(|f| f["detail"].as_str().unwrap().split('(').nth(1).unwrap().split(' ').next().unwrap().parse::<u64>().unwrap())
+            .map(|f| {
+                f["detail"]
+                    .as_str()
+                    .unwrap()
+                    .split('(')
+                    .nth(1)
+                    .unwrap()
+                    .split(' ')
+                    .next()
+                    .unwrap()
+                    .parse::<u64>()
+                    .unwrap()
+            })
             .sum();
-        assert_eq!(missing, drops + corrupts, "every dropped or corrupted block shows up in a gap");
+        assert_eq!(
+            missing,
+            drops + corrupts,
+            "every dropped or corrupted block shows up in a gap"
+        );
         // No block is accepted twice or out of order.
-        let seqs: Vec<u64> = topic(&rs, "/daq/block").iter().map(|b| b.value["seq"].as_u64().unwrap()).collect();
+        let seqs: Vec<u64> = topic(&rs, "/daq/block")
+            .iter()
+            .map(|b| b.value["seq"].as_u64().unwrap())
+            .collect();
         assert!(seqs.windows(2).all(|w| w[1] > w[0]));
-        assert_eq!(seqs.len() as u64 + missing, last_seq + 1, "blocks + missing account for every sequence number");
+        assert_eq!(
+            seqs.len() as u64 + missing,
+            last_seq + 1,
+            "blocks + missing account for every sequence number"
+        );
         // Windows hit by faults were re-measured, and that is recorded.
-        assert!(topic(&rs, "/sweep/event").iter().any(|e| e.value["kind"] == "retry"));
+        assert!(topic(&rs, "/sweep/event")
+            .iter()
+            .any(|e| e.value["kind"] == "retry"));
     })
     .await
 }
 
-async fn expect_sweep_error(mut stand: Stand, set: impl FnOnce(&mut acquire::stand::Faults)) -> (SweepError, Vec<acquire::session::Record>) {
+async fn expect_sweep_error(
+    mut stand: Stand,
+    set: impl FnOnce(&mut acquire::stand::Faults),
+) -> (SweepError, Vec<acquire::session::Record>) {
     set(&mut stand.faults);
     let (_d, path) = temp_file("fail.mcap");
-    let (r, _sim) = run_sweep(&stand, &quick_plan(6), &path, &StopSignal::new(), &BTreeSet::new(), &NoProgress).await;
+    let (r, _sim) = run_sweep(
+        &stand,
+        &quick_plan(6),
+        &path,
+        &StopSignal::new(),
+        &BTreeSet::new(),
+        &NoProgress,
+    )
+    .await;
     let e = r.expect_err("the sweep must fail");
     let rs = records(&path); // the file is still complete
-    assert!(topic(&rs, "/sweep/event").iter().any(|x| x.value["kind"] == "error" && x.value["detail"].as_str().unwrap() == e.to_string()), "error recorded");
+    assert!(
+        topic(&rs, "/sweep/event")
+            .iter()
+            .any(|x| x.value["kind"] == "error"
+                && x.value["detail"].as_str().unwrap() == e.to_string()),
+        "error recorded"
+    );
     (e, rs)
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn silent_daq_is_a_timeout_naming_the_port() {
     bounded(60, async {
-        let (e, _) = expect_sweep_error(sim_stand(10.0), |f| f.daq_silent_after_blocks = Some(60)).await;
-        let SweepError::Daq(DaqError::Timeout { port, .. }) = &e else { panic!("{e}") };
+        let (e, _) =
+            expect_sweep_error(sim_stand(10.0), |f| f.daq_silent_after_blocks = Some(60)).await;
+        let SweepError::Daq(DaqError::Timeout { port, .. }) = &e else {
+            panic!("{e}")
+        };
         assert!(port.starts_with("/dev/pts/"), "{e}");
-        assert!(e.to_string().contains("check that the device is powered"), "{e}");
+        assert!(
+            e.to_string().contains("check that the device is powered"),
+            "{e}"
+        );
     })
     .await
 }
@@ -203,16 +349,30 @@ async fn silent_daq_is_a_timeout_naming_the_port() {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn pulled_cable_mid_sweep_ends_the_sweep_cleanly() {
     bounded(60, async {
-        let (e, rs) = expect_sweep_error(sim_stand(10.0), |f| f.cable_pull_after_blocks = Some(60)).await;
+        let (e, rs) =
+            expect_sweep_error(sim_stand(10.0), |f| f.cable_pull_after_blocks = Some(60)).await;
         assert!(
-            matches!(e, SweepError::Daq(DaqError::Disconnected { .. } | DaqError::Timeout { .. }) | SweepError::Shaker(ShakerError::Disconnected { .. } | ShakerError::Timeout { .. })),
+            matches!(
+                e,
+                SweepError::Daq(DaqError::Disconnected { .. } | DaqError::Timeout { .. })
+                    | SweepError::Shaker(
+                        ShakerError::Disconnected { .. } | ShakerError::Timeout { .. }
+                    )
+            ),
             "{e}"
         );
         assert!(e.to_string().contains("/dev/pts/"), "{e}");
         // Blocks before the pull are in the file, in order and without holes (blocks still in
         // the port's buffer when the cable goes are lost with it, as on real hardware).
-        let seqs: Vec<u64> = topic(&rs, "/daq/block").iter().map(|b| b.value["seq"].as_u64().unwrap()).collect();
-        assert!(seqs.len() >= 20 && seqs.len() <= 61, "{} blocks", seqs.len());
+        let seqs: Vec<u64> = topic(&rs, "/daq/block")
+            .iter()
+            .map(|b| b.value["seq"].as_u64().unwrap())
+            .collect();
+        assert!(
+            seqs.len() >= 20 && seqs.len() <= 61,
+            "{} blocks",
+            seqs.len()
+        );
         assert!(seqs.iter().enumerate().all(|(i, s)| *s == i as u64));
     })
     .await
@@ -221,8 +381,16 @@ async fn pulled_cable_mid_sweep_ends_the_sweep_cleanly() {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn silent_shaker_controller_is_a_timeout_naming_the_command() {
     bounded(60, async {
-        let (e, _) = expect_sweep_error(sim_stand(10.0), |f| f.shaker_silent_after_commands = Some(14)).await;
-        let SweepError::Shaker(ShakerError::Timeout { command, attempts, .. }) = &e else { panic!("{e}") };
+        let (e, _) = expect_sweep_error(sim_stand(10.0), |f| {
+            f.shaker_silent_after_commands = Some(14)
+        })
+        .await;
+        let SweepError::Shaker(ShakerError::Timeout {
+            command, attempts, ..
+        }) = &e
+        else {
+            panic!("{e}")
+        };
         assert_eq!(*attempts, 3);
         assert!(!command.is_empty());
     })
@@ -247,20 +415,41 @@ async fn stop_leaves_a_complete_file_and_the_sweep_resumes_from_it() {
         let plan = quick_plan(6);
         let (_d, first) = temp_file("first.mcap");
         let stop = StopSignal::new();
-        let (r, _sim) = run_sweep(&stand, &plan, &first, &stop, &BTreeSet::new(), &StopAfter(2, stop.clone())).await;
+        let (r, _sim) = run_sweep(
+            &stand,
+            &plan,
+            &first,
+            &stop,
+            &BTreeSet::new(),
+            &StopAfter(2, stop.clone()),
+        )
+        .await;
         let o = r.unwrap();
         assert!(o.stopped);
         assert_eq!(o.steps.len(), 2);
         let rs = records(&first);
-        assert!(topic(&rs, "/sweep/event").iter().any(|e| e.value["kind"] == "stopped"));
+        assert!(topic(&rs, "/sweep/event")
+            .iter()
+            .any(|e| e.value["kind"] == "stopped"));
 
         let done = sweep::completed_steps(&first, &plan).unwrap();
         assert_eq!(done, [0, 1].into_iter().collect());
         let other = quick_plan(7);
-        assert!(matches!(sweep::completed_steps(&first, &other), Err(SweepError::Resume { .. })));
+        assert!(matches!(
+            sweep::completed_steps(&first, &other),
+            Err(SweepError::Resume { .. })
+        ));
 
         let second = first.with_file_name("second.mcap");
-        let (r, _sim) = run_sweep(&stand, &plan, &second, &StopSignal::new(), &done, &NoProgress).await;
+        let (r, _sim) = run_sweep(
+            &stand,
+            &plan,
+            &second,
+            &StopSignal::new(),
+            &done,
+            &NoProgress,
+        )
+        .await;
         let o = r.unwrap();
         assert!(!o.stopped);
         let measured: Vec<usize> = o.steps.iter().map(|s| s.step).collect();
@@ -277,7 +466,10 @@ async fn bad_ports_give_errors_that_name_the_port() {
     bounded(30, async {
         let e = open_serial("/dev/ttyDOESNOTEXIST9", &SerialSettings::default()).unwrap_err();
         assert!(matches!(e, TransportError::NotFound { .. }), "{e}");
-        assert!(e.to_string().contains("/dev/ttyDOESNOTEXIST9") && e.to_string().contains("plugged in"), "{e}");
+        assert!(
+            e.to_string().contains("/dev/ttyDOESNOTEXIST9") && e.to_string().contains("plugged in"),
+            "{e}"
+        );
 
         let e = open_serial("/dev/null", &SerialSettings::default()).unwrap_err();
         assert!(matches!(e, TransportError::NotSerial { .. }), "{e}");
@@ -289,7 +481,10 @@ async fn bad_ports_give_errors_that_name_the_port() {
         let first = open_serial(&pty.path, &SerialSettings::default()).unwrap();
         let e = open_serial(&pty.path, &SerialSettings::default()).unwrap_err();
         assert!(matches!(e, TransportError::Busy { .. }), "{e}");
-        assert!(e.to_string().contains(&pty.path) && e.to_string().contains("already in use"), "{e}");
+        assert!(
+            e.to_string().contains(&pty.path) && e.to_string().contains("already in use"),
+            "{e}"
+        );
         drop(first);
         open_serial(&pty.path, &SerialSettings::default()).expect("free again after close");
     })
@@ -304,14 +499,24 @@ async fn wrong_identities_are_refused() {
         setup.identities.shaker.manufacturer = "ACME".into();
         let sim = SimStand::start_with(setup).unwrap();
         let e = Rig::connect(&sim.bind(&stand), None).await.err().unwrap();
-        assert!(matches!(e, RigError::Shaker(ShakerError::WrongIdentity { .. })), "{e}");
-        assert!(e.to_string().contains("ACME,SHAKER-4K") && e.to_string().contains(&sim.shaker_port), "{e}");
+        assert!(
+            matches!(e, RigError::Shaker(ShakerError::WrongIdentity { .. })),
+            "{e}"
+        );
+        assert!(
+            e.to_string().contains("ACME,SHAKER-4K") && e.to_string().contains(&sim.shaker_port),
+            "{e}"
+        );
 
         let mut setup = SimSetup::from_stand(&stand).unwrap();
         setup.identities.daq.model = "SCOPE".into();
         let sim = SimStand::start_with(setup).unwrap();
         let e = Rig::connect(&sim.bind(&stand), None).await.err().unwrap();
-        assert!(matches!(e, RigError::Daq(DaqError::WrongIdentity { .. })) || e.to_string().contains("identifies as `IDENT-SIM,SCOPE"), "{e}");
+        assert!(
+            matches!(e, RigError::Daq(DaqError::WrongIdentity { .. }))
+                || e.to_string().contains("identifies as `IDENT-SIM,SCOPE"),
+            "{e}"
+        );
     })
     .await
 }
@@ -336,13 +541,19 @@ async fn garbage_device(mut io: acquire::transport::SerialTransport, junk: &'sta
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn devices_answering_garbage_are_reported() {
     bounded(30, async {
-        let opts = ShakerOptions { timeout: std::time::Duration::from_millis(150), retries: 1 };
+        let opts = ShakerOptions {
+            timeout: std::time::Duration::from_millis(150),
+            retries: 1,
+        };
         // Text without line ends (wrong baud rate): timeout with a hint.
         let pty = pty_pair("shaker").unwrap();
         let path = pty.path.clone();
         let io = pty.device;
         tokio::spawn(garbage_device(io, b"\xfe\x13\x88garbage"));
-        let mut sh = ScpiShaker::new(open_serial(&path, &SerialSettings::default()).unwrap(), opts.clone());
+        let mut sh = ScpiShaker::new(
+            open_serial(&path, &SerialSettings::default()).unwrap(),
+            opts.clone(),
+        );
         let e = sh.identify().await.unwrap_err();
         assert!(matches!(e, ShakerError::Timeout { .. }), "{e}");
         assert!(e.to_string().contains("without a line end"), "{e}");
@@ -351,7 +562,10 @@ async fn devices_answering_garbage_are_reported() {
         let path = pty.path.clone();
         let io = pty.device;
         tokio::spawn(garbage_device(io, b"hello world\n"));
-        let mut sh = ScpiShaker::new(open_serial(&path, &SerialSettings::default()).unwrap(), opts);
+        let mut sh = ScpiShaker::new(
+            open_serial(&path, &SerialSettings::default()).unwrap(),
+            opts,
+        );
         let e = sh.identify().await.unwrap_err();
         assert!(matches!(e, ShakerError::Garbled { .. }), "{e}");
         assert!(e.to_string().contains("hello world"), "{e}");
@@ -362,11 +576,18 @@ async fn devices_answering_garbage_are_reported() {
         tokio::spawn(garbage_device(io, b"OK\r\n>"));
         let mut daq = SerialDaq::new(
             open_serial(&path, &SerialSettings::default()).unwrap(),
-            DaqOptions { command_timeout: std::time::Duration::from_millis(150), retries: 1, ..Default::default() },
+            DaqOptions {
+                command_timeout: std::time::Duration::from_millis(150),
+                retries: 1,
+                ..Default::default()
+            },
         );
         let e = daq.identify().await.unwrap_err();
         assert!(matches!(e, DaqError::Timeout { .. }), "{e}");
-        assert!(e.to_string().contains("not DAQ frames") && e.to_string().contains(&path), "{e}");
+        assert!(
+            e.to_string().contains("not DAQ frames") && e.to_string().contains(&path),
+            "{e}"
+        );
     })
     .await
 }
@@ -376,20 +597,34 @@ async fn controller_errors_reach_the_operator() {
     bounded(30, async {
         let stand = sim_stand(10.0);
         let sim = SimStand::start(&stand).unwrap();
-        let mut sh = ScpiShaker::new(open_serial(&sim.shaker_port, &SerialSettings::default()).unwrap(), ShakerOptions::default());
+        let mut sh = ScpiShaker::new(
+            open_serial(&sim.shaker_port, &SerialSettings::default()).unwrap(),
+            ShakerOptions::default(),
+        );
         sh.reset().await.unwrap();
         let e = sh.set_force(99_000.0).await.unwrap_err();
-        let ShakerError::Device { code, message, .. } = &e else { panic!("{e}") };
+        let ShakerError::Device { code, message, .. } = &e else {
+            panic!("{e}")
+        };
         assert_eq!(*code, -222);
         assert!(message.contains("force"), "{e}");
         // The queue is drained: the next command succeeds.
         sh.set_force(100.0).await.unwrap();
-        let e = sh.query(&acquire::shaker::scpi::Command::QueryForce).await.unwrap();
+        let e = sh
+            .query(&acquire::shaker::scpi::Command::QueryForce)
+            .await
+            .unwrap();
         assert_eq!(e.trim(), "100");
-        assert!(matches!(sh.set_frequency(f64::NAN).await, Err(ShakerError::InvalidValue { .. })));
+        assert!(matches!(
+            sh.set_frequency(f64::NAN).await,
+            Err(ShakerError::InvalidValue { .. })
+        ));
         let st = sh.status().await.unwrap();
         assert!(!st.output_on);
-        let _ = Interaction { gain: 1.0, cutoff_hz: 1.0 };
+        let _ = Interaction {
+            gain: 1.0,
+            cutoff_hz: 1.0,
+        };
     })
     .await
 }
@@ -399,18 +634,37 @@ async fn broadband_random_and_chirp_recover_the_truth_frf() {
     bounded(120, async {
         let stand = sim_stand(10.0);
         for waveform in [
-            acquire::shaker::Waveform::Random { f_lo_hz: 20.0, f_hi_hz: 400.0 },
-            acquire::shaker::Waveform::Chirp { f_lo_hz: 20.0, f_hi_hz: 400.0, period_s: 0.5 },
-            acquire::shaker::Waveform::BurstRandom { f_lo_hz: 20.0, f_hi_hz: 400.0, duty: 0.5, period_s: 0.5 },
+            acquire::shaker::Waveform::Random {
+                f_lo_hz: 20.0,
+                f_hi_hz: 400.0,
+            },
+            acquire::shaker::Waveform::Chirp {
+                f_lo_hz: 20.0,
+                f_hi_hz: 400.0,
+                period_s: 0.5,
+            },
+            acquire::shaker::Waveform::BurstRandom {
+                f_lo_hz: 20.0,
+                f_hi_hz: 400.0,
+                duty: 0.5,
+                period_s: 0.5,
+            },
         ] {
             let sim = SimStand::start(&stand).unwrap();
             let (_d, path) = temp_file("bb.mcap");
             let session = Session::create(&path, SessionOptions::default()).unwrap();
             let h = session.handle();
-            let plan = sweep::Broadband { waveform: waveform.clone(), force_n: 1000.0, averages: 4, settle_periods: 1 };
+            let plan = sweep::Broadband {
+                waveform: waveform.clone(),
+                force_n: 1000.0,
+                averages: 4,
+                settle_periods: 1,
+            };
             sweep::log_session_start(&h, &stand.file, &plan, None, &BTreeSet::new()).unwrap();
             let mut rig = Rig::connect(&sim.bind(&stand), Some(&h)).await.unwrap();
-            let r = sweep::broadband(&mut rig, &plan, &h, &NoProgress, &StopSignal::new()).await.unwrap();
+            let r = sweep::broadband(&mut rig, &plan, &h, &NoProgress, &StopSignal::new())
+                .await
+                .unwrap();
             session.finish().unwrap();
             assert_eq!(r.averages, 4);
             let mut checked = 0;
@@ -419,23 +673,41 @@ async fn broadband_random_and_chirp_recover_the_truth_frf() {
                 for (c, w) in want.iter().enumerate() {
                     let got = r.h1[c + 1][j];
                     // Noise is small against the periodic excitation: 2 % (chirp ends are weak).
-                    assert!((got - w).norm() < 0.02 * w.norm() + 1e-3, "{waveform:?} {f} Hz ch {c}: {got} vs {w}");
+                    assert!(
+                        (got - w).norm() < 0.02 * w.norm() + 1e-3,
+                        "{waveform:?} {f} Hz ch {c}: {got} vs {w}"
+                    );
                     checked += 1;
                 }
                 // Low-frequency bins carry little acceleration against the sensor noise.
-                assert!(r.coherence[1][j] > 0.8, "{waveform:?} {f} Hz coherence {}", r.coherence[1][j]);
+                assert!(
+                    r.coherence[1][j] > 0.8,
+                    "{waveform:?} {f} Hz coherence {}",
+                    r.coherence[1][j]
+                );
             }
             let mean = r.coherence[1].iter().sum::<f64>() / r.coherence[1].len() as f64;
             assert!(mean > 0.98, "{waveform:?}: mean coherence {mean}");
             assert!(checked > 100);
             let rs = records(&path);
-            assert_eq!(topic(&rs, "/sweep/event").iter().filter(|e| e.value["kind"] == "average").count(), 4);
+            assert_eq!(
+                topic(&rs, "/sweep/event")
+                    .iter()
+                    .filter(|e| e.value["kind"] == "average")
+                    .count(),
+                4
+            );
             // The H1 estimates are in the session, exactly as returned.
             let bb = topic(&rs, "/sweep/broadband");
             assert_eq!(bb.len(), 1);
             let ch1 = &bb[0].value["channels"][1];
             assert_eq!(ch1["name"], stand.channels[1].name.as_str());
-            let re: Vec<f64> = ch1["h1_re"].as_array().unwrap().iter().map(|x| x.as_f64().unwrap()).collect();
+            let re: Vec<f64> = ch1["h1_re"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .map(|x| x.as_f64().unwrap())
+                .collect();
             assert_eq!(re, r.h1[1].iter().map(|h| h.re).collect::<Vec<_>>());
         }
     })
@@ -445,12 +717,27 @@ async fn broadband_random_and_chirp_recover_the_truth_frf() {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn rfe_model_truth_is_recovered_by_a_stepped_sine() {
     bounded(120, async {
-        let p = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../configs/stands/fwd32j-model-sim.toml");
+        let p = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../configs/stands/fwd32j-model-sim.toml");
         let mut stand = Stand::load(&p).unwrap_or_else(|e| panic!("{e}"));
         stand.truth.as_mut().unwrap().speed = 10.0;
-        let plan = SteppedSine { frequencies: FrequencyList::Explicit { freqs: vec![25.0, 60.0, 140.0] }, settle_s: 0.25, ..quick_plan(0) };
+        let plan = SteppedSine {
+            frequencies: FrequencyList::Explicit {
+                freqs: vec![25.0, 60.0, 140.0],
+            },
+            settle_s: 0.25,
+            ..quick_plan(0)
+        };
         let (_d, path) = temp_file("rfe.mcap");
-        let (r, _sim) = run_sweep(&stand, &plan, &path, &StopSignal::new(), &BTreeSet::new(), &NoProgress).await;
+        let (r, _sim) = run_sweep(
+            &stand,
+            &plan,
+            &path,
+            &StopSignal::new(),
+            &BTreeSet::new(),
+            &NoProgress,
+        )
+        .await;
         let o = r.unwrap();
         let t = stand.truth.as_ref().unwrap();
         let plant = acquire::sim::plant::plant_for(t, &stand.channels).unwrap();
@@ -459,8 +746,15 @@ async fn rfe_model_truth_is_recovered_by_a_stepped_sine() {
             for (c, w) in want.iter().enumerate() {
                 let ch = &stand.channels[c + 1];
                 let got = s.frf(&ch.name).unwrap();
-                let sigma = (2.0 / s.samples as f64).sqrt() * (t.noise_acceleration + w.norm() * t.noise_force) / s.force_amplitude_n;
-                assert!((got - w).norm() < 6.0 * sigma + 2e-3 * w.norm(), "{} Hz {}: {got} vs {w}", s.frequency_hz, ch.name);
+                let sigma = (2.0 / s.samples as f64).sqrt()
+                    * (t.noise_acceleration + w.norm() * t.noise_force)
+                    / s.force_amplitude_n;
+                assert!(
+                    (got - w).norm() < 6.0 * sigma + 2e-3 * w.norm(),
+                    "{} Hz {}: {got} vs {w}",
+                    s.frequency_hz,
+                    ch.name
+                );
             }
         }
     })
@@ -474,22 +768,46 @@ async fn in_memory_stand_runs_the_same_sweep_without_any_device() {
         let stand = sim_stand(10.0);
         let (s_host, s_dev) = MemoryTransport::pair("shaker", "shaker-sim", 1 << 16);
         let (d_host, d_dev) = MemoryTransport::pair("daq", "daq-sim", 1 << 20);
-        let _sim = SimStand::serve(SimSetup::from_stand(&stand).unwrap(), s_dev, d_dev, "mem:shaker".into(), "mem:daq".into());
+        let _sim = SimStand::serve(
+            SimSetup::from_stand(&stand).unwrap(),
+            s_dev,
+            d_dev,
+            "mem:shaker".into(),
+            "mem:daq".into(),
+        );
         let (_d, path) = temp_file("mem.mcap");
         let session = Session::create(&path, SessionOptions::default()).unwrap();
         let h = session.handle();
         let shaker: Box<dyn Shaker> = Box::new(ScpiShaker::new(s_host, ShakerOptions::default()));
         let daq: Box<dyn Daq> = Box::new(SerialDaq::new(d_host, DaqOptions::default()));
-        let mut rig = Rig::from_devices(&stand, shaker, daq, Some(&h)).await.unwrap();
+        let mut rig = Rig::from_devices(&stand, shaker, daq, Some(&h))
+            .await
+            .unwrap();
         assert_eq!(rig.daq_identity.model, "DAQ-8");
-        let plan = SteppedSine { settle_s: 0.25, ..quick_plan(3) };
-        let o = sweep::stepped_sine(&mut rig, &plan, &h, &NoProgress, &StopSignal::new(), &BTreeSet::new()).await.unwrap();
+        let plan = SteppedSine {
+            settle_s: 0.25,
+            ..quick_plan(3)
+        };
+        let o = sweep::stepped_sine(
+            &mut rig,
+            &plan,
+            &h,
+            &NoProgress,
+            &StopSignal::new(),
+            &BTreeSet::new(),
+        )
+        .await
+        .unwrap();
         session.finish().unwrap();
         assert_eq!(o.steps.len(), 3);
         for s in &o.steps {
             let w = truth(&stand, s.frequency_hz)[0];
             let got = s.frf("table-a-x").unwrap();
-            assert!((got - w).norm() < 0.01 * w.norm(), "{} Hz: {got} vs {w}", s.frequency_hz);
+            assert!(
+                (got - w).norm() < 0.01 * w.norm(),
+                "{} Hz: {got} vs {w}",
+                s.frequency_hz
+            );
         }
     })
     .await

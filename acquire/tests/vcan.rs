@@ -15,7 +15,9 @@ use std::time::{Duration, Instant};
 
 use acquire::can::codec::{Message, Reassembler, SampleFormat, Segmenter, WireBlock};
 use acquire::can::sim::{SimCanDaq, SimCanDaqSettings, SimFaults, SimStats};
-use acquire::can::{BusEvent, CanBus, CanDaq, CanDaqSettings, CanError, CanId, FrameKind, WireFrame};
+use acquire::can::{
+    BusEvent, CanBus, CanDaq, CanDaqSettings, CanError, CanId, FrameKind, WireFrame,
+};
 use acquire::daq::{Daq, DaqConfig, DaqError, DaqEvent, FaultKind, SampleBlock};
 use acquire::transport::{ByteTap, Direction};
 
@@ -29,7 +31,8 @@ fn vcan0_is_up() -> bool {
     let dev = Path::new("/sys/class/net").join(IFACE);
     let ty = std::fs::read_to_string(dev.join("type")).unwrap_or_default();
     let flags = std::fs::read_to_string(dev.join("flags")).unwrap_or_default();
-    let up = u32::from_str_radix(flags.trim().trim_start_matches("0x"), 16).is_ok_and(|f| f & 1 == 1);
+    let up =
+        u32::from_str_radix(flags.trim().trim_start_matches("0x"), 16).is_ok_and(|f| f & 1 == 1);
     ty.trim() == "280" && up
 }
 
@@ -41,19 +44,36 @@ fn vcan_suite() {
     // creates and deletes its own interface).
     let status = if vcan0_is_up() && std::env::var_os("IDENT_VCAN_FORCE_VM").is_none() {
         eprintln!("vcan_suite: {IFACE} is up on this host; running the CAN tests directly");
-        Command::new(&exe).args(test_args).env(INSIDE, "host").status().expect("run this test binary")
+        Command::new(&exe)
+            .args(test_args)
+            .env(INSIDE, "host")
+            .status()
+            .expect("run this test binary")
     } else {
         let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../.ci/vcan/run-in-vm.sh");
-        eprintln!("vcan_suite: no {IFACE} on this host; running the CAN tests in a qemu VM ({})", script.display());
+        eprintln!(
+            "vcan_suite: no {IFACE} on this host; running the CAN tests in a qemu VM ({})",
+            script.display()
+        );
         let started = Instant::now();
         let status = Command::new("bash")
             .arg(&script)
-            .args(["--env", &format!("{INSIDE}=vm"), "--env", "RUST_BACKTRACE=1", "--timeout", "300"])
+            .args([
+                "--env",
+                &format!("{INSIDE}=vm"),
+                "--env",
+                "RUST_BACKTRACE=1",
+                "--timeout",
+                "300",
+            ])
             .arg(&exe)
             .args(test_args)
             .status()
             .expect("run .ci/vcan/run-in-vm.sh");
-        eprintln!("vcan_suite: VM run took {:.1} s", started.elapsed().as_secs_f64());
+        eprintln!(
+            "vcan_suite: VM run took {:.1} s",
+            started.elapsed().as_secs_f64()
+        );
         if status.code() == Some(3) {
             panic!(
                 "the vcan VM's prerequisites are missing (qemu-system-x86, busybox-static, can-utils, cpio and the Debian kernel); \
@@ -62,7 +82,10 @@ fn vcan_suite() {
         }
         status
     };
-    assert!(status.success(), "CAN tests over {IFACE} failed (see their output above); exit status {status}");
+    assert!(
+        status.success(),
+        "CAN tests over {IFACE} failed (see their output above); exit status {status}"
+    );
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -76,7 +99,10 @@ impl ByteTap for LineTap {
     fn bytes(&self, port: &str, direction: Direction, data: &[u8]) {
         assert_eq!(port, IFACE);
         let line = String::from_utf8(data.to_vec()).expect("tap lines are text");
-        self.0.lock().expect("tap lock").push((direction, line.trim_end().to_string()));
+        self.0
+            .lock()
+            .expect("tap lock")
+            .push((direction, line.trim_end().to_string()));
     }
 }
 
@@ -88,7 +114,11 @@ fn require_vcan() {
 }
 
 fn runtime() -> tokio::runtime::Runtime {
-    tokio::runtime::Builder::new_multi_thread().worker_threads(2).enable_all().build().expect("tokio runtime")
+    tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(2)
+        .enable_all()
+        .build()
+        .expect("tokio runtime")
 }
 
 /// The simulated DAQ's signal: a deterministic pattern per channel and sample, so that every
@@ -116,7 +146,10 @@ fn settings_pair(base: u16, frames: FrameKind) -> (CanDaqSettings, SimCanDaqSett
     (host, dev)
 }
 
-type SimTask = (tokio::task::JoinHandle<Result<SimStats, CanError>>, tokio::sync::oneshot::Sender<()>);
+type SimTask = (
+    tokio::task::JoinHandle<Result<SimStats, CanError>>,
+    tokio::sync::oneshot::Sender<()>,
+);
 
 fn spawn_sim(dev: SimCanDaqSettings) -> SimTask {
     let (stop_tx, stop_rx) = tokio::sync::oneshot::channel();
@@ -149,7 +182,14 @@ fn check_block(b: &SampleBlock, channels: &[u16], spb: u16, vpc: f64) {
 }
 
 /// Identify, configure, start, read `blocks` blocks (asserting no fault and exact values), stop.
-async fn acquire_clean(base: u16, frames: FrameKind, channels: Vec<u16>, spb: u16, rate: f64, blocks: u64) {
+async fn acquire_clean(
+    base: u16,
+    frames: FrameKind,
+    channels: Vec<u16>,
+    spb: u16,
+    rate: f64,
+    blocks: u64,
+) {
     let (host, dev) = settings_pair(base, frames);
     let vpc = dev.volts_per_count as f64;
     let identity = dev.identity.clone();
@@ -157,12 +197,24 @@ async fn acquire_clean(base: u16, frames: FrameKind, channels: Vec<u16>, spb: u1
     let tap = std::sync::Arc::new(LineTap::default());
     let command_prefix = format!("{}#", host.command_id);
     let data_prefix = format!("{}#", host.data_id);
-    let mut daq = CanDaq::open(IFACE, host).expect("open CAN DAQ on vcan0").with_tap(tap.clone());
+    let mut daq = CanDaq::open(IFACE, host)
+        .expect("open CAN DAQ on vcan0")
+        .with_tap(tap.clone());
     assert_eq!(daq.identify().await.expect("identify"), identity);
-    let config = DaqConfig { sample_rate_hz: rate, channels: channels.clone(), samples_per_block: spb };
+    let config = DaqConfig {
+        sample_rate_hz: rate,
+        channels: channels.clone(),
+        samples_per_block: spb,
+    };
     let info = daq.configure(&config).await.expect("configure");
     assert_eq!(info.sample_rate_hz, rate);
-    assert_eq!(info.channels.iter().map(|c| c.device_channel).collect::<Vec<_>>(), channels);
+    assert_eq!(
+        info.channels
+            .iter()
+            .map(|c| c.device_channel)
+            .collect::<Vec<_>>(),
+        channels
+    );
     daq.start().await.expect("start");
     for want in 0..blocks {
         match daq.next_event().await.expect("next event") {
@@ -178,11 +230,27 @@ async fn acquire_clean(base: u16, frames: FrameKind, channels: Vec<u16>, spb: u1
     assert!(stats.blocks >= blocks);
     // The tap saw every frame: our 4 commands out, and at least the data frames of the blocks in.
     let lines = tap.0.lock().expect("tap lock");
-    let tx: Vec<&String> = lines.iter().filter(|(d, _)| *d == Direction::Tx).map(|(_, l)| l).collect();
-    assert!(tx.len() >= 4 && tx.iter().all(|l| l.starts_with(&command_prefix)), "{tx:?}");
-    let rx_data = lines.iter().filter(|(d, l)| *d == Direction::Rx && l.starts_with(&data_prefix)).count() as u64;
-    assert!(rx_data >= blocks, "{rx_data} data frames recorded for {blocks} blocks");
-    assert_eq!((stats.dropped, stats.duplicated, stats.corrupted), (0, 0, 0));
+    let tx: Vec<&String> = lines
+        .iter()
+        .filter(|(d, _)| *d == Direction::Tx)
+        .map(|(_, l)| l)
+        .collect();
+    assert!(
+        tx.len() >= 4 && tx.iter().all(|l| l.starts_with(&command_prefix)),
+        "{tx:?}"
+    );
+    let rx_data = lines
+        .iter()
+        .filter(|(d, l)| *d == Direction::Rx && l.starts_with(&data_prefix))
+        .count() as u64;
+    assert!(
+        rx_data >= blocks,
+        "{rx_data} data frames recorded for {blocks} blocks"
+    );
+    assert_eq!(
+        (stats.dropped, stats.duplicated, stats.corrupted),
+        (0, 0, 0)
+    );
 }
 
 #[test]
@@ -190,9 +258,12 @@ async fn acquire_clean(base: u16, frames: FrameKind, channels: Vec<u16>, spb: u1
 fn classic_frames_acquisition_against_simulated_daq() {
     require_vcan();
     runtime().block_on(async {
-        tokio::time::timeout(Duration::from_secs(30), acquire_clean(0x110, FrameKind::Classic, vec![0, 2, 5], 16, 2000.0, 25))
-            .await
-            .expect("classic acquisition finishes within 30 s");
+        tokio::time::timeout(
+            Duration::from_secs(30),
+            acquire_clean(0x110, FrameKind::Classic, vec![0, 2, 5], 16, 2000.0, 25),
+        )
+        .await
+        .expect("classic acquisition finishes within 30 s");
     });
 }
 
@@ -201,9 +272,12 @@ fn classic_frames_acquisition_against_simulated_daq() {
 fn fd_frames_acquisition_against_simulated_daq() {
     require_vcan();
     runtime().block_on(async {
-        tokio::time::timeout(Duration::from_secs(30), acquire_clean(0x120, FrameKind::Fd, vec![7, 1, 3, 0], 64, 25_600.0, 50))
-            .await
-            .expect("FD acquisition finishes within 30 s");
+        tokio::time::timeout(
+            Duration::from_secs(30),
+            acquire_clean(0x120, FrameKind::Fd, vec![7, 1, 3, 0], 64, 25_600.0, 50),
+        )
+        .await
+        .expect("FD acquisition finishes within 30 s");
     });
 }
 
@@ -214,14 +288,23 @@ fn injected_faults_are_all_reported_and_no_damaged_block_is_delivered() {
     runtime().block_on(async {
         tokio::time::timeout(Duration::from_secs(40), async {
             let (host, mut dev) = settings_pair(0x130, FrameKind::Classic);
-            dev.faults = SimFaults { drop_every: Some(97), duplicate_every: Some(61), corrupt_every: Some(89), ..SimFaults::default() };
+            dev.faults = SimFaults {
+                drop_every: Some(97),
+                duplicate_every: Some(61),
+                corrupt_every: Some(89),
+                ..SimFaults::default()
+            };
             let vpc = dev.volts_per_count as f64;
             let sim = spawn_sim(dev);
             let mut daq = CanDaq::open(IFACE, host).expect("open");
             let channels = vec![0u16, 1, 2, 3];
-            daq.configure(&DaqConfig { sample_rate_hz: 8000.0, channels: channels.clone(), samples_per_block: 16 })
-                .await
-                .expect("configure");
+            daq.configure(&DaqConfig {
+                sample_rate_hz: 8000.0,
+                channels: channels.clone(),
+                samples_per_block: 16,
+            })
+            .await
+            .expect("configure");
             daq.start().await.expect("start");
             let mut delivered = Vec::new();
             let mut faults = Vec::new();
@@ -237,34 +320,74 @@ fn injected_faults_are_all_reported_and_no_damaged_block_is_delivered() {
             daq.stop().await.expect("stop");
             let stats = stop_sim(sim).await;
             let kinds: Vec<FaultKind> = faults.iter().map(|f| f.kind).collect();
-            eprintln!("sim: {stats:?}; delivered {} blocks; faults {kinds:?}", delivered.len());
-            assert!(stats.dropped > 0 && stats.duplicated > 0 && stats.corrupted > 0, "every fault kind was injected: {stats:?}");
+            eprintln!(
+                "sim: {stats:?}; delivered {} blocks; faults {kinds:?}",
+                delivered.len()
+            );
+            assert!(
+                stats.dropped > 0 && stats.duplicated > 0 && stats.corrupted > 0,
+                "every fault kind was injected: {stats:?}"
+            );
             for k in [FaultKind::Gap, FaultKind::Duplicate, FaultKind::Crc] {
-                assert!(kinds.contains(&k), "{k:?} injected but not reported; faults: {faults:?}");
+                assert!(
+                    kinds.contains(&k),
+                    "{k:?} injected but not reported; faults: {faults:?}"
+                );
             }
             // Every missing block is covered by a block-level gap report.
-            let missing = (0..=*delivered.last().expect("blocks")).filter(|s| !delivered.contains(s)).count() as u64;
+            let missing = (0..=*delivered.last().expect("blocks"))
+                .filter(|s| !delivered.contains(s))
+                .count() as u64;
             let gap_blocks: u64 = faults
                 .iter()
                 .filter(|f| f.kind == FaultKind::Gap && f.detail.contains("block(s) missing"))
-                .map(|f| f.detail.split_whitespace().next().and_then(|n| n.parse::<u64>().ok()).expect("gap count"))
+                .map(|f| {
+                    f.detail
+                        .split_whitespace()
+                        .next()
+                        .and_then(|n| n.parse::<u64>().ok())
+                        .expect("gap count")
+                })
                 .sum();
             assert!(missing > 0, "faults should have cost some blocks");
-            assert_eq!(gap_blocks, missing, "missing blocks {missing} vs reported {gap_blocks}");
-            assert!(delivered.windows(2).all(|w| w[0] < w[1]), "blocks in order, no duplicates");
+            assert_eq!(
+                gap_blocks, missing,
+                "missing blocks {missing} vs reported {gap_blocks}"
+            );
+            assert!(
+                delivered.windows(2).all(|w| w[0] < w[1]),
+                "blocks in order, no duplicates"
+            );
         })
         .await
         .expect("fault-injection run finishes within 40 s");
     });
 }
 
-fn block_frames(id: CanId, kind: FrameKind, seq: u32, channels: u8, spb: usize) -> (WireBlock, Vec<WireFrame>) {
-    let counts: Vec<i32> = (0..spb as u64).flat_map(|i| (0..channels as u16).map(move |c| pattern(c, i))).collect();
-    let block = WireBlock { seq, format: SampleFormat::I24, channel_count: channels, counts };
+fn block_frames(
+    id: CanId,
+    kind: FrameKind,
+    seq: u32,
+    channels: u8,
+    spb: usize,
+) -> (WireBlock, Vec<WireFrame>) {
+    let counts: Vec<i32> = (0..spb as u64)
+        .flat_map(|i| (0..channels as u16).map(move |c| pattern(c, i)))
+        .collect();
+    let block = WireBlock {
+        seq,
+        format: SampleFormat::I24,
+        channel_count: channels,
+        counts,
+    };
     let mut body = Vec::new();
-    Message::Block(block.clone()).encode(&mut body).expect("encode block");
+    Message::Block(block.clone())
+        .encode(&mut body)
+        .expect("encode block");
     let mut frames = Vec::new();
-    Segmenter::new(id, kind).segment(&body, &mut frames).expect("segment");
+    Segmenter::new(id, kind)
+        .segment(&body, &mut frames)
+        .expect("segment");
     (block, frames)
 }
 
@@ -282,8 +405,15 @@ fn decode_frames<'a>(frames: impl IntoIterator<Item = &'a [u8]>) -> Vec<Message>
 }
 
 fn cansend(frame: &str) {
-    let out = Command::new("cansend").args([IFACE, frame]).output().expect("run cansend (can-utils)");
-    assert!(out.status.success(), "cansend {IFACE} {frame}: {}", String::from_utf8_lossy(&out.stderr));
+    let out = Command::new("cansend")
+        .args([IFACE, frame])
+        .output()
+        .expect("run cansend (can-utils)");
+    assert!(
+        out.status.success(),
+        "cansend {IFACE} {frame}: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
 }
 
 #[test]
@@ -291,21 +421,31 @@ fn cansend(frame: &str) {
 fn frames_injected_by_cansend_are_decoded() {
     require_vcan();
     runtime().block_on(async {
-        for (kind, id) in [(FrameKind::Classic, CanId::Standard(0x142)), (FrameKind::Fd, CanId::Extended(0x18FF_0142))] {
+        for (kind, id) in [
+            (FrameKind::Classic, CanId::Standard(0x142)),
+            (FrameKind::Fd, CanId::Extended(0x18FF_0142)),
+        ] {
             let (block, frames) = block_frames(id, kind, 41, 3, 6);
             let bus = CanBus::open_filtered(IFACE, &[id]).expect("open");
             let lines: Vec<String> = frames.iter().map(WireFrame::to_cansend).collect();
             let sender = tokio::task::spawn_blocking(move || lines.iter().for_each(|l| cansend(l)));
             let mut got = Vec::new();
             while got.len() < frames.len() {
-                match tokio::time::timeout(Duration::from_secs(10), bus.recv()).await.expect("frame within 10 s").expect("recv") {
+                match tokio::time::timeout(Duration::from_secs(10), bus.recv())
+                    .await
+                    .expect("frame within 10 s")
+                    .expect("recv")
+                {
                     BusEvent::Frame(f) => got.push(f),
                     other => panic!("unexpected {other:?}"),
                 }
             }
             sender.await.expect("cansend task");
             assert_eq!(got, frames, "{kind:?}: frames as cansend sent them");
-            assert_eq!(decode_frames(got.iter().map(WireFrame::data)), vec![Message::Block(block)]);
+            assert_eq!(
+                decode_frames(got.iter().map(WireFrame::data)),
+                vec![Message::Block(block)]
+            );
         }
     });
 }
@@ -315,11 +455,21 @@ fn frames_injected_by_cansend_are_decoded() {
 fn candump_sees_the_frames_our_sender_emits() {
     require_vcan();
     runtime().block_on(async {
-        for (kind, id) in [(FrameKind::Classic, CanId::Standard(0x152)), (FrameKind::Fd, CanId::Standard(0x153))] {
+        for (kind, id) in [
+            (FrameKind::Classic, CanId::Standard(0x152)),
+            (FrameKind::Fd, CanId::Standard(0x153)),
+        ] {
             let (block, frames) = block_frames(id, kind, 7, 4, 10);
             // -T: candump gives up after 10 s without frames, so this can never hang.
             let dump = Command::new("candump")
-                .args(["-L", "-T", "10000", "-n", &frames.len().to_string(), &format!("{IFACE},{:03X}:7FF", id.raw())])
+                .args([
+                    "-L",
+                    "-T",
+                    "10000",
+                    "-n",
+                    &frames.len().to_string(),
+                    &format!("{IFACE},{:03X}:7FF", id.raw()),
+                ])
                 .stdout(std::process::Stdio::piped())
                 .spawn()
                 .expect("run candump (can-utils)");
@@ -356,10 +506,16 @@ fn candump_sees_the_frames_our_sender_emits() {
                 .map(|s| {
                     let hex = s.split('#').next_back().expect("data");
                     let hex = if s.contains("##") { &hex[1..] } else { hex };
-                    (0..hex.len()).step_by(2).map(|i| u8::from_str_radix(&hex[i..i + 2], 16).expect("hex")).collect()
+                    (0..hex.len())
+                        .step_by(2)
+                        .map(|i| u8::from_str_radix(&hex[i..i + 2], 16).expect("hex"))
+                        .collect()
                 })
                 .collect();
-            assert_eq!(decode_frames(bytes.iter().map(Vec::as_slice)), vec![Message::Block(block)]);
+            assert_eq!(
+                decode_frames(bytes.iter().map(Vec::as_slice)),
+                vec![Message::Block(block)]
+            );
         }
     });
 }
@@ -373,10 +529,18 @@ fn error_frames_are_reported_and_bus_off_ends_the_stream() {
             let (host, dev) = settings_pair(0x160, FrameKind::Fd);
             let sim = spawn_sim(dev);
             let mut daq = CanDaq::open(IFACE, host).expect("open");
-            daq.configure(&DaqConfig { sample_rate_hz: 1000.0, channels: vec![0], samples_per_block: 50 }).await.expect("configure");
+            daq.configure(&DaqConfig {
+                sample_rate_hz: 1000.0,
+                channels: vec![0],
+                samples_per_block: 50,
+            })
+            .await
+            .expect("configure");
             daq.start().await.expect("start");
             // Controller problem: RX error-passive (CAN_ERR_CRTL, data[1] = CAN_ERR_CRTL_RX_PASSIVE).
-            tokio::task::spawn_blocking(|| cansend("20000004#0010000000000000")).await.expect("cansend");
+            tokio::task::spawn_blocking(|| cansend("20000004#0010000000000000"))
+                .await
+                .expect("cansend");
             let fault = loop {
                 match daq.next_event().await.expect("event") {
                     DaqEvent::Fault(f) => break f,
@@ -384,9 +548,15 @@ fn error_frames_are_reported_and_bus_off_ends_the_stream() {
                 }
             };
             assert_eq!(fault.kind, FaultKind::Bus);
-            assert!(fault.detail.contains("error-passive") && fault.detail.contains(IFACE), "{}", fault.detail);
+            assert!(
+                fault.detail.contains("error-passive") && fault.detail.contains(IFACE),
+                "{}",
+                fault.detail
+            );
             // Bus-off (CAN_ERR_BUSOFF).
-            tokio::task::spawn_blocking(|| cansend("20000040#0000000000000000")).await.expect("cansend");
+            tokio::task::spawn_blocking(|| cansend("20000040#0000000000000000"))
+                .await
+                .expect("cansend");
             let err = loop {
                 match daq.next_event().await {
                     Ok(DaqEvent::Block(_)) => {}
@@ -396,7 +566,10 @@ fn error_frames_are_reported_and_bus_off_ends_the_stream() {
             };
             assert!(matches!(err, DaqError::Bus { .. }), "{err:?}");
             let msg = err.to_string();
-            assert!(msg.contains("bus off") && msg.contains("termination") && msg.contains(IFACE), "{msg}");
+            assert!(
+                msg.contains("bus off") && msg.contains("termination") && msg.contains(IFACE),
+                "{msg}"
+            );
             stop_sim(sim).await;
         })
         .await
@@ -459,19 +632,42 @@ fn device_refusals_and_misuse_are_clear_errors() {
             let sim = spawn_sim(dev);
             let mut daq = CanDaq::open(IFACE, host).expect("open");
             let e = daq.start().await.expect_err("start before configure");
-            assert!(matches!(e, DaqError::State { .. }) && e.to_string().contains("configure"), "{e}");
+            assert!(
+                matches!(e, DaqError::State { .. }) && e.to_string().contains("configure"),
+                "{e}"
+            );
             let e = daq.next_event().await.expect_err("next_event before start");
             assert!(matches!(e, DaqError::State { .. }), "{e}");
             // The simulated DAQ has channels 0–7: it refuses channel 9 with a NAK.
-            let bad = DaqConfig { sample_rate_hz: 1000.0, channels: vec![0, 9], samples_per_block: 8 };
+            let bad = DaqConfig {
+                sample_rate_hz: 1000.0,
+                channels: vec![0, 9],
+                samples_per_block: 8,
+            };
             let e = daq.configure(&bad).await.expect_err("channel 9 refused");
             let msg = e.to_string();
-            assert!(matches!(e, DaqError::Rejected { code: 2, .. }) && msg.contains("no channel 9") && msg.contains(IFACE), "{msg}");
+            assert!(
+                matches!(e, DaqError::Rejected { code: 2, .. })
+                    && msg.contains("no channel 9")
+                    && msg.contains(IFACE),
+                "{msg}"
+            );
             // Refused locally, before the bus: a rate DAQ-over-CAN cannot carry.
-            let e = daq.configure(&DaqConfig { sample_rate_hz: 1.0e7, ..bad.clone() }).await.expect_err("rate too high for u32 mHz");
+            let e = daq
+                .configure(&DaqConfig {
+                    sample_rate_hz: 1.0e7,
+                    ..bad.clone()
+                })
+                .await
+                .expect_err("rate too high for u32 mHz");
             assert!(e.to_string().contains("sample rate"), "{e}");
             // And the device still works afterwards.
-            daq.configure(&DaqConfig { channels: vec![0, 7], ..bad }).await.expect("configure");
+            daq.configure(&DaqConfig {
+                channels: vec![0, 7],
+                ..bad
+            })
+            .await
+            .expect("configure");
             stop_sim(sim).await;
         })
         .await
@@ -494,26 +690,45 @@ fn lost_answers_are_asked_again_and_the_stream_starts_clean() {
             let vpc = dev.volts_per_count as f64;
             let sim = spawn_sim(dev);
             let tap = std::sync::Arc::new(LineTap::default());
-            let mut daq = CanDaq::open(IFACE, host).expect("open").with_tap(tap.clone());
+            let mut daq = CanDaq::open(IFACE, host)
+                .expect("open")
+                .with_tap(tap.clone());
             daq.identify().await.expect("identify");
             let channels = vec![1, 4];
-            let config = DaqConfig { sample_rate_hz: 2000.0, channels: channels.clone(), samples_per_block: 16 };
-            daq.configure(&config).await.expect("configure, answered the second time");
-            daq.start().await.expect("start, acknowledged after STOP and START again");
+            let config = DaqConfig {
+                sample_rate_hz: 2000.0,
+                channels: channels.clone(),
+                samples_per_block: 16,
+            };
+            daq.configure(&config)
+                .await
+                .expect("configure, answered the second time");
+            daq.start()
+                .await
+                .expect("start, acknowledged after STOP and START again");
             for want in 0..20 {
                 match daq.next_event().await.expect("next event") {
                     DaqEvent::Block(b) => {
                         assert_eq!(b.seq, want);
                         check_block(&b, &channels, 16, vpc);
                     }
-                    DaqEvent::Fault(f) => panic!("the re-sent START left a fault on the new stream: {f:?}"),
+                    DaqEvent::Fault(f) => {
+                        panic!("the re-sent START left a fault on the new stream: {f:?}")
+                    }
                 }
             }
             daq.stop().await.expect("stop");
             let stats = stop_sim(sim).await;
             // The device received IDENTIFY, CONFIGURE twice, START, STOP, START and STOP.
             assert_eq!((stats.answers_lost, stats.commands), (2, 7), "{stats:?}");
-            assert!(tap.0.lock().expect("tap lock").iter().any(|(d, _)| *d == Direction::Tx), "the tap saw the commands");
+            assert!(
+                tap.0
+                    .lock()
+                    .expect("tap lock")
+                    .iter()
+                    .any(|(d, _)| *d == Direction::Tx),
+                "the tap saw the commands"
+            );
         })
         .await
         .expect("finishes within 60 s");
@@ -601,7 +816,10 @@ fn stand_file_faults_reach_the_simulated_can_daq() {
 fn thread_cpu() -> Duration {
     let stat = std::fs::read_to_string("/proc/thread-self/stat").expect("/proc/thread-self/stat");
     let after = &stat[stat.rfind(')').expect("stat format") + 2..];
-    let f: Vec<u64> = after.split_whitespace().map(|x| x.parse().unwrap_or(0)).collect();
+    let f: Vec<u64> = after
+        .split_whitespace()
+        .map(|x| x.parse().unwrap_or(0))
+        .collect();
     // Fields 14 and 15 of stat (utime, stime) are 12 and 13 after the command name.
     Duration::from_millis((f[11] + f[12]) * 10)
 }
@@ -614,7 +832,10 @@ fn thread_cpu() -> Duration {
 #[ignore = "needs vcan0: run by vcan_suite (in the qemu VM when the host has no CAN)"]
 fn throughput_benchmark() {
     require_vcan();
-    let secs: f64 = std::env::var("IDENT_VCAN_BENCH_SECS").ok().and_then(|s| s.parse().ok()).unwrap_or(2.0);
+    let secs: f64 = std::env::var("IDENT_VCAN_BENCH_SECS")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(2.0);
     let rt = runtime();
     // (frame kind, target frames/s); `None` = the simulator sends as fast as it can (no pacing).
     let steps = [
@@ -640,10 +861,19 @@ fn throughput_benchmark() {
         let sim = rt.block_on(async { spawn_sim(dev) });
         let ch = channels.clone();
         let receiver = std::thread::spawn(move || {
-            let local = tokio::runtime::Builder::new_current_thread().enable_all().build().expect("runtime");
+            let local = tokio::runtime::Builder::new_current_thread()
+                .enable_all()
+                .build()
+                .expect("runtime");
             local.block_on(async move {
                 let mut daq = CanDaq::open(IFACE, host).expect("open");
-                daq.configure(&DaqConfig { sample_rate_hz: rate, channels: ch.clone(), samples_per_block: spb }).await.expect("configure");
+                daq.configure(&DaqConfig {
+                    sample_rate_hz: rate,
+                    channels: ch.clone(),
+                    samples_per_block: spb,
+                })
+                .await
+                .expect("configure");
                 daq.start().await.expect("start");
                 let cpu0 = thread_cpu();
                 let t0 = Instant::now();
@@ -683,9 +913,16 @@ fn throughput_benchmark() {
         // Integrity, not speed: no fault injected, so any loss must have been reported as a fault.
         let last = last.expect("some blocks received");
         if blocks < last + 1 {
-            assert!(!faults.is_empty(), "{} blocks lost without a fault report", last + 1 - blocks);
+            assert!(
+                !faults.is_empty(),
+                "{} blocks lost without a fault report",
+                last + 1 - blocks
+            );
         }
-        assert_eq!((stats.dropped, stats.duplicated, stats.corrupted), (0, 0, 0));
+        assert_eq!(
+            (stats.dropped, stats.duplicated, stats.corrupted),
+            (0, 0, 0)
+        );
     }
 }
 
@@ -704,20 +941,40 @@ fn stepped_sine_over_vcan_recovers_the_truth_characteristics() {
     require_vcan();
     let dir = tempfile::tempdir().expect("temp dir");
     let stand = can_stand(dir.path(), 2.0, 0x300, FrameKind::Fd);
-    let plan = SteppedSine { frequencies: FrequencyList::Log { start: 20.0, stop: 400.0, n: 6 }, ..SteppedSine::default() };
+    let plan = SteppedSine {
+        frequencies: FrequencyList::Log {
+            start: 20.0,
+            stop: 400.0,
+            n: 6,
+        },
+        ..SteppedSine::default()
+    };
     let path = dir.path().join("vcan.mcap");
     let started = Instant::now();
     let live = runtime().block_on(async {
         tokio::time::timeout(Duration::from_secs(90), async {
-            let sim = SimStand::start_can(&stand, IFACE).expect("simulated stand with its DAQ on vcan0");
+            let sim =
+                SimStand::start_can(&stand, IFACE).expect("simulated stand with its DAQ on vcan0");
             let bound = sim.bind(&stand);
             assert_eq!(bound.daq.port, acquire::stand::PortSpec::Can(IFACE.into()));
             let session = Session::create(&path, SessionOptions::default()).expect("session");
             let h = session.handle();
-            sweep::log_session_start(&h, &stand.file, &plan, None, &Default::default()).expect("log");
-            let mut rig = acquire::rig::Rig::connect(&bound, Some(&h)).await.expect("connect shaker (pty) and DAQ (vcan0)");
+            sweep::log_session_start(&h, &stand.file, &plan, None, &Default::default())
+                .expect("log");
+            let mut rig = acquire::rig::Rig::connect(&bound, Some(&h))
+                .await
+                .expect("connect shaker (pty) and DAQ (vcan0)");
             assert_eq!(rig.daq.port(), IFACE);
-            let o = sweep::stepped_sine(&mut rig, &plan, &h, &NoProgress, &StopSignal::new(), &Default::default()).await.expect("sweep");
+            let o = sweep::stepped_sine(
+                &mut rig,
+                &plan,
+                &h,
+                &NoProgress,
+                &StopSignal::new(),
+                &Default::default(),
+            )
+            .await
+            .expect("sweep");
             session.finish().expect("finish");
             sim.shutdown();
             o
@@ -725,15 +982,29 @@ fn stepped_sine_over_vcan_recovers_the_truth_characteristics() {
         .await
         .expect("sweep over vcan0 finishes within 90 s")
     });
-    eprintln!("vcan sweep: {} steps in {:.1} s, {} stream faults", live.steps.len(), started.elapsed().as_secs_f64(), live.faults);
+    eprintln!(
+        "vcan sweep: {} steps in {:.1} s, {} stream faults",
+        live.steps.len(),
+        started.elapsed().as_secs_f64(),
+        live.faults
+    );
     assert_eq!(live.steps.len(), 6);
     let a = characteristics(&path, &AnalysisOptions::default()).expect("characteristics");
     assert_eq!(a.steps.len(), 6, "dropped: {:?}", a.dropped);
     for (s, l) in a.steps.iter().zip(&live.steps) {
-        assert!(s.matches_live && s.channels == l.channels, "step {}: replay differs from live", s.step);
+        assert!(
+            s.matches_live && s.channels == l.channels,
+            "step {}: replay differs from live",
+            s.step
+        );
     }
     // The CAN frames themselves are in the session (every byte received and sent).
-    let raw = acquire::session::read(&path).expect("read").records.iter().filter(|r| r.topic == "/raw").count();
+    let raw = acquire::session::read(&path)
+        .expect("read")
+        .records
+        .iter()
+        .filter(|r| r.topic == "/raw")
+        .count();
     assert!(raw > 100, "{raw} /raw records");
     util::assert_matches_truth(&a, &dir.path().join("models/fwd32j.toml"));
 }

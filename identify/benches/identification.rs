@@ -26,14 +26,18 @@ fn root() -> PathBuf {
 }
 
 fn load(name: &str) -> Model {
-    identify::modelfile::load(&root().join("configs/models").join(name)).expect("FWD-32J model").model
+    identify::modelfile::load(&root().join("configs/models").join(name))
+        .expect("FWD-32J model")
+        .model
 }
 
 /// The benchmark's data: the synthetic FWD-32J measurement, 1 % noise, seed 32.
 fn synthetic(truth: &Model) -> MeasuredData {
     let mut rng = StdRng::seed_from_u64(32);
-    idn::synthetic::amplitude_data(truth, &idn::synthetic::fwd32j_lines(), 0.01, || StandardNormal.sample(&mut rng))
-        .expect("truth solves")
+    idn::synthetic::amplitude_data(truth, &idn::synthetic::fwd32j_lines(), 0.01, || {
+        StandardNormal.sample(&mut rng)
+    })
+    .expect("truth solves")
 }
 
 fn median(mut v: Vec<f64>) -> f64 {
@@ -46,10 +50,16 @@ fn bench(c: &mut Bench) {
     let initial = load("fwd32j-initial.toml");
     let d = synthetic(&truth);
     let obs = data::validate(&d, &initial, "bench").expect("data");
-    let vars = variables::load(&root().join("configs/identification/fwd32j.toml"), &initial).expect("variables");
+    let vars = variables::load(&root().join("configs/identification/fwd32j.toml"), &initial)
+        .expect("variables");
     let analytic = Options::default();
-    let fd = Options { jacobian: JacobianMode::ForwardDifference, ..Options::default() };
-    let run = |o: &Options| idn::identify(&initial, &obs, &vars, o, &mut |_, _| {}).expect("identification");
+    let fd = Options {
+        jacobian: JacobianMode::ForwardDifference,
+        ..Options::default()
+    };
+    let run = |o: &Options| {
+        idn::identify(&initial, &obs, &vars, o, &mut |_, _| {}).expect("identification")
+    };
 
     // Same-run comparison (medians of 5).
     let time = |o: &Options| {
@@ -78,13 +88,26 @@ fn bench(c: &mut Bench) {
     let dir = std::env::temp_dir().join(format!("ident-bench-{}", std::process::id()));
     std::fs::create_dir_all(&dir).expect("temp dir");
     let problem = dir.join("fwd32j-problem.json");
-    std::fs::write(&problem, serde_json::to_string(&idn::problem::to_json(&initial, &obs, &vars, &analytic).expect("problem")).expect("json")).expect("write");
+    std::fs::write(
+        &problem,
+        serde_json::to_string(
+            &idn::problem::to_json(&initial, &obs, &vars, &analytic).expect("problem"),
+        )
+        .expect("json"),
+    )
+    .expect("write");
     let script = root().join("bench/python/ident_baseline.py");
     for (jac, repeat) in [("analytic", "3"), ("2-point", "1")] {
-        match Command::new("python3").arg(&script).arg(&problem).args(["--repeat", repeat, "--jac", jac]).output() {
+        match Command::new("python3")
+            .arg(&script)
+            .arg(&problem)
+            .args(["--repeat", repeat, "--jac", jac])
+            .output()
+        {
             Ok(out) if out.status.success() => {
                 let text = String::from_utf8_lossy(&out.stdout);
-                let v: serde_json::Value = serde_json::from_str(text.trim()).expect("baseline prints JSON");
+                let v: serde_json::Value =
+                    serde_json::from_str(text.trim()).expect("baseline prints JSON");
                 let tp = v["median_s"].as_f64().expect("median_s");
                 println!(
                     "Python baseline (numpy FRF + scipy least_squares, {jac} Jacobian): {:.1} ms, {} residual + {} Jacobian evaluations, J {:.9} (ident {:.9}); FRF check vs ident: max rel diff {:.2e}; ratio python/ident = {:.1}",
@@ -92,7 +115,10 @@ fn bench(c: &mut Bench) {
                     v["frf_check_max_rel"].as_f64().unwrap_or(f64::NAN), tp / ta
                 );
             }
-            Ok(out) => println!("Python baseline ({jac}) FAILED: {}", String::from_utf8_lossy(&out.stderr)),
+            Ok(out) => println!(
+                "Python baseline ({jac}) FAILED: {}",
+                String::from_utf8_lossy(&out.stderr)
+            ),
             Err(e) => println!("Python baseline NOT RUN: python3 could not be started ({e})"),
         }
     }

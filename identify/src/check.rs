@@ -59,26 +59,52 @@ pub fn check(model: &Model) -> (Vec<Problem>, Vec<Problem>) {
     let mut err = |item, message: String| errors.push(Problem { item, message });
     let nb = model.bodies.len();
     if nb == 0 {
-        err(Item::Model, "the model has no bodies; add at least one [[body]]".into());
+        err(
+            Item::Model,
+            "the model has no bodies; add at least one [[body]]".into(),
+        );
     }
     for (i, b) in model.bodies.iter().enumerate() {
         if !(b.mass.is_finite() && b.mass > 0.0) {
-            err(Item::Body(i, "mass"), format!("body \"{}\": mass must be a positive number of kg, got {}", b.name, b.mass));
+            err(
+                Item::Body(i, "mass"),
+                format!(
+                    "body \"{}\": mass must be a positive number of kg, got {}",
+                    b.name, b.mass
+                ),
+            );
         }
         if b.inertia.iter().any(|j| !(j.is_finite() && *j > 0.0)) {
-            err(Item::Body(i, "inertia"), format!(
-                "body \"{}\": principal moments of inertia must be positive (kg·m²), got {:?}",
-                b.name, b.inertia
-            ));
+            err(
+                Item::Body(i, "inertia"),
+                format!(
+                    "body \"{}\": principal moments of inertia must be positive (kg·m²), got {:?}",
+                    b.name, b.inertia
+                ),
+            );
         }
         if b.position.iter().any(|v| !v.is_finite()) {
-            err(Item::Body(i, "position"), format!("body \"{}\": position is not finite", b.name));
+            err(
+                Item::Body(i, "position"),
+                format!("body \"{}\": position is not finite", b.name),
+            );
         }
         if let Some(m) = rotation_problem(&b.rotation, 1e-9) {
-            err(Item::Body(i, "rotation"), format!("body \"{}\": {m}", b.name));
+            err(
+                Item::Body(i, "rotation"),
+                format!("body \"{}\": {m}", b.name),
+            );
         }
         if let Some(j) = model.bodies[..i].iter().position(|o| o.name == b.name) {
-            err(Item::Body(i, "name"), format!("body name \"{}\" is used twice (bodies {} and {}); names must be unique", b.name, j + 1, i + 1));
+            err(
+                Item::Body(i, "name"),
+                format!(
+                    "body name \"{}\" is used twice (bodies {} and {}); names must be unique",
+                    b.name,
+                    j + 1,
+                    i + 1
+                ),
+            );
         }
     }
     for (i, s) in model.sdes.iter().enumerate() {
@@ -98,7 +124,10 @@ pub fn check(model: &Model) -> (Vec<Problem>, Vec<Problem>) {
             _ => {}
         }
         if s.point.iter().any(|v| !v.is_finite()) {
-            err(Item::Sde(i, "point"), format!("sde \"{}\": point is not finite", s.name));
+            err(
+                Item::Sde(i, "point"),
+                format!("sde \"{}\": point is not finite", s.name),
+            );
         }
         if let Some(m) = rotation_problem(&s.rotation, 1e-9) {
             err(Item::Sde(i, "rotation"), format!("sde \"{}\": {m}", s.name));
@@ -106,30 +135,79 @@ pub fn check(model: &Model) -> (Vec<Problem>, Vec<Problem>) {
         let k = s.law.stiffness();
         let psi = s.law.dissipation();
         if k.iter().chain(&psi).any(|v| !v.is_finite()) {
-            err(Item::Sde(i, "k"), format!("sde \"{}\": stiffness or dissipation is NaN or infinite", s.name));
+            err(
+                Item::Sde(i, "k"),
+                format!(
+                    "sde \"{}\": stiffness or dissipation is NaN or infinite",
+                    s.name
+                ),
+            );
         } else if k.iter().any(|v| *v < 0.0) {
-            err(Item::Sde(i, "k"), format!("sde \"{}\": stiffnesses must be ≥ 0, got {k:?}", s.name));
+            err(
+                Item::Sde(i, "k"),
+                format!("sde \"{}\": stiffnesses must be ≥ 0, got {k:?}", s.name),
+            );
         } else if psi.iter().any(|v| *v < 0.0) {
-            err(Item::Sde(i, "psi"), format!("sde \"{}\": dissipation ψ must be ≥ 0, got {psi:?}", s.name));
+            err(
+                Item::Sde(i, "psi"),
+                format!("sde \"{}\": dissipation ψ must be ≥ 0, got {psi:?}", s.name),
+            );
         }
         if let Some(j) = model.sdes[..i].iter().position(|o| o.name == s.name) {
-            err(Item::Sde(i, "name"), format!("sde name \"{}\" is used twice (elements {} and {}); names must be unique", s.name, j + 1, i + 1));
+            err(
+                Item::Sde(i, "name"),
+                format!(
+                    "sde name \"{}\" is used twice (elements {} and {}); names must be unique",
+                    s.name,
+                    j + 1,
+                    i + 1
+                ),
+            );
         }
     }
     for (i, f) in model.forces.iter().enumerate() {
         if f.body >= nb {
-            err(Item::Force(i, "body"), format!("force {}: body index {} does not exist; there are {nb} bodies", i + 1, f.body));
+            err(
+                Item::Force(i, "body"),
+                format!(
+                    "force {}: body index {} does not exist; there are {nb} bodies",
+                    i + 1,
+                    f.body
+                ),
+            );
         }
-        if f.point.iter().chain(f.force.iter()).chain(f.moment.iter()).any(|v| !v.is_finite()) {
-            err(Item::Force(i, "force"), format!("force {}: point, force or moment is not finite", i + 1));
+        if f.point
+            .iter()
+            .chain(f.force.iter())
+            .chain(f.moment.iter())
+            .any(|v| !v.is_finite())
+        {
+            err(
+                Item::Force(i, "force"),
+                format!("force {}: point, force or moment is not finite", i + 1),
+            );
         }
     }
     for (i, o) in model.outputs.iter().enumerate() {
         if o.body >= nb {
-            err(Item::Output(i, "body"), format!("output {}: body index {} does not exist; there are {nb} bodies", i + 1, o.body));
+            err(
+                Item::Output(i, "body"),
+                format!(
+                    "output {}: body index {} does not exist; there are {nb} bodies",
+                    i + 1,
+                    o.body
+                ),
+            );
         }
         if o.dof > 5 {
-            err(Item::Output(i, "dof"), format!("output {}: dof {} is out of range 0-5 (u1 u2 u3 r1 r2 r3)", i + 1, o.dof));
+            err(
+                Item::Output(i, "dof"),
+                format!(
+                    "output {}: dof {} is out of range 0-5 (u1 u2 u3 r1 r2 r3)",
+                    i + 1,
+                    o.dof
+                ),
+            );
         }
     }
     if !errors.is_empty() {
@@ -155,11 +233,14 @@ pub fn check(model: &Model) -> (Vec<Problem>, Vec<Problem>) {
     }
     for (i, b) in model.bodies.iter().enumerate() {
         if !touched[i] {
-            warnings.push(Problem { item: Item::Body(i, "name"), message: format!(
+            warnings.push(Problem {
+                item: Item::Body(i, "name"),
+                message: format!(
                 "body \"{}\" is connected to nothing: it has six free rigid-body modes and its \
                  response is unbounded at 0 Hz; connect it with an SDE or remove it",
                 b.name
-            ) });
+            ),
+            });
         }
     }
     let ground = find(&mut parent, nb);
@@ -168,11 +249,14 @@ pub fn check(model: &Model) -> (Vec<Problem>, Vec<Problem>) {
         .map(|i| model.bodies[i].name.as_str())
         .collect();
     if !floating.is_empty() {
-        warnings.push(Problem { item: Item::Model, message: format!(
+        warnings.push(Problem {
+            item: Item::Model,
+            message: format!(
             "bodies {} have no path to the ground: the model has free rigid-body modes (response \
              unbounded at 0 Hz); add isolators or supports if that is not intended",
             floating.join(", ")
-        ) });
+        ),
+        });
     }
     (errors, warnings)
 }

@@ -1,5 +1,5 @@
 //! The resolved model JSON: the interchange contract with other tools
-//! (`docs/model-json.md`, from `shared/docs/model-json.md`). SI units only, every SDE reduced to
+//! (`docs/model-json.md`). SI units only, every SDE reduced to
 //! six stiffnesses and six dissipations in its own frame, every excitation to forces at points.
 //! Rotations are row-major 3×3 matrices whose **columns** are the body's principal axes (or the
 //! SDE's axes) in the global frame. This module reads and writes exactly that form, and the
@@ -188,12 +188,18 @@ pub fn from_json(j: &ModelJson) -> Result<Model, JsonProblem> {
         let Some(body) = j.bodies.get(f.body) else {
             return Err(JsonProblem {
                 path: format!("$.excitation.forces[{i}].body"),
-                message: format!("body index {} does not exist; there are {nb} bodies (0-based)", f.body),
+                message: format!(
+                    "body index {} does not exist; there are {nb} bodies (0-based)",
+                    f.body
+                ),
             });
         };
         forces.push(PointForce {
             body: f.body,
-            point: f.point.map(Vector3::from).unwrap_or_else(|| Vector3::from(body.position)),
+            point: f
+                .point
+                .map(Vector3::from)
+                .unwrap_or_else(|| Vector3::from(body.position)),
             force: f.force.into(),
             moment: f.moment.map(Vector3::from).unwrap_or_else(Vector3::zeros),
         });
@@ -207,7 +213,11 @@ pub fn from_json(j: &ModelJson) -> Result<Model, JsonProblem> {
                 o.quantity
             ),
         })?;
-        outputs.push(Characteristic { body: o.body, dof: o.dof, quantity });
+        outputs.push(Characteristic {
+            body: o.body,
+            dof: o.dof,
+            quantity,
+        });
     }
     Ok(Model {
         name: j.name.clone(),

@@ -176,8 +176,16 @@ pub fn response(
         values: vec![C64::new(0.0, 0.0); quantities.len() * freqs_hz.len()],
         jacobian: vec![C64::new(0.0, 0.0); params.len() * quantities.len() * freqs_hz.len()],
     };
-    match method.resolve(system.n, freqs_hz.len(), Work::Outputs { params: blocks.len() }) {
-        Method::Modal => ModalSolver::new(&system)?.fill(&system, &blocks, &quantities, &mut out)?,
+    match method.resolve(
+        system.n,
+        freqs_hz.len(),
+        Work::Outputs {
+            params: blocks.len(),
+        },
+    ) {
+        Method::Modal => {
+            ModalSolver::new(&system)?.fill(&system, &blocks, &quantities, &mut out)?
+        }
         _ => DirectSolver::new(&system).fill(&system, &blocks, &quantities, &mut out)?,
     }
     Ok(out)
@@ -195,7 +203,9 @@ pub fn dof_response(model: &Model, freqs_hz: &[f64]) -> Result<Vec<Vec<C64>>, So
     DirectSolver::new(&system).solve_lines(&system, freqs_hz, |k, sol| {
         let q = sol[..n].to_vec();
         if q.iter().any(|v| !v.is_finite()) {
-            return Err(SolveError::Singular { freq_hz: freqs_hz[k] });
+            return Err(SolveError::Singular {
+                freq_hz: freqs_hz[k],
+            });
         }
         out.push(q);
         Ok(())
@@ -231,7 +241,12 @@ pub type Row = [(usize, f64)];
 impl States {
     /// First-order change of output `o` at line `k` per unit of a parameter γ entering as
     /// `∂A/∂γ = Σ_t c_t t_tᵀ t_t` (terms `(row, c)`): `−factor · Σ c (t·w_o)(t·q)`.
-    pub fn first_order<'a>(&self, k: usize, o: usize, terms: impl IntoIterator<Item = (&'a Row, C64)>) -> C64 {
+    pub fn first_order<'a>(
+        &self,
+        k: usize,
+        o: usize,
+        terms: impl IntoIterator<Item = (&'a Row, C64)>,
+    ) -> C64 {
         let q = &self.load[k * self.n..(k + 1) * self.n];
         let w = &self.unit[(k * self.outputs + o) * self.n..(k * self.outputs + o + 1) * self.n];
         let mut acc = C64::new(0.0, 0.0);
@@ -275,8 +290,15 @@ pub fn states(model: &Model, freqs_hz: &[f64], method: Method) -> Result<States,
     match method.resolve(n, lines, Work::States { rhs: 1 + outputs }) {
         Method::Modal => {
             let modal = ModalSolver::new(&system)?;
-            let b: Vec<C64> = (0..n).map(|m| (0..n).map(|i| modal.y[(m, i)] * system.load[i]).sum()).collect();
-            let lambda_scale = modal.lambda.iter().map(|l| l.norm()).fold(0.0, f64::max).max(1.0);
+            let b: Vec<C64> = (0..n)
+                .map(|m| (0..n).map(|i| modal.y[(m, i)] * system.load[i]).sum())
+                .collect();
+            let lambda_scale = modal
+                .lambda
+                .iter()
+                .map(|l| l.norm())
+                .fold(0.0, f64::max)
+                .max(1.0);
             let mut eta = vec![C64::new(0.0, 0.0); n];
             let mut inv = vec![C64::new(0.0, 0.0); n];
             for (k, &f) in freqs_hz.iter().enumerate() {
@@ -290,7 +312,12 @@ pub fn states(model: &Model, freqs_hz: &[f64], method: Method) -> Result<States,
                 }
                 for col in 0..=outputs {
                     for m in 0..n {
-                        eta[m] = inv[m] * if col == 0 { b[m] } else { modal.y[(m, system.output_dofs[col - 1])] };
+                        eta[m] = inv[m]
+                            * if col == 0 {
+                                b[m]
+                            } else {
+                                modal.y[(m, system.output_dofs[col - 1])]
+                            };
                     }
                     let dst = if col == 0 {
                         &mut st.load[k * n..(k + 1) * n]
@@ -490,7 +517,12 @@ impl DirectSolver {
         let outputs = quantities.len();
         let used = distinct_blocks(blocks);
         let mut derivatives = Derivatives::new(s, blocks.len());
-        let Response { freqs_hz: freqs, values, jacobian, .. } = out;
+        let Response {
+            freqs_hz: freqs,
+            values,
+            jacobian,
+            ..
+        } = out;
         self.solve_batches(s, freqs, |first, batch| {
             if !blocks.is_empty() {
                 batch.derivatives(s, blocks, &used, &mut derivatives);
@@ -592,7 +624,12 @@ impl ModalSolver {
         let mut dq = vec![[C64::new(0.0, 0.0); 6]; s.sdes.len()];
         let mut dw = vec![vec![[C64::new(0.0, 0.0); 6]; s.sdes.len()]; outputs];
         let mut fac = vec![C64::new(0.0, 0.0); outputs];
-        let lambda_scale = self.lambda.iter().map(|l| l.norm()).fold(0.0, f64::max).max(1.0);
+        let lambda_scale = self
+            .lambda
+            .iter()
+            .map(|l| l.norm())
+            .fold(0.0, f64::max)
+            .max(1.0);
         for (k, &f) in out.freqs_hz.iter().enumerate() {
             let omega = TWO_PI * f;
             let w2 = omega * omega;
@@ -648,14 +685,23 @@ mod tests {
         assert_eq!(Method::Auto.resolve(42, 20, outputs(0)), Method::Direct);
         assert_eq!(Method::Auto.resolve(42, 400, outputs(0)), Method::Modal);
         // Full solutions cost the modal path n² per line: direct at 42 DOFs (0.82× at 400 lines).
-        assert_eq!(Method::Auto.resolve(42, 400, Work::States { rhs: 4 }), Method::Direct);
+        assert_eq!(
+            Method::Auto.resolve(42, 400, Work::States { rhs: 4 }),
+            Method::Direct
+        );
         // Large models: modal once the lines amortise the eigen-decomposition.
         assert_eq!(Method::Auto.resolve(240, 20, outputs(20)), Method::Direct);
         assert_eq!(Method::Auto.resolve(240, 100, outputs(20)), Method::Modal);
-        assert_eq!(Method::Auto.resolve(240, 400, Work::States { rhs: 4 }), Method::Modal);
+        assert_eq!(
+            Method::Auto.resolve(240, 400, Work::States { rhs: 4 }),
+            Method::Modal
+        );
         // An explicit choice stands.
         assert_eq!(Method::Modal.resolve(42, 1, outputs(74)), Method::Modal);
-        assert_eq!(Method::Direct.resolve(600, 5000, outputs(0)), Method::Direct);
+        assert_eq!(
+            Method::Direct.resolve(600, 5000, outputs(0)),
+            Method::Direct
+        );
     }
 
     #[test]
@@ -670,19 +716,27 @@ mod tests {
         s.d.iter_mut().for_each(|d| *d = 0.0);
         let mut solver = DirectSolver::new(&s);
         let mut got = Vec::new();
-        solver.solve_lines(&s, &[5.0, 10.0], |_, sol| {
-            got.push(sol.to_vec());
-            Ok(())
-        }).expect("a regular matrix solves");
+        solver
+            .solve_lines(&s, &[5.0, 10.0], |_, sol| {
+                got.push(sol.to_vec());
+                Ok(())
+            })
+            .expect("a regular matrix solves");
         for (k, f) in [5.0, 10.0].into_iter().enumerate() {
             solver.factor(&s, f).expect("pivoted LU");
             let n = s.n;
             let cols = 1 + s.output_dofs.len();
-            let scale = (0..cols).flat_map(|c| (0..n).map(move |i| (i, c))).map(|ic| solver.rhs[ic].norm()).fold(0.0, f64::max);
+            let scale = (0..cols)
+                .flat_map(|c| (0..n).map(move |i| (i, c)))
+                .map(|ic| solver.rhs[ic].norm())
+                .fold(0.0, f64::max);
             for c in 0..cols {
                 for i in 0..n {
                     let d = (got[k][c * n + i] - solver.rhs[(i, c)]).norm();
-                    assert!(d <= 1e-12 * scale, "line {f} Hz, column {c}, DOF {i}: differs by {d:e}");
+                    assert!(
+                        d <= 1e-12 * scale,
+                        "line {f} Hz, column {c}, DOF {i}: differs by {d:e}"
+                    );
                 }
             }
             assert!(got[k].iter().all(|v| v.is_finite()));

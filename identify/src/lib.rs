@@ -31,14 +31,14 @@ pub mod check;
 pub mod contract;
 pub mod diagnose;
 pub mod frf;
-pub mod lines;
 pub mod identification;
+pub mod lines;
 pub mod measured;
 pub mod model;
 pub mod modelfile;
 pub mod modes;
-pub mod system;
 pub mod sensitivity;
+pub mod system;
 pub mod textbook;
 pub mod units;
 

@@ -110,7 +110,10 @@ impl pulp::WithSimd for DerivativeWork<'_> {
             for o in 0..outputs {
                 let (qr, qi) = (&d.def_re[0], &d.def_im[0]);
                 let (wr, wi) = (&d.def_re[o + 1], &d.def_im[o + 1]);
-                let (pr, pi) = (&mut d.prod_re[blk * outputs + o], &mut d.prod_im[blk * outputs + o]);
+                let (pr, pi) = (
+                    &mut d.prod_re[blk * outputs + o],
+                    &mut d.prod_im[blk * outputs + o],
+                );
                 for i in 0..6 {
                     for l in 0..LANES {
                         pr[i][l] = wr[i][l] * qr[i][l] - wi[i][l] * qi[i][l];
@@ -121,7 +124,10 @@ impl pulp::WithSimd for DerivativeWork<'_> {
         }
         for (p, pb) in self.blocks.iter().enumerate() {
             for o in 0..outputs {
-                let (pr, pi) = (&d.prod_re[pb.block * outputs + o], &d.prod_im[pb.block * outputs + o]);
+                let (pr, pi) = (
+                    &d.prod_re[pb.block * outputs + o],
+                    &d.prod_im[pb.block * outputs + o],
+                );
                 let (mut ar, mut ai) = (ZERO, ZERO);
                 for (i, c) in pb.coeff.iter().enumerate() {
                     // Most parameters touch one or three of the six directions (kn, ψn, …).
@@ -241,8 +247,20 @@ impl Batch {
     /// `Σ_i c_pi (T w_o)_i (T q)_i` for every parameter `p` and output `o`, in every lane: the
     /// adjoint-form derivative of the frf module (times `−factor_o`), with `T` the SDE's
     /// deformation taps, `q` the load's solution and `w_o` output `o`'s unit-load solution.
-    pub fn derivatives(&self, s: &System, blocks: &[ParamBlock], used: &[usize], out: &mut Derivatives) {
-        pulp::Arch::new().dispatch(DerivativeWork { batch: self, s, blocks, used, out });
+    pub fn derivatives(
+        &self,
+        s: &System,
+        blocks: &[ParamBlock],
+        used: &[usize],
+        out: &mut Derivatives,
+    ) {
+        pulp::Arch::new().dispatch(DerivativeWork {
+            batch: self,
+            s,
+            blocks,
+            used,
+            out,
+        });
     }
 
     /// Lane `l`'s solutions: `out[c * n + i]` is DOF `i` of right-hand side `c`.
@@ -292,7 +310,13 @@ impl Batch {
                 let (mut ar, mut ai) = (self.re[i * n + j], self.im[i * n + j]);
                 let (row_re, row_im) = (&self.re[i * n..i * n + j], &self.im[i * n..i * n + j]);
                 let (v_re, v_im) = (&self.v_re[..j], &self.v_im[..j]);
-                dot_sub(&mut ar, &mut ai, j, |k| (&row_re[k], &row_im[k]), |k| (&v_re[k], &v_im[k]));
+                dot_sub(
+                    &mut ar,
+                    &mut ai,
+                    j,
+                    |k| (&row_re[k], &row_im[k]),
+                    |k| (&v_re[k], &v_im[k]),
+                );
                 if i == j {
                     let (mut inr, mut ini) = (ZERO, ZERO);
                     for l in 0..LANES {
@@ -322,13 +346,21 @@ impl Batch {
                 let (lr, li) = (&self.re[i * n + k], &self.im[i * n + k]);
                 for l in 0..LANES {
                     let dabs = (dr[l] * dr[l] + di[l] * di[l]).sqrt();
-                    let l2 = if k == i { 1.0 } else { lr[l] * lr[l] + li[l] * li[l] };
+                    let l2 = if k == i {
+                        1.0
+                    } else {
+                        lr[l] * lr[l] + li[l] * li[l]
+                    };
                     acc[l] += l2 * dabs;
                 }
             }
             for l in 0..LANES {
                 // NaN-propagating max: a NaN pivot must fail the growth test.
-                growth[l] = if acc[l].is_nan() || growth[l].is_nan() { f64::NAN } else { growth[l].max(acc[l]) };
+                growth[l] = if acc[l].is_nan() || growth[l].is_nan() {
+                    f64::NAN
+                } else {
+                    growth[l].max(acc[l])
+                };
             }
         }
         growth
@@ -348,13 +380,22 @@ impl Batch {
             self.x_re[(o + 1) * n + d] = [1.0; LANES];
         }
         for c in 0..self.cols {
-            let (xr, xi) = (&mut self.x_re[c * n..(c + 1) * n], &mut self.x_im[c * n..(c + 1) * n]);
+            let (xr, xi) = (
+                &mut self.x_re[c * n..(c + 1) * n],
+                &mut self.x_im[c * n..(c + 1) * n],
+            );
             // L y = b, row by row.
             for i in 1..n {
                 let (mut ar, mut ai) = (xr[i], xi[i]);
                 let (row_re, row_im) = (&self.re[i * n..i * n + i], &self.im[i * n..i * n + i]);
                 let (yr, yi) = (&xr[..i], &xi[..i]);
-                dot_sub(&mut ar, &mut ai, i, |k| (&row_re[k], &row_im[k]), |k| (&yr[k], &yi[k]));
+                dot_sub(
+                    &mut ar,
+                    &mut ai,
+                    i,
+                    |k| (&row_re[k], &row_im[k]),
+                    |k| (&yr[k], &yi[k]),
+                );
                 xr[i] = ar;
                 xi[i] = ai;
             }
@@ -426,7 +467,10 @@ mod tests {
         let n = s.n;
         let w2 = (2.0 * std::f64::consts::PI * f).powi(2);
         let a = Mat::<C64>::from_fn(n, n, |i, j| {
-            C64::new(s.k[i * n + j] - if i == j { w2 * s.mass[i] } else { 0.0 }, s.d[i * n + j])
+            C64::new(
+                s.k[i * n + j] - if i == j { w2 * s.mass[i] } else { 0.0 },
+                s.d[i * n + j],
+            )
         });
         let cols = 1 + s.output_dofs.len();
         let mut b = Mat::<C64>::zeros(n, cols);
@@ -437,12 +481,19 @@ mod tests {
             b[(d, o + 1)] = C64::new(1.0, 0.0);
         }
         let x = faer::linalg::solvers::Solve::solve(&a.partial_piv_lu(), &b);
-        (0..cols).flat_map(|c| (0..n).map(move |i| (c, i))).map(|(c, i)| x[(i, c)]).collect()
+        (0..cols)
+            .flat_map(|c| (0..n).map(move |i| (c, i)))
+            .map(|(c, i)| x[(i, c)])
+            .collect()
     }
 
     fn fwd32j() -> System {
         let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
-        System::assemble(&crate::modelfile::load(&root.join("configs/models/fwd32j.toml")).expect("model").model)
+        System::assemble(
+            &crate::modelfile::load(&root.join("configs/models/fwd32j.toml"))
+                .expect("model")
+                .model,
+        )
     }
 
     #[test]
@@ -450,7 +501,9 @@ mod tests {
         let s = fwd32j();
         // 38 log-spaced lines over 3–1000 Hz: below, through and above every resonance; the last
         // batch is partial.
-        let freqs: Vec<f64> = (0..38).map(|k| 3.0 * (1000.0f64 / 3.0).powf(k as f64 / 37.0)).collect();
+        let freqs: Vec<f64> = (0..38)
+            .map(|k| 3.0 * (1000.0f64 / 3.0).powf(k as f64 / 37.0))
+            .collect();
         let mut batch = Batch::new(&s);
         let mut sol = vec![C64::new(0.0, 0.0); (1 + s.output_dofs.len()) * s.n];
         let mut worst = 0.0f64;
@@ -461,11 +514,19 @@ mod tests {
                 batch.solution(l, &mut sol);
                 let r = reference(&s, f);
                 let scale = r.iter().map(|v| v.norm()).fold(0.0, f64::max);
-                let err = sol.iter().zip(&r).map(|(a, b)| (a - b).norm()).fold(0.0, f64::max) / scale;
+                let err = sol
+                    .iter()
+                    .zip(&r)
+                    .map(|(a, b)| (a - b).norm())
+                    .fold(0.0, f64::max)
+                    / scale;
                 worst = worst.max(err);
             }
         }
-        assert!(worst < 1e-10, "largest difference from the pivoted LU: {worst:e} of the largest entry");
+        assert!(
+            worst < 1e-10,
+            "largest difference from the pivoted LU: {worst:e} of the largest entry"
+        );
     }
 
     #[test]
@@ -484,7 +545,11 @@ mod tests {
         let mut sol = vec![C64::new(0.0, 0.0); (1 + s.output_dofs.len()) * s.n];
         batch.solution(2, &mut sol);
         let r = reference(&s, 20.0);
-        let err = sol.iter().zip(&r).map(|(a, b)| (a - b).norm()).fold(0.0, f64::max);
+        let err = sol
+            .iter()
+            .zip(&r)
+            .map(|(a, b)| (a - b).norm())
+            .fold(0.0, f64::max);
         assert!(err <= 1e-12 * r.iter().map(|v| v.norm()).fold(0.0, f64::max));
     }
 
@@ -499,6 +564,9 @@ mod tests {
         s.d.iter_mut().for_each(|d| *d = 0.0);
         let mut batch = Batch::new(&s);
         batch.factor_and_solve(&s, &[10.0]);
-        assert!(!batch.accurate(0), "growth of ~1e9 must send the line to the pivoted solver");
+        assert!(
+            !batch.accurate(0),
+            "growth of ~1e9 must send the line to the pivoted solver"
+        );
     }
 }

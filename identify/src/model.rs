@@ -224,7 +224,13 @@ impl SdeLaw {
     pub fn get(&self, p: ParamName) -> Option<f64> {
         match (self, p) {
             (SdeLaw::Contact { kn, .. }, ParamName::Kn) => Some(*kn),
-            (SdeLaw::Contact { kt: Tangential::Value(kt), .. }, ParamName::Kt) => Some(*kt),
+            (
+                SdeLaw::Contact {
+                    kt: Tangential::Value(kt),
+                    ..
+                },
+                ParamName::Kt,
+            ) => Some(*kt),
             (SdeLaw::Contact { psi_n, .. }, ParamName::PsiN) => Some(*psi_n),
             (SdeLaw::Contact { psi_t, .. }, ParamName::PsiT) => Some(*psi_t),
             (SdeLaw::Axial { k, .. }, ParamName::K) => Some(*k),
@@ -243,7 +249,13 @@ impl SdeLaw {
     pub fn set(&mut self, p: ParamName, value: f64) -> bool {
         let slot: &mut f64 = match (self, p) {
             (SdeLaw::Contact { kn, .. }, ParamName::Kn) => kn,
-            (SdeLaw::Contact { kt: Tangential::Value(kt), .. }, ParamName::Kt) => kt,
+            (
+                SdeLaw::Contact {
+                    kt: Tangential::Value(kt),
+                    ..
+                },
+                ParamName::Kt,
+            ) => kt,
             (SdeLaw::Contact { psi_n, .. }, ParamName::PsiN) => psi_n,
             (SdeLaw::Contact { psi_t, .. }, ParamName::PsiT) => psi_t,
             (SdeLaw::Axial { k, .. }, ParamName::K) => k,
@@ -265,7 +277,15 @@ impl SdeLaw {
     pub fn derivative(&self, p: ParamName) -> Option<([f64; 6], [f64; 6])> {
         let z = [0.0; 6];
         Some(match (*self, p) {
-            (SdeLaw::Contact { area, moments: [j1, j2, j3], kt, .. }, ParamName::Kn) => {
+            (
+                SdeLaw::Contact {
+                    area,
+                    moments: [j1, j2, j3],
+                    kt,
+                    ..
+                },
+                ParamName::Kn,
+            ) => {
                 let r = match kt {
                     Tangential::Ratio(r) => 1.0 / r,
                     Tangential::Value(_) => 0.0,
@@ -273,7 +293,12 @@ impl SdeLaw {
                 ([area, area * r, area * r, j1 * r, j2, j3], z)
             }
             (
-                SdeLaw::Contact { area, moments: [j1, ..], kt: Tangential::Value(_), .. },
+                SdeLaw::Contact {
+                    area,
+                    moments: [j1, ..],
+                    kt: Tangential::Value(_),
+                    ..
+                },
                 ParamName::Kt,
             ) => ([0.0, area, area, j1, 0.0, 0.0], z),
             (SdeLaw::Contact { .. }, ParamName::PsiN) => (z, [1.0, 0.0, 0.0, 0.0, 1.0, 1.0]),
@@ -486,7 +511,12 @@ impl Model {
             .iter()
             .enumerate()
             .filter(|(_, s)| s.enabled)
-            .flat_map(|(i, s)| s.law.params().into_iter().map(move |name| ParamRef { sde: i, name }))
+            .flat_map(|(i, s)| {
+                s.law
+                    .params()
+                    .into_iter()
+                    .map(move |name| ParamRef { sde: i, name })
+            })
             .collect()
     }
 

@@ -80,7 +80,9 @@ pub fn parse_json(text: &str, origin: &str) -> Result<Loaded, LoadError> {
         let inner = e.inner();
         LoadError::Json {
             origin: origin.into(),
-            path: format!("$.{}", e.path()).replace("$.?", "$").replace(".[", "["),
+            path: format!("$.{}", e.path())
+                .replace("$.?", "$")
+                .replace(".[", "["),
             message: format!("{inner} (line {}, column {})", inner.line(), inner.column()),
         }
     })?;
@@ -248,9 +250,17 @@ impl Ctx<'_> {
     fn scalar(&self, v: &Sp<Value>, dim: Dim, field: &str) -> Result<f64, LoadError> {
         let x = match v.get_ref() {
             Value::Num(x) => *x,
-            Value::Text(t) => parse_quantity(t, dim).map_err(|e| self.at(v.span(), format!("{field}: {e}")))?,
+            Value::Text(t) => {
+                parse_quantity(t, dim).map_err(|e| self.at(v.span(), format!("{field}: {e}")))?
+            }
             Value::List(_) => {
-                return Err(self.at(v.span(), format!("{field}: expected one value, {}, not a list", dim.describe())))
+                return Err(self.at(
+                    v.span(),
+                    format!(
+                        "{field}: expected one value, {}, not a list",
+                        dim.describe()
+                    ),
+                ))
             }
         };
         if !x.is_finite() {
@@ -289,7 +299,10 @@ impl Ctx<'_> {
             }
         };
         if values.len() != n {
-            return Err(self.at(v.span(), format!("{field}: expected {n} values, found {}", values.len())));
+            return Err(self.at(
+                v.span(),
+                format!("{field}: expected {n} values, found {}", values.len()),
+            ));
         }
         if values.iter().any(|x| !x.is_finite()) {
             return Err(self.at(v.span(), format!("{field}: values must be finite numbers")));
@@ -306,7 +319,10 @@ impl Ctx<'_> {
         let d = self.vec3(v, Dim::NONE, field)?;
         let n = d.norm();
         if n < 1e-12 {
-            return Err(self.at(v.span(), format!("{field}: the direction has zero length; give a non-zero vector")));
+            return Err(self.at(
+                v.span(),
+                format!("{field}: the direction has zero length; give a non-zero vector"),
+            ));
         }
         Ok(d / n)
     }
@@ -314,22 +330,41 @@ impl Ctx<'_> {
     /// Three axes given as rows `[[a1], [a2], [a3]]` → `global_from_local` (axes as columns).
     fn axes(&self, v: &Sp<Value>, field: &str) -> Result<Matrix3<f64>, LoadError> {
         let Value::List(rows) = v.get_ref() else {
-            return Err(self.at(v.span(), format!("{field}: expected three axis vectors, e.g. [[1,0,0],[0,1,0],[0,0,1]]")));
+            return Err(self.at(
+                v.span(),
+                format!("{field}: expected three axis vectors, e.g. [[1,0,0],[0,1,0],[0,0,1]]"),
+            ));
         };
         if rows.len() != 3 {
-            return Err(self.at(v.span(), format!("{field}: expected three axis vectors, found {}", rows.len())));
+            return Err(self.at(
+                v.span(),
+                format!("{field}: expected three axis vectors, found {}", rows.len()),
+            ));
         }
         let mut m = Matrix3::zeros();
         for (j, row) in rows.iter().enumerate() {
             let Value::List(xs) = row else {
-                return Err(self.at(v.span(), format!("{field}: axis {} is not a list of three numbers", j + 1)));
+                return Err(self.at(
+                    v.span(),
+                    format!("{field}: axis {} is not a list of three numbers", j + 1),
+                ));
             };
             if xs.len() != 3 {
-                return Err(self.at(v.span(), format!("{field}: axis {} has {} components, expected 3", j + 1, xs.len())));
+                return Err(self.at(
+                    v.span(),
+                    format!(
+                        "{field}: axis {} has {} components, expected 3",
+                        j + 1,
+                        xs.len()
+                    ),
+                ));
             }
             for (i, x) in xs.iter().enumerate() {
                 let Value::Num(x) = x else {
-                    return Err(self.at(v.span(), format!("{field}: axis components are plain numbers")));
+                    return Err(self.at(
+                        v.span(),
+                        format!("{field}: axis components are plain numbers"),
+                    ));
                 };
                 m[(i, j)] = *x;
             }
@@ -378,7 +413,12 @@ pub(crate) fn line_col(text: &str, offset: usize) -> (usize, usize) {
     }
     let before = &text[..offset];
     let line = before.matches('\n').count() + 1;
-    let col = before.rsplit('\n').next().map(|l| l.chars().count()).unwrap_or(0) + 1;
+    let col = before
+        .rsplit('\n')
+        .next()
+        .map(|l| l.chars().count())
+        .unwrap_or(0)
+        + 1;
     (line, col)
 }
 
@@ -402,17 +442,30 @@ pub fn parse_toml(text: &str, origin: &str) -> Result<Loaded, LoadError> {
     for (i, b) in raw.bodies.iter().enumerate() {
         let name = b.name.get_ref().trim().to_string();
         if name.is_empty() || name == "ground" {
-            return Err(cx.at(b.name.span(), "body name must be non-empty and not \"ground\" (reserved for the fixed ground)"));
+            return Err(cx.at(
+                b.name.span(),
+                "body name must be non-empty and not \"ground\" (reserved for the fixed ground)",
+            ));
         }
         if let Some(j) = bodies.iter().position(|o: &Body| o.name == name) {
-            return Err(cx.at(b.name.span(), format!("body name \"{name}\" is used twice (bodies {} and {}); names must be unique", j + 1, i + 1)));
+            return Err(cx.at(
+                b.name.span(),
+                format!(
+                    "body name \"{name}\" is used twice (bodies {} and {}); names must be unique",
+                    j + 1,
+                    i + 1
+                ),
+            ));
         }
         spans.push((Item::Body(i, "name"), b.name.span()));
         spans.push((Item::Body(i, "mass"), b.mass.span()));
         spans.push((Item::Body(i, "position"), b.position.span()));
         let mass = cx.scalar(&b.mass, Dim::MASS, "mass")?;
         if mass <= 0.0 {
-            return Err(cx.at(b.mass.span(), format!("body \"{name}\": mass must be positive, got {mass} kg")));
+            return Err(cx.at(
+                b.mass.span(),
+                format!("body \"{name}\": mass must be positive, got {mass} kg"),
+            ));
         }
         let position = cx.vec3(&b.position, Dim::LENGTH, "position")?;
         let (inertia, rotation) = match (&b.inertia, &b.inertia_tensor) {
@@ -445,17 +498,33 @@ pub fn parse_toml(text: &str, origin: &str) -> Result<Loaded, LoadError> {
                 principal_axes(&cx, t, &name)?
             }
         };
-        bodies.push(Body { name, mass, inertia, position, rotation });
+        bodies.push(Body {
+            name,
+            mass,
+            inertia,
+            position,
+            rotation,
+        });
     }
     let body_ref = |s: &Sp<String>| -> Result<Option<usize>, LoadError> {
         let n = s.get_ref().trim();
         if n == "ground" {
             return Ok(None);
         }
-        bodies.iter().position(|b| b.name == n).map(Some).ok_or_else(|| {
-            let known: Vec<&str> = bodies.iter().map(|b| b.name.as_str()).collect();
-            cx.at(s.span(), format!("unknown body \"{n}\"; known bodies: {} (or \"ground\")", known.join(", ")))
-        })
+        bodies
+            .iter()
+            .position(|b| b.name == n)
+            .map(Some)
+            .ok_or_else(|| {
+                let known: Vec<&str> = bodies.iter().map(|b| b.name.as_str()).collect();
+                cx.at(
+                    s.span(),
+                    format!(
+                        "unknown body \"{n}\"; known bodies: {} (or \"ground\")",
+                        known.join(", ")
+                    ),
+                )
+            })
     };
 
     let mut sdes = Vec::new();
@@ -490,7 +559,10 @@ pub fn parse_toml(text: &str, origin: &str) -> Result<Loaded, LoadError> {
             return Err(cx.at(s.bodies.span(), format!("sde {name} joins body \"{}\" to itself; an SDE joins two different bodies, or a body and \"ground\"", ends[0].get_ref())));
         }
         if pair == [None, None] {
-            return Err(cx.at(s.bodies.span(), format!("sde {name} joins the ground to the ground; name at least one body")));
+            return Err(cx.at(
+                s.bodies.span(),
+                format!("sde {name} joins the ground to the ground; name at least one body"),
+            ));
         }
         let point = cx.vec3(&s.point, Dim::LENGTH, "point")?;
         let rotation = match (&s.axes, &s.axis) {
@@ -508,20 +580,35 @@ pub fn parse_toml(text: &str, origin: &str) -> Result<Loaded, LoadError> {
         let law = sde_law(&cx, s, kind, &name)?;
         spans.push((Item::Sde(i, "k"), s.name.span()));
         spans.push((Item::Sde(i, "psi"), s.name.span()));
-        sdes.push(Sde { name, kind, bodies: pair, point, rotation, law, enabled: s.enabled.unwrap_or(true) });
+        sdes.push(Sde {
+            name,
+            kind,
+            bodies: pair,
+            point,
+            rotation,
+            law,
+            enabled: s.enabled.unwrap_or(true),
+        });
     }
 
     let mut forces = Vec::new();
     if let Some(ex) = &raw.excitation {
         for f in &ex.force {
             let Some(body) = body_ref(&f.body)? else {
-                return Err(cx.at(f.body.span(), "a force cannot act on the ground; name a body"));
+                return Err(cx.at(
+                    f.body.span(),
+                    "a force cannot act on the ground; name a body",
+                ));
             };
             let point = match &f.point {
                 Some(p) => cx.vec3(p, Dim::LENGTH, "point")?,
                 None => bodies[body].position,
             };
-            let dir = RawDirection { direction: f.direction.clone(), alpha: f.alpha.clone(), beta: f.beta.clone() };
+            let dir = RawDirection {
+                direction: f.direction.clone(),
+                alpha: f.alpha.clone(),
+                beta: f.beta.clone(),
+            };
             let force = match (&f.force, &f.amplitude) {
                 (Some(v), None) => {
                     if dir.direction.is_some() || dir.alpha.is_some() || dir.beta.is_some() {
@@ -529,29 +616,50 @@ pub fn parse_toml(text: &str, origin: &str) -> Result<Loaded, LoadError> {
                     }
                     cx.vec3(v, Dim::FORCE, "force")?
                 }
-                (None, Some(a)) => cx.scalar(a, Dim::FORCE, "amplitude")? * direction(&cx, &dir, a.span())?,
+                (None, Some(a)) => {
+                    cx.scalar(a, Dim::FORCE, "amplitude")? * direction(&cx, &dir, a.span())?
+                }
                 (None, None) => Vector3::zeros(),
-                (Some(v), Some(_)) => return Err(cx.at(v.span(), "give either `force` (a vector) or `amplitude` with a direction, not both")),
+                (Some(v), Some(_)) => {
+                    return Err(cx.at(
+                        v.span(),
+                        "give either `force` (a vector) or `amplitude` with a direction, not both",
+                    ))
+                }
             };
             let moment = match &f.moment {
                 Some(m) => cx.vec3(m, Dim::MOMENT, "moment")?,
                 None => Vector3::zeros(),
             };
             if force == Vector3::zeros() && moment == Vector3::zeros() {
-                return Err(cx.at(f.body.span(), "this force has neither `force`, `amplitude` nor `moment`; give at least one"));
+                return Err(cx.at(
+                    f.body.span(),
+                    "this force has neither `force`, `amplitude` nor `moment`; give at least one",
+                ));
             }
-            forces.push(PointForce { body, point, force, moment });
+            forces.push(PointForce {
+                body,
+                point,
+                force,
+                moment,
+            });
         }
         for p in &ex.pair {
             let ends = p.bodies.get_ref();
             if ends.len() != 2 {
-                return Err(cx.at(p.bodies.span(), "a force pair acts between two bodies: bodies = [\"acted on\", \"reacting\"]"));
+                return Err(cx.at(
+                    p.bodies.span(),
+                    "a force pair acts between two bodies: bodies = [\"acted on\", \"reacting\"]",
+                ));
             }
             let (Some(a), Some(b)) = (body_ref(&ends[0])?, body_ref(&ends[1])?) else {
                 return Err(cx.at(p.bodies.span(), "a force pair acts between two bodies, not the ground; use [[excitation.force]] for a grounded exciter"));
             };
             if a == b {
-                return Err(cx.at(p.bodies.span(), "a force pair between a body and itself does nothing; name two bodies"));
+                return Err(cx.at(
+                    p.bodies.span(),
+                    "a force pair between a body and itself does nothing; name two bodies",
+                ));
             }
             let point = cx.vec3(&p.point, Dim::LENGTH, "point")?;
             let reaction = match &p.reaction_point {
@@ -559,10 +667,24 @@ pub fn parse_toml(text: &str, origin: &str) -> Result<Loaded, LoadError> {
                 None => point,
             };
             let amp = cx.scalar(&p.amplitude, Dim::FORCE, "amplitude")?;
-            let dir = RawDirection { direction: p.direction.clone(), alpha: p.alpha.clone(), beta: p.beta.clone() };
+            let dir = RawDirection {
+                direction: p.direction.clone(),
+                alpha: p.alpha.clone(),
+                beta: p.beta.clone(),
+            };
             let f = amp * direction(&cx, &dir, p.amplitude.span())?;
-            forces.push(PointForce { body: a, point, force: f, moment: Vector3::zeros() });
-            forces.push(PointForce { body: b, point: reaction, force: -f, moment: Vector3::zeros() });
+            forces.push(PointForce {
+                body: a,
+                point,
+                force: f,
+                moment: Vector3::zeros(),
+            });
+            forces.push(PointForce {
+                body: b,
+                point: reaction,
+                force: -f,
+                moment: Vector3::zeros(),
+            });
         }
     }
 
@@ -573,7 +695,15 @@ pub fn parse_toml(text: &str, origin: &str) -> Result<Loaded, LoadError> {
         };
         let quantity = match &o.quantity {
             None => Quantity::Displacement,
-            Some(q) => Quantity::parse(q.get_ref()).ok_or_else(|| cx.at(q.span(), format!("unknown quantity \"{}\"; use displacement, velocity or acceleration", q.get_ref())))?,
+            Some(q) => Quantity::parse(q.get_ref()).ok_or_else(|| {
+                cx.at(
+                    q.span(),
+                    format!(
+                        "unknown quantity \"{}\"; use displacement, velocity or acceleration",
+                        q.get_ref()
+                    ),
+                )
+            })?,
         };
         let names: Vec<&Sp<String>> = match (&o.dof, &o.dofs) {
             (Some(d), None) => vec![d],
@@ -582,7 +712,11 @@ pub fn parse_toml(text: &str, origin: &str) -> Result<Loaded, LoadError> {
         };
         for d in names {
             let dof = DOF_NAMES.iter().position(|n| n == d.get_ref()).ok_or_else(|| cx.at(d.span(), format!("unknown dof \"{}\"; use u1, u2, u3 (translations) or r1, r2, r3 (rotations) along the body's principal axes", d.get_ref())))?;
-            outputs.push(Characteristic { body, dof: dof as u8, quantity });
+            outputs.push(Characteristic {
+                body,
+                dof: dof as u8,
+                quantity,
+            });
         }
     }
 
@@ -594,7 +728,11 @@ pub fn parse_toml(text: &str, origin: &str) -> Result<Loaded, LoadError> {
         outputs,
     };
     let locate = |p: &Problem| -> Range<usize> {
-        spans.iter().find(|(it, _)| *it == p.item).map(|(_, s)| s.clone()).unwrap_or(0..0)
+        spans
+            .iter()
+            .find(|(it, _)| *it == p.item)
+            .map(|(_, s)| s.clone())
+            .unwrap_or(0..0)
     };
     let (errors, warnings) = check(&model);
     if let Some(p) = errors.first() {
@@ -613,7 +751,11 @@ pub fn parse_toml(text: &str, origin: &str) -> Result<Loaded, LoadError> {
 /// Unit direction from `direction = [x, y, z]` or from angles: `beta` is the angle from the
 /// global +z axis, `alpha` the azimuth of the projection on the x-y plane from +x towards +y:
 /// `d = [sin β cos α, sin β sin α, cos β]`.
-fn direction(cx: &Ctx, d: &RawDirection, fallback: Range<usize>) -> Result<Vector3<f64>, LoadError> {
+fn direction(
+    cx: &Ctx,
+    d: &RawDirection,
+    fallback: Range<usize>,
+) -> Result<Vector3<f64>, LoadError> {
     match (&d.direction, &d.alpha, &d.beta) {
         (Some(v), None, None) => cx.direction(v, "direction"),
         (None, Some(a), Some(b)) => {
@@ -625,16 +767,30 @@ fn direction(cx: &Ctx, d: &RawDirection, fallback: Range<usize>) -> Result<Vecto
     }
 }
 
-fn principal_axes(cx: &Ctx, t: &Sp<Value>, name: &str) -> Result<([f64; 3], Matrix3<f64>), LoadError> {
+fn principal_axes(
+    cx: &Ctx,
+    t: &Sp<Value>,
+    name: &str,
+) -> Result<([f64; 3], Matrix3<f64>), LoadError> {
     let Value::List(rows) = t.get_ref() else {
-        return Err(cx.at(t.span(), "inertia_tensor: expected three rows of three values (kg m^2, global frame)"));
+        return Err(cx.at(
+            t.span(),
+            "inertia_tensor: expected three rows of three values (kg m^2, global frame)",
+        ));
     };
     if rows.len() != 3 {
-        return Err(cx.at(t.span(), format!("inertia_tensor: expected 3 rows, found {}", rows.len())));
+        return Err(cx.at(
+            t.span(),
+            format!("inertia_tensor: expected 3 rows, found {}", rows.len()),
+        ));
     }
     let mut m = Matrix3::zeros();
     for (i, row) in rows.iter().enumerate() {
-        let r = cx.vector(&Spanned::new(t.span(), row.clone()), &[Dim::INERTIA; 3], "inertia_tensor")?;
+        let r = cx.vector(
+            &Spanned::new(t.span(), row.clone()),
+            &[Dim::INERTIA; 3],
+            "inertia_tensor",
+        )?;
         for j in 0..3 {
             m[(i, j)] = r[j];
         }
@@ -660,7 +816,18 @@ fn principal_axes(cx: &Ctx, t: &Sp<Value>, name: &str) -> Result<([f64; 3], Matr
 /// Fields allowed per kind, for error messages about fields that do not apply.
 fn allowed(kind: SdeKind) -> &'static [&'static str] {
     match kind {
-        SdeKind::Slideway | SdeKind::Rotary => &["area", "moments", "size", "inner_radius", "outer_radius", "kn", "kt", "kn_kt_ratio", "psi_n", "psi_t"],
+        SdeKind::Slideway | SdeKind::Rotary => &[
+            "area",
+            "moments",
+            "size",
+            "inner_radius",
+            "outer_radius",
+            "kn",
+            "kt",
+            "kn_kt_ratio",
+            "psi_n",
+            "psi_t",
+        ],
         SdeKind::Screw | SdeKind::Spring => &["k", "psi"],
         SdeKind::Isolator => &["kn", "kt", "psi", "psi_n", "psi_t"],
         SdeKind::General => &["k", "psi"],
@@ -669,14 +836,30 @@ fn allowed(kind: SdeKind) -> &'static [&'static str] {
 
 fn sde_law(cx: &Ctx, s: &RawSde, kind: SdeKind, name: &str) -> Result<SdeLaw, LoadError> {
     let present: [(&str, &Option<Sp<Value>>); 12] = [
-        ("area", &s.area), ("moments", &s.moments), ("size", &s.size), ("inner_radius", &s.inner_radius),
-        ("outer_radius", &s.outer_radius), ("kn", &s.kn), ("kt", &s.kt), ("kn_kt_ratio", &s.kn_kt_ratio),
-        ("psi_n", &s.psi_n), ("psi_t", &s.psi_t), ("k", &s.k), ("psi", &s.psi),
+        ("area", &s.area),
+        ("moments", &s.moments),
+        ("size", &s.size),
+        ("inner_radius", &s.inner_radius),
+        ("outer_radius", &s.outer_radius),
+        ("kn", &s.kn),
+        ("kt", &s.kt),
+        ("kn_kt_ratio", &s.kn_kt_ratio),
+        ("psi_n", &s.psi_n),
+        ("psi_t", &s.psi_t),
+        ("k", &s.k),
+        ("psi", &s.psi),
     ];
     for (field, v) in present {
         if let Some(v) = v {
             if !allowed(kind).contains(&field) {
-                return Err(cx.at(v.span(), format!("sde {name}: `{field}` does not apply to a {} (its keys: {})", kind.as_str(), allowed(kind).join(", "))));
+                return Err(cx.at(
+                    v.span(),
+                    format!(
+                        "sde {name}: `{field}` does not apply to a {} (its keys: {})",
+                        kind.as_str(),
+                        allowed(kind).join(", ")
+                    ),
+                ));
             }
         }
     }
@@ -685,11 +868,17 @@ fn sde_law(cx: &Ctx, s: &RawSde, kind: SdeKind, name: &str) -> Result<SdeLaw, Lo
             Some(v) => {
                 let x = cx.scalar(v, dim, field)?;
                 if x < 0.0 {
-                    return Err(cx.at(v.span(), format!("sde {name}: `{field}` must be ≥ 0, got {x}")));
+                    return Err(cx.at(
+                        v.span(),
+                        format!("sde {name}: `{field}` must be ≥ 0, got {x}"),
+                    ));
                 }
                 Ok(x)
             }
-            None => Err(cx.at(s.name.span(), format!("sde {name}: missing `{field}` ({})", dim.describe()))),
+            None => Err(cx.at(
+                s.name.span(),
+                format!("sde {name}: missing `{field}` ({})", dim.describe()),
+            )),
         }
     };
     Ok(match kind {
@@ -722,14 +911,23 @@ fn sde_law(cx: &Ctx, s: &RawSde, kind: SdeKind, name: &str) -> Result<SdeLaw, Lo
             psi: need(&s.psi, "psi", Dim::NONE)?,
         },
         SdeKind::Isolator => {
-            let (psi_n, psi_t) = match (&s.psi, &s.psi_n, &s.psi_t) {
-                (Some(_), None, None) => {
-                    let p = need(&s.psi, "psi", Dim::NONE)?;
-                    (p, p)
-                }
-                (None, Some(_), Some(_)) => (need(&s.psi_n, "psi_n", Dim::NONE)?, need(&s.psi_t, "psi_t", Dim::NONE)?),
-                _ => return Err(cx.at(s.name.span(), format!("sde {name}: give `psi` (both directions) or both `psi_n` and `psi_t`"))),
-            };
+            let (psi_n, psi_t) =
+                match (&s.psi, &s.psi_n, &s.psi_t) {
+                    (Some(_), None, None) => {
+                        let p = need(&s.psi, "psi", Dim::NONE)?;
+                        (p, p)
+                    }
+                    (None, Some(_), Some(_)) => (
+                        need(&s.psi_n, "psi_n", Dim::NONE)?,
+                        need(&s.psi_t, "psi_t", Dim::NONE)?,
+                    ),
+                    _ => return Err(cx.at(
+                        s.name.span(),
+                        format!(
+                            "sde {name}: give `psi` (both directions) or both `psi_n` and `psi_t`"
+                        ),
+                    )),
+                };
             SdeLaw::Isolator {
                 kn: need(&s.kn, "kn", Dim::STIFFNESS)?,
                 kt: need(&s.kt, "kt", Dim::STIFFNESS)?,
@@ -739,17 +937,34 @@ fn sde_law(cx: &Ctx, s: &RawSde, kind: SdeKind, name: &str) -> Result<SdeLaw, Lo
         }
         SdeKind::General => {
             let Some(kv) = &s.k else {
-                return Err(cx.at(s.name.span(), format!("sde {name}: missing `k`, six stiffnesses [N/m ×3, N·m/rad ×3]")));
+                return Err(cx.at(
+                    s.name.span(),
+                    format!("sde {name}: missing `k`, six stiffnesses [N/m ×3, N·m/rad ×3]"),
+                ));
             };
-            let dims = [Dim::STIFFNESS, Dim::STIFFNESS, Dim::STIFFNESS, Dim::ROTATIONAL_STIFFNESS, Dim::ROTATIONAL_STIFFNESS, Dim::ROTATIONAL_STIFFNESS];
+            let dims = [
+                Dim::STIFFNESS,
+                Dim::STIFFNESS,
+                Dim::STIFFNESS,
+                Dim::ROTATIONAL_STIFFNESS,
+                Dim::ROTATIONAL_STIFFNESS,
+                Dim::ROTATIONAL_STIFFNESS,
+            ];
             let k = cx.vector(kv, &dims, "k")?;
             if k.iter().any(|x| *x < 0.0) {
                 return Err(cx.at(kv.span(), format!("sde {name}: stiffnesses must be ≥ 0")));
             }
             let psi = match &s.psi {
-                Some(p) if matches!(p.get_ref(), Value::List(_)) => cx.vector(p, &[Dim::NONE; 6], "psi")?,
+                Some(p) if matches!(p.get_ref(), Value::List(_)) => {
+                    cx.vector(p, &[Dim::NONE; 6], "psi")?
+                }
                 Some(_) => vec![need(&s.psi, "psi", Dim::NONE)?; 6],
-                None => return Err(cx.at(s.name.span(), format!("sde {name}: missing `psi` (one value or six)"))),
+                None => {
+                    return Err(cx.at(
+                        s.name.span(),
+                        format!("sde {name}: missing `psi` (one value or six)"),
+                    ))
+                }
             };
             if psi.iter().any(|x| *x < 0.0) {
                 return Err(cx.at(s.name.span(), format!("sde {name}: ψ must be ≥ 0")));
@@ -796,10 +1011,16 @@ fn contact_area(cx: &Ctx, s: &RawSde, name: &str) -> Result<(f64, [f64; 3]), Loa
         _ => return Err(cx.at(s.name.span(), format!("sde {name}: give the working area once: `area` + `moments`, `size = [a2, a3]` (rectangle), or `outer_radius` (+ `inner_radius`) for an annulus"))),
     };
     if area <= 0.0 || m.iter().any(|x| *x < 0.0) {
-        return Err(cx.at(s.name.span(), format!("sde {name}: the working area must be positive and its moments ≥ 0")));
+        return Err(cx.at(
+            s.name.span(),
+            format!("sde {name}: the working area must be positive and its moments ≥ 0"),
+        ));
     }
     if s.moments.is_some() && s.area.is_none() {
-        return Err(cx.at(s.name.span(), format!("sde {name}: `moments` goes with `area`")));
+        return Err(cx.at(
+            s.name.span(),
+            format!("sde {name}: `moments` goes with `area`"),
+        ));
     }
     Ok((area, m))
 }

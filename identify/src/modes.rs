@@ -30,21 +30,38 @@ pub struct Mode {
 
 fn finish(model: &Model, mass: &[f64], lambda: C64, shape: Vec<C64>) -> Mode {
     let freq_hz = lambda.re.max(0.0).sqrt() / TWO_PI;
-    let loss_factor = if lambda.re > 0.0 { lambda.im / lambda.re } else { 0.0 };
+    let loss_factor = if lambda.re > 0.0 {
+        lambda.im / lambda.re
+    } else {
+        0.0
+    };
     let big = shape
         .iter()
         .copied()
         .max_by(|a, b| a.norm().total_cmp(&b.norm()))
         .unwrap_or(C64::new(1.0, 0.0));
-    let shape: Vec<C64> = if big.norm() > 0.0 { shape.iter().map(|v| v / big).collect() } else { shape };
+    let shape: Vec<C64> = if big.norm() > 0.0 {
+        shape.iter().map(|v| v / big).collect()
+    } else {
+        shape
+    };
     let mut energy: Vec<f64> = (0..model.bodies.len())
-        .map(|b| (0..6).map(|i| mass[6 * b + i] * shape[6 * b + i].norm_sqr()).sum())
+        .map(|b| {
+            (0..6)
+                .map(|i| mass[6 * b + i] * shape[6 * b + i].norm_sqr())
+                .sum()
+        })
         .collect();
     let total: f64 = energy.iter().sum();
     if total > 0.0 {
         energy.iter_mut().for_each(|e| *e /= total);
     }
-    Mode { freq_hz, loss_factor, shape, energy }
+    Mode {
+        freq_hz,
+        loss_factor,
+        shape,
+        energy,
+    }
 }
 
 /// Undamped modes, ascending in frequency.
@@ -59,7 +76,9 @@ pub fn undamped(model: &Model) -> Result<Vec<Mode>, SolveError> {
     Ok((0..n)
         .map(|m| {
             let lambda = eig.S()[m];
-            let shape = (0..n).map(|i| C64::new(eig.U()[(i, m)] * scale[i], 0.0)).collect();
+            let shape = (0..n)
+                .map(|i| C64::new(eig.U()[(i, m)] * scale[i], 0.0))
+                .collect();
             finish(model, &s.mass, C64::new(lambda, 0.0), shape)
         })
         .collect())

@@ -31,7 +31,13 @@ impl Sensitivity {
             .params
             .iter()
             .enumerate()
-            .map(|(p, r)| (*r, self.mi[p * self.outputs + o], self.relative[p * self.outputs + o]))
+            .map(|(p, r)| {
+                (
+                    *r,
+                    self.mi[p * self.outputs + o],
+                    self.relative[p * self.outputs + o],
+                )
+            })
             .collect();
         rows.sort_by(|a, b| b.2.total_cmp(&a.2));
         rows
@@ -45,7 +51,11 @@ pub fn band_sensitivity(
     params: &[ParamRef],
     method: Method,
 ) -> Result<Sensitivity, SolveError> {
-    let params = if params.is_empty() { model.all_params() } else { params.to_vec() };
+    let params = if params.is_empty() {
+        model.all_params()
+    } else {
+        params.to_vec()
+    };
     let r = response(model, freqs_hz, &params, method)?;
     let outputs = model.outputs.len();
     let mut mi = vec![0.0; params.len() * outputs];
@@ -59,12 +69,23 @@ pub fn band_sensitivity(
             let sum: f64 = q
                 .iter()
                 .zip(dq)
-                .map(|(q, d)| if q.norm() > 0.0 { ((q.conj() * d).re / q.norm()).abs() } else { 0.0 })
+                .map(|(q, d)| {
+                    if q.norm() > 0.0 {
+                        ((q.conj() * d).re / q.norm()).abs()
+                    } else {
+                        0.0
+                    }
+                })
                 .sum();
             let v = if total > 0.0 { sum / total } else { 0.0 };
             mi[p * outputs + o] = v;
             relative[p * outputs + o] = v * model.param(*pr).unwrap_or(0.0).abs();
         }
     }
-    Ok(Sensitivity { params, outputs, mi, relative })
+    Ok(Sensitivity {
+        params,
+        outputs,
+        mi,
+        relative,
+    })
 }

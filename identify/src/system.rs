@@ -131,7 +131,11 @@ impl System {
     /// Assembles M, K, D and P from a model. The model must be valid (see the loader).
     pub fn assemble(model: &Model) -> System {
         let n = model.dof_count();
-        let mass: Vec<f64> = model.bodies.iter().flat_map(|b| b.inertia_diagonal()).collect();
+        let mass: Vec<f64> = model
+            .bodies
+            .iter()
+            .flat_map(|b| b.inertia_diagonal())
+            .collect();
         let mut k = vec![0.0; n * n];
         let mut d = vec![0.0; n * n];
         let mut sdes = Vec::new();
@@ -187,7 +191,13 @@ impl System {
         let mut load = vec![0.0; n];
         for f in &model.forces {
             let body = &model.bodies[f.body];
-            let p = generalized_force(&body.position, &body.rotation, &f.point, &f.force, &f.moment);
+            let p = generalized_force(
+                &body.position,
+                &body.rotation,
+                &f.point,
+                &f.force,
+                &f.moment,
+            );
             for i in 0..6 {
                 load[6 * f.body + i] += p[i];
             }

@@ -7,9 +7,7 @@
 
 use nalgebra::{Matrix3, Vector3};
 
-use crate::model::{
-    Body, Characteristic, Model, PointForce, Quantity, Sde, SdeKind, SdeLaw,
-};
+use crate::model::{Body, Characteristic, Model, PointForce, Quantity, Sde, SdeKind, SdeLaw};
 
 fn body(name: &str, mass: f64, z: f64) -> Body {
     Body {
@@ -99,8 +97,16 @@ pub fn two_in_series(m1: f64, m2: f64, k1: f64, k2: f64, psi: f64) -> Model {
             moment: Vector3::zeros(),
         }],
         outputs: vec![
-            Characteristic { body: 0, dof: 2, quantity: Quantity::Displacement },
-            Characteristic { body: 1, dof: 2, quantity: Quantity::Displacement },
+            Characteristic {
+                body: 0,
+                dof: 2,
+                quantity: Quantity::Displacement,
+            },
+            Characteristic {
+                body: 1,
+                dof: 2,
+                quantity: Quantity::Displacement,
+            },
         ],
     }
 }
@@ -123,14 +129,22 @@ pub fn chain(n: usize) -> Model {
         })
         .collect();
     let mut sdes = Vec::new();
-    for (j, (x, y)) in [(-0.3, -0.3), (-0.3, 0.3), (0.3, -0.3), (0.3, 0.3)].into_iter().enumerate() {
+    for (j, (x, y)) in [(-0.3, -0.3), (-0.3, 0.3), (0.3, -0.3), (0.3, 0.3)]
+        .into_iter()
+        .enumerate()
+    {
         sdes.push(Sde {
             name: format!("isolator {j}"),
             kind: SdeKind::Isolator,
             bodies: [None, Some(0)],
             point: Vector3::new(x, y, 0.0),
             rotation: Matrix3::new(0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 1.0, 0.0, 0.0),
-            law: SdeLaw::Isolator { kn: 5e6, kt: 2e6, psi_n: 0.3, psi_t: 0.3 },
+            law: SdeLaw::Isolator {
+                kn: 5e6,
+                kt: 2e6,
+                psi_n: 0.3,
+                psi_t: 0.3,
+            },
             enabled: true,
         });
     }
@@ -162,7 +176,11 @@ pub fn chain(n: usize) -> Model {
             moment: Vector3::zeros(),
         }],
         outputs: (0..3)
-            .map(|dof| Characteristic { body: last, dof, quantity: Quantity::Displacement })
+            .map(|dof| Characteristic {
+                body: last,
+                dof,
+                quantity: Quantity::Displacement,
+            })
             .collect(),
         bodies,
         sdes,

@@ -45,16 +45,28 @@ impl Dim {
     /// N·m/rad.
     pub const ROTATIONAL_STIFFNESS: Dim = Dim { kg: 1, m: 2, s: -2 };
     /// Pa/m: contact stiffness per unit area.
-    pub const CONTACT_STIFFNESS: Dim = Dim { kg: 1, m: -2, s: -2 };
+    pub const CONTACT_STIFFNESS: Dim = Dim {
+        kg: 1,
+        m: -2,
+        s: -2,
+    };
     /// Hz.
     pub const FREQUENCY: Dim = Dim { kg: 0, m: 0, s: -1 };
 
     fn pow(self, e: i8) -> Dim {
-        Dim { kg: self.kg * e, m: self.m * e, s: self.s * e }
+        Dim {
+            kg: self.kg * e,
+            m: self.m * e,
+            s: self.s * e,
+        }
     }
 
     fn mul(self, o: Dim) -> Dim {
-        Dim { kg: self.kg + o.kg, m: self.m + o.m, s: self.s + o.s }
+        Dim {
+            kg: self.kg + o.kg,
+            m: self.m + o.m,
+            s: self.s + o.s,
+        }
     }
 
     /// A usual unit and an example for this dimension, for error messages.
@@ -135,7 +147,10 @@ struct Factor {
 }
 
 impl Factor {
-    const ONE: Factor = Factor { extra: 1.0, pow10: 0 };
+    const ONE: Factor = Factor {
+        extra: 1.0,
+        pow10: 0,
+    };
 
     fn apply(self, x: f64) -> f64 {
         let x = x * self.extra;
@@ -156,10 +171,23 @@ fn symbol(sym: &str) -> Option<(Factor, Dim)> {
             "t" => (p(3), Dim::MASS),
             "s" => (p(0), Dim { kg: 0, m: 0, s: 1 }),
             "N" => (p(0), Dim::FORCE),
-            "Pa" => (p(0), Dim { kg: 1, m: -1, s: -2 }),
+            "Pa" => (
+                p(0),
+                Dim {
+                    kg: 1,
+                    m: -1,
+                    s: -2,
+                },
+            ),
             "Hz" => (p(0), Dim::FREQUENCY),
             "rad" => (p(0), Dim::NONE),
-            "deg" | "°" => (Factor { extra: std::f64::consts::PI / 180.0, pow10: 0 }, Dim::NONE),
+            "deg" | "°" => (
+                Factor {
+                    extra: std::f64::consts::PI / 180.0,
+                    pow10: 0,
+                },
+                Dim::NONE,
+            ),
             _ => return None,
         })
     };
@@ -183,7 +211,15 @@ fn symbol(sym: &str) -> Option<(Factor, Dim)> {
     if rest == "deg" || rest == "°" || rest == "t" {
         return None;
     }
-    base(rest).map(|(f, d)| (Factor { extra: f.extra, pow10: f.pow10 + prefix }, d))
+    base(rest).map(|(f, d)| {
+        (
+            Factor {
+                extra: f.extra,
+                pow10: f.pow10 + prefix,
+            },
+            d,
+        )
+    })
 }
 
 fn superscript_power(term: &str) -> (&str, Option<i8>) {
@@ -200,7 +236,10 @@ fn superscript_power(term: &str) -> (&str, Option<i8>) {
 fn parse_unit(unit: &str, text: &str) -> Result<(Factor, Dim), UnitError> {
     let mut factor = Factor::ONE;
     let mut dim = Dim::NONE;
-    let unknown = |u: &str| UnitError::Unknown { unit: u.to_string(), text: text.to_string() };
+    let unknown = |u: &str| UnitError::Unknown {
+        unit: u.to_string(),
+        text: text.to_string(),
+    };
     let spaced = unit.replace('/', " / ").replace(['*', '·'], " ");
     let mut divide = false;
     for term in spaced.split_whitespace() {
@@ -221,7 +260,10 @@ fn parse_unit(unit: &str, text: &str) -> Result<(Factor, Dim), UnitError> {
                         .find(|c: char| c.is_ascii_digit() || c == '-')
                         .unwrap_or(b.len());
                     if split < b.len() && split > 0 {
-                        (&b[..split], Some(b[split..].parse::<i8>().map_err(|_| unknown(term))?))
+                        (
+                            &b[..split],
+                            Some(b[split..].parse::<i8>().map_err(|_| unknown(term))?),
+                        )
                     } else {
                         (b, None)
                     }
@@ -255,11 +297,14 @@ fn split_number(text: &str) -> Result<(f64, &str), UnitError> {
                 || c == '+'
                 || c == '-'
                 || ((c == 'e' || c == 'E')
-                    && t[i + 1..].starts_with(|n: char| n.is_ascii_digit() || n == '-' || n == '+')))
+                    && t[i + 1..]
+                        .starts_with(|n: char| n.is_ascii_digit() || n == '-' || n == '+')))
         })
         .map(|(i, _)| i)
         .unwrap_or(t.len());
-    let number: f64 = t[..end].parse().map_err(|_| UnitError::NoNumber(text.to_string()))?;
+    let number: f64 = t[..end]
+        .parse()
+        .map_err(|_| UnitError::NoNumber(text.to_string()))?;
     Ok((number, t[end..].trim()))
 }
 
@@ -290,7 +335,11 @@ pub fn parse_quantities(text: &str, expected: Dim) -> Result<Vec<f64>, UnitError
             Ok((n, r)) if !rest.is_empty() => {
                 numbers.push(n);
                 rest = r;
-                if rest.is_empty() || !rest.starts_with(|c: char| c.is_ascii_digit() || c == '-' || c == '+' || c == '.') {
+                if rest.is_empty()
+                    || !rest.starts_with(|c: char| {
+                        c.is_ascii_digit() || c == '-' || c == '+' || c == '.'
+                    })
+                {
                     break;
                 }
             }
@@ -346,7 +395,10 @@ mod tests {
         ];
         for (text, dim, want) in cases {
             let got = parse_quantity(text, *dim).unwrap();
-            assert!((got - want).abs() <= 1e-12 * want.abs(), "{text}: {got} vs {want}");
+            assert!(
+                (got - want).abs() <= 1e-12 * want.abs(),
+                "{text}: {got} vs {want}"
+            );
         }
         let deg = parse_quantity("60 deg", Dim::NONE).unwrap();
         assert!((deg - std::f64::consts::FRAC_PI_3).abs() < 1e-15);
@@ -356,15 +408,27 @@ mod tests {
     fn bad_units_are_explained() {
         let e = parse_quantity("10 N/mm2", Dim::STIFFNESS).unwrap_err();
         assert!(e.to_string().contains("stiffness"), "{e}");
-        assert!(matches!(parse_quantity("3 furlong", Dim::LENGTH), Err(UnitError::Unknown { .. })));
-        assert!(matches!(parse_quantity("mm", Dim::LENGTH), Err(UnitError::NoNumber(_))));
+        assert!(matches!(
+            parse_quantity("3 furlong", Dim::LENGTH),
+            Err(UnitError::Unknown { .. })
+        ));
+        assert!(matches!(
+            parse_quantity("mm", Dim::LENGTH),
+            Err(UnitError::NoNumber(_))
+        ));
         assert!(parse_quantity("1e400 m", Dim::LENGTH).is_err());
         assert!(parse_quantity("5 m/", Dim::LENGTH).is_err());
     }
 
     #[test]
     fn vectors_share_a_unit() {
-        assert_eq!(parse_quantities("0 450 950 mm", Dim::LENGTH).unwrap(), vec![0.0, 0.45, 0.95]);
-        assert_eq!(parse_quantities("1 -2 3", Dim::LENGTH).unwrap(), vec![1.0, -2.0, 3.0]);
+        assert_eq!(
+            parse_quantities("0 450 950 mm", Dim::LENGTH).unwrap(),
+            vec![0.0, 0.45, 0.95]
+        );
+        assert_eq!(
+            parse_quantities("1 -2 3", Dim::LENGTH).unwrap(),
+            vec![1.0, -2.0, 3.0]
+        );
     }
 }

@@ -23,14 +23,19 @@ fn root() -> PathBuf {
 
 fn load_model(name: &str) -> Model {
     let p = root().join("configs/models").join(name);
-    identify::modelfile::load(&p).unwrap_or_else(|e| panic!("{}: {e}", p.display())).model
+    identify::modelfile::load(&p)
+        .unwrap_or_else(|e| panic!("{}: {e}", p.display()))
+        .model
 }
 
 /// The FWD-32J measurement (38 log-spaced lines, 20-400 Hz, per table characteristic), amplitude
 /// with relative noise `rel` and its stated variance.
 fn measure(truth: &Model, rel: f64, seed: u64) -> MeasuredData {
     let mut rng = StdRng::seed_from_u64(seed);
-    synthetic::amplitude_data(truth, &synthetic::fwd32j_lines(), rel, || StandardNormal.sample(&mut rng)).expect("truth FRF")
+    synthetic::amplitude_data(truth, &synthetic::fwd32j_lines(), rel, || {
+        StandardNormal.sample(&mut rng)
+    })
+    .expect("truth FRF")
 }
 
 struct Case {
@@ -42,14 +47,32 @@ struct Case {
 
 fn fit(model_file: &str, vars_file: &str, data: &MeasuredData) -> Case {
     let model = load_model(model_file);
-    let vars = variables::load(&root().join("configs/identification").join(vars_file), &model).expect("variables");
+    let vars = variables::load(
+        &root().join("configs/identification").join(vars_file),
+        &model,
+    )
+    .expect("variables");
     let obs = data::validate(data, &model, "synthetic").expect("data");
-    let id = idn::identify(&model, &obs, &vars, &Options::default(), &mut |_, _| {}).expect("identification");
-    Case { model, vars, obs, id }
+    let id = idn::identify(&model, &obs, &vars, &Options::default(), &mut |_, _| {})
+        .expect("identification");
+    Case {
+        model,
+        vars,
+        obs,
+        id,
+    }
 }
 
 fn run(c: &Case) -> diagnose::Diagnosis {
-    let d = diagnose(&c.model, &c.obs, &c.vars, &c.id, &diagnose::Options::default(), &mut |_| {}).expect("diagnosis");
+    let d = diagnose(
+        &c.model,
+        &c.obs,
+        &c.vars,
+        &c.id,
+        &diagnose::Options::default(),
+        &mut |_| {},
+    )
+    .expect("diagnosis");
     println!("{}", diagnose::text(&d));
     d
 }
@@ -57,25 +80,60 @@ fn run(c: &Case) -> diagnose::Diagnosis {
 #[test]
 fn the_missing_hydraulic_actuator_is_found_added_and_the_fit_reaches_the_noise_floor() {
     let truth = load_model("fwd32j.toml");
-    let data = measure(&truth, 0.01, std::env::var("IDENT_SUPPORT_SEED").map(|v| v.parse().unwrap()).unwrap_or(11));
+    let data = measure(
+        &truth,
+        0.01,
+        std::env::var("IDENT_SUPPORT_SEED")
+            .map(|v| v.parse().unwrap())
+            .unwrap_or(11),
+    );
     let case = fit("fwd32j-no-actuator.toml", "fwd32j-no-actuator.toml", &data);
     let d = run(&case);
-    assert!(!d.before.explained, "the model without the actuator should not explain the data");
+    assert!(
+        !d.before.explained,
+        "the model without the actuator should not explain the data"
+    );
     // The actuator: a spring between spindle head and table at the excitation point along the
     // excitation direction. Placements the data cannot tell apart form the first family.
     let actuator = "spring spindle head–table at (0, 900, 1150) mm along (0.494, 0.855, 0.156)";
     let first = &d.rounds[0].ranked[0];
     assert_eq!(first.kind, "spring", "ranked first: {}", first.effect);
-    assert!(first.effect == actuator || first.equivalent.iter().any(|e| e == actuator), "ranked first: {first:?}");
+    assert!(
+        first.effect == actuator || first.equivalent.iter().any(|e| e == actuator),
+        "ranked first: {first:?}"
+    );
     let added = d.accepted.first().expect("an effect is added");
-    assert!(added.effect == actuator || added.equivalent.iter().any(|e| e == actuator), "added: {added:?}");
+    assert!(
+        added.effect == actuator || added.equivalent.iter().any(|e| e == actuator),
+        "added: {added:?}"
+    );
     // Its stiffness: the truth is 0.5639 N/µm.
     let k = &added.params[0];
-    assert!((k.value - 0.5639e6).abs() < 3.0 * k.std_error, "k = {} ± {}", k.value, k.std_error);
+    assert!(
+        (k.value - 0.5639e6).abs() < 3.0 * k.std_error,
+        "k = {} ± {}",
+        k.value,
+        k.std_error
+    );
     assert_eq!(d.accepted.len(), 1, "nothing else should be added");
-    assert!(d.after.chi2_p.expect("R is known") > 0.001, "after: {}", d.after.verdict);
-    for (b, a) in d.before.characteristics.iter().zip(&d.after.characteristics) {
-        assert!(a.rms_relative < 0.02 && a.rms_relative < b.rms_relative, "{}: {} → {}", a.label, b.rms_relative, a.rms_relative);
+    assert!(
+        d.after.chi2_p.expect("R is known") > 0.001,
+        "after: {}",
+        d.after.verdict
+    );
+    for (b, a) in d
+        .before
+        .characteristics
+        .iter()
+        .zip(&d.after.characteristics)
+    {
+        assert!(
+            a.rms_relative < 0.02 && a.rms_relative < b.rms_relative,
+            "{}: {} → {}",
+            a.label,
+            b.rms_relative,
+            a.rms_relative
+        );
     }
     assert!(matches!(d.effects[0], Effect::Spring { .. }));
 }
@@ -102,7 +160,17 @@ fn with_support(mut m: Model) -> Model {
 #[test]
 fn an_unmodelled_support_under_the_table_is_found_and_the_refit_reaches_the_noise_floor() {
     let truth = with_support(load_model("fwd32j.toml"));
-    let case = fit("fwd32j.toml", "fwd32j.toml", &measure(&truth, 0.01, std::env::var("IDENT_SUPPORT_SEED").map(|v| v.parse().unwrap()).unwrap_or(11)));
+    let case = fit(
+        "fwd32j.toml",
+        "fwd32j.toml",
+        &measure(
+            &truth,
+            0.01,
+            std::env::var("IDENT_SUPPORT_SEED")
+                .map(|v| v.parse().unwrap())
+                .unwrap_or(11),
+        ),
+    );
     let d = run(&case);
     assert!(!d.before.explained);
     // One effect: a vertical spring from the ground, to the table or to a saddle it rests on (the
@@ -113,13 +181,32 @@ fn an_unmodelled_support_under_the_table_is_found_and_the_refit_reaches_the_nois
     // (`IDENT_SUPPORT_SEED=N`).
     assert_eq!(d.accepted.len(), 1, "{}", diagnose::text(&d));
     let a = &d.accepted[0];
-    let host_ok = ["spring ground–table", "spring ground–lower saddle", "spring ground–upper saddle"].iter().any(|h| a.effect.starts_with(h));
-    assert!(host_ok && a.effect.contains("along (0.000, 0.000, 1.000)"), "{}", a.effect);
+    let host_ok = [
+        "spring ground–table",
+        "spring ground–lower saddle",
+        "spring ground–upper saddle",
+    ]
+    .iter()
+    .any(|h| a.effect.starts_with(h));
+    assert!(
+        host_ok && a.effect.contains("along (0.000, 0.000, 1.000)"),
+        "{}",
+        a.effect
+    );
     if a.effect.starts_with("spring ground–table") {
         let k = &a.params[0];
-        assert!((k.value - 2.0e6).abs() < 4.0 * k.std_error, "k = {} ± {} N/m, truth 2e6", k.value, k.std_error);
+        assert!(
+            (k.value - 2.0e6).abs() < 4.0 * k.std_error,
+            "k = {} ± {} N/m, truth 2e6",
+            k.value,
+            k.std_error
+        );
     }
-    assert!(d.after.chi2_p.expect("R known") > 0.001, "after: {}", d.after.verdict);
+    assert!(
+        d.after.chi2_p.expect("R known") > 0.001,
+        "after: {}",
+        d.after.verdict
+    );
 }
 
 /// A 20 kg fixture bolted to a corner of the table: a body on a mount stiff enough to be rigid
@@ -130,7 +217,13 @@ fn with_fixture(mut m: Model, kg: f64) -> Model {
     let table = m.body_index("table").expect("table");
     let p = Vector3::new(0.55, 1.02, 0.95);
     let j = kg * 0.05f64.powi(2);
-    m.bodies.push(Body { name: "fixture".into(), mass: kg, inertia: [j; 3], position: p, rotation: Matrix3::identity() });
+    m.bodies.push(Body {
+        name: "fixture".into(),
+        mass: kg,
+        inertia: [j; 3],
+        position: p,
+        rotation: Matrix3::identity(),
+    });
     let b = m.bodies.len() - 1;
     let (kt, kr) = (1.0e11, 1.0e9);
     m.sdes.push(Sde {
@@ -139,7 +232,10 @@ fn with_fixture(mut m: Model, kg: f64) -> Model {
         bodies: [Some(table), Some(b)],
         point: p,
         rotation: Matrix3::identity(),
-        law: SdeLaw::General { k: [kt, kt, kt, kr, kr, kr], psi: [0.05; 6] },
+        law: SdeLaw::General {
+            k: [kt, kt, kt, kr, kr, kr],
+            psi: [0.05; 6],
+        },
         enabled: true,
     });
     m
@@ -157,20 +253,37 @@ fn with_flexible_table(mut m: Model, e: f64) -> Model {
     let (lx, ly, lz) = (1.25, 0.32, 0.12);
     let mass = table.mass / PIECES as f64;
     let seg = lx / PIECES as f64;
-    let inertia = [mass * (ly * ly + lz * lz) / 12.0, mass * (seg * seg + lz * lz) / 12.0, mass * (seg * seg + ly * ly) / 12.0];
+    let inertia = [
+        mass * (ly * ly + lz * lz) / 12.0,
+        mass * (seg * seg + lz * lz) / 12.0,
+        mass * (seg * seg + ly * ly) / 12.0,
+    ];
     let mut idx = Vec::new();
     for i in 0..PIECES {
         let x = (i as f64 - (PIECES as f64 - 1.0) / 2.0) * seg;
-        let body = Body { name: format!("table piece {i}"), mass, inertia, position: table.position + Vector3::new(x, 0.0, 0.0), rotation: table.rotation };
+        let body = Body {
+            name: format!("table piece {i}"),
+            mass,
+            inertia,
+            position: table.position + Vector3::new(x, 0.0, 0.0),
+            rotation: table.rotation,
+        };
         if i == PIECES / 2 {
-            m.bodies[t] = Body { name: "table".into(), ..body };
+            m.bodies[t] = Body {
+                name: "table".into(),
+                ..body
+            };
             idx.push(t);
         } else {
             m.bodies.push(body);
             idx.push(m.bodies.len() - 1);
         }
     }
-    let piece = |x: f64| -> usize { idx[(((x - table.position.x) / seg + PIECES as f64 / 2.0).floor().clamp(0.0, PIECES as f64 - 1.0)) as usize] };
+    let piece = |x: f64| -> usize {
+        idx[(((x - table.position.x) / seg + PIECES as f64 / 2.0)
+            .floor()
+            .clamp(0.0, PIECES as f64 - 1.0)) as usize]
+    };
     for s in m.sdes.iter_mut() {
         for side in 0..2 {
             if s.bodies[side] == Some(t) {
@@ -219,16 +332,41 @@ fn a_fixture_mass_on_the_table_is_found_and_the_refit_reaches_the_noise_floor() 
     assert_eq!(d.accepted.len(), 1, "{}", diagnose::text(&d));
     let first = &d.accepted[0];
     assert_eq!(first.kind, "mass", "first added: {first:?}");
-    assert!(first.effect.contains("on table") && first.effect.contains("position fitted"), "first added: {}", first.effect);
+    assert!(
+        first.effect.contains("on table") && first.effect.contains("position fitted"),
+        "first added: {}",
+        first.effect
+    );
     // The placed effect is named after the candidate corner it started from ("… near (x, y, z)
     // mm …"), whichever round accepted it (an earlier round may accept a stand-in that the
     // backward check later removes).
-    let corner: Vec<f64> = first.effect.split(" near (").nth(1).unwrap().split(") mm").next().unwrap().split(", ").map(|v| v.parse::<f64>().unwrap() / 1e3).collect();
+    let corner: Vec<f64> = first
+        .effect
+        .split(" near (")
+        .nth(1)
+        .unwrap()
+        .split(") mm")
+        .next()
+        .unwrap()
+        .split(", ")
+        .map(|v| v.parse::<f64>().unwrap() / 1e3)
+        .collect();
     let truth = [20.0, 0.55 - corner[0], 1.02 - corner[1], 0.95 - corner[2]];
     for (p, t) in first.params.iter().zip(truth) {
-        assert!((p.value - t).abs() < 3.0 * p.std_error, "{} = {} ± {} {}, truth {t}", p.name, p.value, p.std_error, p.unit);
+        assert!(
+            (p.value - t).abs() < 3.0 * p.std_error,
+            "{} = {} ± {} {}, truth {t}",
+            p.name,
+            p.value,
+            p.std_error,
+            p.unit
+        );
     }
-    assert!(d.after.chi2_p.expect("R known") > 0.001, "after: {}", d.after.verdict);
+    assert!(
+        d.after.chi2_p.expect("R known") > 0.001,
+        "after: {}",
+        d.after.verdict
+    );
     for a in &d.after.characteristics {
         assert!(a.rms_relative < 0.02, "{}: {}", a.label, a.rms_relative);
     }
@@ -249,16 +387,32 @@ fn a_body_split_at_vanishing_compliance_is_the_rigid_body() {
             identify::diagnose::effects::split_body(&mut split, "table", axis, c).unwrap();
             assert_eq!(split.bodies.len(), m.bodies.len() + 2);
             let r = frf::response(&split, &freqs, &[], Method::Direct).unwrap();
-            rigid.values.iter().zip(&r.values).map(|(a, b)| (a - b).norm() / a.norm()).fold(0.0, f64::max)
+            rigid
+                .values
+                .iter()
+                .zip(&r.values)
+                .map(|(a, b)| (a - b).norm() / a.norm())
+                .fold(0.0, f64::max)
         };
         // (Far stiffer joints only add round-off: the LU then mixes 1e17 N/m with ω²m.)
         let (d11, d12, d13) = (diff(1e-12), diff(1e-13), diff(1e-14));
-        assert!(d12 < d11 / 5.0 && d13 < d12 / 5.0 && d13 < 1e-3, "axis {axis}: {d11:e}, {d12:e}, {d13:e} at 1e-12, 1e-13, 1e-14 m/N");
+        assert!(
+            d12 < d11 / 5.0 && d13 < d12 / 5.0 && d13 < 1e-3,
+            "axis {axis}: {d11:e}, {d12:e}, {d13:e} at 1e-12, 1e-13, 1e-14 m/N"
+        );
         let mut soft = m.clone();
         identify::diagnose::effects::split_body(&mut soft, "table", axis, 1e-8).unwrap();
         let r = frf::response(&soft, &freqs, &[], Method::Direct).unwrap();
-        let change = rigid.values.iter().zip(&r.values).map(|(a, b)| (a - b).norm() / a.norm()).fold(0.0, f64::max);
-        assert!(change > 1e-3, "axis {axis}: a 10 nm/N joint should show, max change {change}");
+        let change = rigid
+            .values
+            .iter()
+            .zip(&r.values)
+            .map(|(a, b)| (a - b).norm() / a.norm())
+            .fold(0.0, f64::max);
+        assert!(
+            change > 1e-3,
+            "axis {axis}: a 10 nm/N joint should show, max change {change}"
+        );
     }
 }
 
@@ -266,13 +420,28 @@ fn a_body_split_at_vanishing_compliance_is_the_rigid_body() {
 /// is 8 seeds; `IDENT_FALSE_ALARM_SEEDS=100` measures the rate over more.
 #[test]
 fn data_without_an_undeclared_effect_gets_nothing_added() {
-    let seeds: u64 = std::env::var("IDENT_FALSE_ALARM_SEEDS").ok().and_then(|v| v.parse().ok()).unwrap_or(8);
+    let seeds: u64 = std::env::var("IDENT_FALSE_ALARM_SEEDS")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(8);
     let truth = load_model("fwd32j.toml");
     let opts = diagnose::Options::default();
     let mut alarms = 0;
     for seed in 0..seeds {
-        let case = fit("fwd32j.toml", "fwd32j.toml", &measure(&truth, 0.01, 1000 + seed));
-        let d = diagnose(&case.model, &case.obs, &case.vars, &case.id, &opts, &mut |_| {}).expect("diagnosis");
+        let case = fit(
+            "fwd32j.toml",
+            "fwd32j.toml",
+            &measure(&truth, 0.01, 1000 + seed),
+        );
+        let d = diagnose(
+            &case.model,
+            &case.obs,
+            &case.vars,
+            &case.id,
+            &opts,
+            &mut |_| {},
+        )
+        .expect("diagnosis");
         if !d.accepted.is_empty() {
             alarms += 1;
             println!("seed {seed}: added {}", d.accepted[0].effect);
@@ -281,7 +450,11 @@ fn data_without_an_undeclared_effect_gets_nothing_added() {
     println!("false alarms: {alarms} of {seeds} at α = {}", opts.alpha);
     // Binomial(seeds, α): more than this has probability < 0.5 %.
     let allowed = 1 + (seeds as f64 * opts.alpha * 3.0).ceil() as usize;
-    assert!(alarms <= allowed, "{alarms} false alarms in {seeds} data sets at α = {}", opts.alpha);
+    assert!(
+        alarms <= allowed,
+        "{alarms} false alarms in {seeds} data sets at α = {}",
+        opts.alpha
+    );
 }
 
 /// A table that is not rigid: a stiff ribbed table (five-RFE beam, E = 1.2e12 Pa equivalent)
@@ -293,7 +466,17 @@ fn a_table_that_is_not_rigid_is_found_and_the_refit_reaches_the_noise_floor() {
     let d = run(&case);
     assert!(!d.before.explained);
     let first = &d.rounds[0].ranked[0];
-    assert_eq!(first.effect, "table not rigid: three RFEs along its principal axis 1", "{first:?}");
-    assert_eq!(d.accepted.first().map(|a| a.effect.as_str()), Some(first.effect.as_str()));
-    assert!(d.after.chi2_p.expect("R known") > 0.001, "after: {}", d.after.verdict);
+    assert_eq!(
+        first.effect, "table not rigid: three RFEs along its principal axis 1",
+        "{first:?}"
+    );
+    assert_eq!(
+        d.accepted.first().map(|a| a.effect.as_str()),
+        Some(first.effect.as_str())
+    );
+    assert!(
+        d.after.chi2_p.expect("R known") > 0.001,
+        "after: {}",
+        d.after.verdict
+    );
 }

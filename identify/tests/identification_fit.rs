@@ -7,8 +7,8 @@
 
 use identify::frf::{self, Method};
 use identify::identification::{
-    self as idn, data, report, variables, AtBound, Criterion, FitKind, JacobianMode, NoiseChoice, NoiseSource,
-    Optimizer, Options, Settings, StopReason,
+    self as idn, data, report, variables, AtBound, Criterion, FitKind, JacobianMode, NoiseChoice,
+    NoiseSource, Optimizer, Options, Settings, StopReason,
 };
 use identify::measured::{MeasuredData, Measurement, QuantityName};
 use identify::model::Model;
@@ -51,7 +51,8 @@ fn measured(model: &Model, rel: f64, seed: u64) -> MeasuredData {
                     freqs_hz: f.clone(),
                     amplitude: noisy.iter().map(|v| v.norm()).collect(),
                     phase_rad: Some(noisy.iter().map(|v| v.arg()).collect()),
-                    variance: (rel > 0.0).then(|| q.iter().map(|v| (rel * v.norm()).powi(2)).collect()),
+                    variance: (rel > 0.0)
+                        .then(|| q.iter().map(|v| (rel * v.norm()).powi(2)).collect()),
                     coherence: (rel > 0.0).then(|| vec![g2; f.len()]),
                     averages: (rel > 0.0).then_some(n),
                 }
@@ -90,7 +91,8 @@ fn setup(rel: f64, seed: u64) -> (Model, data::Observations, variables::Variable
 fn the_criterion_jacobian_matches_finite_differences() {
     let (m, obs, vars) = setup(0.02, 1);
     for fit in [FitKind::Amplitude, FitKind::Complex] {
-        let mut c = Criterion::new(&m, &obs, &vars, fit, NoiseChoice::Variance, Method::Direct).unwrap();
+        let mut c =
+            Criterion::new(&m, &obs, &vars, fit, NoiseChoice::Variance, Method::Direct).unwrap();
         let x = vars.initial();
         let (_, ja) = c.evaluate(&x, Some(JacobianMode::Analytic)).unwrap();
         let ja = ja.unwrap();
@@ -114,23 +116,43 @@ fn the_criterion_jacobian_matches_finite_differences() {
 fn every_optimizer_recovers_exact_data() {
     let (m, obs, vars) = setup(0.0, 1);
     let xt = [2.0e7, 5.0e6, 0.5];
-    for optimizer in [Optimizer::LevenbergMarquardt, Optimizer::GaussNewton, Optimizer::Bfgs] {
+    for optimizer in [
+        Optimizer::LevenbergMarquardt,
+        Optimizer::GaussNewton,
+        Optimizer::Bfgs,
+    ] {
         for fit in [FitKind::Amplitude, FitKind::Complex] {
             let opts = Options {
                 optimizer,
                 fit,
-                settings: Settings { max_iterations: 300, ..Settings::default() },
+                settings: Settings {
+                    max_iterations: 300,
+                    ..Settings::default()
+                },
                 ..Options::default()
             };
             let mut iterations = 0;
-            let id = idn::identify(&m, &obs, &vars, &opts, &mut |_, p| iterations = p.iteration).unwrap();
-            assert!(id.stop.converged(), "{optimizer:?} {fit:?}: {}", id.stop.describe());
+            let id = idn::identify(&m, &obs, &vars, &opts, &mut |_, p| iterations = p.iteration)
+                .unwrap();
+            assert!(
+                id.stop.converged(),
+                "{optimizer:?} {fit:?}: {}",
+                id.stop.describe()
+            );
             assert_eq!(iterations, id.iterations);
             for (e, t) in id.estimate.iter().zip(xt) {
-                assert!((e / t - 1.0).abs() < 1e-5, "{optimizer:?} {fit:?}: {:?}", id.estimate);
+                assert!(
+                    (e / t - 1.0).abs() < 1e-5,
+                    "{optimizer:?} {fit:?}: {:?}",
+                    id.estimate
+                );
             }
             assert!(id.criterion < 1e-8 * id.criterion_initial);
-            assert_eq!(id.noise, NoiseSource::Relative(0.01), "no variances → relative model");
+            assert_eq!(
+                id.noise,
+                NoiseSource::Relative(0.01),
+                "no variances → relative model"
+            );
             assert!(id.rms.iter().all(|(_, r)| *r < 1e-6));
         }
     }
@@ -140,13 +162,22 @@ fn every_optimizer_recovers_exact_data() {
 fn the_finite_difference_mode_gives_the_same_estimate() {
     let (m, obs, vars) = setup(0.01, 3);
     let a = idn::identify(&m, &obs, &vars, &Options::default(), &mut |_, _| {}).unwrap();
-    let fd = Options { jacobian: JacobianMode::ForwardDifference, ..Options::default() };
+    let fd = Options {
+        jacobian: JacobianMode::ForwardDifference,
+        ..Options::default()
+    };
     let b = idn::identify(&m, &obs, &vars, &fd, &mut |_, _| {}).unwrap();
     for i in 0..3 {
         let se = a.uncertainty.std_error[i];
-        assert!((a.estimate[i] - b.estimate[i]).abs() < 1e-3 * se, "variable {i}");
+        assert!(
+            (a.estimate[i] - b.estimate[i]).abs() < 1e-3 * se,
+            "variable {i}"
+        );
     }
-    assert!(b.evaluations.model > a.evaluations.model, "finite differences cost more model evaluations");
+    assert!(
+        b.evaluations.model > a.evaluations.model,
+        "finite differences cost more model evaluations"
+    );
 }
 
 #[test]
@@ -155,7 +186,10 @@ fn noise_models_are_chosen_and_reported() {
     let auto = idn::identify(&m, &obs, &vars, &Options::default(), &mut |_, _| {}).unwrap();
     assert_eq!(auto.noise, NoiseSource::Variance);
     assert_eq!(auto.uncertainty.covariance_scale, 1.0);
-    let coh = Options { noise: NoiseChoice::Coherence, ..Options::default() };
+    let coh = Options {
+        noise: NoiseChoice::Coherence,
+        ..Options::default()
+    };
     let c = idn::identify(&m, &obs, &vars, &coh, &mut |_, _| {}).unwrap();
     assert_eq!(c.noise, NoiseSource::Coherence);
     // Coherence chosen to imply the same σ as the variances (measured |z| instead of |q|).
@@ -163,12 +197,18 @@ fn noise_models_are_chosen_and_reported() {
         let r = c.uncertainty.std_error[i] / auto.uncertainty.std_error[i];
         assert!((0.9..1.1).contains(&r), "variable {i}: ratio {r}");
     }
-    let rel = Options { noise: NoiseChoice::Relative(0.05), ..Options::default() };
+    let rel = Options {
+        noise: NoiseChoice::Relative(0.05),
+        ..Options::default()
+    };
     let r = idn::identify(&m, &obs, &vars, &rel, &mut |_, _| {}).unwrap();
     assert!(r.noise.scale_unknown());
     assert_eq!(r.uncertainty.covariance_scale, r.uncertainty.reduced_chi2);
     // Scaled by the residual variance, the errors do not depend on the assumed ε.
-    let rel2 = Options { noise: NoiseChoice::Relative(0.5), ..Options::default() };
+    let rel2 = Options {
+        noise: NoiseChoice::Relative(0.5),
+        ..Options::default()
+    };
     let r2 = idn::identify(&m, &obs, &vars, &rel2, &mut |_, _| {}).unwrap();
     for i in 0..3 {
         let q = r.uncertainty.std_error[i] / r2.uncertainty.std_error[i];
@@ -184,15 +224,29 @@ fn a_complex_fit_needs_phases() {
     d.characteristics[1].phase_rad = None;
     let obs = data::validate(&d, &m, "nophase.json").unwrap();
     let vars = variables::parse(VARS, "vars.toml", &m).unwrap();
-    let opts = Options { fit: FitKind::Complex, ..Options::default() };
-    let e = idn::identify(&m, &obs, &vars, &opts, &mut |_, _| {}).unwrap_err().to_string();
-    assert!(e.contains("nophase.json") && e.contains("second u3") && e.contains("phase_rad"), "{e}");
+    let opts = Options {
+        fit: FitKind::Complex,
+        ..Options::default()
+    };
+    let e = idn::identify(&m, &obs, &vars, &opts, &mut |_, _| {})
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("nophase.json") && e.contains("second u3") && e.contains("phase_rad"),
+        "{e}"
+    );
 }
 
 #[test]
 fn the_iteration_limit_keeps_the_best_point_and_says_so() {
     let (m, obs, vars) = setup(0.01, 4);
-    let opts = Options { settings: Settings { max_iterations: 1, ..Settings::default() }, ..Options::default() };
+    let opts = Options {
+        settings: Settings {
+            max_iterations: 1,
+            ..Settings::default()
+        },
+        ..Options::default()
+    };
     let id = idn::identify(&m, &obs, &vars, &opts, &mut |_, _| {}).unwrap();
     assert_eq!(id.stop, StopReason::IterationLimit);
     assert!(!id.stop.converged());
@@ -211,8 +265,15 @@ fn a_bound_below_the_truth_is_where_the_estimate_ends() {
         &m,
     )
     .unwrap();
-    for optimizer in [Optimizer::LevenbergMarquardt, Optimizer::GaussNewton, Optimizer::Bfgs] {
-        let opts = Options { optimizer, ..Options::default() };
+    for optimizer in [
+        Optimizer::LevenbergMarquardt,
+        Optimizer::GaussNewton,
+        Optimizer::Bfgs,
+    ] {
+        let opts = Options {
+            optimizer,
+            ..Options::default()
+        };
         let id = idn::identify(&m, &obs, &vars, &opts, &mut |_, _| {}).unwrap();
         assert!(id.stop.converged(), "{optimizer:?}: {}", id.stop.describe());
         assert_eq!(id.estimate[0], 16.0e6, "{optimizer:?}");
@@ -225,7 +286,11 @@ fn a_bound_below_the_truth_is_where_the_estimate_ends() {
 #[test]
 fn multiple_starts_are_seeded_and_find_the_minimum() {
     let (m, obs, vars) = setup(0.0, 1);
-    let opts = Options { starts: 4, seed: 9, ..Options::default() };
+    let opts = Options {
+        starts: 4,
+        seed: 9,
+        ..Options::default()
+    };
     let a = idn::identify(&m, &obs, &vars, &opts, &mut |_, _| {}).unwrap();
     let b = idn::identify(&m, &obs, &vars, &opts, &mut |_, _| {}).unwrap();
     assert_eq!(a.starts.len(), 4);
@@ -261,28 +326,53 @@ fn tied_and_scaled_variables_move_their_parameters_together() {
     .unwrap();
     let id = idn::identify(&start, &obs2, &vars2, &Options::default(), &mut |_, _| {}).unwrap();
     assert!(id.stop.converged());
-    assert!((id.estimate[0] / 2.0e7 - 1.0).abs() < 1e-6, "{:?}", id.estimate);
-    assert!((id.estimate[1] * 0.3 / 0.5 - 1.0).abs() < 1e-6, "{:?}", id.estimate);
-    let k2 = id.model.param(identify::ParamRef { sde: 1, name: identify::ParamName::K }).unwrap();
+    assert!(
+        (id.estimate[0] / 2.0e7 - 1.0).abs() < 1e-6,
+        "{:?}",
+        id.estimate
+    );
+    assert!(
+        (id.estimate[1] * 0.3 / 0.5 - 1.0).abs() < 1e-6,
+        "{:?}",
+        id.estimate
+    );
+    let k2 = id
+        .model
+        .param(identify::ParamRef {
+            sde: 1,
+            name: identify::ParamName::K,
+        })
+        .unwrap();
     assert!((k2 / 5.0e6 - 1.0).abs() < 1e-6);
     let _ = obs;
 }
 
 #[test]
 fn the_updated_model_is_written_back_into_the_toml_text() {
-    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../configs/models/textbook-two-mass.toml");
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../configs/models/textbook-two-mass.toml");
     let text = std::fs::read_to_string(&path).unwrap();
-    let m = identify::modelfile::parse_toml(&text, "two-mass.toml").unwrap().model;
+    let m = identify::modelfile::parse_toml(&text, "two-mass.toml")
+        .unwrap()
+        .model;
     let d = measured(&m, 0.0, 1);
     // Start away from the file's values and fit back to them.
     let mut start = m.clone();
-    start.set_param(identify::ParamRef { sde: 0, name: identify::ParamName::K }, 1.4e7);
+    start.set_param(
+        identify::ParamRef {
+            sde: 0,
+            name: identify::ParamName::K,
+        },
+        1.4e7,
+    );
     let obs = data::validate(&d, &start, "textbook").unwrap();
     let vars = variables::parse(VARS, "vars.toml", &start).unwrap();
     let id = idn::identify(&start, &obs, &vars, &Options::default(), &mut |_, _| {}).unwrap();
     let out = report::update_toml(&text, "two-mass.toml", &id).unwrap();
     assert!(out.contains("# Textbook case"), "comments are kept");
-    let back = identify::modelfile::parse_toml(&out, "out.toml").unwrap().model;
+    let back = identify::modelfile::parse_toml(&out, "out.toml")
+        .unwrap()
+        .model;
     for v in &vars.vars {
         for t in &v.targets {
             let a = back.param(t.param).unwrap();
@@ -292,7 +382,9 @@ fn the_updated_model_is_written_back_into_the_toml_text() {
     }
     // The resolved JSON of the updated model loads back to the same stiffnesses.
     let json = serde_json::to_string(&identify::contract::to_json(&id.model)).unwrap();
-    let j = identify::modelfile::parse_json(&json, "model.json").unwrap().model;
+    let j = identify::modelfile::parse_json(&json, "model.json")
+        .unwrap()
+        .model;
     assert_eq!(j.sdes[0].law.stiffness(), id.model.sdes[0].law.stiffness());
     // The table in JSON and CSV.
     let rj = serde_json::to_value(report::json(&id)).unwrap();
@@ -314,6 +406,8 @@ fn more_variables_than_observations_is_an_error() {
     }
     let obs = data::validate(&d, &m, "short.json").unwrap();
     let vars = variables::parse(VARS, "vars.toml", &m).unwrap();
-    let e = idn::identify(&m, &obs, &vars, &Options::default(), &mut |_, _| {}).unwrap_err().to_string();
+    let e = idn::identify(&m, &obs, &vars, &Options::default(), &mut |_, _| {})
+        .unwrap_err()
+        .to_string();
     assert!(e.contains("3 variables but only 2 observations"), "{e}");
 }

@@ -22,7 +22,12 @@ fn root() -> PathBuf {
 fn load_model(name: &str) -> Model {
     let p = root().join("configs/models").join(name);
     identify::modelfile::load(&p)
-        .unwrap_or_else(|e| panic!("the FWD-32J model {} is needed by this test: {e}", p.display()))
+        .unwrap_or_else(|e| {
+            panic!(
+                "the FWD-32J model {} is needed by this test: {e}",
+                p.display()
+            )
+        })
         .model
 }
 
@@ -30,16 +35,22 @@ fn load_model(name: &str) -> Model {
 /// 20-400 Hz per characteristic, multiplicative Gaussian noise of relative σ `rel`, variances
 /// stated.
 fn synthetic(truth: &Model, rel: f64, rng: &mut StdRng) -> MeasuredData {
-    idn::synthetic::amplitude_data(truth, &idn::synthetic::fwd32j_lines(), rel, || StandardNormal.sample(&mut *rng))
-        .expect("truth model solves")
+    idn::synthetic::amplitude_data(truth, &idn::synthetic::fwd32j_lines(), rel, || {
+        StandardNormal.sample(&mut *rng)
+    })
+    .expect("truth model solves")
 }
 
 fn vars_for(model: &Model) -> variables::Variables {
-    variables::load(&root().join("configs/identification/fwd32j.toml"), model).expect("variables file loads")
+    variables::load(&root().join("configs/identification/fwd32j.toml"), model)
+        .expect("variables file loads")
 }
 
 fn truth_values(truth: &Model, vars: &variables::Variables) -> Vec<f64> {
-    vars.vars.iter().map(|v| truth.param(v.targets[0].param).unwrap() / v.targets[0].ratio).collect()
+    vars.vars
+        .iter()
+        .map(|v| truth.param(v.targets[0].param).unwrap() / v.targets[0].ratio)
+        .collect()
 }
 
 #[test]
@@ -47,7 +58,10 @@ fn fwd32j_synthetic_recovery_from_the_initial_values() {
     let truth = load_model("fwd32j.toml");
     let initial = load_model("fwd32j-initial.toml");
     assert_eq!(truth.outputs.len(), 3);
-    assert!(truth.outputs.iter().all(|c| truth.bodies[c.body].name == "table" && c.dof < 3));
+    assert!(truth
+        .outputs
+        .iter()
+        .all(|c| truth.bodies[c.body].name == "table" && c.dof < 3));
     let mut rng = StdRng::seed_from_u64(32);
     let d = synthetic(&truth, 0.01, &mut rng);
     let obs = data::validate(&d, &initial, "synthetic").unwrap();
@@ -55,14 +69,25 @@ fn fwd32j_synthetic_recovery_from_the_initial_values() {
     let vars = vars_for(&initial);
     assert_eq!(vars.len(), 20);
     let xt = truth_values(&truth, &vars);
-    let opts = Options { settings: Settings { max_iterations: 200, ..Settings::default() }, ..Options::default() };
+    let opts = Options {
+        settings: Settings {
+            max_iterations: 200,
+            ..Settings::default()
+        },
+        ..Options::default()
+    };
     let mut lines = Vec::new();
     let id = idn::identify(&initial, &obs, &vars, &opts, &mut |_, p| lines.push(*p)).unwrap();
     let report = idn::report::text(&id);
     println!("{report}");
-    let mut crit = idn::Criterion::new(&initial, &obs, &vars, opts.fit, opts.noise, opts.frf_method).unwrap();
+    let mut crit =
+        idn::Criterion::new(&initial, &obs, &vars, opts.fit, opts.noise, opts.frf_method).unwrap();
     let (et, _) = crit.evaluate(&xt, None).unwrap();
-    println!("J at the truth {:.3}, at the estimate {:.3}", 0.5 * et.norm_squared(), id.criterion);
+    println!(
+        "J at the truth {:.3}, at the estimate {:.3}",
+        0.5 * et.norm_squared(),
+        id.criterion
+    );
     println!("truth vs identified:");
     for (i, v) in vars.vars.iter().enumerate() {
         let f = v.unit.factor;
@@ -77,32 +102,54 @@ fn fwd32j_synthetic_recovery_from_the_initial_values() {
         );
     }
     assert!(id.stop.converged(), "{}", id.stop.describe());
-    assert_eq!(lines.len(), id.iterations, "one progress line per iteration");
+    assert_eq!(
+        lines.len(),
+        id.iterations,
+        "one progress line per iteration"
+    );
     assert!(id.criterion < id.criterion_initial);
     for (i, v) in vars.vars.iter().enumerate() {
         let se = id.uncertainty.std_error[i];
         let dev = (id.estimate[i] - xt[i]).abs();
         assert!(se.is_finite() && se > 0.0, "{}: std error {se}", v.name);
-        assert!(dev <= 3.0 * se, "{}: |identified − truth| = {:.3} se", v.name, dev / se);
+        assert!(
+            dev <= 3.0 * se,
+            "{}: |identified − truth| = {:.3} se",
+            v.name,
+            dev / se
+        );
     }
     let i6 = vars.vars.iter().position(|v| v.sdes == "6").unwrap();
     assert_eq!(id.estimate[i6], 0.0, "SDE 6 ends at its lower bound 0");
     assert_eq!(id.uncertainty.at_bound[i6], Some(idn::AtBound::Lower));
     // The fit is consistent with the stated noise.
-    assert!((0.6..1.5).contains(&id.uncertainty.reduced_chi2), "reduced chi2 {}", id.uncertainty.reduced_chi2);
+    assert!(
+        (0.6..1.5).contains(&id.uncertainty.reduced_chi2),
+        "reduced chi2 {}",
+        id.uncertainty.reduced_chi2
+    );
     // The updated model written back into fwd32j-initial.toml's text (units kept) loads to the
     // estimates.
     let path = root().join("configs/models/fwd32j-initial.toml");
     let text = std::fs::read_to_string(&path).unwrap();
     let out = idn::report::update_toml(&text, "fwd32j-initial.toml", &id).unwrap();
-    assert!(out.contains("# THIS FILE: the INITIAL values"), "comments kept");
+    assert!(
+        out.contains("# THIS FILE: the INITIAL values"),
+        "comments kept"
+    );
     assert!(out.contains("MPa/um\""), "contact stiffness keeps its unit");
-    let back = identify::modelfile::parse_toml(&out, "updated.toml").unwrap().model;
+    let back = identify::modelfile::parse_toml(&out, "updated.toml")
+        .unwrap()
+        .model;
     for (i, v) in vars.vars.iter().enumerate() {
         for t in &v.targets {
             let a = back.param(t.param).unwrap();
             let b = t.ratio * id.estimate[i];
-            assert!((a - b).abs() <= 1e-9 * b.abs().max(v.scale), "{}: {a} vs {b}", v.name);
+            assert!(
+                (a - b).abs() <= 1e-9 * b.abs().max(v.scale),
+                "{}: {a} vs {b}",
+                v.name
+            );
         }
     }
 }
@@ -128,8 +175,14 @@ fn fwd32j_cramer_rao_errors_are_calibrated() {
         v.initial = *x;
     }
     let u0 = idn::uncertainty_at(&truth, &obs0, &at_truth, &Options::default()).unwrap();
-    let well: Vec<usize> = (0..vars.len()).filter(|&i| xt_all[i] > 0.0 && u0.variability[i] < 0.15).collect();
-    assert!(well.len() >= 12, "expected most kn and the group psi to be well identified, got {}", well.len());
+    let well: Vec<usize> = (0..vars.len())
+        .filter(|&i| xt_all[i] > 0.0 && u0.variability[i] < 0.15)
+        .collect();
+    assert!(
+        well.len() >= 12,
+        "expected most kn and the group psi to be well identified, got {}",
+        well.len()
+    );
     let mut vt = at_truth.clone();
     vt.vars = well.iter().map(|&i| at_truth.vars[i].clone()).collect();
     for v in &mut vt.vars {
@@ -138,7 +191,10 @@ fn fwd32j_cramer_rao_errors_are_calibrated() {
     let xt: Vec<f64> = well.iter().map(|&i| xt_all[i]).collect();
     let opts = Options {
         optimizer: Optimizer::GaussNewton,
-        settings: Settings { max_iterations: 10, ..Settings::default() },
+        settings: Settings {
+            max_iterations: 10,
+            ..Settings::default()
+        },
         ..Options::default()
     };
     let runs = 200;
@@ -160,13 +216,23 @@ fn fwd32j_cramer_rao_errors_are_calibrated() {
     }
     for i in 0..vt.len() {
         let c = inside[i] as f64 / runs as f64;
-        println!("{:<20} variability {:.3}  coverage {:.3}", vt.vars[i].name, u0.variability[well[i]], c);
-        assert!((0.89..=0.995).contains(&c), "{}: coverage {c}", vt.vars[i].name);
+        println!(
+            "{:<20} variability {:.3}  coverage {:.3}",
+            vt.vars[i].name, u0.variability[well[i]], c
+        );
+        assert!(
+            (0.89..=0.995).contains(&c),
+            "{}: coverage {c}",
+            vt.vars[i].name
+        );
     }
     let pooled = inside.iter().sum::<usize>() as f64 / (runs * vt.len()) as f64;
     println!("pooled coverage over {} variables × {runs} runs: {pooled:.4}; not converged: {not_converged}", vt.len());
     assert!((0.92..=0.98).contains(&pooled), "pooled coverage {pooled}");
-    assert!(not_converged <= runs / 50, "{not_converged} of {runs} fits did not converge");
+    assert!(
+        not_converged <= runs / 50,
+        "{not_converged} of {runs} fits did not converge"
+    );
 }
 
 /// The paper's finding: one ψn for the whole slideway group is well determined, the ψn of the
@@ -180,14 +246,24 @@ fn fwd32j_group_damping_is_identifiable_individual_joint_damping_is_not() {
     let opts = Options::default();
     let group = vars_for(&truth);
     let ug = idn::uncertainty_at(&truth, &obs, &group, &opts).unwrap();
-    let gi = group.vars.iter().position(|v| v.name == "slideway psi_n").unwrap();
+    let gi = group
+        .vars
+        .iter()
+        .position(|v| v.name == "slideway psi_n")
+        .unwrap();
     // The same problem with one ψn per slideway SDE instead of the group.
     let text = std::fs::read_to_string(root().join("configs/identification/fwd32j.toml")).unwrap();
-    let head = text.split("# --- slideway dissipation groups ---").next().unwrap().to_string();
+    let head = text
+        .split("# --- slideway dissipation groups ---")
+        .next()
+        .unwrap()
+        .to_string();
     let tail = text.split("name = \"slideway psi_t\"").nth(1).unwrap();
     let mut individual = head;
     for s in (2..=11).chain(13..=21).chain(23..=28) {
-        individual.push_str(&format!("[[variable]]\nsdes = \"{s}\"\nparameter = \"psi_n\"\n\n"));
+        individual.push_str(&format!(
+            "[[variable]]\nsdes = \"{s}\"\nparameter = \"psi_n\"\n\n"
+        ));
     }
     individual.push_str("[[variable]]\nname = \"slideway psi_t\"");
     individual.push_str(tail);
@@ -204,10 +280,27 @@ fn fwd32j_group_damping_is_identifiable_individual_joint_damping_is_not() {
     for (n, v) in &psi {
         println!("  {n}: {v:.3}");
     }
-    assert!(ug.variability[gi] < 0.05, "group ψn variability {}", ug.variability[gi]);
-    let poor = psi.iter().filter(|(_, v)| !v.is_finite() || *v > 0.5).count();
-    assert!(poor * 2 >= psi.len(), "only {poor} of {} individual ψn have variability > 0.5", psi.len());
+    assert!(
+        ug.variability[gi] < 0.05,
+        "group ψn variability {}",
+        ug.variability[gi]
+    );
+    let poor = psi
+        .iter()
+        .filter(|(_, v)| !v.is_finite() || *v > 0.5)
+        .count();
+    assert!(
+        poor * 2 >= psi.len(),
+        "only {poor} of {} individual ψn have variability > 0.5",
+        psi.len()
+    );
     let best = psi.iter().map(|(_, v)| *v).fold(f64::INFINITY, f64::min);
-    assert!(best > 2.0 * ug.variability[gi], "best individual ψn variability {best}");
-    assert!(!ui.weak.is_empty(), "the individual-ψ problem reports weak directions");
+    assert!(
+        best > 2.0 * ug.variability[gi],
+        "best individual ψn variability {best}"
+    );
+    assert!(
+        !ui.weak.is_empty(),
+        "the individual-ψ problem reports weak directions"
+    );
 }

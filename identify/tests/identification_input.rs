@@ -71,16 +71,29 @@ fn csv_err(text: &str) -> String {
 #[test]
 fn csv_errors_name_the_line() {
     let e = csv_err("body,dof,freq_hz,amplitude\nfirst,u3,10,1e-7\nfirst,u3,10,2e-7\n");
-    assert!(e.starts_with("bad.csv:3:") && e.contains("repeats line 2"), "{e}");
+    assert!(
+        e.starts_with("bad.csv:3:") && e.contains("repeats line 2"),
+        "{e}"
+    );
     let e = csv_err("body,dof,freq_hz,amplitude\nfirst,u3,ten,1e-7\n");
-    assert!(e.starts_with("bad.csv:2:") && e.contains("\"ten\" is not a number"), "{e}");
+    assert!(
+        e.starts_with("bad.csv:2:") && e.contains("\"ten\" is not a number"),
+        "{e}"
+    );
     let e = csv_err("body,dof,freq_hz,amp\n");
-    assert!(e.starts_with("bad.csv:1:") && e.contains("unknown column \"amp\""), "{e}");
+    assert!(
+        e.starts_with("bad.csv:1:") && e.contains("unknown column \"amp\""),
+        "{e}"
+    );
     let e = csv_err("body,dof,freq_hz\n");
     assert!(e.contains("missing column \"amplitude\""), "{e}");
     let e = csv_err("body,dof,freq_hz,amplitude\nfirst,u7,10,1e-7\n");
-    assert!(e.starts_with("bad.csv:2:") && e.contains("unknown dof \"u7\""), "{e}");
-    let e = csv_err("body,dof,freq_hz,amplitude,variance\nfirst,u3,10,1e-7,1e-17\nfirst,u3,20,1e-7,\n");
+    assert!(
+        e.starts_with("bad.csv:2:") && e.contains("unknown dof \"u7\""),
+        "{e}"
+    );
+    let e =
+        csv_err("body,dof,freq_hz,amplitude,variance\nfirst,u3,10,1e-7,1e-17\nfirst,u3,20,1e-7,\n");
     assert!(e.starts_with("bad.csv:3:") && e.contains("variance"), "{e}");
     let e = csv_err("body,dof,freq_hz,amplitude\nfirst,u3,10\n");
     assert!(e.starts_with("bad.csv:2:") && e.contains("3 cells"), "{e}");
@@ -89,25 +102,53 @@ fn csv_errors_name_the_line() {
 fn invalid(edit: impl Fn(&mut MeasuredData)) -> String {
     let mut d = sample();
     edit(&mut d);
-    data::validate(&d, &model(), "data.json").unwrap_err().to_string()
+    data::validate(&d, &model(), "data.json")
+        .unwrap_err()
+        .to_string()
 }
 
 #[test]
 fn invalid_data_is_named_by_file_characteristic_and_point() {
     let e = invalid(|d| d.characteristics[0].amplitude[1] = f64::NAN);
-    assert!(e.contains("data.json") && e.contains("$.characteristics[0] (first u3 displacement), point 1 (20 Hz)") && e.contains("NaN"), "{e}");
+    assert!(
+        e.contains("data.json")
+            && e.contains("$.characteristics[0] (first u3 displacement), point 1 (20 Hz)")
+            && e.contains("NaN"),
+        "{e}"
+    );
     let e = invalid(|d| d.characteristics[1].amplitude[0] = -1e-7);
-    assert!(e.contains("characteristics[1]") && e.contains("negative"), "{e}");
+    assert!(
+        e.contains("characteristics[1]") && e.contains("negative"),
+        "{e}"
+    );
     let e = invalid(|d| d.characteristics[0].freqs_hz[1] = 10.0);
-    assert!(e.contains("point 1") && e.contains("repeats point 0"), "{e}");
+    assert!(
+        e.contains("point 1") && e.contains("repeats point 0"),
+        "{e}"
+    );
     let e = invalid(|d| d.characteristics[0].freqs_hz[2] = 15.0);
     assert!(e.contains("point 2") && e.contains("must increase"), "{e}");
     let e = invalid(|d| d.characteristics[0].body = "tabel".into());
-    assert!(e.contains("unknown body \"tabel\"") && e.contains("first, second"), "{e}");
+    assert!(
+        e.contains("unknown body \"tabel\"") && e.contains("first, second"),
+        "{e}"
+    );
     let e = invalid(|d| d.characteristics[0].dof = 0);
-    assert!(e.contains("not among the model's outputs") && e.contains("first u3 displacement"), "{e}");
-    let e = invalid(|d| d.characteristics[0].amplitude.pop().map(|_| ()).unwrap_or(()));
-    assert!(e.contains("amplitude has 2 values but freqs_hz has 3"), "{e}");
+    assert!(
+        e.contains("not among the model's outputs") && e.contains("first u3 displacement"),
+        "{e}"
+    );
+    let e = invalid(|d| {
+        d.characteristics[0]
+            .amplitude
+            .pop()
+            .map(|_| ())
+            .unwrap_or(())
+    });
+    assert!(
+        e.contains("amplitude has 2 values but freqs_hz has 3"),
+        "{e}"
+    );
     let e = invalid(|d| d.characteristics[1].coherence = Some(vec![0.9, 1.5]));
     assert!(e.contains("coherence 1.5"), "{e}");
     let e = invalid(|d| d.characteristics[0].variance = Some(vec![1e-17, 0.0, 1e-17]));
@@ -116,14 +157,22 @@ fn invalid_data_is_named_by_file_characteristic_and_point() {
         let c = d.characteristics[0].clone();
         d.characteristics.push(c)
     });
-    assert!(e.contains("characteristics[2]") && e.contains("appears twice"), "{e}");
+    assert!(
+        e.contains("characteristics[2]") && e.contains("appears twice"),
+        "{e}"
+    );
     let e = invalid(|d| d.characteristics[0].averages = Some(0));
     assert!(e.contains("averages is 0"), "{e}");
 }
 
 #[test]
 fn json_errors_give_the_path() {
-    let e = data::parse_json(r#"{"characteristics": [{"body": "first", "dof": "x"}]}"#, "d.json").unwrap_err().to_string();
+    let e = data::parse_json(
+        r#"{"characteristics": [{"body": "first", "dof": "x"}]}"#,
+        "d.json",
+    )
+    .unwrap_err()
+    .to_string();
     assert!(e.starts_with("d.json: at $.characteristics[0].dof"), "{e}");
 }
 
@@ -158,34 +207,65 @@ proptest! {
 }
 
 fn vars_err(text: &str) -> String {
-    variables::parse(text, "vars.toml", &model()).unwrap_err().to_string()
+    variables::parse(text, "vars.toml", &model())
+        .unwrap_err()
+        .to_string()
 }
 
 #[test]
 fn variables_file_errors_are_located_and_explained() {
     let e = vars_err("[[variable]]\nsdes = \"k3\"\nparameter = \"k\"\n");
-    assert!(e.starts_with("vars.toml:2:") && e.contains("unknown SDE \"k3\"") && e.contains("k1, k2"), "{e}");
+    assert!(
+        e.starts_with("vars.toml:2:") && e.contains("unknown SDE \"k3\"") && e.contains("k1, k2"),
+        "{e}"
+    );
     let e = vars_err("[[variable]]\nsdes = \"k1\"\nparameter = \"kk\"\n");
-    assert!(e.starts_with("vars.toml:3:") && e.contains("unknown parameter \"kk\""), "{e}");
+    assert!(
+        e.starts_with("vars.toml:3:") && e.contains("unknown parameter \"kk\""),
+        "{e}"
+    );
     let e = vars_err("[[variable]]\nsdes = \"k1\"\nparameter = \"kn\"\n");
-    assert!(e.contains("SDE \"k1\" (spring) has no parameter \"kn\"; its parameters: k, psi"), "{e}");
+    assert!(
+        e.contains("SDE \"k1\" (spring) has no parameter \"kn\"; its parameters: k, psi"),
+        "{e}"
+    );
     let e = vars_err("[[variable]]\nsdes = \"k1\"\nparameter = \"k\"\nlower = \"-1 N/um\"\n");
-    assert!(e.starts_with("vars.toml:4:") && e.contains("outside the physical range"), "{e}");
+    assert!(
+        e.starts_with("vars.toml:4:") && e.contains("outside the physical range"),
+        "{e}"
+    );
     let e = vars_err("[[variable]]\nsdes = \"k1\"\nparameter = \"k\"\ninitial = \"30 N/um\"\nupper = \"25 N/um\"\n");
-    assert!(e.starts_with("vars.toml:4:") && e.contains("outside the bounds"), "{e}");
+    assert!(
+        e.starts_with("vars.toml:4:") && e.contains("outside the bounds"),
+        "{e}"
+    );
     let e = vars_err("[[variable]]\nsdes = \"k1\"\nparameter = \"k\"\ninitial = \"3 m\"\n");
     assert!(e.contains("initial") && e.contains("stiffness"), "{e}");
     let e = vars_err("[[variable]]\nsdes = \"k1\"\nparameter = \"k\"\n[[variable]]\nsdes = [\"k2\", \"k1\"]\nparameter = \"k\"\n");
-    assert!(e.starts_with("vars.toml:5:") && e.contains("already set by variable \"k k1\""), "{e}");
+    assert!(
+        e.starts_with("vars.toml:5:") && e.contains("already set by variable \"k k1\""),
+        "{e}"
+    );
     let e = vars_err("[[variable]]\nsdes = \"k1\"\nparameter = \"k\"\nbogus = 1\n");
-    assert!(e.starts_with("vars.toml:4:") && e.contains("unknown field"), "{e}");
+    assert!(
+        e.starts_with("vars.toml:4:") && e.contains("unknown field"),
+        "{e}"
+    );
     let e = vars_err("[[variable]]\nsdes = [\"k1\", \"guide 1\"]\nparameter = \"psi\"\n");
-    assert!(e.contains("\"guide 1\" (general) has no parameter \"psi\""), "{e}");
+    assert!(
+        e.contains("\"guide 1\" (general) has no parameter \"psi\""),
+        "{e}"
+    );
     let e = vars_err("[[variable]]\nsdes = \"k1\"\nparameter = \"k\"\ninitial = 0\n");
     assert!(e.contains("no natural scale"), "{e}");
     let e = vars_err("[[variable]]\nsdes = \"k1, k2\"\nparameter = \"k\"\n");
-    assert!(e.contains("values of these SDEs differ") && e.contains("give `initial`"), "{e}");
-    let e = vars_err("[[variable]]\nsdes = \"k1, k2\"\nparameter = \"k\"\nratios = [1.0]\ninitial = 1e6\n");
+    assert!(
+        e.contains("values of these SDEs differ") && e.contains("give `initial`"),
+        "{e}"
+    );
+    let e = vars_err(
+        "[[variable]]\nsdes = \"k1, k2\"\nparameter = \"k\"\nratios = [1.0]\ninitial = 1e6\n",
+    );
     assert!(e.contains("1 ratios for 2 SDEs"), "{e}");
     let e = vars_err("");
     assert!(e.contains("no [[variable]]"), "{e}");
@@ -194,7 +274,9 @@ fn variables_file_errors_are_located_and_explained() {
 #[test]
 fn the_fwd32j_variables_file_has_the_papers_twenty_variables() {
     let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
-    let m = identify::modelfile::load(&root.join("configs/models/fwd32j-initial.toml")).unwrap().model;
+    let m = identify::modelfile::load(&root.join("configs/models/fwd32j-initial.toml"))
+        .unwrap()
+        .model;
     let v = variables::load(&root.join("configs/identification/fwd32j.toml"), &m).unwrap();
     assert_eq!(v.len(), 20);
     let by = |n: &str| v.vars.iter().find(|x| x.name == n).unwrap();
@@ -204,11 +286,18 @@ fn the_fwd32j_variables_file_has_the_papers_twenty_variables() {
     assert_eq!(by("kn 2").unit.symbol, "MPa/um");
     assert_eq!(by("kn 2").initial, 0.05e12);
     assert_eq!(by("k 34").initial, 0.5e6);
-    assert!(v.vars.iter().all(|x| x.lower == 0.0 && x.upper.is_infinite()));
+    assert!(v
+        .vars
+        .iter()
+        .all(|x| x.lower == 0.0 && x.upper.is_infinite()));
     // The initial values are the model's (fwd32j-initial.toml).
     for x in &v.vars {
         for t in &x.targets {
-            assert!((m.param(t.param).unwrap() / (t.ratio * x.initial) - 1.0).abs() < 1e-12, "{}", x.name);
+            assert!(
+                (m.param(t.param).unwrap() / (t.ratio * x.initial) - 1.0).abs() < 1e-12,
+                "{}",
+                x.name
+            );
         }
     }
 }

@@ -93,7 +93,10 @@ fn resolved_json_round_trips_exactly() {
     let model = parse_toml(TWO_MASS, "two.toml").unwrap().model;
     let json = serde_json::to_string_pretty(&to_json(&model)).unwrap();
     let again = parse_json(&json, "two.json").unwrap().model;
-    assert_eq!(serde_json::to_string_pretty(&to_json(&again)).unwrap(), json);
+    assert_eq!(
+        serde_json::to_string_pretty(&to_json(&again)).unwrap(),
+        json
+    );
     let freqs = [3.0, 30.0, 300.0];
     let a = response(&model, &freqs, &[], Method::Direct).unwrap();
     let b = response(&again, &freqs, &[], Method::Direct).unwrap();
@@ -101,9 +104,18 @@ fn resolved_json_round_trips_exactly() {
     // the contract's shape: keys exactly as specified
     let v: serde_json::Value = serde_json::from_str(&json).unwrap();
     let keys = |v: &serde_json::Value| v.as_object().unwrap().keys().cloned().collect::<Vec<_>>();
-    assert_eq!(keys(&v), ["bodies", "excitation", "name", "outputs", "sdes"]);
-    assert_eq!(keys(&v["bodies"][0]), ["inertia", "mass", "name", "position", "rotation"]);
-    assert_eq!(keys(&v["sdes"][0]), ["bodies", "k", "name", "point", "psi", "rotation"]);
+    assert_eq!(
+        keys(&v),
+        ["bodies", "excitation", "name", "outputs", "sdes"]
+    );
+    assert_eq!(
+        keys(&v["bodies"][0]),
+        ["inertia", "mass", "name", "position", "rotation"]
+    );
+    assert_eq!(
+        keys(&v["sdes"][0]),
+        ["bodies", "k", "name", "point", "psi", "rotation"]
+    );
     assert_eq!(v["sdes"][0]["bodies"], serde_json::json!([null, 0]));
     assert_eq!(keys(&v["outputs"][0]), ["body", "dof", "quantity"]);
     let _: ModelJson = serde_json::from_value(v).unwrap();
@@ -138,7 +150,14 @@ psi_t = 1.6
         x * x * x / 12.0
     }
     let (kn, kt) = (0.05e12, 0.05e12 / 2.5);
-    let want = [area * kn, area * kt, area * kt, (j2 + j3) * kt, j2 * kn, j3 * kn];
+    let want = [
+        area * kn,
+        area * kt,
+        area * kt,
+        (j2 + j3) * kt,
+        j2 * kn,
+        j3 * kn,
+    ];
     for (g, w) in k.iter().zip(want) {
         assert!((g - w).abs() <= 1e-12 * w, "{k:?} vs {want:?}");
     }
@@ -148,7 +167,12 @@ psi_t = 1.6
 
 fn error_of(text: &str) -> (usize, usize, String) {
     match parse_toml(text, "bad.toml") {
-        Err(LoadError::Toml { line, col, message, origin }) => {
+        Err(LoadError::Toml {
+            line,
+            col,
+            message,
+            origin,
+        }) => {
             assert_eq!(origin, "bad.toml");
             (line, col, message)
         }
@@ -164,28 +188,125 @@ fn replace_once(text: &str, from: &str, to: &str) -> String {
 
 fn line_of(text: &str, needle: &str) -> usize {
     // the last occurrence: for duplicates, the second definition is the culprit
-    text.lines().collect::<Vec<_>>().iter().rposition(|l| l.contains(needle)).unwrap() + 1
+    text.lines()
+        .collect::<Vec<_>>()
+        .iter()
+        .rposition(|l| l.contains(needle))
+        .unwrap()
+        + 1
 }
 
 #[test]
 fn bad_models_are_located_and_explained() {
     let cases: Vec<(String, &str, &str)> = vec![
-        (replace_once(TWO_MASS, r#"bodies = ["first", "second"]"#, r#"bodies = ["first", "secnod"]"#), "secnod", "unknown body \"secnod\"; known bodies: first, second"),
-        (replace_once(TWO_MASS, r#"bodies = ["first", "second"]"#, r#"bodies = ["first", "first"]"#), r#"bodies = ["first", "first"]"#, "to itself"),
-        (replace_once(TWO_MASS, "mass = 120", "mass = -120"), "mass = -120", "mass must be positive"),
-        (replace_once(TWO_MASS, "mass = 120", "mass = nan"), "mass = nan", "not a finite number"),
-        (replace_once(TWO_MASS, "inertia = [12, 24, 36]", "inertia = [12, 0, 36]"), "inertia = [12, 0, 36]", "must be positive"),
-        (replace_once(TWO_MASS, r#"k = "20 N/um""#, r#"k = "20 N/furlong""#), "20 N/furlong", "unknown unit \"furlong\""),
-        (replace_once(TWO_MASS, r#"k = "20 N/um""#, r#"k = "20 MPa/um""#), "20 MPa/um", "a stiffness"),
-        (replace_once(TWO_MASS, "axis = [0, 0, 1]\nk = \"20", "axis = [0, 0, 0]\nk = \"20"), "axis = [0, 0, 0]", "zero length"),
-        (replace_once(TWO_MASS, "axes = [[1, 0, 0], [0, 1, 0], [0, 0, 1]]\nk = [\"10", "axes = [[1, 0, 0], [0.5, 1, 0], [0, 0, 1]]\nk = [\"10"), "[0.5, 1, 0]", "not orthonormal"),
-        (replace_once(TWO_MASS, "axes = [[1, 0, 0], [0, 1, 0], [0, 0, 1]]\nk = [\"10", "axes = [[1, 0, 0], [0, 0, 1], [0, 1, 0]]\nk = [\"10"), "[0, 0, 1], [0, 1, 0]", "left-handed"),
-        (replace_once(TWO_MASS, "name = \"k2\"", "name = \"k1\""), "name = \"k1\"", "used twice"),
-        (replace_once(TWO_MASS, "name = \"second\"\nmass", "name = \"first\"\nmass"), "name = \"first\"\nmass", "used twice"),
-        (replace_once(TWO_MASS, "psi = 0.5\n\n[[sde]]\nname = \"k2\"", "psi = 0.5\nkn = 3\n\n[[sde]]\nname = \"k2\""), "kn = 3", "does not apply to a spring"),
-        (replace_once(TWO_MASS, "kind = \"spring\"", "kind = \"sprung\""), "kind = \"sprung\"", "unknown kind"),
-        (replace_once(TWO_MASS, "dof = \"u3\"", "dof = \"z\""), "dof = \"z\"", "unknown dof"),
-        (replace_once(TWO_MASS, "position = [0, 0, 0]", "positoin = [0, 0, 0]"), "positoin", "unknown field"),
+        (
+            replace_once(
+                TWO_MASS,
+                r#"bodies = ["first", "second"]"#,
+                r#"bodies = ["first", "secnod"]"#,
+            ),
+            "secnod",
+            "unknown body \"secnod\"; known bodies: first, second",
+        ),
+        (
+            replace_once(
+                TWO_MASS,
+                r#"bodies = ["first", "second"]"#,
+                r#"bodies = ["first", "first"]"#,
+            ),
+            r#"bodies = ["first", "first"]"#,
+            "to itself",
+        ),
+        (
+            replace_once(TWO_MASS, "mass = 120", "mass = -120"),
+            "mass = -120",
+            "mass must be positive",
+        ),
+        (
+            replace_once(TWO_MASS, "mass = 120", "mass = nan"),
+            "mass = nan",
+            "not a finite number",
+        ),
+        (
+            replace_once(TWO_MASS, "inertia = [12, 24, 36]", "inertia = [12, 0, 36]"),
+            "inertia = [12, 0, 36]",
+            "must be positive",
+        ),
+        (
+            replace_once(TWO_MASS, r#"k = "20 N/um""#, r#"k = "20 N/furlong""#),
+            "20 N/furlong",
+            "unknown unit \"furlong\"",
+        ),
+        (
+            replace_once(TWO_MASS, r#"k = "20 N/um""#, r#"k = "20 MPa/um""#),
+            "20 MPa/um",
+            "a stiffness",
+        ),
+        (
+            replace_once(
+                TWO_MASS,
+                "axis = [0, 0, 1]\nk = \"20",
+                "axis = [0, 0, 0]\nk = \"20",
+            ),
+            "axis = [0, 0, 0]",
+            "zero length",
+        ),
+        (
+            replace_once(
+                TWO_MASS,
+                "axes = [[1, 0, 0], [0, 1, 0], [0, 0, 1]]\nk = [\"10",
+                "axes = [[1, 0, 0], [0.5, 1, 0], [0, 0, 1]]\nk = [\"10",
+            ),
+            "[0.5, 1, 0]",
+            "not orthonormal",
+        ),
+        (
+            replace_once(
+                TWO_MASS,
+                "axes = [[1, 0, 0], [0, 1, 0], [0, 0, 1]]\nk = [\"10",
+                "axes = [[1, 0, 0], [0, 0, 1], [0, 1, 0]]\nk = [\"10",
+            ),
+            "[0, 0, 1], [0, 1, 0]",
+            "left-handed",
+        ),
+        (
+            replace_once(TWO_MASS, "name = \"k2\"", "name = \"k1\""),
+            "name = \"k1\"",
+            "used twice",
+        ),
+        (
+            replace_once(
+                TWO_MASS,
+                "name = \"second\"\nmass",
+                "name = \"first\"\nmass",
+            ),
+            "name = \"first\"\nmass",
+            "used twice",
+        ),
+        (
+            replace_once(
+                TWO_MASS,
+                "psi = 0.5\n\n[[sde]]\nname = \"k2\"",
+                "psi = 0.5\nkn = 3\n\n[[sde]]\nname = \"k2\"",
+            ),
+            "kn = 3",
+            "does not apply to a spring",
+        ),
+        (
+            replace_once(TWO_MASS, "kind = \"spring\"", "kind = \"sprung\""),
+            "kind = \"sprung\"",
+            "unknown kind",
+        ),
+        (
+            replace_once(TWO_MASS, "dof = \"u3\"", "dof = \"z\""),
+            "dof = \"z\"",
+            "unknown dof",
+        ),
+        (
+            replace_once(TWO_MASS, "position = [0, 0, 0]", "positoin = [0, 0, 0]"),
+            "positoin",
+            "unknown field",
+        ),
     ];
     for (text, needle, want) in cases {
         let (line, col, message) = error_of(&text);
@@ -193,7 +314,10 @@ fn bad_models_are_located_and_explained() {
         assert!(message.contains(want), "expected \"{want}\" in: {message}");
         assert!(col >= 1);
         // errors about a whole element may point at its name a few lines above the bad field
-        assert!(line <= needle_line && needle_line - line <= 8, "{message}: reported line {line}, problem on line {needle_line}");
+        assert!(
+            line <= needle_line && needle_line - line <= 8,
+            "{message}: reported line {line}, problem on line {needle_line}"
+        );
     }
 }
 
@@ -217,9 +341,19 @@ fn inertia_tensor_gives_principal_axes() {
     assert!((b.rotation.column(0).dot(&r.column(0)).abs() - 1.0).abs() < 1e-9);
     assert!(b.rotation.determinant() > 0.0);
     // connected to nothing: warned, naming the body
-    assert!(loaded.warnings.iter().any(|w| w.contains("\"b\" is connected to nothing")), "{:?}", loaded.warnings);
+    assert!(
+        loaded
+            .warnings
+            .iter()
+            .any(|w| w.contains("\"b\" is connected to nothing")),
+        "{:?}",
+        loaded.warnings
+    );
     // not positive definite
-    let bad = text.replace(&format!("[[{}, ", t[(0, 0)]), &format!("[[{}, ", -t[(0, 0)]));
+    let bad = text.replace(
+        &format!("[[{}, ", t[(0, 0)]),
+        &format!("[[{}, ", -t[(0, 0)]),
+    );
     let (_, _, message) = error_of(&bad);
     assert!(message.contains("not positive definite"), "{message}");
 }
@@ -230,20 +364,34 @@ fn json_errors_name_the_path() {
     let good = serde_json::to_value(to_json(&model)).unwrap();
     let mut bad = good.clone();
     bad["sdes"][1]["bodies"] = serde_json::json!([0, 0]);
-    let e = parse_json(&bad.to_string(), "m.json").unwrap_err().to_string();
-    assert!(e.contains("$.sdes[1].bodies") && e.contains("itself"), "{e}");
+    let e = parse_json(&bad.to_string(), "m.json")
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("$.sdes[1].bodies") && e.contains("itself"),
+        "{e}"
+    );
     let mut bad = good.clone();
     bad["bodies"][0]["mass"] = serde_json::json!(-1.0);
-    let e = parse_json(&bad.to_string(), "m.json").unwrap_err().to_string();
+    let e = parse_json(&bad.to_string(), "m.json")
+        .unwrap_err()
+        .to_string();
     assert!(e.contains("$.bodies[0].mass"), "{e}");
     let mut bad = good.clone();
     bad["sdes"][0]["k"] = serde_json::json!([1, 2, 3]);
-    let e = parse_json(&bad.to_string(), "m.json").unwrap_err().to_string();
+    let e = parse_json(&bad.to_string(), "m.json")
+        .unwrap_err()
+        .to_string();
     assert!(e.contains("sdes[0].k"), "{e}");
     let mut bad = good;
     bad["outputs"][0]["quantity"] = serde_json::json!("jerk");
-    let e = parse_json(&bad.to_string(), "m.json").unwrap_err().to_string();
-    assert!(e.contains("$.outputs[0].quantity") && e.contains("jerk"), "{e}");
+    let e = parse_json(&bad.to_string(), "m.json")
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("$.outputs[0].quantity") && e.contains("jerk"),
+        "{e}"
+    );
 }
 
 proptest! {

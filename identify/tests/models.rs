@@ -76,7 +76,12 @@ fn every_model_file_loads() {
     let mut files: Vec<PathBuf> = std::fs::read_dir(models_dir())
         .expect("configs/models exists")
         .map(|e| e.expect("directory entry").path())
-        .filter(|p| matches!(p.extension().and_then(|e| e.to_str()), Some("toml" | "json")))
+        .filter(|p| {
+            matches!(
+                p.extension().and_then(|e| e.to_str()),
+                Some("toml" | "json")
+            )
+        })
         .collect();
     files.sort();
     let names: BTreeSet<String> = files
@@ -90,7 +95,10 @@ fn every_model_file_loads() {
         "textbook-two-mass.toml",
         "textbook-single.toml",
     ] {
-        assert!(names.contains(expected), "configs/models/{expected} is missing");
+        assert!(
+            names.contains(expected),
+            "configs/models/{expected} is missing"
+        );
     }
     let mut failures = Vec::new();
     for f in &files {
@@ -106,7 +114,11 @@ fn every_model_file_loads() {
             Err(e) => failures.push(e.to_string()),
         }
     }
-    assert!(failures.is_empty(), "model files that do not load:\n{}", failures.join("\n"));
+    assert!(
+        failures.is_empty(),
+        "model files that do not load:\n{}",
+        failures.join("\n")
+    );
 }
 
 const FWD_BODIES: [&str; 7] = [
@@ -120,7 +132,9 @@ const FWD_BODIES: [&str; 7] = [
 ];
 
 fn sde<'a>(model: &'a Model, name: &str) -> (usize, &'a identify::Sde) {
-    let i = model.sde_index(name).unwrap_or_else(|| panic!("SDE {name} missing"));
+    let i = model
+        .sde_index(name)
+        .unwrap_or_else(|| panic!("SDE {name} missing"));
     (i, &model.sdes[i])
 }
 
@@ -141,7 +155,11 @@ fn body_pair(model: &Model, name: &str) -> [String; 2] {
 
 #[test]
 fn fwd32j_has_the_papers_structure() {
-    for file in ["fwd32j.toml", "fwd32j-initial.toml", "fwd32j-no-actuator.toml"] {
+    for file in [
+        "fwd32j.toml",
+        "fwd32j-initial.toml",
+        "fwd32j-no-actuator.toml",
+    ] {
         let m = load_model(file);
         let bodies: Vec<&str> = m.bodies.iter().map(|b| b.name.as_str()).collect();
         assert_eq!(bodies.len(), 7, "{file}: bodies {bodies:?}");
@@ -149,9 +167,15 @@ fn fwd32j_has_the_papers_structure() {
             assert!(bodies.contains(&b), "{file}: body {b} missing");
         }
         let total: f64 = m.bodies.iter().map(|b| b.mass).sum();
-        assert!((2500.0..=3000.0).contains(&total), "{file}: total mass {total} kg");
+        assert!(
+            (2500.0..=3000.0).contains(&total),
+            "{file}: total mass {total} kg"
+        );
         let column = m.bodies[m.body_index("column").expect("column")].mass;
-        assert!(m.bodies.iter().all(|b| b.mass <= column), "{file}: the column is the heaviest body");
+        assert!(
+            m.bodies.iter().all(|b| b.mass <= column),
+            "{file}: the column is the heaviest body"
+        );
         let table = m.bodies[m.body_index("table").expect("table")].mass;
         assert!((150.0..=600.0).contains(&table), "{file}: table {table} kg");
 
@@ -168,7 +192,11 @@ fn fwd32j_has_the_papers_structure() {
                 _ => SdeKind::Slideway,
             };
             assert_eq!(s.kind, kind, "{file}: SDE {n} kind");
-            assert_eq!(s.enabled, !(n == 34 && file == "fwd32j-no-actuator.toml"), "{file}: SDE {n} enabled");
+            assert_eq!(
+                s.enabled,
+                !(n == 34 && file == "fwd32j-no-actuator.toml"),
+                "{file}: SDE {n} enabled"
+            );
         }
         // The joint groups of Fig. 4b and the bodies they join.
         let joints: [(&[u32], [&str; 2]); 7] = [
@@ -176,19 +204,33 @@ fn fwd32j_has_the_papers_structure() {
             (&[2, 3, 4, 5, 6, 7], ["column", "overarm"]),
             (&[8, 9, 10, 11, 12], ["column", "knee"]),
             (&[13], ["lower saddle", "upper saddle"]),
-            (&[14, 15, 16, 17, 18, 19, 20, 21, 22], ["upper saddle", "table"]),
+            (
+                &[14, 15, 16, 17, 18, 19, 20, 21, 22],
+                ["upper saddle", "table"],
+            ),
             (&[23, 24, 25, 26, 27, 28, 29], ["knee", "lower saddle"]),
             (&[30, 31, 32, 33], ["ground", "column"]),
         ];
         for (sdes, pair) in joints {
             for n in sdes {
-                assert_eq!(body_pair(&m, &n.to_string()), pair.map(String::from), "{file}: SDE {n}");
+                assert_eq!(
+                    body_pair(&m, &n.to_string()),
+                    pair.map(String::from),
+                    "{file}: SDE {n}"
+                );
             }
         }
-        assert_eq!(body_pair(&m, "34"), ["spindle head".to_string(), "table".to_string()]);
+        assert_eq!(
+            body_pair(&m, "34"),
+            ["spindle head".to_string(), "table".to_string()]
+        );
         let t = m.body_index("table").expect("table");
         let outs: Vec<(usize, u8)> = m.outputs.iter().map(|c| (c.body, c.dof)).collect();
-        assert_eq!(outs, vec![(t, 0), (t, 1), (t, 2)], "{file}: outputs = table u1, u2, u3");
+        assert_eq!(
+            outs,
+            vec![(t, 0), (t, 1), (t, 2)],
+            "{file}: outputs = table u1, u2, u3"
+        );
         // 4 kN pair, alpha = 60 deg, beta = 81 deg: equal and opposite, on spindle head and table.
         assert_eq!(m.forces.len(), 2, "{file}: one force pair");
         let (a, b) = (&m.forces[0], &m.forces[1]);
@@ -196,9 +238,15 @@ fn fwd32j_has_the_papers_structure() {
         assert_eq!(b.body, t);
         let (al, be) = (60f64.to_radians(), 81f64.to_radians());
         let d = nalgebra::Vector3::new(be.sin() * al.cos(), be.sin() * al.sin(), be.cos());
-        assert!((a.force - 4000.0 * d).norm() < 1e-9 && (a.force + b.force).norm() < 1e-9, "{file}: excitation");
+        assert!(
+            (a.force - 4000.0 * d).norm() < 1e-9 && (a.force + b.force).norm() < 1e-9,
+            "{file}: excitation"
+        );
         // The pair acts along one line (no net moment).
-        assert!((b.point - a.point).cross(&d).norm() < 1e-5, "{file}: the pair is not collinear");
+        assert!(
+            (b.point - a.point).cross(&d).norm() < 1e-5,
+            "{file}: the pair is not collinear"
+        );
     }
 }
 
@@ -250,13 +298,29 @@ fn fwd32j_files_carry_table1_and_differ_only_in_it() {
     let t1 = table1();
     for (s, p, init, ident) in &t1 {
         let (a, b) = (param(&initial, s, *p), param(&identified, s, *p));
-        assert!((a - init).abs() <= 1e-9 * init.abs(), "initial SDE {s} {}: {a}, Table 1: {init}", p.as_str());
-        assert!((b - ident).abs() <= 1e-9 * ident.abs(), "identified SDE {s} {}: {b}, Table 1: {ident}", p.as_str());
+        assert!(
+            (a - init).abs() <= 1e-9 * init.abs(),
+            "initial SDE {s} {}: {a}, Table 1: {init}",
+            p.as_str()
+        );
+        assert!(
+            (b - ident).abs() <= 1e-9 * ident.abs(),
+            "identified SDE {s} {}: {b}, Table 1: {ident}",
+            p.as_str()
+        );
     }
     // kn/kt = 2.5 on every contact joint.
-    for s in identified.sdes.iter().filter(|s| matches!(s.kind, SdeKind::Slideway | SdeKind::Rotary)) {
+    for s in identified
+        .sdes
+        .iter()
+        .filter(|s| matches!(s.kind, SdeKind::Slideway | SdeKind::Rotary))
+    {
         let k = s.law.stiffness();
-        assert!((k[0] / k[1] - 2.5).abs() < 1e-12 || k[0] == 0.0, "SDE {}: kn/kt", s.name);
+        assert!(
+            (k[0] / k[1] - 2.5).abs() < 1e-12 || k[0] == 0.0,
+            "SDE {}: kn/kt",
+            s.name
+        );
     }
     // Same geometry, bodies, excitation and outputs; the same value of every parameter not in
     // Table 1.
@@ -265,14 +329,30 @@ fn fwd32j_files_carry_table1_and_differ_only_in_it() {
     assert_eq!(identified.forces, initial.forces);
     assert_eq!(identified.forces, no_actuator.forces);
     assert_eq!(identified.outputs, initial.outputs);
-    let in_table: BTreeSet<(String, String)> =
-        t1.iter().map(|(s, p, _, _)| (s.clone(), p.as_str())).collect();
-    for ((a, b), c) in identified.sdes.iter().zip(&initial.sdes).zip(&no_actuator.sdes) {
-        assert_eq!((&a.name, a.kind, a.bodies, a.point, a.rotation), (&b.name, b.kind, b.bodies, b.point, b.rotation));
+    let in_table: BTreeSet<(String, String)> = t1
+        .iter()
+        .map(|(s, p, _, _)| (s.clone(), p.as_str()))
+        .collect();
+    for ((a, b), c) in identified
+        .sdes
+        .iter()
+        .zip(&initial.sdes)
+        .zip(&no_actuator.sdes)
+    {
+        assert_eq!(
+            (&a.name, a.kind, a.bodies, a.point, a.rotation),
+            (&b.name, b.kind, b.bodies, b.point, b.rotation)
+        );
         assert_eq!(a.law, c.law, "SDE {}: no-actuator differs", a.name);
         for p in a.law.params() {
             if !in_table.contains(&(a.name.clone(), p.as_str())) {
-                assert_eq!(a.law.get(p), b.law.get(p), "SDE {} {}: not in Table 1 but differs", a.name, p.as_str());
+                assert_eq!(
+                    a.law.get(p),
+                    b.law.get(p),
+                    "SDE {} {}: not in Table 1 but differs",
+                    a.name,
+                    p.as_str()
+                );
             }
         }
     }
@@ -281,20 +361,40 @@ fn fwd32j_files_carry_table1_and_differ_only_in_it() {
 #[test]
 fn fwd32j_dynamics_are_plausible() {
     let freqs: Vec<f64> = (1..=200).map(f64::from).collect();
-    for file in ["fwd32j.toml", "fwd32j-initial.toml", "fwd32j-no-actuator.toml"] {
+    for file in [
+        "fwd32j.toml",
+        "fwd32j-initial.toml",
+        "fwd32j-no-actuator.toml",
+    ] {
         let m = load_model(file);
         let r = response(&m, &freqs, &[], Method::Direct).unwrap_or_else(|e| panic!("{file}: {e}"));
         for o in 0..3 {
             let q = r.output(o);
-            assert!(q.iter().all(|x| x.re.is_finite() && x.im.is_finite()), "{file}: table u{} not finite", o + 1);
-            assert!(q.iter().all(|x| x.norm() > 0.0), "{file}: table u{} is zero somewhere", o + 1);
+            assert!(
+                q.iter().all(|x| x.re.is_finite() && x.im.is_finite()),
+                "{file}: table u{} not finite",
+                o + 1
+            );
+            assert!(
+                q.iter().all(|x| x.norm() > 0.0),
+                "{file}: table u{} is zero somewhere",
+                o + 1
+            );
             // Resonances seen in the table's characteristic: local maxima of |q| in 5-200 Hz.
             let peaks: Vec<f64> = (1..q.len() - 1)
-                .filter(|&k| freqs[k] >= 5.0 && q[k].norm() > q[k - 1].norm() && q[k].norm() > q[k + 1].norm())
+                .filter(|&k| {
+                    freqs[k] >= 5.0
+                        && q[k].norm() > q[k - 1].norm()
+                        && q[k].norm() > q[k + 1].norm()
+                })
                 .map(|k| freqs[k])
                 .collect();
             println!("{file}: table u{} peaks in 5-200 Hz at {peaks:?} Hz", o + 1);
-            assert!(!peaks.is_empty(), "{file}: table u{} has no resonance in 5-200 Hz", o + 1);
+            assert!(
+                !peaks.is_empty(),
+                "{file}: table u{} has no resonance in 5-200 Hz",
+                o + 1
+            );
         }
         let f = print_modes(file, &m, 300.0);
         // No free rigid-body motion; six rigid-body modes of the machine on its isolators.
@@ -304,7 +404,10 @@ fn fwd32j_dynamics_are_plausible() {
         // Structural (joint) modes: a gap above the isolator modes, several in the measured band.
         assert!(f[6] > 30.0, "{file}: first structural mode at {} Hz", f[6]);
         let band = f.iter().filter(|f| (30.0..=250.0).contains(*f)).count();
-        assert!(band >= 4, "{file}: only {band} structural modes in 30-250 Hz: {f:?}");
+        assert!(
+            band >= 4,
+            "{file}: only {band} structural modes in 30-250 Hz: {f:?}"
+        );
     }
 }
 
@@ -312,10 +415,21 @@ fn assert_same_system(file: &str, a: &Model, b: &Model) {
     let (sa, sb) = (System::assemble(a), System::assemble(b));
     assert_eq!(sa.n, sb.n);
     assert_eq!(sa.output_dofs, sb.output_dofs, "{file}: outputs");
-    for (what, x, y) in [("M", &sa.mass, &sb.mass), ("K", &sa.k, &sb.k), ("D", &sa.d, &sb.d), ("P", &sa.load, &sb.load)] {
+    for (what, x, y) in [
+        ("M", &sa.mass, &sb.mass),
+        ("K", &sa.k, &sb.k),
+        ("D", &sa.d, &sb.d),
+        ("P", &sa.load, &sb.load),
+    ] {
         let scale = y.iter().fold(0.0f64, |m, v| m.max(v.abs()));
-        let diff = x.iter().zip(y).fold(0.0f64, |m, (p, q)| m.max((p - q).abs()));
-        assert!(diff <= 1e-12 * scale, "{file}: {what} differs from the code-built model by {diff:e}");
+        let diff = x
+            .iter()
+            .zip(y)
+            .fold(0.0f64, |m, (p, q)| m.max((p - q).abs()));
+        assert!(
+            diff <= 1e-12 * scale,
+            "{file}: {what} differs from the code-built model by {diff:e}"
+        );
     }
 }
 
@@ -325,7 +439,11 @@ fn textbook_files_match_the_code_built_models_and_closed_forms() {
 
     let (m1, m2, k1, k2, psi) = (400.0, 120.0, 2.0e7, 5.0e6, 0.5);
     let file = load_model("textbook-two-mass.toml");
-    assert_same_system("textbook-two-mass.toml", &file, &textbook::two_in_series(m1, m2, k1, k2, psi));
+    assert_same_system(
+        "textbook-two-mass.toml",
+        &file,
+        &textbook::two_in_series(m1, m2, k1, k2, psi),
+    );
     let freqs: Vec<f64> = (1..300).map(|i| 0.37 * f64::from(i)).collect();
     let r = response(&file, &freqs, &[], Method::Direct).expect("FRF of a textbook file");
     for (i, &f) in freqs.iter().enumerate() {
@@ -344,12 +462,19 @@ fn textbook_files_match_the_code_built_models_and_closed_forms() {
     let modes = natural_frequencies(&file);
     for w2 in [(a - d) / 2.0, (a + d) / 2.0] {
         let f = w2.sqrt() / TWO_PI;
-        assert!(modes.iter().any(|(g, _)| (g - f).abs() < 1e-9 * f), "two-mass: {f} Hz not found");
+        assert!(
+            modes.iter().any(|(g, _)| (g - f).abs() < 1e-9 * f),
+            "two-mass: {f} Hz not found"
+        );
     }
 
     let (m, k, psi) = (250.0, 3.0e6, 0.3);
     let file = load_model("textbook-single.toml");
-    assert_same_system("textbook-single.toml", &file, &textbook::single_body(m, k, psi));
+    assert_same_system(
+        "textbook-single.toml",
+        &file,
+        &textbook::single_body(m, k, psi),
+    );
     let r = response(&file, &freqs, &[], Method::Direct).expect("FRF of a textbook file");
     for (i, &f) in freqs.iter().enumerate() {
         let exact = C64::new(1.0, 0.0) / (hyst(k, psi) - (TWO_PI * f).powi(2) * m);

@@ -51,7 +51,10 @@ fn two_in_series_matches_closed_form() {
             let q1 = c2 / det;
             let q2 = a11 / det;
             let (e1, e2) = (rel_err(r.output(0)[i], q1), rel_err(r.output(1)[i], q2));
-            assert!(e1 < 1e-12 && e2 < 1e-12, "{method:?} at {f} Hz: {e1:e} {e2:e}");
+            assert!(
+                e1 < 1e-12 && e2 < 1e-12,
+                "{method:?} at {f} Hz: {e1:e} {e2:e}"
+            );
         }
     }
 }
@@ -60,8 +63,14 @@ fn two_in_series_matches_closed_form() {
 fn velocity_and_acceleration_are_jw_multiples() {
     let mut model = textbook::single_body(10.0, 1e5, 0.1);
     let c = model.outputs[0];
-    model.outputs.push(Characteristic { quantity: Quantity::Velocity, ..c });
-    model.outputs.push(Characteristic { quantity: Quantity::Acceleration, ..c });
+    model.outputs.push(Characteristic {
+        quantity: Quantity::Velocity,
+        ..c
+    });
+    model.outputs.push(Characteristic {
+        quantity: Quantity::Acceleration,
+        ..c
+    });
     let r = response(&model, &[3.0, 17.0], &[], Method::Direct).unwrap();
     for i in 0..2 {
         let w = TWO_PI * r.freqs_hz[i];
@@ -72,12 +81,20 @@ fn velocity_and_acceleration_are_jw_multiples() {
 }
 
 fn random_rotation(rng: &mut StdRng) -> Matrix3<f64> {
-    let axis = Vector3::new(rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0));
+    let axis = Vector3::new(
+        rng.random_range(-1.0..1.0),
+        rng.random_range(-1.0..1.0),
+        rng.random_range(-1.0..1.0),
+    );
     *Rotation3::from_scaled_axis(axis.normalize() * rng.random_range(0.0..3.0)).matrix()
 }
 
 fn random_vec(rng: &mut StdRng, s: f64) -> Vector3<f64> {
-    Vector3::new(rng.random_range(-s..s), rng.random_range(-s..s), rng.random_range(-s..s))
+    Vector3::new(
+        rng.random_range(-s..s),
+        rng.random_range(-s..s),
+        rng.random_range(-s..s),
+    )
 }
 
 /// A random, fully connected model with every law, rotated bodies and SDE frames.
@@ -95,7 +112,11 @@ fn random_model(seed: u64, bodies: usize) -> Model {
         m.bodies.push(Body {
             name: format!("b{b}"),
             mass,
-            inertia: [mass * rng.random_range(0.02..0.2), mass * rng.random_range(0.02..0.2), mass * rng.random_range(0.02..0.2)],
+            inertia: [
+                mass * rng.random_range(0.02..0.2),
+                mass * rng.random_range(0.02..0.2),
+                mass * rng.random_range(0.02..0.2),
+            ],
             position: random_vec(&mut rng, 1.0) + Vector3::new(0.0, 0.0, b as f64 * 0.5),
             rotation: random_rotation(&mut rng),
         });
@@ -115,25 +136,82 @@ fn random_model(seed: u64, bodies: usize) -> Model {
     for b in 0..bodies {
         let p = if b == 0 { None } else { Some(b - 1) };
         // contact joint carries rotations; isolators/axial springs add variety
-        let (area, kn) = (rng.random_range(0.01..0.05), rng.random_range(0.02..0.2) * 1e12);
-        add(&mut rng, p, b, SdeLaw::Contact {
-            area,
-            moments: [1e-4, 5e-5, 8e-5],
-            kn,
-            kt: if b % 2 == 0 { Tangential::Ratio(2.5) } else { Tangential::Value(0.03e12) },
-            psi_n: 0.8,
-            psi_t: 1.6,
-        }, SdeKind::Slideway);
-        add(&mut rng, p, b, SdeLaw::Isolator { kn: 2e8, kt: 1e8, psi_n: 0.4, psi_t: 0.5 }, SdeKind::Isolator);
-        add(&mut rng, p, b, SdeLaw::Axial { k: 1e8, psi: 0.6 }, SdeKind::Screw);
-        add(&mut rng, p, b, SdeLaw::General { k: [1e8, 2e8, 3e8, 1e6, 2e6, 3e6], psi: [0.1, 0.2, 0.3, 0.4, 0.5, 0.6] }, SdeKind::General);
+        let (area, kn) = (
+            rng.random_range(0.01..0.05),
+            rng.random_range(0.02..0.2) * 1e12,
+        );
+        add(
+            &mut rng,
+            p,
+            b,
+            SdeLaw::Contact {
+                area,
+                moments: [1e-4, 5e-5, 8e-5],
+                kn,
+                kt: if b % 2 == 0 {
+                    Tangential::Ratio(2.5)
+                } else {
+                    Tangential::Value(0.03e12)
+                },
+                psi_n: 0.8,
+                psi_t: 1.6,
+            },
+            SdeKind::Slideway,
+        );
+        add(
+            &mut rng,
+            p,
+            b,
+            SdeLaw::Isolator {
+                kn: 2e8,
+                kt: 1e8,
+                psi_n: 0.4,
+                psi_t: 0.5,
+            },
+            SdeKind::Isolator,
+        );
+        add(
+            &mut rng,
+            p,
+            b,
+            SdeLaw::Axial { k: 1e8, psi: 0.6 },
+            SdeKind::Screw,
+        );
+        add(
+            &mut rng,
+            p,
+            b,
+            SdeLaw::General {
+                k: [1e8, 2e8, 3e8, 1e6, 2e6, 3e6],
+                psi: [0.1, 0.2, 0.3, 0.4, 0.5, 0.6],
+            },
+            SdeKind::General,
+        );
     }
-    m.forces.push(PointForce { body: bodies - 1, point: m.bodies[bodies - 1].position + Vector3::new(0.1, -0.2, 0.3), force: Vector3::new(300.0, -200.0, 1000.0), moment: Vector3::new(5.0, 0.0, -3.0) });
-    m.forces.push(PointForce { body: 0, point: m.bodies[0].position, force: Vector3::new(-300.0, 200.0, -1000.0), moment: Vector3::zeros() });
+    m.forces.push(PointForce {
+        body: bodies - 1,
+        point: m.bodies[bodies - 1].position + Vector3::new(0.1, -0.2, 0.3),
+        force: Vector3::new(300.0, -200.0, 1000.0),
+        moment: Vector3::new(5.0, 0.0, -3.0),
+    });
+    m.forces.push(PointForce {
+        body: 0,
+        point: m.bodies[0].position,
+        force: Vector3::new(-300.0, 200.0, -1000.0),
+        moment: Vector3::zeros(),
+    });
     for dof in 0..6 {
-        m.outputs.push(Characteristic { body: bodies - 1, dof, quantity: Quantity::Displacement });
+        m.outputs.push(Characteristic {
+            body: bodies - 1,
+            dof,
+            quantity: Quantity::Displacement,
+        });
     }
-    m.outputs.push(Characteristic { body: 0, dof: 1, quantity: Quantity::Acceleration });
+    m.outputs.push(Characteristic {
+        body: 0,
+        dof: 1,
+        quantity: Quantity::Acceleration,
+    });
     m
 }
 
@@ -154,7 +232,10 @@ fn direct_and_modal_paths_agree() {
                 let (jd, jm) = (d.derivative(p, o), m.derivative(p, o));
                 let s = jd.iter().map(|v| v.norm()).fold(0.0, f64::max);
                 for (a, b) in jd.iter().zip(jm) {
-                    assert!((a - b).norm() <= 1e-8 * s.max(1e-300), "seed {seed} param {p} output {o}: {a} vs {b}");
+                    assert!(
+                        (a - b).norm() <= 1e-8 * s.max(1e-300),
+                        "seed {seed} param {p} output {o}: {a} vs {b}"
+                    );
                 }
             }
         }
@@ -198,7 +279,11 @@ fn analytic_jacobian_matches_finite_differences() {
                 // truncation (1e-5 relative) + round-off of q (~1e-11 relative) amplified by 1/h;
                 // a wrong term in the formula (a missing ψ/2π, a sign) is off by ≥ 1e-1.
                 let tol = 1e-5 * an_k.norm() + 1e-11 * r.output(o)[k].norm() / h + 1e-9 * scale;
-                assert!(err <= tol, "{} output {o} line {k}: fd {fd} analytic {an_k} (tol {tol:e})", model.param_label(p));
+                assert!(
+                    err <= tol,
+                    "{} output {o} line {k}: fd {fd} analytic {an_k} (tol {tol:e})",
+                    model.param_label(p)
+                );
             }
         }
     }
@@ -246,7 +331,10 @@ fn stiffness_and_damping_are_symmetric_and_k_is_positive_semidefinite() {
     }
     let k = faer::Mat::<f64>::from_fn(n, n, |i, j| s.k[i * n + j]);
     let ev = k.self_adjoint_eigenvalues(faer::Side::Lower).unwrap();
-    assert!(ev.iter().all(|&l| l >= -1e-9 * kmax), "negative eigenvalue: {ev:?}");
+    assert!(
+        ev.iter().all(|&l| l >= -1e-9 * kmax),
+        "negative eigenvalue: {ev:?}"
+    );
 }
 
 #[test]
@@ -256,7 +344,10 @@ fn free_floating_model_has_rigid_modes_and_zero_hz_is_an_error() {
     model.sdes[0].enabled = false;
     model.sdes.retain(|s| !s.name.starts_with("guide"));
     let err = response(&model, &[0.0], &[], Method::Direct).unwrap_err();
-    assert!(matches!(err, identify::frf::SolveError::Singular { .. }), "{err}");
+    assert!(
+        matches!(err, identify::frf::SolveError::Singular { .. }),
+        "{err}"
+    );
     // away from 0 Hz the response exists and the paths agree
     let d = response(&model, &[5.0, 50.0], &[], Method::Direct).unwrap();
     let m = response(&model, &[5.0, 50.0], &[], Method::Modal).unwrap();
@@ -285,9 +376,18 @@ fn jacobian_of_single_body_matches_closed_form_derivatives() {
     let (m, k, psi) = (80.0, 2.0e6, 0.4);
     let model = textbook::single_body(m, k, psi);
     let params = [
-        ParamRef { sde: 0, name: ParamName::Ki(2) },
-        ParamRef { sde: 0, name: ParamName::PsiI(2) },
-        ParamRef { sde: 0, name: ParamName::Ki(0) },
+        ParamRef {
+            sde: 0,
+            name: ParamName::Ki(2),
+        },
+        ParamRef {
+            sde: 0,
+            name: ParamName::PsiI(2),
+        },
+        ParamRef {
+            sde: 0,
+            name: ParamName::Ki(0),
+        },
     ];
     let freqs = [0.0, 5.0, 25.2, 80.0];
     for method in [Method::Direct, Method::Modal] {
@@ -298,15 +398,19 @@ fn jacobian_of_single_body_matches_closed_form_derivatives() {
             // q = 1/den: dq/dk = -(1 + jψ/2π)/den², dq/dψ = -(j k/2π)/den²
             let dk = -C64::new(1.0, psi / TWO_PI) / (den * den);
             let dpsi = -C64::new(0.0, k / TWO_PI) / (den * den);
-            assert!(rel_err(r.derivative(0, 0)[i], dk) < 1e-12, "{method:?} dq/dk at {f} Hz");
-            assert!(rel_err(r.derivative(1, 0)[i], dpsi) < 1e-12, "{method:?} dq/dpsi at {f} Hz");
+            assert!(
+                rel_err(r.derivative(0, 0)[i], dk) < 1e-12,
+                "{method:?} dq/dk at {f} Hz"
+            );
+            assert!(
+                rel_err(r.derivative(1, 0)[i], dpsi) < 1e-12,
+                "{method:?} dq/dpsi at {f} Hz"
+            );
             // the x spring does not move the z response
             assert!(r.derivative(2, 0)[i].norm() < 1e-12 * dk.norm());
         }
     }
 }
-
-
 
 #[test]
 fn modes_of_the_single_body_are_closed_form() {
@@ -318,7 +422,10 @@ fn modes_of_the_single_body_are_closed_form() {
         want.push((0.01 * k / (f * m)).sqrt());
     }
     want.sort_by(f64::total_cmp);
-    for modes in [identify::modes::undamped(&model).unwrap(), identify::modes::complex(&model).unwrap()] {
+    for modes in [
+        identify::modes::undamped(&model).unwrap(),
+        identify::modes::complex(&model).unwrap(),
+    ] {
         let mut got: Vec<f64> = modes.iter().map(|md| md.freq_hz * TWO_PI).collect();
         got.sort_by(f64::total_cmp);
         for (g, w) in got.iter().zip(&want) {
@@ -327,7 +434,11 @@ fn modes_of_the_single_body_are_closed_form() {
     }
     for md in identify::modes::complex(&model).unwrap() {
         // hysteretic: λ = ω²(1 + jψ/2π), so the loss factor is ψ/2π for every mode
-        assert!((md.loss_factor - psi / TWO_PI).abs() < 1e-12, "{}", md.loss_factor);
+        assert!(
+            (md.loss_factor - psi / TWO_PI).abs() < 1e-12,
+            "{}",
+            md.loss_factor
+        );
         assert!((md.energy.iter().sum::<f64>() - 1.0).abs() < 1e-12);
     }
 }
@@ -337,7 +448,10 @@ fn band_sensitivity_of_the_single_body_is_closed_form() {
     let (m, k, psi) = (80.0, 2.0e6, 0.4);
     let model = textbook::single_body(m, k, psi);
     let freqs: Vec<f64> = (1..60).map(|i| i as f64).collect();
-    let p = ParamRef { sde: 0, name: ParamName::Ki(2) };
+    let p = ParamRef {
+        sde: 0,
+        name: ParamName::Ki(2),
+    };
     let s = identify::sensitivity::band_sensitivity(&model, &freqs, &[p], Method::Direct).unwrap();
     // |q| = 1/|den|, ∂|q|/∂k = −Re(conj(den)(1 + jψ/2π))/|den|³
     let (mut num, mut den_sum) = (0.0, 0.0);

@@ -8,7 +8,7 @@
 #![allow(clippy::unwrap_used, missing_docs)]
 
 use criterion::{criterion_group, criterion_main, Criterion};
-use process::{estimate, spectra::Welch, Estimator, Window, WelchConfig};
+use process::{estimate, spectra::Welch, Estimator, WelchConfig, Window};
 use std::hint::black_box;
 use std::time::{Duration, Instant};
 
@@ -44,7 +44,8 @@ fn generate(start: usize, force: &mut [f64], resp: &mut [Vec<f64>]) {
 fn run(generate_only: bool) -> Option<process::Frf> {
     let names: Vec<String> = (0..RESPONSES).map(|j| format!("acc{j}")).collect();
     let names: Vec<&str> = names.iter().map(|s| s.as_str()).collect();
-    let mut welch = Welch::new(WelchConfig::new(1.0, SEG, Window::Hann), &["force"], &names).expect("welch");
+    let mut welch =
+        Welch::new(WelchConfig::new(1.0, SEG, Window::Hann), &["force"], &names).expect("welch");
     let mut force = vec![0.0; BLOCK];
     let mut resp = vec![vec![0.0; BLOCK]; RESPONSES];
     let mut start = 0;
@@ -74,13 +75,19 @@ fn scipy_baseline(rust: &process::Frf) {
     let _ = std::fs::create_dir_all(&dir);
     let out = dir.join("h1.bin");
     let script = concat!(env!("CARGO_MANIFEST_DIR"), "/benches/scipy_csd.py");
-    let res = std::process::Command::new("python3").arg(script).arg(&out).output();
+    let res = std::process::Command::new("python3")
+        .arg(script)
+        .arg(&out)
+        .output();
     match res {
         Ok(o) if o.status.success() => {
             let text = String::from_utf8_lossy(&o.stdout);
             print!("{text}");
             let b = std::fs::read(&out).unwrap_or_default();
-            let py: Vec<f64> = b.chunks_exact(8).map(|c| f64::from_le_bytes(c.try_into().unwrap())).collect();
+            let py: Vec<f64> = b
+                .chunks_exact(8)
+                .map(|c| f64::from_le_bytes(c.try_into().unwrap()))
+                .collect();
             // python writes Re H, Im H, coherence of every response at lines 100, 1000, 3000.
             let mut worst: f64 = 0.0;
             for (n, k) in [100usize, 1000, 3000].iter().enumerate() {
@@ -101,7 +108,10 @@ fn scipy_baseline(rust: &process::Frf) {
                 }
             }
         }
-        Ok(o) => println!("scipy baseline failed (run .ci/setup): {}", String::from_utf8_lossy(&o.stderr)),
+        Ok(o) => println!(
+            "scipy baseline failed (run .ci/setup): {}",
+            String::from_utf8_lossy(&o.stderr)
+        ),
         Err(e) => println!("python3 not available for the scipy baseline ({e}); run .ci/setup"),
     }
     let _ = std::fs::remove_dir_all(&dir);
@@ -113,7 +123,9 @@ thread_local! {
 
 fn bench(c: &mut Criterion) {
     let mut g = c.benchmark_group("h1_coherence_8ch_2^24");
-    g.sample_size(10).warm_up_time(Duration::from_secs(1)).measurement_time(Duration::from_secs(20));
+    g.sample_size(10)
+        .warm_up_time(Duration::from_secs(1))
+        .measurement_time(Duration::from_secs(20));
     g.bench_function("generate_only", |b| b.iter(|| run(true)));
     g.bench_function("generate+welch+h1", |b| b.iter(|| run(false)));
     g.finish();

@@ -27,18 +27,32 @@ pub struct Calibration {
 impl Calibration {
     /// Accelerometer given in mV/g (data-sheet unit).
     pub fn accelerometer_mv_per_g(name: &str, mv_per_g: f64) -> Calibration {
-        Calibration { name: name.into(), sensitivity: mv_per_g * 1e-3 / STANDARD_GRAVITY, offset: 0.0, quantity: Some(Quantity::Acceleration) }
+        Calibration {
+            name: name.into(),
+            sensitivity: mv_per_g * 1e-3 / STANDARD_GRAVITY,
+            offset: 0.0,
+            quantity: Some(Quantity::Acceleration),
+        }
     }
 
     /// Force sensor or hammer given in mV/N.
     pub fn force_mv_per_n(name: &str, mv_per_n: f64) -> Calibration {
-        Calibration { name: name.into(), sensitivity: mv_per_n * 1e-3, offset: 0.0, quantity: None }
+        Calibration {
+            name: name.into(),
+            sensitivity: mv_per_n * 1e-3,
+            offset: 0.0,
+            quantity: None,
+        }
     }
 
     /// Converts raw samples to SI in place.
     pub fn apply(&self, raw: &mut [f64]) -> Result<()> {
         if !(self.sensitivity.is_finite() && self.sensitivity != 0.0 && self.offset.is_finite()) {
-            return Err(invalid("sensitivity", format!("{} (channel '{}')", self.sensitivity, self.name), "must be finite and nonzero: take it from the sensor's calibration sheet"));
+            return Err(invalid(
+                "sensitivity",
+                format!("{} (channel '{}')", self.sensitivity, self.name),
+                "must be finite and nonzero: take it from the sensor's calibration sheet",
+            ));
         }
         let inv = 1.0 / self.sensitivity;
         raw.iter_mut().for_each(|v| *v = (*v - self.offset) * inv);
@@ -59,7 +73,11 @@ fn order(q: Quantity) -> i32 {
 /// order) at 0 Hz is an error.
 pub fn convert(freqs_hz: &[f64], h: &mut [C64], from: Quantity, to: Quantity) -> Result<()> {
     if freqs_hz.len() != h.len() {
-        return Err(ProcessError::ChannelCount { what: "FRF values (one per frequency)", expected: freqs_hz.len(), got: h.len() });
+        return Err(ProcessError::ChannelCount {
+            what: "FRF values (one per frequency)",
+            expected: freqs_hz.len(),
+            got: h.len(),
+        });
     }
     let p = order(to) - order(from);
     if p == 0 {
@@ -67,7 +85,11 @@ pub fn convert(freqs_hz: &[f64], h: &mut [C64], from: Quantity, to: Quantity) ->
     }
     if p < 0 {
         if let Some(f) = freqs_hz.iter().find(|f| **f == 0.0) {
-            return Err(ProcessError::ZeroFrequency { from: from.as_str(), to: to.as_str(), freq_hz: *f });
+            return Err(ProcessError::ZeroFrequency {
+                from: from.as_str(),
+                to: to.as_str(),
+                freq_hz: *f,
+            });
         }
     }
     for (f, v) in freqs_hz.iter().zip(h.iter_mut()) {
@@ -92,7 +114,13 @@ mod tests {
         assert!((h[2] + h0[2] * w * w).norm() < 1e-12 * (w * w));
         assert!(convert(&f, &mut h, Quantity::Acceleration, Quantity::Velocity).is_err());
         let mut g = h[1..].to_vec();
-        convert(&f[1..], &mut g, Quantity::Acceleration, Quantity::Displacement).unwrap();
+        convert(
+            &f[1..],
+            &mut g,
+            Quantity::Acceleration,
+            Quantity::Displacement,
+        )
+        .unwrap();
         assert!((g[1] - h0[2]).norm() < 1e-18);
     }
 
@@ -102,7 +130,10 @@ mod tests {
         let mut x = vec![0.1];
         c.apply(&mut x).unwrap();
         assert!((x[0] - STANDARD_GRAVITY).abs() < 1e-12);
-        let bad = Calibration { sensitivity: 0.0, ..c };
+        let bad = Calibration {
+            sensitivity: 0.0,
+            ..c
+        };
         assert!(bad.apply(&mut x).unwrap_err().to_string().contains("'a'"));
     }
 }

@@ -7,7 +7,9 @@ use std::path::PathBuf;
 #[derive(Debug, thiserror::Error)]
 pub enum ProcessError {
     /// A record holds no samples.
-    #[error("channel '{channel}' is empty: record at least one segment ({needed} samples) of data")]
+    #[error(
+        "channel '{channel}' is empty: record at least one segment ({needed} samples) of data"
+    )]
     Empty {
         /// Channel name.
         channel: String,
@@ -145,6 +147,14 @@ pub enum ProcessError {
 /// Result alias of this crate.
 pub type Result<T, E = ProcessError> = std::result::Result<T, E>;
 
-pub(crate) fn invalid(field: &'static str, value: impl std::fmt::Display, reason: impl Into<String>) -> ProcessError {
-    ProcessError::InvalidSetting { field, value: value.to_string(), reason: reason.into() }
+pub(crate) fn invalid(
+    field: &'static str,
+    value: impl std::fmt::Display,
+    reason: impl Into<String>,
+) -> ProcessError {
+    ProcessError::InvalidSetting {
+        field,
+        value: value.to_string(),
+        reason: reason.into(),
+    }
 }

@@ -110,7 +110,10 @@ impl Frf {
 pub fn estimate(s: &CrossSpectra, estimator: Estimator) -> Result<Frf> {
     let (r, p) = (s.references, s.responses);
     if estimator != Estimator::H1 && r != 1 {
-        return Err(ProcessError::EstimatorNeedsSingleReference { estimator: estimator.name(), references: r });
+        return Err(ProcessError::EstimatorNeedsSingleReference {
+            estimator: estimator.name(),
+            references: r,
+        });
     }
     let nf = s.freqs_hz.len();
     let mut h = vec![C64::default(); nf * p * r];
@@ -125,7 +128,11 @@ pub fn estimate(s: &CrossSpectra, estimator: Estimator) -> Result<Frf> {
             for i in 0..r {
                 let gxx = s.gxx(k, i, i).re;
                 let gxy = s.gxy(k, i, j);
-                coherence[(k * p + j) * r + i] = if gxx > 0.0 && gyy > 0.0 { (gxy.norm_sqr() / (gxx * gyy)).min(1.0) } else { 0.0 };
+                coherence[(k * p + j) * r + i] = if gxx > 0.0 && gyy > 0.0 {
+                    (gxy.norm_sqr() / (gxx * gyy)).min(1.0)
+                } else {
+                    0.0
+                };
             }
             let out = &mut h[(k * p + j) * r..(k * p + j + 1) * r];
             match estimator {
@@ -140,9 +147,14 @@ pub fn estimate(s: &CrossSpectra, estimator: Estimator) -> Result<Frf> {
                         out.copy_from_slice(&b);
                         // γ² = g^H G^{-1} g / Gyy = Σ conj(g_i) h_i / Gyy.
                         let num: f64 = (0..r).map(|i| (s.gxy(k, i, j).conj() * out[i]).re).sum();
-                        multiple[k * p + j] = if gyy > 0.0 { (num / gyy).clamp(0.0, 1.0) } else { 0.0 };
+                        multiple[k * p + j] = if gyy > 0.0 {
+                            (num / gyy).clamp(0.0, 1.0)
+                        } else {
+                            0.0
+                        };
                     } else {
-                        out.iter_mut().for_each(|v| *v = C64::new(f64::NAN, f64::NAN));
+                        out.iter_mut()
+                            .for_each(|v| *v = C64::new(f64::NAN, f64::NAN));
                         multiple[k * p + j] = 0.0;
                     }
                 }
@@ -163,7 +175,16 @@ pub fn estimate(s: &CrossSpectra, estimator: Estimator) -> Result<Frf> {
             }
         }
     }
-    Ok(Frf { freqs_hz: s.freqs_hz.clone(), references: r, responses: p, averages: s.averages, estimator, h, coherence, multiple_coherence: multiple })
+    Ok(Frf {
+        freqs_hz: s.freqs_hz.clone(),
+        references: r,
+        responses: p,
+        averages: s.averages,
+        estimator,
+        h,
+        coherence,
+        multiple_coherence: multiple,
+    })
 }
 
 /// Solves `A x = b` (A: n×n row-major, overwritten) by Gaussian elimination with partial
@@ -224,13 +245,23 @@ mod tests {
 
     #[test]
     fn solver_solves_and_detects_singular() {
-        let mut a = vec![C64::new(0.0, 0.0), C64::new(2.0, 1.0), C64::new(1.0, 0.0), C64::new(3.0, 0.0)];
+        let mut a = vec![
+            C64::new(0.0, 0.0),
+            C64::new(2.0, 1.0),
+            C64::new(1.0, 0.0),
+            C64::new(3.0, 0.0),
+        ];
         let x = [C64::new(1.0, -1.0), C64::new(0.5, 2.0)];
         let mut b = vec![a[0] * x[0] + a[1] * x[1], a[2] * x[0] + a[3] * x[1]];
         let mut perm = vec![0; 2];
         assert!(solve_in_place(&mut a, &mut b, &mut perm, 2));
         assert!((b[0] - x[0]).norm() < 1e-14 && (b[1] - x[1]).norm() < 1e-14);
-        let mut s = vec![C64::new(1.0, 0.0), C64::new(2.0, 0.0), C64::new(2.0, 0.0), C64::new(4.0, 0.0)];
+        let mut s = vec![
+            C64::new(1.0, 0.0),
+            C64::new(2.0, 0.0),
+            C64::new(2.0, 0.0),
+            C64::new(4.0, 0.0),
+        ];
         let mut b = vec![C64::new(1.0, 0.0); 2];
         assert!(!solve_in_place(&mut s, &mut b, &mut perm, 2));
     }

@@ -82,7 +82,10 @@ const DOF_NAMES: [&str; 6] = ["u1", "u2", "u3", "r1", "r2", "r3"];
 impl RigidFit {
     /// Builds the fit for `body` measured by `sensors`.
     pub fn new(body: &Body, sensors: &[Sensor], dofs: Dofs) -> Result<RigidFit> {
-        let degenerate = |missing: String| ProcessError::DegenerateLayout { body: body.name.clone(), missing };
+        let degenerate = |missing: String| ProcessError::DegenerateLayout {
+            body: body.name.clone(),
+            missing,
+        };
         let rt = body.rotation.transpose();
         let n = sensors.len();
         let mut a = DMatrix::<f64>::zeros(n, 6);
@@ -122,8 +125,16 @@ impl RigidFit {
         let pinv = a
             .clone()
             .pseudo_inverse(1e-12)
-            .map_err(|e| ProcessError::DegenerateLayout { body: body.name.clone(), missing: e.to_string() })?;
-        Ok(RigidFit { body: body.name.clone(), dofs, a, pinv })
+            .map_err(|e| ProcessError::DegenerateLayout {
+                body: body.name.clone(),
+                missing: e.to_string(),
+            })?;
+        Ok(RigidFit {
+            body: body.name.clone(),
+            dofs,
+            a,
+            pinv,
+        })
     }
 
     /// Number of fitted DOFs: 6, or 3 (translations only).
@@ -146,7 +157,11 @@ impl RigidFit {
     pub fn fit_line(&self, y: &[C64], q: &mut [C64; 6]) -> Result<f64> {
         let n = self.a.nrows();
         if y.len() != n {
-            return Err(ProcessError::ChannelCount { what: "sensor channels", expected: n, got: y.len() });
+            return Err(ProcessError::ChannelCount {
+                what: "sensor channels",
+                expected: n,
+                got: y.len(),
+            });
         }
         *q = [C64::default(); 6];
         for (d, qd) in q.iter_mut().enumerate().take(self.dofs) {
@@ -167,11 +182,17 @@ impl RigidFit {
     pub fn variance(&self, channel_variance: &[f64]) -> Result<[f64; 6]> {
         let n = self.a.nrows();
         if channel_variance.len() != n {
-            return Err(ProcessError::ChannelCount { what: "channel variances", expected: n, got: channel_variance.len() });
+            return Err(ProcessError::ChannelCount {
+                what: "channel variances",
+                expected: n,
+                got: channel_variance.len(),
+            });
         }
         let mut out = [0.0; 6];
         for (d, o) in out.iter_mut().enumerate().take(self.dofs) {
-            *o = (0..n).map(|i| self.pinv[(d, i)].powi(2) * channel_variance[i]).sum();
+            *o = (0..n)
+                .map(|i| self.pinv[(d, i)].powi(2) * channel_variance[i])
+                .sum();
         }
         Ok(out)
     }
@@ -180,15 +201,29 @@ impl RigidFit {
     pub fn transform(&self, freqs_hz: &[f64], channels: &[Vec<C64>]) -> Result<PrincipalResponse> {
         let n = self.a.nrows();
         if channels.len() != n {
-            return Err(ProcessError::ChannelCount { what: "sensor channels", expected: n, got: channels.len() });
+            return Err(ProcessError::ChannelCount {
+                what: "sensor channels",
+                expected: n,
+                got: channels.len(),
+            });
         }
         for c in channels {
             if c.len() != freqs_hz.len() {
-                return Err(ProcessError::ChannelCount { what: "frequency lines of a sensor FRF", expected: freqs_hz.len(), got: c.len() });
+                return Err(ProcessError::ChannelCount {
+                    what: "frequency lines of a sensor FRF",
+                    expected: freqs_hz.len(),
+                    got: c.len(),
+                });
             }
         }
         let mut y = vec![C64::default(); n];
-        let mut out = PrincipalResponse { freqs_hz: freqs_hz.to_vec(), q: Vec::with_capacity(freqs_hz.len()), residual: Vec::with_capacity(freqs_hz.len()), variance: None, dofs: self.dofs };
+        let mut out = PrincipalResponse {
+            freqs_hz: freqs_hz.to_vec(),
+            q: Vec::with_capacity(freqs_hz.len()),
+            residual: Vec::with_capacity(freqs_hz.len()),
+            variance: None,
+            dofs: self.dofs,
+        };
         for k in 0..freqs_hz.len() {
             for (yi, c) in y.iter_mut().zip(channels) {
                 *yi = c[k];
@@ -205,18 +240,38 @@ impl RigidFit {
 impl RigidFit {
     /// Transforms the FRFs of `frf` to the principal axes: `sensor_responses[i]` is the response
     /// index in `frf` of sensor i, `reference` the force. Carries each line's variance through.
-    pub fn transform_frf(&self, frf: &crate::Frf, reference: usize, sensor_responses: &[usize]) -> Result<PrincipalResponse> {
+    pub fn transform_frf(
+        &self,
+        frf: &crate::Frf,
+        reference: usize,
+        sensor_responses: &[usize],
+    ) -> Result<PrincipalResponse> {
         let n = self.a.nrows();
         if sensor_responses.len() != n {
-            return Err(ProcessError::ChannelCount { what: "sensor-to-response indices", expected: n, got: sensor_responses.len() });
+            return Err(ProcessError::ChannelCount {
+                what: "sensor-to-response indices",
+                expected: n,
+                got: sensor_responses.len(),
+            });
         }
         if reference >= frf.references {
-            return Err(ProcessError::ChannelCount { what: "references in the FRF (reference index out of range)", expected: reference + 1, got: frf.references });
+            return Err(ProcessError::ChannelCount {
+                what: "references in the FRF (reference index out of range)",
+                expected: reference + 1,
+                got: frf.references,
+            });
         }
         if let Some(&bad) = sensor_responses.iter().find(|&&j| j >= frf.responses) {
-            return Err(ProcessError::ChannelCount { what: "responses in the FRF (sensor index out of range)", expected: bad + 1, got: frf.responses });
+            return Err(ProcessError::ChannelCount {
+                what: "responses in the FRF (sensor index out of range)",
+                expected: bad + 1,
+                got: frf.responses,
+            });
         }
-        let channels: Vec<Vec<C64>> = sensor_responses.iter().map(|&j| frf.line(j, reference)).collect();
+        let channels: Vec<Vec<C64>> = sensor_responses
+            .iter()
+            .map(|&j| frf.line(j, reference))
+            .collect();
         let mut out = self.transform(&frf.freqs_hz, &channels)?;
         let mut var = Vec::with_capacity(frf.freqs_hz.len());
         let mut cv = vec![0.0; n];
@@ -234,12 +289,23 @@ impl RigidFit {
 /// Builds a [`Body`] from mass properties given as a full inertia tensor about the centre of mass
 /// (kg·m², global axes): its eigen-decomposition gives the principal moments (ascending) and the
 /// principal axes (columns of `rotation`, right-handed).
-pub fn body_from_inertia_tensor(name: &str, mass: f64, centre_of_mass: Vector3<f64>, tensor: &nalgebra::Matrix3<f64>) -> Result<Body> {
-    let bad = |what: String| ProcessError::InvalidSetting { field: "inertia tensor", value: name.to_string(), reason: what };
+pub fn body_from_inertia_tensor(
+    name: &str,
+    mass: f64,
+    centre_of_mass: Vector3<f64>,
+    tensor: &nalgebra::Matrix3<f64>,
+) -> Result<Body> {
+    let bad = |what: String| ProcessError::InvalidSetting {
+        field: "inertia tensor",
+        value: name.to_string(),
+        reason: what,
+    };
     if !(mass.is_finite() && mass > 0.0) {
         return Err(bad(format!("mass {mass} kg must be > 0")));
     }
-    if !tensor.iter().all(|v| v.is_finite()) || (tensor - tensor.transpose()).abs().max() > 1e-9 * tensor.abs().max() {
+    if !tensor.iter().all(|v| v.is_finite())
+        || (tensor - tensor.transpose()).abs().max() > 1e-9 * tensor.abs().max()
+    {
         return Err(bad("the tensor must be finite and symmetric".into()));
     }
     let eig = nalgebra::SymmetricEigen::new(*tensor);
@@ -247,14 +313,26 @@ pub fn body_from_inertia_tensor(name: &str, mass: f64, centre_of_mass: Vector3<f
     order.sort_by(|&a, &b| eig.eigenvalues[a].total_cmp(&eig.eigenvalues[b]));
     let inertia = order.map(|i| eig.eigenvalues[i]);
     if inertia[0] <= 0.0 {
-        return Err(bad(format!("principal moments {inertia:?} must all be > 0")));
+        return Err(bad(format!(
+            "principal moments {inertia:?} must all be > 0"
+        )));
     }
     let (a, b, c) = (order[0], order[1], order[2]);
-    let mut rotation = nalgebra::Matrix3::from_columns(&[eig.eigenvectors.column(a), eig.eigenvectors.column(b), eig.eigenvectors.column(c)]);
+    let mut rotation = nalgebra::Matrix3::from_columns(&[
+        eig.eigenvectors.column(a),
+        eig.eigenvectors.column(b),
+        eig.eigenvectors.column(c),
+    ]);
     if rotation.determinant() < 0.0 {
         rotation.column_mut(2).neg_mut();
     }
-    Ok(Body { name: name.to_string(), mass, inertia, position: centre_of_mass, rotation })
+    Ok(Body {
+        name: name.to_string(),
+        mass,
+        inertia,
+        position: centre_of_mass,
+        rotation,
+    })
 }
 
 /// Ok if `a` has full column rank; otherwise a description of the unobserved motions.

@@ -29,7 +29,13 @@ pub struct SelectionConfig {
 
 impl Default for SelectionConfig {
     fn default() -> Self {
-        SelectionConfig { count: 38, band_hz: (0.0, f64::INFINITY), min_coherence: 0.8, resonance_weight: 4.0, resonance_width: 0.1 }
+        SelectionConfig {
+            count: 38,
+            band_hz: (0.0, f64::INFINITY),
+            min_coherence: 0.8,
+            resonance_weight: 4.0,
+            resonance_width: 0.1,
+        }
     }
 }
 
@@ -37,30 +43,61 @@ impl Default for SelectionConfig {
 ///
 /// `magnitude` is |H| per line; `coherence`, when given, the coherence per line; `name` labels
 /// errors.
-pub fn select_points(name: &str, freqs_hz: &[f64], magnitude: &[f64], coherence: Option<&[f64]>, config: &SelectionConfig) -> Result<Vec<usize>> {
+pub fn select_points(
+    name: &str,
+    freqs_hz: &[f64],
+    magnitude: &[f64],
+    coherence: Option<&[f64]>,
+    config: &SelectionConfig,
+) -> Result<Vec<usize>> {
     if magnitude.len() != freqs_hz.len() {
-        return Err(ProcessError::ChannelCount { what: "magnitudes (one per frequency)", expected: freqs_hz.len(), got: magnitude.len() });
+        return Err(ProcessError::ChannelCount {
+            what: "magnitudes (one per frequency)",
+            expected: freqs_hz.len(),
+            got: magnitude.len(),
+        });
     }
     if let Some(c) = coherence {
         if c.len() != freqs_hz.len() {
-            return Err(ProcessError::ChannelCount { what: "coherences (one per frequency)", expected: freqs_hz.len(), got: c.len() });
+            return Err(ProcessError::ChannelCount {
+                what: "coherences (one per frequency)",
+                expected: freqs_hz.len(),
+                got: c.len(),
+            });
         }
     }
     if config.count == 0 {
         return Err(invalid("count", 0, "select at least one point"));
     }
-    if config.resonance_width.is_nan() || config.resonance_width <= 0.0 || config.resonance_weight.is_nan() || config.resonance_weight < 0.0 {
-        return Err(invalid("resonance_width/weight", format!("{}/{}", config.resonance_width, config.resonance_weight), "width > 0 and weight ≥ 0"));
+    if config.resonance_width.is_nan()
+        || config.resonance_width <= 0.0
+        || config.resonance_weight.is_nan()
+        || config.resonance_weight < 0.0
+    {
+        return Err(invalid(
+            "resonance_width/weight",
+            format!("{}/{}", config.resonance_width, config.resonance_weight),
+            "width > 0 and weight ≥ 0",
+        ));
     }
     let (lo, hi) = config.band_hz;
     let cand: Vec<usize> = (0..freqs_hz.len())
         .filter(|&k| {
             let f = freqs_hz[k];
-            f > 0.0 && f >= lo && f <= hi && magnitude[k].is_finite() && coherence.is_none_or(|c| c[k] >= config.min_coherence)
+            f > 0.0
+                && f >= lo
+                && f <= hi
+                && magnitude[k].is_finite()
+                && coherence.is_none_or(|c| c[k] >= config.min_coherence)
         })
         .collect();
     if cand.len() < config.count {
-        return Err(ProcessError::NotEnoughPoints { name: name.into(), usable: cand.len(), wanted: config.count, min_coherence: config.min_coherence });
+        return Err(ProcessError::NotEnoughPoints {
+            name: name.into(),
+            usable: cand.len(),
+            wanted: config.count,
+            min_coherence: config.min_coherence,
+        });
     }
     let lf: Vec<f64> = cand.iter().map(|&k| freqs_hz[k].ln()).collect();
     let w = (1.0 + config.resonance_width).ln();
@@ -84,10 +121,21 @@ pub fn select_points(name: &str, freqs_hz: &[f64], magnitude: &[f64], coherence:
     let mut cum = Vec::with_capacity(n);
     let mut total = 0.0;
     for a in 0..n {
-        let left = if a > 0 { (lf[a] - lf[a - 1]) / 2.0 } else { 0.0 };
-        let right = if a + 1 < n { (lf[a + 1] - lf[a]) / 2.0 } else { 0.0 };
+        let left = if a > 0 {
+            (lf[a] - lf[a - 1]) / 2.0
+        } else {
+            0.0
+        };
+        let right = if a + 1 < n {
+            (lf[a + 1] - lf[a]) / 2.0
+        } else {
+            0.0
+        };
         let span = if n == 1 { 1.0 } else { left + right };
-        let bump: f64 = peaks.iter().map(|p| (-0.5 * ((lf[a] - p) / (w / 2.0)).powi(2)).exp()).sum();
+        let bump: f64 = peaks
+            .iter()
+            .map(|p| (-0.5 * ((lf[a] - p) / (w / 2.0)).powi(2)).exp())
+            .sum();
         total += span * (1.0 + config.resonance_weight * bump);
         cum.push(total);
     }
@@ -146,20 +194,36 @@ pub fn to_measurement(
         return Err(invalid("dof", spec.dof, "0-2 translations, 3-5 rotations"));
     }
     if !(spec.nominal_force.is_finite() && spec.nominal_force > 0.0) {
-        return Err(invalid("nominal_force", spec.nominal_force, "the model's excitation amplitude, > 0 (N)"));
+        return Err(invalid(
+            "nominal_force",
+            spec.nominal_force,
+            "the model's excitation amplitude, > 0 (N)",
+        ));
     }
     if h.len() != freqs_hz.len() {
-        return Err(ProcessError::ChannelCount { what: "FRF values (one per frequency)", expected: freqs_hz.len(), got: h.len() });
+        return Err(ProcessError::ChannelCount {
+            what: "FRF values (one per frequency)",
+            expected: freqs_hz.len(),
+            got: h.len(),
+        });
     }
     for opt in [coherence, variance].into_iter().flatten() {
         if opt.len() != freqs_hz.len() {
-            return Err(ProcessError::ChannelCount { what: "coherence/variance values (one per frequency)", expected: freqs_hz.len(), got: opt.len() });
+            return Err(ProcessError::ChannelCount {
+                what: "coherence/variance values (one per frequency)",
+                expected: freqs_hz.len(),
+                got: opt.len(),
+            });
         }
     }
     let mut last = f64::NEG_INFINITY;
     for &k in points {
         if k >= freqs_hz.len() || freqs_hz[k] <= last {
-            return Err(invalid("points", k, "indices must be in range and at strictly increasing frequencies"));
+            return Err(invalid(
+                "points",
+                k,
+                "indices must be in range and at strictly increasing frequencies",
+            ));
         }
         last = freqs_hz[k];
     }

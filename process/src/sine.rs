@@ -76,7 +76,10 @@ impl Step {
         let r = self.responses.get(j)?;
         let h = self.frf.get(j)?;
         let n = self.samples as f64;
-        Some(4.0 * (r.noise_rms.powi(2) + h.norm_sqr() * self.force.noise_rms.powi(2)) / (n * self.force.fundamental.norm_sqr()))
+        Some(
+            4.0 * (r.noise_rms.powi(2) + h.norm_sqr() * self.force.noise_rms.powi(2))
+                / (n * self.force.fundamental.norm_sqr()),
+        )
     }
 }
 
@@ -95,29 +98,54 @@ impl SineFitter {
     }
 
     /// Fits one step: `force` and each of `responses` are the samples of the step (same length).
-    pub fn fit_step(&mut self, config: &SineConfig, freq_hz: f64, force: &[f64], responses: &[&[f64]]) -> Result<Step> {
+    pub fn fit_step(
+        &mut self,
+        config: &SineConfig,
+        freq_hz: f64,
+        force: &[f64],
+        responses: &[&[f64]],
+    ) -> Result<Step> {
         let fs = config.sample_rate_hz;
         if !(fs.is_finite() && fs > 0.0) {
-            return Err(invalid("sample_rate_hz", fs, "must be a positive number of Hz"));
+            return Err(invalid(
+                "sample_rate_hz",
+                fs,
+                "must be a positive number of Hz",
+            ));
         }
         if !(freq_hz.is_finite() && freq_hz > 0.0 && freq_hz < fs / 2.0) {
-            return Err(invalid("step frequency", freq_hz, format!("must lie in (0, {}) Hz (below Nyquist)", fs / 2.0)));
+            return Err(invalid(
+                "step frequency",
+                freq_hz,
+                format!("must lie in (0, {}) Hz (below Nyquist)", fs / 2.0),
+            ));
         }
         if !(config.settle_s.is_finite() && config.settle_s >= 0.0) {
             return Err(invalid("settle_s", config.settle_s, "must be ≥ 0 s"));
         }
         for (j, r) in responses.iter().enumerate() {
             if r.len() != force.len() {
-                return Err(ProcessError::LengthMismatch { channel: format!("response {j}"), samples: r.len(), first: "force".into(), expected: force.len() });
+                return Err(ProcessError::LengthMismatch {
+                    channel: format!("response {j}"),
+                    samples: r.len(),
+                    first: "force".into(),
+                    expected: force.len(),
+                });
             }
         }
         let skip = (config.settle_s * fs).ceil() as usize;
         let per_period = fs / freq_hz;
         let used = force.len().saturating_sub(skip);
         if (used as f64) < per_period.max(8.0) {
-            return Err(ProcessError::TooShort { channel: format!("step at {freq_hz} Hz"), samples: used, needed: per_period.max(8.0).ceil() as usize + skip });
+            return Err(ProcessError::TooShort {
+                channel: format!("step at {freq_hz} Hz"),
+                samples: used,
+                needed: per_period.max(8.0).ceil() as usize + skip,
+            });
         }
-        let nh = (1..=1 + config.harmonics).take_while(|h| *h as f64 * freq_hz < fs / 2.0).count();
+        let nh = (1..=1 + config.harmonics)
+            .take_while(|h| *h as f64 * freq_hz < fs / 2.0)
+            .count();
         let m = 1 + 2 * nh;
         self.basis.clear();
         self.basis.resize(used * m, 0.0);
@@ -144,12 +172,20 @@ impl SineFitter {
             }
         }
         if !cholesky(&mut self.gram, m) {
-            return Err(ProcessError::TooShort { channel: format!("step at {freq_hz} Hz (sine basis is ill-conditioned)"), samples: used, needed: 2 * per_period.ceil() as usize + skip });
+            return Err(ProcessError::TooShort {
+                channel: format!("step at {freq_hz} Hz (sine basis is ill-conditioned)"),
+                samples: used,
+                needed: 2 * per_period.ceil() as usize + skip,
+            });
         }
         let mut fit = |x: &[f64], name: &str| -> Result<SineFit> {
             let x = &x[skip..];
             if let Some(i) = x.iter().position(|v| !v.is_finite()) {
-                return Err(ProcessError::NonFinite { channel: name.to_string(), index: (skip + i) as u64, value: x[i] });
+                return Err(ProcessError::NonFinite {
+                    channel: name.to_string(),
+                    index: (skip + i) as u64,
+                    value: x[i],
+                });
             }
             self.rhs.clear();
             self.rhs.resize(m, 0.0);
@@ -171,20 +207,38 @@ impl SineFitter {
             let fundamental = ph(0);
             let harmonics: Vec<C64> = (1..nh).map(ph).collect();
             let hp: f64 = harmonics.iter().map(|c| c.norm_sqr()).sum();
-            let distortion = if hp == 0.0 { 0.0 } else { hp.sqrt() / fundamental.norm() };
+            let distortion = if hp == 0.0 {
+                0.0
+            } else {
+                hp.sqrt() / fundamental.norm()
+            };
             let dof = (used - m).max(1) as f64;
-            Ok(SineFit { dc: self.rhs[0], fundamental, harmonics, distortion, noise_rms: (ss / dof).sqrt() })
+            Ok(SineFit {
+                dc: self.rhs[0],
+                fundamental,
+                harmonics,
+                distortion,
+                noise_rms: (ss / dof).sqrt(),
+            })
         };
         let f = fit(force, "force")?;
         if f.amplitude() == 0.0 {
-            return Err(ProcessError::ZeroForce { channel: format!("force at step {freq_hz} Hz") });
+            return Err(ProcessError::ZeroForce {
+                channel: format!("force at step {freq_hz} Hz"),
+            });
         }
         let mut rs = Vec::with_capacity(responses.len());
         for (j, r) in responses.iter().enumerate() {
             rs.push(fit(r, &format!("response {j}"))?);
         }
         let frf = rs.iter().map(|r| r.fundamental / f.fundamental).collect();
-        Ok(Step { freq_hz, force: f, responses: rs, frf, samples: used })
+        Ok(Step {
+            freq_hz,
+            force: f,
+            responses: rs,
+            frf,
+            samples: used,
+        })
     }
 }
 
@@ -202,20 +256,39 @@ pub struct StepSpec {
 impl SineFitter {
     /// Fits every step of a continuous stepped-sine record (force and responses sampled
     /// together). Each step's phases are referred to its own first sample; FRFs are unaffected.
-    pub fn fit_sweep(&mut self, config: &SineConfig, steps: &[StepSpec], force: &[f64], responses: &[&[f64]]) -> Result<Vec<Step>> {
+    pub fn fit_sweep(
+        &mut self,
+        config: &SineConfig,
+        steps: &[StepSpec],
+        force: &[f64],
+        responses: &[&[f64]],
+    ) -> Result<Vec<Step>> {
         for (j, r) in responses.iter().enumerate() {
             if r.len() != force.len() {
-                return Err(ProcessError::LengthMismatch { channel: format!("response {j}"), samples: r.len(), first: "force".into(), expected: force.len() });
+                return Err(ProcessError::LengthMismatch {
+                    channel: format!("response {j}"),
+                    samples: r.len(),
+                    first: "force".into(),
+                    expected: force.len(),
+                });
             }
         }
         let mut out = Vec::with_capacity(steps.len());
         let mut slices: Vec<&[f64]> = Vec::with_capacity(responses.len());
         for (i, s) in steps.iter().enumerate() {
-            let end = s.start.checked_add(s.len).filter(|e| *e <= force.len()).ok_or_else(|| ProcessError::TooShort {
-                channel: format!("record (step {i} at {} Hz ends at sample {})", s.freq_hz, s.start.saturating_add(s.len)),
-                samples: force.len(),
-                needed: s.start.saturating_add(s.len),
-            })?;
+            let end = s
+                .start
+                .checked_add(s.len)
+                .filter(|e| *e <= force.len())
+                .ok_or_else(|| ProcessError::TooShort {
+                    channel: format!(
+                        "record (step {i} at {} Hz ends at sample {})",
+                        s.freq_hz,
+                        s.start.saturating_add(s.len)
+                    ),
+                    samples: force.len(),
+                    needed: s.start.saturating_add(s.len),
+                })?;
             slices.clear();
             slices.extend(responses.iter().map(|r| &r[s.start..end]));
             out.push(self.fit_step(config, s.freq_hz, &force[s.start..end], &slices)?);

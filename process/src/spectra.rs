@@ -35,7 +35,11 @@ fn trend(x: &[f64], detrend: Detrend) -> (f64, f64) {
         Detrend::Linear => {
             let mean = x.iter().sum::<f64>() / n;
             let c = (n - 1.0) / 2.0;
-            let sxy: f64 = x.iter().enumerate().map(|(i, v)| (i as f64 - c) * (v - mean)).sum();
+            let sxy: f64 = x
+                .iter()
+                .enumerate()
+                .map(|(i, v)| (i as f64 - c) * (v - mean))
+                .sum();
             let sxx = n * (n * n - 1.0) / 12.0;
             (mean, if sxx > 0.0 { sxy / sxx } else { 0.0 })
         }
@@ -78,13 +82,23 @@ impl WelchConfig {
 
     /// Impact-test set-up: one segment per hit (no overlap), force × exponential window on the
     /// hammer, exponential window on the responses, no trend removal.
-    pub fn impact(sample_rate_hz: f64, segment_len: usize, force_width: f64, exponential_end: f64) -> Self {
-        let exp = Window::Exponential { end: exponential_end };
+    pub fn impact(
+        sample_rate_hz: f64,
+        segment_len: usize,
+        force_width: f64,
+        exponential_end: f64,
+    ) -> Self {
+        let exp = Window::Exponential {
+            end: exponential_end,
+        };
         WelchConfig {
             sample_rate_hz,
             segment_len,
             overlap: 0,
-            reference_window: Window::Product(vec![Window::Force { width: force_width }, exp.clone()]),
+            reference_window: Window::Product(vec![
+                Window::Force { width: force_width },
+                exp.clone(),
+            ]),
             response_window: exp,
             detrend: Detrend::None,
             full_scale: Vec::new(),
@@ -170,44 +184,84 @@ pub struct Welch {
 
 impl std::fmt::Debug for Welch {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("Welch").field("config", &self.config).field("channels", &self.names).field("segments", &self.segments).finish_non_exhaustive()
+        f.debug_struct("Welch")
+            .field("config", &self.config)
+            .field("channels", &self.names)
+            .field("segments", &self.segments)
+            .finish_non_exhaustive()
     }
 }
 
 impl Welch {
     /// Sets up an estimator for channels named `reference_names` (forces) and `response_names`.
-    pub fn new(config: WelchConfig, reference_names: &[&str], response_names: &[&str]) -> Result<Welch> {
+    pub fn new(
+        config: WelchConfig,
+        reference_names: &[&str],
+        response_names: &[&str],
+    ) -> Result<Welch> {
         let n = config.segment_len;
         if n < 2 {
-            return Err(invalid("segment_len", n, "need at least 2 samples per segment"));
+            return Err(invalid(
+                "segment_len",
+                n,
+                "need at least 2 samples per segment",
+            ));
         }
         if config.overlap >= n {
-            return Err(invalid("overlap", config.overlap, format!("must be smaller than the segment length {n}")));
+            return Err(invalid(
+                "overlap",
+                config.overlap,
+                format!("must be smaller than the segment length {n}"),
+            ));
         }
         if !(config.sample_rate_hz.is_finite() && config.sample_rate_hz > 0.0) {
-            return Err(invalid("sample_rate_hz", config.sample_rate_hz, "must be a positive number of Hz"));
+            return Err(invalid(
+                "sample_rate_hz",
+                config.sample_rate_hz,
+                "must be a positive number of Hz",
+            ));
         }
         if reference_names.is_empty() {
-            return Err(ProcessError::ChannelCount { what: "reference (force) channels", expected: 1, got: 0 });
+            return Err(ProcessError::ChannelCount {
+                what: "reference (force) channels",
+                expected: 1,
+                got: 0,
+            });
         }
         if response_names.is_empty() {
-            return Err(ProcessError::ChannelCount { what: "response channels", expected: 1, got: 0 });
+            return Err(ProcessError::ChannelCount {
+                what: "response channels",
+                expected: 1,
+                got: 0,
+            });
         }
         let channels = reference_names.len() + response_names.len();
         if !config.full_scale.is_empty() && config.full_scale.len() != channels {
-            return Err(ProcessError::ChannelCount { what: "full-scale values", expected: channels, got: config.full_scale.len() });
+            return Err(ProcessError::ChannelCount {
+                what: "full-scale values",
+                expected: channels,
+                got: config.full_scale.len(),
+            });
         }
         let ref_window = config.reference_window.coefficients(n)?;
         let resp_window = config.response_window.coefficients(n)?;
         if resp_window.iter().all(|w| *w == 0.0) {
-            return Err(invalid("response_window", "all zeros", "the window must not be zero everywhere"));
+            return Err(invalid(
+                "response_window",
+                "all zeros",
+                "the window must not be zero everywhere",
+            ));
         }
         let fft = FftPlanner::new().plan_fft_forward(n);
         let scratch = vec![C64::default(); fft.get_inplace_scratch_len()];
         let nf = n / 2 + 1;
         let (r, p) = (reference_names.len(), response_names.len());
         Ok(Welch {
-            names: reference_names.iter().chain(response_names).map(|s| s.to_string()).collect(),
+            names: reference_names
+                .iter()
+                .chain(response_names)
+                .map(|s| s.to_string())
+                .collect(),
             references: r,
             responses: p,
             fft,
@@ -247,10 +301,18 @@ impl Welch {
     /// of each channel, all of the same length.
     pub fn push(&mut self, references: &[&[f64]], responses: &[&[f64]]) -> Result<()> {
         if references.len() != self.references {
-            return Err(ProcessError::ChannelCount { what: "reference channels", expected: self.references, got: references.len() });
+            return Err(ProcessError::ChannelCount {
+                what: "reference channels",
+                expected: self.references,
+                got: references.len(),
+            });
         }
         if responses.len() != self.responses {
-            return Err(ProcessError::ChannelCount { what: "response channels", expected: self.responses, got: responses.len() });
+            return Err(ProcessError::ChannelCount {
+                what: "response channels",
+                expected: self.responses,
+                got: responses.len(),
+            });
         }
         let len = references[0].len();
         for (c, ch) in references.iter().chain(responses).enumerate() {
@@ -263,7 +325,11 @@ impl Welch {
                 });
             }
             if let Some(i) = ch.iter().position(|v| !v.is_finite()) {
-                return Err(ProcessError::NonFinite { channel: self.names[c].clone(), index: self.seen + i as u64, value: ch[i] });
+                return Err(ProcessError::NonFinite {
+                    channel: self.names[c].clone(),
+                    index: self.seen + i as u64,
+                    value: ch[i],
+                });
             }
             if let Some(fs) = self.config.full_scale.get(c) {
                 self.overloads[c] += ch.iter().filter(|v| v.abs() >= *fs).count() as u64;
@@ -290,7 +356,8 @@ impl Welch {
         while at < len {
             let take = (n - self.filled).min(len - at);
             for (c, ch) in references.iter().chain(responses).enumerate() {
-                self.pending[c][self.filled..self.filled + take].copy_from_slice(&ch[at..at + take]);
+                self.pending[c][self.filled..self.filled + take]
+                    .copy_from_slice(&ch[at..at + take]);
             }
             self.filled += take;
             at += take;
@@ -315,10 +382,22 @@ impl Welch {
         let mut c = 0;
         while c < channels {
             let pair = c + 1 < channels;
-            let wa = if c < r { &self.ref_window } else { &self.resp_window };
-            let wb = if c + 1 < r { &self.ref_window } else { &self.resp_window };
+            let wa = if c < r {
+                &self.ref_window
+            } else {
+                &self.resp_window
+            };
+            let wb = if c + 1 < r {
+                &self.ref_window
+            } else {
+                &self.resp_window
+            };
             let (ma, sa) = trend(&self.pending[c], self.config.detrend);
-            let (mb, sb) = if pair { trend(&self.pending[c + 1], self.config.detrend) } else { (0.0, 0.0) };
+            let (mb, sb) = if pair {
+                trend(&self.pending[c + 1], self.config.detrend)
+            } else {
+                (0.0, 0.0)
+            };
             let centre = (n as f64 - 1.0) / 2.0;
             if pair {
                 let (a, b) = (&self.pending[c], &self.pending[c + 1]);
@@ -329,7 +408,8 @@ impl Welch {
                 } else {
                     for i in 0..n {
                         let t = i as f64 - centre;
-                        self.work[i] = C64::new((a[i] - ma - sa * t) * wa[i], (b[i] - mb - sb * t) * wb[i]);
+                        self.work[i] =
+                            C64::new((a[i] - ma - sa * t) * wa[i], (b[i] - mb - sb * t) * wb[i]);
                     }
                 }
             } else {
@@ -346,7 +426,13 @@ impl Welch {
                 pa = pa.max(z.re.abs());
                 pb = pb.max(z.im.abs());
             }
-            let exponent = |m: f64| if m > 0.0 && m.is_finite() { m.log2().round().clamp(-1000.0, 1000.0) as i32 } else { 0 };
+            let exponent = |m: f64| {
+                if m > 0.0 && m.is_finite() {
+                    m.log2().round().clamp(-1000.0, 1000.0) as i32
+                } else {
+                    0
+                }
+            };
             let (ea, eb) = (exponent(pa), exponent(pb));
             if ea != eb {
                 let (sa, sb) = (2f64.powi(-ea), 2f64.powi(-eb));
@@ -354,8 +440,13 @@ impl Welch {
                     *z = C64::new(z.re * sa, z.im * sb);
                 }
             }
-            self.fft.process_with_scratch(&mut self.work, &mut self.scratch);
-            let (ua, ub) = if ea != eb { (2f64.powi(ea) * 0.5, 2f64.powi(eb) * 0.5) } else { (0.5, 0.5) };
+            self.fft
+                .process_with_scratch(&mut self.work, &mut self.scratch);
+            let (ua, ub) = if ea != eb {
+                (2f64.powi(ea) * 0.5, 2f64.powi(eb) * 0.5)
+            } else {
+                (0.5, 0.5)
+            };
             let (head, tail) = self.spectra.split_at_mut((c + 1) * nf);
             let sa = &mut head[c * nf..];
             if pair {
@@ -406,27 +497,43 @@ impl Welch {
             return Err(if self.seen == 0 {
                 ProcessError::Empty { channel, needed: n }
             } else {
-                ProcessError::TooShort { channel, samples: self.seen as usize, needed: n }
+                ProcessError::TooShort {
+                    channel,
+                    samples: self.seen as usize,
+                    needed: n,
+                }
             });
         }
         for i in 0..self.references {
             if self.max_abs[i] == 0.0 {
-                return Err(ProcessError::ZeroForce { channel: self.names[i].clone() });
+                return Err(ProcessError::ZeroForce {
+                    channel: self.names[i].clone(),
+                });
             }
         }
         let nf = n / 2 + 1;
         let fs = self.config.sample_rate_hz;
         let power: f64 = self.resp_window.iter().map(|w| w * w).sum();
         let base = 1.0 / (fs * power * self.segments as f64);
-        let scale = |k: usize| if k == 0 || (n.is_multiple_of(2) && k == n / 2) { base } else { 2.0 * base };
+        let scale = |k: usize| {
+            if k == 0 || (n.is_multiple_of(2) && k == n / 2) {
+                base
+            } else {
+                2.0 * base
+            }
+        };
         let (r, p) = (self.references, self.responses);
         let mut gxx = self.acc_gxx;
         let mut gxy = self.acc_gxy;
         let mut gyy = self.acc_gyy;
         for k in 0..nf {
             let s = scale(k);
-            gxx[k * r * r..(k + 1) * r * r].iter_mut().for_each(|g| *g *= s);
-            gxy[k * r * p..(k + 1) * r * p].iter_mut().for_each(|g| *g *= s);
+            gxx[k * r * r..(k + 1) * r * r]
+                .iter_mut()
+                .for_each(|g| *g *= s);
+            gxy[k * r * p..(k + 1) * r * p]
+                .iter_mut()
+                .for_each(|g| *g *= s);
             gyy[k * p..(k + 1) * p].iter_mut().for_each(|g| *g *= s);
         }
         Ok(CrossSpectra {
@@ -456,7 +563,11 @@ pub struct Signal {
 
 /// Welch spectra of whole recorded signals (references = forces, responses). Checks that all
 /// channels share the configured sample rate and length.
-pub fn cross_spectra(config: &WelchConfig, references: &[Signal], responses: &[Signal]) -> Result<CrossSpectra> {
+pub fn cross_spectra(
+    config: &WelchConfig,
+    references: &[Signal],
+    responses: &[Signal],
+) -> Result<CrossSpectra> {
     let all: Vec<&Signal> = references.iter().chain(responses).collect();
     if let Some(first) = all.first() {
         for s in &all {
@@ -469,7 +580,10 @@ pub fn cross_spectra(config: &WelchConfig, references: &[Signal], responses: &[S
                 });
             }
             if s.samples.is_empty() {
-                return Err(ProcessError::Empty { channel: s.name.clone(), needed: config.segment_len });
+                return Err(ProcessError::Empty {
+                    channel: s.name.clone(),
+                    needed: config.segment_len,
+                });
             }
             if s.samples.len() != first.samples.len() {
                 return Err(ProcessError::LengthMismatch {

@@ -128,7 +128,14 @@ pub struct Function {
 impl Function {
     /// A complex FRF at evenly spaced frequencies (Hz).
     pub fn frf(name: &str, f0_hz: f64, df_hz: f64, h: Vec<C64>) -> Function {
-        let mut f = Function::blank(function_type::FRF, Abscissa::Even { min: f0_hz, increment: df_hz }, Ordinate::Complex(h));
+        let mut f = Function::blank(
+            function_type::FRF,
+            Abscissa::Even {
+                min: f0_hz,
+                increment: df_hz,
+            },
+            Ordinate::Complex(h),
+        );
         f.ids[0] = name.into();
         f.axes[0].spec_data_type = 18;
         f.axes[0].label = "Frequency".into();
@@ -138,7 +145,14 @@ impl Function {
 
     /// A real time history sampled at `sample_rate_hz` from t = 0.
     pub fn time_history(name: &str, sample_rate_hz: f64, samples: Vec<f64>) -> Function {
-        let mut f = Function::blank(function_type::TIME_RESPONSE, Abscissa::Even { min: 0.0, increment: 1.0 / sample_rate_hz }, Ordinate::Real(samples));
+        let mut f = Function::blank(
+            function_type::TIME_RESPONSE,
+            Abscissa::Even {
+                min: 0.0,
+                increment: 1.0 / sample_rate_hz,
+            },
+            Ordinate::Real(samples),
+        );
         f.ids[0] = name.into();
         f.axes[0].spec_data_type = 17;
         f.axes[0].label = "Time".into();
@@ -148,7 +162,13 @@ impl Function {
 
     fn blank(func_type: u32, abscissa: Abscissa, data: Ordinate) -> Function {
         Function {
-            ids: ["NONE".into(), "NONE".into(), "NONE".into(), "NONE".into(), "NONE".into()],
+            ids: [
+                "NONE".into(),
+                "NONE".into(),
+                "NONE".into(),
+                "NONE".into(),
+                "NONE".into(),
+            ],
             func_type,
             func_id: 0,
             version: 0,
@@ -170,7 +190,9 @@ impl Function {
     /// Abscissa values (one per point).
     pub fn x(&self) -> Vec<f64> {
         match &self.abscissa {
-            Abscissa::Even { min, increment } => (0..self.data.len()).map(|i| min + i as f64 * increment).collect(),
+            Abscissa::Even { min, increment } => (0..self.data.len())
+                .map(|i| min + i as f64 * increment)
+                .collect(),
             Abscissa::Uneven(x) => x.clone(),
         }
     }
@@ -183,17 +205,36 @@ impl Function {
             "" | "NONE" => fallback_name.to_string(),
             s => s.to_string(),
         };
-        let fail = |m: String| ProcessError::Format { file: name.clone(), location: "dataset 58".into(), message: m };
+        let fail = |m: String| ProcessError::Format {
+            file: name.clone(),
+            location: "dataset 58".into(),
+            message: m,
+        };
         if self.func_type != function_type::TIME_RESPONSE {
-            return Err(fail(format!("function type {} is not a time response (1)", self.func_type)));
+            return Err(fail(format!(
+                "function type {} is not a time response (1)",
+                self.func_type
+            )));
         }
         let increment = match self.abscissa {
-            Abscissa::Even { increment, .. } if increment.is_finite() && increment > 0.0 => increment,
-            Abscissa::Even { increment, .. } => return Err(fail(format!("time increment {increment} s must be > 0"))),
-            Abscissa::Uneven(_) => return Err(fail("unevenly sampled time history: resample it first".into())),
+            Abscissa::Even { increment, .. } if increment.is_finite() && increment > 0.0 => {
+                increment
+            }
+            Abscissa::Even { increment, .. } => {
+                return Err(fail(format!("time increment {increment} s must be > 0")))
+            }
+            Abscissa::Uneven(_) => {
+                return Err(fail(
+                    "unevenly sampled time history: resample it first".into(),
+                ))
+            }
         };
         match &self.data {
-            Ordinate::Real(v) => Ok(crate::Signal { name, sample_rate_hz: 1.0 / increment, samples: v.clone() }),
+            Ordinate::Real(v) => Ok(crate::Signal {
+                name,
+                sample_rate_hz: 1.0 / increment,
+                samples: v.clone(),
+            }),
             Ordinate::Complex(_) => Err(fail("complex time history: expected real samples".into())),
         }
     }
@@ -248,14 +289,20 @@ pub enum Encoding {
 
 /// Reads every dataset 58/58b of a file.
 pub fn read(path: &Path) -> Result<Vec<Function>> {
-    let bytes = std::fs::read(path).map_err(|source| ProcessError::Io { path: path.to_path_buf(), source })?;
+    let bytes = std::fs::read(path).map_err(|source| ProcessError::Io {
+        path: path.to_path_buf(),
+        source,
+    })?;
     parse(&bytes, &path.display().to_string())
 }
 
 /// Writes datasets to a file.
 pub fn write(path: &Path, functions: &[Function], encoding: Encoding) -> Result<()> {
     let bytes = to_bytes(functions, encoding)?;
-    std::fs::write(path, bytes).map_err(|source| ProcessError::Io { path: path.to_path_buf(), source })
+    std::fs::write(path, bytes).map_err(|source| ProcessError::Io {
+        path: path.to_path_buf(),
+        source,
+    })
 }
 
 /// Fortran-style `Ew.d`: `-1.23456E+02`, exponent at least two digits, right-aligned in `w`.
@@ -283,11 +330,19 @@ pub fn to_bytes(functions: &[Function], encoding: Encoding) -> Result<Vec<u8>> {
     for (i, f) in functions.iter().enumerate() {
         let n = f.data.len();
         if n == 0 {
-            return Err(ProcessError::Format { file: "<output>".into(), location: format!("dataset {}", i + 1), message: "has no points; UFF 58 needs at least one".into() });
+            return Err(ProcessError::Format {
+                file: "<output>".into(),
+                location: format!("dataset {}", i + 1),
+                message: "has no points; UFF 58 needs at least one".into(),
+            });
         }
         if let Abscissa::Uneven(x) = &f.abscissa {
             if x.len() != n {
-                return Err(ProcessError::Format { file: "<output>".into(), location: format!("dataset {}", i + 1), message: format!("{} abscissa values for {n} points", x.len()) });
+                return Err(ProcessError::Format {
+                    file: "<output>".into(),
+                    location: format!("dataset {}", i + 1),
+                    message: format!("{} abscissa values for {n} points", x.len()),
+                });
             }
         }
         let values = f.values();
@@ -296,7 +351,18 @@ pub fn to_bytes(functions: &[Function], encoding: Encoding) -> Result<Vec<u8>> {
         h.push_str("    -1\n");
         match encoding {
             Encoding::Ascii => h.push_str(&format!("{:>6}{:74}\n", 58, "")),
-            Encoding::Binary => h.push_str(&format!("{:>6}b{:>6}{:>6}{:>12}{:>12}{:>6}{:>6}{:>12}{:>12}\n", 58, 1, 2, 11, values.len() * width, 0, 0, 0, 0)),
+            Encoding::Binary => h.push_str(&format!(
+                "{:>6}b{:>6}{:>6}{:>12}{:>12}{:>6}{:>6}{:>12}{:>12}\n",
+                58,
+                1,
+                2,
+                11,
+                values.len() * width,
+                0,
+                0,
+                0,
+                0
+            )),
         }
         for id in &f.ids {
             h.push_str(&format!("{:<80}\n", clip(id, 80)));
@@ -318,9 +384,25 @@ pub fn to_bytes(functions: &[Function], encoding: Encoding) -> Result<Vec<u8>> {
             Abscissa::Even { min, increment } => (1, *min, *increment),
             Abscissa::Uneven(_) => (0, 0.0, 0.0),
         };
-        h.push_str(&format!("{:>10}{:>10}{:>10}{}{}{}\n", f.ord_type(), n, even, fmt_e(min, 13, 5), fmt_e(inc, 13, 5), fmt_e(f.z_value, 13, 5)));
+        h.push_str(&format!(
+            "{:>10}{:>10}{:>10}{}{}{}\n",
+            f.ord_type(),
+            n,
+            even,
+            fmt_e(min, 13, 5),
+            fmt_e(inc, 13, 5),
+            fmt_e(f.z_value, 13, 5)
+        ));
         for a in &f.axes {
-            h.push_str(&format!("{:>10}{:>5}{:>5}{:>5} {:<20} {:<20}\n", a.spec_data_type, a.length_exp, a.force_exp, a.temperature_exp, clip(&a.label, 20), clip(&a.units, 20)));
+            h.push_str(&format!(
+                "{:>10}{:>5}{:>5}{:>5} {:<20} {:<20}\n",
+                a.spec_data_type,
+                a.length_exp,
+                a.force_exp,
+                a.temperature_exp,
+                clip(&a.label, 20),
+                clip(&a.units, 20)
+            ));
         }
         out.extend_from_slice(h.as_bytes());
         match encoding {
@@ -382,7 +464,11 @@ impl<'a> Cursor<'a> {
     }
 
     fn err(&self, dataset: usize, message: impl Into<String>) -> ProcessError {
-        ProcessError::Format { file: self.file.to_string(), location: format!("dataset {dataset} (line {})", self.line), message: message.into() }
+        ProcessError::Format {
+            file: self.file.to_string(),
+            location: format!("dataset {dataset} (line {})", self.line),
+            message: message.into(),
+        }
     }
 }
 
@@ -392,12 +478,18 @@ fn is_delimiter(line: &[u8]) -> bool {
 
 /// Fixed-width field `[start, start+w)` of a line (blank if the line is shorter).
 fn field(line: &str, start: usize, w: usize) -> &str {
-    let s = line.get(start.min(line.len())..(start + w).min(line.len())).unwrap_or("");
+    let s = line
+        .get(start.min(line.len())..(start + w).min(line.len()))
+        .unwrap_or("");
     s.trim()
 }
 
 fn parse_f64(s: &str) -> Option<f64> {
-    let t: String = s.trim().chars().map(|c| if c == 'D' || c == 'd' { 'E' } else { c }).collect();
+    let t: String = s
+        .trim()
+        .chars()
+        .map(|c| if c == 'D' || c == 'd' { 'E' } else { c })
+        .collect();
     t.parse::<f64>().ok()
 }
 
@@ -411,7 +503,10 @@ fn tokens(line: &str, out: &mut Vec<String>) {
             if !cur.is_empty() {
                 out.push(std::mem::take(&mut cur));
             }
-        } else if (c == '-' || c == '+') && !cur.is_empty() && prev.is_some_and(|p| p.is_ascii_digit() || p == '.') {
+        } else if (c == '-' || c == '+')
+            && !cur.is_empty()
+            && prev.is_some_and(|p| p.is_ascii_digit() || p == '.')
+        {
             out.push(std::mem::take(&mut cur));
             cur.push(c);
         } else {
@@ -426,7 +521,12 @@ fn tokens(line: &str, out: &mut Vec<String>) {
 
 /// Parses all datasets 58/58b in `bytes`; `file` names the source in errors.
 pub fn parse(bytes: &[u8], file: &str) -> Result<Vec<Function>> {
-    let mut c = Cursor { bytes, pos: 0, line: 0, file };
+    let mut c = Cursor {
+        bytes,
+        pos: 0,
+        line: 0,
+        file,
+    };
     let mut out = Vec::new();
     let mut dataset = 0;
     loop {
@@ -444,15 +544,26 @@ pub fn parse(bytes: &[u8], file: &str) -> Result<Vec<Function>> {
         };
         let _ = line;
         dataset += 1;
-        let header = c.next_line().ok_or_else(|| c.err(dataset, "file ends after the delimiter: truncated"))?;
+        let header = c
+            .next_line()
+            .ok_or_else(|| c.err(dataset, "file ends after the delimiter: truncated"))?;
         let header = String::from_utf8_lossy(header).into_owned();
-        let kind = header.split_whitespace().next().unwrap_or("").to_ascii_lowercase();
+        let kind = header
+            .split_whitespace()
+            .next()
+            .unwrap_or("")
+            .to_ascii_lowercase();
         match kind.as_str() {
             "58" => out.push(parse_58(&mut c, dataset, None)?),
             "58b" => {
                 let f: Vec<&str> = header.split_whitespace().collect();
                 let num = |i: usize, what: &str| -> Result<i64> {
-                    f.get(i).and_then(|s| s.parse::<i64>().ok()).ok_or_else(|| c.err(dataset, format!("58b header lacks the {what} field (header: {header:?})")))
+                    f.get(i).and_then(|s| s.parse::<i64>().ok()).ok_or_else(|| {
+                        c.err(
+                            dataset,
+                            format!("58b header lacks the {what} field (header: {header:?})"),
+                        )
+                    })
                 };
                 let order = num(1, "byte order")?;
                 let fp = num(2, "floating-point format")?;
@@ -470,13 +581,24 @@ pub fn parse(bytes: &[u8], file: &str) -> Result<Vec<Function>> {
                 if n_bytes < 0 {
                     return Err(c.err(dataset, format!("58b byte count {n_bytes} is negative")));
                 }
-                out.push(parse_58(&mut c, dataset, Some((order == 1, n_bytes as usize)))?);
+                out.push(parse_58(
+                    &mut c,
+                    dataset,
+                    Some((order == 1, n_bytes as usize)),
+                )?);
             }
             _ => {
                 // Another dataset type: skip to its end delimiter.
                 loop {
                     match c.next_line() {
-                        None => return Err(c.err(dataset, format!("dataset {kind:?} has no end delimiter '    -1': truncated"))),
+                        None => {
+                            return Err(c.err(
+                                dataset,
+                                format!(
+                                    "dataset {kind:?} has no end delimiter '    -1': truncated"
+                                ),
+                            ))
+                        }
                         Some(l) if is_delimiter(l) => break,
                         Some(_) => {}
                     }
@@ -489,23 +611,37 @@ pub fn parse(bytes: &[u8], file: &str) -> Result<Vec<Function>> {
 fn parse_58(c: &mut Cursor, dataset: usize, binary: Option<(bool, usize)>) -> Result<Function> {
     let mut rec = Vec::with_capacity(11);
     for r in 1..=11 {
-        let l = c.next_line().ok_or_else(|| c.err(dataset, format!("file ends before record {r} of 11: truncated header")))?;
+        let l = c.next_line().ok_or_else(|| {
+            c.err(
+                dataset,
+                format!("file ends before record {r} of 11: truncated header"),
+            )
+        })?;
         if is_delimiter(l) {
             return Err(c.err(dataset, format!("end delimiter where record {r} was expected: the header has only {} of 11 records", r - 1)));
         }
         rec.push(String::from_utf8_lossy(l).into_owned());
     }
-    let int = |line: &str, start: usize, w: usize, what: &str, r: usize, c: &Cursor| -> Result<i64> {
-        let s = field(line, start, w);
-        if s.is_empty() {
-            return Ok(0);
-        }
-        s.parse::<i64>().map_err(|_| c.err(dataset, format!("record {r} field '{what}' is {s:?}, not an integer")))
-    };
+    let int =
+        |line: &str, start: usize, w: usize, what: &str, r: usize, c: &Cursor| -> Result<i64> {
+            let s = field(line, start, w);
+            if s.is_empty() {
+                return Ok(0);
+            }
+            s.parse::<i64>().map_err(|_| {
+                c.err(
+                    dataset,
+                    format!("record {r} field '{what}' is {s:?}, not an integer"),
+                )
+            })
+        };
     let r6 = &rec[5];
     let func_type = int(r6, 0, 5, "function type", 6, c)?;
     if field(r6, 0, 5).is_empty() || func_type < 0 {
-        return Err(c.err(dataset, format!("record 6 has no valid function type in columns 1-5 ({r6:?})")));
+        return Err(c.err(
+            dataset,
+            format!("record 6 has no valid function type in columns 1-5 ({r6:?})"),
+        ));
     }
     let r7 = &rec[6];
     let ord_type = int(r7, 0, 10, "ordinate data type", 7, c)?;
@@ -516,7 +652,12 @@ fn parse_58(c: &mut Cursor, dataset: usize, binary: Option<(bool, usize)>) -> Re
         if s.is_empty() {
             return Ok(0.0);
         }
-        parse_f64(s).ok_or_else(|| c.err(dataset, format!("record 7 field '{what}' is {s:?}, not a number")))
+        parse_f64(s).ok_or_else(|| {
+            c.err(
+                dataset,
+                format!("record 7 field '{what}' is {s:?}, not a number"),
+            )
+        })
     };
     let min = real7(30, "abscissa minimum")?;
     let inc = real7(43, "abscissa increment")?;
@@ -526,17 +667,31 @@ fn parse_58(c: &mut Cursor, dataset: usize, binary: Option<(bool, usize)>) -> Re
         4 => (false, true),
         5 => (true, false),
         6 => (true, true),
-        t => return Err(c.err(dataset, format!("record 7 ordinate data type {t} is not 2, 4, 5 or 6 (real/complex, single/double)"))),
+        t => return Err(c.err(
+            dataset,
+            format!(
+                "record 7 ordinate data type {t} is not 2, 4, 5 or 6 (real/complex, single/double)"
+            ),
+        )),
     };
     if num_pts <= 0 {
-        return Err(c.err(dataset, format!("record 7 number of points is {num_pts}; must be ≥ 1")));
+        return Err(c.err(
+            dataset,
+            format!("record 7 number of points is {num_pts}; must be ≥ 1"),
+        ));
     }
     if even != 0 && even != 1 {
-        return Err(c.err(dataset, format!("record 7 abscissa spacing is {even}; must be 0 (uneven) or 1 (even)")));
+        return Err(c.err(
+            dataset,
+            format!("record 7 abscissa spacing is {even}; must be 0 (uneven) or 1 (even)"),
+        ));
     }
     let n = num_pts as usize;
     let per = if complex { 2 } else { 1 } + if even == 0 { 1 } else { 0 };
-    let expected = n.checked_mul(per).filter(|e| *e < 1 << 40).ok_or_else(|| c.err(dataset, format!("record 7 number of points {n} is absurd")))?;
+    let expected = n
+        .checked_mul(per)
+        .filter(|e| *e < 1 << 40)
+        .ok_or_else(|| c.err(dataset, format!("record 7 number of points {n} is absurd")))?;
     let mut axes: [Axis; 4] = Default::default();
     for (a, axis) in axes.iter_mut().enumerate() {
         let l = &rec[7 + a];
@@ -565,7 +720,11 @@ fn parse_58(c: &mut Cursor, dataset: usize, binary: Option<(bool, usize)>) -> Re
                     .chunks_exact(8)
                     .map(|b| {
                         let a = [b[0], b[1], b[2], b[3], b[4], b[5], b[6], b[7]];
-                        if little { f64::from_le_bytes(a) } else { f64::from_be_bytes(a) }
+                        if little {
+                            f64::from_le_bytes(a)
+                        } else {
+                            f64::from_be_bytes(a)
+                        }
                     })
                     .collect()
             } else {
@@ -573,7 +732,11 @@ fn parse_58(c: &mut Cursor, dataset: usize, binary: Option<(bool, usize)>) -> Re
                     .chunks_exact(4)
                     .map(|b| {
                         let a = [b[0], b[1], b[2], b[3]];
-                        (if little { f32::from_le_bytes(a) } else { f32::from_be_bytes(a) }) as f64
+                        (if little {
+                            f32::from_le_bytes(a)
+                        } else {
+                            f32::from_be_bytes(a)
+                        }) as f64
                     })
                     .collect()
             };
@@ -598,11 +761,18 @@ fn parse_58(c: &mut Cursor, dataset: usize, binary: Option<(bool, usize)>) -> Re
                 if is_delimiter(l) {
                     break;
                 }
-                let text = std::str::from_utf8(l).map_err(|_| c.err(dataset, "data line is not text (binary data in an ASCII dataset 58?)"))?;
+                let text = std::str::from_utf8(l).map_err(|_| {
+                    c.err(
+                        dataset,
+                        "data line is not text (binary data in an ASCII dataset 58?)",
+                    )
+                })?;
                 toks.clear();
                 tokens(text, &mut toks);
                 for t in &toks {
-                    let x = parse_f64(t).ok_or_else(|| c.err(dataset, format!("data value {t:?} is not a number")))?;
+                    let x = parse_f64(t).ok_or_else(|| {
+                        c.err(dataset, format!("data value {t:?} is not a number"))
+                    })?;
                     v.push(x);
                 }
                 if v.len() > expected {
@@ -616,11 +786,35 @@ fn parse_58(c: &mut Cursor, dataset: usize, binary: Option<(bool, usize)>) -> Re
         }
     };
     let (abscissa, data) = if even == 1 {
-        let data = if complex { Ordinate::Complex(values.chunks_exact(2).map(|p| C64::new(p[0], p[1])).collect()) } else { Ordinate::Real(values) };
-        (Abscissa::Even { min, increment: inc }, data)
+        let data = if complex {
+            Ordinate::Complex(
+                values
+                    .chunks_exact(2)
+                    .map(|p| C64::new(p[0], p[1]))
+                    .collect(),
+            )
+        } else {
+            Ordinate::Real(values)
+        };
+        (
+            Abscissa::Even {
+                min,
+                increment: inc,
+            },
+            data,
+        )
     } else {
         let x: Vec<f64> = values.chunks_exact(per).map(|p| p[0]).collect();
-        let data = if complex { Ordinate::Complex(values.chunks_exact(3).map(|p| C64::new(p[1], p[2])).collect()) } else { Ordinate::Real(values.chunks_exact(2).map(|p| p[1]).collect()) };
+        let data = if complex {
+            Ordinate::Complex(
+                values
+                    .chunks_exact(3)
+                    .map(|p| C64::new(p[1], p[2]))
+                    .collect(),
+            )
+        } else {
+            Ordinate::Real(values.chunks_exact(2).map(|p| p[1]).collect())
+        };
         (Abscissa::Uneven(x), data)
     };
     let ids = [0, 1, 2, 3, 4].map(|i| rec[i].trim_end().to_string());

@@ -45,7 +45,10 @@ impl Window {
             (0..n)
                 .map(|i| {
                     let fac = -PI + 2.0 * PI * i as f64 / n as f64;
-                    a.iter().enumerate().map(|(k, ak)| ak * (k as f64 * fac).cos()).sum()
+                    a.iter()
+                        .enumerate()
+                        .map(|(k, ak)| ak * (k as f64 * fac).cos())
+                        .sum()
                 })
                 .collect()
         };
@@ -54,19 +57,37 @@ impl Window {
             Window::Hann => cosine(&[0.5, 0.5]),
             Window::Hamming => cosine(&[0.54, 0.46]),
             Window::BlackmanHarris => cosine(&[0.35875, 0.48829, 0.14128, 0.01168]),
-            Window::FlatTop => cosine(&[0.21557895, 0.41663158, 0.277263158, 0.083578947, 0.006947368]),
+            Window::FlatTop => cosine(&[
+                0.21557895,
+                0.41663158,
+                0.277263158,
+                0.083578947,
+                0.006947368,
+            ]),
             Window::Force { width } => {
                 if !(*width > 0.0 && *width <= 1.0) {
-                    return Err(invalid("force window width", width, "a fraction of the segment in (0, 1]"));
+                    return Err(invalid(
+                        "force window width",
+                        width,
+                        "a fraction of the segment in (0, 1]",
+                    ));
                 }
                 let keep = ((width * n as f64).round() as usize).clamp(1, n);
                 (0..n).map(|i| if i < keep { 1.0 } else { 0.0 }).collect()
             }
             Window::Exponential { end } => {
                 if !(*end > 0.0 && *end <= 1.0) {
-                    return Err(invalid("exponential window end", end, "the value at the last sample, in (0, 1]"));
+                    return Err(invalid(
+                        "exponential window end",
+                        end,
+                        "the value at the last sample, in (0, 1]",
+                    ));
                 }
-                let rate = if n > 1 { end.ln() / (n - 1) as f64 } else { 0.0 };
+                let rate = if n > 1 {
+                    end.ln() / (n - 1) as f64
+                } else {
+                    0.0
+                };
                 (0..n).map(|i| (rate * i as f64).exp()).collect()
             }
             Window::Product(parts) => {
@@ -80,10 +101,18 @@ impl Window {
             }
             Window::Custom(c) => {
                 if c.len() != n {
-                    return Err(invalid("custom window length", c.len(), format!("must equal the segment length {n}")));
+                    return Err(invalid(
+                        "custom window length",
+                        c.len(),
+                        format!("must equal the segment length {n}"),
+                    ));
                 }
                 if c.iter().any(|v| !v.is_finite()) {
-                    return Err(invalid("custom window", "non-finite value", "all coefficients must be finite"));
+                    return Err(invalid(
+                        "custom window",
+                        "non-finite value",
+                        "all coefficients must be finite",
+                    ));
                 }
                 c.clone()
             }
@@ -94,10 +123,16 @@ impl Window {
     /// `sample_rate_hz`. The added damping of a mode at ω is `1/(ω τ)` of critical.
     pub fn exponential_from_tau(tau_s: f64, n: usize, sample_rate_hz: f64) -> Result<Window> {
         if !(tau_s > 0.0 && sample_rate_hz > 0.0) {
-            return Err(invalid("exponential window tau", tau_s, "must be > 0 s (and the sample rate > 0)"));
+            return Err(invalid(
+                "exponential window tau",
+                tau_s,
+                "must be > 0 s (and the sample rate > 0)",
+            ));
         }
         let t_end = n.saturating_sub(1) as f64 / sample_rate_hz;
-        Ok(Window::Exponential { end: (-t_end / tau_s).exp().max(f64::MIN_POSITIVE) })
+        Ok(Window::Exponential {
+            end: (-t_end / tau_s).exp().max(f64::MIN_POSITIVE),
+        })
     }
 }
 

@@ -8,7 +8,7 @@ use identify::{Body, Quantity};
 use nalgebra::{Matrix3, Rotation3, Vector3};
 use process::principal::{Dofs, RigidFit, Sensor};
 use process::selection::{select_points, to_measurement, CharacteristicSpec, SelectionConfig};
-use process::{estimate, spectra::Welch, Estimator, Window, WelchConfig};
+use process::{estimate, spectra::Welch, Estimator, WelchConfig, Window};
 
 #[test]
 fn signals_to_principal_axis_measurement() {
@@ -23,7 +23,12 @@ fn signals_to_principal_axis_measurement() {
     let sensors: Vec<Sensor> = (0..8)
         .map(|i| Sensor {
             name: format!("acc{i}"),
-            position: body.position + Vector3::new(if i % 2 == 0 { 0.6 } else { -0.6 }, if i % 4 < 2 { 0.4 } else { -0.4 }, if i < 4 { 0.2 } else { -0.2 }),
+            position: body.position
+                + Vector3::new(
+                    if i % 2 == 0 { 0.6 } else { -0.6 },
+                    if i % 4 < 2 { 0.4 } else { -0.4 },
+                    if i < 4 { 0.2 } else { -0.2 },
+                ),
             direction: dirs[i % 3] + 0.1 * dirs[(i + 1) % 3],
         })
         .collect();
@@ -43,7 +48,10 @@ fn signals_to_principal_axis_measurement() {
             let sb = rt * (s.position - body.position);
             let m = sb.cross(&e);
             let coef: f64 = (0..3).map(|c| e[c] * gains[c] + m[c] * gains[3 + c]).sum();
-            base.iter().zip(common::noise(100 + i as u64, n, 0.02)).map(|(v, e)| coef * v + e).collect()
+            base.iter()
+                .zip(common::noise(100 + i as u64, n, 0.02))
+                .map(|(v, e)| coef * v + e)
+                .collect()
         })
         .collect();
     let names: Vec<&str> = sensors.iter().map(|s| s.name.as_str()).collect();
@@ -66,19 +74,52 @@ fn signals_to_principal_axis_measurement() {
         assert!(p.residual[k] < 0.2, "line {k}: residual {}", p.residual[k]);
     }
     let z = z / m as f64;
-    assert!((0.6..1.6).contains(&z), "normalized squared error of principal-axis FRFs {z}");
+    assert!(
+        (0.6..1.6).contains(&z),
+        "normalized squared error of principal-axis FRFs {z}"
+    );
 
     // 38 points of u3, scaled to a 4 kN excitation.
     let u3 = p.dof(2);
     let mag: Vec<f64> = u3.iter().map(|v| v.norm()).collect();
-    let coh: Vec<f64> = (0..frf.freqs_hz.len()).map(|k| frf.multiple_coherence(k, 2)).collect();
-    let pts = select_points("table u3", &frf.freqs_hz, &mag, Some(&coh), &SelectionConfig { band_hz: (5.0, 450.0), min_coherence: 0.5, ..Default::default() }).unwrap();
+    let coh: Vec<f64> = (0..frf.freqs_hz.len())
+        .map(|k| frf.multiple_coherence(k, 2))
+        .collect();
+    let pts = select_points(
+        "table u3",
+        &frf.freqs_hz,
+        &mag,
+        Some(&coh),
+        &SelectionConfig {
+            band_hz: (5.0, 450.0),
+            min_coherence: 0.5,
+            ..Default::default()
+        },
+    )
+    .unwrap();
     let v3: Vec<f64> = var.iter().map(|v| v[2]).collect();
-    let spec = CharacteristicSpec { body: "table".into(), dof: 2, quantity: Quantity::Acceleration, nominal_force: 4000.0 };
-    let meas = to_measurement(&spec, &frf.freqs_hz, &u3, Some(&coh), Some(&v3), Some(frf.averages), &pts).unwrap();
+    let spec = CharacteristicSpec {
+        body: "table".into(),
+        dof: 2,
+        quantity: Quantity::Acceleration,
+        nominal_force: 4000.0,
+    };
+    let meas = to_measurement(
+        &spec,
+        &frf.freqs_hz,
+        &u3,
+        Some(&coh),
+        Some(&v3),
+        Some(frf.averages),
+        &pts,
+    )
+    .unwrap();
     assert_eq!(meas.freqs_hz.len(), 38);
     for (i, &k) in pts.iter().enumerate() {
         let truth = 4000.0 * 2.0 * common::resonator_frf(b, a, frf.freqs_hz[k] / fs).norm();
-        assert!((meas.amplitude[i] - truth).abs() < 5.0 * meas.variance.as_ref().unwrap()[i].sqrt() + 1e-9 * truth);
+        assert!(
+            (meas.amplitude[i] - truth).abs()
+                < 5.0 * meas.variance.as_ref().unwrap()[i].sqrt() + 1e-9 * truth
+        );
     }
 }

@@ -5,13 +5,18 @@
 mod common;
 
 use common::*;
-use process::{estimate, spectra::Welch, Estimator, Window, WelchConfig};
+use process::{estimate, spectra::Welch, Estimator, WelchConfig, Window};
 
 const B: [f64; 3] = [0.05, 0.02, 0.0];
 const A: [f64; 2] = [-1.6, 0.8];
 
 fn spectra(x_meas: &[f64], y_meas: &[f64]) -> process::CrossSpectra {
-    let mut w = Welch::new(WelchConfig::new(1000.0, 512, Window::Hann), &["force"], &["acc"]).unwrap();
+    let mut w = Welch::new(
+        WelchConfig::new(1000.0, 512, Window::Hann),
+        &["force"],
+        &["acc"],
+    )
+    .unwrap();
     w.push(&[x_meas], &[y_meas]).unwrap();
     w.finish().unwrap()
 }
@@ -20,7 +25,11 @@ fn spectra(x_meas: &[f64], y_meas: &[f64]) -> process::CrossSpectra {
 fn h1_recovers_known_frf_within_predicted_error() {
     let n = 200_000;
     let x = noise(21, n, 1.0);
-    let y: Vec<f64> = resonator(&x, B, A).iter().zip(noise(22, n, 0.2)).map(|(a, e)| a + e).collect();
+    let y: Vec<f64> = resonator(&x, B, A)
+        .iter()
+        .zip(noise(22, n, 0.2))
+        .map(|(a, e)| a + e)
+        .collect();
     let s = spectra(&x, &y);
     let frf = estimate(&s, Estimator::H1).unwrap();
     assert!(frf.averages > 700);
@@ -40,7 +49,10 @@ fn h1_recovers_known_frf_within_predicted_error() {
     let mean = sum / count as f64;
     // E|Ĥ−H|²/predicted ≈ 1 (a little above with 50 % overlap); a wrong formula (e.g. a missing
     // factor 2 or n) lands far outside.
-    assert!((0.7..1.5).contains(&mean), "mean normalized squared error {mean}");
+    assert!(
+        (0.7..1.5).contains(&mean),
+        "mean normalized squared error {mean}"
+    );
     assert!(outliers <= 2, "{outliers} lines beyond 4 sigma");
 }
 
@@ -79,7 +91,10 @@ fn noise_free_estimators_agree_exactly_and_coherence_is_one() {
     for e in [Estimator::H1, Estimator::H2, Estimator::Hv] {
         let f = estimate(&s, e).unwrap();
         for k in 1..f.freqs_hz.len() {
-            assert!((f.h(k, 0, 0) - process::C64::new(-3.0, 0.0)).norm() < 1e-12, "{e:?} line {k}");
+            assert!(
+                (f.h(k, 0, 0) - process::C64::new(-3.0, 0.0)).norm() < 1e-12,
+                "{e:?} line {k}"
+            );
             assert!((f.coherence(k, 0, 0) - 1.0).abs() < 1e-12);
         }
     }

@@ -10,19 +10,31 @@ use process::C64;
 use rand::{Rng, SeedableRng};
 
 fn body(rng: &mut impl Rng) -> Body {
-    let rot = Rotation3::from_euler_angles(rng.random_range(-3.0..3.0), rng.random_range(-1.5..1.5), rng.random_range(-3.0..3.0));
+    let rot = Rotation3::from_euler_angles(
+        rng.random_range(-3.0..3.0),
+        rng.random_range(-1.5..1.5),
+        rng.random_range(-3.0..3.0),
+    );
     Body {
         name: "table".into(),
         mass: 850.0,
         inertia: [40.0, 55.0, 80.0],
-        position: Vector3::new(rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0), rng.random_range(0.0..2.0)),
+        position: Vector3::new(
+            rng.random_range(-1.0..1.0),
+            rng.random_range(-1.0..1.0),
+            rng.random_range(0.0..2.0),
+        ),
         rotation: Matrix3::from(rot),
     }
 }
 
 fn unit(rng: &mut impl Rng) -> Vector3<f64> {
     loop {
-        let v = Vector3::new(rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0));
+        let v = Vector3::new(
+            rng.random_range(-1.0..1.0),
+            rng.random_range(-1.0..1.0),
+            rng.random_range(-1.0..1.0),
+        );
         if v.norm() > 0.2 && v.norm() < 1.0 {
             return v.normalize();
         }
@@ -39,13 +51,19 @@ fn reading(b: &Body, s: &Sensor, q: &[C64; 6]) -> C64 {
         let r = Vector3::new(pick(3), pick(4), pick(5));
         let disp = b.rotation * (u + r.cross(&sb));
         let v = disp.dot(&s.direction.normalize());
-        if part == 0 { out.re = v } else { out.im = v }
+        if part == 0 {
+            out.re = v
+        } else {
+            out.im = v
+        }
     }
     out
 }
 
 fn random_q(rng: &mut impl Rng) -> [C64; 6] {
-    std::array::from_fn(|_| C64::new(rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0)) * 1e-6)
+    std::array::from_fn(|_| {
+        C64::new(rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0)) * 1e-6
+    })
 }
 
 #[test]
@@ -57,7 +75,12 @@ fn rigid_motion_is_recovered_exactly_by_random_layouts() {
         let sensors: Vec<Sensor> = (0..n)
             .map(|i| Sensor {
                 name: format!("acc{i}"),
-                position: b.position + Vector3::new(rng.random_range(-0.8..0.8), rng.random_range(-0.5..0.5), rng.random_range(-0.3..0.3)),
+                position: b.position
+                    + Vector3::new(
+                        rng.random_range(-0.8..0.8),
+                        rng.random_range(-0.5..0.5),
+                        rng.random_range(-0.3..0.3),
+                    ),
                 direction: unit(&mut rng),
             })
             .collect();
@@ -65,11 +88,19 @@ fn rigid_motion_is_recovered_exactly_by_random_layouts() {
         assert_eq!(fit.dofs(), 6);
         let freqs = [10.0, 20.0, 30.0];
         let qs: Vec<[C64; 6]> = (0..3).map(|_| random_q(&mut rng)).collect();
-        let channels: Vec<Vec<C64>> = sensors.iter().map(|s| qs.iter().map(|q| reading(&b, s, q)).collect()).collect();
+        let channels: Vec<Vec<C64>> = sensors
+            .iter()
+            .map(|s| qs.iter().map(|q| reading(&b, s, q)).collect())
+            .collect();
         let out = fit.transform(&freqs, &channels).unwrap();
         for (k, q) in qs.iter().enumerate() {
             for d in 0..6 {
-                assert!((out.q[k][d] - q[d]).norm() < 1e-9 * 1e-6, "trial {trial} dof {d}: {} vs {}", out.q[k][d], q[d]);
+                assert!(
+                    (out.q[k][d] - q[d]).norm() < 1e-9 * 1e-6,
+                    "trial {trial} dof {d}: {} vs {}",
+                    out.q[k][d],
+                    q[d]
+                );
             }
             assert!(out.residual[k] < 1e-9, "rigid residual {}", out.residual[k]);
         }
@@ -83,7 +114,13 @@ fn a_flexible_solid_raises_the_rigidity_indicator() {
     let sensors: Vec<Sensor> = (0..12)
         .map(|i| Sensor {
             name: format!("acc{i}"),
-            position: b.position + b.rotation * Vector3::new(-0.8 + 0.15 * i as f64, if i % 2 == 0 { 0.4 } else { -0.4 }, 0.1 * (i % 3) as f64),
+            position: b.position
+                + b.rotation
+                    * Vector3::new(
+                        -0.8 + 0.15 * i as f64,
+                        if i % 2 == 0 { 0.4 } else { -0.4 },
+                        0.1 * (i % 3) as f64,
+                    ),
             direction: b.rotation * [Vector3::x(), Vector3::y(), Vector3::z()][i % 3],
         })
         .collect();
@@ -114,14 +151,30 @@ fn degenerate_layouts_name_what_is_missing() {
     let b = body(&mut rng);
     // Three orthogonal sensors at one point: rotations unobservable.
     let triax: Vec<Sensor> = (0..3)
-        .map(|i| Sensor { name: format!("t{i}"), position: b.position + Vector3::new(0.3, 0.2, 0.1), direction: [Vector3::x(), Vector3::y(), Vector3::z()][i] })
+        .map(|i| Sensor {
+            name: format!("t{i}"),
+            position: b.position + Vector3::new(0.3, 0.2, 0.1),
+            direction: [Vector3::x(), Vector3::y(), Vector3::z()][i],
+        })
         .collect();
-    let e = RigidFit::new(&b, &triax, Dofs::Six).unwrap_err().to_string();
-    assert!(e.contains("table") && e.contains(" r") && e.contains("3 channel"), "{e}");
+    let e = RigidFit::new(&b, &triax, Dofs::Six)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("table") && e.contains(" r") && e.contains("3 channel"),
+        "{e}"
+    );
     let auto = RigidFit::new(&b, &triax, Dofs::Auto).unwrap();
     assert_eq!(auto.dofs(), 3);
     // Translations recovered exactly when the solid only translates.
-    let q: [C64; 6] = [C64::new(1.0, 0.5), C64::new(-2.0, 0.0), C64::new(0.3, 0.1), C64::default(), C64::default(), C64::default()];
+    let q: [C64; 6] = [
+        C64::new(1.0, 0.5),
+        C64::new(-2.0, 0.0),
+        C64::new(0.3, 0.1),
+        C64::default(),
+        C64::default(),
+        C64::default(),
+    ];
     let y: Vec<C64> = triax.iter().map(|s| reading(&b, s, &q)).collect();
     let mut out = [C64::default(); 6];
     auto.fit_line(&y, &mut out).unwrap();
@@ -130,14 +183,22 @@ fn degenerate_layouts_name_what_is_missing() {
     }
     // Six sensors all measuring along global x: y and z motions missing.
     let xs: Vec<Sensor> = (0..6)
-        .map(|i| Sensor { name: format!("x{i}"), position: b.position + Vector3::new(0.1 * i as f64, 0.3 * (i % 2) as f64, 0.2 * (i % 3) as f64), direction: Vector3::x() })
+        .map(|i| Sensor {
+            name: format!("x{i}"),
+            position: b.position
+                + Vector3::new(0.1 * i as f64, 0.3 * (i % 2) as f64, 0.2 * (i % 3) as f64),
+            direction: Vector3::x(),
+        })
         .collect();
     let e = RigidFit::new(&b, &xs, Dofs::Auto).unwrap_err().to_string();
     assert!(e.contains("no sensor sees the motion"), "{e}");
     // Zero direction.
     let mut bad = triax.clone();
     bad[0].direction = Vector3::zeros();
-    assert!(RigidFit::new(&b, &bad, Dofs::Auto).unwrap_err().to_string().contains("'t0'"));
+    assert!(RigidFit::new(&b, &bad, Dofs::Auto)
+        .unwrap_err()
+        .to_string()
+        .contains("'t0'"));
     // Wrong channel count at fit time.
     assert!(auto.fit_line(&y[..2], &mut out).is_err());
 }
@@ -146,8 +207,11 @@ fn degenerate_layouts_name_what_is_missing() {
 fn principal_axes_from_an_inertia_tensor_and_variance_propagation() {
     let mut rng = rand::rngs::StdRng::seed_from_u64(11);
     let b = body(&mut rng);
-    let tensor = b.rotation * Matrix3::from_diagonal(&Vector3::new(40.0, 55.0, 80.0)) * b.rotation.transpose();
-    let got = process::principal::body_from_inertia_tensor("table", 850.0, b.position, &tensor).unwrap();
+    let tensor = b.rotation
+        * Matrix3::from_diagonal(&Vector3::new(40.0, 55.0, 80.0))
+        * b.rotation.transpose();
+    let got =
+        process::principal::body_from_inertia_tensor("table", 850.0, b.position, &tensor).unwrap();
     for i in 0..3 {
         assert!((got.inertia[i] - b.inertia[i]).abs() < 1e-9);
         // Same axis up to sign.
@@ -159,7 +223,16 @@ fn principal_axes_from_an_inertia_tensor_and_variance_propagation() {
 
     // Variance of the fitted DOFs: Monte-Carlo check of var(q) = Σ P² var(y).
     let sensors: Vec<Sensor> = (0..9)
-        .map(|i| Sensor { name: format!("a{i}"), position: b.position + Vector3::new(rng.random_range(-0.8..0.8), rng.random_range(-0.5..0.5), rng.random_range(-0.3..0.3)), direction: unit(&mut rng) })
+        .map(|i| Sensor {
+            name: format!("a{i}"),
+            position: b.position
+                + Vector3::new(
+                    rng.random_range(-0.8..0.8),
+                    rng.random_range(-0.5..0.5),
+                    rng.random_range(-0.3..0.3),
+                ),
+            direction: unit(&mut rng),
+        })
         .collect();
     let fit = RigidFit::new(&b, &sensors, Dofs::Six).unwrap();
     let sd = 1e-3;
@@ -176,6 +249,11 @@ fn principal_axes_from_an_inertia_tensor_and_variance_propagation() {
         }
     }
     for d in 0..6 {
-        assert!((acc[d] / pred[d] - 1.0).abs() < 0.1, "dof {d}: MC {} vs predicted {}", acc[d], pred[d]);
+        assert!(
+            (acc[d] / pred[d] - 1.0).abs() < 0.1,
+            "dof {d}: MC {} vs predicted {}",
+            acc[d],
+            pred[d]
+        );
     }
 }

@@ -5,7 +5,7 @@
 mod common;
 
 use common::*;
-use process::{estimate, spectra::Welch, Detrend, Estimator, Window, WelchConfig};
+use process::{estimate, spectra::Welch, Detrend, Estimator, WelchConfig, Window};
 
 fn rel(a: f64, b: f64, floor: f64) -> f64 {
     (a - b).abs() / b.abs().max(floor)
@@ -52,7 +52,12 @@ fn check_welch(case: &Case, refs: &[Vec<f64>], resps: &[Vec<f64>], fs: f64) {
     cfg.detrend = case.detrend;
     let rn: Vec<String> = (0..r).map(|i| format!("f{i}")).collect();
     let pn: Vec<String> = (0..p).map(|j| format!("a{j}")).collect();
-    let mut w = Welch::new(cfg, &rn.iter().map(|s| s.as_str()).collect::<Vec<_>>(), &pn.iter().map(|s| s.as_str()).collect::<Vec<_>>()).unwrap();
+    let mut w = Welch::new(
+        cfg,
+        &rn.iter().map(|s| s.as_str()).collect::<Vec<_>>(),
+        &pn.iter().map(|s| s.as_str()).collect::<Vec<_>>(),
+    )
+    .unwrap();
     // Feed in uneven blocks to exercise the streaming path.
     let len = refs[0].len();
     let mut at = 0;
@@ -107,8 +112,15 @@ fn check_welch(case: &Case, refs: &[Vec<f64>], resps: &[Vec<f64>], fs: f64) {
         }
         o += nf;
     }
-    eprintln!("window {}: worst relative difference to scipy {worst:.2e} (H1 {h_err:.2e})", case.scipy);
-    assert!(worst <= 1e-9, "window {}: worst relative difference to scipy {worst:e} (H: {h_err:e})", case.scipy);
+    eprintln!(
+        "window {}: worst relative difference to scipy {worst:.2e} (H1 {h_err:.2e})",
+        case.scipy
+    );
+    assert!(
+        worst <= 1e-9,
+        "window {}: worst relative difference to scipy {worst:e} (H: {h_err:e})",
+        case.scipy
+    );
 }
 
 #[test]
@@ -124,12 +136,29 @@ fn siso_h1_coherence_and_densities_match_scipy_for_every_window() {
         (Window::Rectangular, "boxcar", 1024, 0, Detrend::Constant),
         (Window::Hann, "hann", 1024, 512, Detrend::Constant),
         (Window::Hamming, "hamming", 1000, 333, Detrend::None),
-        (Window::BlackmanHarris, "blackmanharris", 2048, 1024, Detrend::Constant),
+        (
+            Window::BlackmanHarris,
+            "blackmanharris",
+            2048,
+            1024,
+            Detrend::Constant,
+        ),
         (Window::FlatTop, "flattop", 512, 256, Detrend::Constant),
         (Window::Hann, "hann", 1024, 768, Detrend::Linear),
     ];
     for (window, scipy, nperseg, overlap, detrend) in cases {
-        check_welch(&Case { window, scipy, nperseg, overlap, detrend }, std::slice::from_ref(&x), std::slice::from_ref(&y), fs);
+        check_welch(
+            &Case {
+                window,
+                scipy,
+                nperseg,
+                overlap,
+                detrend,
+            },
+            std::slice::from_ref(&x),
+            std::slice::from_ref(&y),
+            fs,
+        );
     }
 }
 
@@ -138,14 +167,38 @@ fn mimo_h1_and_multiple_coherence_match_scipy_cross_spectral_matrices() {
     let fs = 1000.0;
     let n = 16_384;
     let x1 = noise(11, n, 1.0);
-    let x2: Vec<f64> = noise(12, n, 1.0).iter().zip(&x1).map(|(a, b)| a + 0.3 * b).collect(); // correlated references
+    let x2: Vec<f64> = noise(12, n, 1.0)
+        .iter()
+        .zip(&x1)
+        .map(|(a, b)| a + 0.3 * b)
+        .collect(); // correlated references
     let r1 = resonator(&x1, [0.02, 0.0, 0.0], [-1.6, 0.8]);
     let r2 = resonator(&x2, [0.01, 0.01, 0.0], [-1.2, 0.7]);
-    let y1: Vec<f64> = r1.iter().zip(&r2).zip(noise(13, n, 0.01)).map(|((a, b), e)| a + b + e).collect();
-    let y2: Vec<f64> = r1.iter().zip(&r2).zip(noise(14, n, 0.02)).map(|((a, b), e)| a - 0.5 * b + e).collect();
-    let y3: Vec<f64> = r2.iter().zip(noise(15, n, 0.05)).map(|(b, e)| 2.0 * b + e).collect();
+    let y1: Vec<f64> = r1
+        .iter()
+        .zip(&r2)
+        .zip(noise(13, n, 0.01))
+        .map(|((a, b), e)| a + b + e)
+        .collect();
+    let y2: Vec<f64> = r1
+        .iter()
+        .zip(&r2)
+        .zip(noise(14, n, 0.02))
+        .map(|((a, b), e)| a - 0.5 * b + e)
+        .collect();
+    let y3: Vec<f64> = r2
+        .iter()
+        .zip(noise(15, n, 0.05))
+        .map(|(b, e)| 2.0 * b + e)
+        .collect();
     check_welch(
-        &Case { window: Window::Hann, scipy: "hann", nperseg: 512, overlap: 256, detrend: Detrend::None },
+        &Case {
+            window: Window::Hann,
+            scipy: "hann",
+            nperseg: 512,
+            overlap: 256,
+            detrend: Detrend::None,
+        },
         &[x1, x2],
         &[y1, y2, y3],
         fs,
@@ -154,17 +207,28 @@ fn mimo_h1_and_multiple_coherence_match_scipy_cross_spectral_matrices() {
 
 #[test]
 fn impact_h1_from_real_hammer_records_matches_scipy() {
-    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data/pyfrf-impact");
-    let files: Vec<std::path::PathBuf> = (1..=5).map(|i| dir.join(format!("measurements_{i}.npy"))).collect();
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../data/pyfrf-impact");
+    let files: Vec<std::path::PathBuf> = (1..=5)
+        .map(|i| dir.join(format!("measurements_{i}.npy")))
+        .collect();
     for f in &files {
-        assert!(f.exists(), "real impact data missing: {} (from ladisk/pyFRF data/)", f.display());
+        assert!(
+            f.exists(),
+            "real impact data missing: {} (from ladisk/pyFRF data/)",
+            f.display()
+        );
     }
     let (width, end) = (0.01, 0.05);
     let first = process::npy::read(&files[0]).unwrap();
     let n = first.shape[1];
     let t = first.row(0).unwrap();
     let fs = 1.0 / (t[1] - t[0]);
-    let mut w = Welch::new(WelchConfig::impact(fs, n, width, end), &["hammer"], &["acc"]).unwrap();
+    let mut w = Welch::new(
+        WelchConfig::impact(fs, n, width, end),
+        &["hammer"],
+        &["acc"],
+    )
+    .unwrap();
     for f in &files {
         let a = process::npy::read(f).unwrap();
         assert_eq!(a.shape, vec![3, n], "{}", f.display());
@@ -176,9 +240,18 @@ fn impact_h1_from_real_hammer_records_matches_scipy() {
 
     let out = tempfile::tempdir().unwrap();
     let out = out.path().join("impact.bin");
-    let mut args = vec!["impact".to_string(), out.to_str().unwrap().into(), width.to_string(), end.to_string()];
+    let mut args = vec![
+        "impact".to_string(),
+        out.to_str().unwrap().into(),
+        width.to_string(),
+        end.to_string(),
+    ];
     args.extend(files.iter().map(|f| f.to_str().unwrap().to_string()));
-    python("h1_scipy.py", &args.iter().map(|s| s.as_str()).collect::<Vec<_>>(), "numpy, scipy");
+    python(
+        "h1_scipy.py",
+        &args.iter().map(|s| s.as_str()).collect::<Vec<_>>(),
+        "numpy, scipy",
+    );
     let py = read_f64(&out);
     let nf = n / 2 + 1;
     assert_eq!(py.len(), 3 * nf);
@@ -200,11 +273,25 @@ fn impact_h1_from_real_hammer_records_matches_scipy() {
         }
     }
     eprintln!("H1 worst {worst:.2e} at {} Hz (|H|/max {:.1e}); coherence worst {worst_coh:.2e} at {} Hz (γ² = {:.1e})", frf.freqs_hz[at.0], frf.h(at.0, 0, 0).norm() / hmax, frf.freqs_hz[at.1], frf.coherence(at.1, 0, 0));
-    eprintln!("  at line {}: process {:.15e}, scipy {:.15e}{:+.15e}i", at.0, frf.h(at.0, 0, 0), py[at.0], py[nf + at.0]);
+    eprintln!(
+        "  at line {}: process {:.15e}, scipy {:.15e}{:+.15e}i",
+        at.0,
+        frf.h(at.0, 0, 0),
+        py[at.0],
+        py[nf + at.0]
+    );
     let worst = worst.max(worst_coh);
     eprintln!("impact H1/coherence vs scipy: worst relative difference {worst:.2e}");
-    assert!(worst <= 1e-9, "impact H1 vs scipy: worst relative difference {worst:e}");
+    assert!(
+        worst <= 1e-9,
+        "impact H1 vs scipy: worst relative difference {worst:e}"
+    );
     // The data are a real, coherent measurement: most of the band below 5 kHz is coherent.
-    let coherent = (1..nf).filter(|&k| frf.freqs_hz[k] < 5000.0 && frf.coherence(k, 0, 0) > 0.9).count();
-    assert!(coherent > 4000, "only {coherent} coherent lines below 5 kHz");
+    let coherent = (1..nf)
+        .filter(|&k| frf.freqs_hz[k] < 5000.0 && frf.coherence(k, 0, 0) > 0.9)
+        .count();
+    assert!(
+        coherent > 4000,
+        "only {coherent} coherent lines below 5 kHz"
+    );
 }

@@ -11,16 +11,32 @@ use std::f64::consts::PI;
 /// The datasets uff_pyuff.py's reference() builds, computed independently here.
 fn reference() -> Vec<Function> {
     let f: Vec<f64> = (1..=200).map(|k| k as f64 * 0.5).collect();
-    let h: Vec<C64> = f.iter().map(|&f| 1.0 / C64::new(1.0e4 - (2.0 * PI * f).powi(2), 2.0 * PI * f * 3.0)).collect();
+    let h: Vec<C64> = f
+        .iter()
+        .map(|&f| 1.0 / C64::new(1.0e4 - (2.0 * PI * f).powi(2), 2.0 * PI * f * 3.0))
+        .collect();
     let t: Vec<f64> = (0..300).map(|n| n as f64 / 2000.0).collect();
-    let x: Vec<f64> = t.iter().map(|&t| (2.0 * PI * 50.0 * t).sin() * (-t * 3.0).exp() + 0.1).collect();
+    let x: Vec<f64> = t
+        .iter()
+        .map(|&t| (2.0 * PI * 50.0 * t).sin() * (-t * 3.0).exp() + 0.1)
+        .collect();
     let mut frf = Function::frf("ours", 0.5, 0.5, h);
     frf.response_dir = 3;
     frf.reference_node = 2;
     frf.reference_dir = 3;
     let mut th = Function::time_history("ours", 2000.0, x);
     th.response_dir = 3;
-    let mut un = Function::frf("ours", 0.0, 0.0, vec![C64::new(1.0, 2.0), C64::new(-3e-7, 1.0), C64::new(4.5e10, 0.0), C64::new(-1e-300, 1e300)]);
+    let mut un = Function::frf(
+        "ours",
+        0.0,
+        0.0,
+        vec![
+            C64::new(1.0, 2.0),
+            C64::new(-3e-7, 1.0),
+            C64::new(4.5e10, 0.0),
+            C64::new(-1e-300, 1e300),
+        ],
+    );
     un.abscissa = Abscissa::Uneven(vec![1.0, 2.5, 7.25, 100.0]);
     vec![frf, th, un]
 }
@@ -36,7 +52,10 @@ fn assert_close(a: &Function, b: &Function, tol: f64, what: &str) {
     let (xa, xb) = (a.x(), b.x());
     assert_eq!(xa.len(), xb.len(), "{what}: point count");
     for (p, q) in xa.iter().zip(&xb) {
-        assert!((p - q).abs() <= 1e-12 * q.abs().max(1e-300), "{what}: x {p} vs {q}");
+        assert!(
+            (p - q).abs() <= 1e-12 * q.abs().max(1e-300),
+            "{what}: x {p} vs {q}"
+        );
     }
     for (p, q) in values(a).iter().zip(values(b).iter()) {
         assert!((p - q).norm() <= tol * q.norm(), "{what}: {p} vs {q}");
@@ -52,7 +71,8 @@ fn our_files_round_trip_in_every_encoding_and_precision() {
                 sets.truncate(2); // 1e300 does not fit single precision
             }
             sets.iter_mut().for_each(|s| s.double = double);
-            let mut real_uneven = Function::time_history("uneven real", 1.0, vec![1.5, -2.25, 1e-9]);
+            let mut real_uneven =
+                Function::time_history("uneven real", 1.0, vec![1.5, -2.25, 1e-9]);
             real_uneven.abscissa = Abscissa::Uneven(vec![0.0, 0.5, 3.0]);
             real_uneven.double = double;
             sets.push(real_uneven);
@@ -66,7 +86,10 @@ fn our_files_round_trip_in_every_encoding_and_precision() {
             };
             for (a, b) in back.iter().zip(&sets) {
                 assert_close(a, b, tol, &format!("{enc:?} double={double}"));
-                assert_eq!((a.func_type, a.response_dir, a.reference_node, a.double), (b.func_type, b.response_dir, b.reference_node, b.double));
+                assert_eq!(
+                    (a.func_type, a.response_dir, a.reference_node, a.double),
+                    (b.func_type, b.response_dir, b.reference_node, b.double)
+                );
                 assert_eq!(a.axes[0], b.axes[0]);
                 assert_eq!(a.ids[0], b.ids[0]);
             }
@@ -82,19 +105,31 @@ fn pyuff_reads_what_we_write() {
         let dump = dir.path().join("dump.bin");
         let sets = reference();
         uff::write(&file, &sets, enc).unwrap();
-        common::python("uff_pyuff.py", &["dump", file.to_str().unwrap(), dump.to_str().unwrap()], "numpy, pyuff");
+        common::python(
+            "uff_pyuff.py",
+            &["dump", file.to_str().unwrap(), dump.to_str().unwrap()],
+            "numpy, pyuff",
+        );
         let d = common::read_f64(&dump);
         let mut o = 0;
         for s in &sets {
             let n = d[o] as usize;
             assert_eq!(n, s.data.len());
             let x = &d[o + 1..o + 1 + n];
-            let v: Vec<C64> = (0..n).map(|i| C64::new(d[o + 1 + n + i], d[o + 1 + 2 * n + i])).collect();
+            let v: Vec<C64> = (0..n)
+                .map(|i| C64::new(d[o + 1 + n + i], d[o + 1 + 2 * n + i]))
+                .collect();
             for (p, q) in x.iter().zip(s.x()) {
-                assert!((p - q).abs() <= 1e-12 * q.abs(), "{enc:?}: pyuff x {p} vs {q}");
+                assert!(
+                    (p - q).abs() <= 1e-12 * q.abs(),
+                    "{enc:?}: pyuff x {p} vs {q}"
+                );
             }
             for (p, q) in v.iter().zip(values(s)) {
-                assert!((p - q).norm() <= tol * q.norm(), "{enc:?}: pyuff value {p} vs {q}");
+                assert!(
+                    (p - q).norm() <= tol * q.norm(),
+                    "{enc:?}: pyuff value {p} vs {q}"
+                );
             }
             o += 1 + 3 * n;
         }
@@ -107,7 +142,11 @@ fn we_read_what_pyuff_writes() {
     let dir = tempfile::tempdir().unwrap();
     for (binary, tol) in [("0", 1e-11), ("1", 1e-14)] {
         let file = dir.path().join(format!("pyuff_{binary}.uff"));
-        common::python("uff_pyuff.py", &["write", file.to_str().unwrap(), binary], "numpy, pyuff");
+        common::python(
+            "uff_pyuff.py",
+            &["write", file.to_str().unwrap(), binary],
+            "numpy, pyuff",
+        );
         let got = uff::read(&file).unwrap();
         let want = reference();
         assert_eq!(got.len(), 3);
@@ -115,7 +154,14 @@ fn we_read_what_pyuff_writes() {
             assert_close(a, b, tol, &format!("pyuff binary={binary}"));
             assert_eq!(a.func_type, b.func_type);
             assert_eq!(a.ids[0], "pyuff");
-            assert_eq!((a.response_entity.as_str(), a.reference_node, a.reference_dir), ("NODE", 2, 3));
+            assert_eq!(
+                (
+                    a.response_entity.as_str(),
+                    a.reference_node,
+                    a.reference_dir
+                ),
+                ("NODE", 2, 3)
+            );
         }
     }
 }
@@ -130,10 +176,17 @@ fn time_histories_become_signals_for_welch() {
     let f = Function::time_history("hammer", 25600.0, x.clone());
     let back = uff::parse(&uff::to_bytes(&[f], Encoding::Binary).unwrap(), "m").unwrap();
     let s = back[0].to_signal("ch1").unwrap();
-    assert_eq!((s.name.as_str(), s.samples.as_slice()), ("hammer", x.as_slice()));
+    assert_eq!(
+        (s.name.as_str(), s.samples.as_slice()),
+        ("hammer", x.as_slice())
+    );
     assert!((s.sample_rate_hz - 25600.0).abs() < 1e-9);
     let frf = Function::frf("h", 0.0, 1.0, vec![C64::new(1.0, 0.0)]);
-    assert!(frf.to_signal("x").unwrap_err().to_string().contains("not a time response"));
+    assert!(frf
+        .to_signal("x")
+        .unwrap_err()
+        .to_string()
+        .contains("not a time response"));
 }
 
 #[test]
@@ -158,18 +211,30 @@ fn malformed_files_give_clear_errors() {
     let text = ascii_reference();
     // Truncated in the data of the first dataset.
     let cut = &text[..text.len() / 5];
-    let e = uff::parse(cut.as_bytes(), "cut.uff").unwrap_err().to_string();
-    assert!(e.contains("cut.uff") && e.contains("dataset 1") && e.contains("truncated"), "{e}");
+    let e = uff::parse(cut.as_bytes(), "cut.uff")
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("cut.uff") && e.contains("dataset 1") && e.contains("truncated"),
+        "{e}"
+    );
     // Wrong point count in record 7.
     let wrong = text.replacen("       200         1", "       201         1", 1);
-    let e = uff::parse(wrong.as_bytes(), "n.uff").unwrap_err().to_string();
+    let e = uff::parse(wrong.as_bytes(), "n.uff")
+        .unwrap_err()
+        .to_string();
     assert!(e.contains("record 7") && e.contains("402"), "{e}");
     let fewer = text.replacen("       200         1", "       190         1", 1);
-    let e = uff::parse(fewer.as_bytes(), "n.uff").unwrap_err().to_string();
+    let e = uff::parse(fewer.as_bytes(), "n.uff")
+        .unwrap_err()
+        .to_string();
     assert!(e.contains("wrong record length"), "{e}");
     // Bad number.
     let bad = text.replacen("E-", "X-", 30);
-    assert!(uff::parse(bad.as_bytes(), "x.uff").unwrap_err().to_string().contains("not a number"));
+    assert!(uff::parse(bad.as_bytes(), "x.uff")
+        .unwrap_err()
+        .to_string()
+        .contains("not a number"));
     // Binary: truncated block and byte count disagreeing with record 7.
     let bin = uff::to_bytes(&reference(), Encoding::Binary).unwrap();
     let e = uff::parse(&bin[..2000], "b.uff").unwrap_err().to_string();
@@ -181,15 +246,24 @@ fn malformed_files_give_clear_errors() {
     let new_hdr = s[hdr..line_end].replacen("3200", "3208", 1);
     wrong.splice(hdr..line_end, new_hdr.bytes());
     // The header count alone is not trusted (pyuff writes half of it for complex data) ...
-    assert_eq!(uff::parse(&wrong, "b.uff").unwrap(), uff::parse(&bin, "b.uff").unwrap());
+    assert_eq!(
+        uff::parse(&wrong, "b.uff").unwrap(),
+        uff::parse(&bin, "b.uff").unwrap()
+    );
     // ... but a record 7 that disagrees with the block is an error.
     let r7 = s.find("       200         1").unwrap();
     let mut wrong = bin.clone();
     wrong.splice(r7..r7 + 20, "       199         1".bytes());
     let e = uff::parse(&wrong, "b.uff").unwrap_err().to_string();
-    assert!(e.contains("199 points") && e.contains("record 7") && e.contains("wrong record length"), "{e}");
+    assert!(
+        e.contains("199 points") && e.contains("record 7") && e.contains("wrong record length"),
+        "{e}"
+    );
     // Not UFF at all.
-    assert!(uff::parse(b"hello\nworld\n", "t.txt").unwrap_err().to_string().contains("delimiter"));
+    assert!(uff::parse(b"hello\nworld\n", "t.txt")
+        .unwrap_err()
+        .to_string()
+        .contains("delimiter"));
 }
 
 proptest! {

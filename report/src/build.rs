@@ -36,11 +36,18 @@ pub struct Inputs<'a> {
 
 impl<'a> Inputs<'a> {
     /// Inputs with defaults: now, no diagnosis, no drift, sensitivity on.
-    pub fn new(title: &str, observations: &'a Observations, identification: &'a Identification) -> Inputs<'a> {
+    pub fn new(
+        title: &str,
+        observations: &'a Observations,
+        identification: &'a Identification,
+    ) -> Inputs<'a> {
         Inputs {
             title: title.into(),
             created_utc: String::new(),
-            source: Source { software: env!("CARGO_PKG_VERSION").into(), ..Source::default() },
+            source: Source {
+                software: env!("CARGO_PKG_VERSION").into(),
+                ..Source::default()
+            },
             observations,
             identification,
             diagnosis: None,
@@ -53,7 +60,10 @@ impl<'a> Inputs<'a> {
 
 /// Current UTC time as `YYYY-MM-DDTHH:MM:SSZ`.
 pub fn now_utc() -> String {
-    let secs = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map(|d| d.as_secs()).unwrap_or(0);
+    let secs = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map(|d| d.as_secs())
+        .unwrap_or(0);
     utc_from_unix(secs)
 }
 
@@ -71,7 +81,12 @@ pub fn utc_from_unix(secs: u64) -> String {
     let d = doy - (153 * mp + 2) / 5 + 1;
     let m = if mp < 10 { mp + 3 } else { mp - 9 };
     let y = yoe + era * 400 + i64::from(m <= 2);
-    format!("{y:04}-{m:02}-{d:02}T{:02}:{:02}:{:02}Z", rem / 3600, rem % 3600 / 60, rem % 60)
+    format!(
+        "{y:04}-{m:02}-{d:02}T{:02}:{:02}:{:02}Z",
+        rem / 3600,
+        rem % 3600 / 60,
+        rem % 60
+    )
 }
 
 fn unit_of(dof: u8, q: Quantity) -> String {
@@ -92,16 +107,31 @@ fn sigmas(c: &Observed) -> (Vec<f64>, &'static str) {
     if let (Some(g), Some(n)) = (&c.coherence, c.averages) {
         let n = f64::from(n.max(1));
         return (
-            g.iter().zip(&c.amplitude).map(|(g, a)| ((1.0 - g) / (2.0 * n * g)).sqrt() * a).collect(),
+            g.iter()
+                .zip(&c.amplitude)
+                .map(|(g, a)| ((1.0 - g) / (2.0 * n * g)).sqrt() * a)
+                .collect(),
             "coherence",
         );
     }
-    (c.amplitude.iter().map(|a| RELATIVE_SIGMA * a).collect(), "relative")
+    (
+        c.amplitude.iter().map(|a| RELATIVE_SIGMA * a).collect(),
+        "relative",
+    )
 }
 
-fn stage_curve(stage: &str, model: &Model, c: &Observed, sigma: &[f64]) -> Result<StageCurve, ReportError> {
-    let r = frf::response(model, &c.freqs_hz, &[], frf::Method::Auto)
-        .map_err(|source| ReportError::Model { stage: stage.into(), source })?;
+fn stage_curve(
+    stage: &str,
+    model: &Model,
+    c: &Observed,
+    sigma: &[f64],
+) -> Result<StageCurve, ReportError> {
+    let r = frf::response(model, &c.freqs_hz, &[], frf::Method::Auto).map_err(|source| {
+        ReportError::Model {
+            stage: stage.into(),
+            source,
+        }
+    })?;
     let q: Vec<f64> = r.output(c.output).iter().map(|v| v.norm()).collect();
     let mut s2 = 0.0;
     let mut n = 0usize;
@@ -115,7 +145,11 @@ fn stage_curve(stage: &str, model: &Model, c: &Observed, sigma: &[f64]) -> Resul
                 s2 += ((q - z) / z).powi(2);
                 n += 1;
             }
-            if *s > 0.0 { (z - q) / s } else { 0.0 }
+            if *s > 0.0 {
+                (z - q) / s
+            } else {
+                0.0
+            }
         })
         .map(finite)
         .collect();
@@ -170,32 +204,62 @@ pub fn summary(id: &Identification) -> IdentificationSummary {
                 at_bound: r.at_bound,
             })
             .collect(),
-        correlation: (0..n).map(|a| (0..n).map(|b| opt(c[(a, b)])).collect()).collect(),
+        correlation: (0..n)
+            .map(|a| (0..n).map(|b| opt(c[(a, b)])).collect())
+            .collect(),
         weak_directions: id
             .uncertainty
             .weak
             .iter()
-            .map(|d| WeakDirection { combination: d.combination(), relative_std: opt(d.relative_std) })
+            .map(|d| WeakDirection {
+                combination: d.combination(),
+                relative_std: opt(d.relative_std),
+            })
             .collect(),
     }
 }
 
 /// The relative band sensitivity of the measured characteristics to the identified parameters,
 /// over the measured band.
-pub fn sensitivity_map(model: &Model, id: &Identification, obs: &Observations) -> Result<SensitivityMap, ReportError> {
-    let mut freqs: Vec<f64> = obs.characteristics.iter().flat_map(|c| c.freqs_hz.iter().copied()).collect();
+pub fn sensitivity_map(
+    model: &Model,
+    id: &Identification,
+    obs: &Observations,
+) -> Result<SensitivityMap, ReportError> {
+    let mut freqs: Vec<f64> = obs
+        .characteristics
+        .iter()
+        .flat_map(|c| c.freqs_hz.iter().copied())
+        .collect();
     freqs.sort_by(f64::total_cmp);
     freqs.dedup();
     let params = id.variables.params();
-    let s = sensitivity::band_sensitivity(model, &freqs, &params, frf::Method::Auto)
-        .map_err(|source| ReportError::Model { stage: "identified".into(), source })?;
-    let label = |p: &identify::ParamRef| format!("SDE {} {}", model.sdes[p.sde].name, p.name.as_str());
+    let s = sensitivity::band_sensitivity(model, &freqs, &params, frf::Method::Auto).map_err(
+        |source| ReportError::Model {
+            stage: "identified".into(),
+            source,
+        },
+    )?;
+    let label =
+        |p: &identify::ParamRef| format!("SDE {} {}", model.sdes[p.sde].name, p.name.as_str());
     Ok(SensitivityMap {
-        band_hz: [freqs.first().copied().unwrap_or(0.0), freqs.last().copied().unwrap_or(0.0)],
+        band_hz: [
+            freqs.first().copied().unwrap_or(0.0),
+            freqs.last().copied().unwrap_or(0.0),
+        ],
         parameters: s.params.iter().map(label).collect(),
-        characteristics: obs.characteristics.iter().map(|c| c.label.clone()).collect(),
+        characteristics: obs
+            .characteristics
+            .iter()
+            .map(|c| c.label.clone())
+            .collect(),
         relative: (0..s.params.len())
-            .map(|p| obs.characteristics.iter().map(|c| finite(s.relative[p * s.outputs + c.output])).collect())
+            .map(|p| {
+                obs.characteristics
+                    .iter()
+                    .map(|c| finite(s.relative[p * s.outputs + c.output]))
+                    .collect()
+            })
             .collect(),
     })
 }
@@ -205,14 +269,23 @@ pub fn sensitivity_map(model: &Model, id: &Identification, obs: &Observations) -
 /// before and after, and what was not tried. `base` names the identified model.
 pub fn diagnosis(d: &diagnose::Diagnosis, base: &str) -> Diagnosis {
     let mut candidates = Vec::new();
-    let removed_in = |effect: &str| d.rounds.iter().position(|r| r.removed.iter().any(|x| x.effect == effect));
+    let removed_in = |effect: &str| {
+        d.rounds
+            .iter()
+            .position(|r| r.removed.iter().any(|x| x.effect == effect))
+    };
     for (i, round) in d.rounds.iter().enumerate() {
         let accepted = round.accepted.and_then(|k| round.refits.get(k));
         for c in &round.ranked {
             let refit = accepted.filter(|a| a.effect == c.effect);
             // Values at the final fit; none for an effect a later round removed.
             // An accepted mass whose position was then fitted is in the final model as placed.
-            let final_effect = refit.map(|a| round.placed.as_ref().map_or(a.effect.as_str(), |p| p.effect.as_str()));
+            let final_effect = refit.map(|a| {
+                round
+                    .placed
+                    .as_ref()
+                    .map_or(a.effect.as_str(), |p| p.effect.as_str())
+            });
             let principal = final_effect
                 .and_then(|e| d.accepted.iter().find(|f| f.effect == e))
                 .and_then(|a| a.params.first())
@@ -221,7 +294,11 @@ pub fn diagnosis(d: &diagnose::Diagnosis, base: &str) -> Diagnosis {
                 round: i + 1,
                 name: c.kind.clone(),
                 location: match removed_in(&c.effect).filter(|_| refit.is_some()) {
-                    Some(k) => format!("{} (removed in round {}: not needed once later effects were added)", c.effect, k + 1),
+                    Some(k) => format!(
+                        "{} (removed in round {}: not needed once later effects were added)",
+                        c.effect,
+                        k + 1
+                    ),
                     None => c.effect.clone(),
                 },
                 statistic: finite(c.statistic),
@@ -237,14 +314,35 @@ pub fn diagnosis(d: &diagnose::Diagnosis, base: &str) -> Diagnosis {
         criterion: finite(r.criterion),
         chi2_p_value: r.chi2_p.map(finite),
         reduced_chi2: finite(r.reduced_chi2),
-        rms_relative_error: r.characteristics.iter().map(|c| LabelledValue { label: c.label.clone(), value: finite(c.rms_relative) }).collect(),
+        rms_relative_error: r
+            .characteristics
+            .iter()
+            .map(|c| LabelledValue {
+                label: c.label.clone(),
+                value: finite(c.rms_relative),
+            })
+            .collect(),
     };
     let added: Vec<String> = d
         .accepted
         .iter()
-        .map(|a| format!("{} ({})", a.effect, a.params.iter().map(diagnose::ParamEstimate::describe).collect::<Vec<_>>().join(", ")))
+        .map(|a| {
+            format!(
+                "{} ({})",
+                a.effect,
+                a.params
+                    .iter()
+                    .map(diagnose::ParamEstimate::describe)
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            )
+        })
         .collect();
-    let final_model = if added.is_empty() { format!("{base} (no effect added)") } else { format!("{base} + {}", added.join(" + ")) };
+    let final_model = if added.is_empty() {
+        format!("{base} (no effect added)")
+    } else {
+        format!("{base} + {}", added.join(" + "))
+    };
     Diagnosis {
         candidates,
         before: fit(&d.before),
@@ -252,7 +350,14 @@ pub fn diagnosis(d: &diagnose::Diagnosis, base: &str) -> Diagnosis {
         final_model,
         explained: d.after.explained,
         verdict: d.after.verdict.clone(),
-        not_tried: d.not_tried.iter().map(|n| NotTried { effect: n.effect.clone(), reason: n.reason.clone() }).collect(),
+        not_tried: d
+            .not_tried
+            .iter()
+            .map(|n| NotTried {
+                effect: n.effect.clone(),
+                reason: n.reason.clone(),
+            })
+            .collect(),
     }
 }
 
@@ -268,10 +373,18 @@ pub fn build(inputs: Inputs<'_>) -> Result<Report, ReportError> {
     let mut characteristics = Vec::new();
     for c in &inputs.observations.characteristics {
         let (sigma, kind) = sigmas(c);
-        let curves = stages.iter().map(|(s, m)| stage_curve(s, m, c, &sigma)).collect::<Result<Vec<_>, _>>()?;
+        let curves = stages
+            .iter()
+            .map(|(s, m)| stage_curve(s, m, c, &sigma))
+            .collect::<Result<Vec<_>, _>>()?;
         characteristics.push(CharacteristicReport {
             label: c.label.clone(),
-            body: id.model.bodies.get(c.characteristic.body).map(|b| b.name.clone()).unwrap_or_default(),
+            body: id
+                .model
+                .bodies
+                .get(c.characteristic.body)
+                .map(|b| b.name.clone())
+                .unwrap_or_default(),
             dof: c.characteristic.dof,
             quantity: c.characteristic.quantity.as_str().into(),
             unit: unit_of(c.characteristic.dof, c.characteristic.quantity),
@@ -283,21 +396,35 @@ pub fn build(inputs: Inputs<'_>) -> Result<Report, ReportError> {
         });
     }
     let sensitivity = if inputs.sensitivity {
-        let final_model = inputs.diagnosis.as_ref().map(|(_, m)| *m).unwrap_or(&id.model);
+        let final_model = inputs
+            .diagnosis
+            .as_ref()
+            .map(|(_, m)| *m)
+            .unwrap_or(&id.model);
         Some(sensitivity_map(final_model, id, inputs.observations)?)
     } else {
         None
     };
     let mut messages = inputs.messages;
     if !id.stop.converged() {
-        messages.push(format!("the identification did not converge: {}", id.stop.describe()));
+        messages.push(format!(
+            "the identification did not converge: {}",
+            id.stop.describe()
+        ));
     }
     Ok(Report {
         schema: SCHEMA.into(),
         title: inputs.title,
-        created_utc: if inputs.created_utc.is_empty() { now_utc() } else { inputs.created_utc },
+        created_utc: if inputs.created_utc.is_empty() {
+            now_utc()
+        } else {
+            inputs.created_utc
+        },
         source: inputs.source,
-        status: Status { outcome: Outcome::Ok, messages },
+        status: Status {
+            outcome: Outcome::Ok,
+            messages,
+        },
         characteristics,
         identification: summary(id),
         diagnosis: inputs.diagnosis.map(|(d, _)| d),

@@ -64,14 +64,21 @@ pub fn read_history(dir: &Path) -> (Vec<Run>, Vec<String>) {
         let text = match std::fs::read_to_string(&path) {
             Ok(t) => t,
             Err(err) => {
-                messages.push(format!("history: cannot read {}: {err}; that run is left out", path.display()));
+                messages.push(format!(
+                    "history: cannot read {}: {err}; that run is left out",
+                    path.display()
+                ));
                 continue;
             }
         };
         match serde_json::from_str::<Minimal>(&text) {
             Ok(m) if m.status.outcome != "failure" => {
                 if let Some(id) = m.identification {
-                    runs.push(Run { created_utc: m.created_utc, folder: e.path(), parameters: id.parameters });
+                    runs.push(Run {
+                        created_utc: m.created_utc,
+                        folder: e.path(),
+                        parameters: id.parameters,
+                    });
                 }
             }
             Ok(_) => {}
@@ -82,14 +89,23 @@ pub fn read_history(dir: &Path) -> (Vec<Run>, Vec<String>) {
             )),
         }
     }
-    runs.sort_by(|a, b| a.created_utc.cmp(&b.created_utc).then(a.folder.cmp(&b.folder)));
+    runs.sort_by(|a, b| {
+        a.created_utc
+            .cmp(&b.created_utc)
+            .then(a.folder.cmp(&b.folder))
+    });
     (runs, messages)
 }
 
 /// Compares `current` (this run's report, before drift is attached) with `history` (earlier runs,
 /// oldest first). Returns `None` when there is no earlier run to compare with; an error message
 /// when the named baseline is not in the history.
-pub fn compare(history: &[Run], current: &Report, baseline: &Baseline, k_sigma: f64) -> Result<Option<Drift>, String> {
+pub fn compare(
+    history: &[Run],
+    current: &Report,
+    baseline: &Baseline,
+    k_sigma: f64,
+) -> Result<Option<Drift>, String> {
     if history.is_empty() {
         return Ok(None);
     }
@@ -109,13 +125,26 @@ pub fn compare(history: &[Run], current: &Report, baseline: &Baseline, k_sigma: 
         .parameters
         .iter()
         .map(|p| {
-            let find = |r: &Run| r.parameters.iter().find(|q| q.variable == p.variable && q.unit == p.unit).cloned();
-            let mut values: Vec<Option<f64>> = history.iter().map(|r| find(r).map(|q| q.identified)).collect();
-            let mut std_errors: Vec<Option<f64>> = history.iter().map(|r| find(r).and_then(|q| q.std_error)).collect();
+            let find = |r: &Run| {
+                r.parameters
+                    .iter()
+                    .find(|q| q.variable == p.variable && q.unit == p.unit)
+                    .cloned()
+            };
+            let mut values: Vec<Option<f64>> = history
+                .iter()
+                .map(|r| find(r).map(|q| q.identified))
+                .collect();
+            let mut std_errors: Vec<Option<f64>> = history
+                .iter()
+                .map(|r| find(r).and_then(|q| q.std_error))
+                .collect();
             values.push(Some(p.identified));
             std_errors.push(p.std_error);
             let deviation_sigma = match (values[b], std_errors[b], p.std_error) {
-                (Some(xb), Some(sb), Some(s)) if (sb * sb + s * s) > 0.0 => Some((p.identified - xb) / (sb * sb + s * s).sqrt()),
+                (Some(xb), Some(sb), Some(s)) if (sb * sb + s * s) > 0.0 => {
+                    Some((p.identified - xb) / (sb * sb + s * s).sqrt())
+                }
                 _ => None,
             };
             DriftSeries {
@@ -128,13 +157,24 @@ pub fn compare(history: &[Run], current: &Report, baseline: &Baseline, k_sigma: 
             }
         })
         .collect();
-    Ok(Some(Drift { k_sigma, runs, baseline: b, parameters }))
+    Ok(Some(Drift {
+        k_sigma,
+        runs,
+        baseline: b,
+        parameters,
+    }))
 }
 
 /// The deviation of run `j` of a series from the baseline, in standard errors of the difference.
 pub fn deviation(series: &DriftSeries, baseline: usize, j: usize) -> Option<f64> {
-    let (xb, sb) = (series.values.get(baseline).copied().flatten()?, series.std_errors.get(baseline).copied().flatten()?);
-    let (x, s) = (series.values.get(j).copied().flatten()?, series.std_errors.get(j).copied().flatten()?);
+    let (xb, sb) = (
+        series.values.get(baseline).copied().flatten()?,
+        series.std_errors.get(baseline).copied().flatten()?,
+    );
+    let (x, s) = (
+        series.values.get(j).copied().flatten()?,
+        series.std_errors.get(j).copied().flatten()?,
+    );
     let d = (sb * sb + s * s).sqrt();
     (d > 0.0).then(|| (x - xb) / d)
 }

@@ -82,8 +82,15 @@ pub fn render(r: &Report) -> Result<String, ReportError> {
         e(&r.source.software),
         e(&r.schema)
     );
-    let _ = write!(h, "<h1>{}</h1>\n<p class=\"meta\">{} · workflow {} · model {} · variables {}",
-        e(&r.title), e(&r.created_utc), e(&r.source.workflow), e(&r.source.model), e(&r.source.variables));
+    let _ = write!(
+        h,
+        "<h1>{}</h1>\n<p class=\"meta\">{} · workflow {} · model {} · variables {}",
+        e(&r.title),
+        e(&r.created_utc),
+        e(&r.source.workflow),
+        e(&r.source.model),
+        e(&r.source.variables)
+    );
     if let Some(s) = &r.source.session {
         let _ = write!(h, " · session {}", e(s));
     }
@@ -92,7 +99,10 @@ pub fn render(r: &Report) -> Result<String, ReportError> {
     }
     let _ = writeln!(h, "<br>measurement: {}</p>", e(&r.source.measurement));
     let o = r.status.outcome.as_str();
-    let _ = write!(h, "<div class=\"status {o}\" id=\"status\"><strong>outcome: {o}</strong>");
+    let _ = write!(
+        h,
+        "<div class=\"status {o}\" id=\"status\"><strong>outcome: {o}</strong>"
+    );
     if !r.status.messages.is_empty() {
         h.push_str("<ul>");
         for m in &r.status.messages {
@@ -124,7 +134,11 @@ pub fn render(r: &Report) -> Result<String, ReportError> {
     h.push_str("<h2 id=\"characteristics\">Amplitude-frequency characteristics</h2>\n");
     h.push_str("<p class=\"note\">Measured points with ± one standard deviation; the model before identification (initial), after it (identified) and, when diagnosis ran, after the diagnosed effects were added and refitted (diagnosed).</p>\n");
     h.push_str("<table><tr><th class=\"l\">characteristic</th>");
-    let stages: Vec<&str> = r.characteristics.first().map(|c| c.stages.iter().map(|s| s.stage.as_str()).collect()).unwrap_or_default();
+    let stages: Vec<&str> = r
+        .characteristics
+        .first()
+        .map(|c| c.stages.iter().map(|s| s.stage.as_str()).collect())
+        .unwrap_or_default();
     for s in &stages {
         let _ = write!(h, "<th>RMS rel. error, {}</th>", e(s));
     }
@@ -134,12 +148,25 @@ pub fn render(r: &Report) -> Result<String, ReportError> {
         for s in &c.stages {
             let _ = write!(h, "<td>{:.2} %</td>", 100.0 * s.rms_relative_error);
         }
-        let _ = writeln!(h, "<td>{}</td><td class=\"l\">{}</td></tr>", c.freqs_hz.len(), e(&c.sigma_kind));
+        let _ = writeln!(
+            h,
+            "<td>{}</td><td class=\"l\">{}</td></tr>",
+            c.freqs_hz.len(),
+            e(&c.sigma_kind)
+        );
     }
     h.push_str("</table>\n");
     for c in &r.characteristics {
-        let _ = writeln!(h, "<figure class=\"plot\" data-chart=\"amplitude\">{}</figure>", inline(plot::amplitude_chart(c)?));
-        let _ = writeln!(h, "<figure class=\"plot\" data-chart=\"residual\">{}</figure>", inline(plot::residual_chart(c)?));
+        let _ = writeln!(
+            h,
+            "<figure class=\"plot\" data-chart=\"amplitude\">{}</figure>",
+            inline(plot::amplitude_chart(c)?)
+        );
+        let _ = writeln!(
+            h,
+            "<figure class=\"plot\" data-chart=\"residual\">{}</figure>",
+            inline(plot::residual_chart(c)?)
+        );
     }
 
     // Parameter table.
@@ -160,11 +187,22 @@ pub fn render(r: &Report) -> Result<String, ReportError> {
         );
     }
     h.push_str("</table>\n");
-    let _ = writeln!(h, "<figure class=\"plot\" data-chart=\"parameters\">{}</figure>", inline(plot::parameter_chart(&id.parameters)?));
+    let _ = writeln!(
+        h,
+        "<figure class=\"plot\" data-chart=\"parameters\">{}</figure>",
+        inline(plot::parameter_chart(&id.parameters)?)
+    );
     if !id.weak_directions.is_empty() {
         h.push_str("<p>Poorly identifiable combinations (group these variables or add measurements):</p><ul>");
         for w in &id.weak_directions {
-            let _ = write!(h, "<li>{} ({})</li>", e(&w.combination), w.relative_std.map(|v| format!("±{:.0} %", 100.0 * v)).unwrap_or_else(|| "no information".into()));
+            let _ = write!(
+                h,
+                "<li>{} ({})</li>",
+                e(&w.combination),
+                w.relative_std
+                    .map(|v| format!("±{:.0} %", 100.0 * v))
+                    .unwrap_or_else(|| "no information".into())
+            );
         }
         h.push_str("</ul>\n");
     }
@@ -174,7 +212,16 @@ pub fn render(r: &Report) -> Result<String, ReportError> {
     match &r.diagnosis {
         None => h.push_str("<p class=\"note\">Diagnosis did not run for this report.</p>\n"),
         Some(d) => {
-            let _ = writeln!(h, "<p class=\"verdict\">{}: {}</p>", if d.explained { "Explained" } else { "Not explained" }, e(&d.verdict));
+            let _ = writeln!(
+                h,
+                "<p class=\"verdict\">{}: {}</p>",
+                if d.explained {
+                    "Explained"
+                } else {
+                    "Not explained"
+                },
+                e(&d.verdict)
+            );
             h.push_str("<table><tr><th>round</th><th class=\"l\">candidate effect</th><th class=\"l\">what and where</th><th>score statistic</th><th>p-value</th><th class=\"l\">accepted</th><th>estimate</th><th>std error</th><th class=\"l\">unit</th></tr>\n");
             for c in &d.candidates {
                 let _ = writeln!(
@@ -191,8 +238,16 @@ pub fn render(r: &Report) -> Result<String, ReportError> {
             }
             h.push_str("</tr>\n");
             for (name, q) in [("before", &d.before), ("after", &d.after)] {
-                let p = q.chi2_p_value.map(|p| format!("{p:.3e}")).unwrap_or_else(|| "— (noise level unknown)".into());
-                let _ = write!(h, "<tr><td class=\"l\">{name}</td><td>{}</td><td>{:.3}</td><td>{p}</td>", num(q.criterion), q.reduced_chi2);
+                let p = q
+                    .chi2_p_value
+                    .map(|p| format!("{p:.3e}"))
+                    .unwrap_or_else(|| "— (noise level unknown)".into());
+                let _ = write!(
+                    h,
+                    "<tr><td class=\"l\">{name}</td><td>{}</td><td>{:.3}</td><td>{p}</td>",
+                    num(q.criterion),
+                    q.reduced_chi2
+                );
                 for l in &q.rms_relative_error {
                     let _ = write!(h, "<td>{:.2} %</td>", 100.0 * l.value);
                 }
@@ -214,7 +269,11 @@ pub fn render(r: &Report) -> Result<String, ReportError> {
     match &r.sensitivity {
         None => h.push_str("<p class=\"note\">Not computed for this report.</p>\n"),
         Some(m) => {
-            let _ = writeln!(h, "<figure class=\"plot\" data-chart=\"sensitivity\">{}</figure>", inline(plot::sensitivity_chart(m)?));
+            let _ = writeln!(
+                h,
+                "<figure class=\"plot\" data-chart=\"sensitivity\">{}</figure>",
+                inline(plot::sensitivity_chart(m)?)
+            );
         }
     }
 
@@ -230,7 +289,11 @@ pub fn render(r: &Report) -> Result<String, ReportError> {
                 e(d.runs.get(d.baseline).map(String::as_str).unwrap_or("?")),
                 d.k_sigma
             );
-            let _ = writeln!(h, "<figure class=\"plot\" data-chart=\"drift\">{}</figure>", inline(plot::drift_chart(d)?));
+            let _ = writeln!(
+                h,
+                "<figure class=\"plot\" data-chart=\"drift\">{}</figure>",
+                inline(plot::drift_chart(d)?)
+            );
             h.push_str("<table><tr><th class=\"l\">variable</th><th class=\"l\">unit</th><th>baseline</th><th>this run</th><th>deviation (σ)</th><th class=\"l\">alarm</th></tr>\n");
             for p in &d.parameters {
                 let _ = writeln!(
@@ -248,6 +311,10 @@ pub fn render(r: &Report) -> Result<String, ReportError> {
             h.push_str("</table>\n");
         }
     }
-    let _ = writeln!(h, "<p class=\"meta\">Machine-readable copy: report.json ({}).</p>\n</body></html>", e(&r.schema));
+    let _ = writeln!(
+        h,
+        "<p class=\"meta\">Machine-readable copy: report.json ({}).</p>\n</body></html>",
+        e(&r.schema)
+    );
     Ok(h)
 }

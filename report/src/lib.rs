@@ -125,15 +125,25 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), ReportError> {
     })();
     result.map_err(|source| {
         let _ = std::fs::remove_file(&tmp);
-        ReportError::Write { path: path.display().to_string(), source }
+        ReportError::Write {
+            path: path.display().to_string(),
+            source,
+        }
     })
 }
 
 /// Reads a report JSON file.
 pub fn read(path: &Path) -> Result<Report, ReportError> {
-    let text = std::fs::read_to_string(path).map_err(|e| ReportError::Read { path: path.display().to_string(), message: e.to_string() })?;
+    let text = std::fs::read_to_string(path).map_err(|e| ReportError::Read {
+        path: path.display().to_string(),
+        message: e.to_string(),
+    })?;
     serde_json::from_str(&text).map_err(|e| ReportError::Read {
         path: path.display().to_string(),
-        message: format!("line {} column {}: {e} (not an {SCHEMA} report)", e.line(), e.column()),
+        message: format!(
+            "line {} column {}: {e} (not an {SCHEMA} report)",
+            e.line(),
+            e.column()
+        ),
     })
 }

@@ -33,7 +33,10 @@ const SERIES: [RGBColor; 10] = [
 const FONT: &str = "sans-serif";
 
 fn err(chart: &str) -> impl Fn(String) -> ReportError + '_ {
-    move |message| ReportError::Plot { chart: chart.to_string(), message }
+    move |message| ReportError::Plot {
+        chart: chart.to_string(),
+        message,
+    }
 }
 
 /// Runs a drawing closure on a fresh SVG canvas and returns the SVG text.
@@ -45,9 +48,13 @@ fn svg(
     let mut out = String::new();
     {
         let root = SVGBackend::with_string(&mut out, size).into_drawing_area();
-        root.fill(&WHITE).map_err(|e| e.to_string()).map_err(err(chart))?;
+        root.fill(&WHITE)
+            .map_err(|e| e.to_string())
+            .map_err(err(chart))?;
         draw(&root).map_err(err(chart))?;
-        root.present().map_err(|e| e.to_string()).map_err(err(chart))?;
+        root.present()
+            .map_err(|e| e.to_string())
+            .map_err(err(chart))?;
     }
     Ok(out)
 }
@@ -79,7 +86,9 @@ fn sci(v: f64) -> String {
 }
 
 /// The series legend, upper right, on a translucent box.
-fn legend<'a, DB: DrawingBackend + 'a, CT: CoordTranslate>(chart: &mut ChartContext<'a, DB, CT>) -> Result<(), String> {
+fn legend<'a, DB: DrawingBackend + 'a, CT: CoordTranslate>(
+    chart: &mut ChartContext<'a, DB, CT>,
+) -> Result<(), String> {
     chart
         .configure_series_labels()
         .position(SeriesLabelPosition::UpperRight)
@@ -114,13 +123,24 @@ fn log_ticks(lo: f64, hi: f64) -> Vec<f64> {
 pub fn amplitude_chart(c: &CharacteristicReport) -> Result<String, ReportError> {
     svg("amplitude", (760, 380), |root| {
         let (f0, f1) = log_range(c.freqs_hz.iter().copied());
-        let (a0, a1) = log_range(c.measured.iter().copied().chain(c.stages.iter().flat_map(|s| s.amplitude.iter().copied())));
+        let (a0, a1) = log_range(
+            c.measured
+                .iter()
+                .copied()
+                .chain(c.stages.iter().flat_map(|s| s.amplitude.iter().copied())),
+        );
         let mut chart = ChartBuilder::on(root)
-            .caption(format!("{} — amplitude-frequency characteristic", c.label), (FONT, 16))
+            .caption(
+                format!("{} — amplitude-frequency characteristic", c.label),
+                (FONT, 16),
+            )
             .margin(10)
             .x_label_area_size(40)
             .y_label_area_size(80)
-            .build_cartesian_2d((f0..f1).log_scale().with_key_points(log_ticks(f0, f1)), (a0..a1).log_scale())
+            .build_cartesian_2d(
+                (f0..f1).log_scale().with_key_points(log_ticks(f0, f1)),
+                (a0..a1).log_scale(),
+            )
             .map_err(|e| e.to_string())?;
         chart
             .configure_mesh()
@@ -135,18 +155,34 @@ pub fn amplitude_chart(c: &CharacteristicReport) -> Result<String, ReportError> 
             let col = stage_colour(&s.stage);
             chart
                 .draw_series(LineSeries::new(
-                    c.freqs_hz.iter().zip(&s.amplitude).filter(|(_, a)| **a > 0.0).map(|(f, a)| (*f, *a)),
+                    c.freqs_hz
+                        .iter()
+                        .zip(&s.amplitude)
+                        .filter(|(_, a)| **a > 0.0)
+                        .map(|(f, a)| (*f, *a)),
                     col.stroke_width(2),
                 ))
                 .map_err(|e| e.to_string())?
                 .label(format!("model, {}", s.stage))
-                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], col.stroke_width(2)));
+                .legend(move |(x, y)| {
+                    PathElement::new(vec![(x, y), (x + 20, y)], col.stroke_width(2))
+                });
         }
         // Error bars (±σ, clipped to the axis) then the points.
         chart
-            .draw_series(c.freqs_hz.iter().zip(&c.measured).zip(&c.sigma).filter(|((_, a), _)| **a > 0.0).map(|((f, a), s)| {
-                PathElement::new(vec![(*f, (a - s).max(a0)), (*f, (a + s).min(a1))], BLACK.stroke_width(1))
-            }))
+            .draw_series(
+                c.freqs_hz
+                    .iter()
+                    .zip(&c.measured)
+                    .zip(&c.sigma)
+                    .filter(|((_, a), _)| **a > 0.0)
+                    .map(|((f, a), s)| {
+                        PathElement::new(
+                            vec![(*f, (a - s).max(a0)), (*f, (a + s).min(a1))],
+                            BLACK.stroke_width(1),
+                        )
+                    }),
+            )
             .map_err(|e| e.to_string())?;
         chart
             .draw_series(
@@ -180,7 +216,10 @@ pub fn residual_chart(c: &CharacteristicReport) -> Result<String, ReportError> {
             .margin(10)
             .x_label_area_size(35)
             .y_label_area_size(80)
-            .build_cartesian_2d((f0..f1).log_scale().with_key_points(log_ticks(f0, f1)), -m..m)
+            .build_cartesian_2d(
+                (f0..f1).log_scale().with_key_points(log_ticks(f0, f1)),
+                -m..m,
+            )
             .map_err(|e| e.to_string())?;
         chart
             .configure_mesh()
@@ -192,7 +231,10 @@ pub fn residual_chart(c: &CharacteristicReport) -> Result<String, ReportError> {
             .map_err(|e| e.to_string())?;
         for lim in [-2.0, 2.0] {
             chart
-                .draw_series(std::iter::once(PathElement::new(vec![(f0, lim), (f1, lim)], RGBColor(200, 80, 80).stroke_width(1))))
+                .draw_series(std::iter::once(PathElement::new(
+                    vec![(f0, lim), (f1, lim)],
+                    RGBColor(200, 80, 80).stroke_width(1),
+                )))
                 .map_err(|e| e.to_string())?;
         }
         for s in shown {
@@ -217,7 +259,11 @@ pub fn parameter_chart(params: &[Parameter]) -> Result<String, ReportError> {
     let n = params.len().max(1);
     svg("parameter", (760, 60 + 22 * n as u32), |root| {
         let ratio = |p: &Parameter| (p.initial != 0.0).then(|| p.identified / p.initial);
-        let bar = |p: &Parameter| p.std_error.zip(ratio(p)).map(|(s, r)| (r, s / p.initial.abs()));
+        let bar = |p: &Parameter| {
+            p.std_error
+                .zip(ratio(p))
+                .map(|(s, r)| (r, s / p.initial.abs()))
+        };
         let hi = params
             .iter()
             .filter_map(bar)
@@ -236,7 +282,10 @@ pub fn parameter_chart(params: &[Parameter]) -> Result<String, ReportError> {
             .max(-100.0);
         let names: Vec<String> = params.iter().map(|p| p.variable.clone()).collect();
         let mut chart = ChartBuilder::on(root)
-            .caption("identified / initial (bars: ± one standard error)", (FONT, 14))
+            .caption(
+                "identified / initial (bars: ± one standard error)",
+                (FONT, 14),
+            )
             .margin(10)
             .x_label_area_size(35)
             .y_label_area_size(150)
@@ -246,7 +295,9 @@ pub fn parameter_chart(params: &[Parameter]) -> Result<String, ReportError> {
             .configure_mesh()
             .y_labels(n)
             .y_label_formatter(&|v| match v {
-                SegmentValue::CenterOf(i) | SegmentValue::Exact(i) => names.get(*i as usize).cloned().unwrap_or_default(),
+                SegmentValue::CenterOf(i) | SegmentValue::Exact(i) => {
+                    names.get(*i as usize).cloned().unwrap_or_default()
+                }
                 SegmentValue::Last => String::new(),
             })
             .x_desc("identified / initial")
@@ -271,7 +322,13 @@ pub fn parameter_chart(params: &[Parameter]) -> Result<String, ReportError> {
                     .map_err(|e| e.to_string())?;
             }
             if let Some(r) = ratio(p).filter(|r| r.is_finite()) {
-                chart.draw_series(std::iter::once(Circle::new((r.clamp(lo, hi), y), 4, blue.filled()))).map_err(|e| e.to_string())?;
+                chart
+                    .draw_series(std::iter::once(Circle::new(
+                        (r.clamp(lo, hi), y),
+                        4,
+                        blue.filled(),
+                    )))
+                    .map_err(|e| e.to_string())?;
             }
         }
         Ok(())
@@ -280,9 +337,18 @@ pub fn parameter_chart(params: &[Parameter]) -> Result<String, ReportError> {
 
 /// Relative MI per parameter (rows) and characteristic (columns), log colour scale.
 pub fn sensitivity_chart(map: &SensitivityMap) -> Result<String, ReportError> {
-    let (nr, nc) = (map.parameters.len().max(1), map.characteristics.len().max(1));
+    let (nr, nc) = (
+        map.parameters.len().max(1),
+        map.characteristics.len().max(1),
+    );
     svg("sensitivity", (760, 80 + 16 * nr as u32), |root| {
-        let max = map.relative.iter().flatten().copied().filter(|v| v.is_finite()).fold(0.0f64, f64::max);
+        let max = map
+            .relative
+            .iter()
+            .flatten()
+            .copied()
+            .filter(|v| v.is_finite())
+            .fold(0.0f64, f64::max);
         let floor = max * 1e-4;
         let rows = map.parameters.clone();
         let cols = map.characteristics.clone();
@@ -302,11 +368,15 @@ pub fn sensitivity_chart(map: &SensitivityMap) -> Result<String, ReportError> {
             .x_labels(nc)
             .y_labels(nr)
             .x_label_formatter(&|v| match v {
-                SegmentValue::CenterOf(i) | SegmentValue::Exact(i) => cols.get(*i as usize).cloned().unwrap_or_default(),
+                SegmentValue::CenterOf(i) | SegmentValue::Exact(i) => {
+                    cols.get(*i as usize).cloned().unwrap_or_default()
+                }
                 SegmentValue::Last => String::new(),
             })
             .y_label_formatter(&|v| match v {
-                SegmentValue::CenterOf(i) | SegmentValue::Exact(i) => rows.get(*i as usize).cloned().unwrap_or_default(),
+                SegmentValue::CenterOf(i) | SegmentValue::Exact(i) => {
+                    rows.get(*i as usize).cloned().unwrap_or_default()
+                }
                 SegmentValue::Last => String::new(),
             })
             .label_style((FONT, 10))
@@ -314,11 +384,21 @@ pub fn sensitivity_chart(map: &SensitivityMap) -> Result<String, ReportError> {
             .map_err(|e| e.to_string())?;
         let cells = map.relative.iter().enumerate().flat_map(|(r, row)| {
             row.iter().enumerate().map(move |(c, v)| {
-                let t = if max > 0.0 && *v > floor { ((v / floor).log10() / (max / floor).log10()).clamp(0.0, 1.0) } else { 0.0 };
+                let t = if max > 0.0 && *v > floor {
+                    ((v / floor).log10() / (max / floor).log10()).clamp(0.0, 1.0)
+                } else {
+                    0.0
+                };
                 let shade = (255.0 * (1.0 - t)) as u8;
                 let colour = RGBColor(shade, shade, 255);
                 Rectangle::new(
-                    [(SegmentValue::Exact(c as i32), SegmentValue::Exact(r as i32)), (SegmentValue::Exact(c as i32 + 1), SegmentValue::Exact(r as i32 + 1))],
+                    [
+                        (SegmentValue::Exact(c as i32), SegmentValue::Exact(r as i32)),
+                        (
+                            SegmentValue::Exact(c as i32 + 1),
+                            SegmentValue::Exact(r as i32 + 1),
+                        ),
+                    ],
                     colour.filled(),
                 )
             })
@@ -333,12 +413,31 @@ pub fn sensitivity_chart(map: &SensitivityMap) -> Result<String, ReportError> {
 pub fn drift_chart(d: &Drift) -> Result<String, ReportError> {
     svg("drift", (760, 360), |root| {
         let n = d.runs.len();
-        let devs: Vec<Vec<(usize, f64)>> =
-            d.parameters.iter().map(|p| (0..n).filter_map(|j| deviation(p, d.baseline, j).map(|v| (j, v))).collect()).collect();
-        let m = devs.iter().flatten().map(|(_, v)| v.abs()).filter(|v| v.is_finite()).fold(d.k_sigma * 1.5, f64::max).min(1e6);
+        let devs: Vec<Vec<(usize, f64)>> = d
+            .parameters
+            .iter()
+            .map(|p| {
+                (0..n)
+                    .filter_map(|j| deviation(p, d.baseline, j).map(|v| (j, v)))
+                    .collect()
+            })
+            .collect();
+        let m = devs
+            .iter()
+            .flatten()
+            .map(|(_, v)| v.abs())
+            .filter(|v| v.is_finite())
+            .fold(d.k_sigma * 1.5, f64::max)
+            .min(1e6);
         let runs = d.runs.clone();
         let mut chart = ChartBuilder::on(root)
-            .caption(format!("drift from the baseline run (alarm beyond ±{} σ)", d.k_sigma), (FONT, 14))
+            .caption(
+                format!(
+                    "drift from the baseline run (alarm beyond ±{} σ)",
+                    d.k_sigma
+                ),
+                (FONT, 14),
+            )
             .margin(10)
             .x_label_area_size(40)
             .y_label_area_size(60)
@@ -349,7 +448,13 @@ pub fn drift_chart(d: &Drift) -> Result<String, ReportError> {
             .x_labels(n.min(12))
             .x_label_formatter(&|v| {
                 let i = v.round();
-                if (v - i).abs() < 1e-6 && i >= 0.0 { runs.get(i as usize).map(|s| s.chars().take(10).collect()).unwrap_or_default() } else { String::new() }
+                if (v - i).abs() < 1e-6 && i >= 0.0 {
+                    runs.get(i as usize)
+                        .map(|s| s.chars().take(10).collect())
+                        .unwrap_or_default()
+                } else {
+                    String::new()
+                }
             })
             .x_desc("run")
             .y_desc("(x − x_baseline) / σ")
@@ -358,13 +463,24 @@ pub fn drift_chart(d: &Drift) -> Result<String, ReportError> {
             .map_err(|e| e.to_string())?;
         for lim in [-d.k_sigma, d.k_sigma] {
             chart
-                .draw_series(std::iter::once(PathElement::new(vec![(-0.5, lim), (n as f64 - 0.5, lim)], RGBColor(214, 39, 40).stroke_width(1))))
+                .draw_series(std::iter::once(PathElement::new(
+                    vec![(-0.5, lim), (n as f64 - 0.5, lim)],
+                    RGBColor(214, 39, 40).stroke_width(1),
+                )))
                 .map_err(|e| e.to_string())?;
         }
         for (i, (p, pts)) in d.parameters.iter().zip(&devs).enumerate() {
             let col = SERIES[i % SERIES.len()];
-            let pts: Vec<(f64, f64)> = pts.iter().map(|(j, v)| (*j as f64, v.clamp(-m, m))).collect();
-            chart.draw_series(LineSeries::new(pts.iter().copied(), col.stroke_width(if p.alarm { 3 } else { 1 }))).map_err(|e| e.to_string())?;
+            let pts: Vec<(f64, f64)> = pts
+                .iter()
+                .map(|(j, v)| (*j as f64, v.clamp(-m, m)))
+                .collect();
+            chart
+                .draw_series(LineSeries::new(
+                    pts.iter().copied(),
+                    col.stroke_width(if p.alarm { 3 } else { 1 }),
+                ))
+                .map_err(|e| e.to_string())?;
             chart
                 .draw_series(pts.iter().map(|xy| Circle::new(*xy, 3, col.filled())))
                 .map_err(|e| e.to_string())?;
@@ -377,7 +493,10 @@ pub fn drift_chart(d: &Drift) -> Result<String, ReportError> {
 mod tests {
     #[test]
     fn frequency_ticks_are_1_2_5_per_decade_inside_the_range() {
-        assert_eq!(super::log_ticks(18.0, 450.0), vec![20.0, 50.0, 100.0, 200.0]);
+        assert_eq!(
+            super::log_ticks(18.0, 450.0),
+            vec![20.0, 50.0, 100.0, 200.0]
+        );
         assert_eq!(super::log_ticks(1.0, 10.0), vec![1.0, 2.0, 5.0, 10.0]);
         assert!(super::log_ticks(0.0, 10.0).is_empty());
     }

@@ -38,7 +38,11 @@ window.addEventListener('load', () => {
 
 fn chromium() -> String {
     for c in ["chromium", "chromium-browser"] {
-        if Command::new(c).arg("--version").output().is_ok_and(|o| o.status.success()) {
+        if Command::new(c)
+            .arg("--version")
+            .output()
+            .is_ok_and(|o| o.status.success())
+        {
             return c.to_string();
         }
     }
@@ -46,7 +50,11 @@ fn chromium() -> String {
 }
 
 fn unescape(s: &str) -> String {
-    s.replace("&lt;", "<").replace("&gt;", ">").replace("&quot;", "\"").replace("&#39;", "'").replace("&amp;", "&")
+    s.replace("&lt;", "<")
+        .replace("&gt;", ">")
+        .replace("&quot;", "\"")
+        .replace("&#39;", "'")
+        .replace("&amp;", "&")
 }
 
 #[test]
@@ -88,18 +96,33 @@ fn report_renders_in_headless_chromium_with_its_plots_and_no_errors() {
         .split("<pre id=\"probe\">")
         .nth(1)
         .and_then(|s| s.split("</pre>").next())
-        .unwrap_or_else(|| panic!("the page did not finish loading (no probe output); stderr: {stderr}"));
+        .unwrap_or_else(|| {
+            panic!("the page did not finish loading (no probe output); stderr: {stderr}")
+        });
     let v: Value = serde_json::from_str(&unescape(probe)).unwrap();
     eprintln!("{v}");
     assert_eq!(v["title"], r.title);
     let expected = 2 * r.characteristics.len() + 3;
     assert_eq!(v["plots"], expected as u64, "{v}");
-    assert_eq!(v["drawn"], expected as u64, "every plot is drawn with its labels: {v}");
+    assert_eq!(
+        v["drawn"], expected as u64,
+        "every plot is drawn with its labels: {v}"
+    );
     assert!(v["texts"].as_u64().unwrap() > 50, "{v}");
-    assert!(v["rows"].as_u64().unwrap() > r.identification.parameters.len() as u64, "{v}");
-    assert_eq!(v["resources"], Value::Array(vec![]), "the page must load nothing: {v}");
+    assert!(
+        v["rows"].as_u64().unwrap() > r.identification.parameters.len() as u64,
+        "{v}"
+    );
+    assert_eq!(
+        v["resources"],
+        Value::Array(vec![]),
+        "the page must load nothing: {v}"
+    );
     assert_eq!(v["errors"], Value::Array(vec![]), "{v}");
     // Console messages Chromium itself logs (CSP, blocked loads, uncaught errors).
-    let console: Vec<&str> = stderr.lines().filter(|l| l.contains("CONSOLE") || l.contains("Uncaught")).collect();
+    let console: Vec<&str> = stderr
+        .lines()
+        .filter(|l| l.contains("CONSOLE") || l.contains("Uncaught"))
+        .collect();
     assert!(console.is_empty(), "console messages: {console:?}");
 }

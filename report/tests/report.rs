@@ -23,7 +23,11 @@ fn paths(v: &Value, prefix: &str, out: &mut BTreeSet<String>) {
     match v {
         Value::Object(m) => {
             for (k, x) in m {
-                let p = if prefix.is_empty() { k.clone() } else { format!("{prefix}.{k}") };
+                let p = if prefix.is_empty() {
+                    k.clone()
+                } else {
+                    format!("{prefix}.{k}")
+                };
                 out.insert(p.clone());
                 paths(x, &p, out);
             }
@@ -85,7 +89,12 @@ print("ok")
         .arg(&bad_path)
         .output()
         .expect("python3 not found: run .ci/setup");
-    assert!(out.status.success(), "{}{}", String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "{}{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
 }
 
 #[test]
@@ -103,8 +112,14 @@ fn docs_table_lists_exactly_the_report_fields() {
         .collect();
     let undocumented: Vec<_> = actual.difference(&documented).collect();
     let stale: Vec<_> = documented.difference(&actual).collect();
-    assert!(undocumented.is_empty(), "fields missing from docs/report-json.md: {undocumented:?}");
-    assert!(stale.is_empty(), "docs/report-json.md documents fields a report does not have: {stale:?}");
+    assert!(
+        undocumented.is_empty(),
+        "fields missing from docs/report-json.md: {undocumented:?}"
+    );
+    assert!(
+        stale.is_empty(),
+        "docs/report-json.md documents fields a report does not have: {stale:?}"
+    );
 }
 
 #[test]
@@ -115,8 +130,17 @@ fn json_round_trips_and_write_leaves_no_partial_files() {
     let w = report::write(&r, dir.path()).unwrap();
     let back = report::read(&w.json).unwrap();
     assert_eq!(back, r);
-    let names: BTreeSet<String> = std::fs::read_dir(dir.path()).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().into_owned()).collect();
-    assert_eq!(names, ["report.html", "report.json"].iter().map(|s| s.to_string()).collect());
+    let names: BTreeSet<String> = std::fs::read_dir(dir.path())
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    assert_eq!(
+        names,
+        ["report.html", "report.json"]
+            .iter()
+            .map(|s| s.to_string())
+            .collect()
+    );
     // Writing into a folder that does not exist fails with the path in the message, and
     // leaves nothing behind.
     let missing = dir.path().join("gone");
@@ -136,17 +160,26 @@ fn html_is_self_contained_with_every_plot() {
     let r = full_report(&f, 5.0);
     let html = report::html::render(&r).unwrap();
     for banned in ["<script", "<link", "<img", "@import", "url(", "https://"] {
-        assert!(!html.contains(banned), "the page must be self-contained, found {banned}");
+        assert!(
+            !html.contains(banned),
+            "the page must be self-contained, found {banned}"
+        );
     }
     // The only URLs are XML namespace names, which are never fetched.
     for (i, _) in html.match_indices("http://") {
         let tail = &html[i..i + 30.min(html.len() - i)];
-        assert!(tail.starts_with("http://www.w3.org/"), "unexpected URL {tail}");
+        assert!(
+            tail.starts_with("http://www.w3.org/"),
+            "unexpected URL {tail}"
+        );
     }
     let svgs = html.matches("<svg").count();
     // amplitude + residual per characteristic, parameters, sensitivity, drift
     assert_eq!(svgs, 2 * r.characteristics.len() + 3, "plots: {svgs}");
-    assert!(html.contains("two masses &lt;test &amp; check&gt;"), "titles are escaped");
+    assert!(
+        html.contains("two masses &lt;test &amp; check&gt;"),
+        "titles are escaped"
+    );
     assert!(html.contains("ALARM") && html.contains("outcome: alarm"));
     // Every parameter row is in the table.
     for p in &r.identification.parameters {
@@ -164,19 +197,36 @@ fn standardized_residuals_have_unit_scale_at_the_estimate() {
         let v: Vec<f64> = r
             .characteristics
             .iter()
-            .flat_map(|c| c.stages.iter().filter(|s| s.stage == stage).flat_map(|s| s.standardized_residual.iter().copied()))
+            .flat_map(|c| {
+                c.stages
+                    .iter()
+                    .filter(|s| s.stage == stage)
+                    .flat_map(|s| s.standardized_residual.iter().copied())
+            })
             .collect();
         (v.iter().map(|x| x * x).sum::<f64>() / v.len() as f64).sqrt()
     };
     let (ini, ide) = (rms("initial"), rms("identified"));
-    assert!((0.75..1.3).contains(&ide), "RMS standardized residual at the estimate {ide}");
+    assert!(
+        (0.75..1.3).contains(&ide),
+        "RMS standardized residual at the estimate {ide}"
+    );
     assert!(ini > 5.0 * ide, "initial {ini} vs identified {ide}");
     for c in &r.characteristics {
         assert_eq!(c.sigma_kind, "variance");
         // The report's RMS relative error equals identification's own.
         let own = f.id.rms.iter().find(|(l, _)| *l == c.label).unwrap().1;
-        let mine = c.stages.iter().find(|s| s.stage == "identified").unwrap().rms_relative_error;
-        assert!((own - mine).abs() <= 1e-9 * own.max(1e-30), "{}: {own} vs {mine}", c.label);
+        let mine = c
+            .stages
+            .iter()
+            .find(|s| s.stage == "identified")
+            .unwrap()
+            .rms_relative_error;
+        assert!(
+            (own - mine).abs() <= 1e-9 * own.max(1e-30),
+            "{}: {own} vs {mine}",
+            c.label
+        );
     }
     // The sensitivity map covers every decision parameter and characteristic, all positive.
     let s = r.sensitivity.as_ref().unwrap();
@@ -197,7 +247,14 @@ fn drift_alarms_beyond_k_standard_errors_only() {
     let d = loud.drift.as_ref().unwrap();
     assert!(d.parameters[0].alarm && !d.parameters[1].alarm);
     assert_eq!(loud.status.outcome, report::Outcome::Alarm);
-    assert!(loud.status.messages.iter().any(|m| m.contains("drift alarm") && m.contains(&d.parameters[0].variable)), "{:?}", loud.status.messages);
+    assert!(
+        loud.status
+            .messages
+            .iter()
+            .any(|m| m.contains("drift alarm") && m.contains(&d.parameters[0].variable)),
+        "{:?}",
+        loud.status.messages
+    );
 }
 
 #[test]
@@ -205,7 +262,11 @@ fn history_is_read_oldest_first_skipping_failures_and_naming_bad_files() {
     let f = fixture(8);
     let dir = tempfile::tempdir().unwrap();
     let base = report::build::build(report::build::Inputs::new("t", &f.obs, &f.id)).unwrap();
-    for (folder, stamp, outcome) in [("b", "2025-01-02T00:00:00Z", report::Outcome::Ok), ("a", "2025-01-01T00:00:00Z", report::Outcome::Alarm), ("c", "2025-01-03T00:00:00Z", report::Outcome::Failure)] {
+    for (folder, stamp, outcome) in [
+        ("b", "2025-01-02T00:00:00Z", report::Outcome::Ok),
+        ("a", "2025-01-01T00:00:00Z", report::Outcome::Alarm),
+        ("c", "2025-01-03T00:00:00Z", report::Outcome::Failure),
+    ] {
         let mut r = base.clone();
         r.created_utc = stamp.into();
         r.status.outcome = outcome;
@@ -218,10 +279,26 @@ fn history_is_read_oldest_first_skipping_failures_and_naming_bad_files() {
     let stamps: Vec<&str> = runs.iter().map(|r| r.created_utc.as_str()).collect();
     assert_eq!(stamps, ["2025-01-01T00:00:00Z", "2025-01-02T00:00:00Z"]);
     assert_eq!(msgs.len(), 1);
-    assert!(msgs[0].contains("d/report.json") && msgs[0].contains("line 1"), "{msgs:?}");
+    assert!(
+        msgs[0].contains("d/report.json") && msgs[0].contains("line 1"),
+        "{msgs:?}"
+    );
     // A named baseline that is not there is an error that says what to set.
-    let e = report::drift::compare(&runs, &base, &report::drift::Baseline::Folder("zz".into()), 3.0).unwrap_err();
+    let e = report::drift::compare(
+        &runs,
+        &base,
+        &report::drift::Baseline::Folder("zz".into()),
+        3.0,
+    )
+    .unwrap_err();
     assert!(e.contains("\"zz\"") && e.contains("baseline"), "{e}");
-    let d = report::drift::compare(&runs, &base, &report::drift::Baseline::Folder("b".into()), 3.0).unwrap().unwrap();
+    let d = report::drift::compare(
+        &runs,
+        &base,
+        &report::drift::Baseline::Folder("b".into()),
+        3.0,
+    )
+    .unwrap()
+    .unwrap();
     assert_eq!(d.baseline, 1);
 }

@@ -26,10 +26,22 @@ use crate::pipeline::{self, ReportContext, Setup};
 /// The built-in configs, at their paths relative to `configs/` (the stand file refers to the
 /// models by relative path).
 const CONFIGS: [(&str, &str); 4] = [
-    ("stands/fwd32j-model-sim.toml", include_str!("../../configs/stands/fwd32j-model-sim.toml")),
-    ("models/fwd32j.toml", include_str!("../../configs/models/fwd32j.toml")),
-    ("models/fwd32j-no-actuator.toml", include_str!("../../configs/models/fwd32j-no-actuator.toml")),
-    ("identification/fwd32j-no-actuator.toml", include_str!("../../configs/identification/fwd32j-no-actuator.toml")),
+    (
+        "stands/fwd32j-model-sim.toml",
+        include_str!("../../configs/stands/fwd32j-model-sim.toml"),
+    ),
+    (
+        "models/fwd32j.toml",
+        include_str!("../../configs/models/fwd32j.toml"),
+    ),
+    (
+        "models/fwd32j-no-actuator.toml",
+        include_str!("../../configs/models/fwd32j-no-actuator.toml"),
+    ),
+    (
+        "identification/fwd32j-no-actuator.toml",
+        include_str!("../../configs/identification/fwd32j-no-actuator.toml"),
+    ),
 ];
 
 /// Arguments of `ident demo`.
@@ -64,7 +76,8 @@ fn materialize(dir: &Path) -> anyhow::Result<PathBuf> {
     for (rel, text) in CONFIGS {
         let p = root.join(rel);
         if let Some(parent) = p.parent() {
-            std::fs::create_dir_all(parent).with_context(|| format!("cannot create {}", parent.display()))?;
+            std::fs::create_dir_all(parent)
+                .with_context(|| format!("cannot create {}", parent.display()))?;
         }
         std::fs::write(&p, text).with_context(|| format!("cannot write {}", p.display()))?;
     }
@@ -74,9 +87,16 @@ fn materialize(dir: &Path) -> anyhow::Result<PathBuf> {
 /// Runs the demo.
 pub fn run(a: DemoArgs) -> anyhow::Result<ExitCode> {
     if let Some(s) = a.speed {
-        anyhow::ensure!(s.is_finite() && s > 0.0 && s <= 50.0, "--speed {s}: give a factor in (0, 50] (1 = real time)");
+        anyhow::ensure!(
+            s.is_finite() && s > 0.0 && s <= 50.0,
+            "--speed {s}: give a factor in (0, 50] (1 = real time)"
+        );
     }
-    anyhow::ensure!((4..=400).contains(&a.points), "--points {}: give 4 to 400 lines", a.points);
+    anyhow::ensure!(
+        (4..=400).contains(&a.points),
+        "--points {}: give 4 to 400 lines",
+        a.points
+    );
     let dir = pipeline::dated_folder(&a.out, "demo")?;
     let configs = materialize(&dir)?;
     let mut stand = Stand::load(&configs.join("stands/fwd32j-model-sim.toml"))?;
@@ -90,9 +110,14 @@ pub fn run(a: DemoArgs) -> anyhow::Result<ExitCode> {
             t.seed = s;
         }
     }
-    let setup = Setup::load(&configs.join("models/fwd32j-no-actuator.toml"), &configs.join("identification/fwd32j-no-actuator.toml"))?;
+    let setup = Setup::load(
+        &configs.join("models/fwd32j-no-actuator.toml"),
+        &configs.join("identification/fwd32j-no-actuator.toml"),
+    )?;
     let plan = plan(a.points);
-    println!("ident demo: simulated FWD-32J stand over simulated serial devices (pseudo-terminals)");
+    println!(
+        "ident demo: simulated FWD-32J stand over simulated serial devices (pseudo-terminals)"
+    );
     println!("  truth: configs/models/fwd32j.toml (the paper's identified values, with the hydraulic actuator SDE 34)");
     println!(
         "  identification model: configs/models/fwd32j-no-actuator.toml ({} bodies, {} SDEs, actuator missing), {} decision variables",
@@ -100,17 +125,43 @@ pub fn run(a: DemoArgs) -> anyhow::Result<ExitCode> {
         setup.model.sdes.len(),
         setup.vars.len()
     );
-    println!("  sweep: {} log-spaced lines 20-400 Hz at 4 kN, simulated stand at {speed}x real time", a.points);
+    println!(
+        "  sweep: {} log-spaced lines 20-400 Hz at 4 kN, simulated stand at {speed}x real time",
+        a.points
+    );
 
     let started = Instant::now();
-    let progress: Box<dyn SweepProgress> = if a.quiet { Box::new(NoProgress) } else { Box::new(IndicatifProgress::new()) };
-    let swept = pipeline::sweep(&stand, &plan, &dir.join("session.mcap"), &Default::default(), progress.as_ref())?;
-    let outcome = swept.outcome.map_err(|e| anyhow::anyhow!("the sweep failed: {e} (session kept: {})", swept.session.display()))?;
+    let progress: Box<dyn SweepProgress> = if a.quiet {
+        Box::new(NoProgress)
+    } else {
+        Box::new(IndicatifProgress::new())
+    };
+    let swept = pipeline::sweep(
+        &stand,
+        &plan,
+        &dir.join("session.mcap"),
+        &Default::default(),
+        progress.as_ref(),
+    )?;
+    let outcome = swept.outcome.map_err(|e| {
+        anyhow::anyhow!(
+            "the sweep failed: {e} (session kept: {})",
+            swept.session.display()
+        )
+    })?;
     if let Some(e) = &swept.finish_error {
-        anyhow::bail!("the session file {} could not be completed: {e}", swept.session.display());
+        anyhow::bail!(
+            "the session file {} could not be completed: {e}",
+            swept.session.display()
+        );
     }
     let t_sweep = started.elapsed().as_secs_f64();
-    println!("  session: {} ({} steps, {} stream faults) in {t_sweep:.1} s", swept.session.display(), outcome.steps.len(), outcome.faults);
+    println!(
+        "  session: {} ({} steps, {} stream faults) in {t_sweep:.1} s",
+        swept.session.display(),
+        outcome.steps.len(),
+        outcome.faults
+    );
 
     let analysis = pipeline::analyse(&swept.session, &setup, &pipeline::identification_options())?;
     let t_all = started.elapsed().as_secs_f64();
@@ -119,9 +170,19 @@ pub fn run(a: DemoArgs) -> anyhow::Result<ExitCode> {
     for m in &analysis.messages {
         println!("note: {m}");
     }
-    let ctx = ReportContext { title: "ident demo: simulated FWD-32J stand", workflow: "demo", stand: Some(stand.name.clone()), drift: None, messages: Vec::new(), created_utc: String::new() };
+    let ctx = ReportContext {
+        title: "ident demo: simulated FWD-32J stand",
+        workflow: "demo",
+        stand: Some(stand.name.clone()),
+        drift: None,
+        messages: Vec::new(),
+        created_utc: String::new(),
+    };
     let (_, written) = pipeline::write_report(&dir, ctx, &setup, &analysis)?;
-    println!("\nsweep {t_sweep:.1} s, processing, identification and diagnosis {:.1} s", t_all - t_sweep);
+    println!(
+        "\nsweep {t_sweep:.1} s, processing, identification and diagnosis {:.1} s",
+        t_all - t_sweep
+    );
     println!("report: {}", dir.display());
     println!("open: {}", written.html.display());
     Ok(ExitCode::SUCCESS)

@@ -37,24 +37,42 @@ pub struct DiagnoseArgs {
 /// Runs identification and diagnosis. Exit 0: the final model explains the data to the noise
 /// level; 1: it does not (or the identification did not converge); 2: bad input.
 pub fn run(a: DiagnoseArgs) -> anyhow::Result<ExitCode> {
-    anyhow::ensure!(a.alpha > 0.0 && a.alpha < 1.0, "--alpha {}: give a significance level between 0 and 1 (e.g. 0.01)", a.alpha);
+    anyhow::ensure!(
+        a.alpha > 0.0 && a.alpha < 1.0,
+        "--alpha {}: give a significance level between 0 and 1 (e.g. 0.01)",
+        a.alpha
+    );
     anyhow::ensure!(a.refit > 0, "--refit must be at least 1");
     let (model, obs, vars, opts) = setup(&a.identify)?;
     let id = idn::identify(&model, &obs, &vars, &opts, &mut |_, p| {
         tracing::info!(iteration = p.iteration, criterion = p.criterion, "identify");
     })?;
     println!("{}", idn::report::text(&id));
-    let dopts = diagnose::Options { alpha: a.alpha, max_effects: a.max_effects, refit: a.refit, identification: opts };
+    let dopts = diagnose::Options {
+        alpha: a.alpha,
+        max_effects: a.max_effects,
+        refit: a.refit,
+        identification: opts,
+    };
     let started = std::time::Instant::now();
-    let d = diagnose(&model, &obs, &vars, &id, &dopts, &mut |line| tracing::info!("diagnose: {line}"))
-        .context("diagnosis")?;
+    let d = diagnose(&model, &obs, &vars, &id, &dopts, &mut |line| {
+        tracing::info!("diagnose: {line}")
+    })
+    .context("diagnosis")?;
     print!("{}", diagnose::text(&d));
     println!("diagnosed in {:.2} s", started.elapsed().as_secs_f64());
     if let Some(p) = &a.json {
         emit(Some(p), &(serde_json::to_string_pretty(&d)? + "\n"))?;
     }
     if let Some(p) = &a.out_model {
-        emit(Some(p), &(serde_json::to_string_pretty(&identify::contract::to_json(&d.model))? + "\n"))?;
+        emit(
+            Some(p),
+            &(serde_json::to_string_pretty(&identify::contract::to_json(&d.model))? + "\n"),
+        )?;
     }
-    Ok(if d.after.explained && id.stop.converged() { ExitCode::SUCCESS } else { ExitCode::from(1) })
+    Ok(if d.after.explained && id.stop.converged() {
+        ExitCode::SUCCESS
+    } else {
+        ExitCode::from(1)
+    })
 }

@@ -44,7 +44,14 @@ pub fn run(a: FrfArgs) -> anyhow::Result<ExitCode> {
             write!(s, "{f}")?;
             for o in 0..model.outputs.len() {
                 let v = r.output(o)[k];
-                write!(s, ",{:e},{:e},{:e},{:.4}", v.re, v.im, v.norm(), v.arg().to_degrees())?;
+                write!(
+                    s,
+                    ",{:e},{:e},{:e},{:.4}",
+                    v.re,
+                    v.im,
+                    v.norm(),
+                    v.arg().to_degrees()
+                )?;
             }
             s.push('\n');
         }

@@ -6,7 +6,8 @@ use std::process::ExitCode;
 
 use anyhow::Context;
 use identify::identification::{
-    self as idn, data, report, variables, FitKind, JacobianMode, NoiseChoice, Optimizer, Options, Settings,
+    self as idn, data, report, variables, FitKind, JacobianMode, NoiseChoice, Optimizer, Options,
+    Settings,
 };
 
 use super::{emit, load_model, MethodArg};
@@ -124,7 +125,9 @@ pub struct IdentifyArgs {
 /// is still reported and written).
 /// Loads and checks the model, data and variables, and the options, of `a` (shared by
 /// `ident identify` and `ident diagnose`).
-pub fn setup(a: &IdentifyArgs) -> anyhow::Result<(identify::Model, idn::Observations, idn::Variables, Options)> {
+pub fn setup(
+    a: &IdentifyArgs,
+) -> anyhow::Result<(identify::Model, idn::Observations, idn::Variables, Options)> {
     let model = load_model(&a.model)?;
     let measured = data::load(&a.data)?;
     let obs = data::validate(&measured, &model, &a.data.display().to_string())?;
@@ -157,8 +160,15 @@ pub fn setup(a: &IdentifyArgs) -> anyhow::Result<(identify::Model, idn::Observat
             OptimizerArg::Gn => Optimizer::GaussNewton,
             OptimizerArg::Bfgs => Optimizer::Bfgs,
         },
-        settings: Settings { max_iterations: a.max_iterations, ..Settings::default() },
-        jacobian: if a.finite_difference { JacobianMode::ForwardDifference } else { JacobianMode::Analytic },
+        settings: Settings {
+            max_iterations: a.max_iterations,
+            ..Settings::default()
+        },
+        jacobian: if a.finite_difference {
+            JacobianMode::ForwardDifference
+        } else {
+            JacobianMode::Analytic
+        },
         frf_method: a.frf_method.into(),
         starts: a.starts,
         seed: a.seed,
@@ -187,7 +197,11 @@ pub fn run(a: IdentifyArgs) -> anyhow::Result<ExitCode> {
             "identify"
         );
         if plain {
-            let prefix = if multi { format!("start {start} ") } else { String::new() };
+            let prefix = if multi {
+                format!("start {start} ")
+            } else {
+                String::new()
+            };
             eprintln!(
                 "{prefix}iteration {:>3}  J = {:.6e}  step = {:.3e}  gradient = {:.3e}",
                 p.iteration, p.criterion, p.step_norm, p.gradient_norm
@@ -210,11 +224,13 @@ pub fn run(a: IdentifyArgs) -> anyhow::Result<ExitCode> {
         FormatArg::Csv => emit(None, &csv)?,
     }
     if let Some(dir) = &a.out {
-        std::fs::create_dir_all(dir).with_context(|| format!("cannot create the output directory {}", dir.display()))?;
+        std::fs::create_dir_all(dir)
+            .with_context(|| format!("cannot create the output directory {}", dir.display()))?;
         emit(Some(&dir.join("report.txt")), &text)?;
         emit(Some(&dir.join("table.json")), &json)?;
         emit(Some(&dir.join("table.csv")), &csv)?;
-        let resolved = serde_json::to_string_pretty(&identify::contract::to_json(&id.model))? + "\n";
+        let resolved =
+            serde_json::to_string_pretty(&identify::contract::to_json(&id.model))? + "\n";
         emit(Some(&dir.join("model.json")), &resolved)?;
         let original = std::fs::read_to_string(&a.model)
             .with_context(|| format!("cannot re-read {}", a.model.display()))?;

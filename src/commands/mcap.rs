@@ -29,7 +29,10 @@ pub fn run(args: McapArgs) -> anyhow::Result<ExitCode> {
         Action::Recover { input, output } => {
             let output = output.unwrap_or_else(|| acquire::session::recovered_path(&input));
             let r = acquire::session::recover(&input, &output)?;
-            println!("{}: {} messages recovered into {}", r.input, r.messages, r.output);
+            println!(
+                "{}: {} messages recovered into {}",
+                r.input, r.messages, r.output
+            );
             match r.truncated {
                 Some(why) => println!("the input was truncated: {why}; everything after the last complete chunk is lost"),
                 None => println!("the input was complete"),

@@ -52,19 +52,29 @@ impl Lines {
     pub fn freqs(&self, default: (f64, f64)) -> anyhow::Result<Vec<f64>> {
         if !self.hz.is_empty() {
             for f in &self.hz {
-                anyhow::ensure!(f.is_finite() && *f >= 0.0, "--hz: {f} is not a frequency ≥ 0 Hz");
+                anyhow::ensure!(
+                    f.is_finite() && *f >= 0.0,
+                    "--hz: {f} is not a frequency ≥ 0 Hz"
+                );
             }
             return Ok(self.hz.clone());
         }
         let (a, b) = (self.from.unwrap_or(default.0), self.to.unwrap_or(default.1));
-        anyhow::ensure!(a.is_finite() && b.is_finite() && a >= 0.0 && b > a, "--from {a} --to {b}: need 0 ≤ from < to");
+        anyhow::ensure!(
+            a.is_finite() && b.is_finite() && a >= 0.0 && b > a,
+            "--from {a} --to {b}: need 0 ≤ from < to"
+        );
         anyhow::ensure!(self.points >= 2, "--points must be at least 2");
         anyhow::ensure!(!self.log || a > 0.0, "--log needs --from > 0");
         let n = self.points;
         Ok((0..n)
             .map(|i| {
                 let t = i as f64 / (n - 1) as f64;
-                if self.log { a * (b / a).powf(t) } else { a + (b - a) * t }
+                if self.log {
+                    a * (b / a).powf(t)
+                } else {
+                    a + (b - a) * t
+                }
             })
             .collect())
     }

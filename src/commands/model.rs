@@ -39,16 +39,34 @@ pub fn run(args: ModelArgs) -> anyhow::Result<ExitCode> {
             let m = load_model(&model)?;
             let mass: f64 = m.bodies.iter().map(|b| b.mass).sum();
             println!("{}: \"{}\"", model.display(), m.name);
-            println!("  {} bodies, total mass {:.1} kg, {} DOFs", m.bodies.len(), mass, m.dof_count());
+            println!(
+                "  {} bodies, total mass {:.1} kg, {} DOFs",
+                m.bodies.len(),
+                mass,
+                m.dof_count()
+            );
             let enabled = m.sdes.iter().filter(|s| s.enabled).count();
-            println!("  {} SDEs ({} enabled), {} parameters", m.sdes.len(), enabled, m.all_params().len());
-            println!("  {} point forces, {} output characteristics", m.forces.len(), m.outputs.len());
+            println!(
+                "  {} SDEs ({} enabled), {} parameters",
+                m.sdes.len(),
+                enabled,
+                m.all_params().len()
+            );
+            println!(
+                "  {} point forces, {} output characteristics",
+                m.forces.len(),
+                m.outputs.len()
+            );
             for c in &m.outputs {
                 println!("    {}", m.characteristic_label(*c));
             }
             Ok(ExitCode::SUCCESS)
         }
-        Action::Export { model, json: _, output } => {
+        Action::Export {
+            model,
+            json: _,
+            output,
+        } => {
             let m = load_model(&model)?;
             let text = serde_json::to_string_pretty(&identify::contract::to_json(&m))? + "\n";
             emit(output.as_deref(), &text)?;

@@ -24,8 +24,15 @@ pub struct ModesArgs {
 /// Runs `ident modes`.
 pub fn run(a: ModesArgs) -> anyhow::Result<ExitCode> {
     let model = load_model(&a.model)?;
-    let modes = if a.complex { identify::modes::complex(&model)? } else { identify::modes::undamped(&model)? };
-    let modes: Vec<_> = modes.into_iter().filter(|m| m.freq_hz <= a.max_hz).collect();
+    let modes = if a.complex {
+        identify::modes::complex(&model)?
+    } else {
+        identify::modes::undamped(&model)?
+    };
+    let modes: Vec<_> = modes
+        .into_iter()
+        .filter(|m| m.freq_hz <= a.max_hz)
+        .collect();
     if a.json {
         let v: Vec<serde_json::Value> = modes
             .iter()
@@ -42,7 +49,10 @@ pub fn run(a: ModesArgs) -> anyhow::Result<ExitCode> {
         println!("{}", serde_json::to_string_pretty(&v)?);
         return Ok(ExitCode::SUCCESS);
     }
-    println!("{:>4} {:>10} {:>8}  energy by body (largest first)", "mode", "f [Hz]", "η [-]");
+    println!(
+        "{:>4} {:>10} {:>8}  energy by body (largest first)",
+        "mode", "f [Hz]", "η [-]"
+    );
     for (i, m) in modes.iter().enumerate() {
         let mut shares: Vec<(usize, f64)> = m.energy.iter().copied().enumerate().collect();
         shares.sort_by(|a, b| b.1.total_cmp(&a.1));
@@ -52,7 +62,13 @@ pub fn run(a: ModesArgs) -> anyhow::Result<ExitCode> {
             .filter(|(_, e)| *e >= 0.05)
             .map(|(b, e)| format!("{} {:.0}%", model.bodies[*b].name, 100.0 * e))
             .collect();
-        println!("{:>4} {:>10.3} {:>8.4}  {}", i + 1, m.freq_hz, m.loss_factor, top.join(", "));
+        println!(
+            "{:>4} {:>10.3} {:>8.4}  {}",
+            i + 1,
+            m.freq_hz,
+            m.loss_factor,
+            top.join(", ")
+        );
     }
     Ok(ExitCode::SUCCESS)
 }

@@ -85,7 +85,13 @@ pub struct SweepConfig {
 
 impl Default for SweepConfig {
     fn default() -> Self {
-        SweepConfig { from_hz: 20.0, to_hz: 400.0, points: 38, force_n: 4000.0, speed: None }
+        SweepConfig {
+            from_hz: 20.0,
+            to_hz: 400.0,
+            points: 38,
+            force_n: 4000.0,
+            speed: None,
+        }
     }
 }
 
@@ -101,7 +107,10 @@ pub struct DriftConfig {
 
 impl Default for DriftConfig {
     fn default() -> Self {
-        DriftConfig { k_sigma: 3.0, baseline: "first".into() }
+        DriftConfig {
+            k_sigma: 3.0,
+            baseline: "first".into(),
+        }
     }
 }
 
@@ -111,23 +120,48 @@ fn line_col(text: &str, offset: usize) -> (usize, usize) {
         offset -= 1;
     }
     let before = &text[..offset];
-    (before.matches('\n').count() + 1, before.rsplit('\n').next().map(|l| l.chars().count()).unwrap_or(0) + 1)
+    (
+        before.matches('\n').count() + 1,
+        before
+            .rsplit('\n')
+            .next()
+            .map(|l| l.chars().count())
+            .unwrap_or(0)
+            + 1,
+    )
 }
 
 impl Config {
     /// Loads a job file; relative paths become relative to its folder. Errors name file:line:column.
     pub fn load(path: &Path) -> anyhow::Result<Config> {
-        let text = std::fs::read_to_string(path).with_context(|| format!("cannot read the nightly job file {}", path.display()))?;
+        let text = std::fs::read_to_string(path)
+            .with_context(|| format!("cannot read the nightly job file {}", path.display()))?;
         let mut c: Config = toml::from_str(&text).map_err(|e| {
             let (l, col) = line_col(&text, e.span().map(|s| s.start).unwrap_or(0));
-            anyhow::anyhow!("{}:{l}:{col}: {} (keys: configs/README.md#nightly)", path.display(), e.message().trim())
+            anyhow::anyhow!(
+                "{}:{l}:{col}: {} (keys: configs/README.md#nightly)",
+                path.display(),
+                e.message().trim()
+            )
         })?;
         let at = |key: &str| {
-            let (l, _) = text.lines().enumerate().find(|(_, s)| s.trim_start().starts_with(key)).map(|(i, _)| (i + 1, 0)).unwrap_or((0, 0));
+            let (l, _) = text
+                .lines()
+                .enumerate()
+                .find(|(_, s)| s.trim_start().starts_with(key))
+                .map(|(i, _)| (i + 1, 0))
+                .unwrap_or((0, 0));
             format!("{}:{l}", path.display())
         };
         let dir = path.parent().unwrap_or(Path::new("."));
-        for p in [&mut c.model, &mut c.variables, &mut c.sessions, &mut c.reports, &mut c.log, &mut c.lock] {
+        for p in [
+            &mut c.model,
+            &mut c.variables,
+            &mut c.sessions,
+            &mut c.reports,
+            &mut c.log,
+            &mut c.lock,
+        ] {
             if p.is_relative() {
                 *p = dir.join(&*p);
             }
@@ -135,13 +169,38 @@ impl Config {
         if let Some(p) = c.stand.as_mut().filter(|p| p.is_relative()) {
             *p = dir.join(&*p);
         }
-        anyhow::ensure!(c.measure != Measure::Sweep || c.stand.is_some(), "{}: measure = \"sweep\" needs `stand = \"stands/NAME.toml\"`", at("measure"));
+        anyhow::ensure!(
+            c.measure != Measure::Sweep || c.stand.is_some(),
+            "{}: measure = \"sweep\" needs `stand = \"stands/NAME.toml\"`",
+            at("measure")
+        );
         let s = &c.sweep;
-        anyhow::ensure!(s.from_hz > 0.0 && s.to_hz > s.from_hz && s.to_hz.is_finite(), "{}: [sweep] needs 0 < from_hz < to_hz (Hz)", at("from_hz"));
-        anyhow::ensure!((2..=1000).contains(&s.points), "{}: [sweep] points = {}: give 2 to 1000 lines", at("points"), s.points);
-        anyhow::ensure!(s.force_n > 0.0 && s.force_n.is_finite(), "{}: [sweep] force_n must be > 0 N", at("force_n"));
-        anyhow::ensure!(s.speed.is_none_or(|v| v > 0.0 && v.is_finite()), "{}: [sweep] speed must be > 0", at("speed"));
-        anyhow::ensure!(c.drift.k_sigma > 0.0 && c.drift.k_sigma.is_finite(), "{}: [drift] k_sigma must be > 0", at("k_sigma"));
+        anyhow::ensure!(
+            s.from_hz > 0.0 && s.to_hz > s.from_hz && s.to_hz.is_finite(),
+            "{}: [sweep] needs 0 < from_hz < to_hz (Hz)",
+            at("from_hz")
+        );
+        anyhow::ensure!(
+            (2..=1000).contains(&s.points),
+            "{}: [sweep] points = {}: give 2 to 1000 lines",
+            at("points"),
+            s.points
+        );
+        anyhow::ensure!(
+            s.force_n > 0.0 && s.force_n.is_finite(),
+            "{}: [sweep] force_n must be > 0 N",
+            at("force_n")
+        );
+        anyhow::ensure!(
+            s.speed.is_none_or(|v| v > 0.0 && v.is_finite()),
+            "{}: [sweep] speed must be > 0",
+            at("speed")
+        );
+        anyhow::ensure!(
+            c.drift.k_sigma > 0.0 && c.drift.k_sigma.is_finite(),
+            "{}: [drift] k_sigma must be > 0",
+            at("k_sigma")
+        );
         Ok(c)
     }
 
@@ -151,7 +210,11 @@ impl Config {
     }
 
     fn baseline(&self) -> report::drift::Baseline {
-        if self.drift.baseline == "first" { report::drift::Baseline::First } else { report::drift::Baseline::Folder(self.drift.baseline.clone()) }
+        if self.drift.baseline == "first" {
+            report::drift::Baseline::First
+        } else {
+            report::drift::Baseline::Folder(self.drift.baseline.clone())
+        }
     }
 }
 
@@ -174,13 +237,18 @@ impl Lock {
     /// PID, or unreadable) is taken over and reported in `notes`.
     pub fn take(path: &Path, notes: &mut Vec<String>) -> anyhow::Result<Result<Lock, String>> {
         if let Some(parent) = path.parent() {
-            std::fs::create_dir_all(parent).with_context(|| format!("cannot create the lock folder {}", parent.display()))?;
+            std::fs::create_dir_all(parent)
+                .with_context(|| format!("cannot create the lock folder {}", parent.display()))?;
         }
         for _ in 0..2 {
             match OpenOptions::new().write(true).create_new(true).open(path) {
                 Ok(mut f) => {
-                    writeln!(f, "{}", std::process::id()).with_context(|| format!("cannot write the lock file {}", path.display()))?;
-                    return Ok(Ok(Lock { path: path.to_path_buf() }));
+                    writeln!(f, "{}", std::process::id()).with_context(|| {
+                        format!("cannot write the lock file {}", path.display())
+                    })?;
+                    return Ok(Ok(Lock {
+                        path: path.to_path_buf(),
+                    }));
                 }
                 Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => {
                     let text = std::fs::read_to_string(path).unwrap_or_default();
@@ -201,17 +269,26 @@ impl Lock {
                         }
                     }
                 }
-                Err(e) => return Err(e).with_context(|| format!("cannot create the lock file {}", path.display())),
+                Err(e) => {
+                    return Err(e)
+                        .with_context(|| format!("cannot create the lock file {}", path.display()))
+                }
             }
         }
-        Ok(Err(format!("the lock {} was taken by another run while this one started; this run exits", path.display())))
+        Ok(Err(format!(
+            "the lock {} was taken by another run while this one started; this run exits",
+            path.display()
+        )))
     }
 }
 
 impl Drop for Lock {
     fn drop(&mut self) {
         if let Err(e) = std::fs::remove_file(&self.path) {
-            eprintln!("warning: cannot remove the lock file {}: {e}", self.path.display());
+            eprintln!(
+                "warning: cannot remove the lock file {}: {e}",
+                self.path.display()
+            );
         }
     }
 }
@@ -224,10 +301,20 @@ struct Log {
 
 impl Log {
     fn open(path: &Path) -> (Log, Option<String>) {
-        let r = path.parent().map(std::fs::create_dir_all).unwrap_or(Ok(())).and_then(|_| OpenOptions::new().create(true).append(true).open(path));
+        let r = path
+            .parent()
+            .map(std::fs::create_dir_all)
+            .unwrap_or(Ok(()))
+            .and_then(|_| OpenOptions::new().create(true).append(true).open(path));
         match r {
             Ok(f) => (Log { file: Some(f) }, None),
-            Err(e) => (Log { file: None }, Some(format!("cannot open the log file {}: {e}; logging to stderr only", path.display()))),
+            Err(e) => (
+                Log { file: None },
+                Some(format!(
+                    "cannot open the log file {}: {e}; logging to stderr only",
+                    path.display()
+                )),
+            ),
         }
     }
 
@@ -245,18 +332,27 @@ impl Log {
 
 /// The newest `*.mcap` in `dir` by modification time.
 fn newest_session(dir: &Path) -> anyhow::Result<PathBuf> {
-    let entries = std::fs::read_dir(dir).with_context(|| format!("cannot read the session folder {}", dir.display()))?;
+    let entries = std::fs::read_dir(dir)
+        .with_context(|| format!("cannot read the session folder {}", dir.display()))?;
     let mut best: Option<(std::time::SystemTime, PathBuf)> = None;
     for e in entries.flatten() {
         let p = e.path();
         if p.extension().is_some_and(|x| x == "mcap") {
-            let t = e.metadata().and_then(|m| m.modified()).unwrap_or(std::time::UNIX_EPOCH);
+            let t = e
+                .metadata()
+                .and_then(|m| m.modified())
+                .unwrap_or(std::time::UNIX_EPOCH);
             if best.as_ref().is_none_or(|(b, bp)| (t, &p) > (*b, bp)) {
                 best = Some((t, p));
             }
         }
     }
-    best.map(|(_, p)| p).with_context(|| format!("no *.mcap session in {}; record one with `ident sweep` or set measure = \"sweep\"", dir.display()))
+    best.map(|(_, p)| p).with_context(|| {
+        format!(
+            "no *.mcap session in {}; record one with `ident sweep` or set measure = \"sweep\"",
+            dir.display()
+        )
+    })
 }
 
 /// Runs the job.
@@ -299,7 +395,9 @@ pub fn run(a: NightlyArgs) -> anyhow::Result<ExitCode> {
             }
             let now = report::build::now_utc();
             let status = json!({"outcome": "failure", "error": msg, "session": session.as_ref().map(|s| s.display().to_string()), "created_utc": now});
-            if let Err(e) = report::write_atomic(&dir.join("status.json"), status.to_string().as_bytes()) {
+            if let Err(e) =
+                report::write_atomic(&dir.join("status.json"), status.to_string().as_bytes())
+            {
                 log.line(&format!("cannot write status.json: {e}"));
             }
             let mut lines = Vec::new();
@@ -320,7 +418,13 @@ pub fn run(a: NightlyArgs) -> anyhow::Result<ExitCode> {
     Ok(ExitCode::from(code))
 }
 
-fn job(cfg: &Config, dir: &Path, log: &mut Log, session: &mut Option<PathBuf>, notes: Vec<String>) -> anyhow::Result<u8> {
+fn job(
+    cfg: &Config,
+    dir: &Path,
+    log: &mut Log,
+    session: &mut Option<PathBuf>,
+    notes: Vec<String>,
+) -> anyhow::Result<u8> {
     let setup = Setup::load(&cfg.model, &cfg.variables)?;
     let mut stand_name = None;
     let path = match cfg.measure {
@@ -336,18 +440,42 @@ fn job(cfg: &Config, dir: &Path, log: &mut Log, session: &mut Option<PathBuf>, n
                 t.speed = s;
             }
             stand_name = Some(stand.name.clone());
-            std::fs::create_dir_all(&cfg.sessions).with_context(|| format!("cannot create the session folder {}", cfg.sessions.display()))?;
-            let stem = stand_file.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_else(|| "stand".into());
-            let p = cfg.sessions.join(format!("{stem}-{}.mcap", dir.file_name().map(|f| f.to_string_lossy().into_owned()).unwrap_or_default()));
+            std::fs::create_dir_all(&cfg.sessions).with_context(|| {
+                format!(
+                    "cannot create the session folder {}",
+                    cfg.sessions.display()
+                )
+            })?;
+            let stem = stand_file
+                .file_stem()
+                .map(|s| s.to_string_lossy().into_owned())
+                .unwrap_or_else(|| "stand".into());
+            let p = cfg.sessions.join(format!(
+                "{stem}-{}.mcap",
+                dir.file_name()
+                    .map(|f| f.to_string_lossy().into_owned())
+                    .unwrap_or_default()
+            ));
             log.line(&format!("sweep of {} into {}", stand.name, p.display()));
             let swept = pipeline::sweep(&stand, &cfg.plan(), &p, &Default::default(), &NoProgress)?;
             *session = Some(p.clone());
             if let Some(e) = &swept.finish_error {
                 log.line(&format!("the session file could not be completed: {e}; its flushed part is readable (ident mcap recover)"));
             }
-            let o = swept.outcome.map_err(|e| anyhow::anyhow!("the sweep failed: {e}"))?;
-            anyhow::ensure!(swept.finish_error.is_none(), "the session file {} could not be completed (disk full?)", p.display());
-            log.line(&format!("sweep done: {} of {} steps, {} stream faults", o.steps.len(), swept.planned, o.faults));
+            let o = swept
+                .outcome
+                .map_err(|e| anyhow::anyhow!("the sweep failed: {e}"))?;
+            anyhow::ensure!(
+                swept.finish_error.is_none(),
+                "the session file {} could not be completed (disk full?)",
+                p.display()
+            );
+            log.line(&format!(
+                "sweep done: {} of {} steps, {} stream faults",
+                o.steps.len(),
+                swept.planned,
+                o.faults
+            ));
             p
         }
     };
@@ -370,14 +498,28 @@ fn job(cfg: &Config, dir: &Path, log: &mut Log, session: &mut Option<PathBuf>, n
     }
     // The drift needs this run's table and time: build once without, compare, then write with it.
     let probe = report::build::build({
-        let mut i = report::build::Inputs::new(&cfg.name, &analysis.observations, &analysis.identification);
+        let mut i =
+            report::build::Inputs::new(&cfg.name, &analysis.observations, &analysis.identification);
         i.sensitivity = false;
         i
     })?;
-    let drift = report::drift::compare(&history, &probe, &cfg.baseline(), cfg.drift.k_sigma).map_err(|e| anyhow::anyhow!("[drift] baseline: {e}"))?;
-    let ctx = ReportContext { title: &cfg.name, workflow: "nightly", stand: stand_name, drift, messages: notes.into_iter().chain(hist_msgs).collect(), created_utc: probe.created_utc.clone() };
+    let drift = report::drift::compare(&history, &probe, &cfg.baseline(), cfg.drift.k_sigma)
+        .map_err(|e| anyhow::anyhow!("[drift] baseline: {e}"))?;
+    let ctx = ReportContext {
+        title: &cfg.name,
+        workflow: "nightly",
+        stand: stand_name,
+        drift,
+        messages: notes.into_iter().chain(hist_msgs).collect(),
+        created_utc: probe.created_utc.clone(),
+    };
     let (r, written) = pipeline::write_report(dir, ctx, &setup, &analysis)?;
-    for m in r.status.messages.iter().filter(|m| m.starts_with("drift alarm")) {
+    for m in r
+        .status
+        .messages
+        .iter()
+        .filter(|m| m.starts_with("drift alarm"))
+    {
         log.line(&format!("ALARM: {m}"));
     }
     let status = json!({"outcome": r.status.outcome.as_str(), "created_utc": r.created_utc, "session": path.display().to_string(), "report": written.html.display().to_string(), "messages": r.status.messages});

@@ -40,11 +40,20 @@ pub fn measured_csv(a: &SessionAnalysis) -> String {
     s.push_str(&a.measured.source.replace('\n', " "));
     s.push_str("\nbody,dof,quantity,freq_hz,amplitude,phase_rad,variance\n");
     for m in &a.measured.characteristics {
-        let q = serde_json::to_value(m.quantity).ok().and_then(|v| v.as_str().map(str::to_string)).unwrap_or_default();
+        let q = serde_json::to_value(m.quantity)
+            .ok()
+            .and_then(|v| v.as_str().map(str::to_string))
+            .unwrap_or_default();
         for (k, f) in m.freqs_hz.iter().enumerate() {
             let ph = m.phase_rad.as_ref().map(|p| p[k]).unwrap_or(f64::NAN);
             let var = m.variance.as_ref().map(|v| v[k]).unwrap_or(f64::NAN);
-            let _ = writeln!(s, "{},{},{q},{f},{:e},{ph},{var:e}", m.body, DOF[m.dof.min(5) as usize], m.amplitude[k]);
+            let _ = writeln!(
+                s,
+                "{},{},{q},{f},{:e},{ph},{var:e}",
+                m.body,
+                DOF[m.dof.min(5) as usize],
+                m.amplitude[k]
+            );
         }
     }
     s
@@ -58,7 +67,20 @@ pub fn steps_csv(a: &SessionAnalysis) -> String {
             let _ = writeln!(
                 s,
                 "{},{},{},{},{:e},{},{:e},{:e},{:e},{:e},{},{},{},{}",
-                st.step, st.frequency_hz, st.force_amplitude_n, c.name, c.amplitude, c.phase_rad, c.frf_re, c.frf_im, c.noise_rms, c.frf_variance, c.fit_quality, st.faults, st.retries, st.matches_live
+                st.step,
+                st.frequency_hz,
+                st.force_amplitude_n,
+                c.name,
+                c.amplitude,
+                c.phase_rad,
+                c.frf_re,
+                c.frf_im,
+                c.noise_rms,
+                c.frf_variance,
+                c.fit_quality,
+                st.faults,
+                st.retries,
+                st.matches_live
             );
         }
     }
@@ -73,9 +95,16 @@ pub fn run(a: ProcessArgs) -> anyhow::Result<ExitCode> {
         ..AnalysisOptions::default()
     };
     let an = characteristics(&a.session, &opts)?;
-    let dir = a.out.clone().unwrap_or_else(|| a.session.parent().map(PathBuf::from).unwrap_or_default());
+    let dir = a
+        .out
+        .clone()
+        .unwrap_or_else(|| a.session.parent().map(PathBuf::from).unwrap_or_default());
     std::fs::create_dir_all(&dir).with_context(|| format!("cannot create {}", dir.display()))?;
-    let stem = a.session.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_else(|| "session".into());
+    let stem = a
+        .session
+        .file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "session".into());
     let write = |suffix: &str, text: String| -> anyhow::Result<PathBuf> {
         let p = dir.join(format!("{stem}.{suffix}"));
         std::fs::write(&p, text).with_context(|| format!("cannot write {}", p.display()))?;
@@ -86,20 +115,49 @@ pub fn run(a: ProcessArgs) -> anyhow::Result<ExitCode> {
     let steps = write("steps.csv", steps_csv(&an))?;
     write("analysis.json", serde_json::to_string_pretty(&an)?)?;
     let live = an.steps.iter().filter(|s| s.matches_live).count();
-    println!("{}: stand {:?}, {} steps used, {} dropped, {} stream faults recorded", an.session, an.stand, an.steps.len(), an.dropped.len(), an.faults.len());
-    println!("recomputed from the raw blocks: {live} of {} steps equal the live estimate bit for bit", an.steps.len());
+    println!(
+        "{}: stand {:?}, {} steps used, {} dropped, {} stream faults recorded",
+        an.session,
+        an.stand,
+        an.steps.len(),
+        an.dropped.len(),
+        an.faults.len()
+    );
+    println!(
+        "recomputed from the raw blocks: {live} of {} steps equal the live estimate bit for bit",
+        an.steps.len()
+    );
     for m in &an.measured.characteristics {
-        println!("  {} {} {:?}: {} points, {:.1}-{:.1} Hz", m.body, DOF[m.dof.min(5) as usize], m.quantity, m.freqs_hz.len(), m.freqs_hz[0], m.freqs_hz[m.freqs_hz.len() - 1]);
+        println!(
+            "  {} {} {:?}: {} points, {:.1}-{:.1} Hz",
+            m.body,
+            DOF[m.dof.min(5) as usize],
+            m.quantity,
+            m.freqs_hz.len(),
+            m.freqs_hz[0],
+            m.freqs_hz[m.freqs_hz.len() - 1]
+        );
     }
-    let worst = an.steps.iter().flat_map(|s| s.rigidity.iter().map(move |r| (r.residual, s.frequency_hz, &r.body))).fold(None, |m: Option<(f64, f64, &String)>, x| match m {
-        Some(y) if y.0 >= x.0 => Some(y),
-        _ => Some(x),
-    });
+    let worst = an
+        .steps
+        .iter()
+        .flat_map(|s| {
+            s.rigidity
+                .iter()
+                .map(move |r| (r.residual, s.frequency_hz, &r.body))
+        })
+        .fold(None, |m: Option<(f64, f64, &String)>, x| match m {
+            Some(y) if y.0 >= x.0 => Some(y),
+            _ => Some(x),
+        });
     if let Some((r, f, b)) = worst {
         println!("  largest rigidity residual: {r:.3} ({b}, {f:.1} Hz)");
     }
     for d in &an.dropped {
-        println!("  dropped step {} ({:.2} Hz): {}", d.step, d.frequency_hz, d.reason);
+        println!(
+            "  dropped step {} ({:.2} Hz): {}",
+            d.step, d.frequency_hz, d.reason
+        );
     }
     for n in &an.notes {
         println!("  note: {n}");
@@ -107,6 +165,14 @@ pub fn run(a: ProcessArgs) -> anyhow::Result<ExitCode> {
     if let Some(t) = &an.truncated {
         println!("  the session file is truncated ({t}); `ident mcap recover` rewrites it into a valid file");
     }
-    println!("data for `ident identify --data`: {}\nper-step FRF table: {}", measured.display(), steps.display());
-    Ok(if an.dropped.is_empty() && an.truncated.is_none() { ExitCode::SUCCESS } else { ExitCode::from(1) })
+    println!(
+        "data for `ident identify --data`: {}\nper-step FRF table: {}",
+        measured.display(),
+        steps.display()
+    );
+    Ok(if an.dropped.is_empty() && an.truncated.is_none() {
+        ExitCode::SUCCESS
+    } else {
+        ExitCode::from(1)
+    })
 }

@@ -41,19 +41,35 @@ pub struct ReplayArgs {
 
 /// Runs the replay.
 pub fn run(a: ReplayArgs) -> anyhow::Result<ExitCode> {
-    anyhow::ensure!(a.session.is_file(), "{}: no such session file", a.session.display());
+    anyhow::ensure!(
+        a.session.is_file(),
+        "{}: no such session file",
+        a.session.display()
+    );
     if a.serve {
         return serve(&a);
     }
     let setup = Setup::load(&a.model, &a.vars)?;
     let analysis = pipeline::analyse(&a.session, &setup, &pipeline::identification_options())?;
-    println!("ident replay: {} ({} steps used, {} dropped)", a.session.display(), analysis.session.steps.len(), analysis.session.dropped.len());
+    println!(
+        "ident replay: {} ({} steps used, {} dropped)",
+        a.session.display(),
+        analysis.session.steps.len(),
+        analysis.session.dropped.len()
+    );
     print!("{}", pipeline::summary_text(&analysis));
     for m in &analysis.messages {
         println!("note: {m}");
     }
     let dir = pipeline::dated_folder(&a.out, "replay")?;
-    let ctx = ReportContext { title: "ident replay", workflow: "replay", stand: None, drift: None, messages: Vec::new(), created_utc: String::new() };
+    let ctx = ReportContext {
+        title: "ident replay",
+        workflow: "replay",
+        stand: None,
+        drift: None,
+        messages: Vec::new(),
+        created_utc: String::new(),
+    };
     let (_, written) = pipeline::write_report(&dir, ctx, &setup, &analysis)?;
     println!("report: {}", dir.display());
     println!("open: {}", written.html.display());
@@ -63,9 +79,20 @@ pub fn run(a: ReplayArgs) -> anyhow::Result<ExitCode> {
 /// `--serve`: the session's devices on pseudo-terminals until Ctrl-C.
 fn serve(a: &ReplayArgs) -> anyhow::Result<ExitCode> {
     let served = acquire::replay::prepare(&a.session, a.speed)?;
-    let (name, speed, lines) = (served.stand.name.clone(), served.setup.speed, served.plant.frequencies().len());
-    let (lo, hi) = (served.plant.frequencies()[0], served.plant.frequencies()[lines - 1]);
-    let rt = tokio::runtime::Builder::new_multi_thread().worker_threads(2).enable_all().build().context("cannot start the async runtime")?;
+    let (name, speed, lines) = (
+        served.stand.name.clone(),
+        served.setup.speed,
+        served.plant.frequencies().len(),
+    );
+    let (lo, hi) = (
+        served.plant.frequencies()[0],
+        served.plant.frequencies()[lines - 1],
+    );
+    let rt = tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(2)
+        .enable_all()
+        .build()
+        .context("cannot start the async runtime")?;
     rt.block_on(async {
         let sim = acquire::sim::SimStand::start_with(served.setup)?;
         let hint = format!(

@@ -27,7 +27,11 @@ pub struct SensitivityArgs {
 /// Runs `ident sensitivity`.
 pub fn run(a: SensitivityArgs) -> anyhow::Result<ExitCode> {
     let model = load_model(&a.model)?;
-    anyhow::ensure!(!model.outputs.is_empty(), "{}: the model declares no [[output]] characteristics", a.model.display());
+    anyhow::ensure!(
+        !model.outputs.is_empty(),
+        "{}: the model declares no [[output]] characteristics",
+        a.model.display()
+    );
     let freqs = a.lines.freqs((1.0, 200.0))?;
     let s = identify::sensitivity::band_sensitivity(&model, &freqs, &[], a.method.into())?;
     if a.json {
@@ -46,16 +50,39 @@ pub fn run(a: SensitivityArgs) -> anyhow::Result<ExitCode> {
                 })
             })
             .collect();
-        let outputs: Vec<String> = model.outputs.iter().map(|c| model.characteristic_label(*c)).collect();
-        println!("{}", serde_json::to_string_pretty(&serde_json::json!({"freqs_hz": [freqs[0], freqs[freqs.len() - 1]], "lines": freqs.len(), "outputs": outputs, "params": rows}))?);
+        let outputs: Vec<String> = model
+            .outputs
+            .iter()
+            .map(|c| model.characteristic_label(*c))
+            .collect();
+        println!(
+            "{}",
+            serde_json::to_string_pretty(
+                &serde_json::json!({"freqs_hz": [freqs[0], freqs[freqs.len() - 1]], "lines": freqs.len(), "outputs": outputs, "params": rows})
+            )?
+        );
         return Ok(ExitCode::SUCCESS);
     }
-    println!("band {:.3}-{:.3} Hz, {} lines; relative MI = p·Σ|∂|q|/∂p| / Σ|q| (eq. 4.16 × p)", freqs[0], freqs[freqs.len() - 1], freqs.len());
+    println!(
+        "band {:.3}-{:.3} Hz, {} lines; relative MI = p·Σ|∂|q|/∂p| / Σ|q| (eq. 4.16 × p)",
+        freqs[0],
+        freqs[freqs.len() - 1],
+        freqs.len()
+    );
     for (o, c) in model.outputs.iter().enumerate() {
         println!("\n{}", model.characteristic_label(*c));
-        println!("  {:>4} {:<14} {:>12} {:>12}", "rank", "parameter", "relative MI", "MI [1/SI]");
+        println!(
+            "  {:>4} {:<14} {:>12} {:>12}",
+            "rank", "parameter", "relative MI", "MI [1/SI]"
+        );
         for (i, (p, mi, rel)) in s.ranking(o).into_iter().take(a.top).enumerate() {
-            println!("  {:>4} {:<14} {:>12.4e} {:>12.4e}", i + 1, model.param_label(p).trim_start_matches("sde "), rel, mi);
+            println!(
+                "  {:>4} {:<14} {:>12.4e} {:>12.4e}",
+                i + 1,
+                model.param_label(p).trim_start_matches("sde "),
+                rel,
+                mi
+            );
         }
     }
     Ok(ExitCode::SUCCESS)

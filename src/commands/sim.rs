@@ -6,9 +6,9 @@ use std::io::Write;
 use std::path::PathBuf;
 use std::process::ExitCode;
 
-use anyhow::Context;
 use acquire::sim::SimStand;
 use acquire::stand::Stand;
+use anyhow::Context;
 
 /// Arguments of `ident sim`.
 #[derive(clap::Args)]
@@ -27,13 +27,25 @@ pub struct SimArgs {
 /// Runs `ident sim`.
 pub fn run(a: SimArgs) -> anyhow::Result<ExitCode> {
     let mut stand = Stand::load(&a.stand)?;
-    let truth = stand.truth.as_mut().with_context(|| format!("{}: `ident sim` needs a [truth] section (the simulated structure)", a.stand.display()))?;
+    let truth = stand.truth.as_mut().with_context(|| {
+        format!(
+            "{}: `ident sim` needs a [truth] section (the simulated structure)",
+            a.stand.display()
+        )
+    })?;
     if let Some(s) = a.speed {
-        anyhow::ensure!(s.is_finite() && s > 0.0, "--speed {s}: give a factor > 0 (1 = real time)");
+        anyhow::ensure!(
+            s.is_finite() && s > 0.0,
+            "--speed {s}: give a factor > 0 (1 = real time)"
+        );
         truth.speed = s;
     }
     let speed = truth.speed;
-    let rt = tokio::runtime::Builder::new_multi_thread().worker_threads(2).enable_all().build().context("cannot start the async runtime")?;
+    let rt = tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(2)
+        .enable_all()
+        .build()
+        .context("cannot start the async runtime")?;
     rt.block_on(async {
         let sim = match &a.can {
             Some(iface) => SimStand::start_can(&stand, iface)?,
@@ -56,7 +68,9 @@ pub async fn serve_until_ctrl_c(sim: SimStand, who: &str, hint: &str) -> anyhow:
     out.flush()?;
     drop(out);
     eprintln!("{who}: {hint}");
-    tokio::signal::ctrl_c().await.context("cannot wait for Ctrl-C")?;
+    tokio::signal::ctrl_c()
+        .await
+        .context("cannot wait for Ctrl-C")?;
     sim.shutdown();
     eprintln!("{who}: stopped");
     Ok(ExitCode::SUCCESS)

@@ -57,9 +57,15 @@ pub fn plan(a: &SweepArgs) -> SteppedSine {
 }
 
 fn session_path(dir: &Path, stand_file: &Path) -> PathBuf {
-    let stem = stand_file.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_else(|| "stand".into());
+    let stem = stand_file
+        .file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "stand".into());
     // `YYYYmmddTHHMMSSZ`: sortable, and valid in file names everywhere.
-    let base = format!("{stem}-{}", report::build::now_utc().replace(['-', ':'], ""));
+    let base = format!(
+        "{stem}-{}",
+        report::build::now_utc().replace(['-', ':'], "")
+    );
     let mut p = dir.join(format!("{base}.mcap"));
     let mut k = 1;
     while p.exists() {
@@ -73,7 +79,10 @@ fn session_path(dir: &Path, stand_file: &Path) -> PathBuf {
 pub fn run(a: SweepArgs) -> anyhow::Result<ExitCode> {
     let mut stand = Stand::load(&a.stand)?;
     if let Some(s) = a.speed {
-        anyhow::ensure!(s.is_finite() && s > 0.0, "--speed {s}: give a factor > 0 (1 = real time)");
+        anyhow::ensure!(
+            s.is_finite() && s > 0.0,
+            "--speed {s}: give a factor > 0 (1 = real time)"
+        );
         let t = stand.truth.as_mut().with_context(|| format!("--speed: {} has no [truth] section (only the simulated stand runs faster than real time)", a.stand.display()))?;
         t.speed = s;
     }
@@ -83,14 +92,23 @@ pub fn run(a: SweepArgs) -> anyhow::Result<ExitCode> {
         Some(prev) => sweep::completed_steps(prev, &plan)?,
         None => BTreeSet::new(),
     };
-    std::fs::create_dir_all(&a.out).with_context(|| format!("cannot create the session folder {}", a.out.display()))?;
+    std::fs::create_dir_all(&a.out)
+        .with_context(|| format!("cannot create the session folder {}", a.out.display()))?;
     let path = session_path(&a.out, &a.stand);
-    let opts = pipeline::SweepOptions { can: a.can.as_deref(), resume: a.resume.as_deref(), done, ctrl_c: true };
+    let opts = pipeline::SweepOptions {
+        can: a.can.as_deref(),
+        resume: a.resume.as_deref(),
+        done,
+        ctrl_c: true,
+    };
     let started = Instant::now();
     let swept = pipeline::sweep(&stand, &plan, &path, &opts, &IndicatifProgress::new())?;
     let elapsed = started.elapsed().as_secs_f64();
     if let Some(e) = &swept.finish_error {
-        anyhow::bail!("the session file {} could not be completed: {e}", path.display());
+        anyhow::bail!(
+            "the session file {} could not be completed: {e}",
+            path.display()
+        );
     }
     match swept.outcome {
         Ok(o) => {
@@ -107,14 +125,21 @@ pub fn run(a: SweepArgs) -> anyhow::Result<ExitCode> {
                 swept.messages
             );
             if o.stopped || measured < freqs.len() {
-                println!("the sweep is incomplete; continue it with: ident sweep --stand {} --resume {}", a.stand.display(), path.display());
+                println!(
+                    "the sweep is incomplete; continue it with: ident sweep --stand {} --resume {}",
+                    a.stand.display(),
+                    path.display()
+                );
                 Ok(ExitCode::from(1))
             } else {
                 Ok(ExitCode::SUCCESS)
             }
         }
         Err(e) => {
-            eprintln!("session (complete, records the failure): {}", path.display());
+            eprintln!(
+                "session (complete, records the failure): {}",
+                path.display()
+            );
             Err(anyhow::anyhow!(e))
         }
     }

@@ -14,7 +14,7 @@ use acquire::rig::Rig;
 use acquire::session::{Session, SessionOptions};
 use acquire::sim::SimStand;
 use acquire::stand::Stand;
-use acquire::sweep::{self, FrequencyList, NoProgress, StopSignal, SteppedSine};
+use acquire::sweep::{self, FrequencyList, NoProgress, SteppedSine, StopSignal};
 
 struct Args {
     stand: PathBuf,
@@ -27,15 +27,36 @@ struct Args {
 
 fn parse_args() -> Result<Args, String> {
     let mut it = std::env::args().skip(1);
-    let mut a = Args { stand: PathBuf::new(), record: None, steps: 12, speed: None, forever: false, flush_ms: 500 };
+    let mut a = Args {
+        stand: PathBuf::new(),
+        record: None,
+        steps: 12,
+        speed: None,
+        forever: false,
+        flush_ms: 500,
+    };
     let mut stand = None;
     while let Some(x) = it.next() {
         let mut val = |name: &str| it.next().ok_or_else(|| format!("{name} needs a value"));
         match x.as_str() {
             "--record" => a.record = Some(PathBuf::from(val("--record")?)),
-            "--steps" => a.steps = val("--steps")?.parse().map_err(|e| format!("--steps: {e}"))?,
-            "--speed" => a.speed = Some(val("--speed")?.parse().map_err(|e| format!("--speed: {e}"))?),
-            "--flush-ms" => a.flush_ms = val("--flush-ms")?.parse().map_err(|e| format!("--flush-ms: {e}"))?,
+            "--steps" => {
+                a.steps = val("--steps")?
+                    .parse()
+                    .map_err(|e| format!("--steps: {e}"))?
+            }
+            "--speed" => {
+                a.speed = Some(
+                    val("--speed")?
+                        .parse()
+                        .map_err(|e| format!("--speed: {e}"))?,
+                )
+            }
+            "--flush-ms" => {
+                a.flush_ms = val("--flush-ms")?
+                    .parse()
+                    .map_err(|e| format!("--flush-ms: {e}"))?
+            }
             "--forever" => a.forever = true,
             "-h" | "--help" => return Err(String::new()),
             s if s.starts_with('-') => return Err(format!("unknown option {s}")),
@@ -75,10 +96,20 @@ async fn run() -> Result<(), Box<dyn std::error::Error>> {
         return Ok(());
     };
     let bound = sim.bind(&stand);
-    let session = Session::create(&out, SessionOptions { flush_interval: Duration::from_millis(args.flush_ms), ..Default::default() })?;
+    let session = Session::create(
+        &out,
+        SessionOptions {
+            flush_interval: Duration::from_millis(args.flush_ms),
+            ..Default::default()
+        },
+    )?;
     let h = session.handle();
     let plan = SteppedSine {
-        frequencies: FrequencyList::Log { start: 30.0, stop: 300.0, n: args.steps },
+        frequencies: FrequencyList::Log {
+            start: 30.0,
+            stop: 300.0,
+            n: args.steps,
+        },
         settle_s: 0.05,
         cycles: 10.0,
         min_window_s: 0.1,
@@ -88,7 +119,8 @@ async fn run() -> Result<(), Box<dyn std::error::Error>> {
         sweep::log_session_start(&h, &stand.file, &plan, None, &BTreeSet::new())?;
         let mut rig = Rig::connect(&bound, Some(&h)).await?;
         loop {
-            let o = sweep::stepped_sine(&mut rig, &plan, &h, &NoProgress, &stop, &BTreeSet::new()).await?;
+            let o = sweep::stepped_sine(&mut rig, &plan, &h, &NoProgress, &stop, &BTreeSet::new())
+                .await?;
             eprintln!("acquire-sim: sweep of {} steps done", o.steps.len());
             if !args.forever || o.stopped {
                 return Ok::<(), Box<dyn std::error::Error>>(());

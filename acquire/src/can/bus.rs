@@ -45,7 +45,12 @@ pub struct BusErrorReport {
 
 impl std::fmt::Display for BusErrorReport {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        write!(f, "CAN interface `{}`: error frame: {}", self.interface, self.causes.join("; "))?;
+        write!(
+            f,
+            "CAN interface `{}`: error frame: {}",
+            self.interface,
+            self.causes.join("; ")
+        )?;
         if self.bus_off {
             write!(
                 f,
@@ -53,7 +58,9 @@ impl std::fmt::Display for BusErrorReport {
                 self.interface
             )?;
         } else if self.error_passive {
-            f.write_str("; error-passive: frames are being corrupted (check termination, bitrate, wiring)")?;
+            f.write_str(
+                "; error-passive: frames are being corrupted (check termination, bitrate, wiring)",
+            )?;
         }
         Ok(())
     }
@@ -80,9 +87,15 @@ pub struct CanBus {
 impl CanBus {
     /// Opens `interface` (e.g. `can0`, `vcan0`), receiving every frame and every error frame.
     pub fn open(interface: &str) -> Result<CanBus, CanError> {
-        let sock = socketcan::tokio::CanFdSocket::open(interface).map_err(|e| open_error(interface, e))?;
-        let bus = CanBus { interface: interface.to_string(), sock };
-        bus.sock.set_error_filter_accept_all().map_err(|e| bus.io("set error filter", e))?;
+        let sock =
+            socketcan::tokio::CanFdSocket::open(interface).map_err(|e| open_error(interface, e))?;
+        let bus = CanBus {
+            interface: interface.to_string(),
+            sock,
+        };
+        bus.sock
+            .set_error_filter_accept_all()
+            .map_err(|e| bus.io("set error filter", e))?;
         Ok(bus)
     }
 
@@ -92,11 +105,17 @@ impl CanBus {
         let filters: Vec<CanFilter> = ids
             .iter()
             .map(|id| match *id {
-                CanId::Standard(x) => CanFilter::new(x as u32, CAN_SFF_MASK | CAN_EFF_FLAG | CAN_RTR_FLAG),
-                CanId::Extended(x) => CanFilter::new(x | CAN_EFF_FLAG, CAN_EFF_MASK | CAN_EFF_FLAG | CAN_RTR_FLAG),
+                CanId::Standard(x) => {
+                    CanFilter::new(x as u32, CAN_SFF_MASK | CAN_EFF_FLAG | CAN_RTR_FLAG)
+                }
+                CanId::Extended(x) => {
+                    CanFilter::new(x | CAN_EFF_FLAG, CAN_EFF_MASK | CAN_EFF_FLAG | CAN_RTR_FLAG)
+                }
             })
             .collect();
-        bus.sock.set_filters(&filters).map_err(|e| bus.io("set filters", e))?;
+        bus.sock
+            .set_filters(&filters)
+            .map_err(|e| bus.io("set filters", e))?;
         Ok(bus)
     }
 
@@ -133,7 +152,10 @@ impl CanBus {
             };
             match r {
                 Ok(()) => return Ok(()),
-                Err(e) if e.raw_os_error() == Some(ENOBUFS) && tokio::time::Instant::now() < deadline => {
+                Err(e)
+                    if e.raw_os_error() == Some(ENOBUFS)
+                        && tokio::time::Instant::now() < deadline =>
+                {
                     tokio::time::sleep(Duration::from_micros(200)).await;
                 }
                 Err(e) => return Err(self.send_error(frame, e)),
@@ -143,13 +165,27 @@ impl CanBus {
 
     /// Receives the next frame or error frame.
     pub async fn recv(&self) -> Result<BusEvent, CanError> {
-        let f = self.sock.read_frame().await.map_err(|e| match e.raw_os_error() {
-            Some(ENETDOWN) => CanError::InterfaceDown { interface: self.interface.clone() },
-            _ => self.io("receive", e),
-        })?;
+        let f = self
+            .sock
+            .read_frame()
+            .await
+            .map_err(|e| match e.raw_os_error() {
+                Some(ENETDOWN) => CanError::InterfaceDown {
+                    interface: self.interface.clone(),
+                },
+                _ => self.io("receive", e),
+            })?;
         Ok(match f {
-            CanAnyFrame::Normal(f) => BusEvent::Frame(WireFrame::from_parts(from_socketcan_id(f.id()), FrameKind::Classic, f.data())),
-            CanAnyFrame::Fd(f) => BusEvent::Frame(WireFrame::from_parts(from_socketcan_id(f.id()), FrameKind::Fd, f.data())),
+            CanAnyFrame::Normal(f) => BusEvent::Frame(WireFrame::from_parts(
+                from_socketcan_id(f.id()),
+                FrameKind::Classic,
+                f.data(),
+            )),
+            CanAnyFrame::Fd(f) => BusEvent::Frame(WireFrame::from_parts(
+                from_socketcan_id(f.id()),
+                FrameKind::Fd,
+                f.data(),
+            )),
             CanAnyFrame::Remote(f) => BusEvent::Remote(from_socketcan_id(f.id())),
             CanAnyFrame::Error(f) => {
                 let class_bits = f.error_bits();
@@ -170,23 +206,42 @@ impl CanBus {
                     }
                     causes.push(c.to_string());
                 }
-                BusEvent::Error(BusErrorReport { interface: self.interface.clone(), bus_off, error_passive, class_bits, causes })
+                BusEvent::Error(BusErrorReport {
+                    interface: self.interface.clone(),
+                    bus_off,
+                    error_passive,
+                    class_bits,
+                    causes,
+                })
             }
         })
     }
 
     fn io(&self, op: &'static str, source: std::io::Error) -> CanError {
-        CanError::Io { interface: self.interface.clone(), op, source }
+        CanError::Io {
+            interface: self.interface.clone(),
+            op,
+            source,
+        }
     }
 
     fn bad_frame(&self, frame: &WireFrame) -> CanError {
-        CanError::Config { detail: format!("frame {frame:?} for `{}` cannot be built (length or identifier)", self.interface) }
+        CanError::Config {
+            detail: format!(
+                "frame {frame:?} for `{}` cannot be built (length or identifier)",
+                self.interface
+            ),
+        }
     }
 
     fn send_error(&self, frame: &WireFrame, e: std::io::Error) -> CanError {
         match e.raw_os_error() {
-            Some(ENETDOWN) => CanError::InterfaceDown { interface: self.interface.clone() },
-            Some(EINVAL) if frame.is_fd() => CanError::FdNotSupported { interface: self.interface.clone() },
+            Some(ENETDOWN) => CanError::InterfaceDown {
+                interface: self.interface.clone(),
+            },
+            Some(EINVAL) if frame.is_fd() => CanError::FdNotSupported {
+                interface: self.interface.clone(),
+            },
             _ => self.io("send", e),
         }
     }
@@ -194,22 +249,37 @@ impl CanBus {
 
 fn open_error(interface: &str, e: std::io::Error) -> CanError {
     match e.raw_os_error() {
-        Some(EAFNOSUPPORT) | Some(EPROTONOSUPPORT) => CanError::NoKernelSupport { interface: interface.to_string(), source: e },
-        Some(ENODEV) | Some(ENXIO) => CanError::UnknownInterface { interface: interface.to_string(), source: e },
-        _ if e.kind() == std::io::ErrorKind::NotFound => {
-            CanError::UnknownInterface { interface: interface.to_string(), source: e }
-        }
-        Some(ENETDOWN) => CanError::InterfaceDown { interface: interface.to_string() },
-        _ => CanError::Io { interface: interface.to_string(), op: "open", source: e },
+        Some(EAFNOSUPPORT) | Some(EPROTONOSUPPORT) => CanError::NoKernelSupport {
+            interface: interface.to_string(),
+            source: e,
+        },
+        Some(ENODEV) | Some(ENXIO) => CanError::UnknownInterface {
+            interface: interface.to_string(),
+            source: e,
+        },
+        _ if e.kind() == std::io::ErrorKind::NotFound => CanError::UnknownInterface {
+            interface: interface.to_string(),
+            source: e,
+        },
+        Some(ENETDOWN) => CanError::InterfaceDown {
+            interface: interface.to_string(),
+        },
+        _ => CanError::Io {
+            interface: interface.to_string(),
+            op: "open",
+            source: e,
+        },
     }
 }
 
 fn to_socketcan_id(id: CanId) -> Result<Id, String> {
     match id {
-        CanId::Standard(x) => StandardId::new(x).map(Id::Standard).ok_or_else(|| format!("standard identifier {x:#x} > 0x7FF")),
-        CanId::Extended(x) => {
-            ExtendedId::new(x).map(Id::Extended).ok_or_else(|| format!("extended identifier {x:#x} > 0x1FFFFFFF"))
-        }
+        CanId::Standard(x) => StandardId::new(x)
+            .map(Id::Standard)
+            .ok_or_else(|| format!("standard identifier {x:#x} > 0x7FF")),
+        CanId::Extended(x) => ExtendedId::new(x)
+            .map(Id::Extended)
+            .ok_or_else(|| format!("extended identifier {x:#x} > 0x1FFFFFFF")),
     }
 }
 
@@ -229,22 +299,38 @@ mod tests {
         let e = open_error("can7", std::io::Error::from_raw_os_error(ENODEV));
         let msg = e.to_string();
         assert!(matches!(e, CanError::UnknownInterface { .. }), "{e:?}");
-        assert!(msg.contains("`can7`") && msg.contains("ip link show can7"), "{msg}");
+        assert!(
+            msg.contains("`can7`") && msg.contains("ip link show can7"),
+            "{msg}"
+        );
         let e = open_error("can7", std::io::Error::from_raw_os_error(EAFNOSUPPORT));
-        assert!(matches!(e, CanError::NoKernelSupport { .. }) && e.to_string().contains("modprobe can-raw"), "{e}");
+        assert!(
+            matches!(e, CanError::NoKernelSupport { .. })
+                && e.to_string().contains("modprobe can-raw"),
+            "{e}"
+        );
         let e = open_error("can7", std::io::Error::from_raw_os_error(ENETDOWN));
         assert!(e.to_string().contains("ip link set can7 up"), "{e}");
         let e = open_error("can7", std::io::Error::from_raw_os_error(13));
-        assert!(matches!(e, CanError::Io { op: "open", .. }) && e.to_string().contains("can7"), "{e}");
+        assert!(
+            matches!(e, CanError::Io { op: "open", .. }) && e.to_string().contains("can7"),
+            "{e}"
+        );
     }
 
     #[test]
     fn identifiers_convert_both_ways_and_out_of_range_ones_are_refused() {
-        for id in [CanId::Standard(0), CanId::Standard(0x7FF), CanId::Extended(0x1FFF_FFFF)] {
+        for id in [
+            CanId::Standard(0),
+            CanId::Standard(0x7FF),
+            CanId::Extended(0x1FFF_FFFF),
+        ] {
             assert_eq!(to_socketcan_id(id).map(from_socketcan_id), Ok(id));
         }
         assert!(to_socketcan_id(CanId::Standard(0x800)).is_err());
         assert!(to_socketcan_id(CanId::Extended(0x2000_0000)).is_err());
-        assert!(CanId::Standard(0x800).validate("data").is_err_and(|e| e.to_string().contains("data identifier 800")));
+        assert!(CanId::Standard(0x800)
+            .validate("data")
+            .is_err_and(|e| e.to_string().contains("data identifier 800")));
     }
 }

@@ -61,7 +61,12 @@ pub struct Segmenter {
 impl Segmenter {
     /// A segmenter sending on `id` with frames of `kind`; the counter starts at 0.
     pub fn new(id: CanId, kind: FrameKind) -> Segmenter {
-        Segmenter { id, kind, counter: 0, scratch: Vec::new() }
+        Segmenter {
+            id,
+            kind,
+            counter: 0,
+            scratch: Vec::new(),
+        }
     }
 
     /// The frame counter of the next frame (0–127).
@@ -75,7 +80,8 @@ impl Segmenter {
             return Err(EncodeError::TooLong { len: body.len() });
         }
         self.scratch.clear();
-        self.scratch.extend_from_slice(&(body.len() as u16).to_le_bytes());
+        self.scratch
+            .extend_from_slice(&(body.len() as u16).to_le_bytes());
         self.scratch.extend_from_slice(body);
         let crc = CRC16.checksum(&self.scratch);
         self.scratch.extend_from_slice(&crc.to_le_bytes());
@@ -134,12 +140,21 @@ pub enum SegmentFault {
 impl std::fmt::Display for SegmentFault {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match self {
-            SegmentFault::Gap { expected, received, missing, message_lost } => write!(
+            SegmentFault::Gap {
+                expected,
+                received,
+                missing,
+                message_lost,
+            } => {
+                write!(
                 f,
                 "frame counter jumped from {expected} to {received} ({missing} frame(s) missing){}",
                 if *message_lost { "; the message in progress was dropped" } else { "" }
-            ),
-            SegmentFault::Duplicate { counter } => write!(f, "frame {counter} received twice; copy ignored"),
+            )
+            }
+            SegmentFault::Duplicate { counter } => {
+                write!(f, "frame {counter} received twice; copy ignored")
+            }
             SegmentFault::Crc { received, computed } => {
                 write!(f, "message CRC mismatch (carried {received:#06x}, computed {computed:#06x}); message dropped")
             }
@@ -184,7 +199,12 @@ impl Default for Reassembler {
 impl Reassembler {
     /// A reassembler that synchronises on the first frame it sees.
     pub fn new() -> Reassembler {
-        Reassembler { last: None, state: State::Idle { quiet: false }, buf: Vec::new(), done: Vec::new() }
+        Reassembler {
+            last: None,
+            state: State::Idle { quiet: false },
+            buf: Vec::new(),
+            done: Vec::new(),
+        }
     }
 
     /// Forgets the counter and any partial message (after the stream was stopped and restarted).
@@ -206,7 +226,9 @@ impl Reassembler {
     pub fn push(&mut self, data: &[u8]) -> Pushed<'_> {
         let Some((&control, payload)) = data.split_first() else {
             return Pushed {
-                fault: Some(SegmentFault::Framing { detail: "empty frame (no control byte); ignored".into() }),
+                fault: Some(SegmentFault::Framing {
+                    detail: "empty frame (no control byte); ignored".into(),
+                }),
                 message: None,
             };
         };
@@ -216,7 +238,10 @@ impl Reassembler {
         if let Some(last) = self.last {
             let expected = (last + 1) & 0x7F;
             if counter == last {
-                return Pushed { fault: Some(SegmentFault::Duplicate { counter }), message: None };
+                return Pushed {
+                    fault: Some(SegmentFault::Duplicate { counter }),
+                    message: None,
+                };
             }
             if counter != expected {
                 let lost = matches!(self.state, State::Collecting { .. });
@@ -246,7 +271,9 @@ impl Reassembler {
                 self.state = State::Idle { quiet: true };
                 return Pushed {
                     fault: fault.or(Some(SegmentFault::Framing {
-                        detail: "start-of-message frame too short for the length field; message dropped".into(),
+                        detail:
+                            "start-of-message frame too short for the length field; message dropped"
+                                .into(),
                     })),
                     message: None,
                 };
@@ -260,16 +287,25 @@ impl Reassembler {
                     detail: format!("continuation frame {counter} outside any message; ignored"),
                 });
             }
-            return Pushed { fault, message: None };
+            return Pushed {
+                fault,
+                message: None,
+            };
         }
 
         let State::Collecting { need } = self.state else {
-            return Pushed { fault, message: None };
+            return Pushed {
+                fault,
+                message: None,
+            };
         };
         let take = payload.len().min(need - self.buf.len());
         self.buf.extend_from_slice(&payload[..take]);
         if self.buf.len() < need {
-            return Pushed { fault, message: None };
+            return Pushed {
+                fault,
+                message: None,
+            };
         }
         // Complete (bytes after `need` in the final frame are padding).
         self.state = State::Idle { quiet: false };
@@ -278,12 +314,18 @@ impl Reassembler {
         let computed = CRC16.checksum(content);
         if received != computed {
             self.buf.clear();
-            return Pushed { fault: fault.or(Some(SegmentFault::Crc { received, computed })), message: None };
+            return Pushed {
+                fault: fault.or(Some(SegmentFault::Crc { received, computed })),
+                message: None,
+            };
         }
         std::mem::swap(&mut self.done, &mut self.buf);
         self.buf.clear();
         let body = &self.done[2..need - 2];
-        Pushed { fault, message: Some(body) }
+        Pushed {
+            fault,
+            message: Some(body),
+        }
     }
 }
 
@@ -353,7 +395,11 @@ pub struct WireBlock {
 impl WireBlock {
     /// Samples per channel.
     pub fn samples_per_channel(&self) -> usize {
-        if self.channel_count == 0 { 0 } else { self.counts.len() / self.channel_count as usize }
+        if self.channel_count == 0 {
+            0
+        } else {
+            self.counts.len() / self.channel_count as usize
+        }
     }
 }
 
@@ -464,7 +510,10 @@ impl<'a> Reader<'a> {
         if self.rest.len() < n {
             return Err(MessageError {
                 message: self.name.into(),
-                detail: format!("ends before `{field}` ({} byte(s) left, {n} needed)", self.rest.len()),
+                detail: format!(
+                    "ends before `{field}` ({} byte(s) left, {n} needed)",
+                    self.rest.len()
+                ),
             });
         }
         let (a, b) = self.rest.split_at(n);
@@ -487,14 +536,19 @@ impl<'a> Reader<'a> {
     }
     fn text(&mut self) -> Result<String, MessageError> {
         let b = std::mem::take(&mut self.rest);
-        String::from_utf8(b.to_vec())
-            .map_err(|e| MessageError { message: self.name.into(), detail: format!("text is not UTF-8: {e}") })
+        String::from_utf8(b.to_vec()).map_err(|e| MessageError {
+            message: self.name.into(),
+            detail: format!("text is not UTF-8: {e}"),
+        })
     }
     fn end(&self) -> Result<(), MessageError> {
         if self.rest.is_empty() {
             Ok(())
         } else {
-            Err(MessageError { message: self.name.into(), detail: format!("{} unexpected trailing byte(s)", self.rest.len()) })
+            Err(MessageError {
+                message: self.name.into(),
+                detail: format!("{} unexpected trailing byte(s)", self.rest.len()),
+            })
         }
     }
 }
@@ -523,7 +577,11 @@ impl Message {
             Message::Identify => out.push(kind::IDENTIFY),
             Message::Start => out.push(kind::START),
             Message::Stop => out.push(kind::STOP),
-            Message::Configure { sample_rate_mhz, samples_per_block, channels } => {
+            Message::Configure {
+                sample_rate_mhz,
+                samples_per_block,
+                channels,
+            } => {
                 out.push(kind::CONFIGURE);
                 out.extend_from_slice(&sample_rate_mhz.to_le_bytes());
                 out.extend_from_slice(&samples_per_block.to_le_bytes());
@@ -536,7 +594,11 @@ impl Message {
                 out.push(kind::IDENTITY);
                 out.extend_from_slice(text.as_bytes());
             }
-            Message::Announce { sample_rate_mhz, samples_per_block, channels } => {
+            Message::Announce {
+                sample_rate_mhz,
+                samples_per_block,
+                channels,
+            } => {
                 out.push(kind::ANNOUNCE);
                 out.extend_from_slice(&sample_rate_mhz.to_le_bytes());
                 out.extend_from_slice(&samples_per_block.to_le_bytes());
@@ -547,7 +609,11 @@ impl Message {
                 }
             }
             Message::Ack { command } => out.extend_from_slice(&[kind::ACK, *command]),
-            Message::Nak { command, code, message } => {
+            Message::Nak {
+                command,
+                code,
+                message,
+            } => {
                 out.extend_from_slice(&[kind::NAK, *command]);
                 out.extend_from_slice(&code.to_le_bytes());
                 out.extend_from_slice(message.as_bytes());
@@ -568,7 +634,10 @@ impl Message {
     /// Parses a reassembled body.
     pub fn decode(body: &[u8]) -> Result<Message, MessageError> {
         let Some((&t, rest)) = body.split_first() else {
-            return Err(MessageError { message: "(empty)".into(), detail: "no type byte".into() });
+            return Err(MessageError {
+                message: "(empty)".into(),
+                detail: "no type byte".into(),
+            });
         };
         let name = match t {
             kind::IDENTIFY => "IDENTIFY",
@@ -582,7 +651,10 @@ impl Message {
             kind::DEVICE_FAULT => "DEVICE_FAULT",
             kind::BLOCK => "BLOCK",
             other => {
-                return Err(MessageError { message: format!("type {other:#04x}"), detail: "unknown message type".into() })
+                return Err(MessageError {
+                    message: format!("type {other:#04x}"),
+                    detail: "unknown message type".into(),
+                })
             }
         };
         let mut r = Reader { name, rest };
@@ -598,7 +670,11 @@ impl Message {
                 for _ in 0..n {
                     channels.push(r.u16("channel")?);
                 }
-                Message::Configure { sample_rate_mhz, samples_per_block, channels }
+                Message::Configure {
+                    sample_rate_mhz,
+                    samples_per_block,
+                    channels,
+                }
             }
             kind::IDENTITY => Message::Identity(r.text()?),
             kind::ANNOUNCE => {
@@ -609,19 +685,35 @@ impl Message {
                 for _ in 0..n {
                     let device_channel = r.u16("device_channel")?;
                     let v = r.u32("volts_per_count")?;
-                    channels.push(WireChannel { device_channel, volts_per_count: f32::from_bits(v) });
+                    channels.push(WireChannel {
+                        device_channel,
+                        volts_per_count: f32::from_bits(v),
+                    });
                 }
-                Message::Announce { sample_rate_mhz, samples_per_block, channels }
+                Message::Announce {
+                    sample_rate_mhz,
+                    samples_per_block,
+                    channels,
+                }
             }
-            kind::ACK => Message::Ack { command: r.u8("command")? },
+            kind::ACK => Message::Ack {
+                command: r.u8("command")?,
+            },
             kind::NAK => {
                 let command = r.u8("command")?;
                 let code = r.i16("code")?;
-                Message::Nak { command, code, message: r.text()? }
+                Message::Nak {
+                    command,
+                    code,
+                    message: r.text()?,
+                }
             }
             kind::DEVICE_FAULT => {
                 let code = r.i16("code")?;
-                Message::DeviceFault { code, message: r.text()? }
+                Message::DeviceFault {
+                    code,
+                    message: r.text()?,
+                }
             }
             _ => Message::Block(decode_block(&mut r)?),
         };
@@ -631,16 +723,26 @@ impl Message {
 }
 
 fn count_u8(field: &'static str, n: usize) -> Result<u8, EncodeError> {
-    u8::try_from(n).map_err(|_| EncodeError::Field { field, value: n.to_string(), limit: "0..=255" })
+    u8::try_from(n).map_err(|_| EncodeError::Field {
+        field,
+        value: n.to_string(),
+        limit: "0..=255",
+    })
 }
 
 fn encode_block(b: &WireBlock, out: &mut Vec<u8>) -> Result<(), EncodeError> {
     if b.channel_count == 0 {
-        return Err(EncodeError::Block { detail: "channel_count is 0".into() });
+        return Err(EncodeError::Block {
+            detail: "channel_count is 0".into(),
+        });
     }
     if !b.counts.len().is_multiple_of(b.channel_count as usize) {
         return Err(EncodeError::Block {
-            detail: format!("{} counts is not a multiple of {} channels", b.counts.len(), b.channel_count),
+            detail: format!(
+                "{} counts is not a multiple of {} channels",
+                b.counts.len(),
+                b.channel_count
+            ),
         });
     }
     let spb = b.samples_per_channel();
@@ -664,7 +766,10 @@ fn encode_block(b: &WireBlock, out: &mut Vec<u8>) -> Result<(), EncodeError> {
     for (i, &c) in b.counts.iter().enumerate() {
         if c < lo || c > hi {
             return Err(EncodeError::Block {
-                detail: format!("count {c} (index {i}) outside the {:?} range {lo}..={hi}", b.format),
+                detail: format!(
+                    "count {c} (index {i}) outside the {:?} range {lo}..={hi}",
+                    b.format
+                ),
             });
         }
         out.extend_from_slice(&c.to_le_bytes()[..width]);
@@ -675,11 +780,16 @@ fn encode_block(b: &WireBlock, out: &mut Vec<u8>) -> Result<(), EncodeError> {
 fn decode_block(r: &mut Reader<'_>) -> Result<WireBlock, MessageError> {
     let seq = r.u32("seq")?;
     let code = r.u8("format")?;
-    let format = SampleFormat::from_code(code)
-        .ok_or_else(|| MessageError { message: "BLOCK".into(), detail: format!("unknown sample format {code}") })?;
+    let format = SampleFormat::from_code(code).ok_or_else(|| MessageError {
+        message: "BLOCK".into(),
+        detail: format!("unknown sample format {code}"),
+    })?;
     let channel_count = r.u8("channel_count")?;
     if channel_count == 0 {
-        return Err(MessageError { message: "BLOCK".into(), detail: "channel_count is 0".into() });
+        return Err(MessageError {
+            message: "BLOCK".into(),
+            detail: "channel_count is 0".into(),
+        });
     }
     let spb = r.u16("samples_per_block")? as usize;
     let n = spb * channel_count as usize;
@@ -694,7 +804,12 @@ fn decode_block(r: &mut Reader<'_>) -> Result<WireBlock, MessageError> {
             SampleFormat::I32 => i32::from_le_bytes([c[0], c[1], c[2], c[3]]),
         })
         .collect();
-    Ok(WireBlock { seq, format, channel_count, counts })
+    Ok(WireBlock {
+        seq,
+        format,
+        channel_count,
+        counts,
+    })
 }
 
 #[cfg(test)]
@@ -754,7 +869,11 @@ mod tests {
         // Bytes and CRC as in the spec (CRC computed independently with a bitwise implementation).
         assert_eq!(f[0].data(), &[0x80, 0x01, 0x00, 0x03, 0xCF, 0xCB]);
         let mut ack = Vec::new();
-        Message::Ack { command: kind::START }.encode(&mut ack).unwrap();
+        Message::Ack {
+            command: kind::START,
+        }
+        .encode(&mut ack)
+        .unwrap();
         let mut s = Segmenter::new(ID, FrameKind::Classic);
         let mut out = Vec::new();
         s.segment(&[], &mut out).unwrap(); // counter 0: an empty message
@@ -770,17 +889,38 @@ mod tests {
             Message::Identify,
             Message::Start,
             Message::Stop,
-            Message::Configure { sample_rate_mhz: 25_600_000, samples_per_block: 64, channels: vec![0, 3, 7] },
+            Message::Configure {
+                sample_rate_mhz: 25_600_000,
+                samples_per_block: 64,
+                channels: vec![0, 3, 7],
+            },
             Message::Identity("IDENT-SIM,CANDAQ-4,0001,1.0".into()),
             Message::Announce {
                 sample_rate_mhz: 25_600_000,
                 samples_per_block: 64,
-                channels: vec![WireChannel { device_channel: 3, volts_per_count: 1.25e-6 }],
+                channels: vec![WireChannel {
+                    device_channel: 3,
+                    volts_per_count: 1.25e-6,
+                }],
             },
-            Message::Ack { command: kind::START },
-            Message::Nak { command: kind::CONFIGURE, code: -3, message: "rate out of range".into() },
-            Message::DeviceFault { code: 7, message: "ADC overrun".into() },
-            Message::Block(WireBlock { seq: 9, format: SampleFormat::I24, channel_count: 2, counts: vec![-8_388_608, 8_388_607, 0, -1] }),
+            Message::Ack {
+                command: kind::START,
+            },
+            Message::Nak {
+                command: kind::CONFIGURE,
+                code: -3,
+                message: "rate out of range".into(),
+            },
+            Message::DeviceFault {
+                code: 7,
+                message: "ADC overrun".into(),
+            },
+            Message::Block(WireBlock {
+                seq: 9,
+                format: SampleFormat::I24,
+                channel_count: 2,
+                counts: vec![-8_388_608, 8_388_607, 0, -1],
+            }),
         ];
         for m in msgs {
             let mut body = Vec::new();
@@ -792,12 +932,36 @@ mod tests {
     #[test]
     fn out_of_range_counts_and_bad_shapes_are_refused() {
         let mut out = Vec::new();
-        let b = WireBlock { seq: 0, format: SampleFormat::I16, channel_count: 1, counts: vec![40_000] };
-        assert!(matches!(Message::Block(b).encode(&mut out), Err(EncodeError::Block { .. })));
-        let b = WireBlock { seq: 0, format: SampleFormat::I16, channel_count: 2, counts: vec![1, 2, 3] };
-        assert!(matches!(Message::Block(b).encode(&mut out), Err(EncodeError::Block { .. })));
-        let b = WireBlock { seq: 0, format: SampleFormat::I32, channel_count: 1, counts: vec![0; 20_000] };
-        assert!(matches!(Message::Block(b).encode(&mut out), Err(EncodeError::TooLong { .. })));
+        let b = WireBlock {
+            seq: 0,
+            format: SampleFormat::I16,
+            channel_count: 1,
+            counts: vec![40_000],
+        };
+        assert!(matches!(
+            Message::Block(b).encode(&mut out),
+            Err(EncodeError::Block { .. })
+        ));
+        let b = WireBlock {
+            seq: 0,
+            format: SampleFormat::I16,
+            channel_count: 2,
+            counts: vec![1, 2, 3],
+        };
+        assert!(matches!(
+            Message::Block(b).encode(&mut out),
+            Err(EncodeError::Block { .. })
+        ));
+        let b = WireBlock {
+            seq: 0,
+            format: SampleFormat::I32,
+            channel_count: 1,
+            counts: vec![0; 20_000],
+        };
+        assert!(matches!(
+            Message::Block(b).encode(&mut out),
+            Err(EncodeError::TooLong { .. })
+        ));
     }
 
     #[test]
@@ -808,7 +972,15 @@ mod tests {
         frames.remove(5);
         let (msgs, faults) = collect(&frames);
         assert_eq!(msgs, vec![bodies[0].clone(), bodies[2].clone()]);
-        assert_eq!(faults, vec![SegmentFault::Gap { expected: 5, received: 6, missing: 1, message_lost: true }]);
+        assert_eq!(
+            faults,
+            vec![SegmentFault::Gap {
+                expected: 5,
+                received: 6,
+                missing: 1,
+                message_lost: true
+            }]
+        );
     }
 
     #[test]
@@ -838,8 +1010,14 @@ mod tests {
         (any::<u32>(), 0..3usize, 1..6u8, 0..40usize).prop_flat_map(|(seq, f, ch, spb)| {
             let format = [SampleFormat::I16, SampleFormat::I24, SampleFormat::I32][f];
             let (lo, hi) = format.range();
-            proptest::collection::vec(lo..=hi, spb * ch as usize)
-                .prop_map(move |counts| WireBlock { seq, format, channel_count: ch, counts })
+            proptest::collection::vec(lo..=hi, spb * ch as usize).prop_map(move |counts| {
+                WireBlock {
+                    seq,
+                    format,
+                    channel_count: ch,
+                    counts,
+                }
+            })
         })
     }
 

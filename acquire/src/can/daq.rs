@@ -7,7 +7,10 @@ use async_trait::async_trait;
 
 use crate::can::codec::{kind, Message, Reassembler, SegmentFault, Segmenter, WireBlock};
 use crate::can::{BusEvent, CanBus, CanError, CanId, FrameKind, WireFrame};
-use crate::daq::{ChannelInfo, Daq, DaqConfig, DaqError, DaqEvent, FaultKind, SampleBlock, StreamFault, StreamInfo};
+use crate::daq::{
+    ChannelInfo, Daq, DaqConfig, DaqError, DaqEvent, FaultKind, SampleBlock, StreamFault,
+    StreamInfo,
+};
 use crate::device::DeviceIdentity;
 use crate::transport::{ByteTap, Direction};
 
@@ -148,16 +151,25 @@ impl CanDaq {
     fn can_err(&self, e: CanError) -> DaqError {
         match e {
             CanError::Io { source, .. } => DaqError::from_io(self.bus.interface(), source),
-            other => DaqError::Bus { port: self.port(), detail: other.to_string() },
+            other => DaqError::Bus {
+                port: self.port(),
+                detail: other.to_string(),
+            },
         }
     }
 
     async fn send(&mut self, m: &Message) -> Result<(), DaqError> {
-        m.encode(&mut self.body).map_err(|e| DaqError::State { port: self.port(), detail: format!("cannot encode {}: {e}", m.name()) })?;
+        m.encode(&mut self.body).map_err(|e| DaqError::State {
+            port: self.port(),
+            detail: format!("cannot encode {}: {e}", m.name()),
+        })?;
         self.frames.clear();
         self.tx
             .segment(&self.body, &mut self.frames)
-            .map_err(|e| DaqError::State { port: self.port(), detail: format!("cannot encode {}: {e}", m.name()) })?;
+            .map_err(|e| DaqError::State {
+                port: self.port(),
+                detail: format!("cannot encode {}: {e}", m.name()),
+            })?;
         for i in 0..self.frames.len() {
             let f = self.frames[i];
             self.bus.send(&f).await.map_err(|e| self.can_err(e))?;
@@ -173,7 +185,9 @@ impl CanDaq {
                 return Err(DaqError::Timeout {
                     port: self.port(),
                     what: what.to_string(),
-                    waited: deadline.saturating_duration_since(tokio::time::Instant::now()).max(Duration::ZERO),
+                    waited: deadline
+                        .saturating_duration_since(tokio::time::Instant::now())
+                        .max(Duration::ZERO),
                 })
             }
             Ok(r) => r.map_err(|e| self.can_err(e))?,
@@ -187,9 +201,19 @@ impl CanDaq {
                 let fault = p.fault;
                 let msg = p.message.map(Message::decode);
                 if let Some(fault) = fault {
-                    let seq = matches!(fault, SegmentFault::Gap { message_lost: true, .. } | SegmentFault::Crc { .. })
-                        .then_some(self.next_seq);
-                    self.fault(fault_kind(&fault), seq, format!("data frames (id {}): {fault}", self.settings.data_id));
+                    let seq = matches!(
+                        fault,
+                        SegmentFault::Gap {
+                            message_lost: true,
+                            ..
+                        } | SegmentFault::Crc { .. }
+                    )
+                    .then_some(self.next_seq);
+                    self.fault(
+                        fault_kind(&fault),
+                        seq,
+                        format!("data frames (id {}): {fault}", self.settings.data_id),
+                    );
                 }
                 match msg {
                     None => {}
@@ -197,9 +221,17 @@ impl CanDaq {
                     Some(Ok(other)) => self.fault(
                         FaultKind::Framing,
                         None,
-                        format!("{} message on the data identifier {}; ignored", other.name(), self.settings.data_id),
+                        format!(
+                            "{} message on the data identifier {}; ignored",
+                            other.name(),
+                            self.settings.data_id
+                        ),
                     ),
-                    Some(Err(e)) => self.fault(FaultKind::Framing, Some(self.next_seq), format!("data: {e}; block dropped")),
+                    Some(Err(e)) => self.fault(
+                        FaultKind::Framing,
+                        Some(self.next_seq),
+                        format!("data: {e}; block dropped"),
+                    ),
                 }
             }
             BusEvent::Frame(f) if f.id() == self.settings.status_id => {
@@ -207,13 +239,19 @@ impl CanDaq {
                 let fault = p.fault;
                 let msg = p.message.map(Message::decode);
                 if let Some(fault) = fault {
-                    self.fault(fault_kind(&fault), None, format!("status frames (id {}): {fault}", self.settings.status_id));
+                    self.fault(
+                        fault_kind(&fault),
+                        None,
+                        format!("status frames (id {}): {fault}", self.settings.status_id),
+                    );
                 }
                 match msg {
                     None => {}
-                    Some(Ok(Message::DeviceFault { code, message })) => {
-                        self.fault(FaultKind::Device, None, format!("device fault {code}: {message}"))
-                    }
+                    Some(Ok(Message::DeviceFault { code, message })) => self.fault(
+                        FaultKind::Device,
+                        None,
+                        format!("device fault {code}: {message}"),
+                    ),
                     Some(Ok(m)) => self.answers.push_back(m),
                     Some(Err(e)) => self.fault(FaultKind::Framing, None, format!("status: {e}")),
                 }
@@ -221,7 +259,10 @@ impl CanDaq {
             BusEvent::Frame(_) | BusEvent::Remote(_) => {}
             BusEvent::Error(report) => {
                 if report.bus_off {
-                    return Err(DaqError::Bus { port: self.port(), detail: report.to_string() });
+                    return Err(DaqError::Bus {
+                        port: self.port(),
+                        detail: report.to_string(),
+                    });
                 }
                 self.fault(FaultKind::Bus, None, report.to_string());
             }
@@ -230,18 +271,29 @@ impl CanDaq {
     }
 
     fn fault(&mut self, kind: FaultKind, seq: Option<u64>, detail: String) {
-        self.pending.push_back(DaqEvent::Fault(StreamFault { kind, seq, detail }));
+        self.pending
+            .push_back(DaqEvent::Fault(StreamFault { kind, seq, detail }));
     }
 
     fn accept_block(&mut self, b: WireBlock) {
-        let Some((channels, samples_per_block)) = self.info.as_ref().map(|i| (i.channels.len(), i.samples_per_block)) else {
-            self.fault(FaultKind::Framing, None, format!("block {} before any announcement; ignored", b.seq));
+        let Some((channels, samples_per_block)) = self
+            .info
+            .as_ref()
+            .map(|i| (i.channels.len(), i.samples_per_block))
+        else {
+            self.fault(
+                FaultKind::Framing,
+                None,
+                format!("block {} before any announcement; ignored", b.seq),
+            );
             return;
         };
         if !self.streaming {
             return; // in flight after STOP: discarded by contract
         }
-        if b.channel_count as usize != channels || b.samples_per_channel() != samples_per_block as usize {
+        if b.channel_count as usize != channels
+            || b.samples_per_channel() != samples_per_block as usize
+        {
             let detail = format!(
                 "block {} has {} channel(s) × {} samples, the announcement says {channels} × {samples_per_block}; block dropped",
                 b.seq,
@@ -259,15 +311,25 @@ impl CanDaq {
             } else {
                 (FaultKind::OutOfOrder, "out of order")
             };
-            let seq = self.next_seq.wrapping_sub(expected.wrapping_sub(b.seq) as u64);
-            self.fault(kind, Some(seq), format!("block {} arrived {what}; discarded", b.seq));
+            let seq = self
+                .next_seq
+                .wrapping_sub(expected.wrapping_sub(b.seq) as u64);
+            self.fault(
+                kind,
+                Some(seq),
+                format!("block {} arrived {what}; discarded", b.seq),
+            );
             return;
         }
         if ahead > 0 {
             self.fault(
                 FaultKind::Gap,
                 Some(self.next_seq),
-                format!("{ahead} block(s) missing: expected block {}, received {}", self.next_seq, self.next_seq + ahead as u64),
+                format!(
+                    "{ahead} block(s) missing: expected block {}, received {}",
+                    self.next_seq,
+                    self.next_seq + ahead as u64
+                ),
             );
         }
         let seq = self.next_seq + ahead as u64;
@@ -290,7 +352,11 @@ impl CanDaq {
 
     /// Sends `m` and waits for the answer `accept` picks out (NAK → [`DaqError::Rejected`]),
     /// sending it again up to `settings.retries` times when the answer times out.
-    async fn request<T>(&mut self, m: Message, accept: impl Fn(&Message) -> Option<T>) -> Result<T, DaqError> {
+    async fn request<T>(
+        &mut self,
+        m: Message,
+        accept: impl Fn(&Message) -> Option<T>,
+    ) -> Result<T, DaqError> {
         let name = m.name();
         let command = match m {
             Message::Identify => kind::IDENTIFY,
@@ -298,12 +364,19 @@ impl CanDaq {
             Message::Start => kind::START,
             _ => kind::STOP,
         };
-        let what = format!("answer to {name} on identifier {} (command sent on {})", self.settings.status_id, self.settings.command_id);
+        let what = format!(
+            "answer to {name} on identifier {} (command sent on {})",
+            self.settings.status_id, self.settings.command_id
+        );
         let attempts = self.settings.retries + 1;
         self.answers.clear();
         for attempt in 0..attempts {
             if attempt > 0 {
-                tracing::warn!(interface = self.bus.interface(), "no {what} within {:?}; sending it again", self.settings.answer_timeout);
+                tracing::warn!(
+                    interface = self.bus.interface(),
+                    "no {what} within {:?}; sending it again",
+                    self.settings.answer_timeout
+                );
                 if command == kind::START {
                     // The first START may have started a stream whose ACK is late: stop it, so
                     // the next START's block counter is the only one on the bus.
@@ -321,18 +394,35 @@ impl CanDaq {
                         return Ok(t);
                     }
                     match a {
-                        Message::Nak { command: c, code, message } if c == command => {
-                            return Err(DaqError::Rejected { port: self.port(), command: name.into(), code: code as i32, message })
+                        Message::Nak {
+                            command: c,
+                            code,
+                            message,
+                        } if c == command => {
+                            return Err(DaqError::Rejected {
+                                port: self.port(),
+                                command: name.into(),
+                                code: code as i32,
+                                message,
+                            })
                         }
                         other => {
-                            let late = answered_command(&other).and_then(|k| self.late.iter().position(|&l| l == k));
+                            let late = answered_command(&other)
+                                .and_then(|k| self.late.iter().position(|&l| l == k));
                             match late {
                                 Some(i) => {
                                     self.late.swap_remove(i);
-                                    tracing::debug!(interface = self.bus.interface(), "late {} to a command sent again; ignored", other.name());
+                                    tracing::debug!(
+                                        interface = self.bus.interface(),
+                                        "late {} to a command sent again; ignored",
+                                        other.name()
+                                    );
                                 }
                                 None => {
-                                    let detail = format!("{} while waiting for the answer to {name}; ignored", other.name());
+                                    let detail = format!(
+                                        "{} while waiting for the answer to {name}; ignored",
+                                        other.name()
+                                    );
                                     self.fault(FaultKind::Framing, None, detail);
                                 }
                             }
@@ -345,7 +435,11 @@ impl CanDaq {
                 }
             }
         }
-        Err(DaqError::Timeout { port: self.port(), what: format!("{what}, {attempts} attempt(s)"), waited: self.settings.answer_timeout })
+        Err(DaqError::Timeout {
+            port: self.port(),
+            what: format!("{what}, {attempts} attempt(s)"),
+            waited: self.settings.answer_timeout,
+        })
     }
 
     /// Notes that an answer to `command` may still arrive (bounded: a device that never got the
@@ -402,10 +496,16 @@ impl Daq for CanDaq {
         if !(1.0..=u32::MAX as f64).contains(&mhz) {
             return Err(DaqError::State {
                 port: self.port(),
-                detail: format!("sample rate {} Hz is outside what DAQ-over-CAN carries (0.001 Hz to 4.29 MHz)", config.sample_rate_hz),
+                detail: format!(
+                    "sample rate {} Hz is outside what DAQ-over-CAN carries (0.001 Hz to 4.29 MHz)",
+                    config.sample_rate_hz
+                ),
             });
         }
-        if config.channels.is_empty() || config.channels.len() > 255 || config.samples_per_block == 0 {
+        if config.channels.is_empty()
+            || config.channels.len() > 255
+            || config.samples_per_block == 0
+        {
             return Err(DaqError::State {
                 port: self.port(),
                 detail: format!(
@@ -416,12 +516,18 @@ impl Daq for CanDaq {
             });
         }
         self.streaming = false;
-        let m = Message::Configure { sample_rate_mhz: mhz as u32, samples_per_block: config.samples_per_block, channels: config.channels.clone() };
+        let m = Message::Configure {
+            sample_rate_mhz: mhz as u32,
+            samples_per_block: config.samples_per_block,
+            channels: config.channels.clone(),
+        };
         let (rate, spb, channels) = self
             .request(m, |m| match m {
-                Message::Announce { sample_rate_mhz, samples_per_block, channels } => {
-                    Some((*sample_rate_mhz, *samples_per_block, channels.clone()))
-                }
+                Message::Announce {
+                    sample_rate_mhz,
+                    samples_per_block,
+                    channels,
+                } => Some((*sample_rate_mhz, *samples_per_block, channels.clone())),
                 _ => None,
             })
             .await?;
@@ -439,7 +545,10 @@ impl Daq for CanDaq {
             sample_rate_hz: rate as f64 / 1000.0,
             channels: channels
                 .iter()
-                .map(|c| ChannelInfo { device_channel: c.device_channel, volts_per_count: c.volts_per_count as f64 })
+                .map(|c| ChannelInfo {
+                    device_channel: c.device_channel,
+                    volts_per_count: c.volts_per_count as f64,
+                })
                 .collect(),
             samples_per_block: spb,
         };
@@ -449,13 +558,25 @@ impl Daq for CanDaq {
 
     async fn start(&mut self) -> Result<(), DaqError> {
         if self.info.is_none() {
-            return Err(DaqError::State { port: self.port(), detail: "start before configure".into() });
+            return Err(DaqError::State {
+                port: self.port(),
+                detail: "start before configure".into(),
+            });
         }
         self.rx_data.reset();
         self.pending.clear();
         self.next_seq = 0;
         self.last_raw_seq = None;
-        self.request(Message::Start, |m| matches!(m, Message::Ack { command: kind::START }).then_some(())).await?;
+        self.request(Message::Start, |m| {
+            matches!(
+                m,
+                Message::Ack {
+                    command: kind::START
+                }
+            )
+            .then_some(())
+        })
+        .await?;
         // Data frames before the ACK belong to an earlier (or a re-sent START's aborted) stream;
         // the device sends the new stream's frames after the ACK.
         self.rx_data.reset();
@@ -468,7 +589,10 @@ impl Daq for CanDaq {
             return Ok(e); // includes faults recorded while stopping
         }
         if !self.streaming {
-            return Err(DaqError::State { port: self.port(), detail: "next_event before start (or after stop)".into() });
+            return Err(DaqError::State {
+                port: self.port(),
+                detail: "next_event before start (or after stop)".into(),
+            });
         }
         let deadline = tokio::time::Instant::now() + self.settings.data_timeout;
         loop {
@@ -478,7 +602,11 @@ impl Daq for CanDaq {
             let what = format!("data frame on identifier {}", self.settings.data_id);
             match self.pump(deadline, &what).await {
                 Err(DaqError::Timeout { port, what, .. }) => {
-                    return Err(DaqError::Timeout { port, what, waited: self.settings.data_timeout })
+                    return Err(DaqError::Timeout {
+                        port,
+                        what,
+                        waited: self.settings.data_timeout,
+                    })
                 }
                 r => r?,
             }
@@ -487,7 +615,17 @@ impl Daq for CanDaq {
 
     async fn stop(&mut self) -> Result<(), DaqError> {
         self.streaming = false;
-        let r = self.request(Message::Stop, |m| matches!(m, Message::Ack { command: kind::STOP }).then_some(())).await;
+        let r = self
+            .request(Message::Stop, |m| {
+                matches!(
+                    m,
+                    Message::Ack {
+                        command: kind::STOP
+                    }
+                )
+                .then_some(())
+            })
+            .await;
         self.pending.retain(|e| matches!(e, DaqEvent::Fault(_)));
         self.rx_data.reset();
         r

@@ -108,7 +108,12 @@ impl WireFrame {
         let len = data.len().min(kind.max_data());
         let mut d = [0u8; 64];
         d[..len].copy_from_slice(&data[..len]);
-        WireFrame { id, kind, len: len as u8, data: d }
+        WireFrame {
+            id,
+            kind,
+            len: len as u8,
+            data: d,
+        }
     }
 
     /// Identifier.

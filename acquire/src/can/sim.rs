@@ -7,7 +7,9 @@ use std::time::Duration;
 
 use rand::{Rng, SeedableRng};
 
-use crate::can::codec::{kind, Message, Reassembler, SampleFormat, Segmenter, WireBlock, WireChannel};
+use crate::can::codec::{
+    kind, Message, Reassembler, SampleFormat, Segmenter, WireBlock, WireChannel,
+};
 use crate::can::{BusEvent, CanBus, CanError, CanId, FrameKind, WireFrame};
 use crate::device::DeviceIdentity;
 
@@ -143,7 +145,11 @@ impl SimCanDaq {
     /// sent after this returns are received.
     pub fn bind(interface: &str, settings: SimCanDaqSettings) -> Result<SimCanDaq, CanError> {
         let bus = CanBus::open_filtered(interface, &[settings.command_id])?;
-        Ok(SimCanDaq { bus, settings, note: None })
+        Ok(SimCanDaq {
+            bus,
+            settings,
+            note: None,
+        })
     }
 
     /// Calls `note` for each per-block fault injected ([`SimFaults::per_block`]).

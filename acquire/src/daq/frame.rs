@@ -99,7 +99,10 @@ impl Default for FrameDecoder {
 impl FrameDecoder {
     /// A decoder with its buffer sized once.
     pub fn new() -> Self {
-        FrameDecoder { buf: Vec::with_capacity(cobs::max_encoding_length(MAX_FRAME) + 1), overflow: false }
+        FrameDecoder {
+            buf: Vec::with_capacity(cobs::max_encoding_length(MAX_FRAME) + 1),
+            overflow: false,
+        }
     }
 
     /// Feeds received bytes; calls `sink` once per delimiter seen, in order.
@@ -149,16 +152,30 @@ fn parse_decoded(d: &[u8]) -> Result<Frame<'_>, FrameError> {
     let expected = u32::from_le_bytes(crc_bytes);
     let computed = FRAME_CRC.checksum(body);
     if expected != computed {
-        return Err(FrameError::Crc { expected, computed, len: d.len() });
+        return Err(FrameError::Crc {
+            expected,
+            computed,
+            len: d.len(),
+        });
     }
     let mut seq = [0u8; 4];
     seq.copy_from_slice(&body[1..5]);
-    Ok(Frame { kind: body[0], seq: u32::from_le_bytes(seq), payload: &body[HEADER..] })
+    Ok(Frame {
+        kind: body[0],
+        seq: u32::from_le_bytes(seq),
+        payload: &body[HEADER..],
+    })
 }
 
 /// Appends one encoded frame (COBS + trailing zero) to `out`. `scratch` is reused between calls.
 /// Payloads longer than `MAX_FRAME − 9` are refused (returns `false`, `out` unchanged).
-pub fn encode_frame(kind: u8, seq: u32, payload: &[u8], scratch: &mut Vec<u8>, out: &mut Vec<u8>) -> bool {
+pub fn encode_frame(
+    kind: u8,
+    seq: u32,
+    payload: &[u8],
+    scratch: &mut Vec<u8>,
+    out: &mut Vec<u8>,
+) -> bool {
     if payload.len() + HEADER + TRAILER > MAX_FRAME {
         return false;
     }
@@ -231,7 +248,10 @@ struct Cursor<'a> {
 impl<'a> Cursor<'a> {
     fn take(&mut self, n: usize, what: &str) -> Result<&'a [u8], PayloadError> {
         if self.b.len() < n {
-            return Err(PayloadError { kind: self.kind, detail: format!("payload ends before {what}") });
+            return Err(PayloadError {
+                kind: self.kind,
+                detail: format!("payload ends before {what}"),
+            });
         }
         let (h, t) = self.b.split_at(n);
         self.b = t;
@@ -259,14 +279,19 @@ impl<'a> Cursor<'a> {
     }
     fn text(&mut self) -> Result<String, PayloadError> {
         let s = std::mem::take(&mut self.b);
-        String::from_utf8(s.to_vec())
-            .map_err(|_| PayloadError { kind: self.kind, detail: "text is not UTF-8".into() })
+        String::from_utf8(s.to_vec()).map_err(|_| PayloadError {
+            kind: self.kind,
+            detail: "text is not UTF-8".into(),
+        })
     }
     fn end(&self) -> Result<(), PayloadError> {
         if self.b.is_empty() {
             Ok(())
         } else {
-            Err(PayloadError { kind: self.kind, detail: format!("{} unexpected trailing bytes", self.b.len()) })
+            Err(PayloadError {
+                kind: self.kind,
+                detail: format!("{} unexpected trailing bytes", self.b.len()),
+            })
         }
     }
 }
@@ -312,7 +337,11 @@ impl Message {
                     out.extend_from_slice(&(ch.volts_per_count as f32).to_le_bytes());
                 }
             }
-            Message::Nak { command, code, message } => {
+            Message::Nak {
+                command,
+                code,
+                message,
+            } => {
                 out.push(*command);
                 out.extend_from_slice(&code.to_le_bytes());
                 out.extend_from_slice(message.as_bytes());
@@ -331,7 +360,10 @@ impl Message {
 
     /// Parses a CRC-valid frame's payload.
     pub fn parse(frame: &Frame<'_>) -> Result<Message, PayloadError> {
-        let mut c = Cursor { b: frame.payload, kind: frame.kind };
+        let mut c = Cursor {
+            b: frame.payload,
+            kind: frame.kind,
+        };
         let m = match frame.kind {
             kind::HELLO => Message::Hello,
             kind::START => Message::Start,
@@ -344,7 +376,11 @@ impl Message {
                 for _ in 0..n {
                     channels.push(c.u16("channel number")?);
                 }
-                Message::Configure(DaqConfig { sample_rate_hz, channels, samples_per_block })
+                Message::Configure(DaqConfig {
+                    sample_rate_hz,
+                    channels,
+                    samples_per_block,
+                })
             }
             kind::ACK => Message::Ack(c.u8("acknowledged type")?),
             kind::IDENTITY => Message::Identity(c.text()?),
@@ -356,20 +392,34 @@ impl Message {
                 for _ in 0..n {
                     let device_channel = c.u16("channel number")?;
                     let volts_per_count = c.f32("volts per count")? as f64;
-                    channels.push(ChannelInfo { device_channel, volts_per_count });
+                    channels.push(ChannelInfo {
+                        device_channel,
+                        volts_per_count,
+                    });
                 }
-                Message::Announce(StreamInfo { sample_rate_hz, channels, samples_per_block })
+                Message::Announce(StreamInfo {
+                    sample_rate_hz,
+                    channels,
+                    samples_per_block,
+                })
             }
             kind::NAK => {
                 let command = c.u8("refused type")?;
                 let code = c.i16("error code")?;
-                Message::Nak { command, code, message: c.text()? }
+                Message::Nak {
+                    command,
+                    code,
+                    message: c.text()?,
+                }
             }
             kind::DATA => {
                 if !frame.payload.len().is_multiple_of(4) {
                     return Err(PayloadError {
                         kind: frame.kind,
-                        detail: format!("data payload of {} bytes is not a whole number of 32-bit samples", frame.payload.len()),
+                        detail: format!(
+                            "data payload of {} bytes is not a whole number of 32-bit samples",
+                            frame.payload.len()
+                        ),
                     });
                 }
                 let counts = frame
@@ -382,10 +432,16 @@ impl Message {
             }
             kind::STATUS => {
                 let code = c.u16("status code")?;
-                Message::Status { code, message: c.text()? }
+                Message::Status {
+                    code,
+                    message: c.text()?,
+                }
             }
             other => {
-                return Err(PayloadError { kind: other, detail: "unknown frame type".into() });
+                return Err(PayloadError {
+                    kind: other,
+                    detail: "unknown frame type".into(),
+                });
             }
         };
         c.end()?;
@@ -393,7 +449,13 @@ impl Message {
     }
 
     /// Encodes this message as one frame appended to `out`; `false` if it does not fit in a frame.
-    pub fn encode(&self, seq: u32, payload_scratch: &mut Vec<u8>, frame_scratch: &mut Vec<u8>, out: &mut Vec<u8>) -> bool {
+    pub fn encode(
+        &self,
+        seq: u32,
+        payload_scratch: &mut Vec<u8>,
+        frame_scratch: &mut Vec<u8>,
+        out: &mut Vec<u8>,
+    ) -> bool {
         self.write_payload(payload_scratch);
         encode_frame(self.kind(), seq, payload_scratch, frame_scratch, out)
     }
@@ -413,12 +475,18 @@ mod tests {
     fn roundtrip(m: &Message, seq: u32) -> Vec<Result<(u8, u32, Message), String>> {
         let mut out = Vec::new();
         assert!(m.encode(seq, &mut Vec::new(), &mut Vec::new(), &mut out));
-        assert_eq!(out.iter().filter(|b| **b == 0).count(), 1, "exactly one delimiter");
+        assert_eq!(
+            out.iter().filter(|b| **b == 0).count(),
+            1,
+            "exactly one delimiter"
+        );
         let mut dec = FrameDecoder::new();
         let mut got = Vec::new();
         dec.feed(&out, |f| {
             got.push(match f {
-                Ok(f) => Message::parse(&f).map(|m| (f.kind, f.seq, m)).map_err(|e| e.to_string()),
+                Ok(f) => Message::parse(&f)
+                    .map(|m| (f.kind, f.seq, m))
+                    .map_err(|e| e.to_string()),
                 Err(e) => Err(e.to_string()),
             })
         });
@@ -433,15 +501,29 @@ mod tests {
             Message::Stop,
             Message::Ack(kind::START),
             Message::Identity("IDENT-SIM,DAQ-8,0001,1.0".into()),
-            Message::Configure(DaqConfig { sample_rate_hz: 5120.0, channels: vec![0, 3, 7], samples_per_block: 64 }),
+            Message::Configure(DaqConfig {
+                sample_rate_hz: 5120.0,
+                channels: vec![0, 3, 7],
+                samples_per_block: 64,
+            }),
             Message::Announce(StreamInfo {
                 sample_rate_hz: 5120.0,
                 samples_per_block: 64,
-                channels: vec![ChannelInfo { device_channel: 3, volts_per_count: 1.0 / 8388608.0 }],
+                channels: vec![ChannelInfo {
+                    device_channel: 3,
+                    volts_per_count: 1.0 / 8388608.0,
+                }],
             }),
-            Message::Nak { command: kind::CONFIGURE, code: -222, message: "rate out of range".into() },
+            Message::Nak {
+                command: kind::CONFIGURE,
+                code: -222,
+                message: "rate out of range".into(),
+            },
             Message::Data(vec![0, -1, i32::MAX, i32::MIN, 12345]),
-            Message::Status { code: 2, message: "ADC overrun".into() },
+            Message::Status {
+                code: 2,
+                message: "ADC overrun".into(),
+            },
         ];
         for m in msgs {
             let got = roundtrip(&m, 0xDEAD_BEEF);
@@ -462,7 +544,12 @@ mod tests {
         bad.extend_from_slice(&out);
         let mut dec = FrameDecoder::new();
         let mut kinds = Vec::new();
-        dec.feed(&bad, |f| kinds.push(f.map(|f| f.seq).map_err(|e| matches!(e, FrameError::Crc { .. } | FrameError::Cobs { .. }))));
+        dec.feed(&bad, |f| {
+            kinds.push(
+                f.map(|f| f.seq)
+                    .map_err(|e| matches!(e, FrameError::Crc { .. } | FrameError::Cobs { .. })),
+            )
+        });
         assert_eq!(kinds, vec![Err(true), Ok(7)]);
     }
 

@@ -110,7 +110,11 @@ impl SampleBlock {
 
     /// Iterator over channel `c`'s samples (V).
     pub fn channel(&self, c: usize) -> impl Iterator<Item = f32> + '_ {
-        self.volts.iter().skip(c).step_by(self.channel_count.max(1) as usize).copied()
+        self.volts
+            .iter()
+            .skip(c)
+            .step_by(self.channel_count.max(1) as usize)
+            .copied()
     }
 }
 
@@ -266,14 +270,25 @@ impl DaqError {
     pub fn from_io(port: &str, e: std::io::Error) -> DaqError {
         use std::io::ErrorKind as K;
         match e.kind() {
-            K::UnexpectedEof | K::BrokenPipe | K::ConnectionReset | K::ConnectionAborted | K::NotConnected => {
-                DaqError::Disconnected { port: port.to_string(), detail: e.to_string() }
-            }
+            K::UnexpectedEof
+            | K::BrokenPipe
+            | K::ConnectionReset
+            | K::ConnectionAborted
+            | K::NotConnected => DaqError::Disconnected {
+                port: port.to_string(),
+                detail: e.to_string(),
+            },
             _ if e.raw_os_error() == Some(5) => {
                 // EIO: a serial adapter or pty whose other end has gone.
-                DaqError::Disconnected { port: port.to_string(), detail: e.to_string() }
+                DaqError::Disconnected {
+                    port: port.to_string(),
+                    detail: e.to_string(),
+                }
             }
-            _ => DaqError::Io { port: port.to_string(), source: e },
+            _ => DaqError::Io {
+                port: port.to_string(),
+                source: e,
+            },
         }
     }
 }

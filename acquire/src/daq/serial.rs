@@ -101,7 +101,10 @@ impl<T: Transport> SerialDaq<T> {
             }
             Ok(Err(e)) => return Err(DaqError::from_io(&self.port, e)),
             Ok(Ok(0)) => {
-                return Err(DaqError::Disconnected { port: self.port.clone(), detail: "end of stream".into() })
+                return Err(DaqError::Disconnected {
+                    port: self.port.clone(),
+                    detail: "end of stream".into(),
+                })
             }
             Ok(Ok(n)) => n,
         };
@@ -111,9 +114,11 @@ impl<T: Transport> SerialDaq<T> {
             Ok(f) => match Message::parse(&f) {
                 Err(e) => state.fault(FaultKind::Framing, None, e.to_string()),
                 Ok(Message::Data(counts)) => state.data(f.seq, counts),
-                Ok(Message::Status { code, message }) => {
-                    state.fault(FaultKind::Device, None, format!("device status {code}: {message}"))
-                }
+                Ok(Message::Status { code, message }) => state.fault(
+                    FaultKind::Device,
+                    None,
+                    format!("device status {code}: {message}"),
+                ),
                 Ok(m) => state.replies.push_back((f.seq, m)),
             },
         });
@@ -129,8 +134,14 @@ impl<T: Transport> SerialDaq<T> {
             self.tx.clear();
             msg.encode(id, &mut self.s1, &mut self.s2, &mut self.tx);
             self.state.undecodable = 0;
-            self.io.write_all(&self.tx).await.map_err(|e| DaqError::from_io(&self.port, e))?;
-            self.io.flush().await.map_err(|e| DaqError::from_io(&self.port, e))?;
+            self.io
+                .write_all(&self.tx)
+                .await
+                .map_err(|e| DaqError::from_io(&self.port, e))?;
+            self.io
+                .flush()
+                .await
+                .map_err(|e| DaqError::from_io(&self.port, e))?;
             let deadline = Instant::now() + self.opts.command_timeout;
             loop {
                 if let Some(pos) = self.state.replies.iter().position(|(s, _)| *s == id) {
@@ -169,7 +180,11 @@ impl<T: Transport> SerialDaq<T> {
     }
 
     fn unexpected(&self, command: &str, got: &Message) -> DaqError {
-        DaqError::Protocol { port: self.port.clone(), command: command.to_string(), detail: format!("{got:?}") }
+        DaqError::Protocol {
+            port: self.port.clone(),
+            command: command.to_string(),
+            detail: format!("{got:?}"),
+        }
     }
 
     fn data_timeout(&self) -> Duration {
@@ -177,7 +192,11 @@ impl<T: Transport> SerialDaq<T> {
             .state
             .info
             .as_ref()
-            .map(|i| Duration::from_secs_f64(4.0 * i.samples_per_block as f64 / i.sample_rate_hz.max(1e-3)))
+            .map(|i| {
+                Duration::from_secs_f64(
+                    4.0 * i.samples_per_block as f64 / i.sample_rate_hz.max(1e-3),
+                )
+            })
             .unwrap_or_default();
         self.opts.data_timeout.max(block)
     }
@@ -185,7 +204,8 @@ impl<T: Transport> SerialDaq<T> {
 
 impl StreamState {
     fn fault(&mut self, kind: FaultKind, seq: Option<u64>, detail: String) {
-        self.events.push_back(DaqEvent::Fault(StreamFault { kind, seq, detail }));
+        self.events
+            .push_back(DaqEvent::Fault(StreamFault { kind, seq, detail }));
     }
 
     fn frame_error(&mut self, e: FrameError) {
@@ -204,7 +224,11 @@ impl StreamState {
 
     fn data(&mut self, raw_seq: u32, counts: Vec<i32>) {
         let Some(info) = self.info.clone() else {
-            self.fault(FaultKind::Framing, None, "data frame before any stream announcement".into());
+            self.fault(
+                FaultKind::Framing,
+                None,
+                "data frame before any stream announcement".into(),
+            );
             return;
         };
         if !self.streaming {
@@ -216,14 +240,27 @@ impl StreamState {
             self.fault(
                 FaultKind::Framing,
                 None,
-                format!("data frame with {} samples; the announcement says {} channels × {} samples", counts.len(), n, spb),
+                format!(
+                    "data frame with {} samples; the announcement says {} channels × {} samples",
+                    counts.len(),
+                    n,
+                    spb
+                ),
             );
             return;
         }
         let seq = unwrap_seq(self.expected, raw_seq);
         if seq < self.expected {
-            let kind = if seq + 1 == self.expected { FaultKind::Duplicate } else { FaultKind::OutOfOrder };
-            self.fault(kind, Some(seq), format!("block {seq} received again (expected {})", self.expected));
+            let kind = if seq + 1 == self.expected {
+                FaultKind::Duplicate
+            } else {
+                FaultKind::OutOfOrder
+            };
+            self.fault(
+                kind,
+                Some(seq),
+                format!("block {seq} received again (expected {})", self.expected),
+            );
             return;
         }
         if seq > self.expected {
@@ -231,7 +268,13 @@ impl StreamState {
             self.fault(
                 FaultKind::Gap,
                 Some(self.expected),
-                format!("blocks {}..={} missing ({} blocks, {} samples per channel)", self.expected, seq - 1, lost, lost * spb as u64),
+                format!(
+                    "blocks {}..={} missing ({} blocks, {} samples per channel)",
+                    self.expected,
+                    seq - 1,
+                    lost,
+                    lost * spb as u64
+                ),
             );
         }
         let volts = counts
@@ -257,24 +300,32 @@ impl<T: Transport> Daq for SerialDaq<T> {
 
     async fn identify(&mut self) -> Result<DeviceIdentity, DaqError> {
         match self.command(Message::Hello, "HELLO").await? {
-            Message::Identity(s) => DeviceIdentity::parse_idn(&s).ok_or_else(|| DaqError::Protocol {
-                port: self.port.clone(),
-                command: "HELLO".into(),
-                detail: format!("identity `{s}` is not `manufacturer,model,serial,firmware`"),
-            }),
+            Message::Identity(s) => {
+                DeviceIdentity::parse_idn(&s).ok_or_else(|| DaqError::Protocol {
+                    port: self.port.clone(),
+                    command: "HELLO".into(),
+                    detail: format!("identity `{s}` is not `manufacturer,model,serial,firmware`"),
+                })
+            }
             other => Err(self.unexpected("HELLO", &other)),
         }
     }
 
     async fn configure(&mut self, config: &DaqConfig) -> Result<StreamInfo, DaqError> {
-        if config.channels.is_empty() || config.channels.len() > 255 || config.samples_per_block == 0 {
+        if config.channels.is_empty()
+            || config.channels.len() > 255
+            || config.samples_per_block == 0
+        {
             return Err(DaqError::Announcement {
                 port: self.port.clone(),
                 detail: format!("requested {} channels and {} samples per block; need 1-255 channels and ≥ 1 sample", config.channels.len(), config.samples_per_block),
             });
         }
         self.state.streaming = false;
-        match self.command(Message::Configure(config.clone()), "CONFIGURE").await? {
+        match self
+            .command(Message::Configure(config.clone()), "CONFIGURE")
+            .await?
+        {
             Message::Announce(info) => {
                 let got: Vec<u16> = info.channels.iter().map(|c| c.device_channel).collect();
                 if got != config.channels || info.samples_per_block != config.samples_per_block {
@@ -301,7 +352,10 @@ impl<T: Transport> Daq for SerialDaq<T> {
 
     async fn start(&mut self) -> Result<(), DaqError> {
         if self.state.info.is_none() {
-            return Err(DaqError::State { port: self.port.clone(), detail: "start before configure".into() });
+            return Err(DaqError::State {
+                port: self.port.clone(),
+                detail: "start before configure".into(),
+            });
         }
         self.state.expected = 0;
         // Data may follow the ACK in the same read: accept it from now on.
@@ -325,12 +379,17 @@ impl<T: Transport> Daq for SerialDaq<T> {
                 return Ok(e);
             }
             if !self.state.streaming {
-                return Err(DaqError::State { port: self.port.clone(), detail: "next_event while not streaming".into() });
+                return Err(DaqError::State {
+                    port: self.port.clone(),
+                    detail: "next_event while not streaming".into(),
+                });
             }
             let waited = self.data_timeout();
             match self.fill(Instant::now() + waited, "sample data").await {
                 Ok(()) => {}
-                Err(DaqError::Timeout { port, what, .. }) => return Err(DaqError::Timeout { port, what, waited }),
+                Err(DaqError::Timeout { port, what, .. }) => {
+                    return Err(DaqError::Timeout { port, what, waited })
+                }
                 Err(e) => return Err(e),
             }
         }
@@ -340,7 +399,9 @@ impl<T: Transport> Daq for SerialDaq<T> {
         self.state.streaming = false;
         let r = self.command(Message::Stop, "STOP").await;
         // Blocks still queued belong to the stopped stream; faults are kept for the caller.
-        self.state.events.retain(|e| matches!(e, DaqEvent::Fault(_)));
+        self.state
+            .events
+            .retain(|e| matches!(e, DaqEvent::Fault(_)));
         match r? {
             Message::Ack(k) if k == kind::STOP => Ok(()),
             other => Err(self.unexpected("STOP", &other)),

@@ -31,7 +31,9 @@ use crate::transport::{ByteTap, Direction};
 #[non_exhaustive]
 pub enum SessionError {
     /// Creating or writing the file failed.
-    #[error("session file {path}: {detail}; check free disk space and permissions of the directory")]
+    #[error(
+        "session file {path}: {detail}; check free disk space and permissions of the directory"
+    )]
     Write {
         /// File.
         path: String,
@@ -69,7 +71,11 @@ pub struct SessionOptions {
 
 impl Default for SessionOptions {
     fn default() -> Self {
-        SessionOptions { flush_interval: Duration::from_millis(500), chunk_size: 1 << 20, zstd_level: 3 }
+        SessionOptions {
+            flush_interval: Duration::from_millis(500),
+            chunk_size: 1 << 20,
+            zstd_level: 3,
+        }
     }
 }
 
@@ -92,7 +98,11 @@ impl SessionSummary {
 }
 
 enum Cmd {
-    Msg { topic: Topic, log_time: u64, data: Vec<u8> },
+    Msg {
+        topic: Topic,
+        log_time: u64,
+        data: Vec<u8>,
+    },
     Flush(mpsc::Sender<()>),
     Finish,
 }
@@ -120,14 +130,20 @@ pub struct SessionHandle {
 
 /// Nanoseconds since the Unix epoch, now.
 pub fn now_ns() -> u64 {
-    SystemTime::now().duration_since(UNIX_EPOCH).map(|d| d.as_nanos() as u64).unwrap_or(0)
+    SystemTime::now()
+        .duration_since(UNIX_EPOCH)
+        .map(|d| d.as_nanos() as u64)
+        .unwrap_or(0)
 }
 
 impl Session {
     /// Creates `path` (refusing to overwrite an existing file) and starts the writer thread.
     pub fn create(path: &Path, opts: SessionOptions) -> Result<Session, SessionError> {
         let p = path.display().to_string();
-        let werr = |detail: String| SessionError::Write { path: p.clone(), detail };
+        let werr = |detail: String| SessionError::Write {
+            path: p.clone(),
+            detail,
+        };
         let file = File::options()
             .write(true)
             .create_new(true)
@@ -144,8 +160,12 @@ impl Session {
         let mut ids = Vec::new();
         for t in schema::ALL {
             let schema = serde_json::to_vec(&t.schema()).map_err(|e| werr(e.to_string()))?;
-            let sid = writer.add_schema(t.schema_name(), "jsonschema", &schema).map_err(|e| werr(e.to_string()))?;
-            let cid = writer.add_channel(sid, t.name(), "json", &BTreeMap::new()).map_err(|e| werr(e.to_string()))?;
+            let sid = writer
+                .add_schema(t.schema_name(), "jsonschema", &schema)
+                .map_err(|e| werr(e.to_string()))?;
+            let cid = writer
+                .add_channel(sid, t.name(), "json", &BTreeMap::new())
+                .map_err(|e| werr(e.to_string()))?;
             ids.push(cid);
         }
         let shared = Arc::new(Shared {
@@ -176,12 +196,18 @@ impl Session {
                         if let Ok(mut f) = sh.failure.lock() {
                             *f = Some(detail.clone());
                         }
-                        Err(SessionError::Write { path: sh.path.clone(), detail })
+                        Err(SessionError::Write {
+                            path: sh.path.clone(),
+                            detail,
+                        })
                     }
                 }
             })
             .map_err(|e| werr(format!("cannot start the writer thread: {e}")))?;
-        Ok(Session { handle: SessionHandle { tx, shared }, thread: Some(thread) })
+        Ok(Session {
+            handle: SessionHandle { tx, shared },
+            thread: Some(thread),
+        })
     }
 
     /// A handle for adding messages.
@@ -197,12 +223,22 @@ impl Session {
 
     fn finish_inner(&mut self) -> Result<SessionSummary, SessionError> {
         let _ = self.handle.tx.send(Cmd::Finish);
-        let closed = |detail: &str| SessionError::Closed { path: self.handle.shared.path.clone(), detail: detail.into() };
-        let t = self.thread.take().ok_or_else(|| closed("finish called twice"))?;
-        let summary = t.join().map_err(|_| closed("the writer thread panicked"))??;
+        let closed = |detail: &str| SessionError::Closed {
+            path: self.handle.shared.path.clone(),
+            detail: detail.into(),
+        };
+        let t = self
+            .thread
+            .take()
+            .ok_or_else(|| closed("finish called twice"))?;
+        let summary = t
+            .join()
+            .map_err(|_| closed("the writer thread panicked"))??;
         let lost = self.handle.shared.tap_lost.load(Ordering::SeqCst);
         if lost > 0 {
-            return Err(closed(&format!("{lost} raw byte records could not be queued")));
+            return Err(closed(&format!(
+                "{lost} raw byte records could not be queued"
+            )));
         }
         Ok(summary)
     }
@@ -215,7 +251,10 @@ impl Drop for Session {
             if let Err(e) = self.finish_inner() {
                 tracing::error!("session dropped without finish(): {e}");
             } else {
-                tracing::warn!("session {} dropped without finish(); finished it", self.handle.shared.path);
+                tracing::warn!(
+                    "session {} dropped without finish(); finished it",
+                    self.handle.shared.path
+                );
             }
         }
     }
@@ -236,7 +275,11 @@ fn write_loop(
     loop {
         let wait = opts.flush_interval.saturating_sub(last_flush.elapsed());
         match rx.recv_timeout(wait) {
-            Ok(Cmd::Msg { topic, log_time, data }) => {
+            Ok(Cmd::Msg {
+                topic,
+                log_time,
+                data,
+            }) => {
                 let i = topic.index();
                 let header = mcap::records::MessageHeader {
                     channel_id: ids[i],
@@ -244,7 +287,9 @@ fn write_loop(
                     log_time,
                     publish_time: log_time,
                 };
-                writer.write_to_known_channel(&header, &data).map_err(|e| e.to_string())?;
+                writer
+                    .write_to_known_channel(&header, &data)
+                    .map_err(|e| e.to_string())?;
                 seq[i] = seq[i].wrapping_add(1);
                 counts[i] += 1;
                 dirty = true;
@@ -268,8 +313,17 @@ fn write_loop(
             last_flush = Instant::now();
         }
     }
-    let messages = schema::ALL.iter().zip(counts).map(|(t, c)| (t.name().to_string(), c)).collect();
-    Ok(SessionSummary { path: String::new(), messages, flushes }).map(|mut s| {
+    let messages = schema::ALL
+        .iter()
+        .zip(counts)
+        .map(|(t, c)| (t.name().to_string(), c))
+        .collect();
+    Ok(SessionSummary {
+        path: String::new(),
+        messages,
+        flushes,
+    })
+    .map(|mut s| {
         s.path = _path.to_string();
         s
     })
@@ -282,12 +336,21 @@ impl SessionHandle {
     }
 
     /// Queues a message with an explicit log time (ns since the Unix epoch).
-    pub fn log_at<T: Serialize + ?Sized>(&self, topic: Topic, log_time: u64, msg: &T) -> Result<(), SessionError> {
+    pub fn log_at<T: Serialize + ?Sized>(
+        &self,
+        topic: Topic,
+        log_time: u64,
+        msg: &T,
+    ) -> Result<(), SessionError> {
         let data = serde_json::to_vec(msg).map_err(|e| SessionError::Write {
             path: self.shared.path.clone(),
             detail: format!("cannot encode a {} message: {e}", topic.name()),
         })?;
-        self.send(Cmd::Msg { topic, log_time, data })
+        self.send(Cmd::Msg {
+            topic,
+            log_time,
+            data,
+        })
     }
 
     fn send(&self, cmd: Cmd) -> Result<(), SessionError> {
@@ -302,8 +365,17 @@ impl SessionHandle {
     /// Errors if the writer has failed or raw bytes were lost.
     pub fn check(&self) -> Result<(), SessionError> {
         if self.shared.failed.load(Ordering::SeqCst) {
-            let detail = self.shared.failure.lock().ok().and_then(|f| f.clone()).unwrap_or_default();
-            return Err(SessionError::Closed { path: self.shared.path.clone(), detail });
+            let detail = self
+                .shared
+                .failure
+                .lock()
+                .ok()
+                .and_then(|f| f.clone())
+                .unwrap_or_default();
+            return Err(SessionError::Closed {
+                path: self.shared.path.clone(),
+                detail,
+            });
         }
         let lost = self.shared.tap_lost.load(Ordering::SeqCst);
         if lost > 0 {
@@ -340,7 +412,11 @@ struct RawRecord<'a> {
 
 impl ByteTap for SessionHandle {
     fn bytes(&self, port: &str, direction: Direction, data: &[u8]) {
-        let rec = RawRecord { port, direction, data: base64::engine::general_purpose::STANDARD.encode(data) };
+        let rec = RawRecord {
+            port,
+            direction,
+            data: base64::engine::general_purpose::STANDARD.encode(data),
+        };
         if self.log(Topic::Raw, &rec).is_err() {
             self.shared.tap_lost.fetch_add(1, Ordering::SeqCst);
         }
@@ -371,13 +447,21 @@ pub struct ReadReport {
 type RawMessage = (Arc<mcap::Channel<'static>>, u32, u64, Vec<u8>);
 
 fn linear_messages(path: &Path) -> Result<(Vec<RawMessage>, Option<String>), SessionError> {
-    let file = File::open(path).map_err(|e| SessionError::Read { path: path.display().to_string(), detail: format!("cannot open: {e}") })?;
+    let file = File::open(path).map_err(|e| SessionError::Read {
+        path: path.display().to_string(),
+        detail: format!("cannot open: {e}"),
+    })?;
     let opts = mcap::sans_io::LinearReaderOptions::default().with_skip_end_magic(true);
     let mut out = Vec::new();
     let mut stop = None;
     for m in mcap::io::MessageReader::new_with_options(BufReader::new(file), opts) {
         match m {
-            Ok(m) => out.push((m.channel.clone(), m.sequence, m.log_time, m.data.into_owned())),
+            Ok(m) => out.push((
+                m.channel.clone(),
+                m.sequence,
+                m.log_time,
+                m.data.into_owned(),
+            )),
             Err(e) => {
                 stop = Some(e.to_string());
                 break;
@@ -393,7 +477,10 @@ pub fn read(path: &Path) -> Result<ReadReport, SessionError> {
     let (msgs, mut stop) = linear_messages(path)?;
     if stop.is_none() {
         // The linear reader accepts files without end magic; say whether the summary is there.
-        let bytes = std::fs::read(path).map_err(|e| SessionError::Read { path: path.display().to_string(), detail: e.to_string() })?;
+        let bytes = std::fs::read(path).map_err(|e| SessionError::Read {
+            path: path.display().to_string(),
+            detail: e.to_string(),
+        })?;
         if !bytes.ends_with(mcap::MAGIC) || bytes.len() < 2 * mcap::MAGIC.len() {
             stop = Some("file ends without the MCAP footer (writer did not finish)".into());
         }
@@ -406,7 +493,10 @@ pub fn read(path: &Path) -> Result<ReadReport, SessionError> {
             value: serde_json::from_slice(&d).unwrap_or(serde_json::Value::Null),
         })
         .collect();
-    Ok(ReadReport { records, truncated: stop })
+    Ok(ReadReport {
+        records,
+        truncated: stop,
+    })
 }
 
 /// What [`recover`] did.
@@ -427,8 +517,15 @@ pub struct RecoverReport {
 pub fn recover(input: &Path, output: &Path) -> Result<RecoverReport, SessionError> {
     let (msgs, stop) = linear_messages(input)?;
     let o = output.display().to_string();
-    let werr = |detail: String| SessionError::Write { path: o.clone(), detail };
-    let file = File::options().write(true).create_new(true).open(output).map_err(|e| werr(format!("cannot create: {e}")))?;
+    let werr = |detail: String| SessionError::Write {
+        path: o.clone(),
+        detail,
+    };
+    let file = File::options()
+        .write(true)
+        .create_new(true)
+        .open(output)
+        .map_err(|e| werr(format!("cannot create: {e}")))?;
     let mut w = mcap::WriteOptions::new()
         .compression(Some(mcap::Compression::Zstd))
         .profile("")
@@ -437,16 +534,30 @@ pub fn recover(input: &Path, output: &Path) -> Result<RecoverReport, SessionErro
         .map_err(|e| werr(e.to_string()))?;
     let n = msgs.len() as u64;
     for (channel, sequence, log_time, data) in msgs {
-        let m = mcap::Message { channel, sequence, log_time, publish_time: log_time, data: std::borrow::Cow::Owned(data) };
+        let m = mcap::Message {
+            channel,
+            sequence,
+            log_time,
+            publish_time: log_time,
+            data: std::borrow::Cow::Owned(data),
+        };
         w.write(&m).map_err(|e| werr(e.to_string()))?;
     }
     w.finish().map_err(|e| werr(e.to_string()))?;
-    Ok(RecoverReport { input: input.display().to_string(), output: o, messages: n, truncated: stop })
+    Ok(RecoverReport {
+        input: input.display().to_string(),
+        output: o,
+        messages: n,
+        truncated: stop,
+    })
 }
 
 /// Default output path of [`recover`]: `<stem>.recovered.mcap` next to the input.
 pub fn recovered_path(input: &Path) -> PathBuf {
-    let stem = input.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_else(|| "session".into());
+    let stem = input
+        .file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "session".into());
     input.with_file_name(format!("{stem}.recovered.mcap"))
 }
 

@@ -166,7 +166,10 @@ impl Topic {
         };
         let mut v = body;
         if let Some(o) = v.as_object_mut() {
-            o.insert("$schema".into(), json!("https://json-schema.org/draft/2020-12/schema"));
+            o.insert(
+                "$schema".into(),
+                json!("https://json-schema.org/draft/2020-12/schema"),
+            );
             o.insert("title".into(), json!(self.schema_name()));
             o.insert("type".into(), json!("object"));
         }

@@ -43,8 +43,13 @@ fn refuses_to_overwrite_and_logging_after_finish_is_an_error() {
     let s = Session::create(&path, SessionOptions::default()).unwrap();
     let h = s.handle();
     s.finish().unwrap();
-    assert!(matches!(h.log(Topic::SweepEvent, &json!({})), Err(SessionError::Closed { .. })));
-    let e = Session::create(&path, SessionOptions::default()).err().unwrap();
+    assert!(matches!(
+        h.log(Topic::SweepEvent, &json!({})),
+        Err(SessionError::Closed { .. })
+    ));
+    let e = Session::create(&path, SessionOptions::default())
+        .err()
+        .unwrap();
     assert!(e.to_string().contains("s.mcap"), "{e}");
 }
 
@@ -52,30 +57,55 @@ fn refuses_to_overwrite_and_logging_after_finish_is_an_error() {
 fn truncated_file_is_recovered_up_to_the_last_flush() {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("s.mcap");
-    let s = Session::create(&path, SessionOptions { flush_interval: Duration::from_secs(3600), ..Default::default() }).unwrap();
+    let s = Session::create(
+        &path,
+        SessionOptions {
+            flush_interval: Duration::from_secs(3600),
+            ..Default::default()
+        },
+    )
+    .unwrap();
     let h = s.handle();
     for i in 0..100 {
-        h.log(Topic::SweepEvent, &json!({"kind": "x", "i": i, "detail": ""})).unwrap();
+        h.log(
+            Topic::SweepEvent,
+            &json!({"kind": "x", "i": i, "detail": ""}),
+        )
+        .unwrap();
     }
     h.flush(Duration::from_secs(10)).unwrap();
     let flushed_len = std::fs::metadata(&path).unwrap().len();
     for i in 100..150 {
-        h.log(Topic::SweepEvent, &json!({"kind": "x", "i": i, "detail": ""})).unwrap();
+        h.log(
+            Topic::SweepEvent,
+            &json!({"kind": "x", "i": i, "detail": ""}),
+        )
+        .unwrap();
     }
     s.finish().unwrap();
     // Simulate a crash right after the flush, plus a torn write of a few extra bytes.
     let bytes = std::fs::read(&path).unwrap();
     let cut = dir.path().join("cut.mcap");
     std::fs::write(&cut, &bytes[..flushed_len as usize + 7]).unwrap();
-    assert!(mcap::MessageStream::new(&std::fs::read(&cut).unwrap()).map(|s| s.count()).is_err()
-        || mcap::MessageStream::new(&std::fs::read(&cut).unwrap()).unwrap().any(|m| m.is_err()));
+    assert!(
+        mcap::MessageStream::new(&std::fs::read(&cut).unwrap())
+            .map(|s| s.count())
+            .is_err()
+            || mcap::MessageStream::new(&std::fs::read(&cut).unwrap())
+                .unwrap()
+                .any(|m| m.is_err())
+    );
     let out = recovered_path(&cut);
     let rep = recover(&cut, &out).unwrap();
     assert_eq!(rep.messages, 100);
     assert!(rep.truncated.is_some());
     let back = read(&out).unwrap();
     assert_eq!(back.truncated, None);
-    let idx: Vec<i64> = back.records.iter().map(|r| r.value["i"].as_i64().unwrap()).collect();
+    let idx: Vec<i64> = back
+        .records
+        .iter()
+        .map(|r| r.value["i"].as_i64().unwrap())
+        .collect();
     assert_eq!(idx, (0..100).collect::<Vec<_>>());
     assert!(recover(&cut, &out).is_err(), "must not overwrite");
 }

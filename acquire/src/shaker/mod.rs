@@ -178,12 +178,19 @@ impl ShakerError {
         use std::io::ErrorKind as K;
         match e.kind() {
             K::UnexpectedEof | K::BrokenPipe | K::ConnectionReset | K::NotConnected => {
-                ShakerError::Disconnected { port: port.to_string(), detail: e.to_string() }
+                ShakerError::Disconnected {
+                    port: port.to_string(),
+                    detail: e.to_string(),
+                }
             }
-            _ if e.raw_os_error() == Some(5) => {
-                ShakerError::Disconnected { port: port.to_string(), detail: e.to_string() }
-            }
-            _ => ShakerError::Io { port: port.to_string(), source: e },
+            _ if e.raw_os_error() == Some(5) => ShakerError::Disconnected {
+                port: port.to_string(),
+                detail: e.to_string(),
+            },
+            _ => ShakerError::Io {
+                port: port.to_string(),
+                source: e,
+            },
         }
     }
 }

@@ -142,7 +142,10 @@ pub struct ScpiError {
 
 impl ScpiError {
     fn new(code: i32, message: impl Into<String>) -> Self {
-        ScpiError { code, message: message.into() }
+        ScpiError {
+            code,
+            message: message.into(),
+        }
     }
     /// `-113 Undefined header`.
     pub fn undefined_header(h: &str) -> Self {
@@ -212,7 +215,10 @@ pub mod questionable {
 /// True if `token` is the long or short form of a mnemonic written as `FREQuency` (short form =
 /// the upper-case prefix), compared case-insensitively.
 fn mnemonic_matches(mnemonic: &str, token: &str) -> bool {
-    let short: String = mnemonic.chars().take_while(|c| !c.is_ascii_lowercase()).collect();
+    let short: String = mnemonic
+        .chars()
+        .take_while(|c| !c.is_ascii_lowercase())
+        .collect();
     token.eq_ignore_ascii_case(mnemonic) || token.eq_ignore_ascii_case(&short)
 }
 
@@ -233,22 +239,84 @@ const TREE: &[(&[&str], bool, Arg, Ctor)] = &[
     (&["*IDN"], true, Arg::None, |_, _| Command::Identify),
     (&["*RST"], false, Arg::None, |_, _| Command::Reset),
     (&["*CLS"], false, Arg::None, |_, _| Command::ClearStatus),
-    (&["*OPC"], true, Arg::None, |_, _| Command::OperationComplete),
-    (&["[SOURce]", "FUNCtion", "[SHAPe]"], false, Arg::Func, |_, f| Command::SetFunction(f.unwrap_or(Function::Sine))),
-    (&["[SOURce]", "FUNCtion", "[SHAPe]"], true, Arg::None, |_, _| Command::QueryFunction),
-    (&["[SOURce]", "FREQuency", "[CW]"], false, Arg::Freq, |x, _| Command::SetFrequency(x)),
-    (&["[SOURce]", "FREQuency", "[CW]"], true, Arg::None, |_, _| Command::QueryFrequency),
-    (&["[SOURce]", "FREQuency", "STARt"], false, Arg::Freq, |x, _| Command::SetBandStart(x)),
-    (&["[SOURce]", "FREQuency", "STOP"], false, Arg::Freq, |x, _| Command::SetBandStop(x)),
-    (&["[SOURce]", "BURSt", "DCYCle"], false, Arg::Percent, |x, _| Command::SetDutyCycle(x)),
-    (&["[SOURce]", "PERiod"], false, Arg::Time, |x, _| Command::SetPeriod(x)),
-    (&["[SOURce]", "FORCe", "[AMPLitude]"], false, Arg::Force, |x, _| Command::SetForce(x)),
-    (&["[SOURce]", "FORCe", "[AMPLitude]"], true, Arg::None, |_, _| Command::QueryForce),
-    (&["OUTPut", "[STATe]"], false, Arg::Bool, |x, _| Command::SetOutput(x != 0.0)),
-    (&["OUTPut", "[STATe]"], true, Arg::None, |_, _| Command::QueryOutput),
-    (&["MEASure", "FORCe"], true, Arg::None, |_, _| Command::MeasureForce),
-    (&["STATus", "QUEStionable", "[CONDition]"], true, Arg::None, |_, _| Command::QuestionableCondition),
-    (&["SYSTem", "ERRor", "[NEXT]"], true, Arg::None, |_, _| Command::NextError),
+    (&["*OPC"], true, Arg::None, |_, _| {
+        Command::OperationComplete
+    }),
+    (
+        &["[SOURce]", "FUNCtion", "[SHAPe]"],
+        false,
+        Arg::Func,
+        |_, f| Command::SetFunction(f.unwrap_or(Function::Sine)),
+    ),
+    (
+        &["[SOURce]", "FUNCtion", "[SHAPe]"],
+        true,
+        Arg::None,
+        |_, _| Command::QueryFunction,
+    ),
+    (
+        &["[SOURce]", "FREQuency", "[CW]"],
+        false,
+        Arg::Freq,
+        |x, _| Command::SetFrequency(x),
+    ),
+    (
+        &["[SOURce]", "FREQuency", "[CW]"],
+        true,
+        Arg::None,
+        |_, _| Command::QueryFrequency,
+    ),
+    (
+        &["[SOURce]", "FREQuency", "STARt"],
+        false,
+        Arg::Freq,
+        |x, _| Command::SetBandStart(x),
+    ),
+    (
+        &["[SOURce]", "FREQuency", "STOP"],
+        false,
+        Arg::Freq,
+        |x, _| Command::SetBandStop(x),
+    ),
+    (
+        &["[SOURce]", "BURSt", "DCYCle"],
+        false,
+        Arg::Percent,
+        |x, _| Command::SetDutyCycle(x),
+    ),
+    (&["[SOURce]", "PERiod"], false, Arg::Time, |x, _| {
+        Command::SetPeriod(x)
+    }),
+    (
+        &["[SOURce]", "FORCe", "[AMPLitude]"],
+        false,
+        Arg::Force,
+        |x, _| Command::SetForce(x),
+    ),
+    (
+        &["[SOURce]", "FORCe", "[AMPLitude]"],
+        true,
+        Arg::None,
+        |_, _| Command::QueryForce,
+    ),
+    (&["OUTPut", "[STATe]"], false, Arg::Bool, |x, _| {
+        Command::SetOutput(x != 0.0)
+    }),
+    (&["OUTPut", "[STATe]"], true, Arg::None, |_, _| {
+        Command::QueryOutput
+    }),
+    (&["MEASure", "FORCe"], true, Arg::None, |_, _| {
+        Command::MeasureForce
+    }),
+    (
+        &["STATus", "QUEStionable", "[CONDition]"],
+        true,
+        Arg::None,
+        |_, _| Command::QuestionableCondition,
+    ),
+    (&["SYSTem", "ERRor", "[NEXT]"], true, Arg::None, |_, _| {
+        Command::NextError
+    }),
 ];
 
 fn header_matches(pattern: &[&str], tokens: &[&str]) -> bool {
@@ -275,12 +343,17 @@ fn parse_number(s: &str, arg: Arg) -> Result<f64, ScpiError> {
         .find(|c: char| c.is_ascii_alphabetic() && c != 'e' && c != 'E')
         .unwrap_or(s.len());
     let (num, unit) = s.split_at(split);
-    let x: f64 = num
-        .trim()
-        .parse()
-        .map_err(|_| ScpiError::new(codes::DATA_TYPE, format!("Data type error;numeric value expected, got {s:?}")))?;
+    let x: f64 = num.trim().parse().map_err(|_| {
+        ScpiError::new(
+            codes::DATA_TYPE,
+            format!("Data type error;numeric value expected, got {s:?}"),
+        )
+    })?;
     if !x.is_finite() {
-        return Err(ScpiError::new(codes::ILLEGAL_VALUE, "Illegal parameter value;not finite"));
+        return Err(ScpiError::new(
+            codes::ILLEGAL_VALUE,
+            "Illegal parameter value;not finite",
+        ));
     }
     let unit = unit.trim().to_ascii_uppercase();
     let scale = match (arg, unit.as_str()) {
@@ -288,7 +361,12 @@ fn parse_number(s: &str, arg: Arg) -> Result<f64, ScpiError> {
         (Arg::Freq, "HZ") | (Arg::Force, "N") | (Arg::Time, "S") | (Arg::Percent, "PCT") => 1.0,
         (Arg::Freq, "KHZ") | (Arg::Force, "KN") => 1e3,
         (Arg::Time, "MS") => 1e-3,
-        _ => return Err(ScpiError::new(codes::INVALID_SUFFIX, format!("Invalid suffix;{unit}"))),
+        _ => {
+            return Err(ScpiError::new(
+                codes::INVALID_SUFFIX,
+                format!("Invalid suffix;{unit}"),
+            ))
+        }
     };
     Ok(x * scale)
 }
@@ -297,7 +375,10 @@ fn parse_number(s: &str, arg: Arg) -> Result<f64, ScpiError> {
 pub fn parse_command(line: &str) -> Result<Command, ScpiError> {
     let line = line.trim();
     if line.is_empty() {
-        return Err(ScpiError::new(codes::COMMAND_ERROR, "Command error;empty line"));
+        return Err(ScpiError::new(
+            codes::COMMAND_ERROR,
+            "Command error;empty line",
+        ));
     }
     let (header, args) = match line.find(|c: char| c.is_ascii_whitespace()) {
         Some(i) => (&line[..i], line[i..].trim()),
@@ -309,7 +390,10 @@ pub fn parse_command(line: &str) -> Result<Command, ScpiError> {
     };
     let tokens: Vec<&str> = header.trim_start_matches(':').split(':').collect();
     if tokens.iter().any(|t| t.is_empty()) {
-        return Err(ScpiError::new(codes::COMMAND_ERROR, format!("Command error;{header}")));
+        return Err(ScpiError::new(
+            codes::COMMAND_ERROR,
+            format!("Command error;{header}"),
+        ));
     }
     let Some(&(_, _, arg, ctor)) = TREE
         .iter()
@@ -318,19 +402,29 @@ pub fn parse_command(line: &str) -> Result<Command, ScpiError> {
         return Err(ScpiError::undefined_header(header));
     };
     match arg {
-        Arg::None if !args.is_empty() => {
-            Err(ScpiError::new(codes::PARAMETER_NOT_ALLOWED, "Parameter not allowed"))
-        }
+        Arg::None if !args.is_empty() => Err(ScpiError::new(
+            codes::PARAMETER_NOT_ALLOWED,
+            "Parameter not allowed",
+        )),
         Arg::None => Ok(ctor(0.0, None)),
-        _ if args.is_empty() => Err(ScpiError::new(codes::MISSING_PARAMETER, "Missing parameter")),
+        _ if args.is_empty() => Err(ScpiError::new(
+            codes::MISSING_PARAMETER,
+            "Missing parameter",
+        )),
         Arg::Func => match Function::parse(args) {
             Some(f) => Ok(ctor(0.0, Some(f))),
-            None => Err(ScpiError::new(codes::ILLEGAL_VALUE, format!("Illegal parameter value;{args}"))),
+            None => Err(ScpiError::new(
+                codes::ILLEGAL_VALUE,
+                format!("Illegal parameter value;{args}"),
+            )),
         },
         Arg::Bool => match args.to_ascii_uppercase().as_str() {
             "ON" | "1" => Ok(ctor(1.0, None)),
             "OFF" | "0" => Ok(ctor(0.0, None)),
-            _ => Err(ScpiError::new(codes::ILLEGAL_VALUE, format!("Illegal parameter value;{args}"))),
+            _ => Err(ScpiError::new(
+                codes::ILLEGAL_VALUE,
+                format!("Illegal parameter value;{args}"),
+            )),
         },
         Arg::Percent => Ok(ctor(parse_number(args, arg)? / 100.0, None)),
         _ => Ok(ctor(parse_number(args, arg)?, None)),
@@ -343,7 +437,10 @@ pub fn parse_error_entry(line: &str) -> Option<ScpiError> {
     let code: i32 = code.trim().parse().ok()?;
     let msg = msg.trim();
     let msg = msg.strip_prefix('"')?.strip_suffix('"')?;
-    Some(ScpiError { code, message: msg.to_string() })
+    Some(ScpiError {
+        code,
+        message: msg.to_string(),
+    })
 }
 
 /// Formats an error-queue entry.
@@ -398,10 +495,15 @@ impl LineBuffer {
                     self.buf.pop();
                 }
                 let line = if self.overflow {
-                    Line::Garbage(format!("{}… (longer than {MAX_LINE} bytes)", String::from_utf8_lossy(&self.buf)))
+                    Line::Garbage(format!(
+                        "{}… (longer than {MAX_LINE} bytes)",
+                        String::from_utf8_lossy(&self.buf)
+                    ))
                 } else {
                     match std::str::from_utf8(&self.buf) {
-                        Ok(s) if !s.chars().any(|c| c.is_control() && c != '\t') => Line::Text(s.to_string()),
+                        Ok(s) if !s.chars().any(|c| c.is_control() && c != '\t') => {
+                            Line::Text(s.to_string())
+                        }
                         _ => Line::Garbage(String::from_utf8_lossy(&self.buf).into_owned()),
                     }
                 };
@@ -435,17 +537,41 @@ mod tests {
 
     #[test]
     fn long_short_and_optional_forms() {
-        for l in ["SOURce:FREQuency 100", "sour:freq 100", ":FREQ 100", "FREQ:CW 0.1 kHz", "source:frequency:cw 100HZ"] {
+        for l in [
+            "SOURce:FREQuency 100",
+            "sour:freq 100",
+            ":FREQ 100",
+            "FREQ:CW 0.1 kHz",
+            "source:frequency:cw 100HZ",
+        ] {
             assert_eq!(parse_command(l), Ok(Command::SetFrequency(100.0)), "{l}");
         }
-        assert_eq!(parse_command("SOUR:FORC 4 kN"), Ok(Command::SetForce(4000.0)));
-        assert_eq!(parse_command("FORC:AMPL 4000"), Ok(Command::SetForce(4000.0)));
+        assert_eq!(
+            parse_command("SOUR:FORC 4 kN"),
+            Ok(Command::SetForce(4000.0))
+        );
+        assert_eq!(
+            parse_command("FORC:AMPL 4000"),
+            Ok(Command::SetForce(4000.0))
+        );
         assert_eq!(parse_command("outp on"), Ok(Command::SetOutput(true)));
-        assert_eq!(parse_command("OUTPut:STATe 0"), Ok(Command::SetOutput(false)));
-        assert_eq!(parse_command("FUNC random"), Ok(Command::SetFunction(Function::Random)));
-        assert_eq!(parse_command("SOUR:BURS:DCYC 25"), Ok(Command::SetDutyCycle(0.25)));
+        assert_eq!(
+            parse_command("OUTPut:STATe 0"),
+            Ok(Command::SetOutput(false))
+        );
+        assert_eq!(
+            parse_command("FUNC random"),
+            Ok(Command::SetFunction(Function::Random))
+        );
+        assert_eq!(
+            parse_command("SOUR:BURS:DCYC 25"),
+            Ok(Command::SetDutyCycle(0.25))
+        );
         assert_eq!(parse_command("SYST:ERR:NEXT?"), Ok(Command::NextError));
-        assert_eq!(parse_command("stat:ques?"), Ok(Command::QuestionableCondition));
+        assert_eq!(
+            parse_command("stat:ques?"),
+            Ok(Command::QuestionableCondition)
+        );
         assert_eq!(parse_command("*idn?"), Ok(Command::Identify));
     }
 
@@ -495,8 +621,13 @@ mod tests {
             Just(Command::Reset),
             Just(Command::ClearStatus),
             Just(Command::OperationComplete),
-            prop_oneof![Just(Function::Sine), Just(Function::Random), Just(Function::Burst), Just(Function::Chirp)]
-                .prop_map(Command::SetFunction),
+            prop_oneof![
+                Just(Function::Sine),
+                Just(Function::Random),
+                Just(Function::Burst),
+                Just(Function::Chirp)
+            ]
+            .prop_map(Command::SetFunction),
             Just(Command::QueryFunction),
             v.clone().prop_map(Command::SetFrequency),
             Just(Command::QueryFrequency),

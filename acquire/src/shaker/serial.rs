@@ -24,7 +24,10 @@ pub struct ShakerOptions {
 
 impl Default for ShakerOptions {
     fn default() -> Self {
-        ShakerOptions { timeout: Duration::from_millis(500), retries: 2 }
+        ShakerOptions {
+            timeout: Duration::from_millis(500),
+            retries: 2,
+        }
     }
 }
 
@@ -42,15 +45,28 @@ impl<T: Transport> ScpiShaker<T> {
     /// A driver over `io`. Nothing is sent until the first call.
     pub fn new(io: T, opts: ShakerOptions) -> Self {
         let port = io.port().to_string();
-        ScpiShaker { io, port, opts, lines: LineBuffer::new(), ready: Default::default(), rx: vec![0; 1024] }
+        ScpiShaker {
+            io,
+            port,
+            opts,
+            lines: LineBuffer::new(),
+            ready: Default::default(),
+            rx: vec![0; 1024],
+        }
     }
 
     async fn send(&mut self, line: &str) -> Result<(), ShakerError> {
         let mut bytes = Vec::with_capacity(line.len() + 1);
         bytes.extend_from_slice(line.as_bytes());
         bytes.push(b'\n');
-        self.io.write_all(&bytes).await.map_err(|e| ShakerError::from_io(&self.port, e))?;
-        self.io.flush().await.map_err(|e| ShakerError::from_io(&self.port, e))
+        self.io
+            .write_all(&bytes)
+            .await
+            .map_err(|e| ShakerError::from_io(&self.port, e))?;
+        self.io
+            .flush()
+            .await
+            .map_err(|e| ShakerError::from_io(&self.port, e))
     }
 
     /// Reads one answer line before `deadline`; `Ok(None)` on timeout.
@@ -63,7 +79,10 @@ impl<T: Transport> ScpiShaker<T> {
                 Err(_) => return Ok(None),
                 Ok(Err(e)) => return Err(ShakerError::from_io(&self.port, e)),
                 Ok(Ok(0)) => {
-                    return Err(ShakerError::Disconnected { port: self.port.clone(), detail: "end of stream".into() })
+                    return Err(ShakerError::Disconnected {
+                        port: self.port.clone(),
+                        detail: "end of stream".into(),
+                    })
                 }
                 Ok(Ok(n)) => n,
             };
@@ -76,10 +95,15 @@ impl<T: Transport> ScpiShaker<T> {
     async fn drain(&mut self) -> Result<(), ShakerError> {
         self.ready.clear();
         self.lines.clear();
-        while let Ok(r) = tokio::time::timeout(Duration::from_millis(5), self.io.read(&mut self.rx)).await {
+        while let Ok(r) =
+            tokio::time::timeout(Duration::from_millis(5), self.io.read(&mut self.rx)).await
+        {
             match r {
                 Ok(0) => {
-                    return Err(ShakerError::Disconnected { port: self.port.clone(), detail: "end of stream".into() })
+                    return Err(ShakerError::Disconnected {
+                        port: self.port.clone(),
+                        detail: "end of stream".into(),
+                    })
                 }
                 Ok(_) => continue,
                 Err(e) => return Err(ShakerError::from_io(&self.port, e)),
@@ -101,7 +125,11 @@ impl<T: Transport> ScpiShaker<T> {
             match self.read_line(deadline).await? {
                 Some(Line::Text(t)) => return Ok(t),
                 Some(Line::Garbage(g)) => {
-                    return Err(ShakerError::Garbled { port: self.port.clone(), command: line, got: g })
+                    return Err(ShakerError::Garbled {
+                        port: self.port.clone(),
+                        command: line,
+                        got: g,
+                    })
                 }
                 None => {
                     let p = self.lines.pending();
@@ -112,7 +140,9 @@ impl<T: Transport> ScpiShaker<T> {
             }
         }
         let hint = match garbage {
-            Some(g) => format!(" (received {g:?} without a line end: wrong device, baud rate or terminator?)"),
+            Some(g) => format!(
+                " (received {g:?} without a line end: wrong device, baud rate or terminator?)"
+            ),
             None => "; check that the controller is on, the cable, and the baud rate".into(),
         };
         Err(ShakerError::Timeout {
@@ -124,23 +154,35 @@ impl<T: Transport> ScpiShaker<T> {
         })
     }
 
-    async fn query_parsed<V>(&mut self, command: &Command, parse: impl Fn(&str) -> Option<V>) -> Result<V, ShakerError> {
+    async fn query_parsed<V>(
+        &mut self,
+        command: &Command,
+        parse: impl Fn(&str) -> Option<V>,
+    ) -> Result<V, ShakerError> {
         let answer = self.query(command).await?;
-        parse(&answer).ok_or_else(|| ShakerError::Garbled { port: self.port.clone(), command: command.to_string(), got: answer })
+        parse(&answer).ok_or_else(|| ShakerError::Garbled {
+            port: self.port.clone(),
+            command: command.to_string(),
+            got: answer,
+        })
     }
 
     /// Sends a setting, then reads the error queue; any queued error fails the call.
     pub async fn set(&mut self, command: &Command) -> Result<(), ShakerError> {
         let line = command.to_string();
         self.send(&line).await?;
-        let first = self.query_parsed(&Command::NextError, scpi::parse_error_entry).await?;
+        let first = self
+            .query_parsed(&Command::NextError, scpi::parse_error_entry)
+            .await?;
         if first.code == scpi::codes::NO_ERROR {
             return Ok(());
         }
         // Drain the rest of the queue so it does not blame the next command.
         let mut more = Vec::new();
         for _ in 0..16 {
-            let e = self.query_parsed(&Command::NextError, scpi::parse_error_entry).await?;
+            let e = self
+                .query_parsed(&Command::NextError, scpi::parse_error_entry)
+                .await?;
             if e.code == scpi::codes::NO_ERROR {
                 break;
             }
@@ -151,7 +193,11 @@ impl<T: Transport> ScpiShaker<T> {
             command: line,
             code: first.code,
             message: first.message,
-            more: if more.is_empty() { String::new() } else { format!(" (also queued: {})", more.join("; ")) },
+            more: if more.is_empty() {
+                String::new()
+            } else {
+                format!(" (also queued: {})", more.join("; "))
+            },
         })
     }
 
@@ -159,7 +205,11 @@ impl<T: Transport> ScpiShaker<T> {
         if value.is_finite() && value >= min {
             Ok(())
         } else {
-            Err(ShakerError::InvalidValue { port: self.port.clone(), what: what.into(), value })
+            Err(ShakerError::InvalidValue {
+                port: self.port.clone(),
+                what: what.into(),
+                value,
+            })
         }
     }
 }
@@ -171,7 +221,8 @@ impl<T: Transport> Shaker for ScpiShaker<T> {
     }
 
     async fn identify(&mut self) -> Result<DeviceIdentity, ShakerError> {
-        self.query_parsed(&Command::Identify, DeviceIdentity::parse_idn).await
+        self.query_parsed(&Command::Identify, DeviceIdentity::parse_idn)
+            .await
     }
 
     async fn reset(&mut self) -> Result<(), ShakerError> {
@@ -189,7 +240,12 @@ impl<T: Transport> Shaker for ScpiShaker<T> {
                 self.set(&Command::SetBandStart(f_lo_hz)).await?;
                 self.set(&Command::SetBandStop(f_hi_hz)).await
             }
-            Waveform::BurstRandom { f_lo_hz, f_hi_hz, duty, period_s } => {
+            Waveform::BurstRandom {
+                f_lo_hz,
+                f_hi_hz,
+                duty,
+                period_s,
+            } => {
                 self.check("band start (Hz)", f_lo_hz, 0.0)?;
                 self.check("band stop (Hz)", f_hi_hz, 0.0)?;
                 self.check("duty cycle", duty, 0.0)?;
@@ -200,7 +256,11 @@ impl<T: Transport> Shaker for ScpiShaker<T> {
                 self.set(&Command::SetDutyCycle(duty)).await?;
                 self.set(&Command::SetPeriod(period_s)).await
             }
-            Waveform::Chirp { f_lo_hz, f_hi_hz, period_s } => {
+            Waveform::Chirp {
+                f_lo_hz,
+                f_hi_hz,
+                period_s,
+            } => {
                 self.check("band start (Hz)", f_lo_hz, 0.0)?;
                 self.check("band stop (Hz)", f_hi_hz, 0.0)?;
                 self.check("period (s)", period_s, 0.0)?;
@@ -227,11 +287,21 @@ impl<T: Transport> Shaker for ScpiShaker<T> {
     }
 
     async fn status(&mut self) -> Result<ShakerStatus, ShakerError> {
-        let output_on = self.query_parsed(&Command::QueryOutput, scpi::parse_bool_answer).await?;
-        let measured_force_n = self.query_parsed(&Command::MeasureForce, scpi::parse_number_answer).await?;
-        let questionable = self
-            .query_parsed(&Command::QuestionableCondition, |s| s.trim().parse::<u16>().ok())
+        let output_on = self
+            .query_parsed(&Command::QueryOutput, scpi::parse_bool_answer)
             .await?;
-        Ok(ShakerStatus { output_on, measured_force_n, questionable })
+        let measured_force_n = self
+            .query_parsed(&Command::MeasureForce, scpi::parse_number_answer)
+            .await?;
+        let questionable = self
+            .query_parsed(&Command::QuestionableCondition, |s| {
+                s.trim().parse::<u16>().ok()
+            })
+            .await?;
+        Ok(ShakerStatus {
+            output_on,
+            measured_force_n,
+            questionable,
+        })
     }
 }

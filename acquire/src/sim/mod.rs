@@ -66,7 +66,10 @@ impl Default for SimIdentities {
             serial: s.into(),
             firmware: env!("CARGO_PKG_VERSION").into(),
         };
-        SimIdentities { shaker: id("SHAKER-4K", "S0001"), daq: id("DAQ-8", "D0001") }
+        SimIdentities {
+            shaker: id("SHAKER-4K", "S0001"),
+            daq: id("DAQ-8", "D0001"),
+        }
     }
 }
 
@@ -95,7 +98,10 @@ pub struct SimSetup {
 impl SimSetup {
     /// The setup described by a stand file's `[truth]` and `[faults]`.
     pub fn from_stand(stand: &Stand) -> Result<SimSetup, SimError> {
-        let truth = stand.truth.as_ref().ok_or_else(|| SimError::NoTruth(stand.file.clone()))?;
+        let truth = stand
+            .truth
+            .as_ref()
+            .ok_or_else(|| SimError::NoTruth(stand.file.clone()))?;
         let plant: Arc<dyn Plant> = Arc::from(plant::plant_for(truth, &stand.channels)?);
         let mut sensor = 0;
         let channels = stand
@@ -109,12 +115,20 @@ impl SimSetup {
                         (Source::Sensor(sensor - 1), truth.noise_acceleration)
                     }
                 };
-                SimChannel { device_channel: c.device_channel, source, sensitivity: c.sensitivity, noise_rms }
+                SimChannel {
+                    device_channel: c.device_channel,
+                    source,
+                    sensitivity: c.sensitivity,
+                    noise_rms,
+                }
             })
             .collect();
         Ok(SimSetup {
             plant,
-            interaction: Interaction { gain: truth.shaker_gain, cutoff_hz: truth.shaker_cutoff_hz },
+            interaction: Interaction {
+                gain: truth.shaker_gain,
+                cutoff_hz: truth.shaker_cutoff_hz,
+            },
             channels,
             sample_rate_hz: stand.daq.sample_rate_hz,
             speed: truth.speed,
@@ -161,7 +175,13 @@ impl SimStand {
         let shaker = pty_pair("shaker")?;
         let daq = pty_pair("daq")?;
         let (shaker_port, daq_port) = (shaker.path.clone(), daq.path.clone());
-        Ok(Self::serve(setup, shaker.device, daq.device, shaker_port, daq_port))
+        Ok(Self::serve(
+            setup,
+            shaker.device,
+            daq.device,
+            shaker_port,
+            daq_port,
+        ))
     }
 
     /// Serves the devices over given transports (e.g. [`crate::transport::MemoryTransport`]).
@@ -179,9 +199,16 @@ impl SimStand {
         let faults = setup.faults.clone();
         let max_force = setup.max_force_n;
         let interaction = setup.interaction;
-        let t1 = tokio::spawn(async move { serve_shaker(shaker_io, s1, ids.shaker, faults, max_force, interaction).await });
+        let t1 = tokio::spawn(async move {
+            serve_shaker(shaker_io, s1, ids.shaker, faults, max_force, interaction).await
+        });
         let t2 = tokio::spawn(async move { serve_daq(daq_io, s2, setup).await });
-        SimStand { shaker_port, daq_port, shared, tasks: vec![t1, t2] }
+        SimStand {
+            shaker_port,
+            daq_port,
+            shared,
+            tasks: vec![t1, t2],
+        }
     }
 
     /// The stand with `port = "sim"` replaced by this simulator's ports.
@@ -232,7 +259,12 @@ impl SimStand {
             ..SimCanDaqSettings::default()
         };
         dev.identity = setup.identities.daq.clone();
-        dev.channel_count = setup.channels.iter().map(|c| c.device_channel + 1).max().unwrap_or(1);
+        dev.channel_count = setup
+            .channels
+            .iter()
+            .map(|c| c.device_channel + 1)
+            .max()
+            .unwrap_or(1);
         dev.faults.per_block = Some(setup.faults.clone());
         let s0 = shared.clone();
         let sim = SimCanDaq::bind(iface, dev)?.on_fault(Box::new(move |kind, seq| {
@@ -247,16 +279,24 @@ impl SimStand {
         });
         let s1 = shared.clone();
         let ids = setup.identities.clone();
-        let (faults, max_force, interaction) = (setup.faults.clone(), setup.max_force_n, setup.interaction);
+        let (faults, max_force, interaction) =
+            (setup.faults.clone(), setup.max_force_n, setup.interaction);
         let shaker_port = shaker.path.clone();
         let io = shaker.device;
-        let t1 = tokio::spawn(async move { serve_shaker(io, s1, ids.shaker, faults, max_force, interaction).await });
+        let t1 = tokio::spawn(async move {
+            serve_shaker(io, s1, ids.shaker, faults, max_force, interaction).await
+        });
         // Dropping the sender stops the CAN simulator with the tasks.
         let keep = tokio::spawn(async move {
             std::future::pending::<()>().await;
             drop(stop_tx);
         });
-        Ok(SimStand { shaker_port, daq_port: format!("can:{iface}"), shared, tasks: vec![t1, t2, keep] })
+        Ok(SimStand {
+            shaker_port,
+            daq_port: format!("can:{iface}"),
+            shared,
+            tasks: vec![t1, t2, keep],
+        })
     }
 
     /// Stops the devices and closes their ports.
@@ -305,9 +345,16 @@ async fn serve_shaker<T: Transport>(
         lines.feed(&buf[..n], |l| got.push(l));
         for line in got {
             count += 1;
-            if !silent && faults.shaker_silent_after_commands.is_some_and(|k| count > k) {
+            if !silent
+                && faults
+                    .shaker_silent_after_commands
+                    .is_some_and(|k| count > k)
+            {
                 silent = true;
-                lock(&shared).injected.push(InjectedFault { kind: "shaker_silent", seq: count });
+                lock(&shared).injected.push(InjectedFault {
+                    kind: "shaker_silent",
+                    seq: count,
+                });
             }
             if silent {
                 continue;
@@ -315,7 +362,13 @@ async fn serve_shaker<T: Transport>(
             let text = match line {
                 Line::Text(t) => t,
                 Line::Garbage(_) => {
-                    push_error(&mut errors, ScpiError { code: scpi::codes::COMMAND_ERROR, message: "Command error;not text".into() });
+                    push_error(
+                        &mut errors,
+                        ScpiError {
+                            code: scpi::codes::COMMAND_ERROR,
+                            message: "Command error;not text".into(),
+                        },
+                    );
                     continue;
                 }
             };
@@ -349,7 +402,10 @@ async fn serve_shaker<T: Transport>(
 fn push_error(q: &mut std::collections::VecDeque<ScpiError>, e: ScpiError) {
     if q.len() >= 10 {
         q.pop_back();
-        q.push_back(ScpiError { code: scpi::codes::QUEUE_OVERFLOW, message: "Queue overflow".into() });
+        q.push_back(ScpiError {
+            code: scpi::codes::QUEUE_OVERFLOW,
+            message: "Queue overflow".into(),
+        });
     } else {
         q.push_back(e);
     }
@@ -367,7 +423,9 @@ fn apply(
         if (lo..=hi).contains(&x) {
             Ok(x)
         } else {
-            Err(ScpiError::out_of_range(&format!("{what} {x} outside {lo}..{hi}")))
+            Err(ScpiError::out_of_range(&format!(
+                "{what} {x} outside {lo}..{hi}"
+            )))
         }
     };
     Ok(match cmd {
@@ -418,8 +476,16 @@ fn apply(
         }
         Command::QueryOutput => Some(if exc.output_on { "1" } else { "0" }.into()),
         Command::MeasureForce => {
-            let f = if exc.function == Function::Sine { exc.freq_hz } else { 0.5 * (exc.band_hz.0 + exc.band_hz.1) };
-            let v = if exc.output_on { exc.force_n * interaction.at(f).norm() } else { 0.0 };
+            let f = if exc.function == Function::Sine {
+                exc.freq_hz
+            } else {
+                0.5 * (exc.band_hz.0 + exc.band_hz.1)
+            };
+            let v = if exc.output_on {
+                exc.force_n * interaction.at(f).norm()
+            } else {
+                0.0
+            };
             Some(format!("{v:.3}"))
         }
         Command::QuestionableCondition => Some("0".into()),
@@ -433,7 +499,13 @@ fn apply(
 async fn serve_daq<T: Transport>(mut io: T, shared: SharedRef, setup: SimSetup) {
     let faults = setup.faults.clone();
     let mut frng = rand::rngs::StdRng::seed_from_u64(faults.seed);
-    let mut gen = SignalGenerator::new(setup.sample_rate_hz, setup.plant.clone(), setup.interaction, setup.channels.clone(), setup.seed);
+    let mut gen = SignalGenerator::new(
+        setup.sample_rate_hz,
+        setup.plant.clone(),
+        setup.interaction,
+        setup.channels.clone(),
+        setup.seed,
+    );
     let all = setup.channels.clone();
     let mut dec = FrameDecoder::new();
     let mut rx = vec![0u8; 4096];
@@ -449,7 +521,9 @@ async fn serve_daq<T: Transport>(mut io: T, shared: SharedRef, setup: SimSetup) 
     loop {
         let period = stream
             .as_ref()
-            .map(|(i, _)| Duration::from_secs_f64(i.samples_per_block as f64 / rate / setup.speed.max(1e-6)))
+            .map(|(i, _)| {
+                Duration::from_secs_f64(i.samples_per_block as f64 / rate / setup.speed.max(1e-6))
+            })
             .unwrap_or(Duration::from_millis(50));
         let read = tokio::select! {
             r = io.read(&mut rx) => Some(r),
@@ -477,17 +551,31 @@ async fn serve_daq<T: Transport>(mut io: T, shared: SharedRef, setup: SimSetup) 
                 }
                 for (id, m) in msgs {
                     let reply = match m {
-                        Err(e) => Message::Nak { command: 0, code: -100, message: e.to_string() },
+                        Err(e) => Message::Nak {
+                            command: 0,
+                            code: -100,
+                            message: e.to_string(),
+                        },
                         Ok(Message::Hello) => Message::Identity(setup.identities.daq.to_idn()),
                         Ok(Message::Configure(c)) => match configure(&c, &all) {
                             Ok((info, idx)) => {
                                 streaming = false;
                                 rate = info.sample_rate_hz;
-                                gen = SignalGenerator::new(rate, setup.plant.clone(), setup.interaction, idx.iter().map(|&i| all[i].clone()).collect(), setup.seed);
+                                gen = SignalGenerator::new(
+                                    rate,
+                                    setup.plant.clone(),
+                                    setup.interaction,
+                                    idx.iter().map(|&i| all[i].clone()).collect(),
+                                    setup.seed,
+                                );
                                 stream = Some((info.clone(), idx));
                                 Message::Announce(info)
                             }
-                            Err((code, message)) => Message::Nak { command: kind::CONFIGURE, code, message },
+                            Err((code, message)) => Message::Nak {
+                                command: kind::CONFIGURE,
+                                code,
+                                message,
+                            },
                         },
                         Ok(Message::Start) => {
                             if stream.is_some() {
@@ -497,14 +585,22 @@ async fn serve_daq<T: Transport>(mut io: T, shared: SharedRef, setup: SimSetup) 
                                 next_tick = tokio::time::Instant::now();
                                 Message::Ack(kind::START)
                             } else {
-                                Message::Nak { command: kind::START, code: -221, message: "not configured".into() }
+                                Message::Nak {
+                                    command: kind::START,
+                                    code: -221,
+                                    message: "not configured".into(),
+                                }
                             }
                         }
                         Ok(Message::Stop) => {
                             streaming = false;
                             Message::Ack(kind::STOP)
                         }
-                        Ok(other) => Message::Nak { command: other.kind(), code: -113, message: "not a host command".into() },
+                        Ok(other) => Message::Nak {
+                            command: other.kind(),
+                            code: -113,
+                            message: "not a host command".into(),
+                        },
                     };
                     reply.encode(id, &mut p1, &mut p2, &mut tx);
                 }
@@ -515,7 +611,10 @@ async fn serve_daq<T: Transport>(mut io: T, shared: SharedRef, setup: SimSetup) 
                 let Some((info, _)) = &stream else { continue };
                 let exc = lock(&shared).excitation.clone();
                 counts.clear();
-                if gen.block(&exc, info.samples_per_block as usize, &mut counts).is_err() {
+                if gen
+                    .block(&exc, info.samples_per_block as usize, &mut counts)
+                    .is_err()
+                {
                     return;
                 }
                 blocks += 1;
@@ -523,22 +622,38 @@ async fn serve_daq<T: Transport>(mut io: T, shared: SharedRef, setup: SimSetup) 
                 seq = seq.wrapping_add(1);
                 if faults.cable_pull_after_blocks.is_some_and(|k| blocks > k) {
                     let mut sh = lock(&shared);
-                    sh.injected.push(InjectedFault { kind: "cable_pull", seq: this as u64 });
+                    sh.injected.push(InjectedFault {
+                        kind: "cable_pull",
+                        seq: this as u64,
+                    });
                     sh.cable_pulled = true;
                     return;
                 }
                 if !silent && faults.daq_silent_after_blocks.is_some_and(|k| blocks > k) {
                     silent = true;
-                    lock(&shared).injected.push(InjectedFault { kind: "daq_silent", seq: this as u64 });
+                    lock(&shared).injected.push(InjectedFault {
+                        kind: "daq_silent",
+                        seq: this as u64,
+                    });
                 }
                 if silent {
                     continue;
                 }
                 let mut frame_bytes = Vec::new();
-                Message::Data(std::mem::take(&mut counts)).encode(this, &mut p1, &mut p2, &mut frame_bytes);
+                Message::Data(std::mem::take(&mut counts)).encode(
+                    this,
+                    &mut p1,
+                    &mut p2,
+                    &mut frame_bytes,
+                );
                 let u: f64 = frng.random();
                 let f = &faults;
-                let note = |k: &'static str| lock(&shared).injected.push(InjectedFault { kind: k, seq: this as u64 });
+                let note = |k: &'static str| {
+                    lock(&shared).injected.push(InjectedFault {
+                        kind: k,
+                        seq: this as u64,
+                    })
+                };
                 if u < f.drop {
                     note("drop");
                 } else if u < f.drop + f.corrupt {
@@ -572,25 +687,45 @@ async fn serve_daq<T: Transport>(mut io: T, shared: SharedRef, setup: SimSetup) 
 
 fn configure(c: &DaqConfig, all: &[SimChannel]) -> Result<(StreamInfo, Vec<usize>), (i16, String)> {
     if !(1.0..=200_000.0).contains(&c.sample_rate_hz) {
-        return Err((-222, format!("sample rate {} Hz outside 1..200000", c.sample_rate_hz)));
+        return Err((
+            -222,
+            format!("sample rate {} Hz outside 1..200000", c.sample_rate_hz),
+        ));
     }
     if c.samples_per_block == 0 || c.channels.is_empty() {
         return Err((-109, "need ≥ 1 channel and ≥ 1 sample per block".into()));
     }
-    if c.channels.len() * c.samples_per_block as usize * 4 + frame::HEADER + frame::TRAILER > frame::MAX_FRAME {
+    if c.channels.len() * c.samples_per_block as usize * 4 + frame::HEADER + frame::TRAILER
+        > frame::MAX_FRAME
+    {
         return Err((-222, "block does not fit a frame".into()));
     }
     let mut idx = Vec::new();
     for ch in &c.channels {
         match all.iter().position(|a| a.device_channel == *ch) {
             Some(i) => idx.push(i),
-            None => return Err((-224, format!("no input {ch} (this unit has inputs {:?})", all.iter().map(|a| a.device_channel).collect::<Vec<_>>()))),
+            None => {
+                return Err((
+                    -224,
+                    format!(
+                        "no input {ch} (this unit has inputs {:?})",
+                        all.iter().map(|a| a.device_channel).collect::<Vec<_>>()
+                    ),
+                ))
+            }
         }
     }
     let info = StreamInfo {
         sample_rate_hz: c.sample_rate_hz,
         samples_per_block: c.samples_per_block,
-        channels: c.channels.iter().map(|&d| ChannelInfo { device_channel: d, volts_per_count: VOLTS_PER_COUNT }).collect(),
+        channels: c
+            .channels
+            .iter()
+            .map(|&d| ChannelInfo {
+                device_channel: d,
+                volts_per_count: VOLTS_PER_COUNT,
+            })
+            .collect(),
     };
     Ok((info, idx))
 }
@@ -599,8 +734,19 @@ fn configure(c: &DaqConfig, all: &[SimChannel]) -> Result<(StreamInfo, Vec<usize
 /// controller currently commands, generated in chunks of 64 samples.
 fn can_signal(setup: &SimSetup, shared: SharedRef) -> crate::can::sim::Signal {
     const CHUNK: u64 = 64;
-    let mut gen = SignalGenerator::new(setup.sample_rate_hz, setup.plant.clone(), setup.interaction, setup.channels.clone(), setup.seed);
-    let position: Vec<(u16, usize)> = setup.channels.iter().enumerate().map(|(i, c)| (c.device_channel, i)).collect();
+    let mut gen = SignalGenerator::new(
+        setup.sample_rate_hz,
+        setup.plant.clone(),
+        setup.interaction,
+        setup.channels.clone(),
+        setup.seed,
+    );
+    let position: Vec<(u16, usize)> = setup
+        .channels
+        .iter()
+        .enumerate()
+        .map(|(i, c)| (c.device_channel, i))
+        .collect();
     let nch = setup.channels.len();
     let mut chunk: Vec<i32> = Vec::with_capacity(CHUNK as usize * nch);
     let mut chunk_start: Option<u64> = None;
@@ -621,7 +767,9 @@ fn can_signal(setup: &SimSetup, shared: SharedRef) -> crate::can::sim::Signal {
             }
             chunk_start = Some(start);
         }
-        let Some(&(_, c)) = position.iter().find(|(d, _)| *d == device_channel) else { return 0 };
+        let Some(&(_, c)) = position.iter().find(|(d, _)| *d == device_channel) else {
+            return 0;
+        };
         let i = (index - chunk_start.unwrap_or(0)) as usize;
         chunk.get(i * nch + c).copied().unwrap_or(0)
     })

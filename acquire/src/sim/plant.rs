@@ -38,7 +38,10 @@ impl SdofPlant {
     /// Acceleration per newton along the direction of motion at `f` (Hz).
     pub fn accelerance(&self, f: f64) -> C64 {
         let w = 2.0 * std::f64::consts::PI * f;
-        let d = C64::new(self.stiffness - w * w * self.mass, self.stiffness * self.loss_factor);
+        let d = C64::new(
+            self.stiffness - w * w * self.mass,
+            self.stiffness * self.loss_factor,
+        );
         C64::new(-w * w, 0.0) / d
     }
 }
@@ -82,17 +85,32 @@ impl Interaction {
 /// Builds the truth plant of a stand: one sensor per acceleration channel, in stand order.
 pub fn plant_for(truth: &Truth, channels: &[Channel]) -> Result<Box<dyn Plant>, PlantError> {
     match &truth.model {
-        TruthModel::Sdof { mass, stiffness, loss_factor, direction, .. } => {
+        TruthModel::Sdof {
+            mass,
+            stiffness,
+            loss_factor,
+            direction,
+            ..
+        } => {
             let gains = channels
                 .iter()
                 .filter(|c| c.kind == ChannelKind::Acceleration)
                 .map(|c| c.direction.iter().zip(direction).map(|(a, b)| a * b).sum())
                 .collect();
-            Ok(Box::new(SdofPlant { mass: *mass, stiffness: *stiffness, loss_factor: *loss_factor, gains }))
+            Ok(Box::new(SdofPlant {
+                mass: *mass,
+                stiffness: *stiffness,
+                loss_factor: *loss_factor,
+                gains,
+            }))
         }
         TruthModel::ModelFile(p) => {
             let loaded = identify::modelfile::load(p).map_err(|e| PlantError(e.to_string()))?;
-            Ok(Box::new(ModelPlant::new(loaded.model, channels, &p.display().to_string())?))
+            Ok(Box::new(ModelPlant::new(
+                loaded.model,
+                channels,
+                &p.display().to_string(),
+            )?))
         }
     }
 }
@@ -111,18 +129,29 @@ pub struct ModelPlant {
 
 impl ModelPlant {
     /// Resolves the acceleration channels against the model's bodies.
-    pub fn new(model: identify::Model, channels: &[Channel], origin: &str) -> Result<ModelPlant, PlantError> {
+    pub fn new(
+        model: identify::Model,
+        channels: &[Channel],
+        origin: &str,
+    ) -> Result<ModelPlant, PlantError> {
         // A force pair declares the same magnitude twice: the exciter's force is one of them.
         let force_n = model.forces.first().map(|f| f.force.norm()).unwrap_or(0.0);
         if !(force_n > 0.0) {
             return Err(PlantError(format!("{origin}: the model declares no excitation force; the simulated stand drives its exciter")));
         }
         let mut sensors = Vec::new();
-        for c in channels.iter().filter(|c| c.kind == ChannelKind::Acceleration) {
+        for c in channels
+            .iter()
+            .filter(|c| c.kind == ChannelKind::Acceleration)
+        {
             let name = c.body.as_deref().unwrap_or("");
             let b = model.body_index(name).ok_or_else(|| {
                 let names: Vec<&str> = model.bodies.iter().map(|b| b.name.as_str()).collect();
-                PlantError(format!("channel `{}`: body `{name}` is not in {origin} (bodies: {})", c.name, names.join(", ")))
+                PlantError(format!(
+                    "channel `{}`: body `{name}` is not in {origin} (bodies: {})",
+                    c.name,
+                    names.join(", ")
+                ))
             })?;
             let body = &model.bodies[b];
             let x = nalgebra::Vector3::from(c.position_m) - body.position;
@@ -130,7 +159,11 @@ impl ModelPlant {
             let d_loc = body.rotation.transpose() * nalgebra::Vector3::from(c.direction);
             sensors.push((b, [r_loc.x, r_loc.y, r_loc.z], [d_loc.x, d_loc.y, d_loc.z]));
         }
-        Ok(ModelPlant { model, sensors, force_n })
+        Ok(ModelPlant {
+            model,
+            sensors,
+            force_n,
+        })
     }
 }
 
@@ -139,7 +172,8 @@ impl Plant for ModelPlant {
         self.sensors.len()
     }
     fn response(&self, freqs_hz: &[f64]) -> Result<Vec<Vec<C64>>, PlantError> {
-        let q = identify::frf::dof_response(&self.model, freqs_hz).map_err(|e| PlantError(e.to_string()))?;
+        let q = identify::frf::dof_response(&self.model, freqs_hz)
+            .map_err(|e| PlantError(e.to_string()))?;
         Ok(q.iter()
             .zip(freqs_hz)
             .map(|(q, &f)| {
@@ -150,7 +184,11 @@ impl Plant for ModelPlant {
                         let u = &q[6 * b..6 * b + 3];
                         let t = &q[6 * b + 3..6 * b + 6];
                         // θ × r
-                        let tr = [t[1] * r[2] - t[2] * r[1], t[2] * r[0] - t[0] * r[2], t[0] * r[1] - t[1] * r[0]];
+                        let tr = [
+                            t[1] * r[2] - t[2] * r[1],
+                            t[2] * r[0] - t[0] * r[2],
+                            t[0] * r[1] - t[1] * r[0],
+                        ];
                         let disp: C64 = (0..3).map(|k| (u[k] + tr[k]) * d[k]).sum();
                         disp * (-w * w) / self.force_n
                     })
@@ -166,7 +204,12 @@ mod tests {
 
     #[test]
     fn sdof_resonance_matches_analytic_values() {
-        let p = SdofPlant { mass: 400.0, stiffness: 1.6e8, loss_factor: 0.05, gains: vec![1.0, 0.5] };
+        let p = SdofPlant {
+            mass: 400.0,
+            stiffness: 1.6e8,
+            loss_factor: 0.05,
+            gains: vec![1.0, 0.5],
+        };
         let fn_ = (1.6e8f64 / 400.0).sqrt() / (2.0 * std::f64::consts::PI);
         let r = p.response(&[fn_, 1.0]).unwrap();
         // At ω_n: a = −ω²/(jηk) → |a| = m⁻¹/η, phase +90°.
@@ -184,7 +227,8 @@ mod tests {
     #[test]
     fn model_plant_sensors_follow_rigid_body_kinematics() {
         use nalgebra::Vector3;
-        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../configs/models/fwd32j.toml");
+        let path =
+            std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../configs/models/fwd32j.toml");
         let model = identify::modelfile::load(&path).unwrap().model;
         let b = 0;
         let body = model.bodies[b].clone();
@@ -201,7 +245,10 @@ mod tests {
             line: 1,
         };
         let axis1 = body.rotation.column(0).into_owned();
-        let channels = vec![ch("com", body.position, axis1), ch("off", body.position + offset, dir)];
+        let channels = vec![
+            ch("com", body.position, axis1),
+            ch("off", body.position + offset, dir),
+        ];
         let plant = ModelPlant::new(model.clone(), &channels, "fwd32j").unwrap();
         let freqs = [15.0, 80.0];
         let r = plant.response(&freqs).unwrap();
@@ -211,7 +258,12 @@ mod tests {
             let w2 = (2.0 * std::f64::consts::PI * f).powi(2);
             // At the centre of mass along principal axis 1: −ω² u1.
             let want = q[k][6 * b] * (-w2) / fnorm;
-            assert!((r[k][0] - want).norm() <= 1e-9 * want.norm(), "{} vs {}", r[k][0], want);
+            assert!(
+                (r[k][0] - want).norm() <= 1e-9 * want.norm(),
+                "{} vs {}",
+                r[k][0],
+                want
+            );
             // Independent, global-frame computation: R u + (R θ) × (x − c).
             let rot = body.rotation.map(|x| C64::new(x, 0.0));
             let u = rot * nalgebra::Vector3::new(q[k][6 * b], q[k][6 * b + 1], q[k][6 * b + 2]);
@@ -219,13 +271,21 @@ mod tests {
             let off = offset.map(|x| C64::new(x, 0.0));
             let disp = u + t.cross(&off);
             let want = disp.dot(&dir.map(|x| C64::new(x, 0.0))) * (-w2) / fnorm;
-            assert!((r[k][1] - want).norm() <= 1e-9 * want.norm(), "{} vs {}", r[k][1], want);
+            assert!(
+                (r[k][1] - want).norm() <= 1e-9 * want.norm(),
+                "{} vs {}",
+                r[k][1],
+                want
+            );
         }
     }
 
     #[test]
     fn interaction_rolls_off() {
-        let i = Interaction { gain: 0.8, cutoff_hz: 100.0 };
+        let i = Interaction {
+            gain: 0.8,
+            cutoff_hz: 100.0,
+        };
         assert!((i.at(0.0).norm() - 0.8).abs() < 1e-12);
         assert!((i.at(100.0).norm() - 0.8 / 2f64.sqrt()).abs() < 1e-12);
     }

@@ -91,7 +91,13 @@ pub struct SignalGenerator {
 
 impl SignalGenerator {
     /// A generator at `fs` (Hz) for `channels`; `seed` seeds the noise.
-    pub fn new(fs: f64, plant: Arc<dyn Plant>, interaction: Interaction, channels: Vec<SimChannel>, seed: u64) -> Self {
+    pub fn new(
+        fs: f64,
+        plant: Arc<dyn Plant>,
+        interaction: Interaction,
+        channels: Vec<SimChannel>,
+        seed: u64,
+    ) -> Self {
         SignalGenerator {
             fs,
             plant,
@@ -137,7 +143,12 @@ impl SignalGenerator {
     }
 
     /// Appends `n` samples of every channel (interleaved sample-major) as ADC counts to `out`.
-    pub fn block(&mut self, exc: &Excitation, n: usize, out: &mut Vec<i32>) -> Result<(), PlantError> {
+    pub fn block(
+        &mut self,
+        exc: &Excitation,
+        n: usize,
+        out: &mut Vec<i32>,
+    ) -> Result<(), PlantError> {
         let nch = self.channels.len();
         self.buf.clear();
         self.buf.resize(n * nch, 0.0);
@@ -148,7 +159,11 @@ impl SignalGenerator {
                     let c = self.sine_coefficients(exc.freq_hz)?;
                     self.sine_cache = Some((exc.freq_hz, c));
                 }
-                let coef = self.sine_cache.as_ref().map(|(_, c)| c.clone()).unwrap_or_default();
+                let coef = self
+                    .sine_cache
+                    .as_ref()
+                    .map(|(_, c)| c.clone())
+                    .unwrap_or_default();
                 let dphi = 2.0 * std::f64::consts::PI * exc.freq_hz / self.fs;
                 for i in 0..n {
                     let e = C64::from_polar(1.0, self.phase);
@@ -181,7 +196,9 @@ impl SignalGenerator {
                         x += d.sample(&mut self.rng);
                     }
                 }
-                let counts = (x * ch.sensitivity / VOLTS_PER_COUNT).round().clamp(-MAX_COUNT, MAX_COUNT);
+                let counts = (x * ch.sensitivity / VOLTS_PER_COUNT)
+                    .round()
+                    .clamp(-MAX_COUNT, MAX_COUNT);
                 out.push(counts as i32);
             }
         }
@@ -201,7 +218,10 @@ impl SignalGenerator {
             return Ok(());
         }
         let n = ((exc.period_s * self.fs).round() as usize).clamp(64, 1 << 20);
-        let (lo, hi) = (exc.band_hz.0.min(exc.band_hz.1), exc.band_hz.0.max(exc.band_hz.1));
+        let (lo, hi) = (
+            exc.band_hz.0.min(exc.band_hz.1),
+            exc.band_hz.0.max(exc.band_hz.1),
+        );
         let df = self.fs / n as f64;
         let mut planner = FftPlanner::<f64>::new();
         let fft = planner.plan_fft_forward(n);
@@ -225,7 +245,11 @@ impl SignalGenerator {
                 }
                 ifft.process(&mut spec);
                 let mut x: Vec<f64> = spec.iter().map(|c| c.re).collect();
-                let on = if exc.function == Function::Burst { ((exc.duty.clamp(0.0, 1.0)) * n as f64) as usize } else { n };
+                let on = if exc.function == Function::Burst {
+                    ((exc.duty.clamp(0.0, 1.0)) * n as f64) as usize
+                } else {
+                    n
+                };
                 for v in x.iter_mut().skip(on) {
                     *v = 0.0;
                 }
@@ -238,7 +262,9 @@ impl SignalGenerator {
                 (0..n)
                     .map(|i| {
                         let t = i as f64 / self.fs;
-                        let ph = 2.0 * std::f64::consts::PI * (lo * t + (hi - lo) * t * t / (2.0 * t_end));
+                        let ph = 2.0
+                            * std::f64::consts::PI
+                            * (lo * t + (hi - lo) * t * t / (2.0 * t_end));
                         C64::new(ph.sin(), 0.0)
                     })
                     .collect()
@@ -254,7 +280,9 @@ impl SignalGenerator {
                 let g = self.interaction.at(freqs[k]);
                 let coef = match ch.source {
                     Source::Force => g,
-                    Source::Sensor(i) => g * h.get(k).and_then(|v| v.get(i)).copied().unwrap_or_default(),
+                    Source::Sensor(i) => {
+                        g * h.get(k).and_then(|v| v.get(i)).copied().unwrap_or_default()
+                    }
                 };
                 y[k] = u[k] * coef;
                 if k > 0 && k < n - k {
@@ -275,14 +303,32 @@ mod tests {
     use crate::sim::plant::SdofPlant;
 
     fn gen(noise: f64) -> SignalGenerator {
-        let plant = Arc::new(SdofPlant { mass: 100.0, stiffness: 4e7, loss_factor: 0.05, gains: vec![1.0] });
+        let plant = Arc::new(SdofPlant {
+            mass: 100.0,
+            stiffness: 4e7,
+            loss_factor: 0.05,
+            gains: vec![1.0],
+        });
         SignalGenerator::new(
             4096.0,
             plant,
-            Interaction { gain: 0.9, cutoff_hz: 300.0 },
+            Interaction {
+                gain: 0.9,
+                cutoff_hz: 300.0,
+            },
             vec![
-                SimChannel { device_channel: 0, source: Source::Force, sensitivity: 1e-3, noise_rms: noise },
-                SimChannel { device_channel: 1, source: Source::Sensor(0), sensitivity: 0.01, noise_rms: 0.0 },
+                SimChannel {
+                    device_channel: 0,
+                    source: Source::Force,
+                    sensitivity: 1e-3,
+                    noise_rms: noise,
+                },
+                SimChannel {
+                    device_channel: 1,
+                    source: Source::Sensor(0),
+                    sensitivity: 0.01,
+                    noise_rms: 0.0,
+                },
             ],
             3,
         )
@@ -291,11 +337,26 @@ mod tests {
     #[test]
     fn sine_block_has_the_delivered_force_amplitude() {
         let mut g = gen(0.0);
-        let exc = Excitation { output_on: true, freq_hz: 64.0, force_n: 1000.0, ..Default::default() };
+        let exc = Excitation {
+            output_on: true,
+            freq_hz: 64.0,
+            force_n: 1000.0,
+            ..Default::default()
+        };
         let mut out = Vec::new();
         g.block(&exc, 4096, &mut out).unwrap();
-        let peak = out.iter().step_by(2).map(|c| (*c as f64 * VOLTS_PER_COUNT / 1e-3).abs()).fold(0.0, f64::max);
-        let want = 1000.0 * Interaction { gain: 0.9, cutoff_hz: 300.0 }.at(64.0).norm();
+        let peak = out
+            .iter()
+            .step_by(2)
+            .map(|c| (*c as f64 * VOLTS_PER_COUNT / 1e-3).abs())
+            .fold(0.0, f64::max);
+        let want = 1000.0
+            * Interaction {
+                gain: 0.9,
+                cutoff_hz: 300.0,
+            }
+            .at(64.0)
+            .norm();
         assert!((peak - want).abs() < 1e-3 * want, "{peak} vs {want}");
     }
 
@@ -304,7 +365,11 @@ mod tests {
         let mut g = gen(2.0);
         let mut out = Vec::new();
         g.block(&Excitation::default(), 8192, &mut out).unwrap();
-        let f: Vec<f64> = out.iter().step_by(2).map(|c| *c as f64 * VOLTS_PER_COUNT / 1e-3).collect();
+        let f: Vec<f64> = out
+            .iter()
+            .step_by(2)
+            .map(|c| *c as f64 * VOLTS_PER_COUNT / 1e-3)
+            .collect();
         let rms = (f.iter().map(|x| x * x).sum::<f64>() / f.len() as f64).sqrt();
         assert!((rms - 2.0).abs() < 0.1, "{rms}");
         assert!(out.iter().skip(1).step_by(2).all(|c| *c == 0));
@@ -313,19 +378,41 @@ mod tests {
     #[test]
     fn periodic_random_has_requested_rms_and_frf() {
         let mut g = gen(0.0);
-        let exc = Excitation { output_on: true, function: Function::Random, force_n: 100.0, band_hz: (20.0, 400.0), period_s: 1.0, ..Default::default() };
+        let exc = Excitation {
+            output_on: true,
+            function: Function::Random,
+            force_n: 100.0,
+            band_hz: (20.0, 400.0),
+            period_s: 1.0,
+            ..Default::default()
+        };
         let mut out = Vec::new();
         g.block(&exc, 4096, &mut out).unwrap();
         // The FRF of one period (sensor / force) equals the plant's accelerance at a bin in band.
         let n = 4096;
-        let mut f: Vec<C64> = out.iter().step_by(2).map(|c| C64::new(*c as f64 * VOLTS_PER_COUNT / 1e-3, 0.0)).collect();
-        let mut a: Vec<C64> = out.iter().skip(1).step_by(2).map(|c| C64::new(*c as f64 * VOLTS_PER_COUNT / 0.01, 0.0)).collect();
+        let mut f: Vec<C64> = out
+            .iter()
+            .step_by(2)
+            .map(|c| C64::new(*c as f64 * VOLTS_PER_COUNT / 1e-3, 0.0))
+            .collect();
+        let mut a: Vec<C64> = out
+            .iter()
+            .skip(1)
+            .step_by(2)
+            .map(|c| C64::new(*c as f64 * VOLTS_PER_COUNT / 0.01, 0.0))
+            .collect();
         let fft = FftPlanner::<f64>::new().plan_fft_forward(n);
         fft.process(&mut f);
         fft.process(&mut a);
         let k = 100; // 100 Hz at 1 Hz resolution
         let h = a[k] / f[k];
-        let want = SdofPlant { mass: 100.0, stiffness: 4e7, loss_factor: 0.05, gains: vec![1.0] }.accelerance(100.0);
+        let want = SdofPlant {
+            mass: 100.0,
+            stiffness: 4e7,
+            loss_factor: 0.05,
+            gains: vec![1.0],
+        }
+        .accelerance(100.0);
         assert!((h - want).norm() < 2e-3 * want.norm(), "{h} vs {want}");
     }
 }

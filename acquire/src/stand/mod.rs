@@ -93,7 +93,11 @@ impl BodyGeometry {
             mass: b.mass,
             inertia: b.inertia,
             position: [b.position.x, b.position.y, b.position.z],
-            rotation: [[r[(0, 0)], r[(0, 1)], r[(0, 2)]], [r[(1, 0)], r[(1, 1)], r[(1, 2)]], [r[(2, 0)], r[(2, 1)], r[(2, 2)]]],
+            rotation: [
+                [r[(0, 0)], r[(0, 1)], r[(0, 2)]],
+                [r[(1, 0)], r[(1, 1)], r[(1, 2)]],
+                [r[(2, 0)], r[(2, 1)], r[(2, 2)]],
+            ],
         }
     }
 
@@ -105,7 +109,9 @@ impl BodyGeometry {
             mass: self.mass,
             inertia: self.inertia,
             position: nalgebra::Vector3::from(self.position),
-            rotation: nalgebra::Matrix3::new(r[0][0], r[0][1], r[0][2], r[1][0], r[1][1], r[1][2], r[2][0], r[2][1], r[2][2]),
+            rotation: nalgebra::Matrix3::new(
+                r[0][0], r[0][1], r[0][2], r[1][0], r[1][1], r[1][2], r[2][0], r[2][1], r[2][2],
+            ),
         }
     }
 
@@ -120,7 +126,11 @@ impl BodyGeometry {
 
     /// Where a global point lies in body axes, relative to the centre of mass (m).
     pub fn body_from_global(&self, x: [f64; 3]) -> [f64; 3] {
-        let d = [x[0] - self.position[0], x[1] - self.position[1], x[2] - self.position[2]];
+        let d = [
+            x[0] - self.position[0],
+            x[1] - self.position[1],
+            x[2] - self.position[2],
+        ];
         let r = &self.rotation;
         // Rᵀ d: column k of R is principal axis k.
         [0, 1, 2].map(|k| r[0][k] * d[0] + r[1][k] * d[1] + r[2][k] * d[2])
@@ -398,15 +408,25 @@ impl Ctx<'_> {
         let before = &self.text[..start];
         let line = before.matches('\n').count() + 1;
         let column = before.rfind('\n').map(|i| start - i).unwrap_or(start + 1);
-        StandError { file: self.file.to_string(), line, column, message: message.into() }
+        StandError {
+            file: self.file.to_string(),
+            line,
+            column,
+            message: message.into(),
+        }
     }
 
     fn line_of(&self, span: Range<usize>) -> usize {
-        self.text[..span.start.min(self.text.len())].matches('\n').count() + 1
+        self.text[..span.start.min(self.text.len())]
+            .matches('\n')
+            .count()
+            + 1
     }
 
     fn value(&self, v: &Spanned<Value>, dim: Dimension, what: &str) -> Result<f64, StandError> {
-        v.get_ref().si(dim).map_err(|e| self.at(v.span(), format!("{what}: {e}")))
+        v.get_ref()
+            .si(dim)
+            .map_err(|e| self.at(v.span(), format!("{what}: {e}")))
     }
 
     fn positive(&self, v: &Spanned<Value>, dim: Dimension, what: &str) -> Result<f64, StandError> {
@@ -414,7 +434,10 @@ impl Ctx<'_> {
         if x > 0.0 {
             Ok(x)
         } else {
-            Err(self.at(v.span(), format!("{what} must be > 0 {}, got {x}", dim.si())))
+            Err(self.at(
+                v.span(),
+                format!("{what} must be > 0 {}, got {x}", dim.si()),
+            ))
         }
     }
 
@@ -425,7 +448,10 @@ impl Ctx<'_> {
         }
         let n = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
         if n < 1e-9 {
-            return Err(self.at(v.span(), format!("{what} has zero length; give the sensor's measuring axis, e.g. [1, 0, 0]")));
+            return Err(self.at(
+                v.span(),
+                format!("{what} has zero length; give the sensor's measuring axis, e.g. [1, 0, 0]"),
+            ));
         }
         Ok([d[0] / n, d[1] / n, d[2] / n])
     }
@@ -434,7 +460,10 @@ impl Ctx<'_> {
         match v {
             None => Ok(0.0),
             Some(p) if (0.0..=1.0).contains(p.get_ref()) => Ok(*p.get_ref()),
-            Some(p) => Err(self.at(p.span(), format!("faults.{what} is a probability per frame and must be within 0..1"))),
+            Some(p) => Err(self.at(
+                p.span(),
+                format!("faults.{what} is a probability per frame and must be within 0..1"),
+            )),
         }
     }
 }
@@ -449,7 +478,10 @@ fn port_spec(p: &str) -> PortSpec {
     }
 }
 
-fn can_settings(cx: &Ctx<'_>, raw: Option<&Spanned<RawCan>>) -> Result<crate::can::CanDaqSettings, StandError> {
+fn can_settings(
+    cx: &Ctx<'_>,
+    raw: Option<&Spanned<RawCan>>,
+) -> Result<crate::can::CanDaqSettings, StandError> {
     use crate::can::{CanDaqSettings, CanId, FrameKind};
     let mut s = CanDaqSettings::default();
     let Some(rc) = raw else { return Ok(s) };
@@ -465,14 +497,20 @@ fn can_settings(cx: &Ctx<'_>, raw: Option<&Spanned<RawCan>>) -> Result<crate::ca
     let id = |v: &Option<Spanned<u32>>, dflt: CanId, what: &str| -> Result<CanId, StandError> {
         let Some(v) = v else { return Ok(dflt) };
         let x = *v.get_ref();
-        let id = if ext { CanId::Extended(x) } else { CanId::Standard(u16::try_from(x).unwrap_or(u16::MAX)) };
-        id.validate(what).map_err(|e| cx.at(v.span(), format!("daq.can.{what}_id: {e}")))?;
+        let id = if ext {
+            CanId::Extended(x)
+        } else {
+            CanId::Standard(u16::try_from(x).unwrap_or(u16::MAX))
+        };
+        id.validate(what)
+            .map_err(|e| cx.at(v.span(), format!("daq.can.{what}_id: {e}")))?;
         Ok(id)
     };
     s.command_id = id(&r.command_id, s.command_id, "command")?;
     s.status_id = id(&r.status_id, s.status_id, "status")?;
     s.data_id = id(&r.data_id, s.data_id, "data")?;
-    s.validate().map_err(|e| cx.at(rc.span(), format!("daq.can: {e}")))?;
+    s.validate()
+        .map_err(|e| cx.at(rc.span(), format!("daq.can: {e}")))?;
     Ok(s)
 }
 
@@ -488,7 +526,11 @@ impl Stand {
         })?;
         let mut stand = Stand::parse(&text, &file)?;
         let dir = path.parent().unwrap_or(Path::new("."));
-        if let Some(Truth { model: TruthModel::ModelFile(p), .. }) = &mut stand.truth {
+        if let Some(Truth {
+            model: TruthModel::ModelFile(p),
+            ..
+        }) = &mut stand.truth
+        {
             if p.is_relative() {
                 *p = dir.join(&*p);
             }
@@ -516,7 +558,9 @@ impl Stand {
             baud: rs.baud.unwrap_or(115_200),
             identity: rs.identity.clone().unwrap_or_default(),
             timeout: match &rs.timeout {
-                Some(t) => Duration::from_secs_f64(cx.positive(t, Dimension::Time, "shaker.timeout")?),
+                Some(t) => {
+                    Duration::from_secs_f64(cx.positive(t, Dimension::Time, "shaker.timeout")?)
+                }
                 None => Duration::from_millis(500),
             },
             retries: rs.retries.unwrap_or(2),
@@ -530,14 +574,22 @@ impl Stand {
             port: port_spec(rd.port.get_ref()),
             baud: rd.baud.unwrap_or(3_000_000),
             identity: rd.identity.clone().unwrap_or_default(),
-            sample_rate_hz: cx.positive(&rd.sample_rate, Dimension::Frequency, "daq.sample_rate")?,
+            sample_rate_hz: cx.positive(
+                &rd.sample_rate,
+                Dimension::Frequency,
+                "daq.sample_rate",
+            )?,
             samples_per_block: match &rd.samples_per_block {
-                Some(s) if *s.get_ref() == 0 => return Err(cx.at(s.span(), "daq.samples_per_block must be ≥ 1")),
+                Some(s) if *s.get_ref() == 0 => {
+                    return Err(cx.at(s.span(), "daq.samples_per_block must be ≥ 1"))
+                }
                 Some(s) => *s.get_ref(),
                 None => 64,
             },
             timeout: match &rd.timeout {
-                Some(t) => Duration::from_secs_f64(cx.positive(t, Dimension::Time, "daq.timeout")?),
+                Some(t) => {
+                    Duration::from_secs_f64(cx.positive(t, Dimension::Time, "daq.timeout")?)
+                }
                 None => Duration::from_millis(500),
             },
             retries: rd.retries.unwrap_or(2),
@@ -559,12 +611,20 @@ impl Stand {
         }
         if let (PortSpec::Path(a), PortSpec::Path(b)) = (&shaker.port, &daq.port) {
             if a == b {
-                return Err(cx.at(rd.port.span(), format!("daq.port {b} is also the shaker's port; each device needs its own port")));
+                return Err(cx.at(
+                    rd.port.span(),
+                    format!(
+                        "daq.port {b} is also the shaker's port; each device needs its own port"
+                    ),
+                ));
             }
         }
 
         if raw.channel.is_empty() {
-            return Err(cx.at(raw.daq.span(), "no [[channel]] entries; list at least the force channel and one accelerometer"));
+            return Err(cx.at(
+                raw.daq.span(),
+                "no [[channel]] entries; list at least the force channel and one accelerometer",
+            ));
         }
         let mut channels: Vec<Channel> = Vec::new();
         for sc in &raw.channel {
@@ -574,7 +634,13 @@ impl Stand {
                 return Err(cx.at(c.name.span(), "channel name is empty"));
             }
             if let Some(o) = channels.iter().find(|o| o.name == name) {
-                return Err(cx.at(c.name.span(), format!("channel name `{name}` is already used on line {}; names must be unique", o.line)));
+                return Err(cx.at(
+                    c.name.span(),
+                    format!(
+                        "channel name `{name}` is already used on line {}; names must be unique",
+                        o.line
+                    ),
+                ));
             }
             let dc = *c.device_channel.get_ref();
             if let Some(o) = channels.iter().find(|o| o.device_channel == dc) {
@@ -584,7 +650,11 @@ impl Stand {
                 ));
             }
             let kind = *c.kind.get_ref();
-            let sensitivity = cx.positive(&c.sensitivity, Dimension::Sensitivity, &format!("channel `{name}`: sensitivity"))?;
+            let sensitivity = cx.positive(
+                &c.sensitivity,
+                Dimension::Sensitivity,
+                &format!("channel `{name}`: sensitivity"),
+            )?;
             let (body, position_m, direction) = match kind {
                 ChannelKind::Force => {
                     let position = match &c.position {
@@ -595,12 +665,30 @@ impl Stand {
                         Some(d) => cx.unit_vector(d, &format!("channel `{name}`: direction"))?,
                         None => [0.0; 3],
                     };
-                    (c.body.as_ref().map(|b| b.get_ref().clone()), position, direction)
+                    (
+                        c.body.as_ref().map(|b| b.get_ref().clone()),
+                        position,
+                        direction,
+                    )
                 }
                 ChannelKind::Acceleration => {
-                    let missing = |what: &str| cx.at(sc.span(), format!("acceleration channel `{name}` needs `{what}`"));
-                    let body = c.body.as_ref().ok_or_else(|| missing("body"))?.get_ref().clone();
-                    let position = vec3(&cx, c.position.as_ref().ok_or_else(|| missing("position"))?, &name)?;
+                    let missing = |what: &str| {
+                        cx.at(
+                            sc.span(),
+                            format!("acceleration channel `{name}` needs `{what}`"),
+                        )
+                    };
+                    let body = c
+                        .body
+                        .as_ref()
+                        .ok_or_else(|| missing("body"))?
+                        .get_ref()
+                        .clone();
+                    let position = vec3(
+                        &cx,
+                        c.position.as_ref().ok_or_else(|| missing("position"))?,
+                        &name,
+                    )?;
                     let direction = cx.unit_vector(
                         c.direction.as_ref().ok_or_else(|| missing("direction"))?,
                         &format!("channel `{name}`: direction"),
@@ -619,7 +707,10 @@ impl Stand {
                 line: cx.line_of(sc.span()),
             });
         }
-        let forces: Vec<&Channel> = channels.iter().filter(|c| c.kind == ChannelKind::Force).collect();
+        let forces: Vec<&Channel> = channels
+            .iter()
+            .filter(|c| c.kind == ChannelKind::Force)
+            .collect();
         if forces.len() != 1 {
             let span = raw.channel.first().map(|c| c.span()).unwrap_or(0..0);
             return Err(cx.at(
@@ -628,11 +719,18 @@ impl Stand {
             ));
         }
         if !channels.iter().any(|c| c.kind == ChannelKind::Acceleration) {
-            return Err(cx.at(raw.daq.span(), "the channel map has no acceleration channel"));
+            return Err(cx.at(
+                raw.daq.span(),
+                "the channel map has no acceleration channel",
+            ));
         }
         let frame = channels.len() * daq.samples_per_block as usize * 4 + 9;
         if frame > crate::daq::frame::MAX_FRAME {
-            let span = rd.samples_per_block.as_ref().map(|s| s.span()).unwrap_or(raw.daq.span());
+            let span = rd
+                .samples_per_block
+                .as_ref()
+                .map(|s| s.span())
+                .unwrap_or(raw.daq.span());
             return Err(cx.at(
                 span,
                 format!("{} channels × {} samples per block do not fit a {}-byte frame; lower daq.samples_per_block", channels.len(), daq.samples_per_block, crate::daq::frame::MAX_FRAME),
@@ -652,7 +750,11 @@ impl Stand {
                 duplicate: cx.probability(&f.duplicate, "duplicate")?,
                 delay: cx.probability(&f.delay, "delay")?,
                 delay_time: match &f.delay_time {
-                    Some(t) => Duration::from_secs_f64(cx.positive(t, Dimension::Time, "faults.delay_time")?),
+                    Some(t) => Duration::from_secs_f64(cx.positive(
+                        t,
+                        Dimension::Time,
+                        "faults.delay_time",
+                    )?),
                     None => Duration::from_millis(20),
                 },
                 daq_silent_after_blocks: f.daq_silent_after_blocks,
@@ -660,10 +762,16 @@ impl Stand {
                 cable_pull_after_blocks: f.cable_pull_after_blocks,
             },
         };
-        let geometry_model = raw.geometry.as_ref().map(|g| PathBuf::from(g.get_ref().model.get_ref()));
+        let geometry_model = raw
+            .geometry
+            .as_ref()
+            .map(|g| PathBuf::from(g.get_ref().model.get_ref()));
         let uses_sim = shaker.port == PortSpec::Sim || daq.port == PortSpec::Sim;
         if uses_sim && truth.is_none() {
-            return Err(cx.at(raw.shaker.span(), "port = \"sim\" needs a [truth] section (the simulated structure)"));
+            return Err(cx.at(
+                raw.shaker.span(),
+                "port = \"sim\" needs a [truth] section (the simulated structure)",
+            ));
         }
         Ok(Stand {
             name: raw.name.unwrap_or_else(|| file.to_string()),
@@ -683,10 +791,15 @@ impl Stand {
     /// accelerometer sits on the body it names: inside the homogeneous box with that body's mass
     /// and principal moments, within `tolerance_m`.
     pub fn resolve_geometry(&mut self, tolerance_m: f64) -> Result<(), StandError> {
-        let Some(path) = self.geometry_model.clone() else { return Ok(()) };
+        let Some(path) = self.geometry_model.clone() else {
+            return Ok(());
+        };
         let text = self.text.clone();
         let span_of = |key: &str| text.find(key).unwrap_or(0);
-        let cx = Ctx { file: &self.file, text: &text };
+        let cx = Ctx {
+            file: &self.file,
+            text: &text,
+        };
         let at_geometry = |msg: String| cx.at(span_of("[geometry]")..span_of("[geometry]"), msg);
         let loaded = identify::modelfile::load(&path)
             .map_err(|e| at_geometry(format!("geometry.model {}: {e}", path.display())))?;
@@ -699,7 +812,11 @@ impl Stand {
             )));
         }
         let mut bodies: Vec<BodyGeometry> = Vec::new();
-        for c in self.channels.iter().filter(|c| c.kind == ChannelKind::Acceleration) {
+        for c in self
+            .channels
+            .iter()
+            .filter(|c| c.kind == ChannelKind::Acceleration)
+        {
             let name = c.body.as_deref().unwrap_or("");
             let Some(b) = model.bodies.iter().find(|b| b.name == name) else {
                 let names: Vec<&str> = model.bodies.iter().map(|b| b.name.as_str()).collect();
@@ -707,7 +824,12 @@ impl Stand {
                     file: self.file.clone(),
                     line: c.line,
                     column: 1,
-                    message: format!("channel `{}`: body `{name}` is not in the geometry model {} (bodies: {})", c.name, path.display(), names.join(", ")),
+                    message: format!(
+                        "channel `{}`: body `{name}` is not in the geometry model {} (bodies: {})",
+                        c.name,
+                        path.display(),
+                        names.join(", ")
+                    ),
                 });
             };
             let g = BodyGeometry::from_body(b);
@@ -739,15 +861,27 @@ impl Stand {
             .outputs
             .iter()
             .filter(|o| bodies.iter().any(|b| b.name == model.bodies[o.body].name))
-            .map(|o| GeometryOutput { body: model.bodies[o.body].name.clone(), dof: o.dof, quantity: o.quantity.as_str().to_string() })
+            .map(|o| GeometryOutput {
+                body: model.bodies[o.body].name.clone(),
+                dof: o.dof,
+                quantity: o.quantity.as_str().to_string(),
+            })
             .collect();
-        self.geometry = Some(Geometry { source: path.display().to_string(), bodies, nominal_force_n, outputs });
+        self.geometry = Some(Geometry {
+            source: path.display().to_string(),
+            bodies,
+            nominal_force_n,
+            outputs,
+        });
         Ok(())
     }
 
     /// The force channel's index in stream order (validated to exist exactly once).
     pub fn force_channel(&self) -> usize {
-        self.channels.iter().position(|c| c.kind == ChannelKind::Force).unwrap_or(0)
+        self.channels
+            .iter()
+            .position(|c| c.kind == ChannelKind::Force)
+            .unwrap_or(0)
     }
 
     /// The DAQ configuration this stand asks for.
@@ -767,7 +901,9 @@ fn vec3(cx: &Ctx<'_>, p: &Spanned<Vec<Value>>, name: &str) -> Result<[f64; 3], S
     }
     let mut out = [0.0; 3];
     for (o, x) in out.iter_mut().zip(v) {
-        *o = x.si(Dimension::Length).map_err(|e| cx.at(p.span(), format!("channel `{name}`: position: {e}")))?;
+        *o = x
+            .si(Dimension::Length)
+            .map_err(|e| cx.at(p.span(), format!("channel `{name}`: position: {e}")))?;
     }
     Ok(out)
 }
@@ -775,26 +911,43 @@ fn vec3(cx: &Ctx<'_>, p: &Spanned<Vec<Value>>, name: &str) -> Result<[f64; 3], S
 fn truth(cx: &Ctx<'_>, st: &Spanned<RawTruth>, channels: &[Channel]) -> Result<Truth, StandError> {
     let t = st.get_ref();
     let model = match (&t.model, &t.sdof) {
-        (Some(_), Some(s)) => return Err(cx.at(s.span(), "[truth] has both `model` and `sdof`; keep one")),
+        (Some(_), Some(s)) => {
+            return Err(cx.at(s.span(), "[truth] has both `model` and `sdof`; keep one"))
+        }
         (None, Some(s)) => {
             let r = s.get_ref();
             let eta = *r.loss_factor.get_ref();
             if !(0.0..1.0).contains(&eta) {
-                return Err(cx.at(r.loss_factor.span(), "truth.sdof.loss_factor must be within 0..1 (η = ψ/2π)"));
+                return Err(cx.at(
+                    r.loss_factor.span(),
+                    "truth.sdof.loss_factor must be within 0..1 (η = ψ/2π)",
+                ));
             }
             TruthModel::Sdof {
                 body: r.body.clone(),
                 mass: cx.positive(&r.mass, Dimension::Mass, "truth.sdof.mass")?,
-                stiffness: cx.positive(&r.stiffness, Dimension::Stiffness, "truth.sdof.stiffness")?,
+                stiffness: cx.positive(
+                    &r.stiffness,
+                    Dimension::Stiffness,
+                    "truth.sdof.stiffness",
+                )?,
                 loss_factor: eta,
                 direction: cx.unit_vector(&r.direction, "truth.sdof.direction")?,
             }
         }
         (Some(m), None) => TruthModel::ModelFile(PathBuf::from(m.get_ref())),
-        (None, None) => return Err(cx.at(st.span(), "[truth] needs `model = \"path\"` or an `sdof = {...}` table")),
+        (None, None) => {
+            return Err(cx.at(
+                st.span(),
+                "[truth] needs `model = \"path\"` or an `sdof = {...}` table",
+            ))
+        }
     };
     if let TruthModel::Sdof { body, .. } = &model {
-        for c in channels.iter().filter(|c| c.kind == ChannelKind::Acceleration) {
+        for c in channels
+            .iter()
+            .filter(|c| c.kind == ChannelKind::Acceleration)
+        {
             if c.body.as_deref() != Some(body) {
                 return Err(StandError {
                     file: cx.file.to_string(),
@@ -822,7 +975,9 @@ fn truth(cx: &Ctx<'_>, st: &Spanned<RawTruth>, channels: &[Channel]) -> Result<T
             None => f64::INFINITY,
         },
         noise_acceleration: match &t.noise_acceleration {
-            Some(v) => cx.value(v, Dimension::Acceleration, "truth.noise_acceleration")?.abs(),
+            Some(v) => cx
+                .value(v, Dimension::Acceleration, "truth.noise_acceleration")?
+                .abs(),
             None => 0.0,
         },
         noise_force: match &t.noise_force {

@@ -51,26 +51,74 @@ fn line_of(text: &str, needle: &str) -> usize {
 fn duplicate_device_channel_names_both_channels_and_line() {
     let t = GOOD.replace("device_channel = 1", "device_channel = 0");
     let e = err(&t);
-    let second = t.lines().enumerate().filter(|(_, l)| l.contains("device_channel = 0")).nth(1).unwrap().0 + 1;
+    let second = t
+        .lines()
+        .enumerate()
+        .filter(|(_, l)| l.contains("device_channel = 0"))
+        .nth(1)
+        .unwrap()
+        .0
+        + 1;
     assert_eq!(e.line, second, "{e}");
-    assert!(e.message.contains("device_channel 0 is already used by channel `force`"), "{e}");
+    assert!(
+        e.message
+            .contains("device_channel 0 is already used by channel `force`"),
+        "{e}"
+    );
     assert!(e.to_string().starts_with("bad.toml:"));
 }
 
 #[test]
 fn inconsistent_channel_maps_are_rejected_with_locations() {
     let cases = [
-        (GOOD.replace("kind = \"force\"", "kind = \"acceleration\"\nbody=\"table\"\nposition=[0,0,0]\ndirection=[0,0,1]"), "exactly one `kind = \"force\"`"),
-        (GOOD.replace("name = \"table-x\"", "name = \"force\""), "already used on line"),
-        (GOOD.replace("direction = [2, 0, 0]", "direction = [0, 0, 0]"), "zero length"),
-        (GOOD.replace("body = \"table\"\nposition", "body = \"spindle\"\nposition"), "body `spindle` is not in the truth model"),
-        (GOOD.replace("direction = [2, 0, 0]\n", ""), "needs `direction`"),
-        (GOOD.replace("\"100 mV/g\"", "\"100 mm\""), "not a Sensitivity unit"),
+        (
+            GOOD.replace(
+                "kind = \"force\"",
+                "kind = \"acceleration\"\nbody=\"table\"\nposition=[0,0,0]\ndirection=[0,0,1]",
+            ),
+            "exactly one `kind = \"force\"`",
+        ),
+        (
+            GOOD.replace("name = \"table-x\"", "name = \"force\""),
+            "already used on line",
+        ),
+        (
+            GOOD.replace("direction = [2, 0, 0]", "direction = [0, 0, 0]"),
+            "zero length",
+        ),
+        (
+            GOOD.replace("body = \"table\"\nposition", "body = \"spindle\"\nposition"),
+            "body `spindle` is not in the truth model",
+        ),
+        (
+            GOOD.replace("direction = [2, 0, 0]\n", ""),
+            "needs `direction`",
+        ),
+        (
+            GOOD.replace("\"100 mV/g\"", "\"100 mm\""),
+            "not a Sensitivity unit",
+        ),
         (GOOD.replace("\"100 mV/g\"", "-1"), "must be > 0"),
-        (GOOD.replace("samples_per_block = 64", "samples_per_block = 4000"), "do not fit"),
-        (GOOD.replace("kind = \"force\"", "kind = \"velocity\""), "unknown variant"),
-        (GOOD.replace("[truth]", "[truth]\nsped = 3"), "unknown field"),
-        (GOOD.replace("port = \"sim\"\nsample_rate", "port = \"/dev/x\"\nsample_rate").replace("port = \"sim\"\nidentity", "port = \"/dev/x\"\nidentity"), "also the shaker's port"),
+        (
+            GOOD.replace("samples_per_block = 64", "samples_per_block = 4000"),
+            "do not fit",
+        ),
+        (
+            GOOD.replace("kind = \"force\"", "kind = \"velocity\""),
+            "unknown variant",
+        ),
+        (
+            GOOD.replace("[truth]", "[truth]\nsped = 3"),
+            "unknown field",
+        ),
+        (
+            GOOD.replace(
+                "port = \"sim\"\nsample_rate",
+                "port = \"/dev/x\"\nsample_rate",
+            )
+            .replace("port = \"sim\"\nidentity", "port = \"/dev/x\"\nidentity"),
+            "also the shaker's port",
+        ),
     ];
     for (text, want) in cases {
         let e = err(&text);
@@ -102,7 +150,10 @@ fn repository_stand_files_load() {
 
 #[test]
 fn can_ports_and_identifiers_are_read_and_checked() {
-    let t = GOOD.replace("port = \"sim\"\nsample_rate", "port = \"can:can0\"\nsample_rate")
+    let t = GOOD.replace(
+        "port = \"sim\"\nsample_rate",
+        "port = \"can:can0\"\nsample_rate",
+    )
         + "\n[daq.can]\nframes = \"fd\"\ncommand_id = 0x310\nstatus_id = 0x311\ndata_id = 0x312\n";
     // `[daq.can]` after `[truth]` is still the daq table's sub-table.
     let s = Stand::parse(&t, "can.toml").unwrap();
@@ -110,28 +161,55 @@ fn can_ports_and_identifiers_are_read_and_checked() {
     assert_eq!(s.daq.can.frames, crate::can::FrameKind::Fd);
     assert_eq!(s.daq.can.data_id, crate::can::CanId::Standard(0x312));
     // Without `daq.timeout` the CAN DAQ keeps its own default; with it, the stand file decides.
-    assert_eq!(s.daq.can.answer_timeout, crate::can::CanDaqSettings::default().answer_timeout);
-    let timed = t.replace("samples_per_block = 64", "samples_per_block = 64\ntimeout = \"3 s\"\nretries = 5");
+    assert_eq!(
+        s.daq.can.answer_timeout,
+        crate::can::CanDaqSettings::default().answer_timeout
+    );
+    let timed = t.replace(
+        "samples_per_block = 64",
+        "samples_per_block = 64\ntimeout = \"3 s\"\nretries = 5",
+    );
     let s = Stand::parse(&timed, "can.toml").unwrap();
-    assert_eq!((s.daq.can.answer_timeout, s.daq.can.retries), (std::time::Duration::from_secs(3), 5));
+    assert_eq!(
+        (s.daq.can.answer_timeout, s.daq.can.retries),
+        (std::time::Duration::from_secs(3), 5)
+    );
     let e = err(&t.replace("frames = \"fd\"", "frames = \"flexible\""));
-    assert!(e.message.contains("daq.can.frames = \"flexible\": write \"classic\""), "{e}");
+    assert!(
+        e.message
+            .contains("daq.can.frames = \"flexible\": write \"classic\""),
+        "{e}"
+    );
     assert_eq!(e.line, line_of(&t, "frames = \"fd\""), "{e}");
     let e = err(&t.replace("status_id = 0x311", "status_id = 0x310"));
     assert!(e.message.contains("must all differ"), "{e}");
     let e = err(&t.replace("data_id = 0x312", "data_id = 0x912"));
-    assert!(e.message.contains("daq.can.data_id") && e.message.contains("out of range"), "{e}");
-    let e = err(&GOOD.replace("port = \"sim\"\nidentity = \"IDENT-SIM,SHAKER-4K\"", "port = \"can:can0\"\nidentity = \"x\""));
-    assert!(e.message.contains("shaker controller speaks SCPI over serial"), "{e}");
+    assert!(
+        e.message.contains("daq.can.data_id") && e.message.contains("out of range"),
+        "{e}"
+    );
+    let e = err(&GOOD.replace(
+        "port = \"sim\"\nidentity = \"IDENT-SIM,SHAKER-4K\"",
+        "port = \"can:can0\"\nidentity = \"x\"",
+    ));
+    assert!(
+        e.message
+            .contains("shaker controller speaks SCPI over serial"),
+        "{e}"
+    );
 }
 
 #[test]
 fn sensors_must_sit_on_the_body_they_name() {
     let dir = tempfile::tempdir().unwrap();
-    let models = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../configs/models/fwd32j-no-actuator.toml");
+    let models = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../configs/models/fwd32j-no-actuator.toml");
     let with = |pos: &str| {
         GOOD.replace("position = [\"320 mm\", \"0 mm\", \"45 mm\"]", pos)
-            .replace("[truth]", &format!("[geometry]\nmodel = \"{}\"\n[truth]", models.display()))
+            .replace(
+                "[truth]",
+                &format!("[geometry]\nmodel = \"{}\"\n[truth]", models.display()),
+            )
     };
     // On the table's top surface (x -625..625, y 740..1060, z up to 950 mm): accepted, geometry recorded.
     let p = dir.path().join("ok.toml");
@@ -142,19 +220,39 @@ fn sensors_must_sit_on_the_body_they_name() {
     assert_eq!(g.bodies[0].name, "table");
     assert!((g.nominal_force_n - 4000.0).abs() < 1e-9);
     let h = g.bodies[0].equivalent_box_half_extents();
-    assert!((h[0] - 0.625).abs() < 1e-3 && (h[1] - 0.16).abs() < 1e-3 && (h[2] - 0.06).abs() < 1e-3, "{h:?}");
-    assert_eq!(g.outputs.iter().map(|o| o.dof).collect::<Vec<_>>(), vec![0, 1, 2]);
+    assert!(
+        (h[0] - 0.625).abs() < 1e-3 && (h[1] - 0.16).abs() < 1e-3 && (h[2] - 0.06).abs() < 1e-3,
+        "{h:?}"
+    );
+    assert_eq!(
+        g.outputs.iter().map(|o| o.dof).collect::<Vec<_>>(),
+        vec![0, 1, 2]
+    );
     // 250 mm beyond the table's side (yesterday's stand file): refused, naming file, line and fix.
     let t = with("position = [\"0 mm\", \"1150 mm\", \"950 mm\"]");
     let p = dir.path().join("off.toml");
     std::fs::write(&p, &t).unwrap();
     let e = Stand::load(&p).unwrap_err();
     assert_eq!(e.line, line_of(&t, "name = \"table-x\"") - 1, "{e}");
-    assert!(e.message.starts_with("channel `table-x`: position [0, 1150, 950] mm is not on body `table`"), "{e}");
-    assert!(e.message.contains("reaches only ±[625, 160, 60] mm") && e.message.contains("y 740..1060"), "{e}");
+    assert!(
+        e.message
+            .starts_with("channel `table-x`: position [0, 1150, 950] mm is not on body `table`"),
+        "{e}"
+    );
+    assert!(
+        e.message.contains("reaches only ±[625, 160, 60] mm") && e.message.contains("y 740..1060"),
+        "{e}"
+    );
     // A body the geometry model does not have.
-    let t = with("position = [\"0 mm\", \"900 mm\", \"950 mm\"]").replace("body = \"table\"\nposition", "body = \"tabel\"\nposition").replace("sdof = { body = \"table\"", "sdof = { body = \"tabel\"");
+    let t = with("position = [\"0 mm\", \"900 mm\", \"950 mm\"]")
+        .replace("body = \"table\"\nposition", "body = \"tabel\"\nposition")
+        .replace("sdof = { body = \"table\"", "sdof = { body = \"tabel\"");
     std::fs::write(&p, &t).unwrap();
     let e = Stand::load(&p).unwrap_err();
-    assert!(e.message.contains("body `tabel` is not in the geometry model") && e.message.contains("table"), "{e}");
+    assert!(
+        e.message
+            .contains("body `tabel` is not in the geometry model")
+            && e.message.contains("table"),
+        "{e}"
+    );
 }

@@ -26,7 +26,11 @@ impl StepEstimator {
     pub fn new(sample_rate_hz: f64, sensitivity: &[f64], force_channel: usize) -> StepEstimator {
         StepEstimator {
             fitter: SineFitter::new(),
-            config: SineConfig { sample_rate_hz, settle_s: 0.0, harmonics: 0 },
+            config: SineConfig {
+                sample_rate_hz,
+                settle_s: 0.0,
+                harmonics: 0,
+            },
             force_channel,
             sensitivity: sensitivity.to_vec(),
             force: Vec::new(),
@@ -67,7 +71,8 @@ impl StepEstimator {
     /// Fits the window at `freq_hz` (Hz). Phases refer to the window's first sample.
     pub fn estimate(&mut self, freq_hz: f64) -> Result<Step, ProcessError> {
         let responses: Vec<&[f64]> = self.responses.iter().map(Vec::as_slice).collect();
-        self.fitter.fit_step(&self.config, freq_hz, &self.force, &responses)
+        self.fitter
+            .fit_step(&self.config, freq_hz, &self.force, &responses)
     }
 
     /// Per channel (stream order, force included with FRF 1) what a step records.
@@ -130,7 +135,10 @@ mod tests {
         let f = 37.3;
         // Force on channel 1 (2 mV/N), response on 0 and 2 (10 mV/(m/s²)).
         let sens = [0.01, 0.002, 0.01];
-        let h = [Complex::from_polar(2.5e-3, 0.7), Complex::from_polar(1.0e-3, -2.0)];
+        let h = [
+            Complex::from_polar(2.5e-3, 0.7),
+            Complex::from_polar(1.0e-3, -2.0),
+        ];
         let force = Complex::from_polar(1000.0, 0.3);
         let mut rng = rand::rngs::StdRng::seed_from_u64(9);
         let noise = Normal::new(0.0, 0.05).unwrap();
@@ -140,11 +148,18 @@ mod tests {
         for trial in 0..40 {
             est.clear();
             for i in 0..n {
-                let e = Complex::from_polar(1.0, 2.0 * std::f64::consts::PI * f * (i + 17 * trial) as f64 / fs);
+                let e = Complex::from_polar(
+                    1.0,
+                    2.0 * std::f64::consts::PI * f * (i + 17 * trial) as f64 / fs,
+                );
                 let fv = (force * e).re;
                 let a0 = (force * h[0] * e).re + noise.sample(&mut rng);
                 let a1 = (force * h[1] * e).re;
-                est.push_row(&[(a0 * sens[0]) as f32, (fv * sens[1]) as f32, (a1 * sens[2]) as f32]);
+                est.push_row(&[
+                    (a0 * sens[0]) as f32,
+                    (fv * sens[1]) as f32,
+                    (a1 * sens[2]) as f32,
+                ]);
             }
             assert_eq!(est.len(), n);
             let step = est.estimate(f).unwrap();
@@ -155,14 +170,20 @@ mod tests {
             // The noiseless channel is exact up to f32 rounding.
             let g1 = Complex::new(r[2].frf_re, r[2].frf_im);
             assert!((g1 - h[1]).norm() < 1e-6 * h[1].norm(), "{g1}");
-            errors.push(((Complex::new(r[0].frf_re, r[0].frf_im) - h[0]).norm_sqr(), r[0].frf_variance));
+            errors.push((
+                (Complex::new(r[0].frf_re, r[0].frf_im) - h[0]).norm_sqr(),
+                r[0].frf_variance,
+            ));
             assert!((r[0].noise_rms - 0.05).abs() < 0.005, "{}", r[0].noise_rms);
         }
         // The stated variance E|Ĥ−H|² matches the observed mean square error within sampling error
         // (40 trials: ±~35 % at 2σ).
         let mse = errors.iter().map(|e| e.0).sum::<f64>() / errors.len() as f64;
         let stated = errors.iter().map(|e| e.1).sum::<f64>() / errors.len() as f64;
-        assert!((mse / stated - 1.0).abs() < 0.4, "mse {mse:e} vs stated {stated:e}");
+        assert!(
+            (mse / stated - 1.0).abs() < 0.4,
+            "mse {mse:e} vs stated {stated:e}"
+        );
     }
 
     #[test]

@@ -110,7 +110,11 @@ impl FrequencyList {
                 let log = matches!(self, FrequencyList::Log { .. });
                 (0..n)
                     .map(|i| {
-                        let u = if n == 1 { 0.0 } else { i as f64 / (n - 1) as f64 };
+                        let u = if n == 1 {
+                            0.0
+                        } else {
+                            i as f64 / (n - 1) as f64
+                        };
                         if log {
                             start * (stop / start).powf(u)
                         } else {
@@ -119,8 +123,15 @@ impl FrequencyList {
                     })
                     .collect()
             }
-            FrequencyList::AroundResonances { resonances, relative_span, per_resonance } => {
-                if resonances.is_empty() || *per_resonance == 0 || !(*relative_span > 0.0 && *relative_span < 1.0) {
+            FrequencyList::AroundResonances {
+                resonances,
+                relative_span,
+                per_resonance,
+            } => {
+                if resonances.is_empty()
+                    || *per_resonance == 0
+                    || !(*relative_span > 0.0 && *relative_span < 1.0)
+                {
                     return bad("need resonances, per_resonance ≥ 1 and 0 < relative_span < 1");
                 }
                 let mut v = Vec::new();
@@ -131,7 +142,11 @@ impl FrequencyList {
                     let (a, b) = (r * (1.0 - relative_span), r * (1.0 + relative_span));
                     // Denser near the resonance: a sine-spaced grid.
                     for i in 0..*per_resonance {
-                        let u = if *per_resonance == 1 { 0.5 } else { i as f64 / (*per_resonance - 1) as f64 };
+                        let u = if *per_resonance == 1 {
+                            0.5
+                        } else {
+                            i as f64 / (*per_resonance - 1) as f64
+                        };
                         let w = 0.5 - 0.5 * (std::f64::consts::PI * u).cos();
                         v.push(a + (b - a) * w);
                     }
@@ -194,7 +209,11 @@ impl SteppedSine {
 impl Default for SteppedSine {
     fn default() -> Self {
         SteppedSine {
-            frequencies: FrequencyList::Log { start: 20.0, stop: 400.0, n: 30 },
+            frequencies: FrequencyList::Log {
+                start: 20.0,
+                stop: 400.0,
+                n: 30,
+            },
             settle_s: 0.2,
             cycles: 20.0,
             min_window_s: 0.25,
@@ -283,7 +302,10 @@ pub struct StepResult {
 impl StepResult {
     /// The FRF of channel `name` (per N).
     pub fn frf(&self, name: &str) -> Option<Complex<f64>> {
-        self.channels.iter().find(|c| c.name == name).map(|c| Complex::new(c.frf_re, c.frf_im))
+        self.channels
+            .iter()
+            .find(|c| c.name == name)
+            .map(|c| Complex::new(c.frf_re, c.frf_im))
     }
 }
 
@@ -300,8 +322,17 @@ pub struct SweepOutcome {
     pub faults: u64,
 }
 
-fn event(s: &SessionHandle, kind: &str, step: Option<usize>, f: Option<f64>, detail: impl Into<String>) -> Result<(), SessionError> {
-    s.log(Topic::SweepEvent, &json!({"kind": kind, "step": step, "frequency_hz": f, "detail": detail.into()}))
+fn event(
+    s: &SessionHandle,
+    kind: &str,
+    step: Option<usize>,
+    f: Option<f64>,
+    detail: impl Into<String>,
+) -> Result<(), SessionError> {
+    s.log(
+        Topic::SweepEvent,
+        &json!({"kind": kind, "step": step, "frequency_hz": f, "detail": detail.into()}),
+    )
 }
 
 /// Pulls blocks from the DAQ, records every block and fault.
@@ -321,7 +352,15 @@ impl<'a> Pump<'a> {
         // The simulated stand runs `speed` times faster than real time; real devices at 1.
         let speed = rig.stand.truth.as_ref().map(|t| t.speed).unwrap_or(1.0);
         let samples_per_wall_s = rig.stream.sample_rate_hz * speed;
-        Pump { rig, session, faults: 0, last_fault_sample: None, next_sample: 0, started: std::time::Instant::now(), samples_per_wall_s }
+        Pump {
+            rig,
+            session,
+            faults: 0,
+            last_fault_sample: None,
+            next_sample: 0,
+            started: std::time::Instant::now(),
+            samples_per_wall_s,
+        }
     }
 
     /// Reads (and records) the blocks the port or socket already holds, so that the next block
@@ -354,7 +393,9 @@ impl Pump<'_> {
         loop {
             match self.rig.daq.next_event().await? {
                 DaqEvent::Block(b) => {
-                    if b.channel_count as usize != self.rig.stand.channels.len() || b.volts.len() % b.channel_count.max(1) as usize != 0 {
+                    if b.channel_count as usize != self.rig.stand.channels.len()
+                        || b.volts.len() % b.channel_count.max(1) as usize != 0
+                    {
                         return Err(SweepError::Daq(DaqError::Protocol {
                             port: self.rig.daq.port().to_string(),
                             command: "stream".into(),
@@ -368,7 +409,9 @@ impl Pump<'_> {
                         }));
                     }
                     let n = b.len() as u64;
-                    let volts: Vec<Vec<f32>> = (0..b.channel_count as usize).map(|c| b.channel(c).collect()).collect();
+                    let volts: Vec<Vec<f32>> = (0..b.channel_count as usize)
+                        .map(|c| b.channel(c).collect())
+                        .collect();
                     self.session.log(
                         Topic::DaqBlock,
                         &json!({"seq": b.seq, "first_sample": b.first_sample, "sample_rate_hz": self.rig.stream.sample_rate_hz, "volts": volts}),
@@ -397,13 +440,28 @@ impl Pump<'_> {
 /// ran the same plan.
 pub fn completed_steps(previous: &Path, plan: &SteppedSine) -> Result<BTreeSet<usize>, SweepError> {
     let p = previous.display().to_string();
-    let rep = session::read(previous).map_err(|e| SweepError::Resume { path: p.clone(), detail: e.to_string() })?;
+    let rep = session::read(previous).map_err(|e| SweepError::Resume {
+        path: p.clone(),
+        detail: e.to_string(),
+    })?;
     let want = serde_json::to_value(plan).map_err(|e| SweepError::Plan(e.to_string()))?;
-    let planned = rep.records.iter().find(|r| r.topic == Topic::Session.name()).map(|r| r.value["plan"].clone());
+    let planned = rep
+        .records
+        .iter()
+        .find(|r| r.topic == Topic::Session.name())
+        .map(|r| r.value["plan"].clone());
     match planned {
-        None => return Err(SweepError::Resume { path: p, detail: "no /session record (not a sweep session?)".into() }),
+        None => {
+            return Err(SweepError::Resume {
+                path: p,
+                detail: "no /session record (not a sweep session?)".into(),
+            })
+        }
         Some(v) if v != want => {
-            return Err(SweepError::Resume { path: p, detail: "it ran a different plan; resume with the same plan or start afresh".into() })
+            return Err(SweepError::Resume {
+                path: p,
+                detail: "it ran a different plan; resume with the same plan or start afresh".into(),
+            })
         }
         _ => {}
     }
@@ -414,7 +472,11 @@ pub fn completed_steps(previous: &Path, plan: &SteppedSine) -> Result<BTreeSet<u
         .filter_map(|r| r.value["step"].as_u64().map(|s| s as usize))
         .collect();
     // Steps completed before that session (chained resumes).
-    for r in rep.records.iter().filter(|r| r.topic == Topic::Session.name()) {
+    for r in rep
+        .records
+        .iter()
+        .filter(|r| r.topic == Topic::Session.name())
+    {
         if let Some(a) = r.value["completed_steps_before"].as_array() {
             done.extend(a.iter().filter_map(|x| x.as_u64().map(|s| s as usize)));
         }
@@ -461,7 +523,17 @@ pub async fn stepped_sine(
             plan.target_force_n, rig.stand.shaker.max_force_n, rig.stand.file
         )));
     }
-    event(session, "started", None, None, format!("stepped sine, {} steps, {} already done", freqs.len(), skip.len()))?;
+    event(
+        session,
+        "started",
+        None,
+        None,
+        format!(
+            "stepped sine, {} steps, {} already done",
+            freqs.len(),
+            skip.len()
+        ),
+    )?;
     progress.start(freqs.len() as u64, skip.len() as u64);
     let r = stepped_inner(rig, plan, &freqs, session, progress, stop, skip).await;
     // Always try to leave the stand safe and the stream stopped.
@@ -469,15 +541,33 @@ pub async fn stepped_sine(
     let stopped_daq = rig.daq.stop().await;
     drain_faults(rig, session).await?;
     match &r {
-        Ok(o) if o.stopped => event(session, "stopped", None, None, "operator stop; output off; the sweep can be resumed")?,
+        Ok(o) if o.stopped => event(
+            session,
+            "stopped",
+            None,
+            None,
+            "operator stop; output off; the sweep can be resumed",
+        )?,
         Ok(_) => event(session, "completed", None, None, "all steps measured")?,
         Err(e) => event(session, "error", None, None, e.to_string())?,
     }
     if let Err(e) = &off {
-        event(session, "error", None, None, format!("could not switch the shaker output off: {e}"))?;
+        event(
+            session,
+            "error",
+            None,
+            None,
+            format!("could not switch the shaker output off: {e}"),
+        )?;
     }
     if let Err(e) = &stopped_daq {
-        event(session, "warning", None, None, format!("could not stop the DAQ stream: {e}"))?;
+        event(
+            session,
+            "warning",
+            None,
+            None,
+            format!("could not stop the DAQ stream: {e}"),
+        )?;
     }
     progress.finish(match &r {
         Ok(o) if o.stopped => "stopped",
@@ -504,8 +594,17 @@ async fn stepped_inner(
     let names: Vec<String> = rig.stand.channels.iter().map(|c| c.name.clone()).collect();
     let mut estimator = StepEstimator::new(fs, &sens, force_ch);
     let max_drive = rig.stand.shaker.max_force_n;
-    let first = freqs.iter().enumerate().find(|(i, _)| !skip.contains(i)).map(|(_, f)| *f);
-    let mut outcome = SweepOutcome { steps: Vec::new(), skipped: skip.iter().copied().collect(), stopped: false, faults: 0 };
+    let first = freqs
+        .iter()
+        .enumerate()
+        .find(|(i, _)| !skip.contains(i))
+        .map(|(_, f)| *f);
+    let mut outcome = SweepOutcome {
+        steps: Vec::new(),
+        skipped: skip.iter().copied().collect(),
+        stopped: false,
+        faults: 0,
+    };
     let Some(first) = first else {
         return Ok(outcome);
     };
@@ -513,7 +612,9 @@ async fn stepped_inner(
     rig.shaker.set_frequency(first).await?;
     // Start gently: half the target until the loop has measured the path gain.
     let mut gain = 1.0f64;
-    rig.shaker.set_force((0.5 * plan.target_force_n).min(max_drive)).await?;
+    rig.shaker
+        .set_force((0.5 * plan.target_force_n).min(max_drive))
+        .await?;
     rig.shaker.set_output(true).await?;
     rig.daq.start().await?;
     let mut pump = Pump::new(rig, session);
@@ -529,7 +630,13 @@ async fn stepped_inner(
         pump.rig.shaker.set_frequency(f).await?;
         let mut drive = (plan.target_force_n / gain).min(max_drive);
         pump.rig.shaker.set_force(drive).await?;
-        event(session, "step_started", Some(step), Some(f), format!("drive {drive:.1} N"))?;
+        event(
+            session,
+            "step_started",
+            Some(step),
+            Some(f),
+            format!("drive {drive:.1} N"),
+        )?;
         let settle = (plan.settle_s * fs).ceil() as u64;
         let window = ((plan.cycles / f).max(plan.min_window_s) * fs).ceil() as u64;
         let mut iterations = 0u32;
@@ -582,7 +689,13 @@ async fn stepped_inner(
                 }
                 continue;
             }
-            let est = estimator.estimate(f).map_err(|source| SweepError::Estimate { step, frequency_hz: f, source })?;
+            let est = estimator
+                .estimate(f)
+                .map_err(|source| SweepError::Estimate {
+                    step,
+                    frequency_hz: f,
+                    source,
+                })?;
             let famp = est.force.amplitude();
             let err = (famp - plan.target_force_n).abs() / plan.target_force_n;
             if famp > 0.0 {
@@ -592,11 +705,22 @@ async fn stepped_inner(
                 if err > plan.force_tolerance {
                     event(session, "warning", Some(step), Some(f), format!("force {famp:.1} N not within {:.1} % of {} N after {iterations} corrections", plan.force_tolerance * 100.0, plan.target_force_n))?;
                 }
-                break Some((est, famp, window_first.unwrap_or(start), estimator.len() as u64));
+                break Some((
+                    est,
+                    famp,
+                    window_first.unwrap_or(start),
+                    estimator.len() as u64,
+                ));
             }
             iterations += 1;
             let new_drive = (plan.target_force_n / gain).min(max_drive);
-            event(session, "force_control", Some(step), Some(f), format!("force {famp:.1} N → drive {drive:.1} N becomes {new_drive:.1} N"))?;
+            event(
+                session,
+                "force_control",
+                Some(step),
+                Some(f),
+                format!("force {famp:.1} N → drive {drive:.1} N becomes {new_drive:.1} N"),
+            )?;
             drive = new_drive;
             pump.rig.shaker.set_force(drive).await?;
         };
@@ -606,9 +730,24 @@ async fn stepped_inner(
         };
         let channels = estimator.channel_results(&est, &names);
         let quality = channels.iter().map(|c| c.fit_quality).fold(1.0, f64::min);
-        let res = StepResult { step, frequency_hz: f, drive_n: drive, force_amplitude_n: famp, first_sample, samples, iterations, channels };
+        let res = StepResult {
+            step,
+            frequency_hz: f,
+            drive_n: drive,
+            force_amplitude_n: famp,
+            first_sample,
+            samples,
+            iterations,
+            channels,
+        };
         session.log(Topic::SweepStep, &res)?;
-        event(session, "step_completed", Some(step), Some(f), format!("force {famp:.1} N, {iterations} corrections"))?;
+        event(
+            session,
+            "step_completed",
+            Some(step),
+            Some(f),
+            format!("force {famp:.1} N, {iterations} corrections"),
+        )?;
         session.check()?;
         progress.step(step, f, famp, quality);
         outcome.steps.push(res);
@@ -671,13 +810,35 @@ pub async fn broadband(
 ) -> Result<BroadbandResult, SweepError> {
     let (lo, hi, period) = match plan.waveform {
         Waveform::Random { f_lo_hz, f_hi_hz } => (f_lo_hz, f_hi_hz, 1.0),
-        Waveform::BurstRandom { f_lo_hz, f_hi_hz, period_s, .. } | Waveform::Chirp { f_lo_hz, f_hi_hz, period_s } => (f_lo_hz, f_hi_hz, period_s),
-        Waveform::Sine => return Err(SweepError::Plan("broadband needs random, burst random or chirp".into())),
+        Waveform::BurstRandom {
+            f_lo_hz,
+            f_hi_hz,
+            period_s,
+            ..
+        }
+        | Waveform::Chirp {
+            f_lo_hz,
+            f_hi_hz,
+            period_s,
+        } => (f_lo_hz, f_hi_hz, period_s),
+        Waveform::Sine => {
+            return Err(SweepError::Plan(
+                "broadband needs random, burst random or chirp".into(),
+            ))
+        }
     };
     if plan.averages == 0 || !(plan.force_n > 0.0) || plan.force_n > rig.stand.shaker.max_force_n {
-        return Err(SweepError::Plan("broadband needs ≥ 1 average and 0 < force ≤ shaker.max_force".into()));
+        return Err(SweepError::Plan(
+            "broadband needs ≥ 1 average and 0 < force ≤ shaker.max_force".into(),
+        ));
     }
-    event(session, "started", None, None, format!("broadband {:?}, {} averages", plan.waveform, plan.averages))?;
+    event(
+        session,
+        "started",
+        None,
+        None,
+        format!("broadband {:?}, {} averages", plan.waveform, plan.averages),
+    )?;
     progress.start(plan.averages as u64, 0);
     let r = broadband_inner(rig, plan, (lo, hi, period), session, progress, stop).await;
     if let Ok(o) = &r {
@@ -726,7 +887,9 @@ async fn broadband_inner(
     let sens: Vec<f64> = rig.stand.channels.iter().map(|c| c.sensitivity).collect();
     let n = (period * fs).round() as usize;
     if n < 16 {
-        return Err(SweepError::Plan("period too short for the sample rate".into()));
+        return Err(SweepError::Plan(
+            "period too short for the sample rate".into(),
+        ));
     }
     rig.shaker.set_waveform(&plan.waveform).await?;
     rig.shaker.set_force(plan.force_n).await?;
@@ -734,7 +897,9 @@ async fn broadband_inner(
     rig.daq.start().await?;
     let fft = rustfft::FftPlanner::<f64>::new().plan_fft_forward(n);
     let df = fs / n as f64;
-    let bins: Vec<usize> = (1..n / 2).filter(|k| (*k as f64 * df) >= lo && (*k as f64 * df) <= hi).collect();
+    let bins: Vec<usize> = (1..n / 2)
+        .filter(|k| (*k as f64 * df) >= lo && (*k as f64 * df) <= hi)
+        .collect();
     let mut sxf = vec![vec![Complex::new(0.0, 0.0); bins.len()]; nch];
     let mut sxx = vec![vec![0.0; bins.len()]; nch];
     let mut bufs = vec![vec![Complex::new(0.0, 0.0); n]; nch];
@@ -782,7 +947,13 @@ async fn broadband_inner(
                 }
                 done += 1;
                 let coh = mean_coherence(&sxf, &sxx, fc);
-                event(session, "average", Some(done as usize), None, format!("mean coherence {coh:.3}"))?;
+                event(
+                    session,
+                    "average",
+                    Some(done as usize),
+                    None,
+                    format!("mean coherence {coh:.3}"),
+                )?;
                 progress.step(done as usize - 1, hi, plan.force_n, coh);
                 if done >= plan.averages {
                     break;
@@ -790,11 +961,23 @@ async fn broadband_inner(
             }
         }
     }
-    let h1 = (0..nch).map(|c| (0..bins.len()).map(|j| sxf[c][j] / sxx[fc][j]).collect()).collect();
-    let coherence = (0..nch)
-        .map(|c| (0..bins.len()).map(|j| sxf[c][j].norm_sqr() / (sxx[c][j] * sxx[fc][j]).max(f64::MIN_POSITIVE)).collect())
+    let h1 = (0..nch)
+        .map(|c| (0..bins.len()).map(|j| sxf[c][j] / sxx[fc][j]).collect())
         .collect();
-    Ok(BroadbandResult { freqs_hz: bins.iter().map(|k| *k as f64 * df).collect(), h1, coherence, averages: done, stopped })
+    let coherence = (0..nch)
+        .map(|c| {
+            (0..bins.len())
+                .map(|j| sxf[c][j].norm_sqr() / (sxx[c][j] * sxx[fc][j]).max(f64::MIN_POSITIVE))
+                .collect()
+        })
+        .collect();
+    Ok(BroadbandResult {
+        freqs_hz: bins.iter().map(|k| *k as f64 * df).collect(),
+        h1,
+        coherence,
+        averages: done,
+        stopped,
+    })
 }
 
 fn mean_coherence(sxf: &[Vec<Complex<f64>>], sxx: &[Vec<f64>], fc: usize) -> f64 {

@@ -36,9 +36,10 @@ impl IndicatifProgress {
     /// A hidden bar until [`SweepProgress::start`].
     pub fn new() -> Self {
         let bar = ProgressBar::new(0);
-        let style = ProgressStyle::with_template("{elapsed_precise} [{bar:30}] step {pos}/{len} {msg}")
-            .unwrap_or_else(|_| ProgressStyle::default_bar())
-            .progress_chars("=> ");
+        let style =
+            ProgressStyle::with_template("{elapsed_precise} [{bar:30}] step {pos}/{len} {msg}")
+                .unwrap_or_else(|_| ProgressStyle::default_bar())
+                .progress_chars("=> ");
         bar.set_style(style);
         IndicatifProgress { bar }
     }
@@ -51,7 +52,9 @@ impl SweepProgress for IndicatifProgress {
     }
     fn step(&self, _step: usize, freq_hz: f64, force_n: f64, quality: f64) {
         self.bar.inc(1);
-        self.bar.set_message(format!("{freq_hz:8.2} Hz  {force_n:7.1} N  coh {quality:.3}"));
+        self.bar.set_message(format!(
+            "{freq_hz:8.2} Hz  {force_n:7.1} N  coh {quality:.3}"
+        ));
     }
     fn finish(&self, how: &str) {
         self.bar.finish_with_message(how.to_string());

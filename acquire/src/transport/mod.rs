@@ -36,8 +36,14 @@ impl MemoryTransport {
     pub fn pair(a: &str, b: &str, capacity: usize) -> (MemoryTransport, MemoryTransport) {
         let (x, y) = tokio::io::duplex(capacity);
         (
-            MemoryTransport { name: format!("mem:{a}"), inner: x },
-            MemoryTransport { name: format!("mem:{b}"), inner: y },
+            MemoryTransport {
+                name: format!("mem:{a}"),
+                inner: x,
+            },
+            MemoryTransport {
+                name: format!("mem:{b}"),
+                inner: y,
+            },
         )
     }
 }
@@ -103,7 +109,9 @@ pub enum TransportError {
         port: String,
     },
     /// The path exists but is not a terminal device.
-    #[error("serial port {port}: not a serial device ({detail}); check the `port` in the stand file")]
+    #[error(
+        "serial port {port}: not a serial device ({detail}); check the `port` in the stand file"
+    )]
     NotSerial {
         /// Port path.
         port: String,

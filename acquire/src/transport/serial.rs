@@ -30,20 +30,29 @@ pub struct SerialTransport {
 
 impl std::fmt::Debug for SerialTransport {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("SerialTransport").field("port", &self.name).finish()
+        f.debug_struct("SerialTransport")
+            .field("port", &self.name)
+            .finish()
     }
 }
 
 /// Opens `port` exclusively (an `flock` plus `TIOCEXCL`, so a second program gets
 /// [`TransportError::Busy`]). Must be called inside a tokio runtime.
-pub fn open_serial(port: &str, settings: &SerialSettings) -> Result<SerialTransport, TransportError> {
+pub fn open_serial(
+    port: &str,
+    settings: &SerialSettings,
+) -> Result<SerialTransport, TransportError> {
     let path = std::path::Path::new(port);
     match std::fs::metadata(path) {
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
-            return Err(TransportError::NotFound { port: port.to_string() })
+            return Err(TransportError::NotFound {
+                port: port.to_string(),
+            })
         }
         Err(e) if e.kind() == std::io::ErrorKind::PermissionDenied => {
-            return Err(TransportError::PermissionDenied { port: port.to_string() })
+            return Err(TransportError::PermissionDenied {
+                port: port.to_string(),
+            })
         }
         Ok(m) if m.is_dir() => {
             return Err(TransportError::NotSerial {
@@ -60,7 +69,10 @@ pub fn open_serial(port: &str, settings: &SerialSettings) -> Result<SerialTransp
         .flow_control(tokio_serial::FlowControl::None)
         .open_native_async()
         .map_err(|e| classify_open_error(port, &e))?;
-    Ok(SerialTransport { name: port.to_string(), inner: stream })
+    Ok(SerialTransport {
+        name: port.to_string(),
+        inner: stream,
+    })
 }
 
 /// Maps a `serialport` error to a [`TransportError`] that says what to check.
@@ -70,7 +82,9 @@ pub(crate) fn classify_open_error(port: &str, e: &tokio_serial::Error) -> Transp
     let detail = e.description.clone();
     match e.kind {
         ErrorKind::Io(std::io::ErrorKind::NotFound) => TransportError::NotFound { port },
-        ErrorKind::Io(std::io::ErrorKind::PermissionDenied) => TransportError::PermissionDenied { port },
+        ErrorKind::Io(std::io::ErrorKind::PermissionDenied) => {
+            TransportError::PermissionDenied { port }
+        }
         ErrorKind::NoDevice if detail.contains("lock") || detail.contains("busy") => {
             TransportError::Busy { port }
         }
@@ -101,7 +115,11 @@ impl AsyncRead for SerialTransport {
 }
 
 impl AsyncWrite for SerialTransport {
-    fn poll_write(mut self: Pin<&mut Self>, cx: &mut Context<'_>, buf: &[u8]) -> Poll<std::io::Result<usize>> {
+    fn poll_write(
+        mut self: Pin<&mut Self>,
+        cx: &mut Context<'_>,
+        buf: &[u8],
+    ) -> Poll<std::io::Result<usize>> {
         Pin::new(&mut self.inner).poll_write(cx, buf)
     }
     fn poll_flush(mut self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<std::io::Result<()>> {
@@ -128,12 +146,21 @@ pub struct PtyDevice {
 /// real port. While no host program has it open, reads of the device end fail with `EIO`; device
 /// simulators treat that as "nobody connected" and retry.
 pub fn pty_pair(role: &str) -> Result<PtyDevice, TransportError> {
-    let err = |e: tokio_serial::Error| TransportError::Pty { role: role.to_string(), detail: e.description };
+    let err = |e: tokio_serial::Error| TransportError::Pty {
+        role: role.to_string(),
+        detail: e.description,
+    };
     let (master, slave) = SerialStream::pair().map_err(err)?;
     let path = slave.name().ok_or_else(|| TransportError::Pty {
         role: role.to_string(),
         detail: "the pseudo-terminal has no name".into(),
     })?;
     drop(slave);
-    Ok(PtyDevice { device: SerialTransport { name: format!("sim-{role}:{path}"), inner: master }, path })
+    Ok(PtyDevice {
+        device: SerialTransport {
+            name: format!("sim-{role}:{path}"),
+            inner: master,
+        },
+        path,
+    })
 }

@@ -28,7 +28,12 @@ pub async fn bounded<F: std::future::Future>(secs: u64, f: F) -> F::Output {
 /// All records of a session file, which must be complete.
 pub fn records(path: &Path) -> Vec<Record> {
     let r = session::read(path).unwrap_or_else(|e| panic!("{e}"));
-    assert_eq!(r.truncated, None, "session file {} is not complete", path.display());
+    assert_eq!(
+        r.truncated,
+        None,
+        "session file {} is not complete",
+        path.display()
+    );
     r.records
 }
 
@@ -70,19 +75,39 @@ with open(sys.argv[1], "rb") as f:
 print(n)
 print(",".join(sorted(topics)))
 "#;
-    let out = std::process::Command::new("python3").arg("-c").arg(script).arg(path).output();
+    let out = std::process::Command::new("python3")
+        .arg("-c")
+        .arg(script)
+        .arg(path)
+        .output();
     let out = match out {
         Ok(o) => o,
-        Err(e) => panic!("python3 is not available ({e}); run .ci/setup to install the test prerequisites"),
+        Err(e) => panic!(
+            "python3 is not available ({e}); run .ci/setup to install the test prerequisites"
+        ),
     };
     let stdout = String::from_utf8_lossy(&out.stdout);
     if stdout.contains("MISSING-MCAP") {
         panic!("the Python `mcap` package is missing; run .ci/setup (it installs .ci/requirements.txt)");
     }
-    assert!(out.status.success(), "python mcap reader failed on {}:\n{}\n{}", path.display(), stdout, String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "python mcap reader failed on {}:\n{}\n{}",
+        path.display(),
+        stdout,
+        String::from_utf8_lossy(&out.stderr)
+    );
     let mut lines = stdout.lines();
-    let n = lines.next().and_then(|l| l.trim().parse().ok()).expect("count");
-    let topics = lines.next().unwrap_or("").split(',').map(str::to_string).collect();
+    let n = lines
+        .next()
+        .and_then(|l| l.trim().parse().ok())
+        .expect("count");
+    let topics = lines
+        .next()
+        .unwrap_or("")
+        .split(',')
+        .map(str::to_string)
+        .collect();
     (n, topics)
 }
 
@@ -93,10 +118,23 @@ pub fn model_sim_stand_in(dir: &Path, speed: Option<f64>) -> Stand {
     let models = dir.join("models");
     std::fs::create_dir_all(&stands).expect("stands dir");
     std::fs::create_dir_all(&models).expect("models dir");
-    std::fs::write(stands.join("fwd32j-model-sim.toml"), include_str!("../../../configs/stands/fwd32j-model-sim.toml")).expect("write stand");
-    std::fs::write(models.join("fwd32j.toml"), include_str!("../../../configs/models/fwd32j.toml")).expect("write truth");
-    std::fs::write(models.join("fwd32j-no-actuator.toml"), include_str!("../../../configs/models/fwd32j-no-actuator.toml")).expect("write geometry");
-    let mut s = Stand::load(&stands.join("fwd32j-model-sim.toml")).unwrap_or_else(|e| panic!("{e}"));
+    std::fs::write(
+        stands.join("fwd32j-model-sim.toml"),
+        include_str!("../../../configs/stands/fwd32j-model-sim.toml"),
+    )
+    .expect("write stand");
+    std::fs::write(
+        models.join("fwd32j.toml"),
+        include_str!("../../../configs/models/fwd32j.toml"),
+    )
+    .expect("write truth");
+    std::fs::write(
+        models.join("fwd32j-no-actuator.toml"),
+        include_str!("../../../configs/models/fwd32j-no-actuator.toml"),
+    )
+    .expect("write geometry");
+    let mut s =
+        Stand::load(&stands.join("fwd32j-model-sim.toml")).unwrap_or_else(|e| panic!("{e}"));
     if let (Some(t), Some(x)) = (s.truth.as_mut(), speed) {
         t.speed = x;
     }
@@ -109,12 +147,19 @@ pub fn model_sim_stand_in(dir: &Path, speed: Option<f64>) -> Stand {
 /// stated noise is not absurdly pessimistic (the median error is at least 1/20 σ).
 /// Returns the number of points checked.
 pub fn assert_matches_truth(a: &acquire::analysis::SessionAnalysis, truth_model: &Path) {
-    let truth = identify::modelfile::load(truth_model).unwrap_or_else(|e| panic!("{e}")).model;
+    let truth = identify::modelfile::load(truth_model)
+        .unwrap_or_else(|e| panic!("{e}"))
+        .model;
     let mut ratios = Vec::new();
     for m in &a.measured.characteristics {
         let c = m.resolve(&truth).expect("characteristic of a truth body");
-        let o = truth.outputs.iter().position(|x| *x == c).expect("a declared output of the truth model");
-        let r = identify::frf::response(&truth, &m.freqs_hz, &[], identify::frf::Method::Auto).expect("truth FRF");
+        let o = truth
+            .outputs
+            .iter()
+            .position(|x| *x == c)
+            .expect("a declared output of the truth model");
+        let r = identify::frf::response(&truth, &m.freqs_hz, &[], identify::frf::Method::Auto)
+            .expect("truth FRF");
         let phase = m.phase_rad.as_ref().expect("phases measured");
         let var = m.variance.as_ref().expect("variances stated");
         for (k, f) in m.freqs_hz.iter().enumerate() {
@@ -134,6 +179,13 @@ pub fn assert_matches_truth(a: &acquire::analysis::SessionAnalysis, truth_model:
     }
     ratios.sort_by(f64::total_cmp);
     let median = ratios[ratios.len() / 2];
-    assert!(median > 0.05 && median < 3.0, "median error / σ = {median}: the stated variances do not describe the errors");
-    eprintln!("truth check: {} points, median |error|/σ = {median:.2}, max {:.2}", ratios.len(), ratios[ratios.len() - 1]);
+    assert!(
+        median > 0.05 && median < 3.0,
+        "median error / σ = {median}: the stated variances do not describe the errors"
+    );
+    eprintln!(
+        "truth check: {} points, median |error|/σ = {median:.2}, max {:.2}",
+        ratios.len(),
+        ratios[ratios.len() - 1]
+    );
 }

@@ -12,7 +12,11 @@ use identify::C64;
 /// Values `[o][line]` and Jacobian `[p][o][line]` (flattened like `frf::Response`).
 pub fn dense_response(model: &Model, freqs: &[f64], params: &[ParamRef]) -> (Vec<C64>, Vec<C64>) {
     let s = System::assemble(model);
-    let blocks: Vec<_> = s.param_blocks(model, params).into_iter().map(|b| b.expect("param")).collect();
+    let blocks: Vec<_> = s
+        .param_blocks(model, params)
+        .into_iter()
+        .map(|b| b.expect("param"))
+        .collect();
     let n = s.n;
     let outs = s.output_dofs.len();
     let lines = freqs.len();
@@ -21,7 +25,10 @@ pub fn dense_response(model: &Model, freqs: &[f64], params: &[ParamRef]) -> (Vec
     for (k, f) in freqs.iter().enumerate() {
         let w2 = (2.0 * std::f64::consts::PI * f).powi(2);
         let a = Mat::<C64>::from_fn(n, n, |i, j| {
-            C64::new(s.k[i * n + j] - if i == j { w2 * s.mass[i] } else { 0.0 }, s.d[i * n + j])
+            C64::new(
+                s.k[i * n + j] - if i == j { w2 * s.mass[i] } else { 0.0 },
+                s.d[i * n + j],
+            )
         });
         let lu = a.partial_piv_lu();
         let p = Mat::<C64>::from_fn(n, 1, |i, _| C64::new(s.load[i], 0.0));
@@ -47,7 +54,8 @@ pub fn dense_response(model: &Model, freqs: &[f64], params: &[ParamRef]) -> (Vec
             let rhs = -(&da * &q);
             let dq = lu.solve(&rhs);
             for (o, &d) in s.output_dofs.iter().enumerate() {
-                jac[(pi * outs + o) * lines + k] = dq[(d, 0)] * model.outputs[o].quantity.factor(w2.sqrt());
+                jac[(pi * outs + o) * lines + k] =
+                    dq[(d, 0)] * model.outputs[o].quantity.factor(w2.sqrt());
             }
         }
     }

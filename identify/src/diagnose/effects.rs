@@ -170,26 +170,69 @@ impl Effect {
 
     /// What and where, for reports (mm at the edge).
     pub fn describe(&self) -> String {
-        let mm = |p: &Vector3<f64>| format!("({:.0}, {:.0}, {:.0}) mm", 1e3 * p.x, 1e3 * p.y, 1e3 * p.z);
+        let mm =
+            |p: &Vector3<f64>| format!("({:.0}, {:.0}, {:.0}) mm", 1e3 * p.x, 1e3 * p.y, 1e3 * p.z);
         let name = |b: &Option<String>| b.clone().unwrap_or_else(|| "ground".into());
-        let spring = |bodies: &[Option<String>; 2], at: &str, point: &Vector3<f64>, d: &Vector3<f64>, tail: &str| {
-            format!("spring {}–{} {at} {} along ({:.3}, {:.3}, {:.3}){tail}", name(&bodies[0]), name(&bodies[1]), mm(point), d.x, d.y, d.z)
+        let spring = |bodies: &[Option<String>; 2],
+                      at: &str,
+                      point: &Vector3<f64>,
+                      d: &Vector3<f64>,
+                      tail: &str| {
+            format!(
+                "spring {}–{} {at} {} along ({:.3}, {:.3}, {:.3}){tail}",
+                name(&bodies[0]),
+                name(&bodies[1]),
+                mm(point),
+                d.x,
+                d.y,
+                d.z
+            )
         };
         match self {
-            Effect::Spring { bodies, point, direction, .. } => spring(bodies, "at", point, direction, ""),
-            Effect::PlacedSpring { bodies, point, direction, .. } => {
-                spring(bodies, "near", point, direction, " (line of action fitted: s1, s2 across it)")
-            }
+            Effect::Spring {
+                bodies,
+                point,
+                direction,
+                ..
+            } => spring(bodies, "at", point, direction, ""),
+            Effect::PlacedSpring {
+                bodies,
+                point,
+                direction,
+                ..
+            } => spring(
+                bodies,
+                "near",
+                point,
+                direction,
+                " (line of action fitted: s1, s2 across it)",
+            ),
             Effect::Mass { body, point, .. } => format!("point mass on {body} at {}", mm(point)),
-            Effect::PlacedMass { body, point, .. } => format!("point mass on {body} near {} (position fitted: dx, dy, dz)", mm(point)),
-            Effect::Resonator { body, point, freq_hz, .. } => {
+            Effect::PlacedMass { body, point, .. } => format!(
+                "point mass on {body} near {} (position fitted: dx, dy, dz)",
+                mm(point)
+            ),
+            Effect::Resonator {
+                body,
+                point,
+                freq_hz,
+                ..
+            } => {
                 format!("resonator (≈{freq_hz:.0} Hz) on {body} at {}", mm(point))
             }
             Effect::Flexible { body, axis, .. } => {
-                format!("{body} not rigid: three RFEs along its principal axis {}", axis + 1)
+                format!(
+                    "{body} not rigid: three RFEs along its principal axis {}",
+                    axis + 1
+                )
             }
             Effect::Gain { label, .. } => format!("gain error of {label}"),
-            Effect::Damping { variable_name, sdes, parameter, .. } => format!(
+            Effect::Damping {
+                variable_name,
+                sdes,
+                parameter,
+                ..
+            } => format!(
                 "own {} for SDE {} (split from \"{variable_name}\")",
                 parameter.as_str(),
                 sdes.join(", ")
@@ -199,7 +242,15 @@ impl Effect {
 
     /// The effect's parameters.
     pub fn params(&self, f_max: f64) -> Vec<EffectParam> {
-        let p = |name, unit, nested, initial, lower, upper, scale| EffectParam { name, unit, nested, initial, lower, upper, scale };
+        let p = |name, unit, nested, initial, lower, upper, scale| EffectParam {
+            name,
+            unit,
+            nested,
+            initial,
+            lower,
+            upper,
+            scale,
+        };
         match self {
             Effect::Spring { psi, .. } => vec![
                 p("k", "N/m", 0.0, 0.0, 0.0, f64::INFINITY, 1e6),
@@ -221,12 +272,30 @@ impl Effect {
             }
             Effect::Resonator { freq_hz, scale, .. } => vec![
                 p("m", "kg", 0.0, 0.0, 0.0, f64::INFINITY, *scale),
-                p("f", "Hz", *freq_hz, *freq_hz, 0.2 * freq_hz, (5.0 * freq_hz).min(MOUNT_ABOVE_BAND * f_max / 3.0), *freq_hz),
+                p(
+                    "f",
+                    "Hz",
+                    *freq_hz,
+                    *freq_hz,
+                    0.2 * freq_hz,
+                    (5.0 * freq_hz).min(MOUNT_ABOVE_BAND * f_max / 3.0),
+                    *freq_hz,
+                ),
             ],
-            Effect::Flexible { scale, .. } => vec![p("c", "m/N", 0.0, 0.0, 0.0, f64::INFINITY, *scale)],
+            Effect::Flexible { scale, .. } => {
+                vec![p("c", "m/N", 0.0, 0.0, 0.0, f64::INFINITY, *scale)]
+            }
             Effect::Gain { .. } => vec![p("g", "-", 0.0, 0.0, -0.5, 0.5, 0.01)],
             Effect::Damping { value, .. } => {
-                vec![p("psi", "-", *value, *value, 0.0, 2.0 * TWO_PI, value.abs().max(0.05))]
+                vec![p(
+                    "psi",
+                    "-",
+                    *value,
+                    *value,
+                    0.0,
+                    2.0 * TWO_PI,
+                    value.abs().max(0.05),
+                )]
             }
         }
     }
@@ -238,19 +307,31 @@ impl Effect {
     /// (flexible body).
     pub fn rows(&self, model: &Model) -> Option<Vec<Vec<(usize, f64)>>> {
         match self {
-            Effect::Spring { bodies, point, direction, .. } => {
+            Effect::Spring {
+                bodies,
+                point,
+                direction,
+                ..
+            } => {
                 let mut row = Vec::with_capacity(12);
                 for (side, sign) in [(0usize, -1.0), (1, 1.0)] {
                     if let Some(name) = &bodies[side] {
                         let b = model.body_index(name)?;
-                        row.extend(point_row(model, b, point, direction).map(|(i, v)| (i, sign * v)));
+                        row.extend(
+                            point_row(model, b, point, direction).map(|(i, v)| (i, sign * v)),
+                        );
                     }
                 }
                 Some(vec![row])
             }
             Effect::Mass { body, point, .. } | Effect::Resonator { body, point, .. } => {
                 let b = model.body_index(body)?;
-                Some(axes().iter().map(|u| point_row(model, b, point, u).to_vec()).collect())
+                Some(
+                    axes()
+                        .iter()
+                        .map(|u| point_row(model, b, point, u).to_vec())
+                        .collect(),
+                )
             }
             _ => None,
         }
@@ -275,26 +356,60 @@ impl Effect {
     pub fn apply(&self, r: &mut Realized, gamma: &[f64], f_max: f64) -> Result<(), String> {
         let model = &mut r.model;
         match self {
-            Effect::Spring { bodies, point, direction, .. } => add_spring(model, bodies, point, direction, gamma[0], gamma[1])?,
-            Effect::PlacedSpring { bodies, point, direction, .. } => {
+            Effect::Spring {
+                bodies,
+                point,
+                direction,
+                ..
+            } => add_spring(model, bodies, point, direction, gamma[0], gamma[1])?,
+            Effect::PlacedSpring {
+                bodies,
+                point,
+                direction,
+                ..
+            } => {
                 let frame = frame_from_axis(direction);
                 let at = point + frame.column(1) * gamma[2] + frame.column(2) * gamma[3];
                 add_spring(model, bodies, &at, direction, gamma[0], gamma[1])?;
             }
             Effect::Mass { body, point, .. } => {
                 if gamma[0] > 0.0 {
-                    attach_mass(model, body, point, gamma[0], MOUNT_ABOVE_BAND * f_max, STRUCTURAL_PSI, "diagnosed mass")?;
+                    attach_mass(
+                        model,
+                        body,
+                        point,
+                        gamma[0],
+                        MOUNT_ABOVE_BAND * f_max,
+                        STRUCTURAL_PSI,
+                        "diagnosed mass",
+                    )?;
                 }
             }
             Effect::PlacedMass { body, point, .. } => {
                 if gamma[0] > 0.0 {
                     let at = point + Vector3::new(gamma[1], gamma[2], gamma[3]);
-                    attach_mass(model, body, &at, gamma[0], MOUNT_ABOVE_BAND * f_max, STRUCTURAL_PSI, "diagnosed mass")?;
+                    attach_mass(
+                        model,
+                        body,
+                        &at,
+                        gamma[0],
+                        MOUNT_ABOVE_BAND * f_max,
+                        STRUCTURAL_PSI,
+                        "diagnosed mass",
+                    )?;
                 }
             }
             Effect::Resonator { body, point, .. } => {
                 if gamma[0] > 0.0 {
-                    attach_mass(model, body, point, gamma[0], gamma[1], STRUCTURAL_PSI, "diagnosed resonator")?;
+                    attach_mass(
+                        model,
+                        body,
+                        point,
+                        gamma[0],
+                        gamma[1],
+                        STRUCTURAL_PSI,
+                        "diagnosed resonator",
+                    )?;
                 }
             }
             Effect::Flexible { body, axis, .. } => {
@@ -306,7 +421,12 @@ impl Effect {
                 let g = r.gains.get_mut(*output).ok_or("no such characteristic")?;
                 *g *= 1.0 + gamma[0];
             }
-            Effect::Damping { variable, sdes, parameter, .. } => {
+            Effect::Damping {
+                variable,
+                sdes,
+                parameter,
+                ..
+            } => {
                 let var = r.vars.vars.get_mut(*variable).ok_or("no such variable")?;
                 let mut moved = Vec::new();
                 var.targets.retain(|t| {
@@ -317,10 +437,18 @@ impl Effect {
                     !hit
                 });
                 if var.targets.is_empty() {
-                    return Err("the split would leave the group variable without parameters".into());
+                    return Err(
+                        "the split would leave the group variable without parameters".into(),
+                    );
                 }
                 for p in moved {
-                    model.set_param(ParamRef { sde: p.sde, name: *parameter }, gamma[0]);
+                    model.set_param(
+                        ParamRef {
+                            sde: p.sde,
+                            name: *parameter,
+                        },
+                        gamma[0],
+                    );
                 }
             }
         }
@@ -333,7 +461,12 @@ fn axes() -> [Vector3<f64>; 3] {
 }
 
 /// Displacement of `point` (global) of body `b` along unit `u` as a row over the model's DOFs.
-pub fn point_row(model: &Model, b: usize, point: &Vector3<f64>, u: &Vector3<f64>) -> [(usize, f64); 6] {
+pub fn point_row(
+    model: &Model,
+    b: usize,
+    point: &Vector3<f64>,
+    u: &Vector3<f64>,
+) -> [(usize, f64); 6] {
     let body = &model.bodies[b];
     let g = generalized_force(&body.position, &body.rotation, point, u, &Vector3::zeros());
     std::array::from_fn(|i| (6 * b + i, g[i]))
@@ -343,7 +476,9 @@ fn fresh_name(model: &Model, stem: &str) -> String {
     let mut i = 1;
     loop {
         let name = format!("{stem} {i}");
-        if !model.sdes.iter().any(|s| s.name == name) && !model.bodies.iter().any(|b| b.name == name) {
+        if !model.sdes.iter().any(|s| s.name == name)
+            && !model.bodies.iter().any(|b| b.name == name)
+        {
             return name;
         }
         i += 1;
@@ -351,9 +486,22 @@ fn fresh_name(model: &Model, stem: &str) -> String {
 }
 
 /// An axial spring-damper `k`, `psi` between `bodies` (None = ground) at `point` along `direction`.
-fn add_spring(model: &mut Model, bodies: &[Option<String>; 2], point: &Vector3<f64>, direction: &Vector3<f64>, k: f64, psi: f64) -> Result<(), String> {
+fn add_spring(
+    model: &mut Model,
+    bodies: &[Option<String>; 2],
+    point: &Vector3<f64>,
+    direction: &Vector3<f64>,
+    k: f64,
+    psi: f64,
+) -> Result<(), String> {
     let idx = |b: &Option<String>| -> Result<Option<usize>, String> {
-        b.as_ref().map(|n| model.body_index(n).ok_or_else(|| format!("no body \"{n}\""))).transpose()
+        b.as_ref()
+            .map(|n| {
+                model
+                    .body_index(n)
+                    .ok_or_else(|| format!("no body \"{n}\""))
+            })
+            .transpose()
     };
     let bodies = [idx(&bodies[0])?, idx(&bodies[1])?];
     let name = fresh_name(model, "diagnosed spring");
@@ -363,22 +511,41 @@ fn add_spring(model: &mut Model, bodies: &[Option<String>; 2], point: &Vector3<f
         bodies,
         point: *point,
         rotation: frame_from_axis(direction),
-        law: SdeLaw::Axial { k: k.max(0.0), psi: psi.max(0.0) },
+        law: SdeLaw::Axial {
+            k: k.max(0.0),
+            psi: psi.max(0.0),
+        },
         enabled: true,
     });
     Ok(())
 }
 
 /// A body of mass `m` at `point`, on an isotropic General SDE to `host` tuned to `freq_hz`.
-fn attach_mass(model: &mut Model, host: &str, point: &Vector3<f64>, m: f64, freq_hz: f64, psi: f64, stem: &str) -> Result<(), String> {
-    let h = model.body_index(host).ok_or_else(|| format!("no body \"{host}\""))?;
+fn attach_mass(
+    model: &mut Model,
+    host: &str,
+    point: &Vector3<f64>,
+    m: f64,
+    freq_hz: f64,
+    psi: f64,
+    stem: &str,
+) -> Result<(), String> {
+    let h = model
+        .body_index(host)
+        .ok_or_else(|| format!("no body \"{host}\""))?;
     if !(freq_hz.is_finite() && freq_hz > 0.0) {
         return Err(format!("resonator frequency {freq_hz} Hz is not > 0"));
     }
     let j = m * POINT_RADIUS * POINT_RADIUS;
     let name = fresh_name(model, stem);
     let b = model.bodies.len();
-    model.bodies.push(Body { name: name.clone(), mass: m, inertia: [j; 3], position: *point, rotation: Matrix3::identity() });
+    model.bodies.push(Body {
+        name: name.clone(),
+        mass: m,
+        inertia: [j; 3],
+        position: *point,
+        rotation: Matrix3::identity(),
+    });
     let w2 = (TWO_PI * freq_hz).powi(2);
     let (kt, kr) = (m * w2, j * w2);
     model.sdes.push(Sde {
@@ -387,7 +554,10 @@ fn attach_mass(model: &mut Model, host: &str, point: &Vector3<f64>, m: f64, freq
         bodies: [Some(h), Some(b)],
         point: *point,
         rotation: Matrix3::identity(),
-        law: SdeLaw::General { k: [kt, kt, kt, kr, kr, kr], psi: [psi; 6] },
+        law: SdeLaw::General {
+            k: [kt, kt, kt, kr, kr, kr],
+            psi: [psi; 6],
+        },
         enabled: true,
     });
     Ok(())
@@ -406,12 +576,17 @@ pub fn box_sides(body: &Body) -> [f64; 3] {
 /// times the cut section's squared radius of gyration). The centre third keeps the name (and the
 /// output characteristics: same centre, same axes); SDEs and forces move to the third they act on.
 pub fn split_body(model: &mut Model, name: &str, axis: usize, c: f64) -> Result<(), String> {
-    let b = model.body_index(name).ok_or_else(|| format!("no body \"{name}\""))?;
+    let b = model
+        .body_index(name)
+        .ok_or_else(|| format!("no body \"{name}\""))?;
     let body = model.bodies[b].clone();
     let sides = box_sides(&body);
     let len = sides[axis];
     if !(len > 0.0) {
-        return Err(format!("{name}: its inertias give no length along axis {}", axis + 1));
+        return Err(format!(
+            "{name}: its inertias give no length along axis {}",
+            axis + 1
+        ));
     }
     let piece_sides = {
         let mut s = sides;
@@ -426,7 +601,16 @@ pub fn split_body(model: &mut Model, name: &str, axis: usize, c: f64) -> Result<
     let u = body.rotation.column(axis).into_owned();
     let ends = [(-1.0, "−"), (1.0, "+")].map(|(s, sign)| {
         let pos = body.position + u * (s * len / 3.0);
-        (s, Body { name: format!("{name} ({sign}{} third)", axis + 1), mass: m, inertia, position: pos, rotation: body.rotation })
+        (
+            s,
+            Body {
+                name: format!("{name} ({sign}{} third)", axis + 1),
+                mass: m,
+                inertia,
+                position: pos,
+                rotation: body.rotation,
+            },
+        )
     });
     model.bodies[b].mass = m;
     model.bodies[b].inertia = inertia;
@@ -462,17 +646,28 @@ pub fn split_body(model: &mut Model, name: &str, axis: usize, c: f64) -> Result<
     let (a1, a2) = (sides[(axis + 1) % 3], sides[(axis + 2) % 3]);
     let kt = 1.0 / c;
     let r2 = [(a1 * a1 + a2 * a2) / 12.0, a2 * a2 / 12.0, a1 * a1 / 12.0];
-    let frame = Matrix3::from_columns(&[u, body.rotation.column((axis + 1) % 3).into_owned(), body.rotation.column((axis + 2) % 3).into_owned()]);
+    let frame = Matrix3::from_columns(&[
+        u,
+        body.rotation.column((axis + 1) % 3).into_owned(),
+        body.rotation.column((axis + 2) % 3).into_owned(),
+    ]);
     for (k, (s, _)) in ends.iter().enumerate() {
         let point = body.position + u * (s * len / 6.0);
-        let jn = format!("{name} joint {}{}", if *s < 0.0 { "−" } else { "+" }, axis + 1);
+        let jn = format!(
+            "{name} joint {}{}",
+            if *s < 0.0 { "−" } else { "+" },
+            axis + 1
+        );
         model.sdes.push(Sde {
             name: jn,
             kind: SdeKind::General,
             bodies: [Some(b), Some(first + k)],
             point,
             rotation: frame,
-            law: SdeLaw::General { k: [kt, kt, kt, kt * r2[0], kt * r2[1], kt * r2[2]], psi: [STRUCTURAL_PSI; 6] },
+            law: SdeLaw::General {
+                k: [kt, kt, kt, kt * r2[0], kt * r2[1], kt * r2[2]],
+                psi: [STRUCTURAL_PSI; 6],
+            },
             enabled: true,
         });
     }

@@ -29,7 +29,14 @@ fn push_unique(points: &mut Vec<Vector3<f64>>, p: Vector3<f64>) {
 
 /// Candidates for `model` (identified values `x` of `vars`), measured characteristics labelled
 /// `labels`, band `f_lo..f_hi` (Hz).
-pub fn candidates(model: &Model, vars: &Variables, x: &[f64], labels: &[String], f_lo: f64, f_hi: f64) -> Vec<Effect> {
+pub fn candidates(
+    model: &Model,
+    vars: &Variables,
+    x: &[f64],
+    labels: &[String],
+    f_lo: f64,
+    f_hi: f64,
+) -> Vec<Effect> {
     let nb = model.bodies.len();
     let mut out = Vec::new();
     let mut directions = vec![Vector3::x(), Vector3::y(), Vector3::z()];
@@ -42,7 +49,13 @@ pub fn candidates(model: &Model, vars: &Variables, x: &[f64], labels: &[String],
         }
     }
     let psi = typical_psi(model);
-    let force_points = |b: usize| model.forces.iter().filter(move |f| f.body == b).map(|f| f.point);
+    let force_points = |b: usize| {
+        model
+            .forces
+            .iter()
+            .filter(move |f| f.body == b)
+            .map(|f| f.point)
+    };
     // Springs.
     for a in 0..nb {
         for b in (a + 1)..nb {
@@ -52,12 +65,20 @@ pub fn candidates(model: &Model, vars: &Variables, x: &[f64], labels: &[String],
                     push_unique(&mut points, s.point);
                 }
             }
-            force_points(a).chain(force_points(b)).for_each(|p| push_unique(&mut points, p));
-            push_unique(&mut points, 0.5 * (model.bodies[a].position + model.bodies[b].position));
+            force_points(a)
+                .chain(force_points(b))
+                .for_each(|p| push_unique(&mut points, p));
+            push_unique(
+                &mut points,
+                0.5 * (model.bodies[a].position + model.bodies[b].position),
+            );
             for p in points {
                 for d in &directions {
                     out.push(Effect::Spring {
-                        bodies: [Some(model.bodies[a].name.clone()), Some(model.bodies[b].name.clone())],
+                        bodies: [
+                            Some(model.bodies[a].name.clone()),
+                            Some(model.bodies[b].name.clone()),
+                        ],
                         point: p,
                         direction: *d,
                         psi,
@@ -79,18 +100,30 @@ pub fn candidates(model: &Model, vars: &Variables, x: &[f64], labels: &[String],
         let sides = box_sides(body);
         for (axis, side) in sides.iter().enumerate() {
             for sign in [-1.0, 1.0] {
-                push_unique(&mut points, body.position + body.rotation.column(axis) * (sign * 0.5 * side));
+                push_unique(
+                    &mut points,
+                    body.position + body.rotation.column(axis) * (sign * 0.5 * side),
+                );
             }
         }
         for p in points {
             for d in &directions {
-                out.push(Effect::Spring { bodies: [None, Some(model.bodies[a].name.clone())], point: p, direction: *d, psi });
+                out.push(Effect::Spring {
+                    bodies: [None, Some(model.bodies[a].name.clone())],
+                    point: p,
+                    direction: *d,
+                    psi,
+                });
             }
         }
     }
     // Masses and resonators.
-    let n_res = ((f_hi / f_lo).log10() * RESONATORS_PER_DECADE).ceil().max(1.0) as usize;
-    let res_freqs: Vec<f64> = (0..n_res).map(|i| f_lo * (f_hi / f_lo).powf((i as f64 + 0.5) / n_res as f64)).collect();
+    let n_res = ((f_hi / f_lo).log10() * RESONATORS_PER_DECADE)
+        .ceil()
+        .max(1.0) as usize;
+    let res_freqs: Vec<f64> = (0..n_res)
+        .map(|i| f_lo * (f_hi / f_lo).powf((i as f64 + 0.5) / n_res as f64))
+        .collect();
     for (b, body) in model.bodies.iter().enumerate() {
         let mut points = vec![body.position];
         let sides = box_sides(body);
@@ -102,9 +135,18 @@ pub fn candidates(model: &Model, vars: &Variables, x: &[f64], labels: &[String],
         force_points(b).for_each(|p| push_unique(&mut points, p));
         let scale = 0.01 * body.mass;
         for p in &points {
-            out.push(Effect::Mass { body: body.name.clone(), point: *p, scale });
+            out.push(Effect::Mass {
+                body: body.name.clone(),
+                point: *p,
+                scale,
+            });
             for f in &res_freqs {
-                out.push(Effect::Resonator { body: body.name.clone(), point: *p, freq_hz: *f, scale });
+                out.push(Effect::Resonator {
+                    body: body.name.clone(),
+                    point: *p,
+                    freq_hz: *f,
+                    scale,
+                });
             }
         }
         let stiff = model
@@ -116,16 +158,28 @@ pub fn candidates(model: &Model, vars: &Variables, x: &[f64], labels: &[String],
         if stiff > 0.0 {
             for (axis, side) in sides.iter().enumerate() {
                 if *side > 0.0 {
-                    out.push(Effect::Flexible { body: body.name.clone(), axis, scale: 1.0 / stiff });
+                    out.push(Effect::Flexible {
+                        body: body.name.clone(),
+                        axis,
+                        scale: 1.0 / stiff,
+                    });
                 }
             }
         }
     }
     for (o, label) in labels.iter().enumerate() {
-        out.push(Effect::Gain { output: o, label: label.clone() });
+        out.push(Effect::Gain {
+            output: o,
+            label: label.clone(),
+        });
     }
     // Joint damping: split a ψ group by the pair of bodies its SDEs join.
-    for (vi, v) in vars.vars.iter().enumerate().filter(|(_, v)| v.dissipation && v.tie == Tie::Equal && v.targets.len() > 1) {
+    for (vi, v) in vars
+        .vars
+        .iter()
+        .enumerate()
+        .filter(|(_, v)| v.dissipation && v.tie == Tie::Equal && v.targets.len() > 1)
+    {
         let mut joints: Vec<([Option<usize>; 2], Vec<String>)> = Vec::new();
         for t in &v.targets {
             let sde = &model.sdes[t.param.sde];

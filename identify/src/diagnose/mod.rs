@@ -56,7 +56,12 @@ pub struct Options {
 
 impl Default for Options {
     fn default() -> Options {
-        Options { alpha: 0.01, max_effects: 3, refit: 5, identification: identification::Options::default() }
+        Options {
+            alpha: 0.01,
+            max_effects: 3,
+            refit: 5,
+            identification: identification::Options::default(),
+        }
     }
 }
 
@@ -88,8 +93,16 @@ impl ParamEstimate {
     /// `k = 0.5635 ± 0.0005 N/µm`, in report units.
     pub fn describe(&self) -> String {
         let (v, s, u) = self.display();
-        let u = if u == "-" { String::new() } else { format!(" {u}") };
-        let v = if (0.01..1e5).contains(&v.abs()) { format!("{v:.4}") } else { format!("{v:.4e}") };
+        let u = if u == "-" {
+            String::new()
+        } else {
+            format!(" {u}")
+        };
+        let v = if (0.01..1e5).contains(&v.abs()) {
+            format!("{v:.4}")
+        } else {
+            format!("{v:.4e}")
+        };
         format!("{} = {v} ± {s:.2e}{u}", self.name)
     }
 }
@@ -237,19 +250,42 @@ pub fn diagnose(
     progress: &mut dyn FnMut(&str),
 ) -> Result<Diagnosis, DiagnoseError> {
     if !(opts.alpha > 0.0 && opts.alpha < 1.0) {
-        return Err(DiagnoseError::Options(format!("significance level {}: give 0 < α < 1", opts.alpha)));
+        return Err(DiagnoseError::Options(format!(
+            "significance level {}: give 0 < α < 1",
+            opts.alpha
+        )));
     }
-    let freqs: Vec<f64> = obs.characteristics.iter().flat_map(|c| c.freqs_hz.iter().copied()).collect();
-    let f_lo = freqs.iter().copied().fold(f64::INFINITY, f64::min).max(1e-3);
+    let freqs: Vec<f64> = obs
+        .characteristics
+        .iter()
+        .flat_map(|c| c.freqs_hz.iter().copied())
+        .collect();
+    let f_lo = freqs
+        .iter()
+        .copied()
+        .fold(f64::INFINITY, f64::min)
+        .max(1e-3);
     let f_hi = freqs.iter().copied().fold(0.0, f64::max).max(f_lo * 1.01);
     let iopts = &opts.identification;
-    let labels: Vec<String> = obs.characteristics.iter().map(|c| c.label.clone()).collect();
+    let labels: Vec<String> = obs
+        .characteristics
+        .iter()
+        .map(|c| c.label.clone())
+        .collect();
 
     let mut p0 = Problem::new(model, vars, obs, iopts, Vec::new(), f_hi);
-    let u0 = DVector::from_iterator(vars.len(), id.estimate.iter().zip(&p0.scale).map(|(x, s)| x / s));
+    let u0 = DVector::from_iterator(
+        vars.len(),
+        id.estimate.iter().zip(&p0.scale).map(|(x, s)| x / s),
+    );
     let (e, jac) = p0.eval(&u0, true).map_err(DiagnoseError::Model)?;
     let jac = jac.unwrap_or_else(|| DMatrix::zeros(e.len(), 0));
-    let mut cur = Current { effects: Vec::new(), u: u0, e, jac };
+    let mut cur = Current {
+        effects: Vec::new(),
+        u: u0,
+        e,
+        jac,
+    };
     let before = analysis(&p0, &cur, opts)?;
     progress(&format!("before: {}", before.verdict));
 
@@ -277,19 +313,40 @@ pub fn diagnose(
         let free = free_columns(&pc, &cur.u);
         let jfree = DMatrix::from_fn(cur.jac.nrows(), free.len(), |r, c| cur.jac[(r, free[c])]);
         let sigma2 = residual_scale(&cur, free.len(), crit.noise.scale_unknown());
-        let cands = generate::candidates(&crit.model_at(&x), &realized.vars, &x, &labels, f_lo, f_hi);
-        let fit = score::FitPoint { crit: &crit, x: &x, gains: &realized.gains, e: &cur.e, jac: &jfree, sigma2 };
+        let cands =
+            generate::candidates(&crit.model_at(&x), &realized.vars, &x, &labels, f_lo, f_hi);
+        let fit = score::FitPoint {
+            crit: &crit,
+            x: &x,
+            gains: &realized.gains,
+            e: &cur.e,
+            jac: &jfree,
+            sigma2,
+        };
         let scores = score::score_all(&fit, &cands).map_err(DiagnoseError::Model)?;
         let mut ok: Vec<score::Scored> = Vec::new();
         for (c, s) in cands.iter().zip(scores) {
             match s {
                 Ok(s) => ok.push(s),
-                Err(reason) => not_tried.push(NotTried { effect: c.describe(), reason }),
+                Err(reason) => not_tried.push(NotTried {
+                    effect: c.describe(),
+                    reason,
+                }),
             }
         }
-        ok.sort_by(|a, b| a.p_value.total_cmp(&b.p_value).then(b.statistic.total_cmp(&a.statistic)));
+        ok.sort_by(|a, b| {
+            a.p_value
+                .total_cmp(&b.p_value)
+                .then(b.statistic.total_cmp(&a.statistic))
+        });
         let threshold = opts.alpha / ok.len().max(1) as f64;
-        progress(&format!("ranked {} candidates; best: {}", ok.len(), ok.first().map(|s| cands[s.candidate].describe()).unwrap_or_default()));
+        progress(&format!(
+            "ranked {} candidates; best: {}",
+            ok.len(),
+            ok.first()
+                .map(|s| cands[s.candidate].describe())
+                .unwrap_or_default()
+        ));
         let families = families(&ok, 20);
         let ranked: Vec<Ranked> = families
             .iter()
@@ -302,7 +359,10 @@ pub fn diagnose(
                     effect: cands[s.candidate].describe(),
                     statistic: s.statistic,
                     p_value: s.p_value,
-                    equivalent: f[1..].iter().map(|&j| cands[ok[j].candidate].describe()).collect(),
+                    equivalent: f[1..]
+                        .iter()
+                        .map(|&j| cands[ok[j].candidate].describe())
+                        .collect(),
                 }
             })
             .collect();
@@ -311,43 +371,93 @@ pub fn diagnose(
         // Refit only what the score makes plausible: the score and LR statistics agree for small
         // effects and the score understates large ones, so a loose gate (1000× the LR's
         // threshold) loses nothing and saves the refits when there is nothing to find.
-        for (f, family) in families.iter().enumerate().take(opts.refit).filter(|(_, f)| ok[f[0]].p_value < (1000.0 * threshold).min(1.0)) {
+        for (f, family) in families
+            .iter()
+            .enumerate()
+            .take(opts.refit)
+            .filter(|(_, f)| ok[f[0]].p_value < (1000.0 * threshold).min(1.0))
+        {
             let s = &ok[family[0]];
             let cand = &cands[s.candidate];
             // The first parameter starts at the score's Gauss-Newton step, the others at their
             // initial values.
-            let start: Vec<f64> = cand.params(f_hi).iter().enumerate().map(|(j, np)| if j == 0 { np.nested + s.step } else { np.initial }).collect();
+            let start: Vec<f64> = cand
+                .params(f_hi)
+                .iter()
+                .enumerate()
+                .map(|(j, np)| {
+                    if j == 0 {
+                        np.nested + s.step
+                    } else {
+                        np.initial
+                    }
+                })
+                .collect();
             match refit(model, vars, obs, opts, &cur, cand, &start, f_hi, sigma2) {
                 Ok((mut r, next)) => {
                     r.equivalent = ranked[f].equivalent.clone();
-                    progress(&format!("refit {}: ΔJ = {:.1}, LR = {:.1}, p = {:.2e}", r.effect, r.criterion_before - r.criterion_after, r.lr, r.p_value));
+                    progress(&format!(
+                        "refit {}: ΔJ = {:.1}, LR = {:.1}, p = {:.2e}",
+                        r.effect,
+                        r.criterion_before - r.criterion_after,
+                        r.lr,
+                        r.p_value
+                    ));
                     // Most significant first; p-values of large effects underflow to 0, so
                     // compare the LR's margin over its critical value at the threshold.
-                    let better = best.as_ref().is_none_or(|(b, _)| margin(&r, threshold) > margin(&refits[*b], threshold));
+                    let better = best.as_ref().is_none_or(|(b, _)| {
+                        margin(&r, threshold) > margin(&refits[*b], threshold)
+                    });
                     if r.p_value < threshold && better {
                         best = Some((refits.len(), next));
                     }
                     refits.push(r);
                 }
-                Err(reason) => not_tried.push(NotTried { effect: format!("refit of {}", cand.describe()), reason }),
+                Err(reason) => not_tried.push(NotTried {
+                    effect: format!("refit of {}", cand.describe()),
+                    reason,
+                }),
             }
         }
         let chosen = best.as_ref().map(|(i, _)| *i);
-        let mut round = Round { candidates: ok.len(), ranked, refits: refits.clone(), threshold, accepted: chosen, removed: Vec::new(), placed: None };
+        let mut round = Round {
+            candidates: ok.len(),
+            ranked,
+            refits: refits.clone(),
+            threshold,
+            accepted: chosen,
+            removed: Vec::new(),
+            placed: None,
+        };
         match best {
             Some((i, mut next)) => {
                 progress(&format!("accepted: {}", refits[i].effect));
                 let mut chosen = refits[i].clone();
-                if let Some((placed, better)) = place(model, vars, obs, opts, &cur, &next, &chosen, f_hi, sigma2, threshold) {
-                    progress(&format!("placed: {}", placed.params.iter().map(ParamEstimate::describe).collect::<Vec<_>>().join(", ")));
+                if let Some((placed, better)) = place(
+                    model, vars, obs, opts, &cur, &next, &chosen, f_hi, sigma2, threshold,
+                ) {
+                    progress(&format!(
+                        "placed: {}",
+                        placed
+                            .params
+                            .iter()
+                            .map(ParamEstimate::describe)
+                            .collect::<Vec<_>>()
+                            .join(", ")
+                    ));
                     round.placed = Some(placed.clone());
                     chosen = placed;
                     next = better;
                 }
                 accepted.push(chosen);
                 cur = next;
-                while let Some((k, r, next)) = backward(model, vars, obs, opts, &cur, f_hi, sigma2, threshold) {
-                    progress(&format!("removed: {} (no longer needed: LR = {:.1}, p = {:.2e})", r.effect, r.lr, r.p_value));
+                while let Some((k, r, next)) =
+                    backward(model, vars, obs, opts, &cur, f_hi, sigma2, threshold)
+                {
+                    progress(&format!(
+                        "removed: {} (no longer needed: LR = {:.1}, p = {:.2e})",
+                        r.effect, r.lr, r.p_value
+                    ));
                     accepted.remove(k);
                     round.removed.push(r);
                     cur = next;
@@ -367,8 +477,15 @@ pub fn diagnose(
     // Effects refitted after their own round (a later effect, a removal) moved: report their
     // values and errors at the final fit.
     if !cur.effects.is_empty() {
-        let crit_scale = residual_scale(&cur, free_columns(&pf, &cur.u).len(), after.chi2_p.is_none());
-        for (a, params) in accepted.iter_mut().zip(estimates(&pf, &cur, f_hi, crit_scale)) {
+        let crit_scale = residual_scale(
+            &cur,
+            free_columns(&pf, &cur.u).len(),
+            after.chi2_p.is_none(),
+        );
+        for (a, params) in accepted
+            .iter_mut()
+            .zip(estimates(&pf, &cur, f_hi, crit_scale))
+        {
             a.params = params;
         }
     }
@@ -376,7 +493,16 @@ pub fn diagnose(
     let realized = pf.realize(&gamma).map_err(DiagnoseError::Model)?;
     let mut final_model = realized.model;
     realized.vars.apply(&mut final_model, &x);
-    Ok(Diagnosis { before, after, rounds, accepted, not_tried, estimate: x, model: final_model, effects: cur.effects })
+    Ok(Diagnosis {
+        before,
+        after,
+        rounds,
+        accepted,
+        not_tried,
+        estimate: x,
+        model: final_model,
+        effects: cur.effects,
+    })
 }
 
 /// The backward check after an effect was added: an earlier effect may only have compensated for
@@ -395,24 +521,74 @@ fn backward(
     threshold: f64,
 ) -> Option<(usize, Removed, Current)> {
     let n = cur.effects.len();
-    let nx = cur.u.len() - cur.effects.iter().map(|e| e.params(f_hi).len()).sum::<usize>();
+    let nx = cur.u.len()
+        - cur
+            .effects
+            .iter()
+            .map(|e| e.params(f_hi).len())
+            .sum::<usize>();
     let mut offset = nx;
     for k in 0..n.saturating_sub(1) {
         let q = cur.effects[k].params(f_hi).len();
-        let effects: Vec<Effect> = cur.effects.iter().enumerate().filter(|(j, _)| *j != k).map(|(_, e)| e.clone()).collect();
-        let u0 = DVector::from_iterator(cur.u.len() - q, cur.u.iter().enumerate().filter(|(i, _)| *i < offset || *i >= offset + q).map(|(_, v)| *v));
+        let effects: Vec<Effect> = cur
+            .effects
+            .iter()
+            .enumerate()
+            .filter(|(j, _)| *j != k)
+            .map(|(_, e)| e.clone())
+            .collect();
+        let u0 = DVector::from_iterator(
+            cur.u.len() - q,
+            cur.u
+                .iter()
+                .enumerate()
+                .filter(|(i, _)| *i < offset || *i >= offset + q)
+                .map(|(_, v)| *v),
+        );
         offset += q;
-        let mut p = Problem::new(model, vars, obs, &opts.identification, effects.clone(), f_hi);
+        let mut p = Problem::new(
+            model,
+            vars,
+            obs,
+            &opts.identification,
+            effects.clone(),
+            f_hi,
+        );
         let (lo, hi) = p.bounds();
-        let Ok(out) = optimize::minimize(opts.identification.optimizer, &mut p, &u0, &lo, &hi, &opts.identification.settings, &mut |_| {}) else {
+        let Ok(out) = optimize::minimize(
+            opts.identification.optimizer,
+            &mut p,
+            &u0,
+            &lo,
+            &hi,
+            &opts.identification.settings,
+            &mut |_| {},
+        ) else {
             continue;
         };
-        let Ok((e, Some(jac))) = p.eval(&out.u, true) else { continue };
+        let Ok((e, Some(jac))) = p.eval(&out.u, true) else {
+            continue;
+        };
         let lr = ((e.norm_squared() - cur.e.norm_squared()) / sigma2).max(0.0);
-        let p_value = ChiSquared::new(q as f64).map(|c| 1.0 - c.cdf(lr)).unwrap_or(0.0);
+        let p_value = ChiSquared::new(q as f64)
+            .map(|c| 1.0 - c.cdf(lr))
+            .unwrap_or(0.0);
         if p_value >= threshold {
-            let r = Removed { effect: cur.effects[k].describe(), lr, p_value };
-            return Some((k, r, Current { effects, u: out.u, e, jac }));
+            let r = Removed {
+                effect: cur.effects[k].describe(),
+                lr,
+                p_value,
+            };
+            return Some((
+                k,
+                r,
+                Current {
+                    effects,
+                    u: out.u,
+                    e,
+                    jac,
+                },
+            ));
         }
     }
     None
@@ -436,7 +612,13 @@ fn place(
     sigma2: f64,
     threshold: f64,
 ) -> Option<(Refit, Current)> {
-    let half_side = |name: &str| model.bodies.iter().find(|b| b.name == name).map(|b| 0.5 * effects::box_sides(b).into_iter().fold(0.0, f64::max));
+    let half_side = |name: &str| {
+        model
+            .bodies
+            .iter()
+            .find(|b| b.name == name)
+            .map(|b| 0.5 * effects::box_sides(b).into_iter().fold(0.0, f64::max))
+    };
     let values: Vec<f64> = accepted.params.iter().map(|p| p.value).collect();
     // The place is a nonlinear parameter with local minima: start from the candidate's point and
     // from points half a reach away (a 3×3 grid across a spring's line of action; ± along each
@@ -454,16 +636,46 @@ fn place(
                     offsets.push(o);
                 }
             }
-            (Effect::PlacedMass { body: body.clone(), point: *point, scale: *scale, reach }, vec![values[0]], offsets)
+            (
+                Effect::PlacedMass {
+                    body: body.clone(),
+                    point: *point,
+                    scale: *scale,
+                    reach,
+                },
+                vec![values[0]],
+                offsets,
+            )
         }
-        Effect::Spring { bodies, point, direction, .. } => {
-            let reach = bodies.iter().flatten().filter_map(|b| half_side(b)).fold(0.0, f64::max);
+        Effect::Spring {
+            bodies,
+            point,
+            direction,
+            ..
+        } => {
+            let reach = bodies
+                .iter()
+                .flatten()
+                .filter_map(|b| half_side(b))
+                .fold(0.0, f64::max);
             if !(reach > 0.0) {
                 return None;
             }
             let h = 0.5 * reach;
-            let offsets = [-h, 0.0, h].iter().flat_map(|&a| [-h, 0.0, h].map(|b| vec![a, b])).collect();
-            (Effect::PlacedSpring { bodies: bodies.clone(), point: *point, direction: *direction, reach }, vec![values[0], values[1]], offsets)
+            let offsets = [-h, 0.0, h]
+                .iter()
+                .flat_map(|&a| [-h, 0.0, h].map(|b| vec![a, b]))
+                .collect();
+            (
+                Effect::PlacedSpring {
+                    bodies: bodies.clone(),
+                    point: *point,
+                    direction: *direction,
+                    reach,
+                },
+                vec![values[0], values[1]],
+                offsets,
+            )
         }
         _ => return None,
     };
@@ -483,7 +695,10 @@ fn place(
 /// The effects' parameter estimates and Cramér-Rao errors at the fit `cur` of `p`.
 fn estimates(p: &Problem, cur: &Current, f_hi: f64, sigma2: f64) -> Vec<Vec<ParamEstimate>> {
     let info = cur.jac.tr_mul(&cur.jac);
-    let cov = info.clone().try_inverse().or_else(|| info.pseudo_inverse(1e-12).ok());
+    let cov = info
+        .clone()
+        .try_inverse()
+        .or_else(|| info.pseudo_inverse(1e-12).ok());
     let (_, gamma) = p.split(&cur.u);
     let nx = cur.u.len() - gamma.len();
     let mut idx = 0;
@@ -494,8 +709,16 @@ fn estimates(p: &Problem, cur: &Current, f_hi: f64, sigma2: f64) -> Vec<Vec<Para
                 .iter()
                 .map(|np| {
                     let i = nx + idx;
-                    let se = cov.as_ref().map(|c| (c[(i, i)] * sigma2).max(0.0).sqrt() * np.scale).unwrap_or(f64::NAN);
-                    let v = ParamEstimate { name: np.name.into(), unit: np.unit.into(), value: gamma[idx], std_error: se };
+                    let se = cov
+                        .as_ref()
+                        .map(|c| (c[(i, i)] * sigma2).max(0.0).sqrt() * np.scale)
+                        .unwrap_or(f64::NAN);
+                    let v = ParamEstimate {
+                        name: np.name.into(),
+                        unit: np.unit.into(),
+                        value: gamma[idx],
+                        std_error: se,
+                    };
                     idx += 1;
                     v
                 })
@@ -506,7 +729,9 @@ fn estimates(p: &Problem, cur: &Current, f_hi: f64, sigma2: f64) -> Vec<Vec<Para
 
 /// How far a refit's LR exceeds the critical value of its test at `threshold`.
 fn margin(r: &Refit, threshold: f64) -> f64 {
-    let crit = ChiSquared::new(r.dof as f64).map(|c| c.inverse_cdf(1.0 - threshold)).unwrap_or(f64::INFINITY);
+    let crit = ChiSquared::new(r.dof as f64)
+        .map(|c| c.inverse_cdf(1.0 - threshold))
+        .unwrap_or(f64::INFINITY);
     r.lr - crit
 }
 
@@ -517,7 +742,10 @@ fn families(ranked: &[score::Scored], n: usize) -> Vec<Vec<usize>> {
     // Only the head of the ranking matters; bound the quadratic grouping.
     for (i, s) in ranked.iter().enumerate().take(50 * n) {
         let len = out.len();
-        match out.iter_mut().find(|f| ranked[f[0]].direction.dot(&s.direction).abs() >= EQUIVALENT_COS) {
+        match out
+            .iter_mut()
+            .find(|f| ranked[f[0]].direction.dot(&s.direction).abs() >= EQUIVALENT_COS)
+        {
             Some(f) => f.push(i),
             None if len < n => out.push(vec![i]),
             None => {}
@@ -540,14 +768,22 @@ fn residual_scale(cur: &Current, free: usize, unknown: bool) -> f64 {
 /// The parameters of `p` not at a bound at `u`: the fit's free columns.
 fn free_columns(p: &Problem, u: &DVector<f64>) -> Vec<usize> {
     let (lo, hi) = p.bounds();
-    (0..u.len()).filter(|&i| u[i] > lo[i] + 1e-12 && u[i] < hi[i] - 1e-12).collect()
+    (0..u.len())
+        .filter(|&i| u[i] > lo[i] + 1e-12 && u[i] < hi[i] - 1e-12)
+        .collect()
 }
 
 fn analysis(p: &Problem, cur: &Current, opts: &Options) -> Result<ResidualAnalysis, DiagnoseError> {
     let (x, gamma) = p.split(&cur.u);
     let r = p.realize(&gamma).map_err(DiagnoseError::Model)?;
     let crit = p.criterion(&r).map_err(DiagnoseError::Model)?;
-    Ok(residuals::analyze(&crit, &cur.e, free_columns(p, &cur.u).len(), &crit.model_at(&x), opts.alpha))
+    Ok(residuals::analyze(
+        &crit,
+        &cur.e,
+        free_columns(p, &cur.u).len(),
+        &crit.model_at(&x),
+        opts.alpha,
+    ))
 }
 
 /// Refits the current effects plus `cand` with every parameter free.
@@ -565,12 +801,22 @@ fn refit(
 ) -> Result<(Refit, Current), String> {
     let mut effects = cur.effects.clone();
     effects.push(cand.clone());
-    let mut p = Problem::new(model, vars, obs, &opts.identification, effects.clone(), f_hi);
+    let mut p = Problem::new(
+        model,
+        vars,
+        obs,
+        &opts.identification,
+        effects.clone(),
+        f_hi,
+    );
     let new_params = cand.params(f_hi);
     let q = new_params.len();
     let m = cur.e.len();
     if m <= p.scale.len() + 1 {
-        return Err(format!("too few observations ({m}) for {} parameters", p.scale.len()));
+        return Err(format!(
+            "too few observations ({m}) for {} parameters",
+            p.scale.len()
+        ));
     }
     // Start: the current point, the new parameters at `start`.
     let mut u0: Vec<f64> = cur.u.iter().copied().collect();
@@ -580,7 +826,15 @@ fn refit(
     let (lo, hi) = p.bounds();
     let u0 = DVector::from_vec(u0);
     let settings = opts.identification.settings;
-    let out = optimize::minimize(opts.identification.optimizer, &mut p, &u0, &lo, &hi, &settings, &mut |_| {})?;
+    let out = optimize::minimize(
+        opts.identification.optimizer,
+        &mut p,
+        &u0,
+        &lo,
+        &hi,
+        &settings,
+        &mut |_| {},
+    )?;
     let (e, jac) = p.eval(&out.u, true)?;
     let jac = jac.ok_or("no Jacobian")?;
     let j0 = 0.5 * cur.e.norm_squared();
@@ -590,7 +844,12 @@ fn refit(
     let p_value = 1.0 - chi.cdf(lr);
     let n = m as f64;
     let stop = out.stop.describe();
-    let next = Current { effects, u: out.u, e, jac };
+    let next = Current {
+        effects,
+        u: out.u,
+        e,
+        jac,
+    };
     // Standard errors from the Fisher information at the refit (σ̂² scaled when R is unknown):
     // the new effect's are the last.
     let params = estimates(&p, &next, f_hi, sigma2).pop().unwrap_or_default();
@@ -619,48 +878,102 @@ pub fn text(d: &Diagnosis) -> String {
     let _ = writeln!(s, "  before: {}", d.before.verdict);
     for (i, r) in d.rounds.iter().enumerate() {
         let _ = writeln!(s, "\n  round {}: {} candidates scored (score test at the current fit); LR threshold p < {:.1e}", i + 1, r.candidates, r.threshold);
-        let _ = writeln!(s, "    {:>4}  {:<14} {:>10} {:>9}  effect", "rank", "kind", "LM", "p");
+        let _ = writeln!(
+            s,
+            "    {:>4}  {:<14} {:>10} {:>9}  effect",
+            "rank", "kind", "LM", "p"
+        );
         for c in r.ranked.iter().take(10) {
-            let _ = writeln!(s, "    {:>4}  {:<14} {:>10.1} {:>9.1e}  {}", c.rank, c.kind, c.statistic, c.p_value, c.effect);
+            let _ = writeln!(
+                s,
+                "    {:>4}  {:<14} {:>10.1} {:>9.1e}  {}",
+                c.rank, c.kind, c.statistic, c.p_value, c.effect
+            );
             if !c.equivalent.is_empty() {
                 let shown: Vec<&str> = c.equivalent.iter().take(3).map(String::as_str).collect();
                 let more = c.equivalent.len().saturating_sub(3);
-                let tail = if more > 0 { format!(" and {more} more") } else { String::new() };
+                let tail = if more > 0 {
+                    format!(" and {more} more")
+                } else {
+                    String::new()
+                };
                 let _ = writeln!(s, "          ≡ {}{tail}", shown.join("; "));
             }
         }
         for (k, f) in r.refits.iter().enumerate() {
-            let mark = if r.accepted == Some(k) { "ACCEPTED" } else { "" };
+            let mark = if r.accepted == Some(k) {
+                "ACCEPTED"
+            } else {
+                ""
+            };
             let _ = writeln!(
                 s,
                 "    refit: {}: J {:.1} → {:.1}, LR {:.1} ({} dof), p {:.1e}, ΔBIC {:.1} {mark}",
-                f.effect, f.criterion_before, f.criterion_after, f.lr, f.dof, f.p_value, f.bic_change
+                f.effect,
+                f.criterion_before,
+                f.criterion_after,
+                f.lr,
+                f.dof,
+                f.p_value,
+                f.bic_change
             );
         }
         if let Some(p) = &r.placed {
             let ps: Vec<String> = p.params.iter().map(ParamEstimate::describe).collect();
-            let _ = writeln!(s, "    placed: {} ({}): its place fitted, LR {:.1} against the model without it", p.effect, ps.join(", "), p.lr);
+            let _ = writeln!(
+                s,
+                "    placed: {} ({}): its place fitted, LR {:.1} against the model without it",
+                p.effect,
+                ps.join(", "),
+                p.lr
+            );
         }
         for x in &r.removed {
-            let _ = writeln!(s, "    removed: {} (not needed once this round's effect is in: LR {:.1}, p {:.2e})", x.effect, x.lr, x.p_value);
+            let _ = writeln!(
+                s,
+                "    removed: {} (not needed once this round's effect is in: LR {:.1}, p {:.2e})",
+                x.effect, x.lr, x.p_value
+            );
         }
     }
     let _ = writeln!(s);
     if d.accepted.is_empty() {
-        let _ = writeln!(s, "  no effect added: nothing significant at the chosen level");
+        let _ = writeln!(
+            s,
+            "  no effect added: nothing significant at the chosen level"
+        );
     }
     for a in &d.accepted {
         let ps: Vec<String> = a.params.iter().map(ParamEstimate::describe).collect();
         let _ = writeln!(s, "  added: {} ({})", a.effect, ps.join(", "));
     }
     let _ = writeln!(s, "\n  error before → after:");
-    let _ = writeln!(s, "    criterion J     {:.1} → {:.1}", d.before.criterion, d.after.criterion);
-    let _ = writeln!(s, "    reduced χ²      {:.2} → {:.2}", d.before.reduced_chi2, d.after.reduced_chi2);
+    let _ = writeln!(
+        s,
+        "    criterion J     {:.1} → {:.1}",
+        d.before.criterion, d.after.criterion
+    );
+    let _ = writeln!(
+        s,
+        "    reduced χ²      {:.2} → {:.2}",
+        d.before.reduced_chi2, d.after.reduced_chi2
+    );
     if let (Some(a), Some(b)) = (d.before.chi2_p, d.after.chi2_p) {
         let _ = writeln!(s, "    χ² p-value      {a:.2e} → {b:.3}");
     }
-    for (a, b) in d.before.characteristics.iter().zip(&d.after.characteristics) {
-        let _ = writeln!(s, "    RMS rel. error  {:<28} {:.2} % → {:.2} %", a.label, 100.0 * a.rms_relative, 100.0 * b.rms_relative);
+    for (a, b) in d
+        .before
+        .characteristics
+        .iter()
+        .zip(&d.after.characteristics)
+    {
+        let _ = writeln!(
+            s,
+            "    RMS rel. error  {:<28} {:.2} % → {:.2} %",
+            a.label,
+            100.0 * a.rms_relative,
+            100.0 * b.rms_relative
+        );
     }
     let _ = writeln!(s, "  after: {}", d.after.verdict);
     let skipped: Vec<&NotTried> = d.not_tried.iter().collect();
@@ -670,7 +983,11 @@ pub fn text(d: &Diagnosis) -> String {
             let _ = writeln!(s, "    - {}: {}", n.effect, n.reason);
         }
         if skipped.len() > 12 {
-            let _ = writeln!(s, "    … and {} more (see the JSON report)", skipped.len() - 12);
+            let _ = writeln!(
+                s,
+                "    … and {} more (see the JSON report)",
+                skipped.len() - 12
+            );
         }
     }
     s

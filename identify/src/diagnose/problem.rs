@@ -41,8 +41,23 @@ impl<'a> Problem<'a> {
         f_max: f64,
     ) -> Problem<'a> {
         let params: Vec<EffectParam> = effects.iter().flat_map(|e| e.params(f_max)).collect();
-        let scale = vars.vars.iter().map(|v| v.scale).chain(params.iter().map(|p| p.scale)).collect();
-        Problem { base, vars, obs, opts, effects, params, f_max, scale, evaluations: 0 }
+        let scale = vars
+            .vars
+            .iter()
+            .map(|v| v.scale)
+            .chain(params.iter().map(|p| p.scale))
+            .collect();
+        Problem {
+            base,
+            vars,
+            obs,
+            opts,
+            effects,
+            params,
+            f_max,
+            scale,
+            evaluations: 0,
+        }
     }
 
     /// Number of identification variables.
@@ -59,8 +74,18 @@ impl<'a> Problem<'a> {
 
     /// Bounds of `u`.
     pub fn bounds(&self) -> (DVector<f64>, DVector<f64>) {
-        let lo = self.vars.vars.iter().map(|v| v.lower).chain(self.params.iter().map(|p| p.lower));
-        let hi = self.vars.vars.iter().map(|v| v.upper).chain(self.params.iter().map(|p| p.upper));
+        let lo = self
+            .vars
+            .vars
+            .iter()
+            .map(|v| v.lower)
+            .chain(self.params.iter().map(|p| p.lower));
+        let hi = self
+            .vars
+            .vars
+            .iter()
+            .map(|v| v.upper)
+            .chain(self.params.iter().map(|p| p.upper));
         let n = self.scale.len();
         (
             DVector::from_iterator(n, lo.zip(&self.scale).map(|(l, s)| l / s)),
@@ -86,8 +111,15 @@ impl<'a> Problem<'a> {
 
     /// The identification criterion of a realized model.
     pub fn criterion(&self, r: &Realized) -> Result<Criterion, String> {
-        Criterion::new(&r.model, self.obs, &r.vars, self.opts.fit, self.opts.noise, self.opts.frf_method)
-            .map_err(|e| e.to_string())
+        Criterion::new(
+            &r.model,
+            self.obs,
+            &r.vars,
+            self.opts.fit,
+            self.opts.noise,
+            self.opts.frf_method,
+        )
+        .map_err(|e| e.to_string())
     }
 
     /// Whitened residuals with the gains applied: `e' = (1 − G) z/σ + G e`.
@@ -107,7 +139,12 @@ impl<'a> Problem<'a> {
     }
 
     /// Whitened residuals at `(x, γ)`, with the Jacobian in scaled `u` if asked.
-    pub fn residuals(&mut self, x: &[f64], gamma: &[f64], jacobian: bool) -> Result<(DVector<f64>, Option<DMatrix<f64>>), String> {
+    pub fn residuals(
+        &mut self,
+        x: &[f64],
+        gamma: &[f64],
+        jacobian: bool,
+    ) -> Result<(DVector<f64>, Option<DMatrix<f64>>), String> {
         let r = self.realize(gamma)?;
         let mut crit = self.criterion(&r)?;
         let (mut e, jx) = crit
@@ -152,7 +189,11 @@ impl<'a> Problem<'a> {
 }
 
 impl identification::optimize::Residuals for Problem<'_> {
-    fn eval(&mut self, u: &DVector<f64>, jacobian: bool) -> Result<(DVector<f64>, Option<DMatrix<f64>>), String> {
+    fn eval(
+        &mut self,
+        u: &DVector<f64>,
+        jacobian: bool,
+    ) -> Result<(DVector<f64>, Option<DMatrix<f64>>), String> {
         let (x, g) = self.split(u);
         self.residuals(&x, &g, jacobian)
     }

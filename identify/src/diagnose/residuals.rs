@@ -111,7 +111,11 @@ pub fn analyze(
             c.freqs_hz.push(freqs[line]);
             let (amp, q) = if complex {
                 let d = C64::new(e[i], e[np + i]);
-                let unit = if z.norm() > 0.0 { z.conj() / z.norm() } else { C64::new(1.0, 0.0) };
+                let unit = if z.norm() > 0.0 {
+                    z.conj() / z.norm()
+                } else {
+                    C64::new(1.0, 0.0)
+                };
                 let rot = unit * d;
                 if let Some(p) = c.phase.as_mut() {
                     p.push(rot.im);
@@ -136,11 +140,16 @@ pub fn analyze(
     let dof = m.saturating_sub(parameters).max(1);
     let two_j = e.norm_squared();
     let reduced_chi2 = two_j / dof as f64;
-    let chi2_p = (!crit.noise.scale_unknown())
-        .then(|| ChiSquared::new(dof as f64).map(|d| 1.0 - d.cdf(two_j)).unwrap_or(f64::NAN));
+    let chi2_p = (!crit.noise.scale_unknown()).then(|| {
+        ChiSquared::new(dof as f64)
+            .map(|d| 1.0 - d.cdf(two_j))
+            .unwrap_or(f64::NAN)
+    });
     let bands = mode_bands(model, &characteristics, crit);
-    let structured: Vec<&CharacteristicResiduals> =
-        characteristics.iter().filter(|c| c.runs_p < alpha / characteristics.len().max(1) as f64).collect();
+    let structured: Vec<&CharacteristicResiduals> = characteristics
+        .iter()
+        .filter(|c| c.runs_p < alpha / characteristics.len().max(1) as f64)
+        .collect();
     let chi2_bad = chi2_p.is_some_and(|p| p < alpha);
     let explained = !chi2_bad && structured.is_empty();
     let verdict = if explained {
@@ -155,16 +164,25 @@ pub fn analyze(
     } else {
         let mut why = Vec::new();
         if let Some(p) = chi2_p.filter(|p| *p < alpha) {
-            why.push(format!("2J = {two_j:.1} is {:.1}× its expectation {dof} (χ² p = {p:.1e})", two_j / dof as f64));
+            why.push(format!(
+                "2J = {two_j:.1} is {:.1}× its expectation {dof} (χ² p = {p:.1e})",
+                two_j / dof as f64
+            ));
         }
         for c in &structured {
-            why.push(format!("{} has {} runs where {:.1} were expected (p = {:.1e})", c.label, c.runs, c.runs_expected, c.runs_p));
+            why.push(format!(
+                "{} has {} runs where {:.1} were expected (p = {:.1e})",
+                c.label, c.runs, c.runs_expected, c.runs_p
+            ));
         }
         let place = bands
             .first()
             .map(|b| format!("; the misfit concentrates near the {:.0} Hz mode ({} {:.0} %): {:.0} % of Σe² on {:.0} % of the points ({:.0}-{:.0} Hz)", b.mode_hz, b.body, 100.0 * b.body_share, 100.0 * b.share, 100.0 * b.points_share, b.from_hz, b.to_hz))
             .unwrap_or_default();
-        format!("the model does NOT explain the data: {}{place}", why.join("; "))
+        format!(
+            "the model does NOT explain the data: {}{place}",
+            why.join("; ")
+        )
     };
     ResidualAnalysis {
         criterion: 0.5 * two_j,
@@ -185,10 +203,18 @@ pub fn runs_test(r: &[f64]) -> (usize, f64, f64) {
     let n = signs.len();
     let np = signs.iter().filter(|s| **s).count() as f64;
     let nm = n as f64 - np;
-    let runs = if n == 0 { 0 } else { 1 + signs.windows(2).filter(|w| w[0] != w[1]).count() };
+    let runs = if n == 0 {
+        0
+    } else {
+        1 + signs.windows(2).filter(|w| w[0] != w[1]).count()
+    };
     if np == 0.0 || nm == 0.0 {
         // All one sign: the strongest possible structure when there are enough points.
-        let p = if n >= 2 { 0.5f64.powi(n as i32 - 1) } else { 1.0 };
+        let p = if n >= 2 {
+            0.5f64.powi(n as i32 - 1)
+        } else {
+            1.0
+        };
         return (runs, 1.0, p);
     }
     let nf = n as f64;
@@ -206,9 +232,16 @@ pub fn runs_test(r: &[f64]) -> (usize, f64, f64) {
 
 fn mode_bands(model: &Model, chars: &[CharacteristicResiduals], crit: &Criterion) -> Vec<Band> {
     let lines = crit.lines();
-    let (Some(&lo), Some(&hi)) = (lines.first(), lines.last()) else { return Vec::new() };
-    let Ok(modes) = modes::undamped(model) else { return Vec::new() };
-    let modes: Vec<&modes::Mode> = modes.iter().filter(|m| m.freq_hz > lo / 1.5 && m.freq_hz < hi * 1.5).collect();
+    let (Some(&lo), Some(&hi)) = (lines.first(), lines.last()) else {
+        return Vec::new();
+    };
+    let Ok(modes) = modes::undamped(model) else {
+        return Vec::new();
+    };
+    let modes: Vec<&modes::Mode> = modes
+        .iter()
+        .filter(|m| m.freq_hz > lo / 1.5 && m.freq_hz < hi * 1.5)
+        .collect();
     if modes.is_empty() {
         return Vec::new();
     }

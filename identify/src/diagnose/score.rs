@@ -62,20 +62,31 @@ pub struct FitPoint<'a> {
 }
 
 /// Scores every candidate; `Err` entries say why a candidate could not be scored.
-pub fn score_all(fit: &FitPoint, candidates: &[Effect]) -> Result<Vec<Result<Scored, String>>, String> {
+pub fn score_all(
+    fit: &FitPoint,
+    candidates: &[Effect],
+) -> Result<Vec<Result<Scored, String>>, String> {
     let crit = fit.crit;
     let model = crit.model_at(fit.x);
     let lines = crit.lines().to_vec();
     let states = frf::states(&model, &lines, frf::Method::Auto).map_err(|e| e.to_string())?;
-    let outputs: Vec<usize> = model.outputs.iter().map(|c| 6 * c.body + c.dof as usize).collect();
-    let q = |o: usize, k: usize| states.load_at(k)[outputs[o]] * states.factor[k * states.outputs + o] * fit.gains[o];
+    let outputs: Vec<usize> = model
+        .outputs
+        .iter()
+        .map(|c| 6 * c.body + c.dof as usize)
+        .collect();
+    let q = |o: usize, k: usize| {
+        states.load_at(k)[outputs[o]] * states.factor[k * states.outputs + o] * fit.gains[o]
+    };
     // Orthonormal basis of the fit Jacobian's columns, for the projection.
     let basis = orthonormal_columns(fit.jac);
     let damping = damping_jacobian(&model, &lines, candidates)?;
     let mut out = Vec::with_capacity(candidates.len());
     let mut dq = vec![C64::new(0.0, 0.0); outputs.len() * lines.len()];
     for (ci, cand) in candidates.iter().enumerate() {
-        let filled = fill_derivative(cand, &model, &states, &outputs, fit.gains, &lines, &damping, &mut dq);
+        let filled = fill_derivative(
+            cand, &model, &states, &outputs, fit.gains, &lines, &damping, &mut dq,
+        );
         let col = match filled {
             Ok(()) => crit.whitened_derivative(q, |o, k| dq[o * lines.len() + k]),
             Err(e) => {
@@ -88,7 +99,13 @@ pub fn score_all(fit: &FitPoint, candidates: &[Effect]) -> Result<Vec<Result<Sco
     Ok(out)
 }
 
-fn statistic(ci: usize, cand: &Effect, g: &DVector<f64>, fit: &FitPoint, basis: &DMatrix<f64>) -> Result<Scored, String> {
+fn statistic(
+    ci: usize,
+    cand: &Effect,
+    g: &DVector<f64>,
+    fit: &FitPoint,
+    basis: &DMatrix<f64>,
+) -> Result<Scored, String> {
     let s = g.dot(fit.e);
     let resid = g - basis * (basis.transpose() * g);
     let info = resid.norm_squared();
@@ -101,12 +118,22 @@ fn statistic(ci: usize, cand: &Effect, g: &DVector<f64>, fit: &FitPoint, basis: 
     let chi = ChiSquared::new(1.0).map_err(|e| e.to_string())?;
     let tail = 1.0 - chi.cdf(lm);
     let p_value = if one_sided {
-        if step > 0.0 { 0.5 * tail } else { 1.0 }
+        if step > 0.0 {
+            0.5 * tail
+        } else {
+            1.0
+        }
     } else {
         tail
     };
     let direction = resid / info.sqrt();
-    Ok(Scored { candidate: ci, statistic: if one_sided && step <= 0.0 { 0.0 } else { lm }, p_value, step, direction })
+    Ok(Scored {
+        candidate: ci,
+        statistic: if one_sided && step <= 0.0 { 0.0 } else { lm },
+        p_value,
+        step,
+        direction,
+    })
 }
 
 /// `∂ output / ∂γ` of one candidate at every (characteristic, line), into `dq[o * lines + k]`.
@@ -126,7 +153,8 @@ fn fill_derivative(
         for (k, f) in lines.iter().enumerate() {
             let c = cand.coefficient(TWO_PI * f);
             for (o, g) in gains.iter().enumerate() {
-                dq[o * nl + k] = states.first_order(k, o, rows.iter().map(|r| (r.as_slice(), c))) * g;
+                dq[o * nl + k] =
+                    states.first_order(k, o, rows.iter().map(|r| (r.as_slice(), c))) * g;
             }
         }
         return Ok(());
@@ -136,7 +164,9 @@ fn fill_derivative(
             for o in 0..gains.len() {
                 for k in 0..nl {
                     dq[o * nl + k] = if o == *output {
-                        states.load_at(k)[outputs[o]] * states.factor[k * states.outputs + o] * gains[o]
+                        states.load_at(k)[outputs[o]]
+                            * states.factor[k * states.outputs + o]
+                            * gains[o]
                     } else {
                         C64::new(0.0, 0.0)
                     };
@@ -144,7 +174,9 @@ fn fill_derivative(
             }
             Ok(())
         }
-        Effect::Damping { sdes, parameter, .. } => {
+        Effect::Damping {
+            sdes, parameter, ..
+        } => {
             let (params, r) = damping.as_ref().ok_or("no damping Jacobian")?;
             dq.iter_mut().for_each(|v| *v = C64::new(0.0, 0.0));
             for (p, pr) in params.iter().enumerate() {
@@ -158,7 +190,9 @@ fn fill_derivative(
             }
             Ok(())
         }
-        Effect::Flexible { body, axis, .. } => flexible_first_order(model, states, body, *axis, gains, lines, dq),
+        Effect::Flexible { body, axis, .. } => {
+            flexible_first_order(model, states, body, *axis, gains, lines, dq)
+        }
         _ => Err("this effect has no first-order form".into()),
     }
 }
@@ -173,8 +207,18 @@ fn fill_derivative(
 /// equation of motion with the rigid motion inserted, `P − A_free q` on its six DOFs — and `K_j`
 /// is joint j's complex stiffness block on those DOFs at c = 1. Checked against a finite
 /// difference of the split model in the tests.
-fn flexible_first_order(model: &Model, states: &States, body: &str, axis: usize, gains: &[f64], lines: &[f64], dq: &mut [C64]) -> Result<(), String> {
-    let b = model.body_index(body).ok_or_else(|| format!("no body \"{body}\""))?;
+fn flexible_first_order(
+    model: &Model,
+    states: &States,
+    body: &str,
+    axis: usize,
+    gains: &[f64],
+    lines: &[f64],
+    dq: &mut [C64],
+) -> Result<(), String> {
+    let b = model
+        .body_index(body)
+        .ok_or_else(|| format!("no body \"{body}\""))?;
     let n = model.dof_count();
     let mut split = model.clone();
     split_body(&mut split, body, axis, 1.0)?;
@@ -198,7 +242,10 @@ fn flexible_first_order(model: &Model, states: &States, body: &str, axis: usize,
             let (i, k) = (6 * e + r, 6 * e + c);
             C64::new(sj.k[i * ns + k], sj.d[i * ns + k])
         });
-        joint_inv.push(kj.try_inverse().ok_or("a split joint's stiffness is singular")?);
+        joint_inv.push(
+            kj.try_inverse()
+                .ok_or("a split joint's stiffness is singular")?,
+        );
     }
     // Rigid motion of the body carried to the end thirds' centres (same axes).
     let rot = model.bodies[b].rotation;
@@ -222,31 +269,40 @@ fn flexible_first_order(model: &Model, states: &States, body: &str, axis: usize,
     let rows: Vec<Vec<(usize, C64)>> = ends
         .iter()
         .flat_map(|&e| (0..6).map(move |i| 6 * e + i))
-        .map(|r| (0..ns).filter_map(|c| {
-            let v = C64::new(sys.k[r * ns + c], sys.d[r * ns + c]);
-            (v != C64::new(0.0, 0.0)).then_some((c, v))
-        }).collect())
+        .map(|r| {
+            (0..ns)
+                .filter_map(|c| {
+                    let v = C64::new(sys.k[r * ns + c], sys.d[r * ns + c]);
+                    (v != C64::new(0.0, 0.0)).then_some((c, v))
+                })
+                .collect()
+        })
         .collect();
     let mut full = vec![C64::new(0.0, 0.0); ns];
     // Generalized force on each end third with the rigid motion `x` (n DOFs) inserted: rhs − A_free x.
-    let mut end_force = |x: &[C64], rhs: &dyn Fn(usize) -> f64, w2: f64, out: &mut [[C64; 6]; 2]| {
-        full[..n].copy_from_slice(x);
-        for (k, &e) in ends.iter().enumerate() {
-            for (i, row) in expand[k].iter().enumerate() {
-                full[6 * e + i] = row.iter().zip(&x[6 * b..6 * b + 6]).map(|(r, v)| v * r).sum();
-            }
-        }
-        for (k, &e) in ends.iter().enumerate() {
-            for i in 0..6 {
-                let r = 6 * e + i;
-                let mut acc = C64::new(rhs(r), 0.0) + full[r] * (w2 * sys.mass[r]);
-                for &(c, a) in &rows[6 * k + i] {
-                    acc -= a * full[c];
+    let mut end_force =
+        |x: &[C64], rhs: &dyn Fn(usize) -> f64, w2: f64, out: &mut [[C64; 6]; 2]| {
+            full[..n].copy_from_slice(x);
+            for (k, &e) in ends.iter().enumerate() {
+                for (i, row) in expand[k].iter().enumerate() {
+                    full[6 * e + i] = row
+                        .iter()
+                        .zip(&x[6 * b..6 * b + 6])
+                        .map(|(r, v)| v * r)
+                        .sum();
                 }
-                out[k][i] = acc;
             }
-        }
-    };
+            for (k, &e) in ends.iter().enumerate() {
+                for i in 0..6 {
+                    let r = 6 * e + i;
+                    let mut acc = C64::new(rhs(r), 0.0) + full[r] * (w2 * sys.mass[r]);
+                    for &(c, a) in &rows[6 * k + i] {
+                        acc -= a * full[c];
+                    }
+                    out[k][i] = acc;
+                }
+            }
+        };
     let nl = lines.len();
     let mut lambda = [[C64::new(0.0, 0.0); 6]; 2];
     let mut rho = [[C64::new(0.0, 0.0); 6]; 2];
@@ -270,13 +326,23 @@ fn flexible_first_order(model: &Model, states: &States, body: &str, axis: usize,
 }
 
 /// One Jacobian of every ψ parameter the damping candidates split off.
-fn damping_jacobian(model: &Model, lines: &[f64], candidates: &[Effect]) -> Result<Option<(Vec<ParamRef>, frf::Response)>, String> {
+fn damping_jacobian(
+    model: &Model,
+    lines: &[f64],
+    candidates: &[Effect],
+) -> Result<Option<(Vec<ParamRef>, frf::Response)>, String> {
     let mut params: Vec<ParamRef> = Vec::new();
     for c in candidates {
-        if let Effect::Damping { sdes, parameter, .. } = c {
+        if let Effect::Damping {
+            sdes, parameter, ..
+        } = c
+        {
             for s in sdes {
                 if let Some(i) = model.sde_index(s) {
-                    let p = ParamRef { sde: i, name: *parameter };
+                    let p = ParamRef {
+                        sde: i,
+                        name: *parameter,
+                    };
                     if !params.contains(&p) {
                         params.push(p);
                     }
@@ -298,8 +364,12 @@ fn orthonormal_columns(j: &DMatrix<f64>) -> DMatrix<f64> {
     }
     let qr = j.clone().qr();
     let (q, r) = (qr.q(), qr.r());
-    let big = (0..r.nrows().min(r.ncols())).map(|i| r[(i, i)].abs()).fold(0.0, f64::max);
-    let keep: Vec<usize> = (0..r.nrows().min(r.ncols())).filter(|&i| r[(i, i)].abs() > 1e-10 * big).collect();
+    let big = (0..r.nrows().min(r.ncols()))
+        .map(|i| r[(i, i)].abs())
+        .fold(0.0, f64::max);
+    let keep: Vec<usize> = (0..r.nrows().min(r.ncols()))
+        .filter(|&i| r[(i, i)].abs() > 1e-10 * big)
+        .collect();
     DMatrix::from_fn(q.nrows(), keep.len(), |a, b| q[(a, keep[b])])
 }
 
@@ -311,33 +381,44 @@ mod tests {
     /// the split model (O(h) accurate).
     #[test]
     fn flexible_body_derivative_matches_a_finite_difference_of_the_split_model() {
-        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../configs/models/fwd32j.toml");
+        let path =
+            std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../configs/models/fwd32j.toml");
         let model = crate::modelfile::load(&path).unwrap().model;
         let lines = [20.0, 57.0, 131.0, 250.0, 400.0];
         let states = frf::states(&model, &lines, frf::Method::Direct).unwrap();
-        let outputs: Vec<usize> = model.outputs.iter().map(|c| 6 * c.body + c.dof as usize).collect();
+        let outputs: Vec<usize> = model
+            .outputs
+            .iter()
+            .map(|c| 6 * c.body + c.dof as usize)
+            .collect();
         let gains = vec![1.0; outputs.len()];
         let nl = lines.len();
         let mut analytic = vec![C64::new(0.0, 0.0); outputs.len() * nl];
         let mut checked = 0;
         for body in ["table", "column", "knee", "spindle head"] {
             for axis in 0..3 {
-                flexible_first_order(&model, &states, body, axis, &gains, &lines, &mut analytic).unwrap();
+                flexible_first_order(&model, &states, body, axis, &gains, &lines, &mut analytic)
+                    .unwrap();
                 // The split response is linear in c to first order: Richardson-extrapolate two
                 // forward differences (c = 1e-12 and 1e-13 m/N; the structure's compliances
                 // are ~1e-8) to cancel the O(c) term.
                 let fd_at = |h: f64| {
                     let mut split = model.clone();
                     split_body(&mut split, body, axis, h).unwrap();
-                    (h, frf::response(&split, &lines, &[], frf::Method::Direct).unwrap())
+                    (
+                        h,
+                        frf::response(&split, &lines, &[], frf::Method::Direct).unwrap(),
+                    )
                 };
                 let (h1, r1) = fd_at(1e-12);
                 let (h2, r2) = fd_at(1e-13);
                 for o in 0..outputs.len() {
                     let fd: Vec<C64> = (0..nl)
                         .map(|k| {
-                            let y0 = states.load_at(k)[outputs[o]] * states.factor[k * states.outputs + o];
-                            let (d1, d2) = ((r1.output(o)[k] - y0) / h1, (r2.output(o)[k] - y0) / h2);
+                            let y0 = states.load_at(k)[outputs[o]]
+                                * states.factor[k * states.outputs + o];
+                            let (d1, d2) =
+                                ((r1.output(o)[k] - y0) / h1, (r2.output(o)[k] - y0) / h2);
                             (d2 * 10.0 - d1) / 9.0
                         })
                         .collect();
@@ -346,7 +427,11 @@ mod tests {
                     let scale = fd.iter().map(|v| v.norm()).fold(0.0, f64::max);
                     for (k, fd) in fd.into_iter().enumerate() {
                         let a = analytic[o * nl + k];
-                        assert!((a - fd).norm() <= 1e-3 * scale + 1e-30, "{body} axis {axis}, output {o}, {} Hz: analytic {a}, FD {fd}", lines[k]);
+                        assert!(
+                            (a - fd).norm() <= 1e-3 * scale + 1e-30,
+                            "{body} axis {axis}, output {o}, {} Hz: analytic {a}, FD {fd}",
+                            lines[k]
+                        );
                         checked += 1;
                     }
                 }

@@ -136,14 +136,22 @@ impl Criterion {
         noise: NoiseChoice,
         method: Method,
     ) -> Result<Criterion, IdentifyError> {
-        let mut freqs: Vec<f64> = data.characteristics.iter().flat_map(|c| c.freqs_hz.iter().copied()).collect();
+        let mut freqs: Vec<f64> = data
+            .characteristics
+            .iter()
+            .flat_map(|c| c.freqs_hz.iter().copied())
+            .collect();
         freqs.sort_by(f64::total_cmp);
         freqs.dedup();
         let source = match noise {
             NoiseChoice::Auto => {
                 if data.characteristics.iter().all(|c| c.variance.is_some()) {
                     NoiseSource::Variance
-                } else if data.characteristics.iter().all(|c| c.coherence.is_some() && c.averages.is_some()) {
+                } else if data
+                    .characteristics
+                    .iter()
+                    .all(|c| c.coherence.is_some() && c.averages.is_some())
+                {
                     NoiseSource::Coherence
                 } else {
                     NoiseSource::Relative(0.01)
@@ -153,13 +161,20 @@ impl Criterion {
             NoiseChoice::Coherence => NoiseSource::Coherence,
             NoiseChoice::Relative(e) => {
                 if !(e.is_finite() && e > 0.0) {
-                    return Err(IdentifyError::Noise { item: "relative error".into(), message: format!("ε = {e} must be a finite number > 0") });
+                    return Err(IdentifyError::Noise {
+                        item: "relative error".into(),
+                        message: format!("ε = {e} must be a finite number > 0"),
+                    });
                 }
                 NoiseSource::Relative(e)
             }
         };
         let mut work = model.clone();
-        work.outputs = data.characteristics.iter().map(|c| c.characteristic).collect();
+        work.outputs = data
+            .characteristics
+            .iter()
+            .map(|c| c.characteristic)
+            .collect();
         let mut obs = Vec::new();
         let mut groups = Vec::new();
         for (o, c) in data.characteristics.iter().enumerate() {
@@ -201,7 +216,12 @@ impl Criterion {
                     (FitKind::Complex, Some(p)) => C64::from_polar(a, p[k]),
                     _ => C64::new(a, 0.0),
                 };
-                obs.push(Obs { output: o, line, z, sigma: var.sqrt() });
+                obs.push(Obs {
+                    output: o,
+                    line,
+                    z,
+                    sigma: var.sqrt(),
+                });
             }
             groups.push((c.label.clone(), start..obs.len()));
         }
@@ -212,7 +232,12 @@ impl Criterion {
             .map(|v| {
                 v.targets
                     .iter()
-                    .map(|t| (params.iter().position(|p| *p == t.param).unwrap_or(0), t.ratio))
+                    .map(|t| {
+                        (
+                            params.iter().position(|p| *p == t.param).unwrap_or(0),
+                            t.ratio,
+                        )
+                    })
                     .collect()
             })
             .collect();
@@ -230,7 +255,10 @@ impl Criterion {
             groups,
         };
         if vars.len() > c.residual_count() {
-            return Err(IdentifyError::TooManyVariables { variables: vars.len(), observations: c.residual_count() });
+            return Err(IdentifyError::TooManyVariables {
+                variables: vars.len(),
+                observations: c.residual_count(),
+            });
         }
         Ok(c)
     }
@@ -260,7 +288,11 @@ impl Criterion {
         self.vars.apply(&mut self.model, x);
         let r = frf::response(&self.model, &self.freqs, &[], self.method)?;
         self.evaluations.model += 1;
-        Ok(self.obs.iter().map(|o| r.output(o.output)[o.line]).collect())
+        Ok(self
+            .obs
+            .iter()
+            .map(|o| r.output(o.output)[o.line])
+            .collect())
     }
 
     /// Measured values at every observation (amplitude fit: the amplitude as a real number).
@@ -319,7 +351,10 @@ impl Criterion {
         Ok(e)
     }
 
-    fn residuals_analytic(&mut self, x: &[f64]) -> Result<(DVector<f64>, DMatrix<f64>), frf::SolveError> {
+    fn residuals_analytic(
+        &mut self,
+        x: &[f64],
+    ) -> Result<(DVector<f64>, DMatrix<f64>), frf::SolveError> {
         self.vars.apply(&mut self.model, x);
         let r = frf::response(&self.model, &self.freqs, &self.params, self.method)?;
         self.evaluations.model += 1;
@@ -349,7 +384,11 @@ impl Criterion {
                     FitKind::Amplitude => {
                         // ∂|q|/∂x = Re(q̄ ∂q/∂x)/|q|; at |q| = 0 the modulus is not differentiable:
                         // use the subgradient 0.
-                        let da = if qa > 0.0 { (q.conj() * dq).re / qa } else { 0.0 };
+                        let da = if qa > 0.0 {
+                            (q.conj() * dq).re / qa
+                        } else {
+                            0.0
+                        };
                         jac[(i, v)] = -da / o.sigma;
                     }
                     FitKind::Complex => {
@@ -375,7 +414,10 @@ impl Criterion {
     /// Per observation, in residual order: (characteristic index, line index, σ of one
     /// component).
     pub fn points(&self) -> Vec<(usize, usize, f64)> {
-        self.obs.iter().map(|o| (o.output, o.line, o.sigma)).collect()
+        self.obs
+            .iter()
+            .map(|o| (o.output, o.line, o.sigma))
+            .collect()
     }
 
     /// `∂e/∂γ` for a direction γ in which the model's outputs change by `dq(characteristic,
@@ -393,7 +435,11 @@ impl Criterion {
             match self.fit {
                 FitKind::Amplitude => {
                     let qa = qv.norm();
-                    col[i] = if qa > 0.0 { -(qv.conj() * d).re / qa / o.sigma } else { 0.0 };
+                    col[i] = if qa > 0.0 {
+                        -(qv.conj() * d).re / qa / o.sigma
+                    } else {
+                        0.0
+                    };
                 }
                 FitKind::Complex => {
                     col[i] = -d.re / o.sigma;
@@ -421,7 +467,14 @@ impl Criterion {
                         n += 1;
                     }
                 }
-                (label.clone(), if n > 0 { (s / n as f64).sqrt() } else { f64::NAN })
+                (
+                    label.clone(),
+                    if n > 0 {
+                        (s / n as f64).sqrt()
+                    } else {
+                        f64::NAN
+                    },
+                )
             })
             .collect())
     }

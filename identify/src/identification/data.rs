@@ -74,7 +74,9 @@ pub fn parse_json(text: &str, origin: &str) -> Result<MeasuredData, DataError> {
         let inner = e.inner();
         DataError::Json {
             origin: origin.into(),
-            path: format!("$.{}", e.path()).replace("$.?", "$").replace(".[", "["),
+            path: format!("$.{}", e.path())
+                .replace("$.?", "$")
+                .replace(".[", "["),
             message: format!(
                 "{inner} (line {}, column {}); see docs/identification.md for the format",
                 inner.line(),
@@ -103,20 +105,36 @@ pub const CSV_COLUMNS: [&str; 9] = [
 /// lines are skipped. Rows of a characteristic may come in any order; they are sorted by
 /// frequency, and a repeated frequency is an error naming both lines.
 pub fn parse_csv(text: &str, origin: &str) -> Result<MeasuredData, DataError> {
-    let err = |line: usize, message: String| DataError::Csv { origin: origin.into(), line, message };
+    let err = |line: usize, message: String| DataError::Csv {
+        origin: origin.into(),
+        line,
+        message,
+    };
     let mut lines = text
         .lines()
         .enumerate()
         .map(|(i, l)| (i + 1, l.trim()))
         .filter(|(_, l)| !l.is_empty() && !l.starts_with('#'));
     let Some((hline, header)) = lines.next() else {
-        return Err(err(1, "empty file: expected a header line, e.g. `body,dof,quantity,freq_hz,amplitude`".into()));
+        return Err(err(
+            1,
+            "empty file: expected a header line, e.g. `body,dof,quantity,freq_hz,amplitude`".into(),
+        ));
     };
-    let names: Vec<String> = header.split(',').map(|s| s.trim().to_ascii_lowercase()).collect();
+    let names: Vec<String> = header
+        .split(',')
+        .map(|s| s.trim().to_ascii_lowercase())
+        .collect();
     let mut col: BTreeMap<&str, usize> = BTreeMap::new();
     for (i, n) in names.iter().enumerate() {
         let Some(known) = CSV_COLUMNS.iter().find(|c| **c == n.as_str()) else {
-            return Err(err(hline, format!("unknown column \"{n}\"; known columns: {}", CSV_COLUMNS.join(", "))));
+            return Err(err(
+                hline,
+                format!(
+                    "unknown column \"{n}\"; known columns: {}",
+                    CSV_COLUMNS.join(", ")
+                ),
+            ));
         };
         if col.insert(known, i).is_some() {
             return Err(err(hline, format!("column \"{n}\" appears twice")));
@@ -142,26 +160,40 @@ pub fn parse_csv(text: &str, origin: &str) -> Result<MeasuredData, DataError> {
     for (ln, l) in lines {
         let cells: Vec<&str> = l.split(',').map(str::trim).collect();
         if cells.len() != names.len() {
-            return Err(err(ln, format!("{} cells, but the header has {} columns", cells.len(), names.len())));
+            return Err(err(
+                ln,
+                format!(
+                    "{} cells, but the header has {} columns",
+                    cells.len(),
+                    names.len()
+                ),
+            ));
         }
         let cell = |name: &str| col.get(name).map(|&i| cells[i]).filter(|c| !c.is_empty());
         let number = |name: &str| -> Result<Option<f64>, DataError> {
             match cell(name) {
                 None => Ok(None),
-                Some(c) => c.parse::<f64>().map(Some).map_err(|_| {
-                    err(ln, format!("column {name}: \"{c}\" is not a number"))
-                }),
+                Some(c) => c
+                    .parse::<f64>()
+                    .map(Some)
+                    .map_err(|_| err(ln, format!("column {name}: \"{c}\" is not a number"))),
             }
         };
-        let body = cell("body").ok_or_else(|| err(ln, "empty body name".into()))?.to_string();
-        let dof_text = cell("dof").ok_or_else(|| err(ln, "empty dof; use u1, u2, u3, r1, r2, r3".into()))?;
+        let body = cell("body")
+            .ok_or_else(|| err(ln, "empty body name".into()))?
+            .to_string();
+        let dof_text =
+            cell("dof").ok_or_else(|| err(ln, "empty dof; use u1, u2, u3, r1, r2, r3".into()))?;
         let dof = parse_dof(dof_text).ok_or_else(|| {
             err(ln, format!("unknown dof \"{dof_text}\"; use u1, u2, u3 (translations) or r1, r2, r3 (rotations), or 0-5"))
         })?;
         let quantity = match cell("quantity") {
             None => QuantityName::Displacement,
             Some(q) => Quantity::parse(q).map(QuantityName::from).ok_or_else(|| {
-                err(ln, format!("unknown quantity \"{q}\"; use displacement, velocity or acceleration"))
+                err(
+                    ln,
+                    format!("unknown quantity \"{q}\"; use displacement, velocity or acceleration"),
+                )
             })?,
         };
         let freq = number("freq_hz")?.ok_or_else(|| err(ln, "empty freq_hz".into()))?;
@@ -169,7 +201,10 @@ pub fn parse_csv(text: &str, origin: &str) -> Result<MeasuredData, DataError> {
         let avg = match cell("averages") {
             None => None,
             Some(c) => Some(c.parse::<u32>().map_err(|_| {
-                err(ln, format!("column averages: \"{c}\" is not a whole number"))
+                err(
+                    ln,
+                    format!("column averages: \"{c}\" is not a whole number"),
+                )
             })?),
         };
         let row = Row {
@@ -207,7 +242,11 @@ pub fn parse_csv(text: &str, origin: &str) -> Result<MeasuredData, DataError> {
         let all_or_none = |what: &str, has: &dyn Fn(&Row) -> bool| -> Result<bool, DataError> {
             let n = pts.iter().filter(|r| has(r)).count();
             if n != 0 && n != pts.len() {
-                let missing = pts.iter().find(|r| !has(r)).map(|r| r.line).unwrap_or(hline);
+                let missing = pts
+                    .iter()
+                    .find(|r| !has(r))
+                    .map(|r| r.line)
+                    .unwrap_or(hline);
                 return Err(err(missing, format!(
                     "{body} {}: column {what} is given for some points of this characteristic but not this one; give it for every point or none",
                     DOF_NAMES[dof as usize]
@@ -243,7 +282,10 @@ pub fn parse_csv(text: &str, origin: &str) -> Result<MeasuredData, DataError> {
             averages,
         });
     }
-    Ok(MeasuredData { source: origin.to_string(), characteristics })
+    Ok(MeasuredData {
+        source: origin.to_string(),
+        characteristics,
+    })
 }
 
 fn parse_dof(s: &str) -> Option<u8> {
@@ -259,7 +301,11 @@ pub fn to_csv(data: &MeasuredData) -> String {
     let mut s = String::new();
     s.push_str(&CSV_COLUMNS.join(","));
     s.push('\n');
-    let opt = |v: &Option<Vec<f64>>, k: usize| v.as_ref().map(|v| format!("{:?}", v[k])).unwrap_or_default();
+    let opt = |v: &Option<Vec<f64>>, k: usize| {
+        v.as_ref()
+            .map(|v| format!("{:?}", v[k]))
+            .unwrap_or_default()
+    };
     for m in &data.characteristics {
         for k in 0..m.freqs_hz.len() {
             let dof = DOF_NAMES.get(m.dof as usize).copied().unwrap_or("?");
@@ -323,7 +369,11 @@ impl Observations {
 /// outputs (the body known), appear once, and have equally long, finite arrays with strictly
 /// increasing non-negative frequencies, non-negative amplitudes, positive variances, coherences
 /// in (0, 1] and at least one average. Errors name `origin`, the characteristic and the point.
-pub fn validate(data: &MeasuredData, model: &Model, origin: &str) -> Result<Observations, DataError> {
+pub fn validate(
+    data: &MeasuredData,
+    model: &Model,
+    origin: &str,
+) -> Result<Observations, DataError> {
     let mut out = Vec::new();
     if data.characteristics.is_empty() {
         return Err(DataError::Invalid {
@@ -334,29 +384,53 @@ pub fn validate(data: &MeasuredData, model: &Model, origin: &str) -> Result<Obse
     }
     for (i, m) in data.characteristics.iter().enumerate() {
         let dof_name = DOF_NAMES.get(m.dof as usize).copied().unwrap_or("?");
-        let item = format!("$.characteristics[{i}] ({} {dof_name} {})", m.body, Quantity::from(m.quantity).as_str());
-        let bad = |message: String| DataError::Invalid { origin: origin.into(), item: item.clone(), message };
+        let item = format!(
+            "$.characteristics[{i}] ({} {dof_name} {})",
+            m.body,
+            Quantity::from(m.quantity).as_str()
+        );
+        let bad = |message: String| DataError::Invalid {
+            origin: origin.into(),
+            item: item.clone(),
+            message,
+        };
         let bad_point = |k: usize, message: String| DataError::Invalid {
             origin: origin.into(),
-            item: format!("{item}, point {k} ({} Hz)", m.freqs_hz.get(k).copied().unwrap_or(f64::NAN)),
+            item: format!(
+                "{item}, point {k} ({} Hz)",
+                m.freqs_hz.get(k).copied().unwrap_or(f64::NAN)
+            ),
             message,
         };
         if model.body_index(&m.body).is_none() {
             let known: Vec<&str> = model.bodies.iter().map(|b| b.name.as_str()).collect();
-            return Err(bad(format!("unknown body \"{}\"; the model's bodies: {}", m.body, known.join(", "))));
+            return Err(bad(format!(
+                "unknown body \"{}\"; the model's bodies: {}",
+                m.body,
+                known.join(", ")
+            )));
         }
         let Some(c) = m.resolve(model) else {
-            return Err(bad(format!("dof {} is out of range; use 0-5 (u1 u2 u3 r1 r2 r3)", m.dof)));
+            return Err(bad(format!(
+                "dof {} is out of range; use 0-5 (u1 u2 u3 r1 r2 r3)",
+                m.dof
+            )));
         };
         let Some(output) = model.outputs.iter().position(|o| *o == c) else {
-            let outs: Vec<String> = model.outputs.iter().map(|o| model.characteristic_label(*o)).collect();
+            let outs: Vec<String> = model
+                .outputs
+                .iter()
+                .map(|o| model.characteristic_label(*o))
+                .collect();
             return Err(bad(format!(
                 "this characteristic is not among the model's outputs ({}); add it as an [[output]] of the model or drop it from the data",
                 if outs.is_empty() { "none".to_string() } else { outs.join(", ") }
             )));
         };
         if out.iter().any(|o: &Observed| o.characteristic == c) {
-            return Err(bad("this characteristic appears twice; merge the two entries".into()));
+            return Err(bad(
+                "this characteristic appears twice; merge the two entries".into(),
+            ));
         }
         let n = m.freqs_hz.len();
         if n == 0 {
@@ -371,19 +445,30 @@ pub fn validate(data: &MeasuredData, model: &Model, origin: &str) -> Result<Obse
         for (name, len) in lens {
             if let Some(len) = len {
                 if len != n {
-                    return Err(bad(format!("{name} has {len} values but freqs_hz has {n}; one value per frequency")));
+                    return Err(bad(format!(
+                        "{name} has {len} values but freqs_hz has {n}; one value per frequency"
+                    )));
                 }
             }
         }
         for k in 0..n {
             let f = m.freqs_hz[k];
             if !f.is_finite() || f < 0.0 {
-                return Err(bad_point(k, format!("frequency {f} is not a finite, non-negative number")));
+                return Err(bad_point(
+                    k,
+                    format!("frequency {f} is not a finite, non-negative number"),
+                ));
             }
             if k > 0 {
                 let prev = m.freqs_hz[k - 1];
                 if f == prev {
-                    return Err(bad_point(k, format!("frequency {f} Hz repeats point {}; frequencies must be distinct", k - 1)));
+                    return Err(bad_point(
+                        k,
+                        format!(
+                            "frequency {f} Hz repeats point {}; frequencies must be distinct",
+                            k - 1
+                        ),
+                    ));
                 }
                 if f < prev {
                     return Err(bad_point(k, format!("frequency {f} Hz is below the previous one ({prev} Hz); frequencies must increase")));
@@ -391,24 +476,36 @@ pub fn validate(data: &MeasuredData, model: &Model, origin: &str) -> Result<Obse
             }
             let a = m.amplitude[k];
             if !a.is_finite() {
-                return Err(bad_point(k, format!("amplitude is {a}; every amplitude must be a finite number")));
+                return Err(bad_point(
+                    k,
+                    format!("amplitude is {a}; every amplitude must be a finite number"),
+                ));
             }
             if a < 0.0 {
                 return Err(bad_point(k, format!("amplitude {a} is negative; amplitudes are moduli |z| ≥ 0 (put the sign into phase_rad)")));
             }
             if let Some(p) = &m.phase_rad {
                 if !p[k].is_finite() {
-                    return Err(bad_point(k, format!("phase_rad is {}; must be finite", p[k])));
+                    return Err(bad_point(
+                        k,
+                        format!("phase_rad is {}; must be finite", p[k]),
+                    ));
                 }
             }
             if let Some(v) = &m.variance {
                 if !(v[k].is_finite() && v[k] > 0.0) {
-                    return Err(bad_point(k, format!("variance {} must be a finite number > 0", v[k])));
+                    return Err(bad_point(
+                        k,
+                        format!("variance {} must be a finite number > 0", v[k]),
+                    ));
                 }
             }
             if let Some(g) = &m.coherence {
                 if !(g[k] > 0.0 && g[k] <= 1.0) {
-                    return Err(bad_point(k, format!("coherence {} must lie in (0, 1]", g[k])));
+                    return Err(bad_point(
+                        k,
+                        format!("coherence {} must lie in (0, 1]", g[k]),
+                    ));
                 }
             }
         }
@@ -427,7 +524,10 @@ pub fn validate(data: &MeasuredData, model: &Model, origin: &str) -> Result<Obse
             averages: m.averages,
         });
     }
-    Ok(Observations { origin: origin.into(), characteristics: out })
+    Ok(Observations {
+        origin: origin.into(),
+        characteristics: out,
+    })
 }
 
 #[cfg(test)]

@@ -201,9 +201,16 @@ struct Scaled<'a> {
 }
 
 impl optimize::Residuals for Scaled<'_> {
-    fn eval(&mut self, u: &DVector<f64>, jacobian: bool) -> Result<(DVector<f64>, Option<DMatrix<f64>>), String> {
+    fn eval(
+        &mut self,
+        u: &DVector<f64>,
+        jacobian: bool,
+    ) -> Result<(DVector<f64>, Option<DMatrix<f64>>), String> {
         let x: Vec<f64> = u.iter().zip(&self.scale).map(|(u, s)| u * s).collect();
-        let (e, j) = self.crit.evaluate(&x, jacobian.then_some(self.mode)).map_err(|e| e.to_string())?;
+        let (e, j) = self
+            .crit
+            .evaluate(&x, jacobian.then_some(self.mode))
+            .map_err(|e| e.to_string())?;
         if e.iter().any(|v| !v.is_finite()) {
             return Err("the model response is not finite".into());
         }
@@ -262,37 +269,81 @@ pub fn identify(
     let hi = DVector::from_iterator(x0.len(), vars.vars.iter().map(|v| v.upper / v.scale));
     let (e0, _) = crit.evaluate(&x0, None).map_err(IdentifyError::Initial)?;
     let criterion_initial = 0.5 * e0.norm_squared();
-    let rms_initial = crit.rms_relative_error(&x0).map_err(IdentifyError::Initial)?;
+    let rms_initial = crit
+        .rms_relative_error(&x0)
+        .map_err(IdentifyError::Initial)?;
     let mut best: Option<(optimize::Outcome, usize)> = None;
     let mut starts = Vec::new();
-    for (k, xs) in start_points(vars, opts.starts, opts.seed).into_iter().enumerate() {
+    for (k, xs) in start_points(vars, opts.starts, opts.seed)
+        .into_iter()
+        .enumerate()
+    {
         let u0 = DVector::from_iterator(xs.len(), xs.iter().zip(&scale).map(|(x, s)| x / s));
-        let mut obj = Scaled { crit: &mut crit, scale: scale.clone(), mode: opts.jacobian };
-        let res = optimize::minimize(opts.optimizer, &mut obj, &u0, &lo, &hi, &opts.settings, &mut |p| progress(k, p));
+        let mut obj = Scaled {
+            crit: &mut crit,
+            scale: scale.clone(),
+            mode: opts.jacobian,
+        };
+        let res = optimize::minimize(
+            opts.optimizer,
+            &mut obj,
+            &u0,
+            &lo,
+            &hi,
+            &opts.settings,
+            &mut |p| progress(k, p),
+        );
         match res {
             Ok(o) => {
-                starts.push(StartSummary { x0: xs, criterion: o.criterion, iterations: o.iterations, stop: o.stop.clone() });
+                starts.push(StartSummary {
+                    x0: xs,
+                    criterion: o.criterion,
+                    iterations: o.iterations,
+                    stop: o.stop.clone(),
+                });
                 if best.as_ref().is_none_or(|(b, _)| o.criterion < b.criterion) {
                     best = Some((o, k));
                 }
             }
             Err(m) => {
                 if k == 0 {
-                    return Err(IdentifyError::Noise { item: "initial values".into(), message: m });
+                    return Err(IdentifyError::Noise {
+                        item: "initial values".into(),
+                        message: m,
+                    });
                 }
-                starts.push(StartSummary { x0: xs, criterion: f64::INFINITY, iterations: 0, stop: StopReason::Diverged(m) });
+                starts.push(StartSummary {
+                    x0: xs,
+                    criterion: f64::INFINITY,
+                    iterations: 0,
+                    stop: StopReason::Diverged(m),
+                });
             }
         }
     }
     let Some((out, _)) = best else {
-        return Err(IdentifyError::Noise { item: "initial values".into(), message: "no start could be evaluated".into() });
+        return Err(IdentifyError::Noise {
+            item: "initial values".into(),
+            message: "no start could be evaluated".into(),
+        });
     };
     let estimate: Vec<f64> = out.u.iter().zip(&scale).map(|(u, s)| u * s).collect();
-    let (e, jac) = crit.evaluate(&estimate, Some(JacobianMode::Analytic)).map_err(IdentifyError::Initial)?;
+    let (e, jac) = crit
+        .evaluate(&estimate, Some(JacobianMode::Analytic))
+        .map_err(IdentifyError::Initial)?;
     let criterion = 0.5 * e.norm_squared();
     let jac = jac.unwrap_or_else(|| DMatrix::zeros(e.len(), estimate.len()));
-    let unc = uncertainty::uncertainty(vars, &estimate, &jac, criterion, crit.noise.scale_unknown(), opts.weak_threshold);
-    let rms = crit.rms_relative_error(&estimate).map_err(IdentifyError::Initial)?;
+    let unc = uncertainty::uncertainty(
+        vars,
+        &estimate,
+        &jac,
+        criterion,
+        crit.noise.scale_unknown(),
+        opts.weak_threshold,
+    );
+    let rms = crit
+        .rms_relative_error(&estimate)
+        .map_err(IdentifyError::Initial)?;
     let mut updated = model.clone();
     vars.apply(&mut updated, &estimate);
     Ok(Identification {
@@ -328,8 +379,17 @@ pub fn uncertainty_at(
 ) -> Result<Uncertainty, IdentifyError> {
     let mut crit = Criterion::new(model, data, vars, opts.fit, opts.noise, opts.frf_method)?;
     let x0 = vars.initial();
-    let (e, jac) = crit.evaluate(&x0, Some(JacobianMode::Analytic)).map_err(IdentifyError::Initial)?;
+    let (e, jac) = crit
+        .evaluate(&x0, Some(JacobianMode::Analytic))
+        .map_err(IdentifyError::Initial)?;
     let jac = jac.unwrap_or_else(|| DMatrix::zeros(e.len(), x0.len()));
     let j = 0.5 * e.norm_squared();
-    Ok(uncertainty::uncertainty(vars, &x0, &jac, j, false, opts.weak_threshold))
+    Ok(uncertainty::uncertainty(
+        vars,
+        &x0,
+        &jac,
+        j,
+        false,
+        opts.weak_threshold,
+    ))
 }

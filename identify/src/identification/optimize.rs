@@ -54,7 +54,12 @@ pub struct Settings {
 
 impl Default for Settings {
     fn default() -> Settings {
-        Settings { max_iterations: 100, step_tol: 1e-9, gradient_tol: 1e-8, criterion_tol: 1e-12 }
+        Settings {
+            max_iterations: 100,
+            step_tol: 1e-9,
+            gradient_tol: 1e-8,
+            criterion_tol: 1e-12,
+        }
     }
 }
 
@@ -122,7 +127,11 @@ pub struct Progress {
 /// variables. An `Err` means the model cannot be evaluated at that point.
 pub trait Residuals {
     /// `e(u)` and `∂e/∂u` if `jacobian`.
-    fn eval(&mut self, u: &DVector<f64>, jacobian: bool) -> Result<(DVector<f64>, Option<DMatrix<f64>>), String>;
+    fn eval(
+        &mut self,
+        u: &DVector<f64>,
+        jacobian: bool,
+    ) -> Result<(DVector<f64>, Option<DMatrix<f64>>), String>;
     /// True when the Jacobian costs little more than the residuals (analytic): trial points are
     /// then evaluated with it.
     fn cheap_jacobian(&self) -> bool;
@@ -166,11 +175,18 @@ fn clamp(u: &DVector<f64>, lo: &DVector<f64>, hi: &DVector<f64>) -> DVector<f64>
 
 /// Free variables: not at a bound that the gradient pushes against.
 fn free_set(u: &DVector<f64>, g: &DVector<f64>, lo: &DVector<f64>, hi: &DVector<f64>) -> Vec<bool> {
-    (0..u.len()).map(|i| !((u[i] <= lo[i] && g[i] > 0.0) || (u[i] >= hi[i] && g[i] < 0.0))).collect()
+    (0..u.len())
+        .map(|i| !((u[i] <= lo[i] && g[i] > 0.0) || (u[i] >= hi[i] && g[i] < 0.0)))
+        .collect()
 }
 
 fn projected_norm(g: &DVector<f64>, free: &[bool]) -> f64 {
-    g.iter().zip(free).filter(|(_, f)| **f).map(|(x, _)| x * x).sum::<f64>().sqrt()
+    g.iter()
+        .zip(free)
+        .filter(|(_, f)| **f)
+        .map(|(x, _)| x * x)
+        .sum::<f64>()
+        .sqrt()
 }
 
 fn gradient_converged(s: &State, free: &[bool], tol: f64) -> bool {
@@ -208,7 +224,12 @@ pub fn minimize(
 }
 
 fn outcome(s: &State, iterations: usize, stop: StopReason) -> Outcome {
-    Outcome { u: s.u.clone(), criterion: s.cost, iterations, stop }
+    Outcome {
+        u: s.u.clone(),
+        criterion: s.cost,
+        iterations,
+        stop,
+    }
 }
 
 /// After an accepted step of iteration `it` (criterion `old` before it, step norm `sn`): reports
@@ -226,7 +247,12 @@ fn after_step(
     progress: &mut dyn FnMut(&Progress),
 ) -> Option<Outcome> {
     let free = free_set(&s.u, &s.g, lo, hi);
-    progress(&Progress { iteration: it, criterion: s.cost, step_norm: sn, gradient_norm: projected_norm(&s.g, &free) });
+    progress(&Progress {
+        iteration: it,
+        criterion: s.cost,
+        step_norm: sn,
+        gradient_norm: projected_norm(&s.g, &free),
+    });
     if !test_tolerances {
         return None;
     }
@@ -249,7 +275,10 @@ fn at_limit(s: &State, lo: &DVector<f64>, hi: &DVector<f64>, set: &Settings) -> 
 }
 
 /// Evaluates a trial point: the full state if the Jacobian is cheap, residuals only otherwise.
-fn trial(obj: &mut dyn Residuals, u: DVector<f64>) -> Result<(f64, Option<State>, DVector<f64>), String> {
+fn trial(
+    obj: &mut dyn Residuals,
+    u: DVector<f64>,
+) -> Result<(f64, Option<State>, DVector<f64>), String> {
     if obj.cheap_jacobian() {
         let s = state(obj, u.clone())?;
         Ok((s.cost, Some(s), u))
@@ -263,7 +292,10 @@ fn trial(obj: &mut dyn Residuals, u: DVector<f64>) -> Result<(f64, Option<State>
     }
 }
 
-fn complete(obj: &mut dyn Residuals, t: (f64, Option<State>, DVector<f64>)) -> Result<State, String> {
+fn complete(
+    obj: &mut dyn Residuals,
+    t: (f64, Option<State>, DVector<f64>),
+) -> Result<State, String> {
     match t.1 {
         Some(s) => Ok(s),
         None => state(obj, t.2),
@@ -292,7 +324,11 @@ fn levenberg_marquardt(
         for i in 0..n {
             diag[i] = diag[i].max(a[(i, i)]);
         }
-        let dmax = idx.iter().map(|&i| diag[i]).fold(0.0, f64::max).max(f64::MIN_POSITIVE);
+        let dmax = idx
+            .iter()
+            .map(|&i| diag[i])
+            .fold(0.0, f64::max)
+            .max(f64::MIN_POSITIVE);
         let mut lam = lambda.unwrap_or(1e-3 * dmax);
         let mut tries = 0;
         let accepted = loop {
@@ -457,7 +493,11 @@ fn line_point(
     let u = clamp(&(&s.u + d * alpha), lo, hi);
     let st = state(obj, u).ok()?;
     let slope = st.g.dot(d);
-    Some(LinePoint { alpha, s: st, slope })
+    Some(LinePoint {
+        alpha,
+        s: st,
+        slope,
+    })
 }
 
 const WOLFE_C1: f64 = 1e-4;
@@ -478,7 +518,10 @@ fn zoom(
 ) -> Option<LinePoint> {
     let phi0 = s.cost;
     for _ in 0..30 {
-        let (la, lphi) = lo_p.as_ref().map(|p| (p.alpha, p.s.cost)).unwrap_or((0.0, phi0));
+        let (la, lphi) = lo_p
+            .as_ref()
+            .map(|p| (p.alpha, p.s.cost))
+            .unwrap_or((0.0, phi0));
         let a = la + 0.5 * (hi_a - la);
         let Some(p) = line_point(obj, s, d, a, lo, hi) else {
             hi_a = a;
@@ -568,7 +611,9 @@ fn bfgs(
         let gf = DVector::from_fn(n, |i, _| if free[i] { s.g[i] } else { 0.0 });
         // Components that would leave the box at once are dropped (the quasi-Newton direction
         // can point outward where the gradient points inward).
-        let blocked = |i: usize, di: f64| !free[i] || (s.u[i] >= hi[i] && di > 0.0) || (s.u[i] <= lo[i] && di < 0.0);
+        let blocked = |i: usize, di: f64| {
+            !free[i] || (s.u[i] >= hi[i] && di > 0.0) || (s.u[i] <= lo[i] && di < 0.0)
+        };
         let mut d = -(&hinv * &gf);
         for i in 0..n {
             if blocked(i, d[i]) {
@@ -595,7 +640,11 @@ fn bfgs(
         }
         let alpha_max = alpha_max.max(0.0);
         let dinf = d.amax();
-        let alpha0 = if fresh { (0.1 / dinf.max(f64::MIN_POSITIVE)).min(1.0) } else { 1.0 };
+        let alpha0 = if fresh {
+            (0.1 / dinf.max(f64::MIN_POSITIVE)).min(1.0)
+        } else {
+            1.0
+        };
         let Some(p) = wolfe_search(obj, &s, &d, alpha0, alpha_max, lo, hi) else {
             return outcome(&s, it - 1, StopReason::NoFurtherDecrease);
         };
@@ -635,9 +684,14 @@ mod tests {
     /// Rosenbrock as residuals: e = [10 (u1 − u0²), 1 − u0].
     struct Rosen;
     impl Residuals for Rosen {
-        fn eval(&mut self, u: &DVector<f64>, jacobian: bool) -> Result<(DVector<f64>, Option<DMatrix<f64>>), String> {
+        fn eval(
+            &mut self,
+            u: &DVector<f64>,
+            jacobian: bool,
+        ) -> Result<(DVector<f64>, Option<DMatrix<f64>>), String> {
             let e = DVector::from_vec(vec![10.0 * (u[1] - u[0] * u[0]), 1.0 - u[0]]);
-            let j = jacobian.then(|| DMatrix::from_row_slice(2, 2, &[-20.0 * u[0], 10.0, -1.0, 0.0]));
+            let j =
+                jacobian.then(|| DMatrix::from_row_slice(2, 2, &[-20.0 * u[0], 10.0, -1.0, 0.0]));
             Ok((e, j))
         }
         fn cheap_jacobian(&self) -> bool {
@@ -649,11 +703,31 @@ mod tests {
     fn every_method_solves_rosenbrock() {
         let lo = DVector::from_element(2, -10.0);
         let hi = DVector::from_element(2, 10.0);
-        for m in [Optimizer::LevenbergMarquardt, Optimizer::GaussNewton, Optimizer::Bfgs] {
-            let set = Settings { max_iterations: 500, ..Settings::default() };
-            let o = minimize(m, &mut Rosen, &DVector::from_vec(vec![-1.2, 1.0]), &lo, &hi, &set, &mut |_| {}).unwrap();
+        for m in [
+            Optimizer::LevenbergMarquardt,
+            Optimizer::GaussNewton,
+            Optimizer::Bfgs,
+        ] {
+            let set = Settings {
+                max_iterations: 500,
+                ..Settings::default()
+            };
+            let o = minimize(
+                m,
+                &mut Rosen,
+                &DVector::from_vec(vec![-1.2, 1.0]),
+                &lo,
+                &hi,
+                &set,
+                &mut |_| {},
+            )
+            .unwrap();
             assert!(o.stop.converged(), "{m:?}: {:?}", o.stop);
-            assert!((o.u[0] - 1.0).abs() < 1e-5 && (o.u[1] - 1.0).abs() < 1e-5, "{m:?}: {:?}", o.u);
+            assert!(
+                (o.u[0] - 1.0).abs() < 1e-5 && (o.u[1] - 1.0).abs() < 1e-5,
+                "{m:?}: {:?}",
+                o.u
+            );
         }
     }
 
@@ -662,9 +736,25 @@ mod tests {
         // Minimum at (1, 1) lies outside u0 ≤ 0.5: the solution is on the bound.
         let lo = DVector::from_element(2, -10.0);
         let hi = DVector::from_vec(vec![0.5, 10.0]);
-        for m in [Optimizer::LevenbergMarquardt, Optimizer::GaussNewton, Optimizer::Bfgs] {
-            let set = Settings { max_iterations: 500, ..Settings::default() };
-            let o = minimize(m, &mut Rosen, &DVector::from_vec(vec![-1.2, 1.0]), &lo, &hi, &set, &mut |_| {}).unwrap();
+        for m in [
+            Optimizer::LevenbergMarquardt,
+            Optimizer::GaussNewton,
+            Optimizer::Bfgs,
+        ] {
+            let set = Settings {
+                max_iterations: 500,
+                ..Settings::default()
+            };
+            let o = minimize(
+                m,
+                &mut Rosen,
+                &DVector::from_vec(vec![-1.2, 1.0]),
+                &lo,
+                &hi,
+                &set,
+                &mut |_| {},
+            )
+            .unwrap();
             assert_eq!(o.u[0], 0.5, "{m:?}");
             assert!((o.u[1] - 0.25).abs() < 1e-5, "{m:?}: {:?}", o.u);
         }
@@ -674,8 +764,20 @@ mod tests {
     fn the_iteration_limit_is_reported() {
         let lo = DVector::from_element(2, -10.0);
         let hi = DVector::from_element(2, 10.0);
-        let set = Settings { max_iterations: 2, ..Settings::default() };
-        let o = minimize(Optimizer::Bfgs, &mut Rosen, &DVector::from_vec(vec![-1.2, 1.0]), &lo, &hi, &set, &mut |_| {}).unwrap();
+        let set = Settings {
+            max_iterations: 2,
+            ..Settings::default()
+        };
+        let o = minimize(
+            Optimizer::Bfgs,
+            &mut Rosen,
+            &DVector::from_vec(vec![-1.2, 1.0]),
+            &lo,
+            &hi,
+            &set,
+            &mut |_| {},
+        )
+        .unwrap();
         assert_eq!(o.stop, StopReason::IterationLimit);
         assert!(!o.stop.converged());
     }

@@ -30,23 +30,34 @@ pub const FORMAT: &str = "ident identification problem 1";
 ///   `terms`: per SDE it moves, `sde` (index into `model.sdes`) and `dk`, `dpsi`, the change of
 ///   the SDE's six stiffnesses (N/m, N·m/rad) and six ψ per unit of the variable. Every law is
 ///   linear in its parameters, so `k(x) = k(x0) + Σ_v (x_v − x0_v) dk_v`, likewise ψ.
-pub fn to_json(model: &Model, data: &Observations, vars: &Variables, opts: &Options) -> Result<Value, IdentifyError> {
+pub fn to_json(
+    model: &Model,
+    data: &Observations,
+    vars: &Variables,
+    opts: &Options,
+) -> Result<Value, IdentifyError> {
     let mut crit = Criterion::new(model, data, vars, opts.fit, opts.noise, opts.frf_method)?;
     let x0 = vars.initial();
     let at_initial = crit.model_at(&x0);
     let q0 = crit.predicted(&x0).map_err(IdentifyError::Initial)?;
-    let enabled: Vec<usize> = (0..at_initial.sdes.len()).filter(|&i| at_initial.sdes[i].enabled).collect();
+    let enabled: Vec<usize> = (0..at_initial.sdes.len())
+        .filter(|&i| at_initial.sdes[i].enabled)
+        .collect();
     let mut variables = Vec::with_capacity(vars.len());
     for v in &vars.vars {
         let mut terms = Vec::with_capacity(v.targets.len());
         for t in &v.targets {
             let sde = &at_initial.sdes[t.param.sde];
-            let (Some((dk, dpsi)), Some(index)) =
-                (sde.law.derivative(t.param.name), enabled.iter().position(|&i| i == t.param.sde))
-            else {
+            let (Some((dk, dpsi)), Some(index)) = (
+                sde.law.derivative(t.param.name),
+                enabled.iter().position(|&i| i == t.param.sde),
+            ) else {
                 return Err(IdentifyError::Noise {
                     item: format!("{}: variable {}", vars.origin, v.name),
-                    message: format!("SDE {} has no parameter {} that can be exported", sde.name, v.parameter),
+                    message: format!(
+                        "SDE {} has no parameter {} that can be exported",
+                        sde.name, v.parameter
+                    ),
                 });
             };
             terms.push(json!({

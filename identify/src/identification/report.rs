@@ -47,7 +47,11 @@ pub fn rows(id: &Identification) -> Vec<Row> {
             Row {
                 variable: v.name.clone(),
                 sdes: v.sdes.clone(),
-                parameter: if v.tie == Tie::Scale { format!("{} (factor)", v.parameter) } else { v.parameter.clone() },
+                parameter: if v.tie == Tie::Scale {
+                    format!("{} (factor)", v.parameter)
+                } else {
+                    v.parameter.clone()
+                },
                 unit: v.unit.symbol.clone(),
                 initial: id.initial[i] / f,
                 identified: id.estimate[i] / f,
@@ -99,7 +103,11 @@ pub fn text(id: &Identification) -> String {
     ));
     if id.starts.len() > 1 {
         for (k, st) in id.starts.iter().enumerate() {
-            s.push_str(&format!("  start {k}: J = {} ({})\n", num(st.criterion), st.stop.describe()));
+            s.push_str(&format!(
+                "  start {k}: J = {} ({})\n",
+                num(st.criterion),
+                st.stop.describe()
+            ));
         }
     }
     s.push_str(&format!(
@@ -108,13 +116,21 @@ pub fn text(id: &Identification) -> String {
         num(id.criterion),
         u.reduced_chi2,
         if id.noise.scale_unknown() {
-            format!(" (covariance scaled by the residual variance {:.3})", u.covariance_scale)
+            format!(
+                " (covariance scaled by the residual variance {:.3})",
+                u.covariance_scale
+            )
         } else {
             String::new()
         }
     ));
     let rows = rows(id);
-    let w = rows.iter().map(|r| r.variable.len()).max().unwrap_or(8).max(8);
+    let w = rows
+        .iter()
+        .map(|r| r.variable.len())
+        .max()
+        .unwrap_or(8)
+        .max(8);
     let ws = rows.iter().map(|r| r.sdes.len()).max().unwrap_or(4).max(4);
     s.push_str(&format!(
         "\n{:<w$}  {:<ws$}  {:<8}  {:>12}  {:>12}  {:>12}  {:>8}\n",
@@ -128,14 +144,25 @@ pub fn text(id: &Identification) -> String {
             r.unit,
             num(r.initial),
             num(r.identified),
-            r.std_error.map(num).unwrap_or_else(|| "undetermined".into()),
-            r.variability.map(|v| format!("{v:.3}")).unwrap_or_else(|| "-".into()),
-            r.at_bound.as_ref().map(|b| format!("  at {b} bound")).unwrap_or_default()
+            r.std_error
+                .map(num)
+                .unwrap_or_else(|| "undetermined".into()),
+            r.variability
+                .map(|v| format!("{v:.3}"))
+                .unwrap_or_else(|| "-".into()),
+            r.at_bound
+                .as_ref()
+                .map(|b| format!("  at {b} bound"))
+                .unwrap_or_default()
         ));
     }
     s.push_str("\nRMS relative amplitude error per characteristic (initial -> identified):\n");
     for ((label, a), (_, b)) in id.rms_initial.iter().zip(&id.rms) {
-        s.push_str(&format!("  {label}: {:.2} % -> {:.2} %\n", 100.0 * a, 100.0 * b));
+        s.push_str(&format!(
+            "  {label}: {:.2} % -> {:.2} %\n",
+            100.0 * a,
+            100.0 * b
+        ));
     }
     if !u.weak.is_empty() {
         s.push_str(&format!(
@@ -143,7 +170,11 @@ pub fn text(id: &Identification) -> String {
             u.condition
         ));
         for d in &u.weak {
-            let rel = if d.relative_std.is_finite() { format!("±{:.0} %", 100.0 * d.relative_std) } else { "no information".into() };
+            let rel = if d.relative_std.is_finite() {
+                format!("±{:.0} %", 100.0 * d.relative_std)
+            } else {
+                "no information".into()
+            };
             s.push_str(&format!("  {} ({rel})\n", d.combination()));
         }
         s.push_str("  (relative changes along these directions barely change the characteristics: group these variables or add measurements)\n");
@@ -154,7 +185,10 @@ pub fn text(id: &Identification) -> String {
         for b in a + 1..n {
             let c = u.correlation[(a, b)];
             if c.abs() > 0.9 {
-                strong.push(format!("  {} ~ {}: {c:+.3}", id.variables.vars[a].name, id.variables.vars[b].name));
+                strong.push(format!(
+                    "  {} ~ {}: {c:+.3}",
+                    id.variables.vars[a].name, id.variables.vars[b].name
+                ));
             }
         }
     }
@@ -229,22 +263,50 @@ pub fn json(id: &Identification) -> ReportJson {
         reduced_chi2: id.uncertainty.reduced_chi2,
         covariance_scale: id.uncertainty.covariance_scale,
         table: rows(id),
-        correlation: (0..n).map(|a| (0..n).map(|b| Some(c[(a, b)]).filter(|v| v.is_finite())).collect()).collect(),
-        rms_relative_error: id.rms_initial.iter().zip(&id.rms).map(|((l, a), (_, b))| (l.clone(), *a, *b)).collect(),
+        correlation: (0..n)
+            .map(|a| {
+                (0..n)
+                    .map(|b| Some(c[(a, b)]).filter(|v| v.is_finite()))
+                    .collect()
+            })
+            .collect(),
+        rms_relative_error: id
+            .rms_initial
+            .iter()
+            .zip(&id.rms)
+            .map(|((l, a), (_, b))| (l.clone(), *a, *b))
+            .collect(),
         weak_directions: id
             .uncertainty
             .weak
             .iter()
-            .map(|d| (d.combination(), Some(d.relative_std).filter(|v| v.is_finite())))
+            .map(|d| {
+                (
+                    d.combination(),
+                    Some(d.relative_std).filter(|v| v.is_finite()),
+                )
+            })
             .collect(),
-        starts: id.starts.iter().map(|s| (s.criterion, s.stop.describe())).collect(),
+        starts: id
+            .starts
+            .iter()
+            .map(|s| (s.criterion, s.stop.describe()))
+            .collect(),
     }
 }
 
 /// The table as CSV: `variable,sdes,parameter,unit,initial,identified,std_error,variability,at_bound`.
 pub fn csv(id: &Identification) -> String {
-    let mut s = String::from("variable,sdes,parameter,unit,initial,identified,std_error,variability,at_bound\n");
-    let q = |t: &str| if t.contains(',') || t.contains('"') { format!("\"{}\"", t.replace('"', "\"\"")) } else { t.to_string() };
+    let mut s = String::from(
+        "variable,sdes,parameter,unit,initial,identified,std_error,variability,at_bound\n",
+    );
+    let q = |t: &str| {
+        if t.contains(',') || t.contains('"') {
+            format!("\"{}\"", t.replace('"', "\"\""))
+        } else {
+            t.to_string()
+        }
+    };
     for r in rows(id) {
         s.push_str(&format!(
             "{},{},{},{},{:?},{:?},{},{},{}\n",
@@ -328,38 +390,68 @@ fn set_value(item: &mut Item, si: f64, dim: Dim) {
 /// Writes the identified values into the model's TOML text (`[[sde]]` tables matched by name),
 /// keeping comments and layout. An isolator given one `psi` whose `psi_n` or `psi_t` was
 /// identified gets both keys; a general element's `k`/`psi` arrays are rewritten in SI.
-pub fn update_toml(text: &str, origin: &str, id: &Identification) -> Result<String, WriteBackError> {
-    let mut doc: DocumentMut = text
-        .parse()
-        .map_err(|e: toml_edit::TomlError| WriteBackError::Parse { origin: origin.into(), message: e.to_string() })?;
+pub fn update_toml(
+    text: &str,
+    origin: &str,
+    id: &Identification,
+) -> Result<String, WriteBackError> {
+    let mut doc: DocumentMut =
+        text.parse()
+            .map_err(|e: toml_edit::TomlError| WriteBackError::Parse {
+                origin: origin.into(),
+                message: e.to_string(),
+            })?;
     let model = &id.model;
     let mut touched: Vec<usize> = id.variables.params().iter().map(|p| p.sde).collect();
     touched.sort_unstable();
     touched.dedup();
     let Some(sdes) = doc.get_mut("sde").and_then(Item::as_array_of_tables_mut) else {
-        let sde = touched.first().map(|&i| model.sdes[i].name.clone()).unwrap_or_default();
-        return Err(WriteBackError::MissingSde { origin: origin.into(), sde });
+        let sde = touched
+            .first()
+            .map(|&i| model.sdes[i].name.clone())
+            .unwrap_or_default();
+        return Err(WriteBackError::MissingSde {
+            origin: origin.into(),
+            sde,
+        });
     };
     for &si in &touched {
         let sde = &model.sdes[si];
-        let table = sdes.iter_mut().find(|t| match t.get("name").and_then(Item::as_value) {
-            Some(Value::Integer(i)) => i.value().to_string() == sde.name,
-            Some(Value::String(s)) => s.value().trim() == sde.name,
-            _ => false,
-        });
+        let table = sdes
+            .iter_mut()
+            .find(|t| match t.get("name").and_then(Item::as_value) {
+                Some(Value::Integer(i)) => i.value().to_string() == sde.name,
+                Some(Value::String(s)) => s.value().trim() == sde.name,
+                _ => false,
+            });
         let Some(table) = table else {
-            return Err(WriteBackError::MissingSde { origin: origin.into(), sde: sde.name.clone() });
+            return Err(WriteBackError::MissingSde {
+                origin: origin.into(),
+                sde: sde.name.clone(),
+            });
         };
-        let params: Vec<ParamName> = id.variables.params().iter().filter(|p| p.sde == si).map(|p| p.name).collect();
+        let params: Vec<ParamName> = id
+            .variables
+            .params()
+            .iter()
+            .filter(|p| p.sde == si)
+            .map(|p| p.name)
+            .collect();
         for p in params {
             let value = sde.law.get(p).unwrap_or(0.0);
             match (&sde.law, p) {
                 (SdeLaw::General { k, psi }, ParamName::Ki(_) | ParamName::PsiI(_)) => {
-                    let (key, vals) = if matches!(p, ParamName::Ki(_)) { ("k", k) } else { ("psi", psi) };
+                    let (key, vals) = if matches!(p, ParamName::Ki(_)) {
+                        ("k", k)
+                    } else {
+                        ("psi", psi)
+                    };
                     let arr: toml_edit::Array = vals.iter().map(|v| round_sig(*v)).collect();
                     table.insert(key, Item::Value(Value::Array(arr)));
                 }
-                (SdeLaw::Isolator { psi_n, psi_t, .. }, ParamName::PsiN | ParamName::PsiT) if table.contains_key("psi") => {
+                (SdeLaw::Isolator { psi_n, psi_t, .. }, ParamName::PsiN | ParamName::PsiT)
+                    if table.contains_key("psi") =>
+                {
                     let mut old = table.remove("psi").unwrap_or(Item::None);
                     let mut other = old.clone();
                     set_value(&mut old, *psi_n, Dim::NONE);

@@ -22,7 +22,9 @@ use crate::model::Model;
 /// `n ≥ 2` log-spaced lines from `from_hz` to `to_hz` (both included, > 0).
 pub fn log_lines(from_hz: f64, to_hz: f64, n: usize) -> Vec<f64> {
     let last = n.saturating_sub(1).max(1) as f64;
-    (0..n).map(|i| from_hz * (to_hz / from_hz).powf(i as f64 / last)).collect()
+    (0..n)
+        .map(|i| from_hz * (to_hz / from_hz).powf(i as f64 / last))
+        .collect()
 }
 
 /// The FWD-32J synthetic measurement of the paper's worked problem: 38 log-spaced lines over
@@ -47,7 +49,10 @@ pub fn amplitude_data(
 ) -> Result<MeasuredData, frf::SolveError> {
     let r = frf::response(truth, freqs_hz, &[], Method::Auto)?;
     Ok(MeasuredData {
-        source: format!("synthetic: {} with relative noise σ = {relative_sigma}·|q|", truth.name),
+        source: format!(
+            "synthetic: {} with relative noise σ = {relative_sigma}·|q|",
+            truth.name
+        ),
         characteristics: truth
             .outputs
             .iter()
@@ -59,9 +64,16 @@ pub fn amplitude_data(
                     dof: c.dof,
                     quantity: QuantityName::from(c.quantity),
                     freqs_hz: freqs_hz.to_vec(),
-                    amplitude: q.iter().map(|a| a * (1.0 + relative_sigma * standard_normal())).collect(),
+                    amplitude: q
+                        .iter()
+                        .map(|a| a * (1.0 + relative_sigma * standard_normal()))
+                        .collect(),
                     phase_rad: None,
-                    variance: Some(q.iter().map(|a| 2.0 * (relative_sigma * a).powi(2)).collect()),
+                    variance: Some(
+                        q.iter()
+                            .map(|a| 2.0 * (relative_sigma * a).powi(2))
+                            .collect(),
+                    ),
                     coherence: None,
                     averages: None,
                 }
@@ -100,7 +112,10 @@ mod tests {
         }
         // One unit of noise moves an amplitude by ε of itself.
         let d1 = amplitude_data(&truth, &f, 0.02, || 1.0).unwrap();
-        let (a0, a1) = (d.characteristics[1].amplitude[3], d1.characteristics[1].amplitude[3]);
+        let (a0, a1) = (
+            d.characteristics[1].amplitude[3],
+            d1.characteristics[1].amplitude[3],
+        );
         assert!((a1 / a0 - 1.02).abs() < 1e-12);
     }
 }

@@ -112,7 +112,13 @@ pub fn uncertainty(
         .vars
         .iter()
         .zip(x)
-        .map(|(v, &xi)| if xi.abs() > 1e-6 * v.scale { xi.abs() } else { v.scale })
+        .map(|(v, &xi)| {
+            if xi.abs() > 1e-6 * v.scale {
+                xi.abs()
+            } else {
+                v.scale
+            }
+        })
         .collect();
     let f = jac.tr_mul(jac);
     let ft = DMatrix::from_fn(n, n, |a, b| f[(a, b)] * d[a] * d[b]);
@@ -131,7 +137,11 @@ pub fn uncertainty(
     let covariance = DMatrix::from_fn(n, n, |a, b| pinv[(a, b)] * d[a] * d[b] * covariance_scale);
     let correlation = DMatrix::from_fn(n, n, |a, b| {
         let s = (covariance[(a, a)] * covariance[(b, b)]).sqrt();
-        if s > 0.0 { covariance[(a, b)] / s } else { f64::NAN }
+        if s > 0.0 {
+            covariance[(a, b)] / s
+        } else {
+            f64::NAN
+        }
     });
     let mut std_error: Vec<f64> = (0..n).map(|i| covariance[(i, i)].max(0.0).sqrt()).collect();
     for k in 0..n {
@@ -148,14 +158,32 @@ pub fn uncertainty(
     let variability = std_error
         .iter()
         .zip(x)
-        .map(|(s, xi)| if *xi != 0.0 { s / xi.abs() } else { f64::INFINITY })
+        .map(|(s, xi)| {
+            if *xi != 0.0 {
+                s / xi.abs()
+            } else {
+                f64::INFINITY
+            }
+        })
         .collect();
-    let lmin = eig.eigenvalues.iter().copied().fold(f64::INFINITY, f64::min);
-    let condition = if lmin > 0.0 { lmax / lmin } else { f64::INFINITY };
+    let lmin = eig
+        .eigenvalues
+        .iter()
+        .copied()
+        .fold(f64::INFINITY, f64::min);
+    let condition = if lmin > 0.0 {
+        lmax / lmin
+    } else {
+        f64::INFINITY
+    };
     let mut weak: Vec<WeakDirection> = (0..n)
         .filter_map(|k| {
             let l = eig.eigenvalues[k];
-            let rel = if l > cutoff { (covariance_scale / l).sqrt() } else { f64::INFINITY };
+            let rel = if l > cutoff {
+                (covariance_scale / l).sqrt()
+            } else {
+                f64::INFINITY
+            };
             if rel <= weak_threshold {
                 return None;
             }
@@ -170,7 +198,10 @@ pub fn uncertainty(
                     c.1 = -c.1;
                 }
             }
-            Some(WeakDirection { relative_std: rel, components: comps })
+            Some(WeakDirection {
+                relative_std: rel,
+                components: comps,
+            })
         })
         .collect();
     weak.sort_by(|a, b| b.relative_std.total_cmp(&a.relative_std));

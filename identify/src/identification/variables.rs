@@ -13,8 +13,8 @@ use std::path::Path;
 use serde::Deserialize;
 use serde_spanned::Spanned;
 
-use crate::modelfile::line_col;
 use crate::model::{Model, ParamName, ParamRef, SdeLaw};
+use crate::modelfile::line_col;
 use crate::units::{parse_quantity, Dim};
 
 /// Why a variables file could not be used.
@@ -194,13 +194,20 @@ struct Ctx<'a> {
 impl Ctx<'_> {
     fn at(&self, span: Range<usize>, message: impl Into<String>) -> VarsError {
         let (line, col) = line_col(self.text, span.start);
-        VarsError::At { origin: self.origin.into(), line, col, message: message.into() }
+        VarsError::At {
+            origin: self.origin.into(),
+            line,
+            col,
+            message: message.into(),
+        }
     }
 
     fn value(&self, v: &Spanned<Value>, dim: Dim, field: &str) -> Result<f64, VarsError> {
         let x = match v.get_ref() {
             Value::Num(x) => *x,
-            Value::Text(t) => parse_quantity(t, dim).map_err(|e| self.at(v.span(), format!("{field}: {e}")))?,
+            Value::Text(t) => {
+                parse_quantity(t, dim).map_err(|e| self.at(v.span(), format!("{field}: {e}")))?
+            }
         };
         if !x.is_finite() {
             return Err(self.at(v.span(), format!("{field} must be a finite number")));
@@ -227,7 +234,10 @@ fn default_unit(dim: Dim) -> DisplayUnit {
         Dim::ROTATIONAL_STIFFNESS => ("N*m/rad", 1.0),
         _ => ("-", 1.0),
     };
-    DisplayUnit { symbol: symbol.into(), factor }
+    DisplayUnit {
+        symbol: symbol.into(),
+        factor,
+    }
 }
 
 /// Expands `"2-10, 13-17, 19-21"`, `"30"`, `[2, "5-7"]` into SDE names.
@@ -241,7 +251,9 @@ fn expand(list: &SdeList) -> Result<Vec<String>, String> {
         match it {
             Value::Num(x) => {
                 if x.fract() != 0.0 {
-                    return Err(format!("SDE name {x} is not a whole number; write names as strings"));
+                    return Err(format!(
+                        "SDE name {x} is not a whole number; write names as strings"
+                    ));
                 }
                 names.push(format!("{}", x as i64));
             }
@@ -252,7 +264,9 @@ fn expand(list: &SdeList) -> Result<Vec<String>, String> {
                     });
                     match range {
                         Some((a, b)) if a <= b => names.extend((a..=b).map(|i| i.to_string())),
-                        Some((a, b)) => return Err(format!("range \"{part}\" runs backwards; write {b}-{a}")),
+                        Some((a, b)) => {
+                            return Err(format!("range \"{part}\" runs backwards; write {b}-{a}"))
+                        }
                         None => names.push(part.to_string()),
                     }
                 }
@@ -260,7 +274,9 @@ fn expand(list: &SdeList) -> Result<Vec<String>, String> {
         }
     }
     if names.is_empty() {
-        return Err("no SDE named; give `sdes = \"2\"`, a list, or ranges like \"2-10, 13-17\"".into());
+        return Err(
+            "no SDE named; give `sdes = \"2\"`, a list, or ranges like \"2-10, 13-17\"".into(),
+        );
     }
     Ok(names)
 }
@@ -276,7 +292,9 @@ pub fn compress(names: &[String]) -> String {
             continue;
         };
         let mut j = i;
-        while j + 1 < names.len() && names[j + 1].parse::<i64>().ok() == Some(a + (j + 1 - i) as i64) {
+        while j + 1 < names.len()
+            && names[j + 1].parse::<i64>().ok() == Some(a + (j + 1 - i) as i64)
+        {
             j += 1;
         }
         if j > i {
@@ -308,11 +326,18 @@ pub fn parse(text: &str, origin: &str, model: &Model) -> Result<Variables, VarsE
     let raw: RawFile = toml::from_str(text).map_err(|e| {
         let span = e.span().unwrap_or(0..0);
         let msg = e.message().trim().to_string();
-        let hint = if msg.contains("unknown field") { " (see docs/identification.md for every key)" } else { "" };
+        let hint = if msg.contains("unknown field") {
+            " (see docs/identification.md for every key)"
+        } else {
+            ""
+        };
         cx.at(span, format!("{msg}{hint}"))
     })?;
     if raw.variables.is_empty() {
-        return Err(cx.at(0..0, "no [[variable]] tables; declare at least one decision variable"));
+        return Err(cx.at(
+            0..0,
+            "no [[variable]] tables; declare at least one decision variable",
+        ));
     }
     let mut vars: Vec<Variable> = Vec::new();
     let mut owner: Vec<(ParamRef, String)> = Vec::new();
@@ -338,20 +363,32 @@ pub fn parse(text: &str, origin: &str, model: &Model) -> Result<Variables, VarsE
         for n in &names {
             let Some(s) = model.sde_index(n) else {
                 let known: Vec<&str> = model.sdes.iter().map(|s| s.name.as_str()).collect();
-                return Err(cx.at(rv.sdes.span(), format!("unknown SDE \"{n}\"; the model's SDEs: {}", known.join(", "))));
+                return Err(cx.at(
+                    rv.sdes.span(),
+                    format!(
+                        "unknown SDE \"{n}\"; the model's SDEs: {}",
+                        known.join(", ")
+                    ),
+                ));
             };
             let sde = &model.sdes[s];
             if !sde.enabled {
                 return Err(cx.at(rv.sdes.span(), format!("SDE \"{n}\" is disabled in the model (enabled = false); enable it or leave it out")));
             }
-            let pr = ParamRef { sde: s, name: param };
+            let pr = ParamRef {
+                sde: s,
+                name: param,
+            };
             let Some(value) = sde.law.get(param) else {
                 let has: Vec<String> = sde.law.params().iter().map(|p| p.as_str()).collect();
-                return Err(cx.at(rv.parameter.span(), format!(
-                    "SDE \"{n}\" ({}) has no parameter \"{pname}\"; its parameters: {}",
-                    sde.kind.as_str(),
-                    has.join(", ")
-                )));
+                return Err(cx.at(
+                    rv.parameter.span(),
+                    format!(
+                        "SDE \"{n}\" ({}) has no parameter \"{pname}\"; its parameters: {}",
+                        sde.kind.as_str(),
+                        has.join(", ")
+                    ),
+                ));
             };
             let d = param_dim(&sde.law, param);
             if let Some(d0) = dim {
@@ -369,7 +406,10 @@ pub fn parse(text: &str, origin: &str, model: &Model) -> Result<Variables, VarsE
             if targets.iter().any(|t: &Target| t.param == pr) {
                 return Err(cx.at(rv.sdes.span(), format!("SDE \"{n}\" is listed twice")));
             }
-            targets.push(Target { param: pr, ratio: 1.0 });
+            targets.push(Target {
+                param: pr,
+                ratio: 1.0,
+            });
             model_values.push(value);
         }
         let dim = dim.unwrap_or(Dim::NONE);
@@ -380,7 +420,10 @@ pub fn parse(text: &str, origin: &str, model: &Model) -> Result<Variables, VarsE
         };
         if vars.iter().any(|v| v.name == name) {
             let span = rv.name.as_ref().map(|n| n.span()).unwrap_or(rv.sdes.span());
-            return Err(cx.at(span, format!("a variable named \"{name}\" already exists; give it another `name`")));
+            return Err(cx.at(
+                span,
+                format!("a variable named \"{name}\" already exists; give it another `name`"),
+            ));
         }
         let vdim = if tie == Tie::Scale { Dim::NONE } else { dim };
         // Ratios.
@@ -411,12 +454,25 @@ pub fn parse(text: &str, origin: &str, model: &Model) -> Result<Variables, VarsE
                 let sym = u.get_ref().trim();
                 if sym == "-" || sym.is_empty() {
                     if vdim != Dim::NONE {
-                        return Err(cx.at(u.span(), format!("unit \"-\" is for plain numbers; this variable is {}", vdim.describe())));
+                        return Err(cx.at(
+                            u.span(),
+                            format!(
+                                "unit \"-\" is for plain numbers; this variable is {}",
+                                vdim.describe()
+                            ),
+                        ));
                     }
-                    DisplayUnit { symbol: "-".into(), factor: 1.0 }
+                    DisplayUnit {
+                        symbol: "-".into(),
+                        factor: 1.0,
+                    }
                 } else {
-                    let factor = parse_quantity(&format!("1 {sym}"), vdim).map_err(|e| cx.at(u.span(), format!("unit: {e}")))?;
-                    DisplayUnit { symbol: sym.into(), factor }
+                    let factor = parse_quantity(&format!("1 {sym}"), vdim)
+                        .map_err(|e| cx.at(u.span(), format!("unit: {e}")))?;
+                    DisplayUnit {
+                        symbol: sym.into(),
+                        factor,
+                    }
                 }
             }
         };
@@ -425,9 +481,16 @@ pub fn parse(text: &str, origin: &str, model: &Model) -> Result<Variables, VarsE
             None => match tie {
                 Tie::Scale => 1.0,
                 Tie::Equal => {
-                    let implied: Vec<f64> = targets.iter().zip(&model_values).map(|(t, v)| v / t.ratio).collect();
+                    let implied: Vec<f64> = targets
+                        .iter()
+                        .zip(&model_values)
+                        .map(|(t, v)| v / t.ratio)
+                        .collect();
                     let first = implied[0];
-                    if implied.iter().any(|v| (v - first).abs() > 1e-9 * first.abs().max(f64::MIN_POSITIVE)) {
+                    if implied
+                        .iter()
+                        .any(|v| (v - first).abs() > 1e-9 * first.abs().max(f64::MIN_POSITIVE))
+                    {
                         return Err(cx.at(rv.sdes.span(), format!(
                             "the model's {pname} values of these SDEs differ ({}); give `initial` for the shared value",
                             implied.iter().map(|v| format!("{:.6}", v / unit.factor)).collect::<Vec<_>>().join(", ")
@@ -454,17 +517,27 @@ pub fn parse(text: &str, origin: &str, model: &Model) -> Result<Variables, VarsE
             Some(v) => {
                 let u = cx.value(v, vdim, "upper")?;
                 if u <= lower {
-                    return Err(cx.at(v.span(), format!(
-                        "upper bound {} {} is not above the lower bound {} {}",
-                        u / unit.factor, unit.symbol, lower / unit.factor, unit.symbol
-                    )));
+                    return Err(cx.at(
+                        v.span(),
+                        format!(
+                            "upper bound {} {} is not above the lower bound {} {}",
+                            u / unit.factor,
+                            unit.symbol,
+                            lower / unit.factor,
+                            unit.symbol
+                        ),
+                    ));
                 }
                 u
             }
             None => f64::INFINITY,
         };
         if initial < lower || initial > upper {
-            let span = rv.initial.as_ref().map(|v| v.span()).unwrap_or(rv.sdes.span());
+            let span = rv
+                .initial
+                .as_ref()
+                .map(|v| v.span())
+                .unwrap_or(rv.sdes.span());
             return Err(cx.at(span, format!(
                 "initial value {} {} is outside the bounds [{}, {}] {}; move it inside or widen the bounds",
                 initial / unit.factor, unit.symbol, lower / unit.factor, upper / unit.factor, unit.symbol
@@ -481,7 +554,11 @@ pub fn parse(text: &str, origin: &str, model: &Model) -> Result<Variables, VarsE
             None if initial.abs() > 0.0 => initial.abs(),
             None if upper.is_finite() => upper - lower,
             None => {
-                let span = rv.initial.as_ref().map(|v| v.span()).unwrap_or(rv.sdes.span());
+                let span = rv
+                    .initial
+                    .as_ref()
+                    .map(|v| v.span())
+                    .unwrap_or(rv.sdes.span());
                 return Err(cx.at(span, format!(
                     "initial value is 0 and there is no upper bound, so the variable has no natural scale; give `scale` (e.g. scale = \"1 {}\") or an `upper` bound",
                     unit.symbol
@@ -505,7 +582,10 @@ pub fn parse(text: &str, origin: &str, model: &Model) -> Result<Variables, VarsE
             dissipation: param.is_dissipation(),
         });
     }
-    Ok(Variables { origin: origin.into(), vars })
+    Ok(Variables {
+        origin: origin.into(),
+        vars,
+    })
 }
 
 #[cfg(test)]

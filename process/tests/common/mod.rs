@@ -8,7 +8,9 @@ use std::process::Command;
 /// Runs `python3` with the given script and arguments; panics with a clear message if Python or
 /// a needed package is missing (never passes silently).
 pub fn python(script: &str, args: &[&str], modules: &str) {
-    let probe = Command::new("python3").args(["-c", &format!("import {modules}")]).output();
+    let probe = Command::new("python3")
+        .args(["-c", &format!("import {modules}")])
+        .output();
     match probe {
         Ok(o) if o.status.success() => {}
         Ok(o) => panic!(
@@ -18,7 +20,11 @@ pub fn python(script: &str, args: &[&str], modules: &str) {
         Err(e) => panic!("python3 not found ({e}): run `.ci/setup` to install Python and .ci/requirements.txt"),
     }
     let path = script_path(script);
-    let out = Command::new("python3").arg(&path).args(args).output().expect("run python3");
+    let out = Command::new("python3")
+        .arg(&path)
+        .args(args)
+        .output()
+        .expect("run python3");
     assert!(
         out.status.success(),
         "{} failed: {}\n(if a module is missing, run `.ci/setup`)",
@@ -28,7 +34,9 @@ pub fn python(script: &str, args: &[&str], modules: &str) {
 }
 
 pub fn script_path(script: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/python").join(script)
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/python")
+        .join(script)
 }
 
 pub fn write_f64(path: &Path, data: &[f64]) {
@@ -38,7 +46,9 @@ pub fn write_f64(path: &Path, data: &[f64]) {
 
 pub fn read_f64(path: &Path) -> Vec<f64> {
     let b = std::fs::read(path).expect("read python output");
-    b.chunks_exact(8).map(|c| f64::from_le_bytes(c.try_into().unwrap())).collect()
+    b.chunks_exact(8)
+        .map(|c| f64::from_le_bytes(c.try_into().unwrap()))
+        .collect()
 }
 
 /// Seeded white noise.

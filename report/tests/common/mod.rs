@@ -17,7 +17,9 @@ pub struct Fixture {
 
 pub fn fixture(seed: u64) -> Fixture {
     let truth = textbook::two_in_series(400.0, 120.0, 2.0e7, 5.0e6, 0.5);
-    let freqs: Vec<f64> = (0..40).map(|i| 8.0 * (80.0f64 / 8.0).powf(i as f64 / 39.0)).collect();
+    let freqs: Vec<f64> = (0..40)
+        .map(|i| 8.0 * (80.0f64 / 8.0).powf(i as f64 / 39.0))
+        .collect();
     let r = frf::response(&truth, &freqs, &[], frf::Method::Direct).unwrap();
     let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
     let n = Normal::new(0.0, 1.0).unwrap();
@@ -30,9 +32,18 @@ pub fn fixture(seed: u64) -> Fixture {
                 dof: 2,
                 quantity: identify::measured::QuantityName::Displacement,
                 freqs_hz: freqs.clone(),
-                amplitude: r.output(o).iter().map(|v| v.norm() + eps * v.norm() * n.sample(&mut rng)).collect(),
+                amplitude: r
+                    .output(o)
+                    .iter()
+                    .map(|v| v.norm() + eps * v.norm() * n.sample(&mut rng))
+                    .collect(),
                 phase_rad: None,
-                variance: Some(r.output(o).iter().map(|v| 2.0 * (eps * v.norm()).powi(2)).collect()),
+                variance: Some(
+                    r.output(o)
+                        .iter()
+                        .map(|v| 2.0 * (eps * v.norm()).powi(2))
+                        .collect(),
+                ),
                 coherence: None,
                 averages: None,
             })
@@ -52,18 +63,58 @@ pub fn fixture(seed: u64) -> Fixture {
 /// A diagnosis section as the pipeline would pass it (values are illustrative inputs to the
 /// renderer, not a diagnosis result).
 pub fn diagnosis_section(f: &Fixture) -> Diagnosis {
-    let rms: Vec<LabelledValue> = f.id.rms.iter().map(|(l, v)| LabelledValue { label: l.clone(), value: *v }).collect();
+    let rms: Vec<LabelledValue> =
+        f.id.rms
+            .iter()
+            .map(|(l, v)| LabelledValue {
+                label: l.clone(),
+                value: *v,
+            })
+            .collect();
     Diagnosis {
         candidates: vec![
-            Candidate { round: 1, name: "spring".into(), location: "k1-body–ground".into(), statistic: 42.0, p_value: 1e-10, accepted: true, estimate: Some(0.5), std_error: Some(0.05), unit: "N/um".into() },
-            Candidate { round: 1, name: "joint stiffness kn".into(), location: "SDE k2".into(), statistic: 0.3, p_value: 0.58, accepted: false, estimate: None, std_error: None, unit: "N/um".into() },
+            Candidate {
+                round: 1,
+                name: "spring".into(),
+                location: "k1-body–ground".into(),
+                statistic: 42.0,
+                p_value: 1e-10,
+                accepted: true,
+                estimate: Some(0.5),
+                std_error: Some(0.05),
+                unit: "N/um".into(),
+            },
+            Candidate {
+                round: 1,
+                name: "joint stiffness kn".into(),
+                location: "SDE k2".into(),
+                statistic: 0.3,
+                p_value: 0.58,
+                accepted: false,
+                estimate: None,
+                std_error: None,
+                unit: "N/um".into(),
+            },
         ],
-        before: FitQuality { criterion: f.id.criterion * 3.0, chi2_p_value: Some(1e-6), reduced_chi2: 3.0, rms_relative_error: rms.clone() },
-        after: FitQuality { criterion: f.id.criterion, chi2_p_value: None, reduced_chi2: 1.0, rms_relative_error: rms },
+        before: FitQuality {
+            criterion: f.id.criterion * 3.0,
+            chi2_p_value: Some(1e-6),
+            reduced_chi2: 3.0,
+            rms_relative_error: rms.clone(),
+        },
+        after: FitQuality {
+            criterion: f.id.criterion,
+            chi2_p_value: None,
+            reduced_chi2: 1.0,
+            rms_relative_error: rms,
+        },
         final_model: "two masses + spring k1-body–ground".into(),
         explained: true,
         verdict: "the model explains the data to the noise level".into(),
-        not_tried: vec![NotTried { effect: "point mass on k2-body".into(), reason: "the model becomes singular".into() }],
+        not_tried: vec![NotTried {
+            effect: "point mass on k2-body".into(),
+            reason: "the model becomes singular".into(),
+        }],
     }
 }
 
@@ -82,7 +133,10 @@ pub fn full_report(f: &Fixture, shift: f64) -> Report {
     let mut r = report::build::build(inputs).unwrap();
     if r.identification.weak_directions.is_empty() {
         // Well-posed fixture: add one so that every field appears.
-        r.identification.weak_directions.push(WeakDirection { combination: "0.71 k1 − 0.70 k2".into(), relative_std: Some(0.8) });
+        r.identification.weak_directions.push(WeakDirection {
+            combination: "0.71 k1 − 0.70 k2".into(),
+            relative_std: Some(0.8),
+        });
     }
     let history: Vec<report::drift::Run> = (0..3)
         .map(|k| {
@@ -93,10 +147,16 @@ pub fn full_report(f: &Fixture, shift: f64) -> Report {
                 let s = p.std_error.unwrap();
                 p.identified -= shift * (2.0f64).sqrt() * s;
             }
-            report::drift::Run { created_utc: format!("2025-01-0{}T02:00:00Z", k + 1), folder: format!("run{k}").into(), parameters: params }
+            report::drift::Run {
+                created_utc: format!("2025-01-0{}T02:00:00Z", k + 1),
+                folder: format!("run{k}").into(),
+                parameters: params,
+            }
         })
         .collect();
-    let d = report::drift::compare(&history, &r, &report::drift::Baseline::First, 3.0).unwrap().unwrap();
+    let d = report::drift::compare(&history, &r, &report::drift::Baseline::First, 3.0)
+        .unwrap()
+        .unwrap();
     report::drift::attach(&mut r, d);
     r
 }
