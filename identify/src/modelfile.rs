@@ -911,23 +911,24 @@ fn sde_law(cx: &Ctx, s: &RawSde, kind: SdeKind, name: &str) -> Result<SdeLaw, Lo
             psi: need(&s.psi, "psi", Dim::NONE)?,
         },
         SdeKind::Isolator => {
-            let (psi_n, psi_t) =
-                match (&s.psi, &s.psi_n, &s.psi_t) {
-                    (Some(_), None, None) => {
-                        let p = need(&s.psi, "psi", Dim::NONE)?;
-                        (p, p)
-                    }
-                    (None, Some(_), Some(_)) => (
-                        need(&s.psi_n, "psi_n", Dim::NONE)?,
-                        need(&s.psi_t, "psi_t", Dim::NONE)?,
-                    ),
-                    _ => return Err(cx.at(
+            let (psi_n, psi_t) = match (&s.psi, &s.psi_n, &s.psi_t) {
+                (Some(_), None, None) => {
+                    let p = need(&s.psi, "psi", Dim::NONE)?;
+                    (p, p)
+                }
+                (None, Some(_), Some(_)) => (
+                    need(&s.psi_n, "psi_n", Dim::NONE)?,
+                    need(&s.psi_t, "psi_t", Dim::NONE)?,
+                ),
+                _ => {
+                    return Err(cx.at(
                         s.name.span(),
                         format!(
                             "sde {name}: give `psi` (both directions) or both `psi_n` and `psi_t`"
                         ),
-                    )),
-                };
+                    ))
+                }
+            };
             SdeLaw::Isolator {
                 kn: need(&s.kn, "kn", Dim::STIFFNESS)?,
                 kt: need(&s.kt, "kt", Dim::STIFFNESS)?,

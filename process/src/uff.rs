@@ -667,12 +667,14 @@ fn parse_58(c: &mut Cursor, dataset: usize, binary: Option<(bool, usize)>) -> Re
         4 => (false, true),
         5 => (true, false),
         6 => (true, true),
-        t => return Err(c.err(
-            dataset,
-            format!(
+        t => {
+            return Err(c.err(
+                dataset,
+                format!(
                 "record 7 ordinate data type {t} is not 2, 4, 5 or 6 (real/complex, single/double)"
             ),
-        )),
+            ))
+        }
     };
     if num_pts <= 0 {
         return Err(c.err(
