@@ -180,6 +180,34 @@ fn bad_model_exits_2_with_location() {
 }
 
 #[test]
+fn files_that_are_not_sessions_get_a_clear_error_and_a_failing_exit() {
+    let dir = tempfile::tempdir().unwrap();
+    let empty = dir.path().join("empty.mcap");
+    std::fs::write(&empty, b"").unwrap();
+    let csv = dir.path().join("frf.csv");
+    std::fs::write(&csv, "frequency,amplitude\n10,1e-6\n").unwrap();
+    let magic = dir.path().join("magic.mcap");
+    std::fs::write(&magic, b"\x89MCAP0\r\n").unwrap();
+    for (file, want) in [
+        (&empty, "is not an MCAP file (the file is empty)"),
+        (&csv, "is not an MCAP file"),
+        (&magic, "no message can be recovered"),
+    ] {
+        let out = ident(&["mcap", "recover", file.to_str().unwrap()]);
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success(), "{}: {err}", file.display());
+        assert!(err.contains(want), "{}: {err}", file.display());
+    }
+    let out = ident(&["process", csv.to_str().unwrap()]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "{err}");
+    assert!(
+        err.contains("frf.csv is not an MCAP file") && !err.contains("/stand"),
+        "{err}"
+    );
+}
+
+#[test]
 fn modes_and_sensitivity_run_on_the_textbook_model() {
     let m = root().join("configs/models/textbook-two-mass.toml");
     let out = ident(&["modes", m.to_str().unwrap()]);

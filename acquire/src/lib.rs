@@ -36,6 +36,5 @@ pub mod sim;
 pub mod stand;
 pub mod sweep;
 pub mod transport;
-pub mod units;
 
 pub use device::DeviceIdentity;

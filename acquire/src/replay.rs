@@ -28,9 +28,12 @@ use crate::stand::{ChannelKind, Faults, Stand};
 /// Why a session cannot be served.
 #[derive(Debug, thiserror::Error)]
 pub enum ReplayError {
-    /// The session cannot be read or analysed.
-    #[error("{0}")]
-    Session(String),
+    /// The session cannot be read.
+    #[error(transparent)]
+    Session(#[from] session::SessionError),
+    /// The session's records cannot be analysed.
+    #[error(transparent)]
+    Analysis(#[from] crate::analysis::AnalysisError),
     /// The session lacks what serving needs.
     #[error("{path}: {what}")]
     Incomplete {
@@ -39,6 +42,22 @@ pub enum ReplayError {
         /// What is missing, and what to do.
         what: String,
     },
+}
+
+/// Why a session's analysis gives no structure to serve.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum RecordingGap {
+    /// A step lacks one of the stand's acceleration channels.
+    #[error("step {step} has no channel `{channel}`")]
+    MissingChannel {
+        /// Step number.
+        step: usize,
+        /// The stand's channel name.
+        channel: String,
+    },
+    /// Nothing was measured.
+    #[error("it has no usable step (nothing measured to serve)")]
+    NoSteps,
 }
 
 /// The response a session measured, as the simulated stand's structure.
@@ -55,7 +74,7 @@ impl RecordedPlant {
     pub fn from_analysis(
         analysis: &SessionAnalysis,
         stand: &Stand,
-    ) -> Result<RecordedPlant, String> {
+    ) -> Result<RecordedPlant, RecordingGap> {
         let sensors: Vec<&str> = stand
             .channels
             .iter()
@@ -74,13 +93,16 @@ impl RecordedPlant {
                         .iter()
                         .find(|c| c.name == *name)
                         .map(|c| C64::new(c.frf_re, c.frf_im))
-                        .ok_or_else(|| format!("step {} has no channel `{name}`", s.step))
+                        .ok_or_else(|| RecordingGap::MissingChannel {
+                            step: s.step,
+                            channel: name.to_string(),
+                        })
                 })
                 .collect::<Result<Vec<_>, _>>()?;
             steps.push((s.frequency_hz, row));
         }
         if steps.is_empty() {
-            return Err("it has no usable step (nothing measured to serve)".into());
+            return Err(RecordingGap::NoSteps);
         }
         steps.sort_by(|a, b| a.0.total_cmp(&b.0));
         let (freqs_hz, frf) = steps.into_iter().unzip();
@@ -143,7 +165,7 @@ pub fn prepare(session: &Path, speed: Option<f64>) -> Result<Served, ReplayError
         path: path.clone(),
         what,
     };
-    let rep = session::read(session).map_err(|e| ReplayError::Session(e.to_string()))?;
+    let rep = session::read(session)?;
     let stand_rec = rep
         .records
         .iter()
@@ -174,9 +196,10 @@ pub fn prepare(session: &Path, speed: Option<f64>) -> Result<Served, ReplayError
         shaker: identity("shaker")?,
         daq: identity("daq")?,
     };
-    let analysis = characteristics(session, &AnalysisOptions::default())
-        .map_err(|e| ReplayError::Session(e.to_string()))?;
-    let plant = Arc::new(RecordedPlant::from_analysis(&analysis, &stand).map_err(incomplete)?);
+    let analysis = characteristics(session, &AnalysisOptions::default())?;
+    let plant = RecordedPlant::from_analysis(&analysis, &stand)
+        .map_err(|gap| incomplete(gap.to_string()))?;
+    let plant = Arc::new(plant);
     let speed = speed
         .or(stand.truth.as_ref().map(|t| t.speed))
         .unwrap_or(1.0);

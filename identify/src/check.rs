@@ -213,8 +213,10 @@ pub fn check(model: &Model) -> (Vec<Problem>, Vec<Problem>) {
     if !errors.is_empty() {
         return (errors, warnings);
     }
-    // Connectivity: bodies touched by no enabled SDE, and groups with no path to the ground.
+    // Connectivity: bodies touched by no enabled SDE, bodies held only by SDEs of zero stiffness,
+    // and groups with no path to the ground (through SDEs with some stiffness).
     let mut touched = vec![false; nb];
+    let mut held = vec![false; nb];
     let mut parent: Vec<usize> = (0..=nb).collect(); // index nb = ground
     fn find(p: &mut [usize], mut x: usize) -> usize {
         while p[x] != x {
@@ -224,38 +226,47 @@ pub fn check(model: &Model) -> (Vec<Problem>, Vec<Problem>) {
         x
     }
     for s in model.sdes.iter().filter(|s| s.enabled) {
-        let ends = s.bodies.map(|b| b.unwrap_or(nb));
+        let stiff = s.law.stiffness().iter().any(|k| *k > 0.0);
         for b in s.bodies.iter().flatten() {
             touched[*b] = true;
+            held[*b] |= stiff;
         }
-        let (a, b) = (find(&mut parent, ends[0]), find(&mut parent, ends[1]));
-        parent[a] = b;
+        if stiff {
+            let ends = s.bodies.map(|b| b.unwrap_or(nb));
+            let (a, b) = (find(&mut parent, ends[0]), find(&mut parent, ends[1]));
+            parent[a] = b;
+        }
     }
     for (i, b) in model.bodies.iter().enumerate() {
-        if !touched[i] {
-            warnings.push(Problem {
-                item: Item::Body(i, "name"),
-                message: format!(
-                "body \"{}\" is connected to nothing: it has six free rigid-body modes and its \
-                 response is unbounded at 0 Hz; connect it with an SDE or remove it",
+        let why = if !touched[i] {
+            "is connected to nothing"
+        } else if !held[i] {
+            "is held only by SDEs whose stiffnesses are all 0"
+        } else {
+            continue;
+        };
+        warnings.push(Problem {
+            item: Item::Body(i, "name"),
+            message: format!(
+                "body \"{}\" {why}: it has six free rigid-body modes and its response is \
+                 unbounded at 0 Hz; connect it with an SDE of nonzero stiffness or remove it",
                 b.name
             ),
-            });
-        }
+        });
     }
     let ground = find(&mut parent, nb);
     let floating: Vec<&str> = (0..nb)
-        .filter(|&i| touched[i] && find(&mut parent, i) != ground)
+        .filter(|&i| held[i] && find(&mut parent, i) != ground)
         .map(|i| model.bodies[i].name.as_str())
         .collect();
     if !floating.is_empty() {
         warnings.push(Problem {
             item: Item::Model,
             message: format!(
-            "bodies {} have no path to the ground: the model has free rigid-body modes (response \
-             unbounded at 0 Hz); add isolators or supports if that is not intended",
-            floating.join(", ")
-        ),
+                "bodies {} have no path to the ground: the model has free rigid-body modes \
+                 (response unbounded at 0 Hz); add isolators or supports if that is not intended",
+                floating.join(", ")
+            ),
         });
     }
     (errors, warnings)

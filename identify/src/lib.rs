@@ -38,6 +38,7 @@ pub mod model;
 pub mod modelfile;
 pub mod modes;
 pub mod sensitivity;
+pub mod source;
 pub mod system;
 pub mod textbook;
 pub mod units;

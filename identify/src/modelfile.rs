@@ -13,6 +13,7 @@ use serde_spanned::Spanned;
 use crate::check::{check, rotation_problem, Item, Problem};
 use crate::contract::{from_json, json_path, ModelJson};
 use crate::model::*;
+use crate::source::{Located, SourceText};
 use crate::units::{parse_quantities, parse_quantity, Dim};
 
 /// A loaded model and the warnings found while loading it.
@@ -36,17 +37,8 @@ pub enum LoadError {
         source: std::io::Error,
     },
     /// A problem at a line and column of a TOML file.
-    #[error("{origin}:{line}:{col}: {message}")]
-    Toml {
-        /// File name.
-        origin: String,
-        /// 1-based line.
-        line: usize,
-        /// 1-based column.
-        col: usize,
-        /// What and how to fix.
-        message: String,
-    },
+    #[error(transparent)]
+    Toml(#[from] Located),
     /// A problem at a JSON path of a resolved-JSON file.
     #[error("{origin}: at {path}: {message}")]
     Json {
@@ -232,19 +224,12 @@ struct RawOutput {
 
 /// Locates errors in the TOML text.
 struct Ctx<'a> {
-    origin: &'a str,
-    text: &'a str,
+    src: SourceText<'a>,
 }
 
 impl Ctx<'_> {
     fn at(&self, span: Range<usize>, message: impl Into<String>) -> LoadError {
-        let (line, col) = line_col(self.text, span.start);
-        LoadError::Toml {
-            origin: self.origin.into(),
-            line,
-            col,
-            message: message.into(),
-        }
+        LoadError::Toml(self.src.at(span, message))
     }
 
     fn scalar(&self, v: &Sp<Value>, dim: Dim, field: &str) -> Result<f64, LoadError> {
@@ -405,26 +390,12 @@ pub fn frame_from_axis(a: &Vector3<f64>) -> Matrix3<f64> {
     Matrix3::from_columns(&[e1, e2, e3])
 }
 
-/// 1-based line and column (in characters) of a byte offset into `text`.
-pub(crate) fn line_col(text: &str, offset: usize) -> (usize, usize) {
-    let mut offset = offset.min(text.len());
-    while !text.is_char_boundary(offset) {
-        offset -= 1;
-    }
-    let before = &text[..offset];
-    let line = before.matches('\n').count() + 1;
-    let col = before
-        .rsplit('\n')
-        .next()
-        .map(|l| l.chars().count())
-        .unwrap_or(0)
-        + 1;
-    (line, col)
-}
-
 /// Parses the TOML model format.
 pub fn parse_toml(text: &str, origin: &str) -> Result<Loaded, LoadError> {
-    let cx = Ctx { origin, text };
+    let text = crate::source::strip_bom(text);
+    let cx = Ctx {
+        src: SourceText::new(origin, text),
+    };
     let raw: RawModel = toml::from_str(text).map_err(|e| {
         let span = e.span().unwrap_or(0..0);
         let msg = e.message().trim().to_string();
@@ -741,8 +712,8 @@ pub fn parse_toml(text: &str, origin: &str) -> Result<Loaded, LoadError> {
     let warnings = warnings
         .iter()
         .map(|w| {
-            let (line, col) = line_col(text, locate(w).start);
-            format!("{origin}:{line}:{col}: warning: {}", w.message)
+            let at = cx.src.at(locate(w), format!("warning: {}", w.message));
+            at.to_string()
         })
         .collect();
     Ok(Loaded { model, warnings })

@@ -64,6 +64,26 @@ fn csv_rows_may_come_in_any_order_and_columns_are_named() {
     assert_eq!(d.characteristics[0].quantity, QuantityName::Displacement);
 }
 
+#[test]
+fn csv_and_toml_with_a_byte_order_mark_read_as_without() {
+    let csv = "body,dof,freq_hz,amplitude\nfirst,u3,10,1e-7\n";
+    let with_bom = format!("\u{feff}{csv}");
+    assert_eq!(
+        data::parse_csv(&with_bom, "bom.csv").unwrap(),
+        data::parse_csv(csv, "bom.csv").unwrap()
+    );
+    let model = "[[body]]\nname = \"b\"\nmass = 2\nposition = [0, 0, 0]\ninertia = [1, 1, 1]\n";
+    let plain = identify::modelfile::parse_toml(model, "m.toml").unwrap();
+    let bom = identify::modelfile::parse_toml(&format!("\u{feff}{model}"), "m.toml").unwrap();
+    assert_eq!(bom.model, plain.model);
+    // Errors in a file with a BOM still point at the right line and column.
+    let bad = "\u{feff}[[body]]\nname = \"b\"\nmass = \"2 furlong\"\nposition = [0, 0, 0]\ninertia = [1, 1, 1]\n";
+    let e = identify::modelfile::parse_toml(bad, "m.toml")
+        .unwrap_err()
+        .to_string();
+    assert!(e.starts_with("m.toml:3:8:"), "{e}");
+}
+
 fn csv_err(text: &str) -> String {
     data::parse_csv(text, "bad.csv").unwrap_err().to_string()
 }

@@ -167,14 +167,9 @@ psi_t = 1.6
 
 fn error_of(text: &str) -> (usize, usize, String) {
     match parse_toml(text, "bad.toml") {
-        Err(LoadError::Toml {
-            line,
-            col,
-            message,
-            origin,
-        }) => {
-            assert_eq!(origin, "bad.toml");
-            (line, col, message)
+        Err(LoadError::Toml(at)) => {
+            assert_eq!(at.file, "bad.toml");
+            (at.line, at.column, at.message)
         }
         Err(e) => panic!("unexpected error kind: {e}"),
         Ok(_) => panic!("accepted a bad model:\n{text}"),
@@ -194,6 +189,34 @@ fn line_of(text: &str, needle: &str) -> usize {
         .rposition(|l| l.contains(needle))
         .unwrap()
         + 1
+}
+
+#[test]
+fn a_model_whose_stiffnesses_are_all_zero_is_warned_of_its_free_bodies() {
+    let before = parse_toml(TWO_MASS, "m.toml").unwrap();
+    assert!(before.warnings.is_empty(), "{:?}", before.warnings);
+    let zero: String = TWO_MASS
+        .lines()
+        .map(|l| match l {
+            l if l.starts_with("k = [") => "k = [0, 0, 0, 0, 0, 0]",
+            l if l.starts_with("k = ") => "k = 0",
+            l => l,
+        })
+        .collect::<Vec<_>>()
+        .join("\n");
+    assert!(!zero.contains("N/um"), "every stiffness is zeroed:\n{zero}");
+    let loaded = parse_toml(&zero, "zero.toml").unwrap();
+    for body in ["first", "second"] {
+        let want = format!("\"{body}\" is held only by SDEs whose stiffnesses are all 0");
+        assert!(
+            loaded
+                .warnings
+                .iter()
+                .any(|w| w.contains(&want) && w.starts_with("zero.toml:")),
+            "{body}: {:?}",
+            loaded.warnings
+        );
+    }
 }
 
 #[test]
@@ -231,6 +254,20 @@ fn bad_models_are_located_and_explained() {
             replace_once(TWO_MASS, "inertia = [12, 24, 36]", "inertia = [12, 0, 36]"),
             "inertia = [12, 0, 36]",
             "must be positive",
+        ),
+        (
+            replace_once(TWO_MASS, "psi = 0.5", "psi = -0.5"),
+            "psi = -0.5",
+            "sde k1: `psi` must be ≥ 0, got -0.5",
+        ),
+        (
+            replace_once(
+                TWO_MASS,
+                "psi = [0.1, 0.1, 0, 0.1, 0.1, 0.1]",
+                "psi = [0.1, 0.1, 0, -0.1, 0.1, 0.1]",
+            ),
+            "psi = [0.1, 0.1, 0, -0.1, 0.1, 0.1]",
+            "must be ≥ 0",
         ),
         (
             replace_once(TWO_MASS, r#"k = "20 N/um""#, r#"k = "20 N/furlong""#),

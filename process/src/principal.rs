@@ -106,18 +106,18 @@ impl RigidFit {
         }
         let want_six = matches!(dofs, Dofs::Six | Dofs::Auto);
         if want_six {
-            match null_motions(&a, lever) {
-                Ok(()) => return Self::finish(body, a, 6),
-                Err(missing) if dofs == Dofs::Six => {
+            match unobserved_motions(&a, lever) {
+                None => return Self::finish(body, a, 6),
+                Some(missing) if dofs == Dofs::Six => {
                     return Err(degenerate(format!("{missing}; {n} channel(s) given, at least 6 in independent directions/places are needed for 6 DOFs (or fit translations only)")));
                 }
-                Err(_) => {}
+                Some(_) => {}
             }
         }
         let t = a.columns(0, 3).into_owned();
-        match null_motions(&t, 1.0) {
-            Ok(()) => Self::finish(body, t, 3),
-            Err(missing) => Err(degenerate(format!("{missing}; {n} channel(s) given: add sensors so that their directions span all three principal axes"))),
+        match unobserved_motions(&t, 1.0) {
+            None => Self::finish(body, t, 3),
+            Some(missing) => Err(degenerate(format!("{missing}; {n} channel(s) given: add sensors so that their directions span all three principal axes"))),
         }
     }
 
@@ -335,9 +335,10 @@ pub fn body_from_inertia_tensor(
     })
 }
 
-/// Ok if `a` has full column rank; otherwise a description of the unobserved motions.
-/// Rotation columns are scaled by `lever` (m) so that translations and rotations compare.
-fn null_motions(a: &DMatrix<f64>, lever: f64) -> std::result::Result<(), String> {
+/// None if `a` has full column rank; otherwise a description of the motions no sensor sees and
+/// what to add. Rotation columns are scaled by `lever` (m) so that translations and rotations
+/// compare.
+fn unobserved_motions(a: &DMatrix<f64>, lever: f64) -> Option<String> {
     let m = a.ncols();
     let mut scaled = a.clone();
     let lever = if lever > 0.0 { lever } else { 1.0 };
@@ -351,7 +352,7 @@ fn null_motions(a: &DMatrix<f64>, lever: f64) -> std::result::Result<(), String>
     let svd = scaled.svd(false, true);
     let vt = match svd.v_t {
         Some(v) => v,
-        None => return Err("the layout matrix could not be decomposed".into()),
+        None => return Some("the layout matrix could not be decomposed".into()),
     };
     let smax = svd.singular_values.max();
     let mut missing = Vec::new();
@@ -368,12 +369,10 @@ fn null_motions(a: &DMatrix<f64>, lever: f64) -> std::result::Result<(), String>
             missing.push(format!("[{}]", terms.join(" ")));
         }
     }
-    if missing.is_empty() {
-        Ok(())
-    } else {
-        Err(format!(
+    (!missing.is_empty()).then(|| {
+        format!(
             "no sensor sees the motion(s) {} of the principal axes (translations u, rotations r); add a sensor whose reading changes under it (another direction, or off the line of the existing ones)",
             missing.join(", ")
-        ))
-    }
+        )
+    })
 }

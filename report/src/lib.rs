@@ -62,12 +62,12 @@ pub enum ReportError {
         source: identify::frf::SolveError,
     },
     /// A plot could not be drawn.
-    #[error("report: cannot draw the {chart} chart: {message}")]
+    #[error("report: cannot draw the {chart} chart: {source}")]
     Plot {
         /// Which chart.
         chart: String,
-        /// Plotters' message.
-        message: String,
+        /// Plotters' error.
+        source: plot::DrawError,
     },
     /// A file could not be written (disk full, permissions).
     #[error("cannot write {path}: {source} (nothing was replaced: free space or fix permissions and re-run)")]

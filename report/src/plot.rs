@@ -32,10 +32,13 @@ const SERIES: [RGBColor; 10] = [
 
 const FONT: &str = "sans-serif";
 
-fn err(chart: &str) -> impl Fn(String) -> ReportError + '_ {
-    move |message| ReportError::Plot {
+/// What drawing on the SVG canvas can fail with.
+pub type DrawError = DrawingAreaErrorKind<std::io::Error>;
+
+fn err(chart: &str) -> impl Fn(DrawError) -> ReportError + '_ {
+    move |source| ReportError::Plot {
         chart: chart.to_string(),
-        message,
+        source,
     }
 }
 
@@ -43,18 +46,14 @@ fn err(chart: &str) -> impl Fn(String) -> ReportError + '_ {
 fn svg(
     chart: &str,
     size: (u32, u32),
-    draw: impl FnOnce(&DrawingArea<SVGBackend<'_>, plotters::coord::Shift>) -> Result<(), String>,
+    draw: impl FnOnce(&DrawingArea<SVGBackend<'_>, plotters::coord::Shift>) -> Result<(), DrawError>,
 ) -> Result<String, ReportError> {
     let mut out = String::new();
     {
         let root = SVGBackend::with_string(&mut out, size).into_drawing_area();
-        root.fill(&WHITE)
-            .map_err(|e| e.to_string())
-            .map_err(err(chart))?;
+        root.fill(&WHITE).map_err(err(chart))?;
         draw(&root).map_err(err(chart))?;
-        root.present()
-            .map_err(|e| e.to_string())
-            .map_err(err(chart))?;
+        root.present().map_err(err(chart))?;
     }
     Ok(out)
 }
@@ -88,7 +87,7 @@ fn sci(v: f64) -> String {
 /// The series legend, upper right, on a translucent box.
 fn legend<'a, DB: DrawingBackend + 'a, CT: CoordTranslate>(
     chart: &mut ChartContext<'a, DB, CT>,
-) -> Result<(), String> {
+) -> Result<(), DrawingAreaErrorKind<DB::ErrorType>> {
     chart
         .configure_series_labels()
         .position(SeriesLabelPosition::UpperRight)
@@ -96,7 +95,6 @@ fn legend<'a, DB: DrawingBackend + 'a, CT: CoordTranslate>(
         .background_style(WHITE.mix(0.85))
         .border_style(BLACK)
         .draw()
-        .map_err(|e| e.to_string())
 }
 
 /// Frequency ticks 1-2-5 per decade within `[lo, hi]` (plotters' own log ticks are decades only,
@@ -140,8 +138,7 @@ pub fn amplitude_chart(c: &CharacteristicReport) -> Result<String, ReportError> 
             .build_cartesian_2d(
                 (f0..f1).log_scale().with_key_points(log_ticks(f0, f1)),
                 (a0..a1).log_scale(),
-            )
-            .map_err(|e| e.to_string())?;
+            )?;
         chart
             .configure_mesh()
             .x_desc("frequency (Hz)")
@@ -149,8 +146,7 @@ pub fn amplitude_chart(c: &CharacteristicReport) -> Result<String, ReportError> 
             .x_label_formatter(&|v| sci(*v))
             .y_label_formatter(&|v| format!("{v:.0e}"))
             .label_style((FONT, 12))
-            .draw()
-            .map_err(|e| e.to_string())?;
+            .draw()?;
         for s in &c.stages {
             let col = stage_colour(&s.stage);
             chart
@@ -161,29 +157,26 @@ pub fn amplitude_chart(c: &CharacteristicReport) -> Result<String, ReportError> 
                         .filter(|(_, a)| **a > 0.0)
                         .map(|(f, a)| (*f, *a)),
                     col.stroke_width(2),
-                ))
-                .map_err(|e| e.to_string())?
+                ))?
                 .label(format!("model, {}", s.stage))
                 .legend(move |(x, y)| {
                     PathElement::new(vec![(x, y), (x + 20, y)], col.stroke_width(2))
                 });
         }
         // Error bars (±σ, clipped to the axis) then the points.
-        chart
-            .draw_series(
-                c.freqs_hz
-                    .iter()
-                    .zip(&c.measured)
-                    .zip(&c.sigma)
-                    .filter(|((_, a), _)| **a > 0.0)
-                    .map(|((f, a), s)| {
-                        PathElement::new(
-                            vec![(*f, (a - s).max(a0)), (*f, (a + s).min(a1))],
-                            BLACK.stroke_width(1),
-                        )
-                    }),
-            )
-            .map_err(|e| e.to_string())?;
+        chart.draw_series(
+            c.freqs_hz
+                .iter()
+                .zip(&c.measured)
+                .zip(&c.sigma)
+                .filter(|((_, a), _)| **a > 0.0)
+                .map(|((f, a), s)| {
+                    PathElement::new(
+                        vec![(*f, (a - s).max(a0)), (*f, (a + s).min(a1))],
+                        BLACK.stroke_width(1),
+                    )
+                }),
+        )?;
         chart
             .draw_series(
                 c.freqs_hz
@@ -191,8 +184,7 @@ pub fn amplitude_chart(c: &CharacteristicReport) -> Result<String, ReportError> 
                     .zip(&c.measured)
                     .filter(|(_, a)| **a > 0.0)
                     .map(|(f, a)| Circle::new((*f, *a), 3, BLACK.filled())),
-            )
-            .map_err(|e| e.to_string())?
+            )?
             .label("measured ± σ")
             .legend(|(x, y)| Circle::new((x + 10, y), 3, BLACK.filled()));
         legend(&mut chart)
@@ -219,23 +211,19 @@ pub fn residual_chart(c: &CharacteristicReport) -> Result<String, ReportError> {
             .build_cartesian_2d(
                 (f0..f1).log_scale().with_key_points(log_ticks(f0, f1)),
                 -m..m,
-            )
-            .map_err(|e| e.to_string())?;
+            )?;
         chart
             .configure_mesh()
             .x_desc("frequency (Hz)")
             .y_desc("(measured − model) / σ")
             .x_label_formatter(&|v| sci(*v))
             .label_style((FONT, 12))
-            .draw()
-            .map_err(|e| e.to_string())?;
+            .draw()?;
         for lim in [-2.0, 2.0] {
-            chart
-                .draw_series(std::iter::once(PathElement::new(
-                    vec![(f0, lim), (f1, lim)],
-                    RGBColor(200, 80, 80).stroke_width(1),
-                )))
-                .map_err(|e| e.to_string())?;
+            chart.draw_series(std::iter::once(PathElement::new(
+                vec![(f0, lim), (f1, lim)],
+                RGBColor(200, 80, 80).stroke_width(1),
+            )))?;
         }
         for s in shown {
             let col = stage_colour(&s.stage);
@@ -245,8 +233,7 @@ pub fn residual_chart(c: &CharacteristicReport) -> Result<String, ReportError> {
                         .iter()
                         .zip(&s.standardized_residual)
                         .map(|(f, r)| Circle::new((*f, r.clamp(-m, m)), 3, col.filled())),
-                )
-                .map_err(|e| e.to_string())?
+                )?
                 .label(s.stage.clone())
                 .legend(move |(x, y)| Circle::new((x + 10, y), 3, col.filled()));
         }
@@ -289,8 +276,7 @@ pub fn parameter_chart(params: &[Parameter]) -> Result<String, ReportError> {
             .margin(10)
             .x_label_area_size(35)
             .y_label_area_size(150)
-            .build_cartesian_2d(lo..hi, (0..n as i32).into_segmented())
-            .map_err(|e| e.to_string())?;
+            .build_cartesian_2d(lo..hi, (0..n as i32).into_segmented())?;
         chart
             .configure_mesh()
             .y_labels(n)
@@ -302,33 +288,26 @@ pub fn parameter_chart(params: &[Parameter]) -> Result<String, ReportError> {
             })
             .x_desc("identified / initial")
             .label_style((FONT, 11))
-            .draw()
-            .map_err(|e| e.to_string())?;
-        chart
-            .draw_series(std::iter::once(PathElement::new(
-                vec![(1.0, SegmentValue::Exact(0)), (1.0, SegmentValue::Last)],
-                RGBColor(150, 150, 150).stroke_width(1),
-            )))
-            .map_err(|e| e.to_string())?;
+            .draw()?;
+        chart.draw_series(std::iter::once(PathElement::new(
+            vec![(1.0, SegmentValue::Exact(0)), (1.0, SegmentValue::Last)],
+            RGBColor(150, 150, 150).stroke_width(1),
+        )))?;
         let blue = stage_colour("identified");
         for (i, p) in params.iter().enumerate() {
             let y = SegmentValue::CenterOf(i as i32);
             if let Some((r, s)) = bar(p) {
-                chart
-                    .draw_series(std::iter::once(PathElement::new(
-                        vec![((r - s).max(lo), y.clone()), ((r + s).min(hi), y.clone())],
-                        blue.stroke_width(2),
-                    )))
-                    .map_err(|e| e.to_string())?;
+                chart.draw_series(std::iter::once(PathElement::new(
+                    vec![((r - s).max(lo), y.clone()), ((r + s).min(hi), y.clone())],
+                    blue.stroke_width(2),
+                )))?;
             }
             if let Some(r) = ratio(p).filter(|r| r.is_finite()) {
-                chart
-                    .draw_series(std::iter::once(Circle::new(
-                        (r.clamp(lo, hi), y),
-                        4,
-                        blue.filled(),
-                    )))
-                    .map_err(|e| e.to_string())?;
+                chart.draw_series(std::iter::once(Circle::new(
+                    (r.clamp(lo, hi), y),
+                    4,
+                    blue.filled(),
+                )))?;
             }
         }
         Ok(())
@@ -360,8 +339,7 @@ pub fn sensitivity_chart(map: &SensitivityMap) -> Result<String, ReportError> {
             .margin(10)
             .x_label_area_size(30)
             .y_label_area_size(120)
-            .build_cartesian_2d((0..nc as i32).into_segmented(), (0..nr as i32).into_segmented())
-            .map_err(|e| e.to_string())?;
+            .build_cartesian_2d((0..nc as i32).into_segmented(), (0..nr as i32).into_segmented())?;
         chart
             .configure_mesh()
             .disable_mesh()
@@ -380,8 +358,7 @@ pub fn sensitivity_chart(map: &SensitivityMap) -> Result<String, ReportError> {
                 SegmentValue::Last => String::new(),
             })
             .label_style((FONT, 10))
-            .draw()
-            .map_err(|e| e.to_string())?;
+            .draw()?;
         let cells = map.relative.iter().enumerate().flat_map(|(r, row)| {
             row.iter().enumerate().map(move |(c, v)| {
                 let t = if max > 0.0 && *v > floor {
@@ -403,7 +380,7 @@ pub fn sensitivity_chart(map: &SensitivityMap) -> Result<String, ReportError> {
                 )
             })
         });
-        chart.draw_series(cells).map_err(|e| e.to_string())?;
+        chart.draw_series(cells)?;
         Ok(())
     })
 }
@@ -441,8 +418,7 @@ pub fn drift_chart(d: &Drift) -> Result<String, ReportError> {
             .margin(10)
             .x_label_area_size(40)
             .y_label_area_size(60)
-            .build_cartesian_2d(-0.5f64..(n as f64 - 0.5).max(0.5), -m..m)
-            .map_err(|e| e.to_string())?;
+            .build_cartesian_2d(-0.5f64..(n as f64 - 0.5).max(0.5), -m..m)?;
         chart
             .configure_mesh()
             .x_labels(n.min(12))
@@ -459,15 +435,12 @@ pub fn drift_chart(d: &Drift) -> Result<String, ReportError> {
             .x_desc("run")
             .y_desc("(x − x_baseline) / σ")
             .label_style((FONT, 11))
-            .draw()
-            .map_err(|e| e.to_string())?;
+            .draw()?;
         for lim in [-d.k_sigma, d.k_sigma] {
-            chart
-                .draw_series(std::iter::once(PathElement::new(
-                    vec![(-0.5, lim), (n as f64 - 0.5, lim)],
-                    RGBColor(214, 39, 40).stroke_width(1),
-                )))
-                .map_err(|e| e.to_string())?;
+            chart.draw_series(std::iter::once(PathElement::new(
+                vec![(-0.5, lim), (n as f64 - 0.5, lim)],
+                RGBColor(214, 39, 40).stroke_width(1),
+            )))?;
         }
         for (i, (p, pts)) in d.parameters.iter().zip(&devs).enumerate() {
             let col = SERIES[i % SERIES.len()];
@@ -475,15 +448,11 @@ pub fn drift_chart(d: &Drift) -> Result<String, ReportError> {
                 .iter()
                 .map(|(j, v)| (*j as f64, v.clamp(-m, m)))
                 .collect();
-            chart
-                .draw_series(LineSeries::new(
-                    pts.iter().copied(),
-                    col.stroke_width(if p.alarm { 3 } else { 1 }),
-                ))
-                .map_err(|e| e.to_string())?;
-            chart
-                .draw_series(pts.iter().map(|xy| Circle::new(*xy, 3, col.filled())))
-                .map_err(|e| e.to_string())?;
+            chart.draw_series(LineSeries::new(
+                pts.iter().copied(),
+                col.stroke_width(if p.alarm { 3 } else { 1 }),
+            ))?;
+            chart.draw_series(pts.iter().map(|xy| Circle::new(*xy, 3, col.filled())))?;
         }
         Ok(())
     })

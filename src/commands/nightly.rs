@@ -114,30 +114,14 @@ impl Default for DriftConfig {
     }
 }
 
-fn line_col(text: &str, offset: usize) -> (usize, usize) {
-    let mut offset = offset.min(text.len());
-    while !text.is_char_boundary(offset) {
-        offset -= 1;
-    }
-    let before = &text[..offset];
-    (
-        before.matches('\n').count() + 1,
-        before
-            .rsplit('\n')
-            .next()
-            .map(|l| l.chars().count())
-            .unwrap_or(0)
-            + 1,
-    )
-}
-
 impl Config {
     /// Loads a job file; relative paths become relative to its folder. Errors name file:line:column.
     pub fn load(path: &Path) -> anyhow::Result<Config> {
         let text = std::fs::read_to_string(path)
             .with_context(|| format!("cannot read the nightly job file {}", path.display()))?;
         let mut c: Config = toml::from_str(&text).map_err(|e| {
-            let (l, col) = line_col(&text, e.span().map(|s| s.start).unwrap_or(0));
+            let (l, col) =
+                identify::source::line_col(&text, e.span().map(|s| s.start).unwrap_or(0));
             anyhow::anyhow!(
                 "{}:{l}:{col}: {} (keys: configs/README.md#nightly)",
                 path.display(),

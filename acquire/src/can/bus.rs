@@ -137,7 +137,12 @@ impl CanBus {
 
     /// Sends one frame. Waits (up to 2 s) while the transmit queue is full.
     pub async fn send(&self, frame: &WireFrame) -> Result<(), CanError> {
-        let id = to_socketcan_id(frame.id()).map_err(|detail| CanError::Config { detail })?;
+        let id = to_socketcan_id(frame.id()).ok_or_else(|| CanError::Config {
+            detail: format!(
+                "identifier {:?} is out of range (standard ≤ 0x7FF, extended ≤ 0x1FFFFFFF)",
+                frame.id()
+            ),
+        })?;
         let deadline = tokio::time::Instant::now() + SEND_BACKPRESSURE_LIMIT;
         loop {
             let r = match frame.kind() {
@@ -272,14 +277,11 @@ fn open_error(interface: &str, e: std::io::Error) -> CanError {
     }
 }
 
-fn to_socketcan_id(id: CanId) -> Result<Id, String> {
+/// The socketcan identifier of `id`; `None` when it is out of its format's range.
+fn to_socketcan_id(id: CanId) -> Option<Id> {
     match id {
-        CanId::Standard(x) => StandardId::new(x)
-            .map(Id::Standard)
-            .ok_or_else(|| format!("standard identifier {x:#x} > 0x7FF")),
-        CanId::Extended(x) => ExtendedId::new(x)
-            .map(Id::Extended)
-            .ok_or_else(|| format!("extended identifier {x:#x} > 0x1FFFFFFF")),
+        CanId::Standard(x) => StandardId::new(x).map(Id::Standard),
+        CanId::Extended(x) => ExtendedId::new(x).map(Id::Extended),
     }
 }
 
@@ -325,10 +327,10 @@ mod tests {
             CanId::Standard(0x7FF),
             CanId::Extended(0x1FFF_FFFF),
         ] {
-            assert_eq!(to_socketcan_id(id).map(from_socketcan_id), Ok(id));
+            assert_eq!(to_socketcan_id(id).map(from_socketcan_id), Some(id));
         }
-        assert!(to_socketcan_id(CanId::Standard(0x800)).is_err());
-        assert!(to_socketcan_id(CanId::Extended(0x2000_0000)).is_err());
+        assert!(to_socketcan_id(CanId::Standard(0x800)).is_none());
+        assert!(to_socketcan_id(CanId::Extended(0x2000_0000)).is_none());
         assert!(CanId::Standard(0x800)
             .validate("data")
             .is_err_and(|e| e.to_string().contains("data identifier 800")));

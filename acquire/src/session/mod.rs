@@ -12,7 +12,7 @@ pub mod schema;
 
 use std::collections::BTreeMap;
 use std::fs::File;
-use std::io::{BufReader, BufWriter};
+use std::io::{BufReader, BufWriter, Read};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::mpsc;
@@ -46,6 +46,22 @@ pub enum SessionError {
         /// File.
         path: String,
         /// Why.
+        detail: String,
+    },
+    /// The file is not an MCAP file at all (empty, or another format).
+    #[error("{path} is not an MCAP file ({detail}); give a session file written by `ident sweep` (*.mcap)")]
+    NotMcap {
+        /// File.
+        path: String,
+        /// What it starts with.
+        detail: String,
+    },
+    /// A truncated file holds no complete chunk: there is nothing to recover.
+    #[error("session file {path}: no message can be recovered ({detail}); the recording was cut before its first chunk was written")]
+    NothingToRecover {
+        /// File.
+        path: String,
+        /// Why reading stopped.
         detail: String,
     },
     /// Reading a session file failed.
@@ -182,7 +198,7 @@ impl Session {
             .spawn(move || {
                 let r = write_loop(&mut writer, &ids, rx, &opts, &sh.path);
                 let r = match r {
-                    Ok(summary) => writer.finish().map(|_| summary).map_err(|e| e.to_string()),
+                    Ok(summary) => writer.finish().map(|_| summary),
                     Err(e) => {
                         // Still try to leave a readable file.
                         let _ = writer.finish();
@@ -191,7 +207,8 @@ impl Session {
                 };
                 match r {
                     Ok(s) => Ok(s),
-                    Err(detail) => {
+                    Err(e) => {
+                        let detail = e.to_string();
                         sh.failed.store(true, Ordering::SeqCst);
                         if let Ok(mut f) = sh.failure.lock() {
                             *f = Some(detail.clone());
@@ -265,8 +282,8 @@ fn write_loop(
     ids: &[u16],
     rx: mpsc::Receiver<Cmd>,
     opts: &SessionOptions,
-    _path: &str,
-) -> Result<SessionSummary, String> {
+    path: &str,
+) -> Result<SessionSummary, mcap::McapError> {
     let mut counts = vec![0u64; ids.len()];
     let mut seq = vec![0u32; ids.len()];
     let mut last_flush = Instant::now();
@@ -287,15 +304,13 @@ fn write_loop(
                     log_time,
                     publish_time: log_time,
                 };
-                writer
-                    .write_to_known_channel(&header, &data)
-                    .map_err(|e| e.to_string())?;
+                writer.write_to_known_channel(&header, &data)?;
                 seq[i] = seq[i].wrapping_add(1);
                 counts[i] += 1;
                 dirty = true;
             }
             Ok(Cmd::Flush(done)) => {
-                writer.flush().map_err(|e| e.to_string())?;
+                writer.flush()?;
                 flushes += 1;
                 dirty = false;
                 last_flush = Instant::now();
@@ -306,7 +321,7 @@ fn write_loop(
         }
         if last_flush.elapsed() >= opts.flush_interval {
             if dirty {
-                writer.flush().map_err(|e| e.to_string())?;
+                writer.flush()?;
                 flushes += 1;
                 dirty = false;
             }
@@ -319,13 +334,9 @@ fn write_loop(
         .map(|(t, c)| (t.name().to_string(), c))
         .collect();
     Ok(SessionSummary {
-        path: String::new(),
+        path: path.to_string(),
         messages,
         flushes,
-    })
-    .map(|mut s| {
-        s.path = _path.to_string();
-        s
     })
 }
 
@@ -446,7 +457,33 @@ pub struct ReadReport {
 /// One message read linearly: its channel, sequence, log time (ns) and payload.
 type RawMessage = (Arc<mcap::Channel<'static>>, u32, u64, Vec<u8>);
 
+/// Fails unless `path` starts with the MCAP magic bytes.
+fn check_magic(path: &Path) -> Result<(), SessionError> {
+    let mut head = Vec::with_capacity(mcap::MAGIC.len());
+    File::open(path)
+        .and_then(|f| f.take(mcap::MAGIC.len() as u64).read_to_end(&mut head))
+        .map_err(|e| SessionError::Read {
+            path: path.display().to_string(),
+            detail: format!("cannot open: {e}"),
+        })?;
+    if head == mcap::MAGIC {
+        return Ok(());
+    }
+    let detail = if head.is_empty() {
+        "the file is empty".to_string()
+    } else {
+        format!("it starts with {head:02x?}, not the MCAP magic")
+    };
+    Err(SessionError::NotMcap {
+        path: path.display().to_string(),
+        detail,
+    })
+}
+
+/// Every message of every complete chunk, and why reading stopped early (`None`: the file is
+/// complete, footer and end magic included).
 fn linear_messages(path: &Path) -> Result<(Vec<RawMessage>, Option<String>), SessionError> {
+    check_magic(path)?;
     let file = File::open(path).map_err(|e| SessionError::Read {
         path: path.display().to_string(),
         detail: format!("cannot open: {e}"),
@@ -468,13 +505,6 @@ fn linear_messages(path: &Path) -> Result<(Vec<RawMessage>, Option<String>), Ses
             }
         }
     }
-    Ok((out, stop))
-}
-
-/// Reads every message of a session file, complete or truncated (a truncated file yields the
-/// messages of every complete chunk, and `truncated` says why it stopped).
-pub fn read(path: &Path) -> Result<ReadReport, SessionError> {
-    let (msgs, mut stop) = linear_messages(path)?;
     if stop.is_none() {
         // The linear reader accepts files without end magic; say whether the summary is there.
         let bytes = std::fs::read(path).map_err(|e| SessionError::Read {
@@ -485,6 +515,13 @@ pub fn read(path: &Path) -> Result<ReadReport, SessionError> {
             stop = Some("file ends without the MCAP footer (writer did not finish)".into());
         }
     }
+    Ok((out, stop))
+}
+
+/// Reads every message of a session file, complete or truncated (a truncated file yields the
+/// messages of every complete chunk, and `truncated` says why it stopped).
+pub fn read(path: &Path) -> Result<ReadReport, SessionError> {
+    let (msgs, stop) = linear_messages(path)?;
     let records = msgs
         .into_iter()
         .map(|(c, _, t, d)| Record {
@@ -516,6 +553,12 @@ pub struct RecoverReport {
 /// every complete chunk is copied with its channel and schema. Refuses to overwrite `output`.
 pub fn recover(input: &Path, output: &Path) -> Result<RecoverReport, SessionError> {
     let (msgs, stop) = linear_messages(input)?;
+    if let (true, Some(why)) = (msgs.is_empty(), &stop) {
+        return Err(SessionError::NothingToRecover {
+            path: input.display().to_string(),
+            detail: why.clone(),
+        });
+    }
     let o = output.display().to_string();
     let werr = |detail: String| SessionError::Write {
         path: o.clone(),

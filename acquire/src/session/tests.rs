@@ -109,3 +109,44 @@ fn truncated_file_is_recovered_up_to_the_last_flush() {
     assert_eq!(idx, (0..100).collect::<Vec<_>>());
     assert!(recover(&cut, &out).is_err(), "must not overwrite");
 }
+
+#[test]
+fn files_that_are_not_sessions_are_refused_and_nothing_is_written() {
+    let dir = tempfile::tempdir().unwrap();
+    let cases: [(&str, Vec<u8>, &str); 4] = [
+        (
+            "empty.mcap",
+            Vec::new(),
+            "is not an MCAP file (the file is empty)",
+        ),
+        (
+            "random.mcap",
+            (0..4096u32)
+                .map(|i| (i.wrapping_mul(2_654_435_761) >> 13) as u8)
+                .collect(),
+            "is not an MCAP file (it starts with",
+        ),
+        (
+            "text.mcap",
+            b"time,force\n0,1\n".to_vec(),
+            "not the MCAP magic",
+        ),
+        (
+            "magic.mcap",
+            mcap::MAGIC.to_vec(),
+            "no message can be recovered",
+        ),
+    ];
+    for (name, bytes, want) in cases {
+        let input = dir.path().join(name);
+        std::fs::write(&input, &bytes).unwrap();
+        let out = recovered_path(&input);
+        let e = recover(&input, &out).expect_err(name);
+        assert!(e.to_string().contains(want), "{name}: {e}");
+        assert!(!out.exists(), "{name}: an output was written");
+        if name != "magic.mcap" {
+            let e = read(&input).expect_err(name);
+            assert!(matches!(e, SessionError::NotMcap { .. }), "{name}: {e}");
+        }
+    }
+}

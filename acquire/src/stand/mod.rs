@@ -9,7 +9,8 @@ use std::time::Duration;
 use serde::{Deserialize, Serialize};
 use serde_spanned::Spanned;
 
-use crate::units::{Dimension, Value};
+use identify::source::{Located, Quantity as Value, SourceText};
+use identify::units::Dim;
 
 /// How far (m) outside its body's equivalent box a sensor may sit (mounting blocks, rounding).
 pub const SENSOR_MOUNT_TOLERANCE_M: f64 = 0.005;
@@ -175,6 +176,9 @@ pub struct DaqPort {
     pub baud: u32,
     /// Expected identity `manufacturer,model` (empty: accept any).
     pub identity: String,
+    /// Number of analog inputs the DAQ has (`daq.inputs`), when the stand file says; every
+    /// channel's `device_channel` is then below it.
+    pub inputs: Option<u16>,
     /// Requested sample rate (Hz).
     pub sample_rate_hz: f64,
     /// Samples per channel per block.
@@ -281,19 +285,8 @@ pub struct Faults {
     pub cable_pull_after_blocks: Option<u64>,
 }
 
-/// A stand-file error: where and what.
-#[derive(Debug, Clone, PartialEq, thiserror::Error)]
-#[error("{file}:{line}:{column}: {message}")]
-pub struct StandError {
-    /// File.
-    pub file: String,
-    /// Line (1-based).
-    pub line: usize,
-    /// Column (1-based).
-    pub column: usize,
-    /// What is wrong and how to fix it.
-    pub message: String,
-}
+/// A stand-file error: where and what (file:line:column: message).
+pub type StandError = Located;
 
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -328,7 +321,7 @@ struct RawCan {
 #[serde(deny_unknown_fields)]
 struct RawShaker {
     port: Spanned<String>,
-    baud: Option<u32>,
+    baud: Option<Spanned<u32>>,
     identity: Option<String>,
     timeout: Option<Spanned<Value>>,
     retries: Option<u32>,
@@ -339,7 +332,8 @@ struct RawShaker {
 #[serde(deny_unknown_fields)]
 struct RawDaq {
     port: Spanned<String>,
-    baud: Option<u32>,
+    baud: Option<Spanned<u32>>,
+    inputs: Option<Spanned<u16>>,
     identity: Option<String>,
     sample_rate: Spanned<Value>,
     samples_per_block: Option<Spanned<u16>>,
@@ -397,48 +391,32 @@ struct RawFaults {
     cable_pull_after_blocks: Option<u64>,
 }
 
+/// Reads the stand file's text: locates errors and converts quantities.
 struct Ctx<'a> {
-    file: &'a str,
-    text: &'a str,
+    src: SourceText<'a>,
 }
 
-impl Ctx<'_> {
-    fn at(&self, span: Range<usize>, message: impl Into<String>) -> StandError {
-        let start = span.start.min(self.text.len());
-        let before = &self.text[..start];
-        let line = before.matches('\n').count() + 1;
-        let column = before.rfind('\n').map(|i| start - i).unwrap_or(start + 1);
-        StandError {
-            file: self.file.to_string(),
-            line,
-            column,
-            message: message.into(),
+impl<'a> Ctx<'a> {
+    fn new(file: &'a str, text: &'a str) -> Ctx<'a> {
+        Ctx {
+            src: SourceText::new(file, text),
         }
+    }
+
+    fn at(&self, span: Range<usize>, message: impl Into<String>) -> StandError {
+        self.src.at(span, message)
     }
 
     fn line_of(&self, span: Range<usize>) -> usize {
-        self.text[..span.start.min(self.text.len())]
-            .matches('\n')
-            .count()
-            + 1
+        identify::source::line_col(self.src.text, span.start).0
     }
 
-    fn value(&self, v: &Spanned<Value>, dim: Dimension, what: &str) -> Result<f64, StandError> {
-        v.get_ref()
-            .si(dim)
-            .map_err(|e| self.at(v.span(), format!("{what}: {e}")))
+    fn value(&self, v: &Spanned<Value>, dim: Dim, what: &str) -> Result<f64, StandError> {
+        self.src.quantity(v, dim, what)
     }
 
-    fn positive(&self, v: &Spanned<Value>, dim: Dimension, what: &str) -> Result<f64, StandError> {
-        let x = self.value(v, dim, what)?;
-        if x > 0.0 {
-            Ok(x)
-        } else {
-            Err(self.at(
-                v.span(),
-                format!("{what} must be > 0 {}, got {x}", dim.si()),
-            ))
-        }
+    fn positive(&self, v: &Spanned<Value>, dim: Dim, what: &str) -> Result<f64, StandError> {
+        self.src.positive(v, dim, what)
     }
 
     fn unit_vector(&self, v: &Spanned<Vec<f64>>, what: &str) -> Result<[f64; 3], StandError> {
@@ -546,7 +524,8 @@ impl Stand {
 
     /// Parses and validates stand-file text; `file` is used in messages.
     pub fn parse(text: &str, file: &str) -> Result<Stand, StandError> {
-        let cx = Ctx { file, text };
+        let text = identify::source::strip_bom(text);
+        let cx = Ctx::new(file, text);
         let raw: RawStand = toml::from_str(text).map_err(|e| {
             let span = e.span().unwrap_or(0..0);
             cx.at(span, e.message().to_string())
@@ -555,30 +534,34 @@ impl Stand {
         let rs = raw.shaker.get_ref();
         let shaker = ShakerPort {
             port: port_spec(rs.port.get_ref()),
-            baud: rs.baud.unwrap_or(115_200),
+            baud: baud(&cx, &rs.baud, "shaker.baud", 115_200)?,
             identity: rs.identity.clone().unwrap_or_default(),
             timeout: match &rs.timeout {
-                Some(t) => {
-                    Duration::from_secs_f64(cx.positive(t, Dimension::Time, "shaker.timeout")?)
-                }
+                Some(t) => Duration::from_secs_f64(cx.positive(t, Dim::TIME, "shaker.timeout")?),
                 None => Duration::from_millis(500),
             },
             retries: rs.retries.unwrap_or(2),
             max_force_n: match &rs.max_force {
-                Some(f) => cx.positive(f, Dimension::Force, "shaker.max_force")?,
+                Some(f) => cx.positive(f, Dim::FORCE, "shaker.max_force")?,
                 None => 5000.0,
             },
         };
         let rd = raw.daq.get_ref();
         let mut daq = DaqPort {
             port: port_spec(rd.port.get_ref()),
-            baud: rd.baud.unwrap_or(3_000_000),
+            baud: baud(&cx, &rd.baud, "daq.baud", 3_000_000)?,
+            inputs: match &rd.inputs {
+                Some(n) if *n.get_ref() == 0 => {
+                    return Err(cx.at(
+                        n.span(),
+                        "daq.inputs must be ≥ 1 (the number of analog inputs the DAQ has)",
+                    ))
+                }
+                Some(n) => Some(*n.get_ref()),
+                None => None,
+            },
             identity: rd.identity.clone().unwrap_or_default(),
-            sample_rate_hz: cx.positive(
-                &rd.sample_rate,
-                Dimension::Frequency,
-                "daq.sample_rate",
-            )?,
+            sample_rate_hz: cx.positive(&rd.sample_rate, Dim::FREQUENCY, "daq.sample_rate")?,
             samples_per_block: match &rd.samples_per_block {
                 Some(s) if *s.get_ref() == 0 => {
                     return Err(cx.at(s.span(), "daq.samples_per_block must be ≥ 1"))
@@ -587,9 +570,7 @@ impl Stand {
                 None => 64,
             },
             timeout: match &rd.timeout {
-                Some(t) => {
-                    Duration::from_secs_f64(cx.positive(t, Dimension::Time, "daq.timeout")?)
-                }
+                Some(t) => Duration::from_secs_f64(cx.positive(t, Dim::TIME, "daq.timeout")?),
                 None => Duration::from_millis(500),
             },
             retries: rd.retries.unwrap_or(2),
@@ -643,6 +624,12 @@ impl Stand {
                 ));
             }
             let dc = *c.device_channel.get_ref();
+            if let Some(n) = daq.inputs.filter(|n| dc >= *n) {
+                return Err(cx.at(
+                    c.device_channel.span(),
+                    format!("channel `{name}`: device_channel {dc} is beyond the DAQ's {n} inputs (numbered 0 to {}); check the wiring, the channel number or daq.inputs", n - 1),
+                ));
+            }
             if let Some(o) = channels.iter().find(|o| o.device_channel == dc) {
                 return Err(cx.at(
                     c.device_channel.span(),
@@ -650,11 +637,7 @@ impl Stand {
                 ));
             }
             let kind = *c.kind.get_ref();
-            let sensitivity = cx.positive(
-                &c.sensitivity,
-                Dimension::Sensitivity,
-                &format!("channel `{name}`: sensitivity"),
-            )?;
+            let sensitivity = sensitivity(&cx, &c.sensitivity, kind, &name)?;
             let (body, position_m, direction) = match kind {
                 ChannelKind::Force => {
                     let position = match &c.position {
@@ -750,11 +733,9 @@ impl Stand {
                 duplicate: cx.probability(&f.duplicate, "duplicate")?,
                 delay: cx.probability(&f.delay, "delay")?,
                 delay_time: match &f.delay_time {
-                    Some(t) => Duration::from_secs_f64(cx.positive(
-                        t,
-                        Dimension::Time,
-                        "faults.delay_time",
-                    )?),
+                    Some(t) => {
+                        Duration::from_secs_f64(cx.positive(t, Dim::TIME, "faults.delay_time")?)
+                    }
                     None => Duration::from_millis(20),
                 },
                 daq_silent_after_blocks: f.daq_silent_after_blocks,
@@ -796,10 +777,7 @@ impl Stand {
         };
         let text = self.text.clone();
         let span_of = |key: &str| text.find(key).unwrap_or(0);
-        let cx = Ctx {
-            file: &self.file,
-            text: &text,
-        };
+        let cx = Ctx::new(&self.file, &text);
         let at_geometry = |msg: String| cx.at(span_of("[geometry]")..span_of("[geometry]"), msg);
         let loaded = identify::modelfile::load(&path)
             .map_err(|e| at_geometry(format!("geometry.model {}: {e}", path.display())))?;
@@ -894,6 +872,53 @@ impl Stand {
     }
 }
 
+/// A serial line's bit rate, `default` when absent; 0 is an error.
+fn baud(
+    cx: &Ctx<'_>,
+    v: &Option<Spanned<u32>>,
+    field: &str,
+    default: u32,
+) -> Result<u32, StandError> {
+    match v {
+        None => Ok(default),
+        Some(b) if *b.get_ref() == 0 => Err(cx.at(
+            b.span(),
+            format!("{field} = 0: give the serial line's bit rate, e.g. {default}"),
+        )),
+        Some(b) => Ok(*b.get_ref()),
+    }
+}
+
+/// A channel's sensitivity (V per N or per m/s²), in the unit its `kind` needs; a unit of the
+/// other kind's says that `kind` or the unit is wrong.
+fn sensitivity(
+    cx: &Ctx<'_>,
+    v: &Spanned<Value>,
+    kind: ChannelKind,
+    name: &str,
+) -> Result<f64, StandError> {
+    let (dim, other, other_kind) = match kind {
+        ChannelKind::Force => (
+            Dim::FORCE_SENSITIVITY,
+            Dim::ACCELERATION_SENSITIVITY,
+            "acceleration",
+        ),
+        ChannelKind::Acceleration => (
+            Dim::ACCELERATION_SENSITIVITY,
+            Dim::FORCE_SENSITIVITY,
+            "force",
+        ),
+    };
+    let what = format!("channel `{name}`: sensitivity");
+    cx.positive(v, dim, &what).map_err(|e| match v.get_ref() {
+        Value::Text(t) if v.get_ref().si(dim).is_err() && v.get_ref().si(other).is_ok() => cx.at(
+            v.span(),
+            format!("{what} \"{t}\" is the unit of a {other_kind} sensor, but the channel's kind is {kind:?}; fix `kind` or the unit"),
+        ),
+        _ => e,
+    })
+}
+
 fn vec3(cx: &Ctx<'_>, p: &Spanned<Vec<Value>>, name: &str) -> Result<[f64; 3], StandError> {
     let v = p.get_ref();
     if v.len() != 3 {
@@ -902,7 +927,7 @@ fn vec3(cx: &Ctx<'_>, p: &Spanned<Vec<Value>>, name: &str) -> Result<[f64; 3], S
     let mut out = [0.0; 3];
     for (o, x) in out.iter_mut().zip(v) {
         *o = x
-            .si(Dimension::Length)
+            .si(Dim::LENGTH)
             .map_err(|e| cx.at(p.span(), format!("channel `{name}`: position: {e}")))?;
     }
     Ok(out)
@@ -925,12 +950,8 @@ fn truth(cx: &Ctx<'_>, st: &Spanned<RawTruth>, channels: &[Channel]) -> Result<T
             }
             TruthModel::Sdof {
                 body: r.body.clone(),
-                mass: cx.positive(&r.mass, Dimension::Mass, "truth.sdof.mass")?,
-                stiffness: cx.positive(
-                    &r.stiffness,
-                    Dimension::Stiffness,
-                    "truth.sdof.stiffness",
-                )?,
+                mass: cx.positive(&r.mass, Dim::MASS, "truth.sdof.mass")?,
+                stiffness: cx.positive(&r.stiffness, Dim::STIFFNESS, "truth.sdof.stiffness")?,
                 loss_factor: eta,
                 direction: cx.unit_vector(&r.direction, "truth.sdof.direction")?,
             }
@@ -950,7 +971,7 @@ fn truth(cx: &Ctx<'_>, st: &Spanned<RawTruth>, channels: &[Channel]) -> Result<T
         {
             if c.body.as_deref() != Some(body) {
                 return Err(StandError {
-                    file: cx.file.to_string(),
+                    file: cx.src.file.to_string(),
                     line: c.line,
                     column: 1,
                     message: format!(
@@ -971,17 +992,17 @@ fn truth(cx: &Ctx<'_>, st: &Spanned<RawTruth>, channels: &[Channel]) -> Result<T
         model,
         shaker_gain: t.shaker_gain.unwrap_or(1.0),
         shaker_cutoff_hz: match &t.shaker_cutoff {
-            Some(v) => cx.positive(v, Dimension::Frequency, "truth.shaker_cutoff")?,
+            Some(v) => cx.positive(v, Dim::FREQUENCY, "truth.shaker_cutoff")?,
             None => f64::INFINITY,
         },
         noise_acceleration: match &t.noise_acceleration {
             Some(v) => cx
-                .value(v, Dimension::Acceleration, "truth.noise_acceleration")?
+                .value(v, Dim::ACCELERATION, "truth.noise_acceleration")?
                 .abs(),
             None => 0.0,
         },
         noise_force: match &t.noise_force {
-            Some(v) => cx.value(v, Dimension::Force, "truth.noise_force")?.abs(),
+            Some(v) => cx.value(v, Dim::FORCE, "truth.noise_force")?.abs(),
             None => 0.0,
         },
         speed,

@@ -73,10 +73,17 @@ fn inconsistent_channel_maps_are_rejected_with_locations() {
     let cases = [
         (
             GOOD.replace(
+                "kind = \"force\"\nsensitivity = \"2.25 mV/N\"",
+                "kind = \"acceleration\"\nsensitivity = \"1 V/g\"\nbody=\"table\"\nposition=[0,0,0]\ndirection=[0,0,1]",
+            ),
+            "exactly one `kind = \"force\"`",
+        ),
+        (
+            GOOD.replace(
                 "kind = \"force\"",
                 "kind = \"acceleration\"\nbody=\"table\"\nposition=[0,0,0]\ndirection=[0,0,1]",
             ),
-            "exactly one `kind = \"force\"`",
+            "is the unit of a force sensor, but the channel's kind is Acceleration",
         ),
         (
             GOOD.replace("name = \"table-x\"", "name = \"force\""),
@@ -96,9 +103,25 @@ fn inconsistent_channel_maps_are_rejected_with_locations() {
         ),
         (
             GOOD.replace("\"100 mV/g\"", "\"100 mm\""),
-            "not a Sensitivity unit",
+            "an accelerometer sensitivity, e.g. \"100 mV/g\"",
         ),
         (GOOD.replace("\"100 mV/g\"", "-1"), "must be > 0"),
+        (
+            GOOD.replace("identity = \"IDENT-SIM,SHAKER-4K\"", "identity = \"IDENT-SIM,SHAKER-4K\"\nbaud = 0"),
+            "shaker.baud = 0: give the serial line's bit rate",
+        ),
+        (
+            GOOD.replace("samples_per_block = 64", "samples_per_block = 64\nbaud = 0"),
+            "daq.baud = 0",
+        ),
+        (
+            GOOD.replace("samples_per_block = 64", "samples_per_block = 64\ninputs = 0"),
+            "daq.inputs must be ≥ 1",
+        ),
+        (
+            GOOD.replace("samples_per_block = 64", "samples_per_block = 64\ninputs = 1"),
+            "device_channel 1 is beyond the DAQ's 1 inputs (numbered 0 to 0)",
+        ),
         (
             GOOD.replace("samples_per_block = 64", "samples_per_block = 4000"),
             "do not fit",

@@ -34,6 +34,42 @@ const POINT_RADIUS: f64 = 0.01;
 /// iron, loss factor ≈ 1 %).
 const STRUCTURAL_PSI: f64 = 0.06;
 
+/// Why an effect cannot be applied to a model.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum EffectError {
+    /// The effect names a body the model does not have.
+    #[error("no body \"{0}\"")]
+    NoBody(String),
+    /// The effect names a characteristic (output) the data does not have.
+    #[error("no characteristic number {0}")]
+    NoCharacteristic(usize),
+    /// The effect names an identification variable that does not exist.
+    #[error("no variable number {0}")]
+    NoVariable(usize),
+    /// Splitting the joints off would leave their ψ group variable with nothing to set.
+    #[error("the split would leave the group variable without parameters")]
+    EmptyGroup,
+    /// A resonator's tuning frequency is not positive.
+    #[error("resonator frequency {0} Hz is not > 0")]
+    BadFrequency(f64),
+    /// A body's principal inertias give it no extent along the axis to split.
+    #[error("{body}: its inertias give no length along axis {axis}")]
+    NoLength {
+        /// The body.
+        body: String,
+        /// The principal axis, 1-based.
+        axis: usize,
+    },
+    /// The body was split along this axis already.
+    #[error("{body} is already split along axis {axis}")]
+    AlreadySplit {
+        /// The body.
+        body: String,
+        /// The principal axis, 1-based.
+        axis: usize,
+    },
+}
+
 /// One candidate effect.
 #[derive(Debug, Clone, PartialEq)]
 pub enum Effect {
@@ -353,7 +389,7 @@ impl Effect {
 
     /// Applies the effect with parameters `gamma` to `r`. At the nested values the model is
     /// unchanged (for the mass-like effects and the flexible body, nothing is added at all).
-    pub fn apply(&self, r: &mut Realized, gamma: &[f64], f_max: f64) -> Result<(), String> {
+    pub fn apply(&self, r: &mut Realized, gamma: &[f64], f_max: f64) -> Result<(), EffectError> {
         let model = &mut r.model;
         match self {
             Effect::Spring {
@@ -418,7 +454,10 @@ impl Effect {
                 }
             }
             Effect::Gain { output, .. } => {
-                let g = r.gains.get_mut(*output).ok_or("no such characteristic")?;
+                let g = r
+                    .gains
+                    .get_mut(*output)
+                    .ok_or(EffectError::NoCharacteristic(*output))?;
                 *g *= 1.0 + gamma[0];
             }
             Effect::Damping {
@@ -427,7 +466,11 @@ impl Effect {
                 parameter,
                 ..
             } => {
-                let var = r.vars.vars.get_mut(*variable).ok_or("no such variable")?;
+                let var = r
+                    .vars
+                    .vars
+                    .get_mut(*variable)
+                    .ok_or(EffectError::NoVariable(*variable))?;
                 let mut moved = Vec::new();
                 var.targets.retain(|t| {
                     let hit = sdes.contains(&model.sdes[t.param.sde].name);
@@ -437,9 +480,7 @@ impl Effect {
                     !hit
                 });
                 if var.targets.is_empty() {
-                    return Err(
-                        "the split would leave the group variable without parameters".into(),
-                    );
+                    return Err(EffectError::EmptyGroup);
                 }
                 for p in moved {
                     model.set_param(
@@ -472,6 +513,13 @@ pub fn point_row(
     std::array::from_fn(|i| (6 * b + i, g[i]))
 }
 
+/// The index of the body called `name`.
+pub(crate) fn body_index(model: &Model, name: &str) -> Result<usize, EffectError> {
+    model
+        .body_index(name)
+        .ok_or_else(|| EffectError::NoBody(name.into()))
+}
+
 fn fresh_name(model: &Model, stem: &str) -> String {
     let mut i = 1;
     loop {
@@ -493,15 +541,9 @@ fn add_spring(
     direction: &Vector3<f64>,
     k: f64,
     psi: f64,
-) -> Result<(), String> {
-    let idx = |b: &Option<String>| -> Result<Option<usize>, String> {
-        b.as_ref()
-            .map(|n| {
-                model
-                    .body_index(n)
-                    .ok_or_else(|| format!("no body \"{n}\""))
-            })
-            .transpose()
+) -> Result<(), EffectError> {
+    let idx = |b: &Option<String>| -> Result<Option<usize>, EffectError> {
+        b.as_ref().map(|n| body_index(model, n)).transpose()
     };
     let bodies = [idx(&bodies[0])?, idx(&bodies[1])?];
     let name = fresh_name(model, "diagnosed spring");
@@ -529,12 +571,10 @@ fn attach_mass(
     freq_hz: f64,
     psi: f64,
     stem: &str,
-) -> Result<(), String> {
-    let h = model
-        .body_index(host)
-        .ok_or_else(|| format!("no body \"{host}\""))?;
+) -> Result<(), EffectError> {
+    let h = body_index(model, host)?;
     if !(freq_hz.is_finite() && freq_hz > 0.0) {
-        return Err(format!("resonator frequency {freq_hz} Hz is not > 0"));
+        return Err(EffectError::BadFrequency(freq_hz));
     }
     let j = m * POINT_RADIUS * POINT_RADIUS;
     let name = fresh_name(model, stem);
@@ -575,18 +615,16 @@ pub fn box_sides(body: &Body) -> [f64; 3] {
 /// by General SDEs of translational compliance `c` (rotational stiffness: the translational one
 /// times the cut section's squared radius of gyration). The centre third keeps the name (and the
 /// output characteristics: same centre, same axes); SDEs and forces move to the third they act on.
-pub fn split_body(model: &mut Model, name: &str, axis: usize, c: f64) -> Result<(), String> {
-    let b = model
-        .body_index(name)
-        .ok_or_else(|| format!("no body \"{name}\""))?;
+pub fn split_body(model: &mut Model, name: &str, axis: usize, c: f64) -> Result<(), EffectError> {
+    let b = body_index(model, name)?;
     let body = model.bodies[b].clone();
     let sides = box_sides(&body);
     let len = sides[axis];
     if !(len > 0.0) {
-        return Err(format!(
-            "{name}: its inertias give no length along axis {}",
-            axis + 1
-        ));
+        return Err(EffectError::NoLength {
+            body: name.into(),
+            axis: axis + 1,
+        });
     }
     let piece_sides = {
         let mut s = sides;
@@ -617,7 +655,10 @@ pub fn split_body(model: &mut Model, name: &str, axis: usize, c: f64) -> Result<
     let first = model.bodies.len();
     for (_, e) in &ends {
         if model.bodies.iter().any(|x| x.name == e.name) {
-            return Err(format!("{name} is already split along axis {}", axis + 1));
+            return Err(EffectError::AlreadySplit {
+                body: name.into(),
+                axis: axis + 1,
+            });
         }
         model.bodies.push(e.clone());
     }

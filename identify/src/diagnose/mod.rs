@@ -37,7 +37,7 @@ pub use effects::Effect;
 pub use residuals::ResidualAnalysis;
 
 use crate::identification::optimize::{self, Residuals as _};
-use crate::identification::{self, Identification, Observations, Variables};
+use crate::identification::{self, EvalError, Identification, Observations, Variables};
 use crate::model::Model;
 use problem::Problem;
 
@@ -225,10 +225,26 @@ pub struct Diagnosis {
 pub enum DiagnoseError {
     /// The identification's model cannot be evaluated.
     #[error("cannot evaluate the identified model for diagnosis: {0}")]
-    Model(String),
-    /// Bad options.
-    #[error("{0}")]
-    Options(String),
+    Model(#[from] EvalError),
+    /// The significance level is not in (0, 1).
+    #[error("significance level {0}: give 0 < α < 1")]
+    Alpha(f64),
+}
+
+/// Why the refit of one candidate failed (the candidate is then reported as not tried).
+#[derive(Debug, thiserror::Error)]
+pub enum RefitError {
+    /// Fewer observations than parameters plus one.
+    #[error("too few observations ({observations}) for {parameters} parameters")]
+    TooFewObservations {
+        /// Scalar residuals.
+        observations: usize,
+        /// Variables plus effect parameters.
+        parameters: usize,
+    },
+    /// The extended model cannot be evaluated.
+    #[error(transparent)]
+    Eval(#[from] EvalError),
 }
 
 /// The state of the extended fit after a round.
@@ -250,10 +266,7 @@ pub fn diagnose(
     progress: &mut dyn FnMut(&str),
 ) -> Result<Diagnosis, DiagnoseError> {
     if !(opts.alpha > 0.0 && opts.alpha < 1.0) {
-        return Err(DiagnoseError::Options(format!(
-            "significance level {}: give 0 < α < 1",
-            opts.alpha
-        )));
+        return Err(DiagnoseError::Alpha(opts.alpha));
     }
     let freqs: Vec<f64> = obs
         .characteristics
@@ -278,7 +291,7 @@ pub fn diagnose(
         vars.len(),
         id.estimate.iter().zip(&p0.scale).map(|(x, s)| x / s),
     );
-    let (e, jac) = p0.eval(&u0, true).map_err(DiagnoseError::Model)?;
+    let (e, jac) = p0.eval(&u0, true)?;
     let jac = jac.unwrap_or_else(|| DMatrix::zeros(e.len(), 0));
     let mut cur = Current {
         effects: Vec::new(),
@@ -308,8 +321,8 @@ pub fn diagnose(
     for _ in 0..opts.max_effects {
         let pc = Problem::new(model, vars, obs, iopts, cur.effects.clone(), f_hi);
         let (x, gamma) = pc.split(&cur.u);
-        let realized = pc.realize(&gamma).map_err(DiagnoseError::Model)?;
-        let crit = pc.criterion(&realized).map_err(DiagnoseError::Model)?;
+        let realized = pc.realize(&gamma)?;
+        let crit = pc.criterion(&realized)?;
         let free = free_columns(&pc, &cur.u);
         let jfree = DMatrix::from_fn(cur.jac.nrows(), free.len(), |r, c| cur.jac[(r, free[c])]);
         let sigma2 = residual_scale(&cur, free.len(), crit.noise.scale_unknown());
@@ -323,14 +336,14 @@ pub fn diagnose(
             jac: &jfree,
             sigma2,
         };
-        let scores = score::score_all(&fit, &cands).map_err(DiagnoseError::Model)?;
+        let scores = score::score_all(&fit, &cands).map_err(EvalError::from)?;
         let mut ok: Vec<score::Scored> = Vec::new();
         for (c, s) in cands.iter().zip(scores) {
             match s {
                 Ok(s) => ok.push(s),
                 Err(reason) => not_tried.push(NotTried {
                     effect: c.describe(),
-                    reason,
+                    reason: reason.to_string(),
                 }),
             }
         }
@@ -415,7 +428,7 @@ pub fn diagnose(
                 }
                 Err(reason) => not_tried.push(NotTried {
                     effect: format!("refit of {}", cand.describe()),
-                    reason,
+                    reason: reason.to_string(),
                 }),
             }
         }
@@ -490,7 +503,7 @@ pub fn diagnose(
         }
     }
     let (x, gamma) = pf.split(&cur.u);
-    let realized = pf.realize(&gamma).map_err(DiagnoseError::Model)?;
+    let realized = pf.realize(&gamma)?;
     let mut final_model = realized.model;
     realized.vars.apply(&mut final_model, &x);
     Ok(Diagnosis {
@@ -570,9 +583,7 @@ fn backward(
             continue;
         };
         let lr = ((e.norm_squared() - cur.e.norm_squared()) / sigma2).max(0.0);
-        let p_value = ChiSquared::new(q as f64)
-            .map(|c| 1.0 - c.cdf(lr))
-            .unwrap_or(0.0);
+        let p_value = residuals::chi2_tail(q as f64, lr);
         if p_value >= threshold {
             let r = Removed {
                 effect: cur.effects[k].describe(),
@@ -688,7 +699,7 @@ fn place(
         })
         .min_by(|a, b| a.1.e.norm_squared().total_cmp(&b.1.e.norm_squared()))?;
     let lr = ((fixed.e.norm_squared() - next.e.norm_squared()) / sigma2).max(0.0);
-    let p = ChiSquared::new(dof).map(|c| 1.0 - c.cdf(lr)).unwrap_or(1.0);
+    let p = residuals::chi2_tail(dof, lr);
     (p < threshold).then_some((r, next))
 }
 
@@ -775,8 +786,8 @@ fn free_columns(p: &Problem, u: &DVector<f64>) -> Vec<usize> {
 
 fn analysis(p: &Problem, cur: &Current, opts: &Options) -> Result<ResidualAnalysis, DiagnoseError> {
     let (x, gamma) = p.split(&cur.u);
-    let r = p.realize(&gamma).map_err(DiagnoseError::Model)?;
-    let crit = p.criterion(&r).map_err(DiagnoseError::Model)?;
+    let r = p.realize(&gamma)?;
+    let crit = p.criterion(&r)?;
     Ok(residuals::analyze(
         &crit,
         &cur.e,
@@ -798,7 +809,7 @@ fn refit(
     start: &[f64],
     f_hi: f64,
     sigma2: f64,
-) -> Result<(Refit, Current), String> {
+) -> Result<(Refit, Current), RefitError> {
     let mut effects = cur.effects.clone();
     effects.push(cand.clone());
     let mut p = Problem::new(
@@ -813,10 +824,10 @@ fn refit(
     let q = new_params.len();
     let m = cur.e.len();
     if m <= p.scale.len() + 1 {
-        return Err(format!(
-            "too few observations ({m}) for {} parameters",
-            p.scale.len()
-        ));
+        return Err(RefitError::TooFewObservations {
+            observations: m,
+            parameters: p.scale.len(),
+        });
     }
     // Start: the current point, the new parameters at `start`.
     let mut u0: Vec<f64> = cur.u.iter().copied().collect();
@@ -836,12 +847,11 @@ fn refit(
         &mut |_| {},
     )?;
     let (e, jac) = p.eval(&out.u, true)?;
-    let jac = jac.ok_or("no Jacobian")?;
+    let jac = jac.ok_or(EvalError::NoJacobian)?;
     let j0 = 0.5 * cur.e.norm_squared();
     let j1 = 0.5 * e.norm_squared();
     let lr = (2.0 * (j0 - j1) / sigma2).max(0.0);
-    let chi = ChiSquared::new(q as f64).map_err(|e| e.to_string())?;
-    let p_value = 1.0 - chi.cdf(lr);
+    let p_value = residuals::chi2_tail(q as f64, lr);
     let n = m as f64;
     let stop = out.stop.describe();
     let next = Current {

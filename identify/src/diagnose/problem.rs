@@ -8,7 +8,7 @@
 use nalgebra::{DMatrix, DVector};
 
 use super::effects::{Effect, EffectParam, Realized};
-use crate::identification::{self, Criterion, JacobianMode, Observations, Variables};
+use crate::identification::{self, Criterion, EvalError, JacobianMode, Observations, Variables};
 use crate::model::Model;
 
 /// The extended fit problem. Optimizers see `u = value / scale`: the variables first, then
@@ -94,7 +94,7 @@ impl<'a> Problem<'a> {
     }
 
     /// The model, variables and gains with effect parameters `gamma` (SI).
-    pub fn realize(&self, gamma: &[f64]) -> Result<Realized, String> {
+    pub fn realize(&self, gamma: &[f64]) -> Result<Realized, EvalError> {
         let mut r = Realized {
             model: self.base.clone(),
             vars: self.vars.clone(),
@@ -110,7 +110,7 @@ impl<'a> Problem<'a> {
     }
 
     /// The identification criterion of a realized model.
-    pub fn criterion(&self, r: &Realized) -> Result<Criterion, String> {
+    pub fn criterion(&self, r: &Realized) -> Result<Criterion, EvalError> {
         Criterion::new(
             &r.model,
             self.obs,
@@ -119,7 +119,7 @@ impl<'a> Problem<'a> {
             self.opts.noise,
             self.opts.frf_method,
         )
-        .map_err(|e| e.to_string())
+        .map_err(|e| EvalError::Setup(Box::new(e)))
     }
 
     /// Whitened residuals with the gains applied: `e' = (1 − G) z/σ + G e`.
@@ -144,16 +144,14 @@ impl<'a> Problem<'a> {
         x: &[f64],
         gamma: &[f64],
         jacobian: bool,
-    ) -> Result<(DVector<f64>, Option<DMatrix<f64>>), String> {
+    ) -> Result<(DVector<f64>, Option<DMatrix<f64>>), EvalError> {
         let r = self.realize(gamma)?;
         let mut crit = self.criterion(&r)?;
-        let (mut e, jx) = crit
-            .evaluate(x, jacobian.then_some(JacobianMode::Analytic))
-            .map_err(|e| e.to_string())?;
+        let (mut e, jx) = crit.evaluate(x, jacobian.then_some(JacobianMode::Analytic))?;
         self.evaluations += 1;
         Self::gained(&crit, &mut e, &r.gains);
         if e.iter().any(|v| !v.is_finite()) {
-            return Err("the extended model's response is not finite".into());
+            return Err(EvalError::NotFinite("extended model's response"));
         }
         let Some(jx) = jx else { return Ok((e, None)) };
         let (m, nx) = (e.len(), x.len());
@@ -174,7 +172,7 @@ impl<'a> Problem<'a> {
             g[j] = gamma[j] + h;
             let rh = self.realize(&g)?;
             let mut ch = self.criterion(&rh)?;
-            let (mut eh, _) = ch.evaluate(x, None).map_err(|e| e.to_string())?;
+            let (mut eh, _) = ch.evaluate(x, None)?;
             self.evaluations += 1;
             Self::gained(&ch, &mut eh, &rh.gains);
             g[j] = gamma[j];
@@ -182,7 +180,7 @@ impl<'a> Problem<'a> {
             jac.set_column(nx + j, &col);
         }
         if jac.iter().any(|v| !v.is_finite()) {
-            return Err("the extended model's Jacobian is not finite".into());
+            return Err(EvalError::NotFinite("extended model's Jacobian"));
         }
         Ok((e, Some(jac)))
     }
@@ -193,7 +191,7 @@ impl identification::optimize::Residuals for Problem<'_> {
         &mut self,
         u: &DVector<f64>,
         jacobian: bool,
-    ) -> Result<(DVector<f64>, Option<DMatrix<f64>>), String> {
+    ) -> Result<(DVector<f64>, Option<DMatrix<f64>>), EvalError> {
         let (x, g) = self.split(u);
         self.residuals(&x, &g, jacobian)
     }

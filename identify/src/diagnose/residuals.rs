@@ -140,11 +140,7 @@ pub fn analyze(
     let dof = m.saturating_sub(parameters).max(1);
     let two_j = e.norm_squared();
     let reduced_chi2 = two_j / dof as f64;
-    let chi2_p = (!crit.noise.scale_unknown()).then(|| {
-        ChiSquared::new(dof as f64)
-            .map(|d| 1.0 - d.cdf(two_j))
-            .unwrap_or(f64::NAN)
-    });
+    let chi2_p = (!crit.noise.scale_unknown()).then(|| chi2_tail(dof as f64, two_j));
     let bands = mode_bands(model, &characteristics, crit);
     let structured: Vec<&CharacteristicResiduals> = characteristics
         .iter()
@@ -288,4 +284,11 @@ fn mode_bands(model: &Model, chars: &[CharacteristicResiduals], crit: &Criterion
         .collect();
     bands.sort_by(|a, b| (b.share - b.points_share).total_cmp(&(a.share - a.points_share)));
     bands
+}
+
+/// `P(X ≥ x)` for `X ~ χ²(dof)`; NaN when `dof` is not positive.
+pub(crate) fn chi2_tail(dof: f64, x: f64) -> f64 {
+    ChiSquared::new(dof)
+        .map(|d| 1.0 - d.cdf(x))
+        .unwrap_or(f64::NAN)
 }

@@ -16,15 +16,14 @@
 //! rigid is scored in its rigid limit from the forces its joints would carry
 //! ([`flexible_first_order`]); the damping splits share one Jacobian.
 
-use nalgebra::{DMatrix, DVector};
-use serde::Serialize;
-use statrs::distribution::{ChiSquared, ContinuousCDF};
-
-use super::effects::{point_row, split_body, Effect};
+use super::effects::{body_index, point_row, split_body, Effect, EffectError};
+use super::residuals::chi2_tail;
 use crate::frf::{self, States};
 use crate::identification::Criterion;
 use crate::model::{Model, ParamRef};
 use crate::C64;
+use nalgebra::{DMatrix, DVector};
+use serde::Serialize;
 
 const TWO_PI: f64 = 2.0 * std::f64::consts::PI;
 
@@ -61,15 +60,40 @@ pub struct FitPoint<'a> {
     pub sigma2: f64,
 }
 
+/// Why one candidate could not be scored (it is reported as not tried).
+#[derive(Debug, thiserror::Error)]
+pub enum NotScored {
+    /// Its derivative lies in the span of the fitted variables' (or is nil).
+    #[error(
+        "its effect on the characteristics is indistinguishable from the fitted variables' (or nil)"
+    )]
+    Indistinguishable,
+    /// The effect has no first-order (score) form.
+    #[error("this effect has no first-order form")]
+    NoFirstOrderForm,
+    /// A joint of the split body has a singular stiffness.
+    #[error("a split joint's stiffness is singular")]
+    SingularJoint,
+    /// The damping candidates' Jacobian was not computed.
+    #[error("no damping Jacobian")]
+    NoDampingJacobian,
+    /// The effect cannot be applied to the model.
+    #[error(transparent)]
+    Effect(#[from] EffectError),
+    /// The split model cannot be solved.
+    #[error(transparent)]
+    Solve(#[from] frf::SolveError),
+}
+
 /// Scores every candidate; `Err` entries say why a candidate could not be scored.
 pub fn score_all(
     fit: &FitPoint,
     candidates: &[Effect],
-) -> Result<Vec<Result<Scored, String>>, String> {
+) -> Result<Vec<Result<Scored, NotScored>>, frf::SolveError> {
     let crit = fit.crit;
     let model = crit.model_at(fit.x);
     let lines = crit.lines().to_vec();
-    let states = frf::states(&model, &lines, frf::Method::Auto).map_err(|e| e.to_string())?;
+    let states = frf::states(&model, &lines, frf::Method::Auto)?;
     let outputs: Vec<usize> = model
         .outputs
         .iter()
@@ -105,18 +129,17 @@ fn statistic(
     g: &DVector<f64>,
     fit: &FitPoint,
     basis: &DMatrix<f64>,
-) -> Result<Scored, String> {
+) -> Result<Scored, NotScored> {
     let s = g.dot(fit.e);
     let resid = g - basis * (basis.transpose() * g);
     let info = resid.norm_squared();
     if !(info.is_finite() && info > 1e-12 * g.norm_squared().max(1e-300)) {
-        return Err("its effect on the characteristics is indistinguishable from the fitted variables' (or nil)".into());
+        return Err(NotScored::Indistinguishable);
     }
     let lm = s * s / (info * fit.sigma2);
     let step = -s / info;
     let one_sided = cand.params(1.0)[0].lower >= cand.params(1.0)[0].nested;
-    let chi = ChiSquared::new(1.0).map_err(|e| e.to_string())?;
-    let tail = 1.0 - chi.cdf(lm);
+    let tail = chi2_tail(1.0, lm);
     let p_value = if one_sided {
         if step > 0.0 {
             0.5 * tail
@@ -147,7 +170,7 @@ fn fill_derivative(
     lines: &[f64],
     damping: &Option<(Vec<ParamRef>, frf::Response)>,
     dq: &mut [C64],
-) -> Result<(), String> {
+) -> Result<(), NotScored> {
     let nl = lines.len();
     if let Some(rows) = cand.rows(model) {
         for (k, f) in lines.iter().enumerate() {
@@ -177,7 +200,7 @@ fn fill_derivative(
         Effect::Damping {
             sdes, parameter, ..
         } => {
-            let (params, r) = damping.as_ref().ok_or("no damping Jacobian")?;
+            let (params, r) = damping.as_ref().ok_or(NotScored::NoDampingJacobian)?;
             dq.iter_mut().for_each(|v| *v = C64::new(0.0, 0.0));
             for (p, pr) in params.iter().enumerate() {
                 if pr.name == *parameter && sdes.contains(&model.sdes[pr.sde].name) {
@@ -193,7 +216,7 @@ fn fill_derivative(
         Effect::Flexible { body, axis, .. } => {
             flexible_first_order(model, states, body, *axis, gains, lines, dq)
         }
-        _ => Err("this effect has no first-order form".into()),
+        _ => Err(NotScored::NoFirstOrderForm),
     }
 }
 
@@ -215,10 +238,8 @@ fn flexible_first_order(
     gains: &[f64],
     lines: &[f64],
     dq: &mut [C64],
-) -> Result<(), String> {
-    let b = model
-        .body_index(body)
-        .ok_or_else(|| format!("no body \"{body}\""))?;
+) -> Result<(), NotScored> {
+    let b = body_index(model, body)?;
     let n = model.dof_count();
     let mut split = model.clone();
     split_body(&mut split, body, axis, 1.0)?;
@@ -242,10 +263,7 @@ fn flexible_first_order(
             let (i, k) = (6 * e + r, 6 * e + c);
             C64::new(sj.k[i * ns + k], sj.d[i * ns + k])
         });
-        joint_inv.push(
-            kj.try_inverse()
-                .ok_or("a split joint's stiffness is singular")?,
-        );
+        joint_inv.push(kj.try_inverse().ok_or(NotScored::SingularJoint)?);
     }
     // Rigid motion of the body carried to the end thirds' centres (same axes).
     let rot = model.bodies[b].rotation;
@@ -330,7 +348,7 @@ fn damping_jacobian(
     model: &Model,
     lines: &[f64],
     candidates: &[Effect],
-) -> Result<Option<(Vec<ParamRef>, frf::Response)>, String> {
+) -> Result<Option<(Vec<ParamRef>, frf::Response)>, frf::SolveError> {
     let mut params: Vec<ParamRef> = Vec::new();
     for c in candidates {
         if let Effect::Damping {
@@ -353,7 +371,7 @@ fn damping_jacobian(
     if params.is_empty() {
         return Ok(None);
     }
-    let r = frf::response(model, lines, &params, frf::Method::Auto).map_err(|e| e.to_string())?;
+    let r = frf::response(model, lines, &params, frf::Method::Auto)?;
     Ok(Some((params, r)))
 }
 

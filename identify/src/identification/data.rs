@@ -105,6 +105,7 @@ pub const CSV_COLUMNS: [&str; 9] = [
 /// lines are skipped. Rows of a characteristic may come in any order; they are sorted by
 /// frequency, and a repeated frequency is an error naming both lines.
 pub fn parse_csv(text: &str, origin: &str) -> Result<MeasuredData, DataError> {
+    let text = crate::source::strip_bom(text);
     let err = |line: usize, message: String| DataError::Csv {
         origin: origin.into(),
         line,

@@ -60,7 +60,7 @@ use rand::{Rng, SeedableRng};
 
 pub use criterion::{Criterion, Evaluations, FitKind, JacobianMode, NoiseChoice, NoiseSource};
 pub use data::{DataError, Observations};
-pub use optimize::{Optimizer, Progress, Settings, StopReason};
+pub use optimize::{EvalError, Optimizer, Progress, Settings, StopReason};
 pub use uncertainty::{AtBound, Uncertainty, WeakDirection};
 pub use variables::{Variables, VarsError};
 
@@ -97,7 +97,10 @@ pub enum IdentifyError {
     },
     /// The model cannot be evaluated at the initial values.
     #[error("the model cannot be evaluated at the initial values: {0}")]
-    Initial(frf::SolveError),
+    Initial(EvalError),
+    /// No start point was given (`starts` = 0).
+    #[error("no start point: give at least one start (--starts 1)")]
+    NoStart,
 }
 
 /// How to identify.
@@ -205,14 +208,11 @@ impl optimize::Residuals for Scaled<'_> {
         &mut self,
         u: &DVector<f64>,
         jacobian: bool,
-    ) -> Result<(DVector<f64>, Option<DMatrix<f64>>), String> {
+    ) -> Result<(DVector<f64>, Option<DMatrix<f64>>), optimize::EvalError> {
         let x: Vec<f64> = u.iter().zip(&self.scale).map(|(u, s)| u * s).collect();
-        let (e, j) = self
-            .crit
-            .evaluate(&x, jacobian.then_some(self.mode))
-            .map_err(|e| e.to_string())?;
+        let (e, j) = self.crit.evaluate(&x, jacobian.then_some(self.mode))?;
         if e.iter().any(|v| !v.is_finite()) {
-            return Err("the model response is not finite".into());
+            return Err(optimize::EvalError::NotFinite("model response"));
         }
         let j = j.map(|mut j| {
             for (c, s) in self.scale.iter().enumerate() {
@@ -267,11 +267,13 @@ pub fn identify(
     let scale: Vec<f64> = vars.vars.iter().map(|v| v.scale).collect();
     let lo = DVector::from_iterator(x0.len(), vars.vars.iter().map(|v| v.lower / v.scale));
     let hi = DVector::from_iterator(x0.len(), vars.vars.iter().map(|v| v.upper / v.scale));
-    let (e0, _) = crit.evaluate(&x0, None).map_err(IdentifyError::Initial)?;
+    let (e0, _) = crit
+        .evaluate(&x0, None)
+        .map_err(|e| IdentifyError::Initial(e.into()))?;
     let criterion_initial = 0.5 * e0.norm_squared();
     let rms_initial = crit
         .rms_relative_error(&x0)
-        .map_err(IdentifyError::Initial)?;
+        .map_err(|e| IdentifyError::Initial(e.into()))?;
     let mut best: Option<(optimize::Outcome, usize)> = None;
     let mut starts = Vec::new();
     for (k, xs) in start_points(vars, opts.starts, opts.seed)
@@ -307,30 +309,24 @@ pub fn identify(
             }
             Err(m) => {
                 if k == 0 {
-                    return Err(IdentifyError::Noise {
-                        item: "initial values".into(),
-                        message: m,
-                    });
+                    return Err(IdentifyError::Initial(m));
                 }
                 starts.push(StartSummary {
                     x0: xs,
                     criterion: f64::INFINITY,
                     iterations: 0,
-                    stop: StopReason::Diverged(m),
+                    stop: StopReason::Diverged(m.to_string()),
                 });
             }
         }
     }
     let Some((out, _)) = best else {
-        return Err(IdentifyError::Noise {
-            item: "initial values".into(),
-            message: "no start could be evaluated".into(),
-        });
+        return Err(IdentifyError::NoStart);
     };
     let estimate: Vec<f64> = out.u.iter().zip(&scale).map(|(u, s)| u * s).collect();
     let (e, jac) = crit
         .evaluate(&estimate, Some(JacobianMode::Analytic))
-        .map_err(IdentifyError::Initial)?;
+        .map_err(|e| IdentifyError::Initial(e.into()))?;
     let criterion = 0.5 * e.norm_squared();
     let jac = jac.unwrap_or_else(|| DMatrix::zeros(e.len(), estimate.len()));
     let unc = uncertainty::uncertainty(
@@ -343,7 +339,7 @@ pub fn identify(
     );
     let rms = crit
         .rms_relative_error(&estimate)
-        .map_err(IdentifyError::Initial)?;
+        .map_err(|e| IdentifyError::Initial(e.into()))?;
     let mut updated = model.clone();
     vars.apply(&mut updated, &estimate);
     Ok(Identification {
@@ -381,7 +377,7 @@ pub fn uncertainty_at(
     let x0 = vars.initial();
     let (e, jac) = crit
         .evaluate(&x0, Some(JacobianMode::Analytic))
-        .map_err(IdentifyError::Initial)?;
+        .map_err(|e| IdentifyError::Initial(e.into()))?;
     let jac = jac.unwrap_or_else(|| DMatrix::zeros(e.len(), x0.len()));
     let j = 0.5 * e.norm_squared();
     Ok(uncertainty::uncertainty(

@@ -123,6 +123,26 @@ pub struct Progress {
     pub gradient_norm: f64,
 }
 
+/// Why the residuals cannot be evaluated at a point.
+#[derive(Debug, thiserror::Error)]
+pub enum EvalError {
+    /// The frequency response cannot be computed there (a singular model, for instance).
+    #[error(transparent)]
+    Solve(#[from] crate::frf::SolveError),
+    /// A residual, the criterion or a Jacobian entry is NaN or infinite; names which.
+    #[error("the {0} is not finite")]
+    NotFinite(&'static str),
+    /// The residuals returned no Jacobian although one was asked for.
+    #[error("the Jacobian was not computed")]
+    NoJacobian,
+    /// A diagnosis effect cannot be applied to the model.
+    #[error(transparent)]
+    Effect(#[from] crate::diagnose::effects::EffectError),
+    /// The criterion of a changed model cannot be set up.
+    #[error(transparent)]
+    Setup(Box<super::IdentifyError>),
+}
+
 /// What a minimizer needs: whitened residuals and, on request, their Jacobian in scaled
 /// variables. An `Err` means the model cannot be evaluated at that point.
 pub trait Residuals {
@@ -131,7 +151,7 @@ pub trait Residuals {
         &mut self,
         u: &DVector<f64>,
         jacobian: bool,
-    ) -> Result<(DVector<f64>, Option<DMatrix<f64>>), String>;
+    ) -> Result<(DVector<f64>, Option<DMatrix<f64>>), EvalError>;
     /// True when the Jacobian costs little more than the residuals (analytic): trial points are
     /// then evaluated with it.
     fn cheap_jacobian(&self) -> bool;
@@ -158,12 +178,12 @@ struct State {
     g: DVector<f64>,
 }
 
-fn state(obj: &mut dyn Residuals, u: DVector<f64>) -> Result<State, String> {
+fn state(obj: &mut dyn Residuals, u: DVector<f64>) -> Result<State, EvalError> {
     let (e, jac) = obj.eval(&u, true)?;
-    let jac = jac.ok_or("the Jacobian was not computed")?;
+    let jac = jac.ok_or(EvalError::NoJacobian)?;
     let cost = 0.5 * e.norm_squared();
     if !cost.is_finite() || jac.iter().any(|v| !v.is_finite()) {
-        return Err("the criterion or its Jacobian is not finite".into());
+        return Err(EvalError::NotFinite("criterion or its Jacobian"));
     }
     let g = jac.tr_mul(&e);
     Ok(State { u, e, jac, cost, g })
@@ -214,7 +234,7 @@ pub fn minimize(
     hi: &DVector<f64>,
     settings: &Settings,
     progress: &mut dyn FnMut(&Progress),
-) -> Result<Outcome, String> {
+) -> Result<Outcome, EvalError> {
     let s0 = state(obj, clamp(u0, lo, hi))?;
     Ok(match method {
         Optimizer::LevenbergMarquardt => levenberg_marquardt(obj, s0, lo, hi, settings, progress),
@@ -278,7 +298,7 @@ fn at_limit(s: &State, lo: &DVector<f64>, hi: &DVector<f64>, set: &Settings) -> 
 fn trial(
     obj: &mut dyn Residuals,
     u: DVector<f64>,
-) -> Result<(f64, Option<State>, DVector<f64>), String> {
+) -> Result<(f64, Option<State>, DVector<f64>), EvalError> {
     if obj.cheap_jacobian() {
         let s = state(obj, u.clone())?;
         Ok((s.cost, Some(s), u))
@@ -286,7 +306,7 @@ fn trial(
         let (e, _) = obj.eval(&u, false)?;
         let cost = 0.5 * e.norm_squared();
         if !cost.is_finite() {
-            return Err("the criterion is not finite".into());
+            return Err(EvalError::NotFinite("criterion"));
         }
         Ok((cost, None, u))
     }
@@ -295,7 +315,7 @@ fn trial(
 fn complete(
     obj: &mut dyn Residuals,
     t: (f64, Option<State>, DVector<f64>),
-) -> Result<State, String> {
+) -> Result<State, EvalError> {
     match t.1 {
         Some(s) => Ok(s),
         None => state(obj, t.2),
@@ -387,7 +407,7 @@ fn levenberg_marquardt(
         let old = s.cost;
         let new = match complete(obj, t) {
             Ok(ns) => ns,
-            Err(m) => return outcome(&s, it, StopReason::Diverged(m)),
+            Err(m) => return outcome(&s, it, StopReason::Diverged(m.to_string())),
         };
         s = new;
         if let Some(o) = after_step(&s, old, sn, it, lo, hi, set, true, progress) {
@@ -466,7 +486,7 @@ fn gauss_newton(
         let old = s.cost;
         s = match complete(obj, t) {
             Ok(ns) => ns,
-            Err(m) => return outcome(&s, it, StopReason::Diverged(m)),
+            Err(m) => return outcome(&s, it, StopReason::Diverged(m.to_string())),
         };
         if let Some(o) = after_step(&s, old, sn, it, lo, hi, set, true, progress) {
             return o;
@@ -688,7 +708,7 @@ mod tests {
             &mut self,
             u: &DVector<f64>,
             jacobian: bool,
-        ) -> Result<(DVector<f64>, Option<DMatrix<f64>>), String> {
+        ) -> Result<(DVector<f64>, Option<DMatrix<f64>>), EvalError> {
             let e = DVector::from_vec(vec![10.0 * (u[1] - u[0] * u[0]), 1.0 - u[0]]);
             let j =
                 jacobian.then(|| DMatrix::from_row_slice(2, 2, &[-20.0 * u[0], 10.0, -1.0, 0.0]));

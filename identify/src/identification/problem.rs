@@ -39,7 +39,9 @@ pub fn to_json(
     let mut crit = Criterion::new(model, data, vars, opts.fit, opts.noise, opts.frf_method)?;
     let x0 = vars.initial();
     let at_initial = crit.model_at(&x0);
-    let q0 = crit.predicted(&x0).map_err(IdentifyError::Initial)?;
+    let q0 = crit
+        .predicted(&x0)
+        .map_err(|e| IdentifyError::Initial(e.into()))?;
     let enabled: Vec<usize> = (0..at_initial.sdes.len())
         .filter(|&i| at_initial.sdes[i].enabled)
         .collect();

@@ -14,7 +14,7 @@ use serde::Deserialize;
 use serde_spanned::Spanned;
 
 use crate::model::{Model, ParamName, ParamRef, SdeLaw};
-use crate::modelfile::line_col;
+use crate::source::{Located, Quantity, SourceText};
 use crate::units::{parse_quantity, Dim};
 
 /// Why a variables file could not be used.
@@ -29,17 +29,8 @@ pub enum VarsError {
         source: std::io::Error,
     },
     /// A problem at a line and column.
-    #[error("{origin}:{line}:{col}: {message}")]
-    At {
-        /// File.
-        origin: String,
-        /// 1-based line.
-        line: usize,
-        /// 1-based column.
-        col: usize,
-        /// What is wrong and how to fix it.
-        message: String,
-    },
+    #[error(transparent)]
+    At(#[from] Located),
 }
 
 /// One parameter a variable sets: `param = ratio · x`.
@@ -175,10 +166,10 @@ struct RawVariable {
     #[serde(alias = "sde")]
     sdes: Spanned<SdeList>,
     parameter: Spanned<String>,
-    initial: Option<Spanned<Value>>,
-    lower: Option<Spanned<Value>>,
-    upper: Option<Spanned<Value>>,
-    scale: Option<Spanned<Value>>,
+    initial: Option<Spanned<Quantity>>,
+    lower: Option<Spanned<Quantity>>,
+    upper: Option<Spanned<Quantity>>,
+    scale: Option<Spanned<Quantity>>,
     unit: Option<Spanned<String>>,
     tie: Option<Spanned<String>>,
     ratios: Option<Spanned<Vec<f64>>>,
@@ -187,32 +178,16 @@ struct RawVariable {
 }
 
 struct Ctx<'a> {
-    origin: &'a str,
-    text: &'a str,
+    src: SourceText<'a>,
 }
 
 impl Ctx<'_> {
     fn at(&self, span: Range<usize>, message: impl Into<String>) -> VarsError {
-        let (line, col) = line_col(self.text, span.start);
-        VarsError::At {
-            origin: self.origin.into(),
-            line,
-            col,
-            message: message.into(),
-        }
+        VarsError::At(self.src.at(span, message))
     }
 
-    fn value(&self, v: &Spanned<Value>, dim: Dim, field: &str) -> Result<f64, VarsError> {
-        let x = match v.get_ref() {
-            Value::Num(x) => *x,
-            Value::Text(t) => {
-                parse_quantity(t, dim).map_err(|e| self.at(v.span(), format!("{field}: {e}")))?
-            }
-        };
-        if !x.is_finite() {
-            return Err(self.at(v.span(), format!("{field} must be a finite number")));
-        }
-        Ok(x)
+    fn value(&self, v: &Spanned<Quantity>, dim: Dim, field: &str) -> Result<f64, VarsError> {
+        Ok(self.src.quantity(v, dim, field)?)
     }
 }
 
@@ -322,7 +297,10 @@ pub fn load(path: &Path, model: &Model) -> Result<Variables, VarsError> {
 /// `lower > upper`, an initial value outside its bounds, groups whose model values differ with
 /// no `initial` given, ratios that do not match the SDE list.
 pub fn parse(text: &str, origin: &str, model: &Model) -> Result<Variables, VarsError> {
-    let cx = Ctx { origin, text };
+    let text = crate::source::strip_bom(text);
+    let cx = Ctx {
+        src: SourceText::new(origin, text),
+    };
     let raw: RawFile = toml::from_str(text).map_err(|e| {
         let span = e.span().unwrap_or(0..0);
         let msg = e.message().trim().to_string();
