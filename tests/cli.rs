@@ -208,6 +208,103 @@ fn files_that_are_not_sessions_get_a_clear_error_and_a_failing_exit() {
 }
 
 #[test]
+fn process_exports_uff58_that_pyuff_reads_back_to_the_same_frfs() {
+    let dir = tempfile::tempdir().unwrap();
+    let session = root().join("acquire/tests/fixtures/session-v1.mcap");
+    let uff = dir.path().join("frf.uff");
+    let out = ident(&[
+        "process",
+        session.to_str().unwrap(),
+        "--out",
+        dir.path().to_str().unwrap(),
+        "--uff",
+        uff.to_str().unwrap(),
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let script = r#"
+import json, sys
+import pyuff
+sets = pyuff.UFF(sys.argv[1]).read_sets()
+sets = sets if isinstance(sets, list) else [sets]
+print(json.dumps([{
+    "type": int(s["type"]), "name": s["id1"].strip(), "func_type": int(s["func_type"]),
+    "rsp_node": int(s["rsp_node"]), "rsp_dir": int(s["rsp_dir"]), "ref_node": int(s["ref_node"]),
+    "x": [float(v) for v in s["x"]],
+    "re": [float(v.real) for v in s["data"]], "im": [float(v.imag) for v in s["data"]],
+    "num_units": s["ordinate_axis_units_lab"].strip(), "den_units": s["orddenom_axis_units_lab"].strip(),
+} for s in sets]))
+"#;
+    let py = Command::new(python_with_numpy())
+        .args(["-c", script])
+        .arg(&uff)
+        .output()
+        .unwrap();
+    assert!(
+        py.status.success(),
+        "pyuff: {}",
+        String::from_utf8_lossy(&py.stderr)
+    );
+    let sets: Vec<serde_json::Value> = serde_json::from_slice(&py.stdout).unwrap();
+    let a = acquire::analysis::characteristics(&session, &Default::default()).unwrap();
+    let close = |p: f64, q: f64| (p - q).abs() <= 1e-11 * q.abs().max(1e-300);
+    // 7 accelerometers, then the table's characteristics.
+    let sensors: Vec<&acquire::stand::Channel> = a
+        .channels
+        .iter()
+        .filter(|c| c.kind == acquire::stand::ChannelKind::Acceleration)
+        .collect();
+    assert_eq!(sets.len(), sensors.len() + a.measured.characteristics.len());
+    for (set, ch) in sets.iter().zip(&sensors) {
+        assert_eq!(set["type"], 58);
+        assert_eq!(set["func_type"], 4, "FRF");
+        assert_eq!(set["name"], ch.name.as_str());
+        assert_eq!(set["num_units"], "m/s^2");
+        assert_eq!(set["den_units"], "N");
+        let c = a.channels.iter().position(|x| x.name == ch.name).unwrap();
+        assert_eq!(set["rsp_node"], c as i64 + 1);
+        for (k, s) in a.steps.iter().enumerate() {
+            let (re, im) = (s.channels[c].frf_re, s.channels[c].frf_im);
+            // UFF 58 ASCII writes an uneven abscissa as E13.5 (6 significant digits), the format's
+            // own limit; the ordinates as E20.12.
+            let x = set["x"][k].as_f64().unwrap();
+            assert!((x - s.frequency_hz).abs() <= 5e-6 * s.frequency_hz, "{set}");
+            assert!(
+                close(set["re"][k].as_f64().unwrap(), re),
+                "{} re {k}",
+                ch.name
+            );
+            assert!(
+                close(set["im"][k].as_f64().unwrap(), im),
+                "{} im {k}",
+                ch.name
+            );
+        }
+    }
+    for (set, m) in sets[sensors.len()..]
+        .iter()
+        .zip(&a.measured.characteristics)
+    {
+        assert_eq!(set["rsp_dir"], i64::from(m.dof) + 1);
+        assert_eq!(set["den_units"], "N");
+        for k in 0..m.freqs_hz.len() {
+            let amp = (set["re"][k].as_f64().unwrap().powi(2)
+                + set["im"][k].as_f64().unwrap().powi(2))
+            .sqrt();
+            assert!(
+                close(amp * a.geometry.nominal_force_n, m.amplitude[k]),
+                "{} dof {}: {amp} per N",
+                m.body,
+                m.dof
+            );
+        }
+    }
+}
+
+#[test]
 fn modes_and_sensitivity_run_on_the_textbook_model() {
     let m = root().join("configs/models/textbook-two-mass.toml");
     let out = ident(&["modes", m.to_str().unwrap()]);

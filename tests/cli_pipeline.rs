@@ -158,13 +158,26 @@ fn nightly_locks_compares_with_history_and_alarms_on_drift() {
     let cfg = write_job(dir.path(), &live, "[drift]\nk_sigma = 3.0\n");
     let cfg_s = cfg.to_str().unwrap();
 
-    // A live process holds the lock: the second run exits 2 and says so, touching nothing.
-    let mut holder = Command::new("sleep").arg("30").spawn().unwrap();
-    std::fs::write(
-        dir.path().join("nightly.lock"),
-        format!("{}\n", holder.id()),
-    )
-    .unwrap();
+    // A live process holds the lock (util-linux `flock`, the same advisory lock, taken by a
+    // program nobody on this project wrote): the second run exits 2 and says so, touching nothing.
+    let lock = dir.path().join("nightly.lock");
+    // `-o`: the lock is flock's own, not inherited by `sleep`, so killing flock releases it.
+    let mut holder = Command::new("flock")
+        .arg("-o")
+        .arg(&lock)
+        .args(["sleep", "30"])
+        .spawn()
+        .expect("util-linux flock");
+    let held = std::time::Instant::now();
+    while Command::new("flock")
+        .args(["-n", lock.to_str().unwrap(), "true"])
+        .status()
+        .unwrap()
+        .success()
+    {
+        assert!(held.elapsed().as_secs() < 10, "flock never took the lock");
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
     let o = ident(&["nightly", cfg_s]);
     assert_eq!(o.status.code(), Some(2), "{}", text(&o));
     assert!(
@@ -178,13 +191,26 @@ fn nightly_locks_compares_with_history_and_alarms_on_drift() {
     );
     holder.kill().unwrap();
     holder.wait().unwrap();
-    // Now the lock is stale (its PID is gone): taken over, logged, and the first run is ok.
+    // A run killed with -9 leaves its PID in the file but no lock (the kernel dropped it): the
+    // next run takes it over, says so in the log, and releases it at its end.
+    let mut dead = Command::new("true").spawn().unwrap();
+    dead.wait().unwrap();
+    std::fs::write(&lock, format!("{}\n", dead.id())).unwrap();
     let o = ident(&["nightly", cfg_s]);
     assert_eq!(o.status.code(), Some(0), "{}", text(&o));
     let log = std::fs::read_to_string(dir.path().join("nightly.log")).unwrap();
     assert!(log.contains("stale lock"), "{log}");
+    assert_eq!(
+        std::fs::read_to_string(&lock).unwrap(),
+        "",
+        "a clean exit empties the PID"
+    );
     assert!(
-        !dir.path().join("nightly.lock").exists(),
+        Command::new("flock")
+            .args(["-n", lock.to_str().unwrap(), "true"])
+            .status()
+            .unwrap()
+            .success(),
         "the lock is released"
     );
     let first = report_dir(&o);

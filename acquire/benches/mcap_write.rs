@@ -9,16 +9,29 @@
 use std::collections::BTreeMap;
 use std::time::Duration;
 
-use acquire::session::{Session, SessionOptions, Topic};
+use acquire::session::records::BlockRecord;
+use acquire::session::{Session, SessionOptions};
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
 
-fn blocks(n: usize) -> Vec<serde_json::Value> {
+fn blocks(n: usize) -> Vec<BlockRecord> {
     (0..n)
         .map(|k| {
             let volts: Vec<Vec<f32>> = (0..8)
-                .map(|c| (0..64).map(|i| (((k * 64 + i) as f32) * 0.01 * (c + 1) as f32).sin() * 0.5 + 1e-4 * ((i * 7 + c) % 13) as f32).collect())
+                .map(|c| {
+                    (0..64)
+                        .map(|i| {
+                            (((k * 64 + i) as f32) * 0.01 * (c + 1) as f32).sin() * 0.5
+                                + 1e-4 * ((i * 7 + c) % 13) as f32
+                        })
+                        .collect()
+                })
                 .collect();
-            serde_json::json!({"seq": k, "first_sample": k * 64, "sample_rate_hz": 5120.0, "volts": volts})
+            BlockRecord {
+                seq: k as u64,
+                first_sample: (k * 64) as u64,
+                sample_rate_hz: Some(5120.0),
+                volts,
+            }
         })
         .collect()
 }
@@ -74,7 +87,7 @@ fn bench(c: &mut Criterion) {
             .unwrap();
             let h = s.handle();
             for m in &msgs {
-                h.log(Topic::DaqBlock, m).unwrap();
+                h.record(m).unwrap();
             }
             s.finish().unwrap();
         })

@@ -19,7 +19,8 @@ use std::sync::Arc;
 
 use crate::analysis::{characteristics, AnalysisOptions, SessionAnalysis};
 use crate::device::DeviceIdentity;
-use crate::session::{self, schema::Topic};
+use crate::session;
+use crate::session::records::{DeviceIdentityRecord, Role, StandRecord};
 use crate::sim::plant::{Interaction, Plant, PlantError, C64};
 use crate::sim::signal::{SimChannel, Source};
 use crate::sim::{SimIdentities, SimSetup};
@@ -166,35 +167,34 @@ pub fn prepare(session: &Path, speed: Option<f64>) -> Result<Served, ReplayError
         what,
     };
     let rep = session::read(session)?;
-    let stand_rec = rep
-        .records
-        .iter()
-        .find(|r| r.topic == Topic::Stand.name())
-        .ok_or_else(|| incomplete("no /stand record: the session was not written by a sweep, or was cut before the stand was recorded".into()))?;
-    let text = stand_rec.value["text"]
-        .as_str()
-        .ok_or_else(|| incomplete("the /stand record has no stand file text".into()))?;
-    let file = stand_rec.value["file"].as_str().unwrap_or("recorded stand");
-    let stand = Stand::parse(text, file)
+    let stand_rec: StandRecord = rep.first()?.ok_or_else(|| incomplete("no /stand record: the session was not written by a sweep, or was cut before the stand was recorded".into()))?;
+    if stand_rec.text.is_empty() {
+        return Err(incomplete(
+            "the /stand record has no stand file text".into(),
+        ));
+    }
+    let file = if stand_rec.file.is_empty() {
+        "recorded stand"
+    } else {
+        &stand_rec.file
+    };
+    let stand = Stand::parse(&stand_rec.text, file)
         .map_err(|e| incomplete(format!("the recorded stand file does not load here: {e}")))?;
-    let identity = |role: &str| -> Result<DeviceIdentity, ReplayError> {
-        let v = &rep
-            .records
-            .iter()
-            .find(|r| r.topic == Topic::Identity.name() && r.value["role"] == role)
-            .ok_or_else(|| incomplete(format!("no /device/identity record for the {role}: the rig never connected; nothing to serve")))?
-            .value;
-        let s = |k: &str| v[k].as_str().unwrap_or("").to_string();
+    let ids: Vec<DeviceIdentityRecord> = rep.all()?;
+    let identity = |role: Role| -> Result<DeviceIdentity, ReplayError> {
+        let r = ids.iter().find(|r| r.role == role).ok_or_else(|| {
+            incomplete(format!("no /device/identity record for the {role:?}: the rig never connected; nothing to serve"))
+        })?;
         Ok(DeviceIdentity {
-            manufacturer: s("manufacturer"),
-            model: s("model"),
-            serial: s("serial"),
-            firmware: s("firmware"),
+            manufacturer: r.manufacturer.clone(),
+            model: r.model.clone(),
+            serial: r.serial.clone(),
+            firmware: r.firmware.clone(),
         })
     };
     let identities = SimIdentities {
-        shaker: identity("shaker")?,
-        daq: identity("daq")?,
+        shaker: identity(Role::Shaker)?,
+        daq: identity(Role::Daq)?,
     };
     let analysis = characteristics(session, &AnalysisOptions::default())?;
     let plant = RecordedPlant::from_analysis(&analysis, &stand)

@@ -3,11 +3,10 @@
 
 use std::sync::Arc;
 
-use serde_json::json;
-
 use crate::daq::{Daq, DaqError, DaqOptions, SerialDaq, StreamInfo};
 use crate::device::DeviceIdentity;
-use crate::session::{SessionError, SessionHandle, Topic};
+use crate::session::records::{DaqStreamRecord, DeviceIdentityRecord, Role, StandRecord};
+use crate::session::{SessionError, SessionHandle};
 use crate::shaker::{ScpiShaker, Shaker, ShakerError, ShakerOptions};
 use crate::stand::{PortSpec, Stand};
 use crate::transport::{open_serial, ByteTap, SerialSettings, Tapped, Transport};
@@ -125,10 +124,13 @@ impl Rig {
         session: Option<&SessionHandle>,
     ) -> Result<Rig, RigError> {
         if let Some(s) = session {
-            s.log(
-                Topic::Stand,
-                &json!({"name": stand.name, "file": stand.file, "text": stand.text, "channels": stand.channels, "geometry": stand.geometry}),
-            )?;
+            s.record(&StandRecord {
+                name: stand.name.clone(),
+                file: stand.file.clone(),
+                text: stand.text.clone(),
+                channels: stand.channels.clone(),
+                geometry: stand.geometry.clone(),
+            })?;
         }
         let shaker_identity = shaker.identify().await?;
         if !shaker_identity.matches(&stand.shaker.identity) {
@@ -150,17 +152,29 @@ impl Rig {
         }
         if let Some(s) = session {
             for (role, port, id) in [
-                ("shaker", shaker.port(), &shaker_identity),
-                ("daq", daq.port(), &daq_identity),
+                (Role::Shaker, shaker.port(), &shaker_identity),
+                (Role::Daq, daq.port(), &daq_identity),
             ] {
-                s.log(Topic::Identity, &json!({"role": role, "port": port, "manufacturer": id.manufacturer, "model": id.model, "serial": id.serial, "firmware": id.firmware}))?;
+                s.record(&DeviceIdentityRecord {
+                    role,
+                    port: port.to_string(),
+                    manufacturer: id.manufacturer.clone(),
+                    model: id.model.clone(),
+                    serial: id.serial.clone(),
+                    firmware: id.firmware.clone(),
+                })?;
             }
         }
         shaker.reset().await?;
         let stream = daq.configure(&stand.daq_config()).await?;
         if let Some(s) = session {
-            let names: Vec<&str> = stand.channels.iter().map(|c| c.name.as_str()).collect();
-            s.log(Topic::DaqStream, &json!({"port": daq.port(), "sample_rate_hz": stream.sample_rate_hz, "samples_per_block": stream.samples_per_block, "channels": stream.channels, "names": names}))?;
+            s.record(&DaqStreamRecord {
+                port: daq.port().to_string(),
+                sample_rate_hz: stream.sample_rate_hz,
+                samples_per_block: stream.samples_per_block,
+                channels: stream.channels.clone(),
+                names: Some(stand.channels.iter().map(|c| c.name.clone()).collect()),
+            })?;
         }
         Ok(Rig {
             stand: stand.clone(),

@@ -709,6 +709,19 @@ async fn broadband_random_and_chirp_recover_the_truth_frf() {
                 .map(|x| x.as_f64().unwrap())
                 .collect();
             assert_eq!(re, r.h1[1].iter().map(|h| h.re).collect::<Vec<_>>());
+            // Processing the file replays the blocks through the same averager: every line equals
+            // the live estimate bit for bit, and the table's characteristics come out of it.
+            let a = acquire::analysis::characteristics(&path, &Default::default()).unwrap();
+            assert_eq!(a.steps.len(), r.freqs_hz.len(), "{waveform:?}");
+            assert!(
+                a.steps.iter().all(|s| s.matches_live),
+                "{waveform:?}: a replayed line differs from the live estimate"
+            );
+            assert!(!a.measured.characteristics.is_empty());
+            assert!(a
+                .measured
+                .source
+                .contains(&format!("{} broadband lines (H1)", r.freqs_hz.len())));
         }
     })
     .await

@@ -8,7 +8,7 @@
 //! ```
 //! use identify::source::SourceText;
 //! let text = "[shaker]\nbaud = 0\n";
-//! let e = SourceText::new("stand.toml", text).at(18..19, "baud must be > 0");
+//! let e = SourceText::new("stand.toml", text).at(16..17, "baud must be > 0");
 //! assert_eq!(e.to_string(), "stand.toml:2:8: baud must be > 0");
 //! ```
 

@@ -1,5 +1,5 @@
-//! Reader for NumPy `.npy` arrays of float64 (little- or big-endian, C or Fortran order,
-//! format versions 1-3), enough for recorded signals saved with `numpy.save`.
+//! NumPy `.npy` arrays of float64 (little- or big-endian, C or Fortran order, format versions
+//! 1-3), as recorded signals are saved with `numpy.save`; the format itself is read by `npyz`.
 
 use std::path::Path;
 
@@ -42,137 +42,67 @@ fn err(file: &str, location: &str, message: impl Into<String>) -> ProcessError {
     }
 }
 
-/// Parses the bytes of a `.npy` file; `file` names it in errors.
+/// Parses the bytes of a `.npy` file named `file` (for messages).
 pub fn parse(bytes: &[u8], file: &str) -> Result<NpyArray> {
-    if bytes.len() < 10 || &bytes[..6] != b"\x93NUMPY" {
+    let npy = npyz::NpyFile::new(bytes)
+        .map_err(|e| err(file, "header", format!("not a NumPy .npy file: {e}")))?;
+    let float64 = matches!(
+        npy.dtype(),
+        npyz::DType::Plain(t) if t.type_char() == npyz::TypeChar::Float && t.size_field() == 8
+    );
+    if !float64 {
         return Err(err(
             file,
-            "magic",
-            "not a NumPy .npy file (missing \\x93NUMPY magic); save it with numpy.save",
-        ));
-    }
-    let major = bytes[6];
-    let (header_len, start) = match major {
-        1 => (u16::from_le_bytes([bytes[8], bytes[9]]) as usize, 10usize),
-        2 | 3 => {
-            if bytes.len() < 12 {
-                return Err(err(file, "header", "truncated header length"));
-            }
-            (
-                u32::from_le_bytes([bytes[8], bytes[9], bytes[10], bytes[11]]) as usize,
-                12,
-            )
-        }
-        v => {
-            return Err(err(
-                file,
-                "version",
-                format!("unsupported .npy format version {v}; re-save with numpy ≥ 1.0"),
-            ))
-        }
-    };
-    let end = start
-        .checked_add(header_len)
-        .filter(|e| *e <= bytes.len())
-        .ok_or_else(|| err(file, "header", "truncated header"))?;
-    let header = std::str::from_utf8(&bytes[start..end])
-        .map_err(|_| err(file, "header", "header is not text"))?;
-    let field = |key: &str| -> Result<&str> {
-        let pat = format!("'{key}':");
-        let at = header.find(&pat).ok_or_else(|| {
-            err(
-                file,
-                "header",
-                format!("no '{key}' entry in header {header:?}"),
-            )
-        })?;
-        Ok(header[at + pat.len()..].trim_start())
-    };
-    let descr = field("descr")?;
-    let little = if descr.starts_with("'<f8'") {
-        true
-    } else if descr.starts_with("'>f8'") {
-        false
-    } else {
-        let shown: String = descr.chars().take(8).collect();
-        return Err(err(
-            file,
-            "header 'descr'",
+            "header",
             format!(
-                "dtype {shown} is not float64 ('<f8'/'>f8'); convert with arr.astype(np.float64)"
+                "dtype {} is not float64; save the array with dtype=np.float64",
+                npy.dtype().descr()
             ),
         ));
-    };
-    let fortran = field("fortran_order")?.starts_with("True");
-    let shape_text = field("shape")?;
-    let close = shape_text
-        .find(')')
-        .ok_or_else(|| err(file, "header 'shape'", "unterminated shape tuple"))?;
-    let inner = shape_text
-        .get(1..close)
-        .ok_or_else(|| err(file, "header 'shape'", "malformed shape tuple"))?;
-    let mut shape = Vec::new();
-    for part in inner.split(',').map(str::trim).filter(|p| !p.is_empty()) {
-        shape.push(part.parse::<usize>().map_err(|_| {
-            err(
-                file,
-                "header 'shape'",
-                format!("dimension {part:?} is not a non-negative integer"),
-            )
-        })?);
     }
-    let count = shape
-        .iter()
-        .try_fold(1usize, |a, d| a.checked_mul(*d))
-        .ok_or_else(|| err(file, "header 'shape'", "shape overflows"))?;
-    let body = &bytes[end..];
-    let need = count
-        .checked_mul(8)
-        .ok_or_else(|| err(file, "header 'shape'", "shape overflows"))?;
-    if body.len() != need {
+    let shape: Vec<usize> = npy.shape().iter().map(|&d| d as usize).collect();
+    let fortran = npy.order() == npyz::Order::Fortran;
+    let n: usize = shape.iter().product();
+    let data = npy.into_vec::<f64>().map_err(|e| {
+        err(
+            file,
+            "data",
+            format!("truncated or unreadable data ({n} values expected): {e}"),
+        )
+    })?;
+    if data.len() != n {
         return Err(err(
             file,
             "data",
-            format!(
-                "holds {} bytes, the shape {:?} needs {need}: the file is truncated or corrupt",
-                body.len(),
-                shape
-            ),
+            format!("truncated: {} of {n} values", data.len()),
         ));
     }
-    let mut data: Vec<f64> = body
-        .chunks_exact(8)
-        .map(|c| {
-            let a = [c[0], c[1], c[2], c[3], c[4], c[5], c[6], c[7]];
-            if little {
-                f64::from_le_bytes(a)
-            } else {
-                f64::from_be_bytes(a)
-            }
-        })
-        .collect();
-    if fortran && shape.len() > 1 {
-        // Column-major -> row-major.
-        let mut out = vec![0.0; count];
-        let nd = shape.len();
-        let mut idx = vec![0usize; nd];
-        for v in data.iter() {
-            let mut off = 0;
-            for d in 0..nd {
-                off = off * shape[d] + idx[d];
-            }
-            out[off] = *v;
-            for d in 0..nd {
-                idx[d] += 1;
-                if idx[d] < shape[d] {
-                    break;
-                }
-                idx[d] = 0;
-            }
-        }
-        data = out;
-    }
+    let data = if fortran {
+        to_c_order(&data, &shape)
+    } else {
+        data
+    };
     Ok(NpyArray { shape, data })
+}
+
+/// Column-major (Fortran) values of an array of `shape` in row-major (C) order.
+fn to_c_order(data: &[f64], shape: &[usize]) -> Vec<f64> {
+    let nd = shape.len();
+    let mut out = vec![0.0; data.len()];
+    // Walk the Fortran order (first index fastest), placing each value at its C offset.
+    let mut idx = vec![0usize; nd];
+    for v in data {
+        let off = idx.iter().zip(shape).fold(0, |off, (i, n)| off * n + i);
+        out[off] = *v;
+        for d in 0..nd {
+            idx[d] += 1;
+            if idx[d] < shape[d] {
+                break;
+            }
+            idx[d] = 0;
+        }
+    }
+    out
 }
 
 #[cfg(test)]

@@ -491,6 +491,12 @@ impl Welch {
     /// Ends the record and returns the averaged spectra. Errors if no full segment was seen or a
     /// reference channel was zero throughout.
     pub fn finish(self) -> Result<CrossSpectra> {
+        self.spectra()
+    }
+
+    /// The spectra averaged so far (the estimator goes on; for progress displays and for
+    /// measurements that stop after a number of averages). Errors as [`Welch::finish`].
+    pub fn spectra(&self) -> Result<CrossSpectra> {
         let n = self.config.segment_len;
         if self.segments == 0 {
             let channel = self.names[0].clone();
@@ -523,9 +529,9 @@ impl Welch {
             }
         };
         let (r, p) = (self.references, self.responses);
-        let mut gxx = self.acc_gxx;
-        let mut gxy = self.acc_gxy;
-        let mut gyy = self.acc_gyy;
+        let mut gxx = self.acc_gxx.clone();
+        let mut gxy = self.acc_gxy.clone();
+        let mut gyy = self.acc_gyy.clone();
         for k in 0..nf {
             let s = scale(k);
             gxx[k * r * r..(k + 1) * r * r]
@@ -544,7 +550,7 @@ impl Welch {
             gxx,
             gxy,
             gyy,
-            overloads: self.overloads,
+            overloads: self.overloads.clone(),
             peak_hits: self.extremes.iter().map(|e| e.1 + e.3).collect(),
         })
     }

@@ -58,35 +58,17 @@ impl<'a> Inputs<'a> {
     }
 }
 
-/// Current UTC time as `YYYY-MM-DDTHH:MM:SSZ`.
+/// Current UTC time as `YYYY-MM-DDTHH:MM:SSZ` (whole seconds).
 pub fn now_utc() -> String {
-    let secs = std::time::SystemTime::now()
-        .duration_since(std::time::UNIX_EPOCH)
-        .map(|d| d.as_secs())
-        .unwrap_or(0);
-    utc_from_unix(secs)
+    utc_from_unix(jiff::Timestamp::now().as_second())
 }
 
-/// `YYYY-MM-DDTHH:MM:SSZ` of a Unix time (s), proleptic Gregorian calendar.
-pub fn utc_from_unix(secs: u64) -> String {
-    let days = (secs / 86_400) as i64;
-    let rem = secs % 86_400;
-    // Howard Hinnant's civil_from_days.
-    let z = days + 719_468;
-    let era = z.div_euclid(146_097);
-    let doe = z - era * 146_097;
-    let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365;
-    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
-    let mp = (5 * doy + 2) / 153;
-    let d = doy - (153 * mp + 2) / 5 + 1;
-    let m = if mp < 10 { mp + 3 } else { mp - 9 };
-    let y = yoe + era * 400 + i64::from(m <= 2);
-    format!(
-        "{y:04}-{m:02}-{d:02}T{:02}:{:02}:{:02}Z",
-        rem / 3600,
-        rem % 3600 / 60,
-        rem % 60
-    )
+/// `YYYY-MM-DDTHH:MM:SSZ` of a Unix time (s); times jiff cannot represent (beyond the years
+/// -9999..9999) print as the raw number of seconds.
+pub fn utc_from_unix(secs: i64) -> String {
+    jiff::Timestamp::from_second(secs)
+        .map(|t| t.to_string())
+        .unwrap_or_else(|_| format!("{secs} s after 1970-01-01T00:00:00Z"))
 }
 
 fn unit_of(dof: u8, q: Quantity) -> String {

@@ -1,6 +1,6 @@
 //! `ident nightly CONFIG`: unattended identification of one stand (cron / systemd timer).
 //!
-//! Takes a lock (a second run exits 2; a lock left by a dead process is taken over), runs the sweep
+//! Takes a lock (a second run exits 2; the kernel releases it when a run dies, even by `kill -9`), runs the sweep
 //! (or takes the newest session), processes, identifies, diagnoses, compares every parameter with
 //! its history (drift beyond k standard errors from the baseline run is an alarm) and writes a
 //! dated report folder (HTML, JSON, identification files, `status.json`). Logs to a file and to
@@ -8,7 +8,7 @@
 //! kept and `status.json` says what happened.
 
 use std::fs::{File, OpenOptions};
-use std::io::Write;
+use std::io::{Read, Seek, SeekFrom, Write};
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
@@ -202,75 +202,76 @@ impl Config {
     }
 }
 
-/// The job lock: a file holding the owner's PID, removed on drop.
+/// The job lock: an advisory lock (`flock`, through std's `File::try_lock`) on the lock file,
+/// held while the job runs. The kernel releases it when the process ends, however it ends
+/// (`kill -9` and power loss included), so a lock can never be left stale. The file holds the
+/// owner's PID for people to read; a clean exit empties it. It is never deleted: deleting a lock
+/// file races with a process that has just opened it.
 pub struct Lock {
+    file: File,
     path: PathBuf,
 }
 
-/// Whether a process with this PID exists (Linux: /proc; elsewhere assume it does).
-fn alive(pid: u32) -> bool {
-    if cfg!(target_os = "linux") {
-        Path::new(&format!("/proc/{pid}")).exists()
-    } else {
-        true
-    }
-}
-
 impl Lock {
-    /// Takes the lock. `Ok(Err(message))` when another live run holds it; a stale lock (dead
-    /// PID, or unreadable) is taken over and reported in `notes`.
+    /// Takes the lock. `Ok(Err(message))` when another run holds it. A PID left in the file by
+    /// a run that did not end cleanly is reported in `notes`.
     pub fn take(path: &Path, notes: &mut Vec<String>) -> anyhow::Result<Result<Lock, String>> {
         if let Some(parent) = path.parent() {
             std::fs::create_dir_all(parent)
                 .with_context(|| format!("cannot create the lock folder {}", parent.display()))?;
         }
-        for _ in 0..2 {
-            match OpenOptions::new().write(true).create_new(true).open(path) {
-                Ok(mut f) => {
-                    writeln!(f, "{}", std::process::id()).with_context(|| {
-                        format!("cannot write the lock file {}", path.display())
-                    })?;
-                    return Ok(Ok(Lock {
-                        path: path.to_path_buf(),
-                    }));
-                }
-                Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => {
-                    let text = std::fs::read_to_string(path).unwrap_or_default();
-                    match text.trim().parse::<u32>() {
-                        Ok(pid) if alive(pid) => {
-                            return Ok(Err(format!(
-                                "another ident nightly is running (pid {pid}, lock {}); this run exits without doing anything. \
-                                 If no such job runs, delete the lock file.",
-                                path.display()
-                            )))
-                        }
-                        other => {
-                            notes.push(match other {
-                                Ok(pid) => format!("stale lock {} from pid {pid}, which no longer exists: taken over", path.display()),
-                                Err(_) => format!("lock file {} held no PID ({:?}): taken over", path.display(), text.trim()),
-                            });
-                            std::fs::remove_file(path).with_context(|| format!("cannot remove the stale lock {}", path.display()))?;
-                        }
-                    }
-                }
-                Err(e) => {
-                    return Err(e)
-                        .with_context(|| format!("cannot create the lock file {}", path.display()))
-                }
+        let mut file = OpenOptions::new()
+            .read(true)
+            .write(true)
+            .create(true)
+            .truncate(false)
+            .open(path)
+            .with_context(|| format!("cannot open the lock file {}", path.display()))?;
+        let mut previous = String::new();
+        match file.try_lock() {
+            Ok(()) => {}
+            Err(std::fs::TryLockError::WouldBlock) => {
+                let _ = file.read_to_string(&mut previous);
+                let owner = match previous.trim() {
+                    "" => String::new(),
+                    pid => format!("pid {pid}, "),
+                };
+                return Ok(Err(format!(
+                    "another ident nightly is running ({owner}lock {}); this run exits without \
+                     doing anything",
+                    path.display()
+                )));
+            }
+            Err(std::fs::TryLockError::Error(e)) => {
+                return Err(e).with_context(|| format!("cannot lock {}", path.display()))
             }
         }
-        Ok(Err(format!(
-            "the lock {} was taken by another run while this one started; this run exits",
-            path.display()
-        )))
+        let _ = file.read_to_string(&mut previous);
+        if !previous.trim().is_empty() {
+            notes.push(format!(
+                "stale lock {} from pid {}, a run that did not end cleanly: taken over",
+                path.display(),
+                previous.trim()
+            ));
+        }
+        file.set_len(0)
+            .and_then(|_| file.seek(SeekFrom::Start(0)))
+            .and_then(|_| writeln!(file, "{}", std::process::id()))
+            .and_then(|_| file.sync_data())
+            .with_context(|| format!("cannot write the lock file {}", path.display()))?;
+        Ok(Ok(Lock {
+            file,
+            path: path.to_path_buf(),
+        }))
     }
 }
 
 impl Drop for Lock {
     fn drop(&mut self) {
-        if let Err(e) = std::fs::remove_file(&self.path) {
+        // Empty the PID (a clean exit); the lock itself goes with the file handle.
+        if let Err(e) = self.file.set_len(0) {
             eprintln!(
-                "warning: cannot remove the lock file {}: {e}",
+                "warning: cannot clear the lock file {}: {e}",
                 self.path.display()
             );
         }

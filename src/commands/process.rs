@@ -4,7 +4,8 @@
 //!
 //! - `DIR/<session>.measured.json` and `.measured.csv` — the data for `ident identify --data`,
 //! - `DIR/<session>.steps.csv` — the per-step FRF table (every channel, noise, variance, faults),
-//! - `DIR/<session>.analysis.json` — everything, including dropped steps and faults.
+//! - `DIR/<session>.analysis.json` — everything, including dropped steps and faults,
+//! - with `--uff FILE`: the sensors' accelerances and the characteristics as UFF dataset 58.
 //!
 //! Exit status: 0 all recorded steps used; 1 some steps were dropped or the file was truncated
 //! (what was usable is written, and why the rest was not is printed); 2 failure.
@@ -30,6 +31,11 @@ pub struct ProcessArgs {
     /// Quantity of the characteristics (default: the geometry model's outputs', else displacement).
     #[arg(long, value_parser = ["displacement", "velocity", "acceleration"])]
     pub quantity: Option<String>,
+    /// Also write the measured FRFs and characteristics as UFF dataset 58 (ASCII) for modal
+    /// analysis tools (pyuff, Simcenter Testlab, ME'scope ...). The format writes uneven
+    /// frequencies with 6 significant digits, values with 13.
+    #[arg(long)]
+    pub uff: Option<PathBuf>,
 }
 
 const DOF: [&str; 6] = ["u1", "u2", "u3", "r1", "r2", "r3"];
@@ -114,6 +120,15 @@ pub fn run(a: ProcessArgs) -> anyhow::Result<ExitCode> {
     write("measured.csv", measured_csv(&an))?;
     let steps = write("steps.csv", steps_csv(&an))?;
     write("analysis.json", serde_json::to_string_pretty(&an)?)?;
+    if let Some(path) = &a.uff {
+        let functions = an.to_uff();
+        process::uff::write(path, &functions, process::uff::Encoding::Ascii)?;
+        println!(
+            "UFF 58: {} functions (accelerances per sensor, characteristics per N) in {}",
+            functions.len(),
+            path.display()
+        );
+    }
     let live = an.steps.iter().filter(|s| s.matches_live).count();
     println!(
         "{}: stand {:?}, {} steps used, {} dropped, {} stream faults recorded",

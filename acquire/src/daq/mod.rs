@@ -60,7 +60,7 @@ pub struct DaqConfig {
 }
 
 /// One channel as the device announces it.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 pub struct ChannelInfo {
     /// Device channel number (the stand file's `device_channel`).
     pub device_channel: u16,

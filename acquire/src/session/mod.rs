@@ -8,6 +8,7 @@
 //! writer makes every later [`SessionHandle::log`] return an error, and bytes the
 //! [`ByteTap`](crate::transport::ByteTap) could not queue are counted and reported.
 
+pub mod records;
 pub mod schema;
 
 use std::collections::BTreeMap;
@@ -22,6 +23,7 @@ use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 use base64::Engine;
 use serde::Serialize;
 
+pub use records::TopicRecord;
 pub use schema::Topic;
 
 use crate::transport::{ByteTap, Direction};
@@ -62,6 +64,18 @@ pub enum SessionError {
         /// File.
         path: String,
         /// Why reading stopped.
+        detail: String,
+    },
+    /// A record does not have its topic's shape.
+    #[error("session file {path}: {topic} record {index}: {detail}; the file was not written by this version of ident, or is damaged")]
+    Malformed {
+        /// File.
+        path: String,
+        /// Topic name.
+        topic: &'static str,
+        /// 0-based index among that topic's records.
+        index: usize,
+        /// What does not fit (serde's message names the field).
         detail: String,
     },
     /// Reading a session file failed.
@@ -342,8 +356,17 @@ fn write_loop(
 
 impl SessionHandle {
     /// Queues a message on `topic` with the current time.
-    pub fn log<T: Serialize + ?Sized>(&self, topic: Topic, msg: &T) -> Result<(), SessionError> {
+    pub(crate) fn log<T: Serialize + ?Sized>(
+        &self,
+        topic: Topic,
+        msg: &T,
+    ) -> Result<(), SessionError> {
         self.log_at(topic, now_ns(), msg)
+    }
+
+    /// Queues a record on its topic, stamped with the current time.
+    pub fn record<R: TopicRecord>(&self, record: &R) -> Result<(), SessionError> {
+        self.log(R::TOPIC, record)
     }
 
     /// Queues a message with an explicit log time (ns since the Unix epoch).
@@ -414,21 +437,14 @@ impl SessionHandle {
     }
 }
 
-#[derive(Serialize)]
-struct RawRecord<'a> {
-    port: &'a str,
-    direction: Direction,
-    data: String,
-}
-
 impl ByteTap for SessionHandle {
     fn bytes(&self, port: &str, direction: Direction, data: &[u8]) {
-        let rec = RawRecord {
-            port,
+        let rec = records::RawBytes {
+            port: port.to_string(),
             direction,
             data: base64::engine::general_purpose::STANDARD.encode(data),
         };
-        if self.log(Topic::Raw, &rec).is_err() {
+        if self.record(&rec).is_err() {
             self.shared.tap_lost.fetch_add(1, Ordering::SeqCst);
         }
     }
@@ -445,13 +461,58 @@ pub struct Record {
     pub value: serde_json::Value,
 }
 
+impl Record {
+    /// True for a record of `R`'s topic.
+    pub fn is<R: TopicRecord>(&self) -> bool {
+        self.topic == R::TOPIC.name()
+    }
+
+    /// This record as `R` (serde's error names the field that does not fit).
+    pub fn decode<R: TopicRecord>(&self) -> Result<R, serde_json::Error> {
+        R::deserialize(&self.value)
+    }
+}
+
 /// What [`read`] or [`recover`] found.
 #[derive(Debug, Clone, PartialEq)]
 pub struct ReadReport {
+    /// The file read.
+    pub path: String,
     /// Messages, in file order.
     pub records: Vec<Record>,
     /// `None` if the file is complete; otherwise where and why reading stopped.
     pub truncated: Option<String>,
+}
+
+impl ReadReport {
+    /// Every record of `R`'s topic, decoded, in file order.
+    pub fn all<R: TopicRecord>(&self) -> Result<Vec<R>, SessionError> {
+        self.records
+            .iter()
+            .filter(|r| r.is::<R>())
+            .enumerate()
+            .map(|(index, r)| r.decode().map_err(|e| self.malformed::<R>(index, e)))
+            .collect()
+    }
+
+    /// The first record of `R`'s topic, decoded, if there is one.
+    pub fn first<R: TopicRecord>(&self) -> Result<Option<R>, SessionError> {
+        self.records
+            .iter()
+            .find(|r| r.is::<R>())
+            .map(|r| r.decode().map_err(|e| self.malformed::<R>(0, e)))
+            .transpose()
+    }
+
+    /// The error for record `index` of `R`'s topic.
+    pub fn malformed<R: TopicRecord>(&self, index: usize, e: serde_json::Error) -> SessionError {
+        SessionError::Malformed {
+            path: self.path.clone(),
+            topic: R::TOPIC.name(),
+            index,
+            detail: e.to_string(),
+        }
+    }
 }
 
 /// One message read linearly: its channel, sequence, log time (ns) and payload.
@@ -531,6 +592,7 @@ pub fn read(path: &Path) -> Result<ReadReport, SessionError> {
         })
         .collect();
     Ok(ReadReport {
+        path: path.display().to_string(),
         records,
         truncated: stop,
     })

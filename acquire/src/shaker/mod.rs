@@ -37,7 +37,7 @@ pub trait Shaker: Send {
 }
 
 /// An excitation waveform. Frequencies in Hz, times in s.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(tag = "kind", rename_all = "snake_case")]
 pub enum Waveform {
     /// A sine at the frequency set by [`Shaker::set_frequency`].

@@ -45,7 +45,7 @@ pub struct Stand {
 
 /// Mass properties of the bodies the accelerometers are on, and the nominal excitation: what
 /// processing needs to turn sensor FRFs into principal-axis characteristics. Truth independent.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 pub struct Geometry {
     /// The model file it was read from.
     pub source: String,
@@ -60,7 +60,7 @@ pub struct Geometry {
 }
 
 /// A characteristic the geometry model declares as an output.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 pub struct GeometryOutput {
     /// Body name.
     pub body: String,
@@ -71,7 +71,7 @@ pub struct GeometryOutput {
 }
 
 /// One body's mass properties (the `identify` model's body, SI).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 pub struct BodyGeometry {
     /// Body name.
     pub name: String,
@@ -192,7 +192,7 @@ pub struct DaqPort {
 }
 
 /// What a channel measures.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(rename_all = "snake_case")]
 pub enum ChannelKind {
     /// The excitation force (N) at the exciter.
@@ -202,7 +202,7 @@ pub enum ChannelKind {
 }
 
 /// One DAQ channel.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 pub struct Channel {
     /// Unique name.
     pub name: String,
@@ -219,6 +219,7 @@ pub struct Channel {
     /// Measuring direction, global frame, unit length.
     pub direction: [f64; 3],
     /// Line in the stand file, for later messages.
+    #[serde(default)]
     pub line: usize,
 }
 

@@ -4,6 +4,7 @@
 //! recorded in the session; the sweep drives `dyn Shaker` and `dyn Daq` and does not know which.
 
 pub mod estimate;
+pub mod periodic;
 mod progress;
 
 pub use progress::{IndicatifProgress, NoProgress, SweepProgress};
@@ -15,11 +16,13 @@ use std::sync::Arc;
 
 use num_complex::Complex;
 use serde::{Deserialize, Serialize};
-use serde_json::json;
 
 use crate::daq::{DaqError, DaqEvent, SampleBlock};
 use crate::rig::Rig;
-use crate::session::{self, SessionError, SessionHandle, Topic};
+use crate::session::records::{
+    self, BlockRecord, BroadbandChannel, BroadbandRecord, FaultRecord, SessionStart, SweepEvent,
+};
+use crate::session::{self, SessionError, SessionHandle};
 use crate::shaker::{ShakerError, Waveform};
 use estimate::StepEstimator;
 
@@ -256,7 +259,7 @@ impl StopSignal {
 }
 
 /// One channel's result at a step.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 pub struct ChannelResult {
     /// Channel name.
     pub name: String,
@@ -279,7 +282,8 @@ pub struct ChannelResult {
 }
 
 /// The record of one completed step (topic `/sweep/step`).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
+#[schemars(title = "ident.SweepStep")]
 pub struct StepResult {
     /// Step index in the plan.
     pub step: usize,
@@ -329,10 +333,12 @@ fn event(
     f: Option<f64>,
     detail: impl Into<String>,
 ) -> Result<(), SessionError> {
-    s.log(
-        Topic::SweepEvent,
-        &json!({"kind": kind, "step": step, "frequency_hz": f, "detail": detail.into()}),
-    )
+    s.record(&SweepEvent {
+        kind: kind.to_string(),
+        step,
+        frequency_hz: f,
+        detail: detail.into(),
+    })
 }
 
 /// Pulls blocks from the DAQ, records every block and fault.
@@ -412,10 +418,12 @@ impl Pump<'_> {
                     let volts: Vec<Vec<f32>> = (0..b.channel_count as usize)
                         .map(|c| b.channel(c).collect())
                         .collect();
-                    self.session.log(
-                        Topic::DaqBlock,
-                        &json!({"seq": b.seq, "first_sample": b.first_sample, "sample_rate_hz": self.rig.stream.sample_rate_hz, "volts": volts}),
-                    )?;
+                    self.session.record(&BlockRecord {
+                        seq: b.seq,
+                        first_sample: b.first_sample,
+                        sample_rate_hz: Some(self.rig.stream.sample_rate_hz),
+                        volts,
+                    })?;
                     if b.first_sample != self.next_sample {
                         *fault_seen = true;
                     }
@@ -426,10 +434,8 @@ impl Pump<'_> {
                     self.faults += 1;
                     *fault_seen = true;
                     self.last_fault_sample = Some(self.next_sample);
-                    self.session.log(
-                        Topic::DaqFault,
-                        &json!({"port": self.rig.daq.port(), "kind": f.kind.as_str(), "seq": f.seq, "detail": f.detail}),
-                    )?;
+                    self.session
+                        .record(&FaultRecord::of(self.rig.daq.port(), &f))?;
                 }
             }
         }
@@ -444,42 +450,26 @@ pub fn completed_steps(previous: &Path, plan: &SteppedSine) -> Result<BTreeSet<u
         path: p.clone(),
         detail: e.to_string(),
     })?;
+    let resume = |detail: String| SweepError::Resume {
+        path: p.clone(),
+        detail,
+    };
     let want = serde_json::to_value(plan).map_err(|e| SweepError::Plan(e.to_string()))?;
-    let planned = rep
-        .records
-        .iter()
-        .find(|r| r.topic == Topic::Session.name())
-        .map(|r| r.value["plan"].clone());
-    match planned {
-        None => {
-            return Err(SweepError::Resume {
-                path: p,
-                detail: "no /session record (not a sweep session?)".into(),
-            })
-        }
-        Some(v) if v != want => {
-            return Err(SweepError::Resume {
-                path: p,
-                detail: "it ran a different plan; resume with the same plan or start afresh".into(),
-            })
+    let starts: Vec<SessionStart> = rep.all().map_err(|e| resume(e.to_string()))?;
+    match starts.first() {
+        None => return Err(resume("no /session record (not a sweep session?)".into())),
+        Some(s) if s.plan.as_ref() != Some(&want) => {
+            return Err(resume(
+                "it ran a different plan; resume with the same plan or start afresh".into(),
+            ))
         }
         _ => {}
     }
-    let mut done: BTreeSet<usize> = rep
-        .records
-        .iter()
-        .filter(|r| r.topic == Topic::SweepStep.name())
-        .filter_map(|r| r.value["step"].as_u64().map(|s| s as usize))
-        .collect();
+    let steps: Vec<StepResult> = rep.all().map_err(|e| resume(e.to_string()))?;
+    let mut done: BTreeSet<usize> = steps.iter().map(|s| s.step).collect();
     // Steps completed before that session (chained resumes).
-    for r in rep
-        .records
-        .iter()
-        .filter(|r| r.topic == Topic::Session.name())
-    {
-        if let Some(a) = r.value["completed_steps_before"].as_array() {
-            done.extend(a.iter().filter_map(|x| x.as_u64().map(|s| s as usize)));
-        }
+    for s in &starts {
+        done.extend(s.completed_steps_before.iter().copied());
     }
     Ok(done)
 }
@@ -492,17 +482,19 @@ pub fn log_session_start(
     resumed_from: Option<&Path>,
     done: &BTreeSet<usize>,
 ) -> Result<(), SessionError> {
-    s.log(
-        Topic::Session,
-        &json!({
-            "software": concat!("ident-acquire ", env!("CARGO_PKG_VERSION")),
-            "started_unix_ns": session::now_ns(),
-            "stand_file": stand_file,
-            "plan": plan,
-            "resumed_from": resumed_from.map(|p| p.display().to_string()),
-            "completed_steps_before": done.iter().collect::<Vec<_>>(),
-        }),
-    )
+    let plan = serde_json::to_value(plan).map_err(|e| SessionError::Write {
+        path: s.path().to_string(),
+        detail: format!("the sweep plan cannot be recorded: {e}"),
+    })?;
+    s.record(&SessionStart {
+        version: records::VERSION,
+        software: concat!("ident-acquire ", env!("CARGO_PKG_VERSION")).into(),
+        started_unix_ns: session::now_ns(),
+        stand_file: stand_file.into(),
+        plan: Some(plan),
+        resumed_from: resumed_from.map(|p| p.display().to_string()),
+        completed_steps_before: done.iter().copied().collect(),
+    })
 }
 
 /// Runs a stepped-sine sweep on a connected rig, skipping `skip` (from [`completed_steps`]).
@@ -740,7 +732,7 @@ async fn stepped_inner(
             iterations,
             channels,
         };
-        session.log(Topic::SweepStep, &res)?;
+        session.record(&res)?;
         event(
             session,
             "step_completed",
@@ -759,11 +751,10 @@ async fn stepped_inner(
 /// Records the faults a DAQ still holds after STOP (decoded while waiting for its answer).
 async fn drain_faults(rig: &mut Rig, session: &SessionHandle) -> Result<(), SweepError> {
     for _ in 0..10_000 {
-        match tokio::time::timeout(std::time::Duration::from_millis(200), rig.daq.next_event()).await {
-            Ok(Ok(DaqEvent::Fault(f))) => session.log(
-                Topic::DaqFault,
-                &json!({"port": rig.daq.port(), "kind": f.kind.as_str(), "seq": f.seq, "detail": f.detail}),
-            )?,
+        match tokio::time::timeout(std::time::Duration::from_millis(200), rig.daq.next_event())
+            .await
+        {
+            Ok(Ok(DaqEvent::Fault(f))) => session.record(&FaultRecord::of(rig.daq.port(), &f))?,
             Ok(Ok(DaqEvent::Block(_))) => continue,
             _ => break,
         }
@@ -808,6 +799,59 @@ pub async fn broadband(
     progress: &dyn SweepProgress,
     stop: &StopSignal,
 ) -> Result<BroadbandResult, SweepError> {
+    broadband_period(plan, rig.stream.sample_rate_hz)?;
+    if plan.averages == 0 || !(plan.force_n > 0.0) || plan.force_n > rig.stand.shaker.max_force_n {
+        return Err(SweepError::Plan(
+            "broadband needs ≥ 1 average and 0 < force ≤ shaker.max_force".into(),
+        ));
+    }
+    event(
+        session,
+        "started",
+        None,
+        None,
+        format!("broadband {:?}, {} averages", plan.waveform, plan.averages),
+    )?;
+    progress.start(plan.averages as u64, 0);
+    let r = broadband_inner(rig, plan, session, progress, stop).await;
+    if let Ok(o) = &r {
+        let channels = rig
+            .stand
+            .channels
+            .iter()
+            .enumerate()
+            .map(|(c, ch)| BroadbandChannel {
+                name: ch.name.clone(),
+                h1_re: o.h1[c].iter().map(|h| h.re).collect(),
+                h1_im: o.h1[c].iter().map(|h| h.im).collect(),
+                coherence: o.coherence[c].clone(),
+            })
+            .collect();
+        session.record(&BroadbandRecord {
+            waveform: plan.waveform.clone(),
+            force_n: plan.force_n,
+            averages: o.averages,
+            stopped: o.stopped,
+            freqs_hz: o.freqs_hz.clone(),
+            channels,
+        })?;
+    }
+    let off = rig.shaker.set_output(false).await;
+    let _ = rig.daq.stop().await;
+    drain_faults(rig, session).await?;
+    match &r {
+        Ok(o) if o.stopped => event(session, "stopped", None, None, "operator stop")?,
+        Ok(_) => event(session, "completed", None, None, "all averages measured")?,
+        Err(e) => event(session, "error", None, None, e.to_string())?,
+    }
+    progress.finish(if r.is_ok() { "done" } else { "failed" });
+    let o = r?;
+    off?;
+    Ok(o)
+}
+
+/// The repetition period of a broadband plan in samples at `fs`, and its band (Hz).
+pub fn broadband_period(plan: &Broadband, fs: f64) -> Result<(usize, f64, f64), SweepError> {
     let (lo, hi, period) = match plan.waveform {
         Waveform::Random { f_lo_hz, f_hi_hz } => (f_lo_hz, f_hi_hz, 1.0),
         Waveform::BurstRandom {
@@ -827,171 +871,91 @@ pub async fn broadband(
             ))
         }
     };
-    if plan.averages == 0 || !(plan.force_n > 0.0) || plan.force_n > rig.stand.shaker.max_force_n {
-        return Err(SweepError::Plan(
-            "broadband needs ≥ 1 average and 0 < force ≤ shaker.max_force".into(),
-        ));
-    }
-    event(
-        session,
-        "started",
-        None,
-        None,
-        format!("broadband {:?}, {} averages", plan.waveform, plan.averages),
-    )?;
-    progress.start(plan.averages as u64, 0);
-    let r = broadband_inner(rig, plan, (lo, hi, period), session, progress, stop).await;
-    if let Ok(o) = &r {
-        let channels: Vec<serde_json::Value> = rig
-            .stand
-            .channels
-            .iter()
-            .enumerate()
-            .map(|(c, ch)| {
-                json!({"name": ch.name,
-                    "h1_re": o.h1[c].iter().map(|h| h.re).collect::<Vec<_>>(),
-                    "h1_im": o.h1[c].iter().map(|h| h.im).collect::<Vec<_>>(),
-                    "coherence": o.coherence[c]})
-            })
-            .collect();
-        session.log(
-            Topic::SweepBroadband,
-            &json!({"waveform": plan.waveform, "force_n": plan.force_n, "averages": o.averages, "stopped": o.stopped, "freqs_hz": o.freqs_hz, "channels": channels}),
-        )?;
-    }
-    let off = rig.shaker.set_output(false).await;
-    let _ = rig.daq.stop().await;
-    drain_faults(rig, session).await?;
-    match &r {
-        Ok(o) if o.stopped => event(session, "stopped", None, None, "operator stop")?,
-        Ok(_) => event(session, "completed", None, None, "all averages measured")?,
-        Err(e) => event(session, "error", None, None, e.to_string())?,
-    }
-    progress.finish(if r.is_ok() { "done" } else { "failed" });
-    let o = r?;
-    off?;
-    Ok(o)
-}
-
-async fn broadband_inner(
-    rig: &mut Rig,
-    plan: &Broadband,
-    (lo, hi, period): (f64, f64, f64),
-    session: &SessionHandle,
-    progress: &dyn SweepProgress,
-    stop: &StopSignal,
-) -> Result<BroadbandResult, SweepError> {
-    let fs = rig.stream.sample_rate_hz;
-    let nch = rig.stand.channels.len();
-    let fc = rig.stand.force_channel();
-    let sens: Vec<f64> = rig.stand.channels.iter().map(|c| c.sensitivity).collect();
     let n = (period * fs).round() as usize;
     if n < 16 {
         return Err(SweepError::Plan(
             "period too short for the sample rate".into(),
         ));
     }
+    Ok((n, lo, hi))
+}
+
+/// The averager of a broadband plan on a stream of these channels (stream order) at `fs` (Hz),
+/// and the plan's band (Hz).
+pub fn period_averager(
+    plan: &Broadband,
+    fs: f64,
+    channels: &[crate::stand::Channel],
+) -> Result<(periodic::PeriodAverager, f64, f64), SweepError> {
+    let (n, lo, hi) = broadband_period(plan, fs)?;
+    let names: Vec<&str> = channels.iter().map(|c| c.name.as_str()).collect();
+    let sens: Vec<f64> = channels.iter().map(|c| c.sensitivity).collect();
+    let force = channels
+        .iter()
+        .position(|c| c.kind == crate::stand::ChannelKind::Force)
+        .unwrap_or(0);
+    let averager = periodic::PeriodAverager::new(
+        fs,
+        n,
+        plan.settle_periods,
+        plan.averages,
+        &names,
+        &sens,
+        force,
+    )
+    .map_err(|e| SweepError::Plan(format!("broadband estimate: {e}")))?;
+    Ok((averager, lo, hi))
+}
+
+async fn broadband_inner(
+    rig: &mut Rig,
+    plan: &Broadband,
+    session: &SessionHandle,
+    progress: &dyn SweepProgress,
+    stop: &StopSignal,
+) -> Result<BroadbandResult, SweepError> {
+    let (mut averager, lo, hi) =
+        period_averager(plan, rig.stream.sample_rate_hz, &rig.stand.channels)?;
     rig.shaker.set_waveform(&plan.waveform).await?;
     rig.shaker.set_force(plan.force_n).await?;
     rig.shaker.set_output(true).await?;
     rig.daq.start().await?;
-    let fft = rustfft::FftPlanner::<f64>::new().plan_fft_forward(n);
-    let df = fs / n as f64;
-    let bins: Vec<usize> = (1..n / 2)
-        .filter(|k| (*k as f64 * df) >= lo && (*k as f64 * df) <= hi)
-        .collect();
-    let mut sxf = vec![vec![Complex::new(0.0, 0.0); bins.len()]; nch];
-    let mut sxx = vec![vec![0.0; bins.len()]; nch];
-    let mut bufs = vec![vec![Complex::new(0.0, 0.0); n]; nch];
     let mut pump = Pump::new(rig, session);
-    let mut done = 0u32;
     let mut stopped = false;
-    // Periods are aligned to the waveform's period in samples from START.
-    let mut period_index = 0u64;
-    let mut filled = 0usize;
     let mut fault = false;
-    while done < plan.averages {
+    while !averager.done() {
         if stop.is_set() {
             stopped = true;
             break;
         }
         let b = pump.next(&mut fault).await?;
-        for i in 0..b.len() {
-            let s = b.first_sample + i as u64;
-            let p = s / n as u64;
-            if p != period_index {
-                period_index = p;
-                filled = 0;
-                fault = false;
-            }
-            if p < plan.settle_periods as u64 {
-                continue;
-            }
-            let k = (s % n as u64) as usize;
-            if k != filled {
-                continue; // a gap: this period is incomplete
-            }
-            for c in 0..nch {
-                bufs[c][k] = Complex::new(b.volts[i * nch + c] as f64 / sens[c], 0.0);
-            }
-            filled += 1;
-            if filled == n && !fault {
-                for buf in bufs.iter_mut() {
-                    fft.process(buf);
-                }
-                for c in 0..nch {
-                    for (j, &k) in bins.iter().enumerate() {
-                        sxf[c][j] += bufs[c][k] * bufs[fc][k].conj();
-                        sxx[c][j] += bufs[c][k].norm_sqr();
-                    }
-                }
-                done += 1;
-                let coh = mean_coherence(&sxf, &sxx, fc);
-                event(
-                    session,
-                    "average",
-                    Some(done as usize),
-                    None,
-                    format!("mean coherence {coh:.3}"),
-                )?;
-                progress.step(done as usize - 1, hi, plan.force_n, coh);
-                if done >= plan.averages {
-                    break;
-                }
-            }
+        if std::mem::take(&mut fault) {
+            averager.fault();
+        }
+        let completed = averager
+            .push_block(b.first_sample, &b.volts)
+            .map_err(|e| SweepError::Plan(format!("broadband estimate: {e}")))?;
+        if completed > 0 {
+            let done = averager.averages();
+            let coh = averager.mean_coherence(lo, hi);
+            event(
+                session,
+                "average",
+                Some(done as usize),
+                None,
+                format!("mean coherence {coh:.3}"),
+            )?;
+            progress.step(done as usize - 1, hi, plan.force_n, coh);
         }
     }
-    let h1 = (0..nch)
-        .map(|c| (0..bins.len()).map(|j| sxf[c][j] / sxx[fc][j]).collect())
-        .collect();
-    let coherence = (0..nch)
-        .map(|c| {
-            (0..bins.len())
-                .map(|j| sxf[c][j].norm_sqr() / (sxx[c][j] * sxx[fc][j]).max(f64::MIN_POSITIVE))
-                .collect()
-        })
-        .collect();
+    let e = averager
+        .estimate(lo, hi)
+        .map_err(|e| SweepError::Plan(format!("broadband estimate: {e}")))?;
     Ok(BroadbandResult {
-        freqs_hz: bins.iter().map(|k| *k as f64 * df).collect(),
-        h1,
-        coherence,
-        averages: done,
+        freqs_hz: e.freqs_hz,
+        h1: e.h1,
+        coherence: e.coherence,
+        averages: e.averages,
         stopped,
     })
-}
-
-fn mean_coherence(sxf: &[Vec<Complex<f64>>], sxx: &[Vec<f64>], fc: usize) -> f64 {
-    let mut sum = 0.0;
-    let mut k = 0usize;
-    for c in (0..sxf.len()).filter(|c| *c != fc) {
-        for j in 0..sxf[c].len() {
-            sum += sxf[c][j].norm_sqr() / (sxx[c][j] * sxx[fc][j]).max(f64::MIN_POSITIVE);
-            k += 1;
-        }
-    }
-    if k == 0 {
-        0.0
-    } else {
-        sum / k as f64
-    }
 }
