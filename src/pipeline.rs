@@ -93,6 +93,16 @@ pub struct SweepOptions<'a> {
     pub ctrl_c: bool,
 }
 
+/// The async runtime the device drivers run on (two worker threads: the sweep and the simulated
+/// stand's devices).
+pub fn runtime() -> anyhow::Result<tokio::runtime::Runtime> {
+    tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(2)
+        .enable_all()
+        .build()
+        .context("cannot start the async runtime")
+}
+
 /// Runs a stepped-sine sweep of `stand` into a new session file at `session`. Ports given as
 /// `"sim"` are served by the simulated stand (announced on stderr). The session file is kept
 /// whatever happens; only failures before it exists are `Err`.
@@ -104,11 +114,7 @@ pub fn sweep(
     progress: &dyn SweepProgress,
 ) -> anyhow::Result<Swept> {
     let planned = plan.frequencies.frequencies()?.len();
-    let rt = tokio::runtime::Builder::new_multi_thread()
-        .worker_threads(2)
-        .enable_all()
-        .build()
-        .context("cannot start the async runtime")?;
+    let rt = runtime()?;
     rt.block_on(async {
         // The Ctrl-C handler needs the runtime.
         let stop = if opts.ctrl_c { StopSignal::on_ctrl_c() } else { StopSignal::new() };

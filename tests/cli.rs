@@ -4,19 +4,12 @@
 // Test and benchmark helpers unwrap: a panic with its message is the failure report.
 #![allow(clippy::unwrap_used)]
 
+mod common;
+
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use std::process::Command;
 
-fn ident(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_ident"))
-        .args(args)
-        .output()
-        .expect("run ident")
-}
-
-fn root() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-}
+use common::{ident, root};
 
 fn python_with_numpy() -> &'static str {
     let ok = Command::new("python3")

@@ -6,31 +6,20 @@
 // Test and benchmark helpers unwrap: a panic with its message is the failure report.
 #![allow(clippy::unwrap_used)]
 
+mod common;
+
 use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output, Stdio};
+use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
-fn ident(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_ident"))
-        .args(args)
-        .output()
-        .expect("run ident")
-}
+use common::{ident, text};
 
 fn stand() -> String {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
         .join("configs/stands/fwd32j-model-sim.toml")
         .display()
         .to_string()
-}
-
-fn text(o: &Output) -> String {
-    format!(
-        "{}{}",
-        String::from_utf8_lossy(&o.stdout),
-        String::from_utf8_lossy(&o.stderr)
-    )
 }
 
 fn sessions(dir: &Path) -> Vec<PathBuf> {

@@ -5,23 +5,12 @@
 // Test and benchmark helpers unwrap: a panic with its message is the failure report.
 #![allow(clippy::unwrap_used)]
 
+mod common;
+
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
-fn ident(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_ident"))
-        .args(args)
-        .output()
-        .expect("run ident")
-}
-
-fn text(o: &Output) -> String {
-    format!(
-        "{}\n{}",
-        String::from_utf8_lossy(&o.stdout),
-        String::from_utf8_lossy(&o.stderr)
-    )
-}
+use common::{ident, text};
 
 fn report_dir(o: &Output) -> PathBuf {
     PathBuf::from(

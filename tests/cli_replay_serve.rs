@@ -6,28 +6,13 @@
 // Test and benchmark helpers unwrap: a panic with its message is the failure report.
 #![allow(clippy::unwrap_used)]
 
+mod common;
+
 use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Output, Stdio};
+use std::process::{Child, Command, Stdio};
 
-fn root() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-}
-
-fn ident(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_ident"))
-        .args(args)
-        .output()
-        .expect("run ident")
-}
-
-fn text(o: &Output) -> String {
-    format!(
-        "{}{}",
-        String::from_utf8_lossy(&o.stdout),
-        String::from_utf8_lossy(&o.stderr)
-    )
-}
+use common::{ident, root, text};
 
 fn only(dir: &Path, suffix: &str) -> PathBuf {
     let v: Vec<PathBuf> = std::fs::read_dir(dir)

@@ -11,8 +11,6 @@
 use std::path::PathBuf;
 use std::process::ExitCode;
 
-use anyhow::Context;
-
 use crate::pipeline::{self, ReportContext, Setup};
 
 /// Arguments of `ident replay`.
@@ -88,11 +86,7 @@ fn serve(a: &ReplayArgs) -> anyhow::Result<ExitCode> {
         served.plant.frequencies()[0],
         served.plant.frequencies()[lines - 1],
     );
-    let rt = tokio::runtime::Builder::new_multi_thread()
-        .worker_threads(2)
-        .enable_all()
-        .build()
-        .context("cannot start the async runtime")?;
+    let rt = crate::pipeline::runtime()?;
     rt.block_on(async {
         let sim = acquire::sim::SimStand::start_with(served.setup)?;
         let hint = format!(

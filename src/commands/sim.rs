@@ -41,11 +41,7 @@ pub fn run(a: SimArgs) -> anyhow::Result<ExitCode> {
         truth.speed = s;
     }
     let speed = truth.speed;
-    let rt = tokio::runtime::Builder::new_multi_thread()
-        .worker_threads(2)
-        .enable_all()
-        .build()
-        .context("cannot start the async runtime")?;
+    let rt = crate::pipeline::runtime()?;
     rt.block_on(async {
         let sim = match &a.can {
             Some(iface) => SimStand::start_can(&stand, iface)?,
