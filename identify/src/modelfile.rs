@@ -407,290 +407,29 @@ pub fn parse_toml(text: &str, origin: &str) -> Result<Loaded, LoadError> {
         cx.at(span, format!("{msg}{hint}"))
     })?;
     // Spans of each element's fields, for locating physical problems found after resolution.
-    let mut spans: Vec<(Item, Range<usize>)> = Vec::new();
-
+    let mut spans: Spans = Vec::new();
     let mut bodies = Vec::new();
     for (i, b) in raw.bodies.iter().enumerate() {
-        let name = b.name.get_ref().trim().to_string();
-        if name.is_empty() || name == "ground" {
-            return Err(cx.at(
-                b.name.span(),
-                "body name must be non-empty and not \"ground\" (reserved for the fixed ground)",
-            ));
-        }
-        if let Some(j) = bodies.iter().position(|o: &Body| o.name == name) {
-            return Err(cx.at(
-                b.name.span(),
-                format!(
-                    "body name \"{name}\" is used twice (bodies {} and {}); names must be unique",
-                    j + 1,
-                    i + 1
-                ),
-            ));
-        }
-        spans.push((Item::Body(i, "name"), b.name.span()));
-        spans.push((Item::Body(i, "mass"), b.mass.span()));
-        spans.push((Item::Body(i, "position"), b.position.span()));
-        let mass = cx.scalar(&b.mass, Dim::MASS, "mass")?;
-        if mass <= 0.0 {
-            return Err(cx.at(
-                b.mass.span(),
-                format!("body \"{name}\": mass must be positive, got {mass} kg"),
-            ));
-        }
-        let position = cx.vec3(&b.position, Dim::LENGTH, "position")?;
-        let (inertia, rotation) = match (&b.inertia, &b.inertia_tensor) {
-            (Some(_), Some(t)) => {
-                return Err(cx.at(t.span(), format!("body \"{name}\": give either `inertia` (principal moments, with `axes`) or `inertia_tensor`, not both")))
-            }
-            (None, None) => {
-                return Err(cx.at(b.name.span(), format!("body \"{name}\" has no inertia: add `inertia = [J1, J2, J3]` (principal central moments, kg m^2) or `inertia_tensor` (3×3, global frame)")))
-            }
-            (Some(j), None) => {
-                spans.push((Item::Body(i, "inertia"), j.span()));
-                let j3 = cx.vector(j, &[Dim::INERTIA; 3], "inertia")?;
-                if j3.iter().any(|x| *x <= 0.0) {
-                    return Err(cx.at(j.span(), format!("body \"{name}\": principal moments of inertia must be positive, got {j3:?}")));
-                }
-                let rotation = match &b.axes {
-                    Some(a) => {
-                        spans.push((Item::Body(i, "rotation"), a.span()));
-                        cx.axes(a, "axes")?
-                    }
-                    None => Matrix3::identity(),
-                };
-                ([j3[0], j3[1], j3[2]], rotation)
-            }
-            (None, Some(t)) => {
-                if let Some(a) = &b.axes {
-                    return Err(cx.at(a.span(), format!("body \"{name}\": `axes` goes with `inertia`; with `inertia_tensor` the principal axes are computed")));
-                }
-                spans.push((Item::Body(i, "inertia"), t.span()));
-                principal_axes(&cx, t, &name)?
-            }
-        };
-        bodies.push(Body {
-            name,
-            mass,
-            inertia,
-            position,
-            rotation,
-        });
+        let body = body(&cx, i, b, &bodies, &mut spans)?;
+        bodies.push(body);
     }
-    let body_ref = |s: &Sp<String>| -> Result<Option<usize>, LoadError> {
-        let n = s.get_ref().trim();
-        if n == "ground" {
-            return Ok(None);
-        }
-        bodies
-            .iter()
-            .position(|b| b.name == n)
-            .map(Some)
-            .ok_or_else(|| {
-                let known: Vec<&str> = bodies.iter().map(|b| b.name.as_str()).collect();
-                cx.at(
-                    s.span(),
-                    format!(
-                        "unknown body \"{n}\"; known bodies: {} (or \"ground\")",
-                        known.join(", ")
-                    ),
-                )
-            })
-    };
-
     let mut sdes = Vec::new();
     for (i, s) in raw.sdes.iter().enumerate() {
-        let name = match s.name.get_ref() {
-            Name::Int(n) => n.to_string(),
-            Name::Text(t) => t.trim().to_string(),
-        };
-        if name.is_empty() {
-            return Err(cx.at(s.name.span(), "sde name must not be empty"));
-        }
-        spans.push((Item::Sde(i, "name"), s.name.span()));
-        spans.push((Item::Sde(i, "bodies"), s.bodies.span()));
-        spans.push((Item::Sde(i, "point"), s.point.span()));
-        let kind = match s.kind.get_ref().as_str() {
-            "slideway" => SdeKind::Slideway,
-            "rotary" => SdeKind::Rotary,
-            "screw" => SdeKind::Screw,
-            "spring" => SdeKind::Spring,
-            "isolator" => SdeKind::Isolator,
-            "general" => SdeKind::General,
-            other => {
-                return Err(cx.at(s.kind.span(), format!("sde {name}: unknown kind \"{other}\"; use slideway, rotary, screw, spring, isolator or general")))
-            }
-        };
-        let ends = s.bodies.get_ref();
-        if ends.len() != 2 {
-            return Err(cx.at(s.bodies.span(), format!("sde {name}: `bodies` needs two entries [p, r] (a body name or \"ground\"), found {}", ends.len())));
-        }
-        let pair = [body_ref(&ends[0])?, body_ref(&ends[1])?];
-        if pair[0].is_some() && pair[0] == pair[1] {
-            return Err(cx.at(s.bodies.span(), format!("sde {name} joins body \"{}\" to itself; an SDE joins two different bodies, or a body and \"ground\"", ends[0].get_ref())));
-        }
-        if pair == [None, None] {
-            return Err(cx.at(
-                s.bodies.span(),
-                format!("sde {name} joins the ground to the ground; name at least one body"),
-            ));
-        }
-        let point = cx.vec3(&s.point, Dim::LENGTH, "point")?;
-        let rotation = match (&s.axes, &s.axis) {
-            (Some(_), Some(a)) => return Err(cx.at(a.span(), format!("sde {name}: give `axes` (all three) or `axis` (axis 1 only), not both"))),
-            (Some(a), None) => {
-                spans.push((Item::Sde(i, "rotation"), a.span()));
-                cx.axes(a, "axes")?
-            }
-            (None, Some(a)) => {
-                spans.push((Item::Sde(i, "rotation"), a.span()));
-                frame_from_axis(&cx.direction(a, "axis")?)
-            }
-            (None, None) => return Err(cx.at(s.name.span(), format!("sde {name}: give its frame, `axes = [[axis1], [axis2], [axis3]]` (axis 1 = normal / screw axis) or `axis = [x, y, z]`"))),
-        };
-        let law = sde_law(&cx, s, kind, &name)?;
-        spans.push((Item::Sde(i, "k"), s.name.span()));
-        spans.push((Item::Sde(i, "psi"), s.name.span()));
-        sdes.push(Sde {
-            name,
-            kind,
-            bodies: pair,
-            point,
-            rotation,
-            law,
-            enabled: s.enabled.unwrap_or(true),
-        });
+        sdes.push(sde(&cx, i, s, &bodies, &mut spans)?);
     }
-
     let mut forces = Vec::new();
     if let Some(ex) = &raw.excitation {
         for f in &ex.force {
-            let Some(body) = body_ref(&f.body)? else {
-                return Err(cx.at(
-                    f.body.span(),
-                    "a force cannot act on the ground; name a body",
-                ));
-            };
-            let point = match &f.point {
-                Some(p) => cx.vec3(p, Dim::LENGTH, "point")?,
-                None => bodies[body].position,
-            };
-            let dir = RawDirection {
-                direction: f.direction.clone(),
-                alpha: f.alpha.clone(),
-                beta: f.beta.clone(),
-            };
-            let force = match (&f.force, &f.amplitude) {
-                (Some(v), None) => {
-                    if dir.direction.is_some() || dir.alpha.is_some() || dir.beta.is_some() {
-                        return Err(cx.at(v.span(), "`force` is a full vector; drop `direction`/`alpha`/`beta` or use `amplitude` with them"));
-                    }
-                    cx.vec3(v, Dim::FORCE, "force")?
-                }
-                (None, Some(a)) => {
-                    cx.scalar(a, Dim::FORCE, "amplitude")? * direction(&cx, &dir, a.span())?
-                }
-                (None, None) => Vector3::zeros(),
-                (Some(v), Some(_)) => {
-                    return Err(cx.at(
-                        v.span(),
-                        "give either `force` (a vector) or `amplitude` with a direction, not both",
-                    ))
-                }
-            };
-            let moment = match &f.moment {
-                Some(m) => cx.vec3(m, Dim::MOMENT, "moment")?,
-                None => Vector3::zeros(),
-            };
-            if force == Vector3::zeros() && moment == Vector3::zeros() {
-                return Err(cx.at(
-                    f.body.span(),
-                    "this force has neither `force`, `amplitude` nor `moment`; give at least one",
-                ));
-            }
-            forces.push(PointForce {
-                body,
-                point,
-                force,
-                moment,
-            });
+            forces.push(point_force(&cx, f, &bodies)?);
         }
         for p in &ex.pair {
-            let ends = p.bodies.get_ref();
-            if ends.len() != 2 {
-                return Err(cx.at(
-                    p.bodies.span(),
-                    "a force pair acts between two bodies: bodies = [\"acted on\", \"reacting\"]",
-                ));
-            }
-            let (Some(a), Some(b)) = (body_ref(&ends[0])?, body_ref(&ends[1])?) else {
-                return Err(cx.at(p.bodies.span(), "a force pair acts between two bodies, not the ground; use [[excitation.force]] for a grounded exciter"));
-            };
-            if a == b {
-                return Err(cx.at(
-                    p.bodies.span(),
-                    "a force pair between a body and itself does nothing; name two bodies",
-                ));
-            }
-            let point = cx.vec3(&p.point, Dim::LENGTH, "point")?;
-            let reaction = match &p.reaction_point {
-                Some(r) => cx.vec3(r, Dim::LENGTH, "reaction_point")?,
-                None => point,
-            };
-            let amp = cx.scalar(&p.amplitude, Dim::FORCE, "amplitude")?;
-            let dir = RawDirection {
-                direction: p.direction.clone(),
-                alpha: p.alpha.clone(),
-                beta: p.beta.clone(),
-            };
-            let f = amp * direction(&cx, &dir, p.amplitude.span())?;
-            forces.push(PointForce {
-                body: a,
-                point,
-                force: f,
-                moment: Vector3::zeros(),
-            });
-            forces.push(PointForce {
-                body: b,
-                point: reaction,
-                force: -f,
-                moment: Vector3::zeros(),
-            });
+            forces.extend(force_pair(&cx, p, &bodies)?);
         }
     }
-
     let mut outputs = Vec::new();
     for o in &raw.outputs {
-        let Some(body) = body_ref(&o.body)? else {
-            return Err(cx.at(o.body.span(), "the ground does not move; name a body"));
-        };
-        let quantity = match &o.quantity {
-            None => Quantity::Displacement,
-            Some(q) => Quantity::parse(q.get_ref()).ok_or_else(|| {
-                cx.at(
-                    q.span(),
-                    format!(
-                        "unknown quantity \"{}\"; use displacement, velocity or acceleration",
-                        q.get_ref()
-                    ),
-                )
-            })?,
-        };
-        let names: Vec<&Sp<String>> = match (&o.dof, &o.dofs) {
-            (Some(d), None) => vec![d],
-            (None, Some(ds)) => ds.get_ref().iter().collect(),
-            _ => return Err(cx.at(o.body.span(), "give `dof = \"u1\"` or `dofs = [\"u1\", \"u2\", \"u3\"]` (u1-u3 translations, r1-r3 rotations along the body's principal axes)")),
-        };
-        for d in names {
-            let dof = DOF_NAMES.iter().position(|n| n == d.get_ref()).ok_or_else(|| cx.at(d.span(), format!("unknown dof \"{}\"; use u1, u2, u3 (translations) or r1, r2, r3 (rotations) along the body's principal axes", d.get_ref())))?;
-            outputs.push(Characteristic {
-                body,
-                dof: dof as u8,
-                quantity,
-            });
-        }
+        outputs.extend(output(&cx, o, &bodies)?);
     }
-
     let model = Model {
         name: raw.name.unwrap_or_else(|| origin.to_string()),
         bodies,
@@ -698,6 +437,319 @@ pub fn parse_toml(text: &str, origin: &str) -> Result<Loaded, LoadError> {
         forces,
         outputs,
     };
+    checked(&cx, model, &spans)
+}
+
+/// Where each element's fields are in the text, for problems found after resolution.
+type Spans = Vec<(Item, Range<usize>)>;
+
+/// Body `i` of the file; `earlier` are the bodies before it (names must be unique).
+fn body(
+    cx: &Ctx,
+    i: usize,
+    b: &RawBody,
+    earlier: &[Body],
+    spans: &mut Spans,
+) -> Result<Body, LoadError> {
+    let name = b.name.get_ref().trim().to_string();
+    if name.is_empty() || name == "ground" {
+        return Err(cx.at(
+            b.name.span(),
+            "body name must be non-empty and not \"ground\" (reserved for the fixed ground)",
+        ));
+    }
+    if let Some(j) = earlier.iter().position(|o: &Body| o.name == name) {
+        return Err(cx.at(
+            b.name.span(),
+            format!(
+                "body name \"{name}\" is used twice (bodies {} and {}); names must be unique",
+                j + 1,
+                i + 1
+            ),
+        ));
+    }
+    spans.push((Item::Body(i, "name"), b.name.span()));
+    spans.push((Item::Body(i, "mass"), b.mass.span()));
+    spans.push((Item::Body(i, "position"), b.position.span()));
+    let mass = cx.scalar(&b.mass, Dim::MASS, "mass")?;
+    if mass <= 0.0 {
+        return Err(cx.at(
+            b.mass.span(),
+            format!("body \"{name}\": mass must be positive, got {mass} kg"),
+        ));
+    }
+    let position = cx.vec3(&b.position, Dim::LENGTH, "position")?;
+    let (inertia, rotation) = match (&b.inertia, &b.inertia_tensor) {
+        (Some(_), Some(t)) => {
+            return Err(cx.at(t.span(), format!("body \"{name}\": give either `inertia` (principal moments, with `axes`) or `inertia_tensor`, not both")))
+        }
+        (None, None) => {
+            return Err(cx.at(b.name.span(), format!("body \"{name}\" has no inertia: add `inertia = [J1, J2, J3]` (principal central moments, kg m^2) or `inertia_tensor` (3×3, global frame)")))
+        }
+        (Some(j), None) => {
+            spans.push((Item::Body(i, "inertia"), j.span()));
+            let j3 = cx.vector(j, &[Dim::INERTIA; 3], "inertia")?;
+            if j3.iter().any(|x| *x <= 0.0) {
+                return Err(cx.at(j.span(), format!("body \"{name}\": principal moments of inertia must be positive, got {j3:?}")));
+            }
+            let rotation = match &b.axes {
+                Some(a) => {
+                    spans.push((Item::Body(i, "rotation"), a.span()));
+                    cx.axes(a, "axes")?
+                }
+                None => Matrix3::identity(),
+            };
+            ([j3[0], j3[1], j3[2]], rotation)
+        }
+        (None, Some(t)) => {
+            if let Some(a) = &b.axes {
+                return Err(cx.at(a.span(), format!("body \"{name}\": `axes` goes with `inertia`; with `inertia_tensor` the principal axes are computed")));
+            }
+            spans.push((Item::Body(i, "inertia"), t.span()));
+            principal_axes(cx, t, &name)?
+        }
+    };
+    Ok(Body {
+        name,
+        mass,
+        inertia,
+        position,
+        rotation,
+    })
+}
+
+/// The body an SDE end, force or output names: `None` for the ground.
+fn body_ref(cx: &Ctx, bodies: &[Body], s: &Sp<String>) -> Result<Option<usize>, LoadError> {
+    let n = s.get_ref().trim();
+    if n == "ground" {
+        return Ok(None);
+    }
+    bodies
+        .iter()
+        .position(|b| b.name == n)
+        .map(Some)
+        .ok_or_else(|| {
+            let known: Vec<&str> = bodies.iter().map(|b| b.name.as_str()).collect();
+            cx.at(
+                s.span(),
+                format!(
+                    "unknown body \"{n}\"; known bodies: {} (or \"ground\")",
+                    known.join(", ")
+                ),
+            )
+        })
+}
+
+/// SDE `i` of the file.
+fn sde(
+    cx: &Ctx,
+    i: usize,
+    s: &RawSde,
+    bodies: &[Body],
+    spans: &mut Spans,
+) -> Result<Sde, LoadError> {
+    let name = match s.name.get_ref() {
+        Name::Int(n) => n.to_string(),
+        Name::Text(t) => t.trim().to_string(),
+    };
+    if name.is_empty() {
+        return Err(cx.at(s.name.span(), "sde name must not be empty"));
+    }
+    spans.push((Item::Sde(i, "name"), s.name.span()));
+    spans.push((Item::Sde(i, "bodies"), s.bodies.span()));
+    spans.push((Item::Sde(i, "point"), s.point.span()));
+    let kind = match s.kind.get_ref().as_str() {
+        "slideway" => SdeKind::Slideway,
+        "rotary" => SdeKind::Rotary,
+        "screw" => SdeKind::Screw,
+        "spring" => SdeKind::Spring,
+        "isolator" => SdeKind::Isolator,
+        "general" => SdeKind::General,
+        other => {
+            return Err(cx.at(s.kind.span(), format!("sde {name}: unknown kind \"{other}\"; use slideway, rotary, screw, spring, isolator or general")))
+        }
+    };
+    let ends = s.bodies.get_ref();
+    if ends.len() != 2 {
+        return Err(cx.at(s.bodies.span(), format!("sde {name}: `bodies` needs two entries [p, r] (a body name or \"ground\"), found {}", ends.len())));
+    }
+    let pair = [
+        body_ref(cx, bodies, &ends[0])?,
+        body_ref(cx, bodies, &ends[1])?,
+    ];
+    if pair[0].is_some() && pair[0] == pair[1] {
+        return Err(cx.at(s.bodies.span(), format!("sde {name} joins body \"{}\" to itself; an SDE joins two different bodies, or a body and \"ground\"", ends[0].get_ref())));
+    }
+    if pair == [None, None] {
+        return Err(cx.at(
+            s.bodies.span(),
+            format!("sde {name} joins the ground to the ground; name at least one body"),
+        ));
+    }
+    let point = cx.vec3(&s.point, Dim::LENGTH, "point")?;
+    let rotation = match (&s.axes, &s.axis) {
+        (Some(_), Some(a)) => return Err(cx.at(a.span(), format!("sde {name}: give `axes` (all three) or `axis` (axis 1 only), not both"))),
+        (Some(a), None) => {
+            spans.push((Item::Sde(i, "rotation"), a.span()));
+            cx.axes(a, "axes")?
+        }
+        (None, Some(a)) => {
+            spans.push((Item::Sde(i, "rotation"), a.span()));
+            frame_from_axis(&cx.direction(a, "axis")?)
+        }
+        (None, None) => return Err(cx.at(s.name.span(), format!("sde {name}: give its frame, `axes = [[axis1], [axis2], [axis3]]` (axis 1 = normal / screw axis) or `axis = [x, y, z]`"))),
+    };
+    let law = sde_law(cx, s, kind, &name)?;
+    spans.push((Item::Sde(i, "k"), s.name.span()));
+    spans.push((Item::Sde(i, "psi"), s.name.span()));
+    Ok(Sde {
+        name,
+        kind,
+        bodies: pair,
+        point,
+        rotation,
+        law,
+        enabled: s.enabled.unwrap_or(true),
+    })
+}
+
+/// A force (and moment) at a point of a body, `[[excitation.force]]`.
+fn point_force(cx: &Ctx, f: &RawForce, bodies: &[Body]) -> Result<PointForce, LoadError> {
+    let Some(body) = body_ref(cx, bodies, &f.body)? else {
+        return Err(cx.at(
+            f.body.span(),
+            "a force cannot act on the ground; name a body",
+        ));
+    };
+    let point = match &f.point {
+        Some(p) => cx.vec3(p, Dim::LENGTH, "point")?,
+        None => bodies[body].position,
+    };
+    let dir = RawDirection {
+        direction: f.direction.clone(),
+        alpha: f.alpha.clone(),
+        beta: f.beta.clone(),
+    };
+    let force = match (&f.force, &f.amplitude) {
+        (Some(v), None) => {
+            if dir.direction.is_some() || dir.alpha.is_some() || dir.beta.is_some() {
+                return Err(cx.at(v.span(), "`force` is a full vector; drop `direction`/`alpha`/`beta` or use `amplitude` with them"));
+            }
+            cx.vec3(v, Dim::FORCE, "force")?
+        }
+        (None, Some(a)) => cx.scalar(a, Dim::FORCE, "amplitude")? * direction(cx, &dir, a.span())?,
+        (None, None) => Vector3::zeros(),
+        (Some(v), Some(_)) => {
+            return Err(cx.at(
+                v.span(),
+                "give either `force` (a vector) or `amplitude` with a direction, not both",
+            ))
+        }
+    };
+    let moment = match &f.moment {
+        Some(m) => cx.vec3(m, Dim::MOMENT, "moment")?,
+        None => Vector3::zeros(),
+    };
+    if force == Vector3::zeros() && moment == Vector3::zeros() {
+        return Err(cx.at(
+            f.body.span(),
+            "this force has neither `force`, `amplitude` nor `moment`; give at least one",
+        ));
+    }
+    Ok(PointForce {
+        body,
+        point,
+        force,
+        moment,
+    })
+}
+
+/// Equal and opposite forces on two bodies, `[[excitation.pair]]` (an actuator between them).
+fn force_pair(cx: &Ctx, p: &RawPair, bodies: &[Body]) -> Result<[PointForce; 2], LoadError> {
+    let ends = p.bodies.get_ref();
+    if ends.len() != 2 {
+        return Err(cx.at(
+            p.bodies.span(),
+            "a force pair acts between two bodies: bodies = [\"acted on\", \"reacting\"]",
+        ));
+    }
+    let (Some(a), Some(b)) = (
+        body_ref(cx, bodies, &ends[0])?,
+        body_ref(cx, bodies, &ends[1])?,
+    ) else {
+        return Err(cx.at(p.bodies.span(), "a force pair acts between two bodies, not the ground; use [[excitation.force]] for a grounded exciter"));
+    };
+    if a == b {
+        return Err(cx.at(
+            p.bodies.span(),
+            "a force pair between a body and itself does nothing; name two bodies",
+        ));
+    }
+    let point = cx.vec3(&p.point, Dim::LENGTH, "point")?;
+    let reaction = match &p.reaction_point {
+        Some(r) => cx.vec3(r, Dim::LENGTH, "reaction_point")?,
+        None => point,
+    };
+    let amp = cx.scalar(&p.amplitude, Dim::FORCE, "amplitude")?;
+    let dir = RawDirection {
+        direction: p.direction.clone(),
+        alpha: p.alpha.clone(),
+        beta: p.beta.clone(),
+    };
+    let f = amp * direction(cx, &dir, p.amplitude.span())?;
+    Ok([
+        PointForce {
+            body: a,
+            point,
+            force: f,
+            moment: Vector3::zeros(),
+        },
+        PointForce {
+            body: b,
+            point: reaction,
+            force: -f,
+            moment: Vector3::zeros(),
+        },
+    ])
+}
+
+/// The characteristics one `[[output]]` declares.
+fn output(cx: &Ctx, o: &RawOutput, bodies: &[Body]) -> Result<Vec<Characteristic>, LoadError> {
+    let Some(body) = body_ref(cx, bodies, &o.body)? else {
+        return Err(cx.at(o.body.span(), "the ground does not move; name a body"));
+    };
+    let quantity = match &o.quantity {
+        None => Quantity::Displacement,
+        Some(q) => Quantity::parse(q.get_ref()).ok_or_else(|| {
+            cx.at(
+                q.span(),
+                format!(
+                    "unknown quantity \"{}\"; use displacement, velocity or acceleration",
+                    q.get_ref()
+                ),
+            )
+        })?,
+    };
+    let names: Vec<&Sp<String>> = match (&o.dof, &o.dofs) {
+        (Some(d), None) => vec![d],
+        (None, Some(ds)) => ds.get_ref().iter().collect(),
+        _ => return Err(cx.at(o.body.span(), "give `dof = \"u1\"` or `dofs = [\"u1\", \"u2\", \"u3\"]` (u1-u3 translations, r1-r3 rotations along the body's principal axes)")),
+    };
+    names
+        .into_iter()
+        .map(|d| {
+            let dof = DOF_NAMES.iter().position(|n| n == d.get_ref()).ok_or_else(|| cx.at(d.span(), format!("unknown dof \"{}\"; use u1, u2, u3 (translations) or r1, r2, r3 (rotations) along the body's principal axes", d.get_ref())))?;
+            Ok(Characteristic {
+                body,
+                dof: dof as u8,
+                quantity,
+            })
+        })
+        .collect()
+}
+
+/// The model after the physical checks: the first error located by `spans`, warnings located.
+fn checked(cx: &Ctx, model: Model, spans: &Spans) -> Result<Loaded, LoadError> {
     let locate = |p: &Problem| -> Range<usize> {
         spans
             .iter()

@@ -320,249 +320,331 @@ pub fn parse(text: &str, origin: &str, model: &Model) -> Result<Variables, VarsE
     let mut vars: Vec<Variable> = Vec::new();
     let mut owner: Vec<(ParamRef, String)> = Vec::new();
     for rv in &raw.variables {
-        let names = expand(rv.sdes.get_ref()).map_err(|m| cx.at(rv.sdes.span(), m))?;
-        let pname = rv.parameter.get_ref().trim();
-        let Some(param) = ParamName::parse(pname) else {
-            return Err(cx.at(rv.parameter.span(), format!(
-                "unknown parameter \"{pname}\"; parameters are kn, kt, psi_n, psi_t (slideway, rotary, isolator), k, psi (screw, spring), k1-k6, psi1-psi6 (general)"
-            )));
-        };
-        let tie = match rv.tie.as_ref().map(|t| t.get_ref().as_str()) {
-            None | Some("equal") => Tie::Equal,
-            Some("scale") => Tie::Scale,
-            Some(other) => {
-                let span = rv.tie.as_ref().map(|t| t.span()).unwrap_or(0..0);
-                return Err(cx.at(span, format!("unknown tie \"{other}\"; use \"equal\" (one shared value, optionally with ratios) or \"scale\" (a factor on the model's values)")));
+        let v = variable(&cx, rv, model, &vars, &owner)?;
+        for t in &v.targets {
+            owner.push((t.param, v.name.clone()));
+        }
+        vars.push(v);
+    }
+    Ok(Variables {
+        origin: origin.into(),
+        vars,
+    })
+}
+
+/// The parameters one variable sets, before ratios: every SDE's `param`, its dimension, and
+/// the model's current values.
+struct Targets {
+    targets: Vec<Target>,
+    dim: Dim,
+    model_values: Vec<f64>,
+}
+
+/// One `[[variable]]`, checked against the model and the variables before it (`earlier`, and
+/// `owner`: which variable already sets which parameter).
+fn variable(
+    cx: &Ctx,
+    rv: &RawVariable,
+    model: &Model,
+    earlier: &[Variable],
+    owner: &[(ParamRef, String)],
+) -> Result<Variable, VarsError> {
+    let names = expand(rv.sdes.get_ref()).map_err(|m| cx.at(rv.sdes.span(), m))?;
+    let pname = rv.parameter.get_ref().trim();
+    let Some(param) = ParamName::parse(pname) else {
+        return Err(cx.at(rv.parameter.span(), format!(
+            "unknown parameter \"{pname}\"; parameters are kn, kt, psi_n, psi_t (slideway, rotary, isolator), k, psi (screw, spring), k1-k6, psi1-psi6 (general)"
+        )));
+    };
+    let tie = match rv.tie.as_ref().map(|t| t.get_ref().as_str()) {
+        None | Some("equal") => Tie::Equal,
+        Some("scale") => Tie::Scale,
+        Some(other) => {
+            let span = rv.tie.as_ref().map(|t| t.span()).unwrap_or(0..0);
+            return Err(cx.at(span, format!("unknown tie \"{other}\"; use \"equal\" (one shared value, optionally with ratios) or \"scale\" (a factor on the model's values)")));
+        }
+    };
+    let Targets {
+        mut targets,
+        dim,
+        model_values,
+    } = targets(cx, rv, model, &names, param, owner)?;
+    let name = match &rv.name {
+        Some(n) => n.get_ref().trim().to_string(),
+        None if names.len() == 1 => format!("{pname} {}", names[0]),
+        None => format!("{pname} {}", compress(&names)),
+    };
+    if earlier.iter().any(|v| v.name == name) {
+        let span = rv.name.as_ref().map(|n| n.span()).unwrap_or(rv.sdes.span());
+        return Err(cx.at(
+            span,
+            format!("a variable named \"{name}\" already exists; give it another `name`"),
+        ));
+    }
+    let vdim = if tie == Tie::Scale { Dim::NONE } else { dim };
+    // Ratios.
+    match (&rv.ratios, tie) {
+        (Some(r), Tie::Scale) => return Err(cx.at(r.span(), "`ratios` go with tie = \"equal\"; with tie = \"scale\" the model's values are the ratios")),
+        (Some(r), Tie::Equal) => {
+            let rs = r.get_ref();
+            if rs.len() != targets.len() {
+                return Err(cx.at(r.span(), format!("{} ratios for {} SDEs; one ratio per SDE, in the order of `sdes`", rs.len(), targets.len())));
             }
-        };
-        let mut targets = Vec::new();
-        let mut dim: Option<Dim> = None;
-        let mut model_values = Vec::new();
-        for n in &names {
-            let Some(s) = model.sde_index(n) else {
-                let known: Vec<&str> = model.sdes.iter().map(|s| s.name.as_str()).collect();
-                return Err(cx.at(
-                    rv.sdes.span(),
-                    format!(
-                        "unknown SDE \"{n}\"; the model's SDEs: {}",
-                        known.join(", ")
-                    ),
-                ));
-            };
-            let sde = &model.sdes[s];
-            if !sde.enabled {
-                return Err(cx.at(rv.sdes.span(), format!("SDE \"{n}\" is disabled in the model (enabled = false); enable it or leave it out")));
+            if let Some(bad) = rs.iter().find(|x| !(x.is_finite() && **x > 0.0)) {
+                return Err(cx.at(r.span(), format!("ratio {bad} must be a finite number > 0")));
             }
-            let pr = ParamRef {
-                sde: s,
-                name: param,
-            };
-            let Some(value) = sde.law.get(param) else {
-                let has: Vec<String> = sde.law.params().iter().map(|p| p.as_str()).collect();
-                return Err(cx.at(
-                    rv.parameter.span(),
-                    format!(
-                        "SDE \"{n}\" ({}) has no parameter \"{pname}\"; its parameters: {}",
-                        sde.kind.as_str(),
-                        has.join(", ")
-                    ),
-                ));
-            };
-            let d = param_dim(&sde.law, param);
-            if let Some(d0) = dim {
-                if d0 != d {
+            for (t, &x) in targets.iter_mut().zip(rs) {
+                t.ratio = x;
+            }
+        }
+        (None, Tie::Scale) => {
+            for (t, &v) in targets.iter_mut().zip(&model_values) {
+                t.ratio = v;
+            }
+        }
+        (None, Tie::Equal) => {}
+    }
+    let unit = display_unit(cx, rv, vdim)?;
+    let Values {
+        initial,
+        lower,
+        upper,
+        scale,
+    } = values(cx, rv, tie, vdim, &unit, &targets, &model_values)?;
+    Ok(Variable {
+        name,
+        sdes: compress(&names),
+        parameter: pname.to_string(),
+        targets,
+        tie,
+        initial,
+        lower,
+        upper,
+        scale,
+        unit,
+        dissipation: param.is_dissipation(),
+    })
+}
+
+/// A variable's initial value, bounds and scale (SI, or the factor for a scale tie).
+struct Values {
+    initial: f64,
+    lower: f64,
+    upper: f64,
+    scale: f64,
+}
+
+/// The initial value (given, or implied by the model's values of a group), the bounds (within
+/// the physical range) and the scale (given, else from the initial value or the bounds).
+fn values(
+    cx: &Ctx,
+    rv: &RawVariable,
+    tie: Tie,
+    vdim: Dim,
+    unit: &DisplayUnit,
+    targets: &[Target],
+    model_values: &[f64],
+) -> Result<Values, VarsError> {
+    let pname = rv.parameter.get_ref().trim();
+    let initial = match &rv.initial {
+        Some(v) => cx.value(v, vdim, "initial")?,
+        None => match tie {
+            Tie::Scale => 1.0,
+            Tie::Equal => {
+                let implied: Vec<f64> = targets
+                    .iter()
+                    .zip(model_values)
+                    .map(|(t, v)| v / t.ratio)
+                    .collect();
+                let first = implied[0];
+                if implied
+                    .iter()
+                    .any(|v| (v - first).abs() > 1e-9 * first.abs().max(f64::MIN_POSITIVE))
+                {
                     return Err(cx.at(rv.sdes.span(), format!(
-                        "SDE \"{n}\"'s {pname} is {} but the variable's first SDE's is {}; one variable sets parameters of one dimension (use tie = \"scale\" for a factor)",
-                        d.describe(), d0.describe()
+                        "the model's {pname} values of these SDEs differ ({}); give `initial` for the shared value",
+                        implied.iter().map(|v| format!("{:.6}", v / unit.factor)).collect::<Vec<_>>().join(", ")
                     )));
                 }
+                first
             }
-            dim = Some(d);
-            if let Some((_, other)) = owner.iter().find(|(p, _)| *p == pr) {
-                return Err(cx.at(rv.sdes.span(), format!("SDE \"{n}\" {pname} is already set by variable \"{other}\"; each parameter belongs to one variable")));
+        },
+    };
+    let lower = match &rv.lower {
+        Some(v) => {
+            let l = cx.value(v, vdim, "lower")?;
+            if l < 0.0 {
+                return Err(cx.at(v.span(), format!(
+                    "lower bound {} {} is outside the physical range: stiffness and ψ are ≥ 0; use lower = 0 or more",
+                    l / unit.factor, unit.symbol
+                )));
             }
-            if targets.iter().any(|t: &Target| t.param == pr) {
-                return Err(cx.at(rv.sdes.span(), format!("SDE \"{n}\" is listed twice")));
-            }
-            targets.push(Target {
-                param: pr,
-                ratio: 1.0,
-            });
-            model_values.push(value);
+            l
         }
-        let dim = dim.unwrap_or(Dim::NONE);
-        let name = match &rv.name {
-            Some(n) => n.get_ref().trim().to_string(),
-            None if names.len() == 1 => format!("{pname} {}", names[0]),
-            None => format!("{pname} {}", compress(&names)),
-        };
-        if vars.iter().any(|v| v.name == name) {
-            let span = rv.name.as_ref().map(|n| n.span()).unwrap_or(rv.sdes.span());
-            return Err(cx.at(
-                span,
-                format!("a variable named \"{name}\" already exists; give it another `name`"),
-            ));
+        None => 0.0,
+    };
+    let upper = match &rv.upper {
+        Some(v) => {
+            let u = cx.value(v, vdim, "upper")?;
+            if u <= lower {
+                return Err(cx.at(
+                    v.span(),
+                    format!(
+                        "upper bound {} {} is not above the lower bound {} {}",
+                        u / unit.factor,
+                        unit.symbol,
+                        lower / unit.factor,
+                        unit.symbol
+                    ),
+                ));
+            }
+            u
         }
-        let vdim = if tie == Tie::Scale { Dim::NONE } else { dim };
-        // Ratios.
-        match (&rv.ratios, tie) {
-            (Some(r), Tie::Scale) => return Err(cx.at(r.span(), "`ratios` go with tie = \"equal\"; with tie = \"scale\" the model's values are the ratios")),
-            (Some(r), Tie::Equal) => {
-                let rs = r.get_ref();
-                if rs.len() != targets.len() {
-                    return Err(cx.at(r.span(), format!("{} ratios for {} SDEs; one ratio per SDE, in the order of `sdes`", rs.len(), targets.len())));
-                }
-                if let Some(bad) = rs.iter().find(|x| !(x.is_finite() && **x > 0.0)) {
-                    return Err(cx.at(r.span(), format!("ratio {bad} must be a finite number > 0")));
-                }
-                for (t, &x) in targets.iter_mut().zip(rs) {
-                    t.ratio = x;
-                }
+        None => f64::INFINITY,
+    };
+    if initial < lower || initial > upper {
+        let span = rv
+            .initial
+            .as_ref()
+            .map(|v| v.span())
+            .unwrap_or(rv.sdes.span());
+        return Err(cx.at(span, format!(
+            "initial value {} {} is outside the bounds [{}, {}] {}; move it inside or widen the bounds",
+            initial / unit.factor, unit.symbol, lower / unit.factor, upper / unit.factor, unit.symbol
+        )));
+    }
+    let scale = match &rv.scale {
+        Some(v) => {
+            let s = cx.value(v, vdim, "scale")?;
+            if s <= 0.0 {
+                return Err(cx.at(v.span(), "scale must be > 0"));
             }
-            (None, Tie::Scale) => {
-                for (t, &v) in targets.iter_mut().zip(&model_values) {
-                    t.ratio = v;
-                }
-            }
-            (None, Tie::Equal) => {}
+            s
         }
-        let unit = match &rv.unit {
-            None => default_unit(vdim),
-            Some(u) => {
-                let sym = u.get_ref().trim();
-                if sym == "-" || sym.is_empty() {
-                    if vdim != Dim::NONE {
-                        return Err(cx.at(
-                            u.span(),
-                            format!(
-                                "unit \"-\" is for plain numbers; this variable is {}",
-                                vdim.describe()
-                            ),
-                        ));
-                    }
-                    DisplayUnit {
-                        symbol: "-".into(),
-                        factor: 1.0,
-                    }
-                } else {
-                    let factor = parse_quantity(&format!("1 {sym}"), vdim)
-                        .map_err(|e| cx.at(u.span(), format!("unit: {e}")))?;
-                    DisplayUnit {
-                        symbol: sym.into(),
-                        factor,
-                    }
-                }
-            }
-        };
-        let initial = match &rv.initial {
-            Some(v) => cx.value(v, vdim, "initial")?,
-            None => match tie {
-                Tie::Scale => 1.0,
-                Tie::Equal => {
-                    let implied: Vec<f64> = targets
-                        .iter()
-                        .zip(&model_values)
-                        .map(|(t, v)| v / t.ratio)
-                        .collect();
-                    let first = implied[0];
-                    if implied
-                        .iter()
-                        .any(|v| (v - first).abs() > 1e-9 * first.abs().max(f64::MIN_POSITIVE))
-                    {
-                        return Err(cx.at(rv.sdes.span(), format!(
-                            "the model's {pname} values of these SDEs differ ({}); give `initial` for the shared value",
-                            implied.iter().map(|v| format!("{:.6}", v / unit.factor)).collect::<Vec<_>>().join(", ")
-                        )));
-                    }
-                    first
-                }
-            },
-        };
-        let lower = match &rv.lower {
-            Some(v) => {
-                let l = cx.value(v, vdim, "lower")?;
-                if l < 0.0 {
-                    return Err(cx.at(v.span(), format!(
-                        "lower bound {} {} is outside the physical range: stiffness and ψ are ≥ 0; use lower = 0 or more",
-                        l / unit.factor, unit.symbol
-                    )));
-                }
-                l
-            }
-            None => 0.0,
-        };
-        let upper = match &rv.upper {
-            Some(v) => {
-                let u = cx.value(v, vdim, "upper")?;
-                if u <= lower {
-                    return Err(cx.at(
-                        v.span(),
-                        format!(
-                            "upper bound {} {} is not above the lower bound {} {}",
-                            u / unit.factor,
-                            unit.symbol,
-                            lower / unit.factor,
-                            unit.symbol
-                        ),
-                    ));
-                }
-                u
-            }
-            None => f64::INFINITY,
-        };
-        if initial < lower || initial > upper {
+        None if initial.abs() > 0.0 => initial.abs(),
+        None if upper.is_finite() => upper - lower,
+        None => {
             let span = rv
                 .initial
                 .as_ref()
                 .map(|v| v.span())
                 .unwrap_or(rv.sdes.span());
             return Err(cx.at(span, format!(
-                "initial value {} {} is outside the bounds [{}, {}] {}; move it inside or widen the bounds",
-                initial / unit.factor, unit.symbol, lower / unit.factor, upper / unit.factor, unit.symbol
+                "initial value is 0 and there is no upper bound, so the variable has no natural scale; give `scale` (e.g. scale = \"1 {}\") or an `upper` bound",
+                unit.symbol
             )));
         }
-        let scale = match &rv.scale {
-            Some(v) => {
-                let s = cx.value(v, vdim, "scale")?;
-                if s <= 0.0 {
-                    return Err(cx.at(v.span(), "scale must be > 0"));
-                }
-                s
-            }
-            None if initial.abs() > 0.0 => initial.abs(),
-            None if upper.is_finite() => upper - lower,
-            None => {
-                let span = rv
-                    .initial
-                    .as_ref()
-                    .map(|v| v.span())
-                    .unwrap_or(rv.sdes.span());
-                return Err(cx.at(span, format!(
-                    "initial value is 0 and there is no upper bound, so the variable has no natural scale; give `scale` (e.g. scale = \"1 {}\") or an `upper` bound",
-                    unit.symbol
+    };
+    Ok(Values {
+        initial,
+        lower,
+        upper,
+        scale,
+    })
+}
+
+/// The parameter `param` of every SDE in `names`, which must exist, be enabled, have it, share
+/// one dimension, and not be set by another variable (`owner`).
+fn targets(
+    cx: &Ctx,
+    rv: &RawVariable,
+    model: &Model,
+    names: &[String],
+    param: ParamName,
+    owner: &[(ParamRef, String)],
+) -> Result<Targets, VarsError> {
+    let pname = rv.parameter.get_ref().trim();
+    let mut targets = Vec::new();
+    let mut dim: Option<Dim> = None;
+    let mut model_values = Vec::new();
+    for n in names {
+        let Some(s) = model.sde_index(n) else {
+            let known: Vec<&str> = model.sdes.iter().map(|s| s.name.as_str()).collect();
+            return Err(cx.at(
+                rv.sdes.span(),
+                format!(
+                    "unknown SDE \"{n}\"; the model's SDEs: {}",
+                    known.join(", ")
+                ),
+            ));
+        };
+        let sde = &model.sdes[s];
+        if !sde.enabled {
+            return Err(cx.at(rv.sdes.span(), format!("SDE \"{n}\" is disabled in the model (enabled = false); enable it or leave it out")));
+        }
+        let pr = ParamRef {
+            sde: s,
+            name: param,
+        };
+        let Some(value) = sde.law.get(param) else {
+            let has: Vec<String> = sde.law.params().iter().map(|p| p.as_str()).collect();
+            return Err(cx.at(
+                rv.parameter.span(),
+                format!(
+                    "SDE \"{n}\" ({}) has no parameter \"{pname}\"; its parameters: {}",
+                    sde.kind.as_str(),
+                    has.join(", ")
+                ),
+            ));
+        };
+        let d = param_dim(&sde.law, param);
+        if let Some(d0) = dim {
+            if d0 != d {
+                return Err(cx.at(rv.sdes.span(), format!(
+                    "SDE \"{n}\"'s {pname} is {} but the variable's first SDE's is {}; one variable sets parameters of one dimension (use tie = \"scale\" for a factor)",
+                    d.describe(), d0.describe()
                 )));
             }
-        };
-        for t in &targets {
-            owner.push((t.param, name.clone()));
         }
-        vars.push(Variable {
-            name,
-            sdes: compress(&names),
-            parameter: pname.to_string(),
-            targets,
-            tie,
-            initial,
-            lower,
-            upper,
-            scale,
-            unit,
-            dissipation: param.is_dissipation(),
+        dim = Some(d);
+        if let Some((_, other)) = owner.iter().find(|(p, _)| *p == pr) {
+            return Err(cx.at(rv.sdes.span(), format!("SDE \"{n}\" {pname} is already set by variable \"{other}\"; each parameter belongs to one variable")));
+        }
+        if targets.iter().any(|t: &Target| t.param == pr) {
+            return Err(cx.at(rv.sdes.span(), format!("SDE \"{n}\" is listed twice")));
+        }
+        targets.push(Target {
+            param: pr,
+            ratio: 1.0,
         });
+        model_values.push(value);
     }
-    Ok(Variables {
-        origin: origin.into(),
-        vars,
+    Ok(Targets {
+        targets,
+        dim: dim.unwrap_or(Dim::NONE),
+        model_values,
+    })
+}
+
+/// The unit the variable is shown in (`unit`, default the paper's for its dimension).
+fn display_unit(cx: &Ctx, rv: &RawVariable, vdim: Dim) -> Result<DisplayUnit, VarsError> {
+    Ok(match &rv.unit {
+        None => default_unit(vdim),
+        Some(u) => {
+            let sym = u.get_ref().trim();
+            if sym == "-" || sym.is_empty() {
+                if vdim != Dim::NONE {
+                    return Err(cx.at(
+                        u.span(),
+                        format!(
+                            "unit \"-\" is for plain numbers; this variable is {}",
+                            vdim.describe()
+                        ),
+                    ));
+                }
+                DisplayUnit {
+                    symbol: "-".into(),
+                    factor: 1.0,
+                }
+            } else {
+                let factor = parse_quantity(&format!("1 {sym}"), vdim)
+                    .map_err(|e| cx.at(u.span(), format!("unit: {e}")))?;
+                DisplayUnit {
+                    symbol: sym.into(),
+                    factor,
+                }
+            }
+        }
     })
 }
 
