@@ -531,218 +531,18 @@ impl Stand {
             let span = e.span().unwrap_or(0..0);
             cx.at(span, e.message().to_string())
         })?;
-
-        let rs = raw.shaker.get_ref();
-        let shaker = ShakerPort {
-            port: port_spec(rs.port.get_ref()),
-            baud: baud(&cx, &rs.baud, "shaker.baud", 115_200)?,
-            identity: rs.identity.clone().unwrap_or_default(),
-            timeout: match &rs.timeout {
-                Some(t) => Duration::from_secs_f64(cx.positive(t, Dim::TIME, "shaker.timeout")?),
-                None => Duration::from_millis(500),
-            },
-            retries: rs.retries.unwrap_or(2),
-            max_force_n: match &rs.max_force {
-                Some(f) => cx.positive(f, Dim::FORCE, "shaker.max_force")?,
-                None => 5000.0,
-            },
-        };
-        let rd = raw.daq.get_ref();
-        let mut daq = DaqPort {
-            port: port_spec(rd.port.get_ref()),
-            baud: baud(&cx, &rd.baud, "daq.baud", 3_000_000)?,
-            inputs: match &rd.inputs {
-                Some(n) if *n.get_ref() == 0 => {
-                    return Err(cx.at(
-                        n.span(),
-                        "daq.inputs must be ≥ 1 (the number of analog inputs the DAQ has)",
-                    ))
-                }
-                Some(n) => Some(*n.get_ref()),
-                None => None,
-            },
-            identity: rd.identity.clone().unwrap_or_default(),
-            sample_rate_hz: cx.positive(&rd.sample_rate, Dim::FREQUENCY, "daq.sample_rate")?,
-            samples_per_block: match &rd.samples_per_block {
-                Some(s) if *s.get_ref() == 0 => {
-                    return Err(cx.at(s.span(), "daq.samples_per_block must be ≥ 1"))
-                }
-                Some(s) => *s.get_ref(),
-                None => 64,
-            },
-            timeout: match &rd.timeout {
-                Some(t) => Duration::from_secs_f64(cx.positive(t, Dim::TIME, "daq.timeout")?),
-                None => Duration::from_millis(500),
-            },
-            retries: rd.retries.unwrap_or(2),
-            can: can_settings(&cx, rd.can.as_ref())?,
-        };
-        // `daq.timeout` and `daq.retries` hold for a DAQ on CAN too (when given: a CAN DAQ's own
-        // default answer timeout is 1 s).
-        if rd.timeout.is_some() {
-            daq.can.answer_timeout = daq.timeout;
-        }
-        daq.can.retries = daq.retries;
-        if matches!(shaker.port, PortSpec::Can(_)) {
-            return Err(cx.at(rs.port.span(), "shaker.port: the shaker controller speaks SCPI over serial; give a device path (or \"sim\"), not a CAN interface"));
-        }
-        if let PortSpec::Can(iface) = &daq.port {
-            if iface.is_empty() {
-                return Err(cx.at(rd.port.span(), "daq.port = \"can:\" needs an interface name, e.g. \"can:can0\" or \"can:vcan0\""));
-            }
-        }
-        if let (PortSpec::Path(a), PortSpec::Path(b)) = (&shaker.port, &daq.port) {
-            if a == b {
-                return Err(cx.at(
-                    rd.port.span(),
-                    format!(
-                        "daq.port {b} is also the shaker's port; each device needs its own port"
-                    ),
-                ));
-            }
-        }
-
-        if raw.channel.is_empty() {
-            return Err(cx.at(
-                raw.daq.span(),
-                "no [[channel]] entries; list at least the force channel and one accelerometer",
-            ));
-        }
-        let mut channels: Vec<Channel> = Vec::new();
-        for sc in &raw.channel {
-            let c = sc.get_ref();
-            let name = c.name.get_ref().trim().to_string();
-            if name.is_empty() {
-                return Err(cx.at(c.name.span(), "channel name is empty"));
-            }
-            if let Some(o) = channels.iter().find(|o| o.name == name) {
-                return Err(cx.at(
-                    c.name.span(),
-                    format!(
-                        "channel name `{name}` is already used on line {}; names must be unique",
-                        o.line
-                    ),
-                ));
-            }
-            let dc = *c.device_channel.get_ref();
-            if let Some(n) = daq.inputs.filter(|n| dc >= *n) {
-                return Err(cx.at(
-                    c.device_channel.span(),
-                    format!("channel `{name}`: device_channel {dc} is beyond the DAQ's {n} inputs (numbered 0 to {}); check the wiring, the channel number or daq.inputs", n - 1),
-                ));
-            }
-            if let Some(o) = channels.iter().find(|o| o.device_channel == dc) {
-                return Err(cx.at(
-                    c.device_channel.span(),
-                    format!("channel `{name}`: device_channel {dc} is already used by channel `{}` (line {}); each channel needs its own DAQ input", o.name, o.line),
-                ));
-            }
-            let kind = *c.kind.get_ref();
-            let sensitivity = sensitivity(&cx, &c.sensitivity, kind, &name)?;
-            let (body, position_m, direction) = match kind {
-                ChannelKind::Force => {
-                    let position = match &c.position {
-                        Some(p) => vec3(&cx, p, &name)?,
-                        None => [0.0; 3],
-                    };
-                    let direction = match &c.direction {
-                        Some(d) => cx.unit_vector(d, &format!("channel `{name}`: direction"))?,
-                        None => [0.0; 3],
-                    };
-                    (
-                        c.body.as_ref().map(|b| b.get_ref().clone()),
-                        position,
-                        direction,
-                    )
-                }
-                ChannelKind::Acceleration => {
-                    let missing = |what: &str| {
-                        cx.at(
-                            sc.span(),
-                            format!("acceleration channel `{name}` needs `{what}`"),
-                        )
-                    };
-                    let body = c
-                        .body
-                        .as_ref()
-                        .ok_or_else(|| missing("body"))?
-                        .get_ref()
-                        .clone();
-                    let position = vec3(
-                        &cx,
-                        c.position.as_ref().ok_or_else(|| missing("position"))?,
-                        &name,
-                    )?;
-                    let direction = cx.unit_vector(
-                        c.direction.as_ref().ok_or_else(|| missing("direction"))?,
-                        &format!("channel `{name}`: direction"),
-                    )?;
-                    (Some(body), position, direction)
-                }
-            };
-            channels.push(Channel {
-                name,
-                device_channel: dc,
-                kind,
-                sensitivity,
-                body,
-                position_m,
-                direction,
-                line: cx.line_of(sc.span()),
-            });
-        }
-        let forces: Vec<&Channel> = channels
-            .iter()
-            .filter(|c| c.kind == ChannelKind::Force)
-            .collect();
-        if forces.len() != 1 {
-            let span = raw.channel.first().map(|c| c.span()).unwrap_or(0..0);
-            return Err(cx.at(
-                span,
-                format!("the channel map needs exactly one `kind = \"force\"` channel (the closed loop and every FRF refer to it); found {}", forces.len()),
-            ));
-        }
-        if !channels.iter().any(|c| c.kind == ChannelKind::Acceleration) {
-            return Err(cx.at(
-                raw.daq.span(),
-                "the channel map has no acceleration channel",
-            ));
-        }
-        let frame = channels.len() * daq.samples_per_block as usize * 4 + 9;
-        if frame > crate::daq::frame::MAX_FRAME {
-            let span = rd
-                .samples_per_block
-                .as_ref()
-                .map(|s| s.span())
-                .unwrap_or(raw.daq.span());
-            return Err(cx.at(
-                span,
-                format!("{} channels × {} samples per block do not fit a {}-byte frame; lower daq.samples_per_block", channels.len(), daq.samples_per_block, crate::daq::frame::MAX_FRAME),
-            ));
-        }
-
+        let (rs, rd) = (raw.shaker.get_ref(), raw.daq.get_ref());
+        let shaker = shaker_port(&cx, rs)?;
+        let daq = daq_port(&cx, rd)?;
+        check_ports(&cx, &shaker, &daq, rs, rd)?;
+        let channels = channel_map(&cx, &raw, &daq)?;
         let truth = match &raw.truth {
             None => None,
             Some(st) => Some(truth(&cx, st, &channels)?),
         };
         let faults = match &raw.faults {
             None => Faults::default(),
-            Some(f) => Faults {
-                seed: f.seed.unwrap_or(1),
-                drop: cx.probability(&f.drop, "drop")?,
-                corrupt: cx.probability(&f.corrupt, "corrupt")?,
-                duplicate: cx.probability(&f.duplicate, "duplicate")?,
-                delay: cx.probability(&f.delay, "delay")?,
-                delay_time: match &f.delay_time {
-                    Some(t) => {
-                        Duration::from_secs_f64(cx.positive(t, Dim::TIME, "faults.delay_time")?)
-                    }
-                    None => Duration::from_millis(20),
-                },
-                daq_silent_after_blocks: f.daq_silent_after_blocks,
-                shaker_silent_after_commands: f.shaker_silent_after_commands,
-                cable_pull_after_blocks: f.cable_pull_after_blocks,
-            },
+            Some(f) => faults(&cx, f)?,
         };
         let geometry_model = raw
             .geometry
@@ -871,6 +671,248 @@ impl Stand {
             samples_per_block: self.daq.samples_per_block,
         }
     }
+}
+
+/// `[shaker]`: its port and settings.
+fn shaker_port(cx: &Ctx<'_>, rs: &RawShaker) -> Result<ShakerPort, StandError> {
+    Ok(ShakerPort {
+        port: port_spec(rs.port.get_ref()),
+        baud: baud(cx, &rs.baud, "shaker.baud", 115_200)?,
+        identity: rs.identity.clone().unwrap_or_default(),
+        timeout: match &rs.timeout {
+            Some(t) => Duration::from_secs_f64(cx.positive(t, Dim::TIME, "shaker.timeout")?),
+            None => Duration::from_millis(500),
+        },
+        retries: rs.retries.unwrap_or(2),
+        max_force_n: match &rs.max_force {
+            Some(f) => cx.positive(f, Dim::FORCE, "shaker.max_force")?,
+            None => 5000.0,
+        },
+    })
+}
+
+/// `[daq]`: its port and settings (`timeout` and `retries` hold on CAN too).
+fn daq_port(cx: &Ctx<'_>, rd: &RawDaq) -> Result<DaqPort, StandError> {
+    let mut daq = DaqPort {
+        port: port_spec(rd.port.get_ref()),
+        baud: baud(cx, &rd.baud, "daq.baud", 3_000_000)?,
+        inputs: match &rd.inputs {
+            Some(n) if *n.get_ref() == 0 => {
+                return Err(cx.at(
+                    n.span(),
+                    "daq.inputs must be ≥ 1 (the number of analog inputs the DAQ has)",
+                ))
+            }
+            Some(n) => Some(*n.get_ref()),
+            None => None,
+        },
+        identity: rd.identity.clone().unwrap_or_default(),
+        sample_rate_hz: cx.positive(&rd.sample_rate, Dim::FREQUENCY, "daq.sample_rate")?,
+        samples_per_block: match &rd.samples_per_block {
+            Some(s) if *s.get_ref() == 0 => {
+                return Err(cx.at(s.span(), "daq.samples_per_block must be ≥ 1"))
+            }
+            Some(s) => *s.get_ref(),
+            None => 64,
+        },
+        timeout: match &rd.timeout {
+            Some(t) => Duration::from_secs_f64(cx.positive(t, Dim::TIME, "daq.timeout")?),
+            None => Duration::from_millis(500),
+        },
+        retries: rd.retries.unwrap_or(2),
+        can: can_settings(cx, rd.can.as_ref())?,
+    };
+    // `daq.timeout` and `daq.retries` hold for a DAQ on CAN too (when given: a CAN DAQ's own
+    // default answer timeout is 1 s).
+    if rd.timeout.is_some() {
+        daq.can.answer_timeout = daq.timeout;
+    }
+    daq.can.retries = daq.retries;
+    Ok(daq)
+}
+
+/// The shaker on serial (never CAN), a CAN DAQ with an interface name, two distinct ports.
+fn check_ports(
+    cx: &Ctx<'_>,
+    shaker: &ShakerPort,
+    daq: &DaqPort,
+    rs: &RawShaker,
+    rd: &RawDaq,
+) -> Result<(), StandError> {
+    if matches!(shaker.port, PortSpec::Can(_)) {
+        return Err(cx.at(rs.port.span(), "shaker.port: the shaker controller speaks SCPI over serial; give a device path (or \"sim\"), not a CAN interface"));
+    }
+    if let PortSpec::Can(iface) = &daq.port {
+        if iface.is_empty() {
+            return Err(cx.at(
+                rd.port.span(),
+                "daq.port = \"can:\" needs an interface name, e.g. \"can:can0\" or \"can:vcan0\"",
+            ));
+        }
+    }
+    if let (PortSpec::Path(a), PortSpec::Path(b)) = (&shaker.port, &daq.port) {
+        if a == b {
+            return Err(cx.at(
+                rd.port.span(),
+                format!("daq.port {b} is also the shaker's port; each device needs its own port"),
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// The `[[channel]]` entries: one force channel, at least one accelerometer, unique names and
+/// inputs, blocks that fit a frame.
+fn channel_map(cx: &Ctx<'_>, raw: &RawStand, daq: &DaqPort) -> Result<Vec<Channel>, StandError> {
+    if raw.channel.is_empty() {
+        return Err(cx.at(
+            raw.daq.span(),
+            "no [[channel]] entries; list at least the force channel and one accelerometer",
+        ));
+    }
+    let mut channels: Vec<Channel> = Vec::new();
+    for sc in &raw.channel {
+        let c = channel(cx, sc, &channels, daq)?;
+        channels.push(c);
+    }
+    let rd = raw.daq.get_ref();
+    let forces: Vec<&Channel> = channels
+        .iter()
+        .filter(|c| c.kind == ChannelKind::Force)
+        .collect();
+    if forces.len() != 1 {
+        let span = raw.channel.first().map(|c| c.span()).unwrap_or(0..0);
+        return Err(cx.at(
+            span,
+            format!("the channel map needs exactly one `kind = \"force\"` channel (the closed loop and every FRF refer to it); found {}", forces.len()),
+        ));
+    }
+    if !channels.iter().any(|c| c.kind == ChannelKind::Acceleration) {
+        return Err(cx.at(
+            raw.daq.span(),
+            "the channel map has no acceleration channel",
+        ));
+    }
+    let frame = channels.len() * daq.samples_per_block as usize * 4 + 9;
+    if frame > crate::daq::frame::MAX_FRAME {
+        let span = rd
+            .samples_per_block
+            .as_ref()
+            .map(|s| s.span())
+            .unwrap_or(raw.daq.span());
+        return Err(cx.at(
+            span,
+            format!("{} channels × {} samples per block do not fit a {}-byte frame; lower daq.samples_per_block", channels.len(), daq.samples_per_block, crate::daq::frame::MAX_FRAME),
+        ));
+    }
+    Ok(channels)
+}
+
+/// One `[[channel]]`; `earlier` are the ones before it.
+fn channel(
+    cx: &Ctx<'_>,
+    sc: &Spanned<RawChannel>,
+    earlier: &[Channel],
+    daq: &DaqPort,
+) -> Result<Channel, StandError> {
+    let c = sc.get_ref();
+    let name = c.name.get_ref().trim().to_string();
+    if name.is_empty() {
+        return Err(cx.at(c.name.span(), "channel name is empty"));
+    }
+    if let Some(o) = earlier.iter().find(|o| o.name == name) {
+        return Err(cx.at(
+            c.name.span(),
+            format!(
+                "channel name `{name}` is already used on line {}; names must be unique",
+                o.line
+            ),
+        ));
+    }
+    let dc = *c.device_channel.get_ref();
+    if let Some(n) = daq.inputs.filter(|n| dc >= *n) {
+        return Err(cx.at(
+            c.device_channel.span(),
+            format!("channel `{name}`: device_channel {dc} is beyond the DAQ's {n} inputs (numbered 0 to {}); check the wiring, the channel number or daq.inputs", n - 1),
+        ));
+    }
+    if let Some(o) = earlier.iter().find(|o| o.device_channel == dc) {
+        return Err(cx.at(
+            c.device_channel.span(),
+            format!("channel `{name}`: device_channel {dc} is already used by channel `{}` (line {}); each channel needs its own DAQ input", o.name, o.line),
+        ));
+    }
+    let kind = *c.kind.get_ref();
+    let sensitivity = sensitivity(cx, &c.sensitivity, kind, &name)?;
+    let (body, position_m, direction) = match kind {
+        ChannelKind::Force => {
+            let position = match &c.position {
+                Some(p) => vec3(cx, p, &name)?,
+                None => [0.0; 3],
+            };
+            let direction = match &c.direction {
+                Some(d) => cx.unit_vector(d, &format!("channel `{name}`: direction"))?,
+                None => [0.0; 3],
+            };
+            (
+                c.body.as_ref().map(|b| b.get_ref().clone()),
+                position,
+                direction,
+            )
+        }
+        ChannelKind::Acceleration => {
+            let missing = |what: &str| {
+                cx.at(
+                    sc.span(),
+                    format!("acceleration channel `{name}` needs `{what}`"),
+                )
+            };
+            let body = c
+                .body
+                .as_ref()
+                .ok_or_else(|| missing("body"))?
+                .get_ref()
+                .clone();
+            let position = vec3(
+                cx,
+                c.position.as_ref().ok_or_else(|| missing("position"))?,
+                &name,
+            )?;
+            let direction = cx.unit_vector(
+                c.direction.as_ref().ok_or_else(|| missing("direction"))?,
+                &format!("channel `{name}`: direction"),
+            )?;
+            (Some(body), position, direction)
+        }
+    };
+    Ok(Channel {
+        name,
+        device_channel: dc,
+        kind,
+        sensitivity,
+        body,
+        position_m,
+        direction,
+        line: cx.line_of(sc.span()),
+    })
+}
+
+/// `[faults]`: injected stream and device faults of a simulated stand.
+fn faults(cx: &Ctx<'_>, f: &RawFaults) -> Result<Faults, StandError> {
+    Ok(Faults {
+        seed: f.seed.unwrap_or(1),
+        drop: cx.probability(&f.drop, "drop")?,
+        corrupt: cx.probability(&f.corrupt, "corrupt")?,
+        duplicate: cx.probability(&f.duplicate, "duplicate")?,
+        delay: cx.probability(&f.delay, "delay")?,
+        delay_time: match &f.delay_time {
+            Some(t) => Duration::from_secs_f64(cx.positive(t, Dim::TIME, "faults.delay_time")?),
+            None => Duration::from_millis(20),
+        },
+        daq_silent_after_blocks: f.daq_silent_after_blocks,
+        shaker_silent_after_commands: f.shaker_silent_after_commands,
+        cable_pull_after_blocks: f.cable_pull_after_blocks,
+    })
 }
 
 /// A serial line's bit rate, `default` when absent; 0 is an error.
