@@ -268,24 +268,13 @@ pub fn diagnose(
     if !(opts.alpha > 0.0 && opts.alpha < 1.0) {
         return Err(DiagnoseError::Alpha(opts.alpha));
     }
-    let freqs: Vec<f64> = obs
-        .characteristics
-        .iter()
-        .flat_map(|c| c.freqs_hz.iter().copied())
-        .collect();
-    let f_lo = freqs
-        .iter()
-        .copied()
-        .fold(f64::INFINITY, f64::min)
-        .max(1e-3);
-    let f_hi = freqs.iter().copied().fold(0.0, f64::max).max(f_lo * 1.01);
+    let (f_lo, f_hi) = band(obs);
     let iopts = &opts.identification;
     let labels: Vec<String> = obs
         .characteristics
         .iter()
         .map(|c| c.label.clone())
         .collect();
-
     let mut p0 = Problem::new(model, vars, obs, iopts, Vec::new(), f_hi);
     let u0 = DVector::from_iterator(
         vars.len(),
@@ -304,185 +293,74 @@ pub fn diagnose(
 
     let mut rounds = Vec::new();
     let mut accepted = Vec::new();
-    let mut not_tried = vec![
-        NotTried {
-            effect: "amplitude-dependent stiffness".into(),
-            reason: "needs characteristics measured at two excitation levels; the data has one".into(),
-        },
-        NotTried {
-            effect: "ψ varying with frequency".into(),
-            reason: "the model's hysteretic damping is frequency independent by construction; a frequency-dependent ψ is not a nested change of this model".into(),
-        },
-        NotTried {
-            effect: "sensor misalignment".into(),
-            reason: "the characteristics are principal-axis motions fitted from several sensors; a per-sensor misalignment is checked by the processing's rigidity indicator, not here".into(),
-        },
-    ];
+    let mut not_tried = untestable();
     for _ in 0..opts.max_effects {
         let pc = Problem::new(model, vars, obs, iopts, cur.effects.clone(), f_hi);
-        let (x, gamma) = pc.split(&cur.u);
-        let realized = pc.realize(&gamma)?;
-        let crit = pc.criterion(&realized)?;
-        let free = free_columns(&pc, &cur.u);
-        let jfree = DMatrix::from_fn(cur.jac.nrows(), free.len(), |r, c| cur.jac[(r, free[c])]);
-        let sigma2 = residual_scale(&cur, free.len(), crit.noise.scale_unknown());
-        let cands =
-            generate::candidates(&crit.model_at(&x), &realized.vars, &x, &labels, f_lo, f_hi);
-        let fit = score::FitPoint {
-            crit: &crit,
-            x: &x,
-            gains: &realized.gains,
-            e: &cur.e,
-            jac: &jfree,
-            sigma2,
-        };
-        let scores = score::score_all(&fit, &cands).map_err(EvalError::from)?;
-        let mut ok: Vec<score::Scored> = Vec::new();
-        for (c, s) in cands.iter().zip(scores) {
-            match s {
-                Ok(s) => ok.push(s),
-                Err(reason) => not_tried.push(NotTried {
-                    effect: c.describe(),
-                    reason: reason.to_string(),
-                }),
-            }
-        }
-        ok.sort_by(|a, b| {
-            a.p_value
-                .total_cmp(&b.p_value)
-                .then(b.statistic.total_cmp(&a.statistic))
-        });
-        let threshold = opts.alpha / ok.len().max(1) as f64;
+        let ranking = rank(&pc, &cur, &labels, (f_lo, f_hi), opts.alpha, &mut not_tried)?;
         progress(&format!(
             "ranked {} candidates; best: {}",
-            ok.len(),
-            ok.first()
-                .map(|s| cands[s.candidate].describe())
+            ranking.scored.len(),
+            ranking
+                .scored
+                .first()
+                .map(|s| ranking.candidates[s.candidate].describe())
                 .unwrap_or_default()
         ));
-        let families = families(&ok, 20);
-        let ranked: Vec<Ranked> = families
-            .iter()
-            .enumerate()
-            .map(|(i, f)| {
-                let s = &ok[f[0]];
-                Ranked {
-                    rank: i + 1,
-                    kind: cands[s.candidate].kind().into(),
-                    effect: cands[s.candidate].describe(),
-                    statistic: s.statistic,
-                    p_value: s.p_value,
-                    equivalent: f[1..]
-                        .iter()
-                        .map(|&j| cands[ok[j].candidate].describe())
-                        .collect(),
-                }
-            })
-            .collect();
-        let mut refits: Vec<Refit> = Vec::new();
-        let mut best: Option<(usize, Current)> = None;
-        // Refit only what the score makes plausible: the score and LR statistics agree for small
-        // effects and the score understates large ones, so a loose gate (1000× the LR's
-        // threshold) loses nothing and saves the refits when there is nothing to find.
-        for (f, family) in families
-            .iter()
-            .enumerate()
-            .take(opts.refit)
-            .filter(|(_, f)| ok[f[0]].p_value < (1000.0 * threshold).min(1.0))
-        {
-            let s = &ok[family[0]];
-            let cand = &cands[s.candidate];
-            // The first parameter starts at the score's Gauss-Newton step, the others at their
-            // initial values.
-            let start: Vec<f64> = cand
-                .params(f_hi)
-                .iter()
-                .enumerate()
-                .map(|(j, np)| {
-                    if j == 0 {
-                        np.nested + s.step
-                    } else {
-                        np.initial
-                    }
-                })
-                .collect();
-            match refit(model, vars, obs, opts, &cur, cand, &start, f_hi, sigma2) {
-                Ok((mut r, next)) => {
-                    r.equivalent = ranked[f].equivalent.clone();
-                    progress(&format!(
-                        "refit {}: ΔJ = {:.1}, LR = {:.1}, p = {:.2e}",
-                        r.effect,
-                        r.criterion_before - r.criterion_after,
-                        r.lr,
-                        r.p_value
-                    ));
-                    // Most significant first; p-values of large effects underflow to 0, so
-                    // compare the LR's margin over its critical value at the threshold.
-                    let better = best.as_ref().is_none_or(|(b, _)| {
-                        margin(&r, threshold) > margin(&refits[*b], threshold)
-                    });
-                    if r.p_value < threshold && better {
-                        best = Some((refits.len(), next));
-                    }
-                    refits.push(r);
-                }
-                Err(reason) => not_tried.push(NotTried {
-                    effect: format!("refit of {}", cand.describe()),
-                    reason: reason.to_string(),
-                }),
-            }
-        }
-        let chosen = best.as_ref().map(|(i, _)| *i);
+        let (refits, best) = refit_leading(
+            (model, vars, obs),
+            opts,
+            &cur,
+            &ranking,
+            f_hi,
+            &mut not_tried,
+            progress,
+        );
         let mut round = Round {
-            candidates: ok.len(),
-            ranked,
+            candidates: ranking.scored.len(),
+            ranked: ranking.ranked.clone(),
             refits: refits.clone(),
-            threshold,
-            accepted: chosen,
+            threshold: ranking.threshold,
+            accepted: best.as_ref().map(|(i, _)| *i),
             removed: Vec::new(),
             placed: None,
         };
-        match best {
-            Some((i, mut next)) => {
-                progress(&format!("accepted: {}", refits[i].effect));
-                let mut chosen = refits[i].clone();
-                if let Some((placed, better)) = place(
-                    model, vars, obs, opts, &cur, &next, &chosen, f_hi, sigma2, threshold,
-                ) {
-                    progress(&format!(
-                        "placed: {}",
-                        placed
-                            .params
-                            .iter()
-                            .map(ParamEstimate::describe)
-                            .collect::<Vec<_>>()
-                            .join(", ")
-                    ));
-                    round.placed = Some(placed.clone());
-                    chosen = placed;
-                    next = better;
-                }
-                accepted.push(chosen);
-                cur = next;
-                while let Some((k, r, next)) =
-                    backward(model, vars, obs, opts, &cur, f_hi, sigma2, threshold)
-                {
-                    progress(&format!(
-                        "removed: {} (no longer needed: LR = {:.1}, p = {:.2e})",
-                        r.effect, r.lr, r.p_value
-                    ));
-                    accepted.remove(k);
-                    round.removed.push(r);
-                    cur = next;
-                }
-                rounds.push(round);
-            }
-            None => {
-                rounds.push(round);
-                progress("nothing significant left");
-                break;
-            }
+        let Some((i, next)) = best else {
+            rounds.push(round);
+            progress("nothing significant left");
+            break;
+        };
+        progress(&format!("accepted: {}", refits[i].effect));
+        let chosen = refits[i].clone();
+        let (chosen, next) = placed(
+            (model, vars, obs),
+            opts,
+            &cur,
+            (chosen, next),
+            (f_hi, ranking.sigma2, ranking.threshold),
+            &mut round,
+            progress,
+        );
+        accepted.push(chosen);
+        cur = next;
+        while let Some((k, r, next)) = backward(
+            model,
+            vars,
+            obs,
+            opts,
+            &cur,
+            f_hi,
+            ranking.sigma2,
+            ranking.threshold,
+        ) {
+            progress(&format!(
+                "removed: {} (no longer needed: LR = {:.1}, p = {:.2e})",
+                r.effect, r.lr, r.p_value
+            ));
+            accepted.remove(k);
+            round.removed.push(r);
+            cur = next;
         }
+        rounds.push(round);
     }
     let pf = Problem::new(model, vars, obs, iopts, cur.effects.clone(), f_hi);
     let after = analysis(&pf, &cur, opts)?;
@@ -516,6 +394,231 @@ pub fn diagnose(
         model: final_model,
         effects: cur.effects,
     })
+}
+
+/// The measured band (Hz): lowest and highest line (at least 1 mHz, the top above the bottom).
+fn band(obs: &Observations) -> (f64, f64) {
+    let freqs: Vec<f64> = obs
+        .characteristics
+        .iter()
+        .flat_map(|c| c.freqs_hz.iter().copied())
+        .collect();
+    let f_lo = freqs
+        .iter()
+        .copied()
+        .fold(f64::INFINITY, f64::min)
+        .max(1e-3);
+    let f_hi = freqs.iter().copied().fold(0.0, f64::max).max(f_lo * 1.01);
+    (f_lo, f_hi)
+}
+
+/// Effects this data cannot test, and why (reported with every diagnosis).
+fn untestable() -> Vec<NotTried> {
+    vec![
+        NotTried {
+            effect: "amplitude-dependent stiffness".into(),
+            reason: "needs characteristics measured at two excitation levels; the data has one".into(),
+        },
+        NotTried {
+            effect: "ψ varying with frequency".into(),
+            reason: "the model's hysteretic damping is frequency independent by construction; a frequency-dependent ψ is not a nested change of this model".into(),
+        },
+        NotTried {
+            effect: "sensor misalignment".into(),
+            reason: "the characteristics are principal-axis motions fitted from several sensors; a per-sensor misalignment is checked by the processing's rigidity indicator, not here".into(),
+        },
+    ]
+}
+
+/// One round's candidates ranked by the score test at the current fit.
+struct Ranking {
+    candidates: Vec<Effect>,
+    /// The scorable candidates, most significant first.
+    scored: Vec<score::Scored>,
+    /// Families of near-identical candidates (indices into `scored`), representative first.
+    families: Vec<Vec<usize>>,
+    /// The families as reported.
+    ranked: Vec<Ranked>,
+    /// Bonferroni threshold of the round: α / candidates.
+    threshold: f64,
+    /// σ̂² of the current fit.
+    sigma2: f64,
+}
+
+/// Generates the candidates on the current fit of `pc` and ranks them at family-wise level
+/// `alpha`; those that cannot be scored go to `not_tried`.
+fn rank(
+    pc: &Problem,
+    cur: &Current,
+    labels: &[String],
+    (f_lo, f_hi): (f64, f64),
+    alpha: f64,
+    not_tried: &mut Vec<NotTried>,
+) -> Result<Ranking, DiagnoseError> {
+    let (x, gamma) = pc.split(&cur.u);
+    let realized = pc.realize(&gamma)?;
+    let crit = pc.criterion(&realized)?;
+    let free = free_columns(pc, &cur.u);
+    let jfree = DMatrix::from_fn(cur.jac.nrows(), free.len(), |r, c| cur.jac[(r, free[c])]);
+    let sigma2 = residual_scale(cur, free.len(), crit.noise.scale_unknown());
+    let candidates =
+        generate::candidates(&crit.model_at(&x), &realized.vars, &x, labels, f_lo, f_hi);
+    let fit = score::FitPoint {
+        crit: &crit,
+        x: &x,
+        gains: &realized.gains,
+        e: &cur.e,
+        jac: &jfree,
+        sigma2,
+    };
+    let scores = score::score_all(&fit, &candidates).map_err(EvalError::from)?;
+    let mut scored: Vec<score::Scored> = Vec::new();
+    for (c, s) in candidates.iter().zip(scores) {
+        match s {
+            Ok(s) => scored.push(s),
+            Err(reason) => not_tried.push(NotTried {
+                effect: c.describe(),
+                reason: reason.to_string(),
+            }),
+        }
+    }
+    scored.sort_by(|a, b| {
+        a.p_value
+            .total_cmp(&b.p_value)
+            .then(b.statistic.total_cmp(&a.statistic))
+    });
+    let threshold = alpha / scored.len().max(1) as f64;
+    let families = families(&scored, 20);
+    let ranked: Vec<Ranked> = families
+        .iter()
+        .enumerate()
+        .map(|(i, f)| {
+            let s = &scored[f[0]];
+            Ranked {
+                rank: i + 1,
+                kind: candidates[s.candidate].kind().into(),
+                effect: candidates[s.candidate].describe(),
+                statistic: s.statistic,
+                p_value: s.p_value,
+                equivalent: f[1..]
+                    .iter()
+                    .map(|&j| candidates[scored[j].candidate].describe())
+                    .collect(),
+            }
+        })
+        .collect();
+    Ok(Ranking {
+        candidates,
+        scored,
+        families,
+        ranked,
+        threshold,
+        sigma2,
+    })
+}
+
+/// Refits the leading families (up to `opts.refit`) whose score makes them plausible; returns
+/// every refit and the most significant one that passes the round's threshold, with its fit.
+fn refit_leading(
+    (model, vars, obs): (&Model, &Variables, &Observations),
+    opts: &Options,
+    cur: &Current,
+    ranking: &Ranking,
+    f_hi: f64,
+    not_tried: &mut Vec<NotTried>,
+    progress: &mut dyn FnMut(&str),
+) -> (Vec<Refit>, Option<(usize, Current)>) {
+    let Ranking {
+        candidates,
+        scored,
+        families,
+        ranked,
+        threshold,
+        sigma2,
+    } = ranking;
+    let mut refits: Vec<Refit> = Vec::new();
+    let mut best: Option<(usize, Current)> = None;
+    // Refit only what the score makes plausible: the score and LR statistics agree for small
+    // effects and the score understates large ones, so a loose gate (1000× the LR's
+    // threshold) loses nothing and saves the refits when there is nothing to find.
+    for (f, family) in families
+        .iter()
+        .enumerate()
+        .take(opts.refit)
+        .filter(|(_, f)| scored[f[0]].p_value < (1000.0 * threshold).min(1.0))
+    {
+        let s = &scored[family[0]];
+        let cand = &candidates[s.candidate];
+        // The first parameter starts at the score's Gauss-Newton step, the others at their
+        // initial values.
+        let start: Vec<f64> = cand
+            .params(f_hi)
+            .iter()
+            .enumerate()
+            .map(|(j, np)| {
+                if j == 0 {
+                    np.nested + s.step
+                } else {
+                    np.initial
+                }
+            })
+            .collect();
+        match refit(model, vars, obs, opts, cur, cand, &start, f_hi, *sigma2) {
+            Ok((mut r, next)) => {
+                r.equivalent = ranked[f].equivalent.clone();
+                progress(&format!(
+                    "refit {}: ΔJ = {:.1}, LR = {:.1}, p = {:.2e}",
+                    r.effect,
+                    r.criterion_before - r.criterion_after,
+                    r.lr,
+                    r.p_value
+                ));
+                // Most significant first; p-values of large effects underflow to 0, so
+                // compare the LR's margin over its critical value at the threshold.
+                let better = best
+                    .as_ref()
+                    .is_none_or(|(b, _)| margin(&r, *threshold) > margin(&refits[*b], *threshold));
+                if r.p_value < *threshold && better {
+                    best = Some((refits.len(), next));
+                }
+                refits.push(r);
+            }
+            Err(reason) => not_tried.push(NotTried {
+                effect: format!("refit of {}", cand.describe()),
+                reason: reason.to_string(),
+            }),
+        }
+    }
+    (refits, best)
+}
+
+/// The accepted refit with its location refined where that is significantly better (recorded
+/// in `round.placed`), and the fit that goes with it.
+fn placed(
+    (model, vars, obs): (&Model, &Variables, &Observations),
+    opts: &Options,
+    cur: &Current,
+    (chosen, next): (Refit, Current),
+    (f_hi, sigma2, threshold): (f64, f64, f64),
+    round: &mut Round,
+    progress: &mut dyn FnMut(&str),
+) -> (Refit, Current) {
+    let Some((placed, better)) = place(
+        model, vars, obs, opts, cur, &next, &chosen, f_hi, sigma2, threshold,
+    ) else {
+        return (chosen, next);
+    };
+    progress(&format!(
+        "placed: {}",
+        placed
+            .params
+            .iter()
+            .map(ParamEstimate::describe)
+            .collect::<Vec<_>>()
+            .join(", ")
+    ));
+    round.placed = Some(placed.clone());
+    (placed, better)
 }
 
 /// The backward check after an effect was added: an earlier effect may only have compensated for
