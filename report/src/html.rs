@@ -72,6 +72,18 @@ pub fn failure_page(title: &str, created_utc: &str, error: &str, lines: &[String
 /// Renders the page.
 pub fn render(r: &Report) -> Result<String, ReportError> {
     let mut h = String::new();
+    header(&mut h, r);
+    identification_summary(&mut h, r);
+    characteristics(&mut h, r)?;
+    parameters(&mut h, r)?;
+    diagnosis(&mut h, r);
+    sensitivity(&mut h, r)?;
+    drift(&mut h, r)?;
+    Ok(h)
+}
+
+/// The title, provenance and outcome.
+fn header(h: &mut String, r: &Report) {
     let e = escape;
     let _ = write!(
         h,
@@ -111,8 +123,11 @@ pub fn render(r: &Report) -> Result<String, ReportError> {
         h.push_str("</ul>");
     }
     h.push_str("</div>\n");
+}
 
-    // Identification summary.
+/// The identification in one paragraph.
+fn identification_summary(h: &mut String, r: &Report) {
+    let e = escape;
     let id = &r.identification;
     let _ = write!(
         h,
@@ -129,8 +144,11 @@ pub fn render(r: &Report) -> Result<String, ReportError> {
         num(id.reduced_chi2),
         e(&id.noise)
     );
+}
 
-    // Characteristics.
+/// The characteristics: errors per stage and the amplitude and residual charts.
+fn characteristics(h: &mut String, r: &Report) -> Result<(), ReportError> {
+    let e = escape;
     h.push_str("<h2 id=\"characteristics\">Amplitude-frequency characteristics</h2>\n");
     h.push_str("<p class=\"note\">Measured points with ± one standard deviation; the model before identification (initial), after it (identified) and, when diagnosis ran, after the diagnosed effects were added and refitted (diagnosed).</p>\n");
     h.push_str("<table><tr><th class=\"l\">characteristic</th>");
@@ -168,8 +186,13 @@ pub fn render(r: &Report) -> Result<String, ReportError> {
             inline(plot::residual_chart(c)?)
         );
     }
+    Ok(())
+}
 
-    // Parameter table.
+/// The parameter table (Table-1-like) and the poorly identifiable directions.
+fn parameters(h: &mut String, r: &Report) -> Result<(), ReportError> {
+    let e = escape;
+    let id = &r.identification;
     h.push_str("<h2 id=\"parameters\">Parameters (Table-1-like)</h2>\n<table><tr><th class=\"l\">variable</th><th class=\"l\">SDEs</th><th class=\"l\">parameter</th><th class=\"l\">unit</th><th>initial</th><th>identified</th><th>std error</th><th>σ/x</th><th class=\"l\">note</th></tr>\n");
     for p in &id.parameters {
         let _ = writeln!(
@@ -206,8 +229,12 @@ pub fn render(r: &Report) -> Result<String, ReportError> {
         }
         h.push_str("</ul>\n");
     }
+    Ok(())
+}
 
-    // Diagnosis.
+/// The diagnosis: before/after, rounds, accepted effects.
+fn diagnosis(h: &mut String, r: &Report) {
+    let e = escape;
     h.push_str("<h2 id=\"diagnosis\">Diagnosis</h2>\n");
     match &r.diagnosis {
         None => h.push_str("<p class=\"note\">Diagnosis did not run for this report.</p>\n"),
@@ -263,8 +290,10 @@ pub fn render(r: &Report) -> Result<String, ReportError> {
             }
         }
     }
+}
 
-    // Sensitivity.
+/// The sensitivity maps.
+fn sensitivity(h: &mut String, r: &Report) -> Result<(), ReportError> {
     h.push_str("<h2 id=\"sensitivity\">Sensitivity (MI map)</h2>\n");
     match &r.sensitivity {
         None => h.push_str("<p class=\"note\">Not computed for this report.</p>\n"),
@@ -276,8 +305,12 @@ pub fn render(r: &Report) -> Result<String, ReportError> {
             );
         }
     }
+    Ok(())
+}
 
-    // Drift.
+/// The drift across runs.
+fn drift(h: &mut String, r: &Report) -> Result<(), ReportError> {
+    let e = escape;
     h.push_str("<h2 id=\"drift\">Drift across runs</h2>\n");
     match &r.drift {
         None => h.push_str("<p class=\"note\">No earlier runs to compare with.</p>\n"),
@@ -316,5 +349,5 @@ pub fn render(r: &Report) -> Result<String, ReportError> {
         "<p class=\"meta\">Machine-readable copy: report.json ({}).</p>\n</body></html>",
         e(&r.schema)
     );
-    Ok(h)
+    Ok(())
 }
