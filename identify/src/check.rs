@@ -4,7 +4,7 @@
 
 use nalgebra::Matrix3;
 
-use crate::model::Model;
+use crate::model::{Body, Characteristic, Model, PointForce, Sde};
 
 /// A field of an element of the model.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -55,165 +55,198 @@ pub fn rotation_problem(r: &Matrix3<f64>, tol: f64) -> Option<String> {
 /// Errors (which make the model unusable) and warnings (which do not) of a resolved model.
 pub fn check(model: &Model) -> (Vec<Problem>, Vec<Problem>) {
     let mut errors = Vec::new();
-    let mut warnings = Vec::new();
-    let mut err = |item, message: String| errors.push(Problem { item, message });
-    let nb = model.bodies.len();
-    if nb == 0 {
-        err(
-            Item::Model,
-            "the model has no bodies; add at least one [[body]]".into(),
-        );
+    if model.bodies.is_empty() {
+        errors.push(Problem {
+            item: Item::Model,
+            message: "the model has no bodies; add at least one [[body]]".into(),
+        });
     }
     for (i, b) in model.bodies.iter().enumerate() {
-        if !(b.mass.is_finite() && b.mass > 0.0) {
-            err(
-                Item::Body(i, "mass"),
-                format!(
-                    "body \"{}\": mass must be a positive number of kg, got {}",
-                    b.name, b.mass
-                ),
-            );
-        }
-        if b.inertia.iter().any(|j| !(j.is_finite() && *j > 0.0)) {
-            err(
-                Item::Body(i, "inertia"),
-                format!(
-                    "body \"{}\": principal moments of inertia must be positive (kg·m²), got {:?}",
-                    b.name, b.inertia
-                ),
-            );
-        }
-        if b.position.iter().any(|v| !v.is_finite()) {
-            err(
-                Item::Body(i, "position"),
-                format!("body \"{}\": position is not finite", b.name),
-            );
-        }
-        if let Some(m) = rotation_problem(&b.rotation, 1e-9) {
-            err(
-                Item::Body(i, "rotation"),
-                format!("body \"{}\": {m}", b.name),
-            );
-        }
-        if let Some(j) = model.bodies[..i].iter().position(|o| o.name == b.name) {
-            err(
-                Item::Body(i, "name"),
-                format!(
-                    "body name \"{}\" is used twice (bodies {} and {}); names must be unique",
-                    b.name,
-                    j + 1,
-                    i + 1
-                ),
-            );
-        }
+        check_body(model, i, b, &mut errors);
     }
     for (i, s) in model.sdes.iter().enumerate() {
-        for (side, b) in s.bodies.iter().enumerate() {
-            if let Some(b) = b {
-                if *b >= nb {
-                    err(Item::Sde(i, "bodies"), format!("sde \"{}\": body index {b} (side {side}) does not exist; there are {nb} bodies", s.name));
-                }
-            }
-        }
-        match s.bodies {
-            [Some(a), Some(b)] if a == b => err(Item::Sde(i, "bodies"), format!(
-                "sde \"{}\" joins body {} to itself; an SDE joins two different bodies, or a body and the ground",
-                s.name, model.bodies.get(a).map(|b| b.name.as_str()).unwrap_or("?")
-            )),
-            [None, None] => err(Item::Sde(i, "bodies"), format!("sde \"{}\" joins the ground to the ground; name at least one body", s.name)),
-            _ => {}
-        }
-        if s.point.iter().any(|v| !v.is_finite()) {
-            err(
-                Item::Sde(i, "point"),
-                format!("sde \"{}\": point is not finite", s.name),
-            );
-        }
-        if let Some(m) = rotation_problem(&s.rotation, 1e-9) {
-            err(Item::Sde(i, "rotation"), format!("sde \"{}\": {m}", s.name));
-        }
-        let k = s.law.stiffness();
-        let psi = s.law.dissipation();
-        if k.iter().chain(&psi).any(|v| !v.is_finite()) {
-            err(
-                Item::Sde(i, "k"),
-                format!(
-                    "sde \"{}\": stiffness or dissipation is NaN or infinite",
-                    s.name
-                ),
-            );
-        } else if k.iter().any(|v| *v < 0.0) {
-            err(
-                Item::Sde(i, "k"),
-                format!("sde \"{}\": stiffnesses must be ≥ 0, got {k:?}", s.name),
-            );
-        } else if psi.iter().any(|v| *v < 0.0) {
-            err(
-                Item::Sde(i, "psi"),
-                format!("sde \"{}\": dissipation ψ must be ≥ 0, got {psi:?}", s.name),
-            );
-        }
-        if let Some(j) = model.sdes[..i].iter().position(|o| o.name == s.name) {
-            err(
-                Item::Sde(i, "name"),
-                format!(
-                    "sde name \"{}\" is used twice (elements {} and {}); names must be unique",
-                    s.name,
-                    j + 1,
-                    i + 1
-                ),
-            );
-        }
+        check_sde(model, i, s, &mut errors);
     }
     for (i, f) in model.forces.iter().enumerate() {
-        if f.body >= nb {
-            err(
-                Item::Force(i, "body"),
-                format!(
-                    "force {}: body index {} does not exist; there are {nb} bodies",
-                    i + 1,
-                    f.body
-                ),
-            );
-        }
-        if f.point
-            .iter()
-            .chain(f.force.iter())
-            .chain(f.moment.iter())
-            .any(|v| !v.is_finite())
-        {
-            err(
-                Item::Force(i, "force"),
-                format!("force {}: point, force or moment is not finite", i + 1),
-            );
-        }
+        check_force(model, i, f, &mut errors);
     }
     for (i, o) in model.outputs.iter().enumerate() {
-        if o.body >= nb {
-            err(
-                Item::Output(i, "body"),
-                format!(
-                    "output {}: body index {} does not exist; there are {nb} bodies",
-                    i + 1,
-                    o.body
-                ),
-            );
-        }
-        if o.dof > 5 {
-            err(
-                Item::Output(i, "dof"),
-                format!(
-                    "output {}: dof {} is out of range 0-5 (u1 u2 u3 r1 r2 r3)",
-                    i + 1,
-                    o.dof
-                ),
-            );
-        }
+        check_output(model, i, o, &mut errors);
     }
     if !errors.is_empty() {
-        return (errors, warnings);
+        return (errors, Vec::new());
     }
-    // Connectivity: bodies touched by no enabled SDE, bodies held only by SDEs of zero stiffness,
+    (errors, connectivity(model))
+}
+
+/// Body `i`: positive mass and inertias, finite position, proper axes, a unique name.
+fn check_body(model: &Model, i: usize, b: &Body, errors: &mut Vec<Problem>) {
+    let mut err = |item, message: String| errors.push(Problem { item, message });
+    if !(b.mass.is_finite() && b.mass > 0.0) {
+        err(
+            Item::Body(i, "mass"),
+            format!(
+                "body \"{}\": mass must be a positive number of kg, got {}",
+                b.name, b.mass
+            ),
+        );
+    }
+    if b.inertia.iter().any(|j| !(j.is_finite() && *j > 0.0)) {
+        err(
+            Item::Body(i, "inertia"),
+            format!(
+                "body \"{}\": principal moments of inertia must be positive (kg·m²), got {:?}",
+                b.name, b.inertia
+            ),
+        );
+    }
+    if b.position.iter().any(|v| !v.is_finite()) {
+        err(
+            Item::Body(i, "position"),
+            format!("body \"{}\": position is not finite", b.name),
+        );
+    }
+    if let Some(m) = rotation_problem(&b.rotation, 1e-9) {
+        err(
+            Item::Body(i, "rotation"),
+            format!("body \"{}\": {m}", b.name),
+        );
+    }
+    if let Some(j) = model.bodies[..i].iter().position(|o| o.name == b.name) {
+        err(
+            Item::Body(i, "name"),
+            format!(
+                "body name \"{}\" is used twice (bodies {} and {}); names must be unique",
+                b.name,
+                j + 1,
+                i + 1
+            ),
+        );
+    }
+}
+
+/// SDE `i`: existing, different bodies, finite point, proper axes, finite non-negative
+/// stiffness and ψ, a unique name.
+fn check_sde(model: &Model, i: usize, s: &Sde, errors: &mut Vec<Problem>) {
+    let nb = model.bodies.len();
+    let mut err = |item, message: String| errors.push(Problem { item, message });
+    for (side, b) in s.bodies.iter().enumerate() {
+        if let Some(b) = b {
+            if *b >= nb {
+                err(Item::Sde(i, "bodies"), format!("sde \"{}\": body index {b} (side {side}) does not exist; there are {nb} bodies", s.name));
+            }
+        }
+    }
+    match s.bodies {
+        [Some(a), Some(b)] if a == b => err(Item::Sde(i, "bodies"), format!(
+            "sde \"{}\" joins body {} to itself; an SDE joins two different bodies, or a body and the ground",
+            s.name, model.bodies.get(a).map(|b| b.name.as_str()).unwrap_or("?")
+        )),
+        [None, None] => err(Item::Sde(i, "bodies"), format!("sde \"{}\" joins the ground to the ground; name at least one body", s.name)),
+        _ => {}
+    }
+    if s.point.iter().any(|v| !v.is_finite()) {
+        err(
+            Item::Sde(i, "point"),
+            format!("sde \"{}\": point is not finite", s.name),
+        );
+    }
+    if let Some(m) = rotation_problem(&s.rotation, 1e-9) {
+        err(Item::Sde(i, "rotation"), format!("sde \"{}\": {m}", s.name));
+    }
+    let k = s.law.stiffness();
+    let psi = s.law.dissipation();
+    if k.iter().chain(&psi).any(|v| !v.is_finite()) {
+        err(
+            Item::Sde(i, "k"),
+            format!(
+                "sde \"{}\": stiffness or dissipation is NaN or infinite",
+                s.name
+            ),
+        );
+    } else if k.iter().any(|v| *v < 0.0) {
+        err(
+            Item::Sde(i, "k"),
+            format!("sde \"{}\": stiffnesses must be ≥ 0, got {k:?}", s.name),
+        );
+    } else if psi.iter().any(|v| *v < 0.0) {
+        err(
+            Item::Sde(i, "psi"),
+            format!("sde \"{}\": dissipation ψ must be ≥ 0, got {psi:?}", s.name),
+        );
+    }
+    if let Some(j) = model.sdes[..i].iter().position(|o| o.name == s.name) {
+        err(
+            Item::Sde(i, "name"),
+            format!(
+                "sde name \"{}\" is used twice (elements {} and {}); names must be unique",
+                s.name,
+                j + 1,
+                i + 1
+            ),
+        );
+    }
+}
+
+/// Force `i`: on an existing body, finite.
+fn check_force(model: &Model, i: usize, f: &PointForce, errors: &mut Vec<Problem>) {
+    let nb = model.bodies.len();
+    let mut err = |item, message: String| errors.push(Problem { item, message });
+    if f.body >= nb {
+        err(
+            Item::Force(i, "body"),
+            format!(
+                "force {}: body index {} does not exist; there are {nb} bodies",
+                i + 1,
+                f.body
+            ),
+        );
+    }
+    if f.point
+        .iter()
+        .chain(f.force.iter())
+        .chain(f.moment.iter())
+        .any(|v| !v.is_finite())
+    {
+        err(
+            Item::Force(i, "force"),
+            format!("force {}: point, force or moment is not finite", i + 1),
+        );
+    }
+}
+
+/// Output `i`: on an existing body, a DOF 0-5.
+fn check_output(model: &Model, i: usize, o: &Characteristic, errors: &mut Vec<Problem>) {
+    let nb = model.bodies.len();
+    let mut err = |item, message: String| errors.push(Problem { item, message });
+    if o.body >= nb {
+        err(
+            Item::Output(i, "body"),
+            format!(
+                "output {}: body index {} does not exist; there are {nb} bodies",
+                i + 1,
+                o.body
+            ),
+        );
+    }
+    if o.dof > 5 {
+        err(
+            Item::Output(i, "dof"),
+            format!(
+                "output {}: dof {} is out of range 0-5 (u1 u2 u3 r1 r2 r3)",
+                i + 1,
+                o.dof
+            ),
+        );
+    }
+}
+
+/// Warnings of a model without errors: bodies connected to nothing or held only by SDEs of zero
+/// stiffness, and groups with no path to the ground.
+fn connectivity(model: &Model) -> Vec<Problem> {
+    let nb = model.bodies.len();
+    let mut warnings = Vec::new();
+    // Bodies touched by no enabled SDE, bodies held only by SDEs of zero stiffness,
     // and groups with no path to the ground (through SDEs with some stiffness).
     let mut touched = vec![false; nb];
     let mut held = vec![false; nb];
@@ -269,5 +302,5 @@ pub fn check(model: &Model) -> (Vec<Problem>, Vec<Problem>) {
             ),
         });
     }
-    (errors, warnings)
+    warnings
 }
