@@ -106,118 +106,31 @@ pub const CSV_COLUMNS: [&str; 9] = [
 /// frequency, and a repeated frequency is an error naming both lines.
 pub fn parse_csv(text: &str, origin: &str) -> Result<MeasuredData, DataError> {
     let text = crate::source::strip_bom(text);
-    let err = |line: usize, message: String| DataError::Csv {
-        origin: origin.into(),
-        line,
-        message,
-    };
+    let err = CsvErr { origin };
     let mut lines = text
         .lines()
         .enumerate()
         .map(|(i, l)| (i + 1, l.trim()))
         .filter(|(_, l)| !l.is_empty() && !l.starts_with('#'));
     let Some((hline, header)) = lines.next() else {
-        return Err(err(
+        return Err(err.at(
             1,
             "empty file: expected a header line, e.g. `body,dof,quantity,freq_hz,amplitude`".into(),
         ));
     };
-    let names: Vec<String> = header
-        .split(',')
-        .map(|s| s.trim().to_ascii_lowercase())
-        .collect();
-    let mut col: BTreeMap<&str, usize> = BTreeMap::new();
-    for (i, n) in names.iter().enumerate() {
-        let Some(known) = CSV_COLUMNS.iter().find(|c| **c == n.as_str()) else {
-            return Err(err(
-                hline,
-                format!(
-                    "unknown column \"{n}\"; known columns: {}",
-                    CSV_COLUMNS.join(", ")
-                ),
-            ));
-        };
-        if col.insert(known, i).is_some() {
-            return Err(err(hline, format!("column \"{n}\" appears twice")));
-        }
-    }
-    for required in ["body", "dof", "freq_hz", "amplitude"] {
-        if !col.contains_key(required) {
-            return Err(err(hline, format!("missing column \"{required}\"; the header needs at least body, dof, freq_hz, amplitude")));
-        }
-    }
-    struct Row {
-        line: usize,
-        freq: f64,
-        amp: f64,
-        phase: Option<f64>,
-        var: Option<f64>,
-        coh: Option<f64>,
-        avg: Option<u32>,
-    }
+    let (col, ncols) = csv_columns(header, hline, &err)?;
     // Characteristics in order of first appearance.
     let mut order: Vec<(String, u8, QuantityName)> = Vec::new();
-    let mut rows: Vec<Vec<Row>> = Vec::new();
+    let mut rows: Vec<Vec<CsvRow>> = Vec::new();
     for (ln, l) in lines {
         let cells: Vec<&str> = l.split(',').map(str::trim).collect();
-        if cells.len() != names.len() {
-            return Err(err(
+        if cells.len() != ncols {
+            return Err(err.at(
                 ln,
-                format!(
-                    "{} cells, but the header has {} columns",
-                    cells.len(),
-                    names.len()
-                ),
+                format!("{} cells, but the header has {ncols} columns", cells.len()),
             ));
         }
-        let cell = |name: &str| col.get(name).map(|&i| cells[i]).filter(|c| !c.is_empty());
-        let number = |name: &str| -> Result<Option<f64>, DataError> {
-            match cell(name) {
-                None => Ok(None),
-                Some(c) => c
-                    .parse::<f64>()
-                    .map(Some)
-                    .map_err(|_| err(ln, format!("column {name}: \"{c}\" is not a number"))),
-            }
-        };
-        let body = cell("body")
-            .ok_or_else(|| err(ln, "empty body name".into()))?
-            .to_string();
-        let dof_text =
-            cell("dof").ok_or_else(|| err(ln, "empty dof; use u1, u2, u3, r1, r2, r3".into()))?;
-        let dof = parse_dof(dof_text).ok_or_else(|| {
-            err(ln, format!("unknown dof \"{dof_text}\"; use u1, u2, u3 (translations) or r1, r2, r3 (rotations), or 0-5"))
-        })?;
-        let quantity = match cell("quantity") {
-            None => QuantityName::Displacement,
-            Some(q) => Quantity::parse(q).map(QuantityName::from).ok_or_else(|| {
-                err(
-                    ln,
-                    format!("unknown quantity \"{q}\"; use displacement, velocity or acceleration"),
-                )
-            })?,
-        };
-        let freq = number("freq_hz")?.ok_or_else(|| err(ln, "empty freq_hz".into()))?;
-        let amp = number("amplitude")?.ok_or_else(|| err(ln, "empty amplitude".into()))?;
-        let avg = match cell("averages") {
-            None => None,
-            Some(c) => Some(c.parse::<u32>().map_err(|_| {
-                err(
-                    ln,
-                    format!("column averages: \"{c}\" is not a whole number"),
-                )
-            })?),
-        };
-        let row = Row {
-            line: ln,
-            freq,
-            amp,
-            phase: number("phase_rad")?,
-            var: number("variance")?,
-            coh: number("coherence")?,
-            avg,
-        };
-        let key = (body, dof, quantity);
+        let (key, row) = csv_row(&cells, &col, ln, &err)?;
         match order.iter().position(|k| *k == key) {
             Some(i) => rows[i].push(row),
             None => {
@@ -227,65 +140,194 @@ pub fn parse_csv(text: &str, origin: &str) -> Result<MeasuredData, DataError> {
         }
     }
     if order.is_empty() {
-        return Err(err(hline, "no data rows after the header".into()));
+        return Err(err.at(hline, "no data rows after the header".into()));
     }
-    let mut characteristics = Vec::new();
-    for ((body, dof, quantity), mut pts) in order.into_iter().zip(rows) {
-        pts.sort_by(|a, b| a.freq.total_cmp(&b.freq));
-        for w in pts.windows(2) {
-            if w[0].freq == w[1].freq {
-                return Err(err(w[1].line, format!(
-                    "{body} {}: frequency {} Hz repeats line {}; each characteristic needs distinct frequencies (average or drop the repeat)",
-                    DOF_NAMES[dof as usize], w[1].freq, w[0].line
-                )));
-            }
-        }
-        let all_or_none = |what: &str, has: &dyn Fn(&Row) -> bool| -> Result<bool, DataError> {
-            let n = pts.iter().filter(|r| has(r)).count();
-            if n != 0 && n != pts.len() {
-                let missing = pts
-                    .iter()
-                    .find(|r| !has(r))
-                    .map(|r| r.line)
-                    .unwrap_or(hline);
-                return Err(err(missing, format!(
-                    "{body} {}: column {what} is given for some points of this characteristic but not this one; give it for every point or none",
-                    DOF_NAMES[dof as usize]
-                )));
-            }
-            Ok(n > 0)
-        };
-        let has_phase = all_or_none("phase_rad", &|r| r.phase.is_some())?;
-        let has_var = all_or_none("variance", &|r| r.var.is_some())?;
-        let has_coh = all_or_none("coherence", &|r| r.coh.is_some())?;
-        let has_avg = all_or_none("averages", &|r| r.avg.is_some())?;
-        let averages = if has_avg {
-            let a = pts[0].avg;
-            if let Some(r) = pts.iter().find(|r| r.avg != a) {
-                return Err(err(r.line, format!(
-                    "{body} {}: averages differ between points of one characteristic ({:?} vs {:?}); one number of averages per characteristic",
-                    DOF_NAMES[dof as usize], r.avg.unwrap_or(0), a.unwrap_or(0)
-                )));
-            }
-            a
-        } else {
-            None
-        };
-        characteristics.push(Measurement {
-            body,
-            dof,
-            quantity,
-            freqs_hz: pts.iter().map(|r| r.freq).collect(),
-            amplitude: pts.iter().map(|r| r.amp).collect(),
-            phase_rad: has_phase.then(|| pts.iter().map(|r| r.phase.unwrap_or(f64::NAN)).collect()),
-            variance: has_var.then(|| pts.iter().map(|r| r.var.unwrap_or(f64::NAN)).collect()),
-            coherence: has_coh.then(|| pts.iter().map(|r| r.coh.unwrap_or(f64::NAN)).collect()),
-            averages,
-        });
-    }
+    let characteristics = order
+        .into_iter()
+        .zip(rows)
+        .map(|(key, pts)| csv_characteristic(key, pts, hline, &err))
+        .collect::<Result<_, _>>()?;
     Ok(MeasuredData {
         source: origin.to_string(),
         characteristics,
+    })
+}
+
+/// Errors of a CSV file: its name and a line.
+struct CsvErr<'a> {
+    origin: &'a str,
+}
+
+impl CsvErr<'_> {
+    fn at(&self, line: usize, message: String) -> DataError {
+        DataError::Csv {
+            origin: self.origin.into(),
+            line,
+            message,
+        }
+    }
+}
+
+/// One data row of the CSV form.
+struct CsvRow {
+    line: usize,
+    freq: f64,
+    amp: f64,
+    phase: Option<f64>,
+    var: Option<f64>,
+    coh: Option<f64>,
+    avg: Option<u32>,
+}
+
+/// The header's columns (name → index; known names, each once, the required ones present)
+/// and their count.
+fn csv_columns(
+    header: &str,
+    hline: usize,
+    err: &CsvErr,
+) -> Result<(BTreeMap<&'static str, usize>, usize), DataError> {
+    let names: Vec<String> = header
+        .split(',')
+        .map(|s| s.trim().to_ascii_lowercase())
+        .collect();
+    let mut col: BTreeMap<&'static str, usize> = BTreeMap::new();
+    for (i, n) in names.iter().enumerate() {
+        let Some(known) = CSV_COLUMNS.iter().find(|c| **c == n.as_str()) else {
+            return Err(err.at(
+                hline,
+                format!(
+                    "unknown column \"{n}\"; known columns: {}",
+                    CSV_COLUMNS.join(", ")
+                ),
+            ));
+        };
+        if col.insert(known, i).is_some() {
+            return Err(err.at(hline, format!("column \"{n}\" appears twice")));
+        }
+    }
+    for required in ["body", "dof", "freq_hz", "amplitude"] {
+        if !col.contains_key(required) {
+            return Err(err.at(hline, format!("missing column \"{required}\"; the header needs at least body, dof, freq_hz, amplitude")));
+        }
+    }
+    Ok((col, names.len()))
+}
+
+/// One data row: the characteristic it belongs to (body, dof, quantity) and its values.
+fn csv_row(
+    cells: &[&str],
+    col: &BTreeMap<&'static str, usize>,
+    ln: usize,
+    err: &CsvErr,
+) -> Result<((String, u8, QuantityName), CsvRow), DataError> {
+    let cell = |name: &str| col.get(name).map(|&i| cells[i]).filter(|c| !c.is_empty());
+    let number = |name: &str| -> Result<Option<f64>, DataError> {
+        match cell(name) {
+            None => Ok(None),
+            Some(c) => c
+                .parse::<f64>()
+                .map(Some)
+                .map_err(|_| err.at(ln, format!("column {name}: \"{c}\" is not a number"))),
+        }
+    };
+    let body = cell("body")
+        .ok_or_else(|| err.at(ln, "empty body name".into()))?
+        .to_string();
+    let dof_text =
+        cell("dof").ok_or_else(|| err.at(ln, "empty dof; use u1, u2, u3, r1, r2, r3".into()))?;
+    let dof = parse_dof(dof_text).ok_or_else(|| {
+        err.at(ln, format!("unknown dof \"{dof_text}\"; use u1, u2, u3 (translations) or r1, r2, r3 (rotations), or 0-5"))
+    })?;
+    let quantity = match cell("quantity") {
+        None => QuantityName::Displacement,
+        Some(q) => Quantity::parse(q).map(QuantityName::from).ok_or_else(|| {
+            err.at(
+                ln,
+                format!("unknown quantity \"{q}\"; use displacement, velocity or acceleration"),
+            )
+        })?,
+    };
+    let freq = number("freq_hz")?.ok_or_else(|| err.at(ln, "empty freq_hz".into()))?;
+    let amp = number("amplitude")?.ok_or_else(|| err.at(ln, "empty amplitude".into()))?;
+    let avg = match cell("averages") {
+        None => None,
+        Some(c) => Some(c.parse::<u32>().map_err(|_| {
+            err.at(
+                ln,
+                format!("column averages: \"{c}\" is not a whole number"),
+            )
+        })?),
+    };
+    let row = CsvRow {
+        line: ln,
+        freq,
+        amp,
+        phase: number("phase_rad")?,
+        var: number("variance")?,
+        coh: number("coherence")?,
+        avg,
+    };
+    Ok(((body, dof, quantity), row))
+}
+
+/// The characteristic of one key from its rows: sorted by frequency, distinct frequencies, the
+/// optional columns given for every point or none, one number of averages.
+fn csv_characteristic(
+    (body, dof, quantity): (String, u8, QuantityName),
+    mut pts: Vec<CsvRow>,
+    hline: usize,
+    err: &CsvErr,
+) -> Result<Measurement, DataError> {
+    pts.sort_by(|a, b| a.freq.total_cmp(&b.freq));
+    for w in pts.windows(2) {
+        if w[0].freq == w[1].freq {
+            return Err(err.at(w[1].line, format!(
+                "{body} {}: frequency {} Hz repeats line {}; each characteristic needs distinct frequencies (average or drop the repeat)",
+                DOF_NAMES[dof as usize], w[1].freq, w[0].line
+            )));
+        }
+    }
+    let all_or_none = |what: &str, has: &dyn Fn(&CsvRow) -> bool| -> Result<bool, DataError> {
+        let n = pts.iter().filter(|r| has(r)).count();
+        if n != 0 && n != pts.len() {
+            let missing = pts
+                .iter()
+                .find(|r| !has(r))
+                .map(|r| r.line)
+                .unwrap_or(hline);
+            return Err(err.at(missing, format!(
+                "{body} {}: column {what} is given for some points of this characteristic but not this one; give it for every point or none",
+                DOF_NAMES[dof as usize]
+            )));
+        }
+        Ok(n > 0)
+    };
+    let has_phase = all_or_none("phase_rad", &|r| r.phase.is_some())?;
+    let has_var = all_or_none("variance", &|r| r.var.is_some())?;
+    let has_coh = all_or_none("coherence", &|r| r.coh.is_some())?;
+    let has_avg = all_or_none("averages", &|r| r.avg.is_some())?;
+    let averages = if has_avg {
+        let a = pts[0].avg;
+        if let Some(r) = pts.iter().find(|r| r.avg != a) {
+            return Err(err.at(r.line, format!(
+                "{body} {}: averages differ between points of one characteristic ({:?} vs {:?}); one number of averages per characteristic",
+                DOF_NAMES[dof as usize], r.avg.unwrap_or(0), a.unwrap_or(0)
+            )));
+        }
+        a
+    } else {
+        None
+    };
+    Ok(Measurement {
+        body,
+        dof,
+        quantity,
+        freqs_hz: pts.iter().map(|r| r.freq).collect(),
+        amplitude: pts.iter().map(|r| r.amp).collect(),
+        phase_rad: has_phase.then(|| pts.iter().map(|r| r.phase.unwrap_or(f64::NAN)).collect()),
+        variance: has_var.then(|| pts.iter().map(|r| r.var.unwrap_or(f64::NAN)).collect()),
+        coherence: has_coh.then(|| pts.iter().map(|r| r.coh.unwrap_or(f64::NAN)).collect()),
+        averages,
     })
 }
 
