@@ -609,32 +609,10 @@ pub fn parse(bytes: &[u8], file: &str) -> Result<Vec<Function>> {
 }
 
 fn parse_58(c: &mut Cursor, dataset: usize, binary: Option<(bool, usize)>) -> Result<Function> {
-    let mut rec = Vec::with_capacity(11);
-    for r in 1..=11 {
-        let l = c.next_line().ok_or_else(|| {
-            c.err(
-                dataset,
-                format!("file ends before record {r} of 11: truncated header"),
-            )
-        })?;
-        if is_delimiter(l) {
-            return Err(c.err(dataset, format!("end delimiter where record {r} was expected: the header has only {} of 11 records", r - 1)));
-        }
-        rec.push(String::from_utf8_lossy(l).into_owned());
-    }
-    let int =
-        |line: &str, start: usize, w: usize, what: &str, r: usize, c: &Cursor| -> Result<i64> {
-            let s = field(line, start, w);
-            if s.is_empty() {
-                return Ok(0);
-            }
-            s.parse::<i64>().map_err(|_| {
-                c.err(
-                    dataset,
-                    format!("record {r} field '{what}' is {s:?}, not an integer"),
-                )
-            })
-        };
+    let rec = header_records(c, dataset)?;
+    let int = |line: &str, start: usize, w: usize, what: &str, r: usize, c: &Cursor| {
+        int_field(c, dataset, line, (start, w), what, r)
+    };
     let r6 = &rec[5];
     let func_type = int(r6, 0, 5, "function type", 6, c)?;
     if field(r6, 0, 5).is_empty() || func_type < 0 {
@@ -643,57 +621,7 @@ fn parse_58(c: &mut Cursor, dataset: usize, binary: Option<(bool, usize)>) -> Re
             format!("record 6 has no valid function type in columns 1-5 ({r6:?})"),
         ));
     }
-    let r7 = &rec[6];
-    let ord_type = int(r7, 0, 10, "ordinate data type", 7, c)?;
-    let num_pts = int(r7, 10, 10, "number of points", 7, c)?;
-    let even = int(r7, 20, 10, "abscissa spacing", 7, c)?;
-    let real7 = |start: usize, what: &str| -> Result<f64> {
-        let s = field(r7, start, 13);
-        if s.is_empty() {
-            return Ok(0.0);
-        }
-        parse_f64(s).ok_or_else(|| {
-            c.err(
-                dataset,
-                format!("record 7 field '{what}' is {s:?}, not a number"),
-            )
-        })
-    };
-    let min = real7(30, "abscissa minimum")?;
-    let inc = real7(43, "abscissa increment")?;
-    let z_value = real7(56, "z-axis value")?;
-    let (complex, double) = match ord_type {
-        2 => (false, false),
-        4 => (false, true),
-        5 => (true, false),
-        6 => (true, true),
-        t => {
-            return Err(c.err(
-                dataset,
-                format!(
-                "record 7 ordinate data type {t} is not 2, 4, 5 or 6 (real/complex, single/double)"
-            ),
-            ))
-        }
-    };
-    if num_pts <= 0 {
-        return Err(c.err(
-            dataset,
-            format!("record 7 number of points is {num_pts}; must be ≥ 1"),
-        ));
-    }
-    if even != 0 && even != 1 {
-        return Err(c.err(
-            dataset,
-            format!("record 7 abscissa spacing is {even}; must be 0 (uneven) or 1 (even)"),
-        ));
-    }
-    let n = num_pts as usize;
-    let per = if complex { 2 } else { 1 } + if even == 0 { 1 } else { 0 };
-    let expected = n
-        .checked_mul(per)
-        .filter(|e| *e < 1 << 40)
-        .ok_or_else(|| c.err(dataset, format!("record 7 number of points {n} is absurd")))?;
+    let layout = Layout::of_record_7(&rec[6], c, dataset)?;
     let mut axes: [Axis; 4] = Default::default();
     for (a, axis) in axes.iter_mut().enumerate() {
         let l = &rec[7 + a];
@@ -706,119 +634,11 @@ fn parse_58(c: &mut Cursor, dataset: usize, binary: Option<(bool, usize)>) -> Re
             units: field(l, 47, 20).to_string(),
         };
     }
-    let values: Vec<f64> = match binary {
-        Some((little, n_bytes)) => {
-            let width = if double { 8 } else { 4 };
-            // Record 7 decides the block size: some writers (pyuff ≤ 2.5 for complex data) put
-            // half the true byte count in the 58b header. The end delimiter must follow the block.
-            let need = expected * width;
-            let end = c.pos.checked_add(need).filter(|e| *e <= c.bytes.len()).ok_or_else(|| {
-                c.err(dataset, format!("binary block of {need} bytes (record 7: {n} points, type {ord_type}; header says {n_bytes}) runs past the end of the file ({} bytes left): truncated", c.bytes.len() - c.pos))
-            })?;
-            let block = &c.bytes[c.pos..end];
-            c.pos = end;
-            let v = if double {
-                block
-                    .chunks_exact(8)
-                    .map(|b| {
-                        let a = [b[0], b[1], b[2], b[3], b[4], b[5], b[6], b[7]];
-                        if little {
-                            f64::from_le_bytes(a)
-                        } else {
-                            f64::from_be_bytes(a)
-                        }
-                    })
-                    .collect()
-            } else {
-                block
-                    .chunks_exact(4)
-                    .map(|b| {
-                        let a = [b[0], b[1], b[2], b[3]];
-                        (if little {
-                            f32::from_le_bytes(a)
-                        } else {
-                            f32::from_be_bytes(a)
-                        }) as f64
-                    })
-                    .collect()
-            };
-            // The end delimiter may follow directly or after a line break.
-            loop {
-                match c.next_line() {
-                    None => return Err(c.err(dataset, "no end delimiter '    -1' after the binary block: truncated")),
-                    Some(l) if is_delimiter(l) => break,
-                    Some(l) if l.trim_ascii().is_empty() => continue,
-                    Some(_) => {
-                        return Err(c.err(dataset, format!("no end delimiter after the {need}-byte binary block that record 7 announces ({n} points, type {ord_type}; header says {n_bytes} bytes): wrong record length")))
-                    }
-                }
-            }
-            v
-        }
-        None => {
-            let mut v = Vec::with_capacity(expected.min(1 << 24));
-            let mut toks = Vec::new();
-            loop {
-                let l = c.next_line().ok_or_else(|| c.err(dataset, format!("file ends after {} of {expected} values and without the end delimiter: truncated", v.len())))?;
-                if is_delimiter(l) {
-                    break;
-                }
-                let text = std::str::from_utf8(l).map_err(|_| {
-                    c.err(
-                        dataset,
-                        "data line is not text (binary data in an ASCII dataset 58?)",
-                    )
-                })?;
-                toks.clear();
-                tokens(text, &mut toks);
-                for t in &toks {
-                    let x = parse_f64(t).ok_or_else(|| {
-                        c.err(dataset, format!("data value {t:?} is not a number"))
-                    })?;
-                    v.push(x);
-                }
-                if v.len() > expected {
-                    return Err(c.err(dataset, format!("more than the {expected} values record 7 announces ({n} points, type {ord_type}): wrong record length")));
-                }
-            }
-            if v.len() != expected {
-                return Err(c.err(dataset, format!("{} values before the end delimiter, record 7 announces {expected} ({n} points, type {ord_type}): truncated or wrong record length", v.len())));
-            }
-            v
-        }
+    let values = match binary {
+        Some((little, n_bytes)) => binary_values(c, dataset, &layout, little, n_bytes)?,
+        None => ascii_values(c, dataset, &layout)?,
     };
-    let (abscissa, data) = if even == 1 {
-        let data = if complex {
-            Ordinate::Complex(
-                values
-                    .chunks_exact(2)
-                    .map(|p| C64::new(p[0], p[1]))
-                    .collect(),
-            )
-        } else {
-            Ordinate::Real(values)
-        };
-        (
-            Abscissa::Even {
-                min,
-                increment: inc,
-            },
-            data,
-        )
-    } else {
-        let x: Vec<f64> = values.chunks_exact(per).map(|p| p[0]).collect();
-        let data = if complex {
-            Ordinate::Complex(
-                values
-                    .chunks_exact(3)
-                    .map(|p| C64::new(p[1], p[2]))
-                    .collect(),
-            )
-        } else {
-            Ordinate::Real(values.chunks_exact(2).map(|p| p[1]).collect())
-        };
-        (Abscissa::Uneven(x), data)
-    };
+    let (abscissa, data) = layout.split(values);
     let ids = [0, 1, 2, 3, 4].map(|i| rec[i].trim_end().to_string());
     Ok(Function {
         ids,
@@ -832,10 +652,278 @@ fn parse_58(c: &mut Cursor, dataset: usize, binary: Option<(bool, usize)>) -> Re
         reference_entity: field(r6, 56, 10).to_string(),
         reference_node: int(r6, 66, 10, "reference node", 6, c)?,
         reference_dir: int(r6, 76, 4, "reference direction", 6, c)?,
-        double,
+        double: layout.double,
         abscissa,
-        z_value,
+        z_value: layout.z_value,
         axes,
         data,
     })
+}
+
+/// Records 1-11 of a dataset 58 header, as text.
+fn header_records(c: &mut Cursor, dataset: usize) -> Result<Vec<String>> {
+    let mut rec = Vec::with_capacity(11);
+    for r in 1..=11 {
+        let l = c.next_line().ok_or_else(|| {
+            c.err(
+                dataset,
+                format!("file ends before record {r} of 11: truncated header"),
+            )
+        })?;
+        if is_delimiter(l) {
+            return Err(c.err(dataset, format!("end delimiter where record {r} was expected: the header has only {} of 11 records", r - 1)));
+        }
+        rec.push(String::from_utf8_lossy(l).into_owned());
+    }
+    Ok(rec)
+}
+
+/// The integer in columns `start..start + width` of header record `r` (0 when blank).
+fn int_field(
+    c: &Cursor,
+    dataset: usize,
+    line: &str,
+    (start, width): (usize, usize),
+    what: &str,
+    r: usize,
+) -> Result<i64> {
+    let s = field(line, start, width);
+    if s.is_empty() {
+        return Ok(0);
+    }
+    s.parse::<i64>().map_err(|_| {
+        c.err(
+            dataset,
+            format!("record {r} field '{what}' is {s:?}, not an integer"),
+        )
+    })
+}
+
+/// What record 7 says about the data block.
+struct Layout {
+    ord_type: i64,
+    /// Number of points.
+    n: usize,
+    /// 1 even abscissa, 0 uneven (each point carries its abscissa).
+    even: i64,
+    min: f64,
+    inc: f64,
+    z_value: f64,
+    complex: bool,
+    double: bool,
+    /// Values per point.
+    per: usize,
+    /// Values in the block.
+    expected: usize,
+}
+
+impl Layout {
+    fn of_record_7(r7: &str, c: &Cursor, dataset: usize) -> Result<Layout> {
+        let int = |start, w, what| int_field(c, dataset, r7, (start, w), what, 7);
+        let ord_type = int(0, 10, "ordinate data type")?;
+        let num_pts = int(10, 10, "number of points")?;
+        let even = int(20, 10, "abscissa spacing")?;
+        let real7 = |start: usize, what: &str| -> Result<f64> {
+            let s = field(r7, start, 13);
+            if s.is_empty() {
+                return Ok(0.0);
+            }
+            parse_f64(s).ok_or_else(|| {
+                c.err(
+                    dataset,
+                    format!("record 7 field '{what}' is {s:?}, not a number"),
+                )
+            })
+        };
+        let min = real7(30, "abscissa minimum")?;
+        let inc = real7(43, "abscissa increment")?;
+        let z_value = real7(56, "z-axis value")?;
+        let (complex, double) = match ord_type {
+            2 => (false, false),
+            4 => (false, true),
+            5 => (true, false),
+            6 => (true, true),
+            t => {
+                return Err(c.err(
+                    dataset,
+                    format!("record 7 ordinate data type {t} is not 2, 4, 5 or 6 (real/complex, single/double)"),
+                ))
+            }
+        };
+        if num_pts <= 0 {
+            return Err(c.err(
+                dataset,
+                format!("record 7 number of points is {num_pts}; must be ≥ 1"),
+            ));
+        }
+        if even != 0 && even != 1 {
+            return Err(c.err(
+                dataset,
+                format!("record 7 abscissa spacing is {even}; must be 0 (uneven) or 1 (even)"),
+            ));
+        }
+        let n = num_pts as usize;
+        let per = if complex { 2 } else { 1 } + if even == 0 { 1 } else { 0 };
+        let expected = n
+            .checked_mul(per)
+            .filter(|e| *e < 1 << 40)
+            .ok_or_else(|| c.err(dataset, format!("record 7 number of points {n} is absurd")))?;
+        Ok(Layout {
+            ord_type,
+            n,
+            even,
+            min,
+            inc,
+            z_value,
+            complex,
+            double,
+            per,
+            expected,
+        })
+    }
+
+    /// The abscissa and ordinates of the block's values.
+    fn split(&self, values: Vec<f64>) -> (Abscissa, Ordinate) {
+        let Layout {
+            min,
+            inc,
+            complex,
+            per,
+            ..
+        } = *self;
+        let (abscissa, data) = if self.even == 1 {
+            let data = if complex {
+                Ordinate::Complex(
+                    values
+                        .chunks_exact(2)
+                        .map(|p| C64::new(p[0], p[1]))
+                        .collect(),
+                )
+            } else {
+                Ordinate::Real(values)
+            };
+            (
+                Abscissa::Even {
+                    min,
+                    increment: inc,
+                },
+                data,
+            )
+        } else {
+            let x: Vec<f64> = values.chunks_exact(per).map(|p| p[0]).collect();
+            let data = if complex {
+                Ordinate::Complex(
+                    values
+                        .chunks_exact(3)
+                        .map(|p| C64::new(p[1], p[2]))
+                        .collect(),
+                )
+            } else {
+                Ordinate::Real(values.chunks_exact(2).map(|p| p[1]).collect())
+            };
+            (Abscissa::Uneven(x), data)
+        };
+        (abscissa, data)
+    }
+}
+
+/// The values of a 58b binary block (record 7 decides its size), and its end delimiter.
+fn binary_values(
+    c: &mut Cursor,
+    dataset: usize,
+    layout: &Layout,
+    little: bool,
+    n_bytes: usize,
+) -> Result<Vec<f64>> {
+    let Layout {
+        n,
+        ord_type,
+        double,
+        expected,
+        ..
+    } = *layout;
+    let width = if double { 8 } else { 4 };
+    // Record 7 decides the block size: some writers (pyuff ≤ 2.5 for complex data) put
+    // half the true byte count in the 58b header. The end delimiter must follow the block.
+    let need = expected * width;
+    let end = c.pos.checked_add(need).filter(|e| *e <= c.bytes.len()).ok_or_else(|| {
+    c.err(dataset, format!("binary block of {need} bytes (record 7: {n} points, type {ord_type}; header says {n_bytes}) runs past the end of the file ({} bytes left): truncated", c.bytes.len() - c.pos))
+})?;
+    let block = &c.bytes[c.pos..end];
+    c.pos = end;
+    let v = if double {
+        block
+            .chunks_exact(8)
+            .map(|b| {
+                let a = [b[0], b[1], b[2], b[3], b[4], b[5], b[6], b[7]];
+                if little {
+                    f64::from_le_bytes(a)
+                } else {
+                    f64::from_be_bytes(a)
+                }
+            })
+            .collect()
+    } else {
+        block
+            .chunks_exact(4)
+            .map(|b| {
+                let a = [b[0], b[1], b[2], b[3]];
+                (if little {
+                    f32::from_le_bytes(a)
+                } else {
+                    f32::from_be_bytes(a)
+                }) as f64
+            })
+            .collect()
+    };
+    // The end delimiter may follow directly or after a line break.
+    loop {
+        match c.next_line() {
+        None => return Err(c.err(dataset, "no end delimiter '    -1' after the binary block: truncated")),
+        Some(l) if is_delimiter(l) => break,
+        Some(l) if l.trim_ascii().is_empty() => continue,
+        Some(_) => {
+            return Err(c.err(dataset, format!("no end delimiter after the {need}-byte binary block that record 7 announces ({n} points, type {ord_type}; header says {n_bytes} bytes): wrong record length")))
+        }
+    }
+    }
+    Ok(v)
+}
+
+/// The values of an ASCII data block, up to its end delimiter.
+fn ascii_values(c: &mut Cursor, dataset: usize, layout: &Layout) -> Result<Vec<f64>> {
+    let Layout {
+        n,
+        ord_type,
+        expected,
+        ..
+    } = *layout;
+    let mut v = Vec::with_capacity(expected.min(1 << 24));
+    let mut toks = Vec::new();
+    loop {
+        let l = c.next_line().ok_or_else(|| c.err(dataset, format!("file ends after {} of {expected} values and without the end delimiter: truncated", v.len())))?;
+        if is_delimiter(l) {
+            break;
+        }
+        let text = std::str::from_utf8(l).map_err(|_| {
+            c.err(
+                dataset,
+                "data line is not text (binary data in an ASCII dataset 58?)",
+            )
+        })?;
+        toks.clear();
+        tokens(text, &mut toks);
+        for t in &toks {
+            let x = parse_f64(t)
+                .ok_or_else(|| c.err(dataset, format!("data value {t:?} is not a number")))?;
+            v.push(x);
+        }
+        if v.len() > expected {
+            return Err(c.err(dataset, format!("more than the {expected} values record 7 announces ({n} points, type {ord_type}): wrong record length")));
+        }
+    }
+    if v.len() != expected {
+        return Err(c.err(dataset, format!("{} values before the end delimiter, record 7 announces {expected} ({n} points, type {ord_type}): truncated or wrong record length", v.len())));
+    }
+    Ok(v)
 }
