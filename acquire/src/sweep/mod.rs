@@ -619,57 +619,83 @@ async fn stepped_inner(
             outcome.stopped = true;
             break;
         }
-        pump.rig.shaker.set_frequency(f).await?;
-        let mut drive = (plan.target_force_n / gain).min(max_drive);
-        pump.rig.shaker.set_force(drive).await?;
+        let measured =
+            measure_step(&mut pump, &mut estimator, plan, (step, f), &mut gain, stop).await?;
+        let Some(m) = measured else {
+            outcome.stopped = true;
+            break;
+        };
+        let channels = estimator.channel_results(&m.estimate, &names);
+        let quality = channels.iter().map(|c| c.fit_quality).fold(1.0, f64::min);
+        let res = StepResult {
+            step,
+            frequency_hz: f,
+            drive_n: m.drive_n,
+            force_amplitude_n: m.force_n,
+            first_sample: m.first_sample,
+            samples: m.samples,
+            iterations: m.iterations,
+            channels,
+        };
+        session.record(&res)?;
         event(
             session,
-            "step_started",
+            "step_completed",
             Some(step),
             Some(f),
-            format!("drive {drive:.1} N"),
+            format!("force {:.1} N, {} corrections", m.force_n, m.iterations),
         )?;
-        let settle = (plan.settle_s * fs).ceil() as u64;
-        let window = ((plan.cycles / f).max(plan.min_window_s) * fs).ceil() as u64;
-        let mut iterations = 0u32;
-        let mut retries = 0u32;
-        let result = loop {
-            if stop.is_set() {
-                break None;
-            }
-            // Catch up with the stream, settle, then measure a window; a fault inside the window
-            // restarts the measurement.
-            let mut fault = false;
-            pump.catch_up(&mut fault).await?;
-            let start = pump.next_sample + settle;
-            estimator.clear();
-            let mut window_first = None;
-            while (estimator.len() as u64) < window {
-                let b = pump.next(&mut fault).await?;
-                if stop.is_set() {
-                    break;
-                }
-                let nch = b.channel_count as usize;
-                for i in 0..b.len() {
-                    let n = b.first_sample + i as u64;
-                    if n < start || estimator.len() as u64 >= window {
-                        continue;
-                    }
-                    if window_first.is_none() {
-                        // Faults while settling do not touch the window: it starts here, after them.
-                        window_first = Some(n);
-                        fault = false;
-                    }
-                    estimator.push_row(&b.volts[i * nch..(i + 1) * nch]);
-                }
-                if fault && window_first.is_some() {
-                    break;
-                }
-            }
-            if stop.is_set() {
-                break None;
-            }
-            if fault {
+        session.check()?;
+        progress.step(step, f, m.force_n, quality);
+        outcome.steps.push(res);
+    }
+    outcome.faults = pump.faults;
+    Ok(outcome)
+}
+
+/// One step measured with the force held at the plan's target.
+struct Measured {
+    estimate: process::sine::Step,
+    force_n: f64,
+    drive_n: f64,
+    first_sample: u64,
+    samples: u64,
+    iterations: u32,
+}
+
+/// Measures step `step` at `f` (Hz): sets the drive from the path `gain` (force per commanded
+/// force, updated here), measures a window, and corrects the drive until the force is within
+/// the plan's tolerance (or the iterations run out, with a warning). A window hit by a stream
+/// fault is re-measured. `None` when the operator stopped.
+async fn measure_step(
+    pump: &mut Pump<'_>,
+    estimator: &mut StepEstimator,
+    plan: &SteppedSine,
+    (step, f): (usize, f64),
+    gain: &mut f64,
+    stop: &StopSignal,
+) -> Result<Option<Measured>, SweepError> {
+    let session = pump.session;
+    let fs = pump.rig.stream.sample_rate_hz;
+    let max_drive = pump.rig.stand.shaker.max_force_n;
+    pump.rig.shaker.set_frequency(f).await?;
+    let mut drive = (plan.target_force_n / *gain).min(max_drive);
+    pump.rig.shaker.set_force(drive).await?;
+    event(
+        session,
+        "step_started",
+        Some(step),
+        Some(f),
+        format!("drive {drive:.1} N"),
+    )?;
+    let settle = (plan.settle_s * fs).ceil() as u64;
+    let window = ((plan.cycles / f).max(plan.min_window_s) * fs).ceil() as u64;
+    let mut iterations = 0u32;
+    let mut retries = 0u32;
+    loop {
+        let start = match measure_window(pump, estimator, settle, window, stop).await? {
+            Window::Stopped => return Ok(None),
+            Window::Fault => {
                 retries += 1;
                 event(session, "retry", Some(step), Some(f), format!("stream fault during the measurement window; re-measuring (attempt {retries})"))?;
                 if retries > plan.max_retries {
@@ -681,71 +707,104 @@ async fn stepped_inner(
                 }
                 continue;
             }
-            let est = estimator
-                .estimate(f)
-                .map_err(|source| SweepError::Estimate {
-                    step,
-                    frequency_hz: f,
-                    source,
-                })?;
-            let famp = est.force.amplitude();
-            let err = (famp - plan.target_force_n).abs() / plan.target_force_n;
-            if famp > 0.0 {
-                gain = famp / drive;
+            Window::Measured { first_sample } => first_sample,
+        };
+        let est = estimator
+            .estimate(f)
+            .map_err(|source| SweepError::Estimate {
+                step,
+                frequency_hz: f,
+                source,
+            })?;
+        let famp = est.force.amplitude();
+        let err = (famp - plan.target_force_n).abs() / plan.target_force_n;
+        if famp > 0.0 {
+            *gain = famp / drive;
+        }
+        if err <= plan.force_tolerance || iterations >= plan.max_iterations || famp <= 0.0 {
+            if err > plan.force_tolerance {
+                event(session, "warning", Some(step), Some(f), format!("force {famp:.1} N not within {:.1} % of {} N after {iterations} corrections", plan.force_tolerance * 100.0, plan.target_force_n))?;
             }
-            if err <= plan.force_tolerance || iterations >= plan.max_iterations || famp <= 0.0 {
-                if err > plan.force_tolerance {
-                    event(session, "warning", Some(step), Some(f), format!("force {famp:.1} N not within {:.1} % of {} N after {iterations} corrections", plan.force_tolerance * 100.0, plan.target_force_n))?;
-                }
-                break Some((
-                    est,
-                    famp,
-                    window_first.unwrap_or(start),
-                    estimator.len() as u64,
-                ));
-            }
-            iterations += 1;
-            let new_drive = (plan.target_force_n / gain).min(max_drive);
-            event(
-                session,
-                "force_control",
-                Some(step),
-                Some(f),
-                format!("force {famp:.1} N → drive {drive:.1} N becomes {new_drive:.1} N"),
-            )?;
-            drive = new_drive;
-            pump.rig.shaker.set_force(drive).await?;
-        };
-        let Some((est, famp, first_sample, samples)) = result else {
-            outcome.stopped = true;
-            break;
-        };
-        let channels = estimator.channel_results(&est, &names);
-        let quality = channels.iter().map(|c| c.fit_quality).fold(1.0, f64::min);
-        let res = StepResult {
-            step,
-            frequency_hz: f,
-            drive_n: drive,
-            force_amplitude_n: famp,
-            first_sample,
-            samples,
-            iterations,
-            channels,
-        };
-        session.record(&res)?;
+            return Ok(Some(Measured {
+                estimate: est,
+                force_n: famp,
+                drive_n: drive,
+                first_sample: start,
+                samples: estimator.len() as u64,
+                iterations,
+            }));
+        }
+        iterations += 1;
+        let new_drive = (plan.target_force_n / *gain).min(max_drive);
         event(
             session,
-            "step_completed",
+            "force_control",
             Some(step),
             Some(f),
-            format!("force {famp:.1} N, {iterations} corrections"),
+            format!("force {famp:.1} N → drive {drive:.1} N becomes {new_drive:.1} N"),
         )?;
-        session.check()?;
-        progress.step(step, f, famp, quality);
-        outcome.steps.push(res);
+        drive = new_drive;
+        pump.rig.shaker.set_force(drive).await?;
     }
-    outcome.faults = pump.faults;
-    Ok(outcome)
+}
+
+/// How a measurement window ended.
+enum Window {
+    /// Complete and fault-free from this sample on.
+    Measured { first_sample: u64 },
+    /// A stream fault hit it.
+    Fault,
+    /// The operator stopped.
+    Stopped,
+}
+
+/// Catches up with the stream, lets `settle` samples pass, then collects `window` samples into
+/// `estimator`. Faults while settling do not touch the window: it starts after them.
+async fn measure_window(
+    pump: &mut Pump<'_>,
+    estimator: &mut StepEstimator,
+    settle: u64,
+    window: u64,
+    stop: &StopSignal,
+) -> Result<Window, SweepError> {
+    if stop.is_set() {
+        return Ok(Window::Stopped);
+    }
+    let mut fault = false;
+    pump.catch_up(&mut fault).await?;
+    let start = pump.next_sample + settle;
+    estimator.clear();
+    let mut window_first = None;
+    while (estimator.len() as u64) < window {
+        let b = pump.next(&mut fault).await?;
+        if stop.is_set() {
+            break;
+        }
+        let nch = b.channel_count as usize;
+        for i in 0..b.len() {
+            let n = b.first_sample + i as u64;
+            if n < start || estimator.len() as u64 >= window {
+                continue;
+            }
+            if window_first.is_none() {
+                window_first = Some(n);
+                fault = false;
+            }
+            estimator.push_row(&b.volts[i * nch..(i + 1) * nch]);
+        }
+        if fault && window_first.is_some() {
+            break;
+        }
+    }
+    Ok(if stop.is_set() {
+        Window::Stopped
+    } else if fault {
+        Window::Fault
+    } else {
+        Window::Measured {
+            first_sample: window_first.unwrap_or(start),
+        }
+    })
 }
 
 /// Records the faults a DAQ still holds after STOP (decoded while waiting for its answer).
