@@ -497,38 +497,16 @@ fn apply(
 }
 
 async fn serve_daq<T: Transport>(mut io: T, shared: SharedRef, setup: SimSetup) {
-    let faults = setup.faults.clone();
-    let mut frng = rand::rngs::StdRng::seed_from_u64(faults.seed);
-    let mut gen = SignalGenerator::new(
-        setup.sample_rate_hz,
-        setup.plant.clone(),
-        setup.interaction,
-        setup.channels.clone(),
-        setup.seed,
-    );
-    let all = setup.channels.clone();
+    let mut daq = SerialSimDaq::new(setup);
     let mut dec = FrameDecoder::new();
     let mut rx = vec![0u8; 4096];
-    let (mut p1, mut p2, mut tx) = (Vec::new(), Vec::new(), Vec::with_capacity(8192));
-    let mut counts = Vec::new();
-    let mut stream: Option<(StreamInfo, Vec<usize>)> = None;
-    let mut streaming = false;
-    let mut seq: u32 = 0;
-    let mut blocks: u64 = 0;
-    let mut silent = false;
-    let mut rate = setup.sample_rate_hz;
+    let mut tx = Vec::with_capacity(8192);
     let mut next_tick = tokio::time::Instant::now();
     loop {
-        let period = stream
-            .as_ref()
-            .map(|(i, _)| {
-                Duration::from_secs_f64(i.samples_per_block as f64 / rate / setup.speed.max(1e-6))
-            })
-            .unwrap_or(Duration::from_millis(50));
         let read = tokio::select! {
             r = io.read(&mut rx) => Some(r),
-            _ = tokio::time::sleep_until(next_tick), if streaming => None,
-            _ = tokio::time::sleep(Duration::from_millis(50)), if !streaming => { if lock(&shared).cable_pulled { return; } continue }
+            _ = tokio::time::sleep_until(next_tick), if daq.streaming => None,
+            _ = tokio::time::sleep(Duration::from_millis(50)), if !daq.streaming => { if lock(&shared).cable_pulled { return; } continue }
         };
         tx.clear();
         match read {
@@ -546,142 +524,244 @@ async fn serve_daq<T: Transport>(mut io: T, shared: SharedRef, setup: SimSetup) 
                         msgs.push((f.seq, Message::parse(&f)));
                     }
                 });
-                if silent {
+                if daq.silent {
                     continue;
                 }
                 for (id, m) in msgs {
-                    let reply = match m {
-                        Err(e) => Message::Nak {
-                            command: 0,
-                            code: -100,
-                            message: e.to_string(),
-                        },
-                        Ok(Message::Hello) => Message::Identity(setup.identities.daq.to_idn()),
-                        Ok(Message::Configure(c)) => match configure(&c, &all) {
-                            Ok((info, idx)) => {
-                                streaming = false;
-                                rate = info.sample_rate_hz;
-                                gen = SignalGenerator::new(
-                                    rate,
-                                    setup.plant.clone(),
-                                    setup.interaction,
-                                    idx.iter().map(|&i| all[i].clone()).collect(),
-                                    setup.seed,
-                                );
-                                stream = Some((info.clone(), idx));
-                                Message::Announce(info)
-                            }
-                            Err((code, message)) => Message::Nak {
-                                command: kind::CONFIGURE,
-                                code,
-                                message,
-                            },
-                        },
-                        Ok(Message::Start) => {
-                            if stream.is_some() {
-                                streaming = true;
-                                seq = 0;
-                                gen.restart();
-                                next_tick = tokio::time::Instant::now();
-                                Message::Ack(kind::START)
-                            } else {
-                                Message::Nak {
-                                    command: kind::START,
-                                    code: -221,
-                                    message: "not configured".into(),
-                                }
-                            }
-                        }
-                        Ok(Message::Stop) => {
-                            streaming = false;
-                            Message::Ack(kind::STOP)
-                        }
-                        Ok(other) => Message::Nak {
-                            command: other.kind(),
-                            code: -113,
-                            message: "not a host command".into(),
-                        },
-                    };
-                    reply.encode(id, &mut p1, &mut p2, &mut tx);
+                    let started = matches!(m, Ok(Message::Start));
+                    let reply = daq.answer(m);
+                    if started && daq.streaming {
+                        next_tick = tokio::time::Instant::now();
+                    }
+                    reply.encode(id, &mut daq.p1, &mut daq.p2, &mut tx);
                 }
             }
             None => {
                 // Time for the next block.
-                next_tick += period;
-                let Some((info, _)) = &stream else { continue };
-                let exc = lock(&shared).excitation.clone();
-                counts.clear();
-                if gen
-                    .block(&exc, info.samples_per_block as usize, &mut counts)
-                    .is_err()
-                {
-                    return;
-                }
-                blocks += 1;
-                let this = seq;
-                seq = seq.wrapping_add(1);
-                if faults.cable_pull_after_blocks.is_some_and(|k| blocks > k) {
-                    let mut sh = lock(&shared);
-                    sh.injected.push(InjectedFault {
-                        kind: "cable_pull",
-                        seq: this as u64,
-                    });
-                    sh.cable_pulled = true;
-                    return;
-                }
-                if !silent && faults.daq_silent_after_blocks.is_some_and(|k| blocks > k) {
-                    silent = true;
-                    lock(&shared).injected.push(InjectedFault {
-                        kind: "daq_silent",
-                        seq: this as u64,
-                    });
-                }
-                if silent {
-                    continue;
-                }
-                let mut frame_bytes = Vec::new();
-                Message::Data(std::mem::take(&mut counts)).encode(
-                    this,
-                    &mut p1,
-                    &mut p2,
-                    &mut frame_bytes,
-                );
-                let u: f64 = frng.random();
-                let f = &faults;
-                let note = |k: &'static str| {
-                    lock(&shared).injected.push(InjectedFault {
-                        kind: k,
-                        seq: this as u64,
-                    })
-                };
-                if u < f.drop {
-                    note("drop");
-                } else if u < f.drop + f.corrupt {
-                    note("corrupt");
-                    let i = frng.random_range(1..frame_bytes.len() - 1);
-                    let mut b = frame_bytes[i] ^ 0x5A;
-                    if b == 0 {
-                        b = frame_bytes[i] ^ 0x3C;
-                    }
-                    frame_bytes[i] = b;
-                    tx.extend_from_slice(&frame_bytes);
-                } else if u < f.drop + f.corrupt + f.duplicate {
-                    note("duplicate");
-                    tx.extend_from_slice(&frame_bytes);
-                    tx.extend_from_slice(&frame_bytes);
-                } else if u < f.drop + f.corrupt + f.duplicate + f.delay {
-                    note("delay");
-                    tokio::time::sleep(f.delay_time).await;
-                    tx.extend_from_slice(&frame_bytes);
-                } else {
-                    tx.extend_from_slice(&frame_bytes);
+                next_tick += daq.block_period();
+                match daq.next_block(&shared, &mut tx) {
+                    Flow::Quit => return,
+                    Flow::Continue => continue,
+                    Flow::Send => {}
+                    Flow::SendAfter(delay) => tokio::time::sleep(delay).await,
                 }
             }
         }
         if !tx.is_empty() && io.write_all(&tx).await.is_err() {
             // The host closed the port mid-stream; keep serving (it may reopen).
-            streaming = false;
+            daq.streaming = false;
         }
+    }
+}
+
+/// What the serial DAQ does after producing a block.
+enum Flow {
+    /// Nothing to send (not configured, dropped or silent).
+    Continue,
+    /// Send what is in the output buffer.
+    Send,
+    /// Send it after a delay (an injected late block).
+    SendAfter(Duration),
+    /// Stop serving (the cable was pulled or the plant failed).
+    Quit,
+}
+
+/// The state of the simulated serial DAQ: its stream configuration, the signal generator and
+/// the fault injector.
+struct SerialSimDaq {
+    setup: SimSetup,
+    /// Fault injection's random numbers.
+    frng: rand::rngs::StdRng,
+    gen: SignalGenerator,
+    stream: Option<(StreamInfo, Vec<usize>)>,
+    streaming: bool,
+    seq: u32,
+    blocks: u64,
+    silent: bool,
+    rate: f64,
+    counts: Vec<i32>,
+    /// Frame encoding buffers.
+    p1: Vec<u8>,
+    p2: Vec<u8>,
+}
+
+impl SerialSimDaq {
+    fn new(setup: SimSetup) -> SerialSimDaq {
+        let gen = SignalGenerator::new(
+            setup.sample_rate_hz,
+            setup.plant.clone(),
+            setup.interaction,
+            setup.channels.clone(),
+            setup.seed,
+        );
+        SerialSimDaq {
+            frng: rand::rngs::StdRng::seed_from_u64(setup.faults.seed),
+            gen,
+            stream: None,
+            streaming: false,
+            seq: 0,
+            blocks: 0,
+            silent: false,
+            rate: setup.sample_rate_hz,
+            counts: Vec::new(),
+            p1: Vec::new(),
+            p2: Vec::new(),
+            setup,
+        }
+    }
+
+    /// Wall-clock time between blocks at the simulated stand's speed.
+    fn block_period(&self) -> Duration {
+        self.stream
+            .as_ref()
+            .map(|(i, _)| {
+                Duration::from_secs_f64(
+                    i.samples_per_block as f64 / self.rate / self.setup.speed.max(1e-6),
+                )
+            })
+            .unwrap_or(Duration::from_millis(50))
+    }
+
+    /// The answer to one host command.
+    fn answer(&mut self, m: Result<Message, frame::PayloadError>) -> Message {
+        let all = &self.setup.channels;
+        match m {
+            Err(e) => Message::Nak {
+                command: 0,
+                code: -100,
+                message: e.to_string(),
+            },
+            Ok(Message::Hello) => Message::Identity(self.setup.identities.daq.to_idn()),
+            Ok(Message::Configure(c)) => match configure(&c, all) {
+                Ok((info, idx)) => {
+                    self.streaming = false;
+                    self.rate = info.sample_rate_hz;
+                    self.gen = SignalGenerator::new(
+                        self.rate,
+                        self.setup.plant.clone(),
+                        self.setup.interaction,
+                        idx.iter().map(|&i| all[i].clone()).collect(),
+                        self.setup.seed,
+                    );
+                    self.stream = Some((info.clone(), idx));
+                    Message::Announce(info)
+                }
+                Err((code, message)) => Message::Nak {
+                    command: kind::CONFIGURE,
+                    code,
+                    message,
+                },
+            },
+            Ok(Message::Start) => {
+                if self.stream.is_some() {
+                    self.streaming = true;
+                    self.seq = 0;
+                    self.gen.restart();
+                    Message::Ack(kind::START)
+                } else {
+                    Message::Nak {
+                        command: kind::START,
+                        code: -221,
+                        message: "not configured".into(),
+                    }
+                }
+            }
+            Ok(Message::Stop) => {
+                self.streaming = false;
+                Message::Ack(kind::STOP)
+            }
+            Ok(other) => Message::Nak {
+                command: other.kind(),
+                code: -113,
+                message: "not a host command".into(),
+            },
+        }
+    }
+
+    /// Generates the next block into `tx`, with the stand's injected faults.
+    fn next_block(&mut self, shared: &SharedRef, tx: &mut Vec<u8>) -> Flow {
+        let Some((info, _)) = &self.stream else {
+            return Flow::Continue;
+        };
+        let exc = lock(shared).excitation.clone();
+        self.counts.clear();
+        if self
+            .gen
+            .block(&exc, info.samples_per_block as usize, &mut self.counts)
+            .is_err()
+        {
+            return Flow::Quit;
+        }
+        self.blocks += 1;
+        let this = self.seq;
+        self.seq = self.seq.wrapping_add(1);
+        let faults = &self.setup.faults;
+        if faults
+            .cable_pull_after_blocks
+            .is_some_and(|k| self.blocks > k)
+        {
+            let mut sh = lock(shared);
+            sh.injected.push(InjectedFault {
+                kind: "cable_pull",
+                seq: this as u64,
+            });
+            sh.cable_pulled = true;
+            return Flow::Quit;
+        }
+        if !self.silent
+            && faults
+                .daq_silent_after_blocks
+                .is_some_and(|k| self.blocks > k)
+        {
+            self.silent = true;
+            lock(shared).injected.push(InjectedFault {
+                kind: "daq_silent",
+                seq: this as u64,
+            });
+        }
+        if self.silent {
+            return Flow::Continue;
+        }
+        let mut frame_bytes = Vec::new();
+        Message::Data(std::mem::take(&mut self.counts)).encode(
+            this,
+            &mut self.p1,
+            &mut self.p2,
+            &mut frame_bytes,
+        );
+        let u: f64 = self.frng.random();
+        let f = faults;
+        let note = |k: &'static str| {
+            lock(shared).injected.push(InjectedFault {
+                kind: k,
+                seq: this as u64,
+            })
+        };
+        if u < f.drop {
+            note("drop");
+            return Flow::Continue;
+        }
+        if u < f.drop + f.corrupt {
+            note("corrupt");
+            let i = self.frng.random_range(1..frame_bytes.len() - 1);
+            let mut b = frame_bytes[i] ^ 0x5A;
+            if b == 0 {
+                b = frame_bytes[i] ^ 0x3C;
+            }
+            frame_bytes[i] = b;
+            tx.extend_from_slice(&frame_bytes);
+        } else if u < f.drop + f.corrupt + f.duplicate {
+            note("duplicate");
+            tx.extend_from_slice(&frame_bytes);
+            tx.extend_from_slice(&frame_bytes);
+        } else if u < f.drop + f.corrupt + f.duplicate + f.delay {
+            note("delay");
+            tx.extend_from_slice(&frame_bytes);
+            return Flow::SendAfter(f.delay_time);
+        } else {
+            tx.extend_from_slice(&frame_bytes);
+        }
+        Flow::Send
     }
 }
 
