@@ -427,133 +427,21 @@ pub fn validate(
     }
     for (i, m) in data.characteristics.iter().enumerate() {
         let dof_name = DOF_NAMES.get(m.dof as usize).copied().unwrap_or("?");
-        let item = format!(
-            "$.characteristics[{i}] ({} {dof_name} {})",
-            m.body,
-            Quantity::from(m.quantity).as_str()
-        );
-        let bad = |message: String| DataError::Invalid {
-            origin: origin.into(),
-            item: item.clone(),
-            message,
-        };
-        let bad_point = |k: usize, message: String| DataError::Invalid {
-            origin: origin.into(),
+        let at = DataItem {
+            origin,
             item: format!(
-                "{item}, point {k} ({} Hz)",
-                m.freqs_hz.get(k).copied().unwrap_or(f64::NAN)
-            ),
-            message,
-        };
-        if model.body_index(&m.body).is_none() {
-            let known: Vec<&str> = model.bodies.iter().map(|b| b.name.as_str()).collect();
-            return Err(bad(format!(
-                "unknown body \"{}\"; the model's bodies: {}",
+                "$.characteristics[{i}] ({} {dof_name} {})",
                 m.body,
-                known.join(", ")
-            )));
-        }
-        let Some(c) = m.resolve(model) else {
-            return Err(bad(format!(
-                "dof {} is out of range; use 0-5 (u1 u2 u3 r1 r2 r3)",
-                m.dof
-            )));
+                Quantity::from(m.quantity).as_str()
+            ),
         };
-        let Some(output) = model.outputs.iter().position(|o| *o == c) else {
-            let outs: Vec<String> = model
-                .outputs
-                .iter()
-                .map(|o| model.characteristic_label(*o))
-                .collect();
-            return Err(bad(format!(
-                "this characteristic is not among the model's outputs ({}); add it as an [[output]] of the model or drop it from the data",
-                if outs.is_empty() { "none".to_string() } else { outs.join(", ") }
-            )));
-        };
+        let (c, output) = resolve_output(m, model, &at)?;
         if out.iter().any(|o: &Observed| o.characteristic == c) {
-            return Err(bad(
-                "this characteristic appears twice; merge the two entries".into(),
-            ));
+            return Err(at.bad("this characteristic appears twice; merge the two entries".into()));
         }
-        let n = m.freqs_hz.len();
-        if n == 0 {
-            return Err(bad("no points".into()));
-        }
-        let lens: [(&str, Option<usize>); 4] = [
-            ("amplitude", Some(m.amplitude.len())),
-            ("phase_rad", m.phase_rad.as_ref().map(Vec::len)),
-            ("variance", m.variance.as_ref().map(Vec::len)),
-            ("coherence", m.coherence.as_ref().map(Vec::len)),
-        ];
-        for (name, len) in lens {
-            if let Some(len) = len {
-                if len != n {
-                    return Err(bad(format!(
-                        "{name} has {len} values but freqs_hz has {n}; one value per frequency"
-                    )));
-                }
-            }
-        }
-        for k in 0..n {
-            let f = m.freqs_hz[k];
-            if !f.is_finite() || f < 0.0 {
-                return Err(bad_point(
-                    k,
-                    format!("frequency {f} is not a finite, non-negative number"),
-                ));
-            }
-            if k > 0 {
-                let prev = m.freqs_hz[k - 1];
-                if f == prev {
-                    return Err(bad_point(
-                        k,
-                        format!(
-                            "frequency {f} Hz repeats point {}; frequencies must be distinct",
-                            k - 1
-                        ),
-                    ));
-                }
-                if f < prev {
-                    return Err(bad_point(k, format!("frequency {f} Hz is below the previous one ({prev} Hz); frequencies must increase")));
-                }
-            }
-            let a = m.amplitude[k];
-            if !a.is_finite() {
-                return Err(bad_point(
-                    k,
-                    format!("amplitude is {a}; every amplitude must be a finite number"),
-                ));
-            }
-            if a < 0.0 {
-                return Err(bad_point(k, format!("amplitude {a} is negative; amplitudes are moduli |z| ≥ 0 (put the sign into phase_rad)")));
-            }
-            if let Some(p) = &m.phase_rad {
-                if !p[k].is_finite() {
-                    return Err(bad_point(
-                        k,
-                        format!("phase_rad is {}; must be finite", p[k]),
-                    ));
-                }
-            }
-            if let Some(v) = &m.variance {
-                if !(v[k].is_finite() && v[k] > 0.0) {
-                    return Err(bad_point(
-                        k,
-                        format!("variance {} must be a finite number > 0", v[k]),
-                    ));
-                }
-            }
-            if let Some(g) = &m.coherence {
-                if !(g[k] > 0.0 && g[k] <= 1.0) {
-                    return Err(bad_point(
-                        k,
-                        format!("coherence {} must lie in (0, 1]", g[k]),
-                    ));
-                }
-            }
-        }
+        check_points(m, &at)?;
         if m.averages == Some(0) {
-            return Err(bad("averages is 0; at least one average".into()));
+            return Err(at.bad("averages is 0; at least one average".into()));
         }
         out.push(Observed {
             characteristic: c,
@@ -571,6 +459,154 @@ pub fn validate(
         origin: origin.into(),
         characteristics: out,
     })
+}
+
+/// A characteristic of a data file, for errors: the file and a JSON-path-like item.
+struct DataItem<'a> {
+    origin: &'a str,
+    item: String,
+}
+
+impl DataItem<'_> {
+    fn bad(&self, message: String) -> DataError {
+        DataError::Invalid {
+            origin: self.origin.into(),
+            item: self.item.clone(),
+            message,
+        }
+    }
+
+    fn bad_point(&self, m: &Measurement, k: usize, message: String) -> DataError {
+        DataError::Invalid {
+            origin: self.origin.into(),
+            item: format!(
+                "{}, point {k} ({} Hz)",
+                self.item,
+                m.freqs_hz.get(k).copied().unwrap_or(f64::NAN)
+            ),
+            message,
+        }
+    }
+}
+
+/// The model characteristic `m` is, and its index among the model's outputs.
+fn resolve_output(
+    m: &Measurement,
+    model: &Model,
+    at: &DataItem,
+) -> Result<(Characteristic, usize), DataError> {
+    let bad = |message| at.bad(message);
+    if model.body_index(&m.body).is_none() {
+        let known: Vec<&str> = model.bodies.iter().map(|b| b.name.as_str()).collect();
+        return Err(bad(format!(
+            "unknown body \"{}\"; the model's bodies: {}",
+            m.body,
+            known.join(", ")
+        )));
+    }
+    let Some(c) = m.resolve(model) else {
+        return Err(bad(format!(
+            "dof {} is out of range; use 0-5 (u1 u2 u3 r1 r2 r3)",
+            m.dof
+        )));
+    };
+    let Some(output) = model.outputs.iter().position(|o| *o == c) else {
+        let outs: Vec<String> = model
+            .outputs
+            .iter()
+            .map(|o| model.characteristic_label(*o))
+            .collect();
+        return Err(bad(format!(
+            "this characteristic is not among the model's outputs ({}); add it as an [[output]] of the model or drop it from the data",
+            if outs.is_empty() { "none".to_string() } else { outs.join(", ") }
+        )));
+    };
+    Ok((c, output))
+}
+
+/// One value per frequency in every column; frequencies finite, non-negative, increasing;
+/// amplitudes finite and ≥ 0; phases finite; variances > 0; coherences in (0, 1].
+fn check_points(m: &Measurement, at: &DataItem) -> Result<(), DataError> {
+    let bad = |message| at.bad(message);
+    let bad_point = |k, message| at.bad_point(m, k, message);
+    let n = m.freqs_hz.len();
+    if n == 0 {
+        return Err(bad("no points".into()));
+    }
+    let lens: [(&str, Option<usize>); 4] = [
+        ("amplitude", Some(m.amplitude.len())),
+        ("phase_rad", m.phase_rad.as_ref().map(Vec::len)),
+        ("variance", m.variance.as_ref().map(Vec::len)),
+        ("coherence", m.coherence.as_ref().map(Vec::len)),
+    ];
+    for (name, len) in lens {
+        if let Some(len) = len {
+            if len != n {
+                return Err(bad(format!(
+                    "{name} has {len} values but freqs_hz has {n}; one value per frequency"
+                )));
+            }
+        }
+    }
+    for k in 0..n {
+        let f = m.freqs_hz[k];
+        if !f.is_finite() || f < 0.0 {
+            return Err(bad_point(
+                k,
+                format!("frequency {f} is not a finite, non-negative number"),
+            ));
+        }
+        if k > 0 {
+            let prev = m.freqs_hz[k - 1];
+            if f == prev {
+                return Err(bad_point(
+                    k,
+                    format!(
+                        "frequency {f} Hz repeats point {}; frequencies must be distinct",
+                        k - 1
+                    ),
+                ));
+            }
+            if f < prev {
+                return Err(bad_point(k, format!("frequency {f} Hz is below the previous one ({prev} Hz); frequencies must increase")));
+            }
+        }
+        let a = m.amplitude[k];
+        if !a.is_finite() {
+            return Err(bad_point(
+                k,
+                format!("amplitude is {a}; every amplitude must be a finite number"),
+            ));
+        }
+        if a < 0.0 {
+            return Err(bad_point(k, format!("amplitude {a} is negative; amplitudes are moduli |z| ≥ 0 (put the sign into phase_rad)")));
+        }
+        if let Some(p) = &m.phase_rad {
+            if !p[k].is_finite() {
+                return Err(bad_point(
+                    k,
+                    format!("phase_rad is {}; must be finite", p[k]),
+                ));
+            }
+        }
+        if let Some(v) = &m.variance {
+            if !(v[k].is_finite() && v[k] > 0.0) {
+                return Err(bad_point(
+                    k,
+                    format!("variance {} must be a finite number > 0", v[k]),
+                ));
+            }
+        }
+        if let Some(g) = &m.coherence {
+            if !(g[k] > 0.0 && g[k] <= 1.0) {
+                return Err(bad_point(
+                    k,
+                    format!("coherence {} must lie in (0, 1]", g[k]),
+                ));
+            }
+        }
+    }
+    Ok(())
 }
 
 #[cfg(test)]
