@@ -37,8 +37,36 @@ pub fn candidates(
     f_lo: f64,
     f_hi: f64,
 ) -> Vec<Effect> {
-    let nb = model.bodies.len();
+    let directions = spring_directions(model);
+    let psi = typical_psi(model);
     let mut out = Vec::new();
+    for a in 0..model.bodies.len() {
+        for b in (a + 1)..model.bodies.len() {
+            springs_between(model, (a, b), &directions, psi, &mut out);
+        }
+        springs_to_ground(model, a, &directions, psi, &mut out);
+    }
+    let n_res = ((f_hi / f_lo).log10() * RESONATORS_PER_DECADE)
+        .ceil()
+        .max(1.0) as usize;
+    let res_freqs: Vec<f64> = (0..n_res)
+        .map(|i| f_lo * (f_hi / f_lo).powf((i as f64 + 0.5) / n_res as f64))
+        .collect();
+    for b in 0..model.bodies.len() {
+        masses_and_flexibility(model, b, &res_freqs, &mut out);
+    }
+    for (o, label) in labels.iter().enumerate() {
+        out.push(Effect::Gain {
+            output: o,
+            label: label.clone(),
+        });
+    }
+    damping_splits(model, vars, x, &mut out);
+    out
+}
+
+/// Spring directions: the global axes and every excitation force's direction.
+fn spring_directions(model: &Model) -> Vec<Vector3<f64>> {
     let mut directions = vec![Vector3::x(), Vector3::y(), Vector3::z()];
     for f in &model.forces {
         if f.force.norm() > 0.0 {
@@ -48,132 +76,146 @@ pub fn candidates(
             }
         }
     }
-    let psi = typical_psi(model);
-    let force_points = |b: usize| {
-        model
-            .forces
-            .iter()
-            .filter(move |f| f.body == b)
-            .map(|f| f.point)
-    };
-    // Springs.
-    for a in 0..nb {
-        for b in (a + 1)..nb {
-            let mut points = Vec::new();
-            for s in model.sdes.iter().filter(|s| s.enabled) {
-                if (s.bodies == [Some(a), Some(b)]) || (s.bodies == [Some(b), Some(a)]) {
-                    push_unique(&mut points, s.point);
-                }
-            }
-            force_points(a)
-                .chain(force_points(b))
-                .for_each(|p| push_unique(&mut points, p));
+    directions
+}
+
+/// Where the forces on body `b` act.
+fn force_points(model: &Model, b: usize) -> impl Iterator<Item = Vector3<f64>> + '_ {
+    model
+        .forces
+        .iter()
+        .filter(move |f| f.body == b)
+        .map(|f| f.point)
+}
+
+/// Springs between bodies `a` and `b`: at their joints' points, their forces' points and
+/// midway between their centres, along every direction.
+fn springs_between(
+    model: &Model,
+    (a, b): (usize, usize),
+    directions: &[Vector3<f64>],
+    psi: f64,
+    out: &mut Vec<Effect>,
+) {
+    let mut points = Vec::new();
+    for s in model.sdes.iter().filter(|s| s.enabled) {
+        if (s.bodies == [Some(a), Some(b)]) || (s.bodies == [Some(b), Some(a)]) {
+            push_unique(&mut points, s.point);
+        }
+    }
+    force_points(model, a)
+        .chain(force_points(model, b))
+        .for_each(|p| push_unique(&mut points, p));
+    push_unique(
+        &mut points,
+        0.5 * (model.bodies[a].position + model.bodies[b].position),
+    );
+    for p in points {
+        for d in directions {
+            out.push(Effect::Spring {
+                bodies: [
+                    Some(model.bodies[a].name.clone()),
+                    Some(model.bodies[b].name.clone()),
+                ],
+                point: p,
+                direction: *d,
+                psi,
+            });
+        }
+    }
+}
+
+/// Springs from body `a` to the ground: at its grounded joints, its centre, its forces' points
+/// and the centres of its equivalent box's faces (a support or contact from outside acts on a
+/// face), along every direction.
+fn springs_to_ground(
+    model: &Model,
+    a: usize,
+    directions: &[Vector3<f64>],
+    psi: f64,
+    out: &mut Vec<Effect>,
+) {
+    let mut points = Vec::new();
+    for s in model.sdes.iter().filter(|s| s.enabled) {
+        if s.bodies.contains(&Some(a)) && s.bodies.contains(&None) {
+            push_unique(&mut points, s.point);
+        }
+    }
+    push_unique(&mut points, model.bodies[a].position);
+    force_points(model, a).for_each(|p| push_unique(&mut points, p));
+    // A support or contact from outside (a jack, a hose, a cover) acts on a face: the centres
+    // of the equivalent box's faces.
+    let body = &model.bodies[a];
+    let sides = box_sides(body);
+    for (axis, side) in sides.iter().enumerate() {
+        for sign in [-1.0, 1.0] {
             push_unique(
                 &mut points,
-                0.5 * (model.bodies[a].position + model.bodies[b].position),
+                body.position + body.rotation.column(axis) * (sign * 0.5 * side),
             );
-            for p in points {
-                for d in &directions {
-                    out.push(Effect::Spring {
-                        bodies: [
-                            Some(model.bodies[a].name.clone()),
-                            Some(model.bodies[b].name.clone()),
-                        ],
-                        point: p,
-                        direction: *d,
-                        psi,
-                    });
-                }
-            }
-        }
-        let mut points = Vec::new();
-        for s in model.sdes.iter().filter(|s| s.enabled) {
-            if s.bodies.contains(&Some(a)) && s.bodies.contains(&None) {
-                push_unique(&mut points, s.point);
-            }
-        }
-        push_unique(&mut points, model.bodies[a].position);
-        force_points(a).for_each(|p| push_unique(&mut points, p));
-        // A support or contact from outside (a jack, a hose, a cover) acts on a face: the centres
-        // of the equivalent box's faces.
-        let body = &model.bodies[a];
-        let sides = box_sides(body);
-        for (axis, side) in sides.iter().enumerate() {
-            for sign in [-1.0, 1.0] {
-                push_unique(
-                    &mut points,
-                    body.position + body.rotation.column(axis) * (sign * 0.5 * side),
-                );
-            }
-        }
-        for p in points {
-            for d in &directions {
-                out.push(Effect::Spring {
-                    bodies: [None, Some(model.bodies[a].name.clone())],
-                    point: p,
-                    direction: *d,
-                    psi,
-                });
-            }
         }
     }
-    // Masses and resonators.
-    let n_res = ((f_hi / f_lo).log10() * RESONATORS_PER_DECADE)
-        .ceil()
-        .max(1.0) as usize;
-    let res_freqs: Vec<f64> = (0..n_res)
-        .map(|i| f_lo * (f_hi / f_lo).powf((i as f64 + 0.5) / n_res as f64))
-        .collect();
-    for (b, body) in model.bodies.iter().enumerate() {
-        let mut points = vec![body.position];
-        let sides = box_sides(body);
-        for corner in 0..8 {
-            let s = |i: usize| if corner >> i & 1 == 1 { 0.5 } else { -0.5 };
-            let local = Vector3::new(s(0) * sides[0], s(1) * sides[1], s(2) * sides[2]);
-            push_unique(&mut points, body.position + body.rotation * local);
+    for p in points {
+        for d in directions {
+            out.push(Effect::Spring {
+                bodies: [None, Some(model.bodies[a].name.clone())],
+                point: p,
+                direction: *d,
+                psi,
+            });
         }
-        force_points(b).for_each(|p| push_unique(&mut points, p));
-        let scale = 0.01 * body.mass;
-        for p in &points {
-            out.push(Effect::Mass {
+    }
+}
+
+/// Point masses and resonators (tuned across the band) at body `b`'s centre, box corners and
+/// force points, and the body split along each principal axis.
+fn masses_and_flexibility(model: &Model, b: usize, res_freqs: &[f64], out: &mut Vec<Effect>) {
+    let body = &model.bodies[b];
+    let mut points = vec![body.position];
+    let sides = box_sides(body);
+    for corner in 0..8 {
+        let s = |i: usize| if corner >> i & 1 == 1 { 0.5 } else { -0.5 };
+        let local = Vector3::new(s(0) * sides[0], s(1) * sides[1], s(2) * sides[2]);
+        push_unique(&mut points, body.position + body.rotation * local);
+    }
+    force_points(model, b).for_each(|p| push_unique(&mut points, p));
+    let scale = 0.01 * body.mass;
+    for p in &points {
+        out.push(Effect::Mass {
+            body: body.name.clone(),
+            point: *p,
+            scale,
+        });
+        for f in res_freqs {
+            out.push(Effect::Resonator {
                 body: body.name.clone(),
                 point: *p,
+                freq_hz: *f,
                 scale,
             });
-            for f in &res_freqs {
-                out.push(Effect::Resonator {
+        }
+    }
+    let stiff = model
+        .sdes
+        .iter()
+        .filter(|s| s.enabled)
+        .flat_map(|s| s.law.stiffness()[..3].to_vec())
+        .fold(0.0, f64::max);
+    if stiff > 0.0 {
+        for (axis, side) in sides.iter().enumerate() {
+            if *side > 0.0 {
+                out.push(Effect::Flexible {
                     body: body.name.clone(),
-                    point: *p,
-                    freq_hz: *f,
-                    scale,
+                    axis,
+                    scale: 1.0 / stiff,
                 });
             }
         }
-        let stiff = model
-            .sdes
-            .iter()
-            .filter(|s| s.enabled)
-            .flat_map(|s| s.law.stiffness()[..3].to_vec())
-            .fold(0.0, f64::max);
-        if stiff > 0.0 {
-            for (axis, side) in sides.iter().enumerate() {
-                if *side > 0.0 {
-                    out.push(Effect::Flexible {
-                        body: body.name.clone(),
-                        axis,
-                        scale: 1.0 / stiff,
-                    });
-                }
-            }
-        }
     }
-    for (o, label) in labels.iter().enumerate() {
-        out.push(Effect::Gain {
-            output: o,
-            label: label.clone(),
-        });
-    }
-    // Joint damping: split a ψ group by the pair of bodies its SDEs join.
+}
+
+/// Joint damping: each ψ group split by the pair of bodies its SDEs join.
+fn damping_splits(model: &Model, vars: &Variables, x: &[f64], out: &mut Vec<Effect>) {
     for (vi, v) in vars
         .vars
         .iter()
@@ -203,7 +245,6 @@ pub fn candidates(
             });
         }
     }
-    out
 }
 
 /// The median ψ of the model's enabled SDEs (ψ of a spring candidate in its score).
