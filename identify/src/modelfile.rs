@@ -858,6 +858,21 @@ fn allowed(kind: SdeKind) -> &'static [&'static str] {
 }
 
 fn sde_law(cx: &Ctx, s: &RawSde, kind: SdeKind, name: &str) -> Result<SdeLaw, LoadError> {
+    check_law_keys(cx, s, kind, name)?;
+    let f = LawFields { cx, s, name };
+    Ok(match kind {
+        SdeKind::Slideway | SdeKind::Rotary => contact_law(&f)?,
+        SdeKind::Screw | SdeKind::Spring => SdeLaw::Axial {
+            k: f.need(&s.k, "k", Dim::STIFFNESS)?,
+            psi: f.need(&s.psi, "psi", Dim::NONE)?,
+        },
+        SdeKind::Isolator => isolator_law(&f)?,
+        SdeKind::General => general_law(&f)?,
+    })
+}
+
+/// Every law key given must apply to the SDE's kind.
+fn check_law_keys(cx: &Ctx, s: &RawSde, kind: SdeKind, name: &str) -> Result<(), LoadError> {
     let present: [(&str, &Option<Sp<Value>>); 12] = [
         ("area", &s.area),
         ("moments", &s.moments),
@@ -886,7 +901,20 @@ fn sde_law(cx: &Ctx, s: &RawSde, kind: SdeKind, name: &str) -> Result<SdeLaw, Lo
             }
         }
     }
-    let need = |v: &Option<Sp<Value>>, field: &str, dim: Dim| -> Result<f64, LoadError> {
+    Ok(())
+}
+
+/// An SDE's law keys being read.
+struct LawFields<'a> {
+    cx: &'a Ctx<'a>,
+    s: &'a RawSde,
+    name: &'a str,
+}
+
+impl LawFields<'_> {
+    /// A required non-negative value of dimension `dim`.
+    fn need(&self, v: &Option<Sp<Value>>, field: &str, dim: Dim) -> Result<f64, LoadError> {
+        let (cx, name) = (self.cx, self.name);
         match v {
             Some(v) => {
                 let x = cx.scalar(v, dim, field)?;
@@ -899,105 +927,104 @@ fn sde_law(cx: &Ctx, s: &RawSde, kind: SdeKind, name: &str) -> Result<SdeLaw, Lo
                 Ok(x)
             }
             None => Err(cx.at(
-                s.name.span(),
+                self.s.name.span(),
                 format!("sde {name}: missing `{field}` ({})", dim.describe()),
             )),
         }
+    }
+}
+
+/// A slideway's or rotary joint's contact law: area (and moments), kn, kt or kn/kt, ψn, ψt.
+fn contact_law(f: &LawFields) -> Result<SdeLaw, LoadError> {
+    let (cx, s, name) = (f.cx, f.s, f.name);
+    let (area, moments) = contact_area(cx, s, name)?;
+    let kn = f.need(&s.kn, "kn", Dim::CONTACT_STIFFNESS)?;
+    let kt = match (&s.kt, &s.kn_kt_ratio) {
+        (Some(_), None) => Tangential::Value(f.need(&s.kt, "kt", Dim::CONTACT_STIFFNESS)?),
+        (None, Some(r)) => {
+            let ratio = cx.scalar(r, Dim::NONE, "kn_kt_ratio")?;
+            if ratio <= 0.0 {
+                return Err(cx.at(r.span(), format!("sde {name}: kn_kt_ratio must be positive, got {ratio}")));
+            }
+            Tangential::Ratio(ratio)
+        }
+        (Some(k), Some(_)) => return Err(cx.at(k.span(), format!("sde {name}: give `kt` or `kn_kt_ratio`, not both"))),
+        (None, None) => return Err(cx.at(s.name.span(), format!("sde {name}: give the tangential stiffness, `kt = \"0.02 MPa/um\"` or `kn_kt_ratio = 2.5`"))),
     };
-    Ok(match kind {
-        SdeKind::Slideway | SdeKind::Rotary => {
-            let (area, moments) = contact_area(cx, s, name)?;
-            let kn = need(&s.kn, "kn", Dim::CONTACT_STIFFNESS)?;
-            let kt = match (&s.kt, &s.kn_kt_ratio) {
-                (Some(_), None) => Tangential::Value(need(&s.kt, "kt", Dim::CONTACT_STIFFNESS)?),
-                (None, Some(r)) => {
-                    let ratio = cx.scalar(r, Dim::NONE, "kn_kt_ratio")?;
-                    if ratio <= 0.0 {
-                        return Err(cx.at(r.span(), format!("sde {name}: kn_kt_ratio must be positive, got {ratio}")));
-                    }
-                    Tangential::Ratio(ratio)
-                }
-                (Some(k), Some(_)) => return Err(cx.at(k.span(), format!("sde {name}: give `kt` or `kn_kt_ratio`, not both"))),
-                (None, None) => return Err(cx.at(s.name.span(), format!("sde {name}: give the tangential stiffness, `kt = \"0.02 MPa/um\"` or `kn_kt_ratio = 2.5`"))),
-            };
-            SdeLaw::Contact {
-                area,
-                moments,
-                kn,
-                kt,
-                psi_n: need(&s.psi_n, "psi_n", Dim::NONE)?,
-                psi_t: need(&s.psi_t, "psi_t", Dim::NONE)?,
-            }
+    Ok(SdeLaw::Contact {
+        area,
+        moments,
+        kn,
+        kt,
+        psi_n: f.need(&s.psi_n, "psi_n", Dim::NONE)?,
+        psi_t: f.need(&s.psi_t, "psi_t", Dim::NONE)?,
+    })
+}
+
+/// An isolator: kn, kt and one ψ or ψn and ψt.
+fn isolator_law(f: &LawFields) -> Result<SdeLaw, LoadError> {
+    let (cx, s, name) = (f.cx, f.s, f.name);
+    let (psi_n, psi_t) = match (&s.psi, &s.psi_n, &s.psi_t) {
+        (Some(_), None, None) => {
+            let p = f.need(&s.psi, "psi", Dim::NONE)?;
+            (p, p)
         }
-        SdeKind::Screw | SdeKind::Spring => SdeLaw::Axial {
-            k: need(&s.k, "k", Dim::STIFFNESS)?,
-            psi: need(&s.psi, "psi", Dim::NONE)?,
-        },
-        SdeKind::Isolator => {
-            let (psi_n, psi_t) = match (&s.psi, &s.psi_n, &s.psi_t) {
-                (Some(_), None, None) => {
-                    let p = need(&s.psi, "psi", Dim::NONE)?;
-                    (p, p)
-                }
-                (None, Some(_), Some(_)) => (
-                    need(&s.psi_n, "psi_n", Dim::NONE)?,
-                    need(&s.psi_t, "psi_t", Dim::NONE)?,
-                ),
-                _ => {
-                    return Err(cx.at(
-                        s.name.span(),
-                        format!(
-                            "sde {name}: give `psi` (both directions) or both `psi_n` and `psi_t`"
-                        ),
-                    ))
-                }
-            };
-            SdeLaw::Isolator {
-                kn: need(&s.kn, "kn", Dim::STIFFNESS)?,
-                kt: need(&s.kt, "kt", Dim::STIFFNESS)?,
-                psi_n,
-                psi_t,
-            }
+        (None, Some(_), Some(_)) => (
+            f.need(&s.psi_n, "psi_n", Dim::NONE)?,
+            f.need(&s.psi_t, "psi_t", Dim::NONE)?,
+        ),
+        _ => {
+            return Err(cx.at(
+                s.name.span(),
+                format!("sde {name}: give `psi` (both directions) or both `psi_n` and `psi_t`"),
+            ))
         }
-        SdeKind::General => {
-            let Some(kv) = &s.k else {
-                return Err(cx.at(
-                    s.name.span(),
-                    format!("sde {name}: missing `k`, six stiffnesses [N/m ×3, N·m/rad ×3]"),
-                ));
-            };
-            let dims = [
-                Dim::STIFFNESS,
-                Dim::STIFFNESS,
-                Dim::STIFFNESS,
-                Dim::ROTATIONAL_STIFFNESS,
-                Dim::ROTATIONAL_STIFFNESS,
-                Dim::ROTATIONAL_STIFFNESS,
-            ];
-            let k = cx.vector(kv, &dims, "k")?;
-            if k.iter().any(|x| *x < 0.0) {
-                return Err(cx.at(kv.span(), format!("sde {name}: stiffnesses must be ≥ 0")));
-            }
-            let psi = match &s.psi {
-                Some(p) if matches!(p.get_ref(), Value::List(_)) => {
-                    cx.vector(p, &[Dim::NONE; 6], "psi")?
-                }
-                Some(_) => vec![need(&s.psi, "psi", Dim::NONE)?; 6],
-                None => {
-                    return Err(cx.at(
-                        s.name.span(),
-                        format!("sde {name}: missing `psi` (one value or six)"),
-                    ))
-                }
-            };
-            if psi.iter().any(|x| *x < 0.0) {
-                return Err(cx.at(s.name.span(), format!("sde {name}: ψ must be ≥ 0")));
-            }
-            SdeLaw::General {
-                k: std::array::from_fn(|i| k[i]),
-                psi: std::array::from_fn(|i| psi[i]),
-            }
+    };
+    Ok(SdeLaw::Isolator {
+        kn: f.need(&s.kn, "kn", Dim::STIFFNESS)?,
+        kt: f.need(&s.kt, "kt", Dim::STIFFNESS)?,
+        psi_n,
+        psi_t,
+    })
+}
+
+/// A general SDE: six stiffnesses and one ψ or six.
+fn general_law(f: &LawFields) -> Result<SdeLaw, LoadError> {
+    let (cx, s, name) = (f.cx, f.s, f.name);
+    let Some(kv) = &s.k else {
+        return Err(cx.at(
+            s.name.span(),
+            format!("sde {name}: missing `k`, six stiffnesses [N/m ×3, N·m/rad ×3]"),
+        ));
+    };
+    let dims = [
+        Dim::STIFFNESS,
+        Dim::STIFFNESS,
+        Dim::STIFFNESS,
+        Dim::ROTATIONAL_STIFFNESS,
+        Dim::ROTATIONAL_STIFFNESS,
+        Dim::ROTATIONAL_STIFFNESS,
+    ];
+    let k = cx.vector(kv, &dims, "k")?;
+    if k.iter().any(|x| *x < 0.0) {
+        return Err(cx.at(kv.span(), format!("sde {name}: stiffnesses must be ≥ 0")));
+    }
+    let psi = match &s.psi {
+        Some(p) if matches!(p.get_ref(), Value::List(_)) => cx.vector(p, &[Dim::NONE; 6], "psi")?,
+        Some(_) => vec![f.need(&s.psi, "psi", Dim::NONE)?; 6],
+        None => {
+            return Err(cx.at(
+                s.name.span(),
+                format!("sde {name}: missing `psi` (one value or six)"),
+            ))
         }
+    };
+    if psi.iter().any(|x| *x < 0.0) {
+        return Err(cx.at(s.name.span(), format!("sde {name}: ψ must be ≥ 0")));
+    }
+    Ok(SdeLaw::General {
+        k: std::array::from_fn(|i| k[i]),
+        psi: std::array::from_fn(|i| psi[i]),
     })
 }
 
