@@ -105,37 +105,35 @@ impl SineFitter {
         force: &[f64],
         responses: &[&[f64]],
     ) -> Result<Step> {
-        let fs = config.sample_rate_hz;
-        if !(fs.is_finite() && fs > 0.0) {
-            return Err(invalid(
-                "sample_rate_hz",
-                fs,
-                "must be a positive number of Hz",
-            ));
+        check_step(config, freq_hz, force, responses)?;
+        let layout = self.factor_basis(config, freq_hz, force.len())?;
+        let f = self.fit_channel(&layout, force, "force")?;
+        if f.amplitude() == 0.0 {
+            return Err(ProcessError::ZeroForce {
+                channel: format!("force at step {freq_hz} Hz"),
+            });
         }
-        if !(freq_hz.is_finite() && freq_hz > 0.0 && freq_hz < fs / 2.0) {
-            return Err(invalid(
-                "step frequency",
-                freq_hz,
-                format!("must lie in (0, {}) Hz (below Nyquist)", fs / 2.0),
-            ));
-        }
-        if !(config.settle_s.is_finite() && config.settle_s >= 0.0) {
-            return Err(invalid("settle_s", config.settle_s, "must be ≥ 0 s"));
-        }
+        let mut rs = Vec::with_capacity(responses.len());
         for (j, r) in responses.iter().enumerate() {
-            if r.len() != force.len() {
-                return Err(ProcessError::LengthMismatch {
-                    channel: format!("response {j}"),
-                    samples: r.len(),
-                    first: "force".into(),
-                    expected: force.len(),
-                });
-            }
+            rs.push(self.fit_channel(&layout, r, &format!("response {j}"))?);
         }
+        let frf = rs.iter().map(|r| r.fundamental / f.fundamental).collect();
+        Ok(Step {
+            freq_hz,
+            force: f,
+            responses: rs,
+            frf,
+            samples: layout.used,
+        })
+    }
+
+    /// Builds the sine basis (DC and `nh` harmonics below Nyquist) over the samples after
+    /// settling, and Cholesky-factors its Gram matrix once for all channels of the step.
+    fn factor_basis(&mut self, config: &SineConfig, freq_hz: f64, len: usize) -> Result<Basis> {
+        let fs = config.sample_rate_hz;
         let skip = (config.settle_s * fs).ceil() as usize;
         let per_period = fs / freq_hz;
-        let used = force.len().saturating_sub(skip);
+        let used = len.saturating_sub(skip);
         if (used as f64) < per_period.max(8.0) {
             return Err(ProcessError::TooShort {
                 channel: format!("step at {freq_hz} Hz"),
@@ -178,66 +176,52 @@ impl SineFitter {
                 needed: 2 * per_period.ceil() as usize + skip,
             });
         }
-        let mut fit = |x: &[f64], name: &str| -> Result<SineFit> {
-            let x = &x[skip..];
-            if let Some(i) = x.iter().position(|v| !v.is_finite()) {
-                return Err(ProcessError::NonFinite {
-                    channel: name.to_string(),
-                    index: (skip + i) as u64,
-                    value: x[i],
-                });
-            }
-            self.rhs.clear();
-            self.rhs.resize(m, 0.0);
-            for (i, xi) in x.iter().enumerate() {
-                let row = &self.basis[i * m..(i + 1) * m];
-                for (r, b) in self.rhs.iter_mut().zip(row) {
-                    *r += b * xi;
-                }
-            }
-            cholesky_solve(&self.gram, &mut self.rhs, m);
-            let mut ss = 0.0;
-            for (i, xi) in x.iter().enumerate() {
-                let row = &self.basis[i * m..(i + 1) * m];
-                let model: f64 = row.iter().zip(&self.rhs).map(|(a, b)| a * b).sum();
-                ss += (xi - model).powi(2);
-            }
-            // x = a cos + b sin = Re((a − jb) e^{jωt}).
-            let ph = |h: usize| C64::new(self.rhs[1 + 2 * h], -self.rhs[2 + 2 * h]);
-            let fundamental = ph(0);
-            let harmonics: Vec<C64> = (1..nh).map(ph).collect();
-            let hp: f64 = harmonics.iter().map(|c| c.norm_sqr()).sum();
-            let distortion = if hp == 0.0 {
-                0.0
-            } else {
-                hp.sqrt() / fundamental.norm()
-            };
-            let dof = (used - m).max(1) as f64;
-            Ok(SineFit {
-                dc: self.rhs[0],
-                fundamental,
-                harmonics,
-                distortion,
-                noise_rms: (ss / dof).sqrt(),
-            })
-        };
-        let f = fit(force, "force")?;
-        if f.amplitude() == 0.0 {
-            return Err(ProcessError::ZeroForce {
-                channel: format!("force at step {freq_hz} Hz"),
+        Ok(Basis { skip, used, nh, m })
+    }
+
+    /// Least-squares fit of one channel's samples `x` (after settling) on the factored basis.
+    fn fit_channel(&mut self, layout: &Basis, x: &[f64], name: &str) -> Result<SineFit> {
+        let Basis { skip, used, nh, m } = *layout;
+        let x = &x[skip..];
+        if let Some(i) = x.iter().position(|v| !v.is_finite()) {
+            return Err(ProcessError::NonFinite {
+                channel: name.to_string(),
+                index: (skip + i) as u64,
+                value: x[i],
             });
         }
-        let mut rs = Vec::with_capacity(responses.len());
-        for (j, r) in responses.iter().enumerate() {
-            rs.push(fit(r, &format!("response {j}"))?);
+        self.rhs.clear();
+        self.rhs.resize(m, 0.0);
+        for (i, xi) in x.iter().enumerate() {
+            let row = &self.basis[i * m..(i + 1) * m];
+            for (r, b) in self.rhs.iter_mut().zip(row) {
+                *r += b * xi;
+            }
         }
-        let frf = rs.iter().map(|r| r.fundamental / f.fundamental).collect();
-        Ok(Step {
-            freq_hz,
-            force: f,
-            responses: rs,
-            frf,
-            samples: used,
+        cholesky_solve(&self.gram, &mut self.rhs, m);
+        let mut ss = 0.0;
+        for (i, xi) in x.iter().enumerate() {
+            let row = &self.basis[i * m..(i + 1) * m];
+            let model: f64 = row.iter().zip(&self.rhs).map(|(a, b)| a * b).sum();
+            ss += (xi - model).powi(2);
+        }
+        // x = a cos + b sin = Re((a − jb) e^{jωt}).
+        let ph = |h: usize| C64::new(self.rhs[1 + 2 * h], -self.rhs[2 + 2 * h]);
+        let fundamental = ph(0);
+        let harmonics: Vec<C64> = (1..nh).map(ph).collect();
+        let hp: f64 = harmonics.iter().map(|c| c.norm_sqr()).sum();
+        let distortion = if hp == 0.0 {
+            0.0
+        } else {
+            hp.sqrt() / fundamental.norm()
+        };
+        let dof = (used - m).max(1) as f64;
+        Ok(SineFit {
+            dc: self.rhs[0],
+            fundamental,
+            harmonics,
+            distortion,
+            noise_rms: (ss / dof).sqrt(),
         })
     }
 }
@@ -295,6 +279,55 @@ impl SineFitter {
         }
         Ok(out)
     }
+}
+
+/// The sine basis of one step: samples skipped while settling, samples used, harmonics, and
+/// basis functions (1 + 2·harmonics).
+#[derive(Debug, Clone, Copy)]
+struct Basis {
+    skip: usize,
+    used: usize,
+    nh: usize,
+    m: usize,
+}
+
+/// A valid sample rate, step frequency (below Nyquist) and settling time, and responses as long
+/// as the force.
+fn check_step(
+    config: &SineConfig,
+    freq_hz: f64,
+    force: &[f64],
+    responses: &[&[f64]],
+) -> Result<()> {
+    let fs = config.sample_rate_hz;
+    if !(fs.is_finite() && fs > 0.0) {
+        return Err(invalid(
+            "sample_rate_hz",
+            fs,
+            "must be a positive number of Hz",
+        ));
+    }
+    if !(freq_hz.is_finite() && freq_hz > 0.0 && freq_hz < fs / 2.0) {
+        return Err(invalid(
+            "step frequency",
+            freq_hz,
+            format!("must lie in (0, {}) Hz (below Nyquist)", fs / 2.0),
+        ));
+    }
+    if !(config.settle_s.is_finite() && config.settle_s >= 0.0) {
+        return Err(invalid("settle_s", config.settle_s, "must be ≥ 0 s"));
+    }
+    for (j, r) in responses.iter().enumerate() {
+        if r.len() != force.len() {
+            return Err(ProcessError::LengthMismatch {
+                channel: format!("response {j}"),
+                samples: r.len(),
+                first: "force".into(),
+                expected: force.len(),
+            });
+        }
+    }
+    Ok(())
 }
 
 /// In-place lower Cholesky of a symmetric positive definite m×m matrix (lower triangle used).
