@@ -88,21 +88,7 @@ pub fn uncertainty(
 ) -> Uncertainty {
     let n = x.len();
     let m = jac.nrows();
-    let at_bound: Vec<Option<AtBound>> = vars
-        .vars
-        .iter()
-        .zip(x)
-        .map(|(v, &xi)| {
-            let tol = 1e-9 * v.scale;
-            if xi <= v.lower + tol {
-                Some(AtBound::Lower)
-            } else if xi >= v.upper - tol {
-                Some(AtBound::Upper)
-            } else {
-                None
-            }
-        })
-        .collect();
+    let at_bound = bounds_hit(vars, x);
     let free: Vec<usize> = (0..n).filter(|&i| at_bound[i].is_none()).collect();
     let dof = m.saturating_sub(free.len()).max(1);
     let reduced_chi2 = 2.0 * j / dof as f64;
@@ -176,6 +162,48 @@ pub fn uncertainty(
     } else {
         f64::INFINITY
     };
+    let weak = weak_directions(vars, &eig, cutoff, covariance_scale, weak_threshold);
+    Uncertainty {
+        std_error,
+        variability,
+        at_bound,
+        covariance,
+        correlation,
+        covariance_scale,
+        reduced_chi2,
+        condition,
+        weak,
+    }
+}
+
+/// Which variables sit at a bound (within 1e-9 of their scale).
+fn bounds_hit(vars: &Variables, x: &[f64]) -> Vec<Option<AtBound>> {
+    vars.vars
+        .iter()
+        .zip(x)
+        .map(|(v, &xi)| {
+            let tol = 1e-9 * v.scale;
+            if xi <= v.lower + tol {
+                Some(AtBound::Lower)
+            } else if xi >= v.upper - tol {
+                Some(AtBound::Upper)
+            } else {
+                None
+            }
+        })
+        .collect()
+}
+
+/// The eigen-directions of the scaled information matrix whose relative standard deviation
+/// exceeds `weak_threshold`, worst first, each with the variables that make it up.
+fn weak_directions(
+    vars: &Variables,
+    eig: &SymmetricEigen<f64, nalgebra::Dyn>,
+    cutoff: f64,
+    covariance_scale: f64,
+    weak_threshold: f64,
+) -> Vec<WeakDirection> {
+    let n = eig.eigenvalues.len();
     let mut weak: Vec<WeakDirection> = (0..n)
         .filter_map(|k| {
             let l = eig.eigenvalues[k];
@@ -205,15 +233,5 @@ pub fn uncertainty(
         })
         .collect();
     weak.sort_by(|a, b| b.relative_std.total_cmp(&a.relative_std));
-    Uncertainty {
-        std_error,
-        variability,
-        at_bound,
-        covariance,
-        correlation,
-        covariance_scale,
-        reduced_chi2,
-        condition,
-        weak,
-    }
+    weak
 }
