@@ -125,6 +125,113 @@ pub struct Criterion {
     pub groups: Vec<(String, std::ops::Range<usize>)>,
 }
 
+/// Where R comes from: the choice, or with `Auto` variances, else coherence and averages, else
+/// 1 % of the amplitude.
+fn noise_source(data: &Observations, noise: NoiseChoice) -> Result<NoiseSource, IdentifyError> {
+    Ok(match noise {
+        NoiseChoice::Auto => {
+            if data.characteristics.iter().all(|c| c.variance.is_some()) {
+                NoiseSource::Variance
+            } else if data
+                .characteristics
+                .iter()
+                .all(|c| c.coherence.is_some() && c.averages.is_some())
+            {
+                NoiseSource::Coherence
+            } else {
+                NoiseSource::Relative(0.01)
+            }
+        }
+        NoiseChoice::Variance => NoiseSource::Variance,
+        NoiseChoice::Coherence => NoiseSource::Coherence,
+        NoiseChoice::Relative(e) => {
+            if !(e.is_finite() && e > 0.0) {
+                return Err(IdentifyError::Noise {
+                    item: "relative error".into(),
+                    message: format!("ε = {e} must be a finite number > 0"),
+                });
+            }
+            NoiseSource::Relative(e)
+        }
+    })
+}
+
+/// Every measured point as an observation (characteristic, line, value, σ), and each
+/// characteristic's range of observations with its label.
+#[allow(clippy::type_complexity)]
+fn observations(
+    data: &Observations,
+    freqs: &[f64],
+    fit: FitKind,
+    source: NoiseSource,
+) -> Result<(Vec<Obs>, Vec<(String, std::ops::Range<usize>)>), IdentifyError> {
+    let mut obs = Vec::new();
+    let mut groups = Vec::new();
+    for (o, c) in data.characteristics.iter().enumerate() {
+        let item = format!("{}: {}", data.origin, c.label);
+        let start = obs.len();
+        if fit == FitKind::Complex && c.phase_rad.is_none() {
+            return Err(IdentifyError::Noise {
+                item,
+                message: "a complex fit needs phase_rad for every characteristic; add the phases or fit amplitudes only".into(),
+            });
+        }
+        for k in 0..c.freqs_hz.len() {
+            let a = c.amplitude[k];
+            let var = point_variance(c, k, source, &item)?;
+            let line = freqs.partition_point(|f| *f < c.freqs_hz[k]);
+            let z = match (fit, &c.phase_rad) {
+                (FitKind::Complex, Some(p)) => C64::from_polar(a, p[k]),
+                _ => C64::new(a, 0.0),
+            };
+            obs.push(Obs {
+                output: o,
+                line,
+                z,
+                sigma: var.sqrt(),
+            });
+        }
+        groups.push((c.label.clone(), start..obs.len()));
+    }
+    Ok((obs, groups))
+}
+
+/// σ² of point `k` of `c` under the noise model `source` (per real component: half the complex
+/// variance E|ẑ−z|²); `item` names the characteristic in errors.
+fn point_variance(
+    c: &super::data::Observed,
+    k: usize,
+    source: NoiseSource,
+    item: &str,
+) -> Result<f64, IdentifyError> {
+    let a = c.amplitude[k];
+    let item = item.to_string();
+    let var = match source {
+        NoiseSource::Variance => match &c.variance {
+            Some(v) => v[k] / 2.0,
+            None => {
+                return Err(IdentifyError::Noise { item, message: "no variances in the data; choose another noise model (coherence or relative)".into() })
+            }
+        },
+        NoiseSource::Coherence => match (&c.coherence, c.averages) {
+            (Some(g), Some(n)) => (1.0 - g[k]) / (2.0 * n as f64 * g[k]) * a * a,
+            _ => {
+                return Err(IdentifyError::Noise { item, message: "no coherence or no averages in the data; choose another noise model (variance or relative)".into() })
+            }
+        },
+        NoiseSource::Relative(e) => (e * a).powi(2),
+    };
+    if !(var.is_finite() && var > 0.0) {
+        return Err(IdentifyError::Noise {
+            item: format!("{item}, point {k} ({} Hz)", c.freqs_hz[k]),
+            message: format!(
+                "the noise model gives σ² = {var} here (zero amplitude or coherence 1); such a point would have infinite weight: drop it or give variances"
+            ),
+        });
+    }
+    Ok(var)
+}
+
 impl Criterion {
     /// Builds the criterion: the model's outputs become the measured characteristics, the
     /// frequency grid the union of the measured frequencies.
@@ -143,88 +250,14 @@ impl Criterion {
             .collect();
         freqs.sort_by(f64::total_cmp);
         freqs.dedup();
-        let source = match noise {
-            NoiseChoice::Auto => {
-                if data.characteristics.iter().all(|c| c.variance.is_some()) {
-                    NoiseSource::Variance
-                } else if data
-                    .characteristics
-                    .iter()
-                    .all(|c| c.coherence.is_some() && c.averages.is_some())
-                {
-                    NoiseSource::Coherence
-                } else {
-                    NoiseSource::Relative(0.01)
-                }
-            }
-            NoiseChoice::Variance => NoiseSource::Variance,
-            NoiseChoice::Coherence => NoiseSource::Coherence,
-            NoiseChoice::Relative(e) => {
-                if !(e.is_finite() && e > 0.0) {
-                    return Err(IdentifyError::Noise {
-                        item: "relative error".into(),
-                        message: format!("ε = {e} must be a finite number > 0"),
-                    });
-                }
-                NoiseSource::Relative(e)
-            }
-        };
+        let source = noise_source(data, noise)?;
         let mut work = model.clone();
         work.outputs = data
             .characteristics
             .iter()
             .map(|c| c.characteristic)
             .collect();
-        let mut obs = Vec::new();
-        let mut groups = Vec::new();
-        for (o, c) in data.characteristics.iter().enumerate() {
-            let item = format!("{}: {}", data.origin, c.label);
-            let start = obs.len();
-            if fit == FitKind::Complex && c.phase_rad.is_none() {
-                return Err(IdentifyError::Noise {
-                    item,
-                    message: "a complex fit needs phase_rad for every characteristic; add the phases or fit amplitudes only".into(),
-                });
-            }
-            for k in 0..c.freqs_hz.len() {
-                let a = c.amplitude[k];
-                let var = match source {
-                    NoiseSource::Variance => match &c.variance {
-                        Some(v) => v[k] / 2.0,
-                        None => {
-                            return Err(IdentifyError::Noise { item, message: "no variances in the data; choose another noise model (coherence or relative)".into() })
-                        }
-                    },
-                    NoiseSource::Coherence => match (&c.coherence, c.averages) {
-                        (Some(g), Some(n)) => (1.0 - g[k]) / (2.0 * n as f64 * g[k]) * a * a,
-                        _ => {
-                            return Err(IdentifyError::Noise { item, message: "no coherence or no averages in the data; choose another noise model (variance or relative)".into() })
-                        }
-                    },
-                    NoiseSource::Relative(e) => (e * a).powi(2),
-                };
-                if !(var.is_finite() && var > 0.0) {
-                    return Err(IdentifyError::Noise {
-                        item: format!("{item}, point {k} ({} Hz)", c.freqs_hz[k]),
-                        message: format!(
-                            "the noise model gives σ² = {var} here (zero amplitude or coherence 1); such a point would have infinite weight: drop it or give variances"
-                        ),
-                    });
-                }
-                let line = freqs.partition_point(|f| *f < c.freqs_hz[k]);
-                let z = match (fit, &c.phase_rad) {
-                    (FitKind::Complex, Some(p)) => C64::from_polar(a, p[k]),
-                    _ => C64::new(a, 0.0),
-                };
-                obs.push(Obs {
-                    output: o,
-                    line,
-                    z,
-                    sigma: var.sqrt(),
-                });
-            }
-            groups.push((c.label.clone(), start..obs.len()));
-        }
+        let (obs, groups) = observations(data, &freqs, fit, source)?;
         let params = vars.params();
         let terms = vars
             .vars
