@@ -276,18 +276,7 @@ pub fn diagnose(
         .map(|c| c.label.clone())
         .collect();
     let mut p0 = Problem::new(model, vars, obs, iopts, Vec::new(), f_hi);
-    let u0 = DVector::from_iterator(
-        vars.len(),
-        id.estimate.iter().zip(&p0.scale).map(|(x, s)| x / s),
-    );
-    let (e, jac) = p0.eval(&u0, true)?;
-    let jac = jac.unwrap_or_else(|| DMatrix::zeros(e.len(), 0));
-    let mut cur = Current {
-        effects: Vec::new(),
-        u: u0,
-        e,
-        jac,
-    };
+    let mut cur = base_fit(&mut p0, &id.estimate)?;
     let before = analysis(&p0, &cur, opts)?;
     progress(&format!("before: {}", before.verdict));
 
@@ -342,24 +331,14 @@ pub fn diagnose(
         );
         accepted.push(chosen);
         cur = next;
-        while let Some((k, r, next)) = backward(
-            model,
-            vars,
-            obs,
+        remove_unneeded(
+            (model, vars, obs),
             opts,
-            &cur,
-            f_hi,
-            ranking.sigma2,
-            ranking.threshold,
-        ) {
-            progress(&format!(
-                "removed: {} (no longer needed: LR = {:.1}, p = {:.2e})",
-                r.effect, r.lr, r.p_value
-            ));
-            accepted.remove(k);
-            round.removed.push(r);
-            cur = next;
-        }
+            (&mut cur, &mut accepted),
+            (f_hi, ranking.sigma2, ranking.threshold),
+            &mut round,
+            progress,
+        );
         rounds.push(round);
     }
     let pf = Problem::new(model, vars, obs, iopts, cur.effects.clone(), f_hi);
@@ -373,10 +352,8 @@ pub fn diagnose(
             free_columns(&pf, &cur.u).len(),
             after.chi2_p.is_none(),
         );
-        for (a, params) in accepted
-            .iter_mut()
-            .zip(estimates(&pf, &cur, f_hi, crit_scale))
-        {
+        let finals = estimates(&pf, &cur, f_hi, crit_scale);
+        for (a, params) in accepted.iter_mut().zip(finals) {
             a.params = params;
         }
     }
@@ -394,6 +371,44 @@ pub fn diagnose(
         model: final_model,
         effects: cur.effects,
     })
+}
+
+/// The identification's fit `estimate` as the starting state: no effect, its residuals and
+/// Jacobian.
+fn base_fit(p0: &mut Problem, estimate: &[f64]) -> Result<Current, DiagnoseError> {
+    let u0 = DVector::from_iterator(
+        estimate.len(),
+        estimate.iter().zip(&p0.scale).map(|(x, s)| x / s),
+    );
+    let (e, jac) = p0.eval(&u0, true)?;
+    let jac = jac.unwrap_or_else(|| DMatrix::zeros(e.len(), 0));
+    Ok(Current {
+        effects: Vec::new(),
+        u: u0,
+        e,
+        jac,
+    })
+}
+
+/// Backward elimination after an acceptance: drops, one at a time, every earlier effect the
+/// later ones made unnecessary (recorded in `round.removed`).
+fn remove_unneeded(
+    (model, vars, obs): (&Model, &Variables, &Observations),
+    opts: &Options,
+    (cur, accepted): (&mut Current, &mut Vec<Refit>),
+    (f_hi, sigma2, threshold): (f64, f64, f64),
+    round: &mut Round,
+    progress: &mut dyn FnMut(&str),
+) {
+    while let Some((k, r, next)) = backward(model, vars, obs, opts, cur, f_hi, sigma2, threshold) {
+        progress(&format!(
+            "removed: {} (no longer needed: LR = {:.1}, p = {:.2e})",
+            r.effect, r.lr, r.p_value
+        ));
+        accepted.remove(k);
+        round.removed.push(r);
+        *cur = next;
+    }
 }
 
 /// The measured band (Hz): lowest and highest line (at least 1 mHz, the top above the bottom).
