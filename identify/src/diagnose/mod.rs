@@ -1005,64 +1005,7 @@ pub fn text(d: &Diagnosis) -> String {
     let _ = writeln!(s, "Diagnosis");
     let _ = writeln!(s, "  before: {}", d.before.verdict);
     for (i, r) in d.rounds.iter().enumerate() {
-        let _ = writeln!(s, "\n  round {}: {} candidates scored (score test at the current fit); LR threshold p < {:.1e}", i + 1, r.candidates, r.threshold);
-        let _ = writeln!(
-            s,
-            "    {:>4}  {:<14} {:>10} {:>9}  effect",
-            "rank", "kind", "LM", "p"
-        );
-        for c in r.ranked.iter().take(10) {
-            let _ = writeln!(
-                s,
-                "    {:>4}  {:<14} {:>10.1} {:>9.1e}  {}",
-                c.rank, c.kind, c.statistic, c.p_value, c.effect
-            );
-            if !c.equivalent.is_empty() {
-                let shown: Vec<&str> = c.equivalent.iter().take(3).map(String::as_str).collect();
-                let more = c.equivalent.len().saturating_sub(3);
-                let tail = if more > 0 {
-                    format!(" and {more} more")
-                } else {
-                    String::new()
-                };
-                let _ = writeln!(s, "          ≡ {}{tail}", shown.join("; "));
-            }
-        }
-        for (k, f) in r.refits.iter().enumerate() {
-            let mark = if r.accepted == Some(k) {
-                "ACCEPTED"
-            } else {
-                ""
-            };
-            let _ = writeln!(
-                s,
-                "    refit: {}: J {:.1} → {:.1}, LR {:.1} ({} dof), p {:.1e}, ΔBIC {:.1} {mark}",
-                f.effect,
-                f.criterion_before,
-                f.criterion_after,
-                f.lr,
-                f.dof,
-                f.p_value,
-                f.bic_change
-            );
-        }
-        if let Some(p) = &r.placed {
-            let ps: Vec<String> = p.params.iter().map(ParamEstimate::describe).collect();
-            let _ = writeln!(
-                s,
-                "    placed: {} ({}): its place fitted, LR {:.1} against the model without it",
-                p.effect,
-                ps.join(", "),
-                p.lr
-            );
-        }
-        for x in &r.removed {
-            let _ = writeln!(
-                s,
-                "    removed: {} (not needed once this round's effect is in: LR {:.1}, p {:.2e})",
-                x.effect, x.lr, x.p_value
-            );
-        }
+        round_text(&mut s, i, r);
     }
     let _ = writeln!(s);
     if d.accepted.is_empty() {
@@ -1075,6 +1018,85 @@ pub fn text(d: &Diagnosis) -> String {
         let ps: Vec<String> = a.params.iter().map(ParamEstimate::describe).collect();
         let _ = writeln!(s, "  added: {} ({})", a.effect, ps.join(", "));
     }
+    before_after_text(&mut s, d);
+    let _ = writeln!(s, "  after: {}", d.after.verdict);
+    let skipped: Vec<&NotTried> = d.not_tried.iter().collect();
+    if !skipped.is_empty() {
+        let _ = writeln!(s, "\n  not tried ({}):", skipped.len());
+        for n in skipped.iter().take(12) {
+            let _ = writeln!(s, "    - {}: {}", n.effect, n.reason);
+        }
+        if skipped.len() > 12 {
+            let _ = writeln!(
+                s,
+                "    … and {} more (see the JSON report)",
+                skipped.len() - 12
+            );
+        }
+    }
+    s
+}
+
+/// Round `i` of a diagnosis: the ranking, the refits, the placement and the removals.
+fn round_text(s: &mut String, i: usize, r: &Round) {
+    use std::fmt::Write;
+    let _ = writeln!(s, "\n  round {}: {} candidates scored (score test at the current fit); LR threshold p < {:.1e}", i + 1, r.candidates, r.threshold);
+    let _ = writeln!(
+        s,
+        "    {:>4}  {:<14} {:>10} {:>9}  effect",
+        "rank", "kind", "LM", "p"
+    );
+    for c in r.ranked.iter().take(10) {
+        let _ = writeln!(
+            s,
+            "    {:>4}  {:<14} {:>10.1} {:>9.1e}  {}",
+            c.rank, c.kind, c.statistic, c.p_value, c.effect
+        );
+        if !c.equivalent.is_empty() {
+            let shown: Vec<&str> = c.equivalent.iter().take(3).map(String::as_str).collect();
+            let more = c.equivalent.len().saturating_sub(3);
+            let tail = if more > 0 {
+                format!(" and {more} more")
+            } else {
+                String::new()
+            };
+            let _ = writeln!(s, "          ≡ {}{tail}", shown.join("; "));
+        }
+    }
+    for (k, f) in r.refits.iter().enumerate() {
+        let mark = if r.accepted == Some(k) {
+            "ACCEPTED"
+        } else {
+            ""
+        };
+        let _ = writeln!(
+            s,
+            "    refit: {}: J {:.1} → {:.1}, LR {:.1} ({} dof), p {:.1e}, ΔBIC {:.1} {mark}",
+            f.effect, f.criterion_before, f.criterion_after, f.lr, f.dof, f.p_value, f.bic_change
+        );
+    }
+    if let Some(p) = &r.placed {
+        let ps: Vec<String> = p.params.iter().map(ParamEstimate::describe).collect();
+        let _ = writeln!(
+            s,
+            "    placed: {} ({}): its place fitted, LR {:.1} against the model without it",
+            p.effect,
+            ps.join(", "),
+            p.lr
+        );
+    }
+    for x in &r.removed {
+        let _ = writeln!(
+            s,
+            "    removed: {} (not needed once this round's effect is in: LR {:.1}, p {:.2e})",
+            x.effect, x.lr, x.p_value
+        );
+    }
+}
+
+/// The error before and after the diagnosis, one line per figure.
+fn before_after_text(s: &mut String, d: &Diagnosis) {
+    use std::fmt::Write;
     let _ = writeln!(s, "\n  error before → after:");
     let _ = writeln!(
         s,
@@ -1103,20 +1125,4 @@ pub fn text(d: &Diagnosis) -> String {
             100.0 * b.rms_relative
         );
     }
-    let _ = writeln!(s, "  after: {}", d.after.verdict);
-    let skipped: Vec<&NotTried> = d.not_tried.iter().collect();
-    if !skipped.is_empty() {
-        let _ = writeln!(s, "\n  not tried ({}):", skipped.len());
-        for n in skipped.iter().take(12) {
-            let _ = writeln!(s, "    - {}: {}", n.effect, n.reason);
-        }
-        if skipped.len() > 12 {
-            let _ = writeln!(
-                s,
-                "    … and {} more (see the JSON report)",
-                skipped.len() - 12
-            );
-        }
-    }
-    s
 }
