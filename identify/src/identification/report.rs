@@ -124,6 +124,21 @@ pub fn text(id: &Identification) -> String {
             String::new()
         }
     ));
+    parameter_table(&mut s, id);
+    s.push_str("\nRMS relative amplitude error per characteristic (initial -> identified):\n");
+    for ((label, a), (_, b)) in id.rms_initial.iter().zip(&id.rms) {
+        s.push_str(&format!(
+            "  {label}: {:.2} % -> {:.2} %\n",
+            100.0 * a,
+            100.0 * b
+        ));
+    }
+    identifiability_text(&mut s, id);
+    s
+}
+
+/// The variables' table: initial, identified, standard error, relative error, bounds hit.
+fn parameter_table(s: &mut String, id: &Identification) {
     let rows = rows(id);
     let w = rows
         .iter()
@@ -156,14 +171,11 @@ pub fn text(id: &Identification) -> String {
                 .unwrap_or_default()
         ));
     }
-    s.push_str("\nRMS relative amplitude error per characteristic (initial -> identified):\n");
-    for ((label, a), (_, b)) in id.rms_initial.iter().zip(&id.rms) {
-        s.push_str(&format!(
-            "  {label}: {:.2} % -> {:.2} %\n",
-            100.0 * a,
-            100.0 * b
-        ));
-    }
+}
+
+/// Poorly identifiable combinations and strongly correlated estimates.
+fn identifiability_text(s: &mut String, id: &Identification) {
+    let u = &id.uncertainty;
     if !u.weak.is_empty() {
         s.push_str(&format!(
             "\npoorly identifiable combinations (relative sigma > threshold; condition number {:.3e}):\n",
@@ -197,7 +209,6 @@ pub fn text(id: &Identification) -> String {
         s.push_str(&strong.join("\n"));
         s.push('\n');
     }
-    s
 }
 
 /// The JSON report.
