@@ -419,48 +419,8 @@ fn job(
             p
         }
         Measure::Sweep => {
-            let stand_file = cfg.stand.as_deref().context("no stand")?;
-            let mut stand = Stand::load(stand_file)?;
-            if let (Some(t), Some(s)) = (stand.truth.as_mut(), cfg.sweep.speed) {
-                t.speed = s;
-            }
-            stand_name = Some(stand.name.clone());
-            std::fs::create_dir_all(&cfg.sessions).with_context(|| {
-                format!(
-                    "cannot create the session folder {}",
-                    cfg.sessions.display()
-                )
-            })?;
-            let stem = stand_file
-                .file_stem()
-                .map(|s| s.to_string_lossy().into_owned())
-                .unwrap_or_else(|| "stand".into());
-            let p = cfg.sessions.join(format!(
-                "{stem}-{}.mcap",
-                dir.file_name()
-                    .map(|f| f.to_string_lossy().into_owned())
-                    .unwrap_or_default()
-            ));
-            log.line(&format!("sweep of {} into {}", stand.name, p.display()));
-            let swept = pipeline::sweep(&stand, &cfg.plan(), &p, &Default::default(), &NoProgress)?;
-            *session = Some(p.clone());
-            if let Some(e) = &swept.finish_error {
-                log.line(&format!("the session file could not be completed: {e}; its flushed part is readable (ident mcap recover)"));
-            }
-            let o = swept
-                .outcome
-                .map_err(|e| anyhow::anyhow!("the sweep failed: {e}"))?;
-            anyhow::ensure!(
-                swept.finish_error.is_none(),
-                "the session file {} could not be completed (disk full?)",
-                p.display()
-            );
-            log.line(&format!(
-                "sweep done: {} of {} steps, {} stream faults",
-                o.steps.len(),
-                swept.planned,
-                o.faults
-            ));
+            let (p, name) = sweep_session(cfg, dir, log, session)?;
+            stand_name = Some(name);
             p
         }
     };
@@ -518,4 +478,56 @@ fn job(
         report::Outcome::Alarm => 1,
         report::Outcome::Failure => 2,
     })
+}
+
+/// Sweeps the job's stand into a new session named after the report folder `dir`; returns the
+/// session and the stand's name. The session path is set in `session` as soon as it exists.
+fn sweep_session(
+    cfg: &Config,
+    dir: &Path,
+    log: &mut Log,
+    session: &mut Option<PathBuf>,
+) -> anyhow::Result<(PathBuf, String)> {
+    let stand_file = cfg.stand.as_deref().context("no stand")?;
+    let mut stand = Stand::load(stand_file)?;
+    if let (Some(t), Some(s)) = (stand.truth.as_mut(), cfg.sweep.speed) {
+        t.speed = s;
+    }
+    std::fs::create_dir_all(&cfg.sessions).with_context(|| {
+        format!(
+            "cannot create the session folder {}",
+            cfg.sessions.display()
+        )
+    })?;
+    let stem = stand_file
+        .file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "stand".into());
+    let p = cfg.sessions.join(format!(
+        "{stem}-{}.mcap",
+        dir.file_name()
+            .map(|f| f.to_string_lossy().into_owned())
+            .unwrap_or_default()
+    ));
+    log.line(&format!("sweep of {} into {}", stand.name, p.display()));
+    let swept = pipeline::sweep(&stand, &cfg.plan(), &p, &Default::default(), &NoProgress)?;
+    *session = Some(p.clone());
+    if let Some(e) = &swept.finish_error {
+        log.line(&format!("the session file could not be completed: {e}; its flushed part is readable (ident mcap recover)"));
+    }
+    let o = swept
+        .outcome
+        .map_err(|e| anyhow::anyhow!("the sweep failed: {e}"))?;
+    anyhow::ensure!(
+        swept.finish_error.is_none(),
+        "the session file {} could not be completed (disk full?)",
+        p.display()
+    );
+    log.line(&format!(
+        "sweep done: {} of {} steps, {} stream faults",
+        o.steps.len(),
+        swept.planned,
+        o.faults
+    ));
+    Ok((p, stand.name))
 }
