@@ -208,41 +208,7 @@ pub fn prepare(session: &Path, speed: Option<f64>) -> Result<Served, ReplayError
             "speed {speed}: give a factor > 0 (1 = real time)"
         )));
     }
-    let median_noise = |name: &str| -> f64 {
-        let mut v: Vec<f64> = analysis
-            .steps
-            .iter()
-            .flat_map(|s| {
-                s.channels
-                    .iter()
-                    .filter(|c| c.name == name)
-                    .map(|c| c.noise_rms)
-            })
-            .filter(|x| x.is_finite())
-            .collect();
-        v.sort_by(f64::total_cmp);
-        v.get(v.len() / 2).copied().unwrap_or(0.0)
-    };
-    let mut sensor = 0;
-    let channels = stand
-        .channels
-        .iter()
-        .map(|c| {
-            let source = match c.kind {
-                ChannelKind::Force => Source::Force,
-                ChannelKind::Acceleration => {
-                    sensor += 1;
-                    Source::Sensor(sensor - 1)
-                }
-            };
-            SimChannel {
-                device_channel: c.device_channel,
-                source,
-                sensitivity: c.sensitivity,
-                noise_rms: median_noise(&c.name),
-            }
-        })
-        .collect();
+    let channels = sim_channels(&stand, &analysis);
     let interaction = stand
         .truth
         .as_ref()
@@ -270,6 +236,46 @@ pub fn prepare(session: &Path, speed: Option<f64>) -> Result<Served, ReplayError
         setup,
         plant,
     })
+}
+
+/// The simulated DAQ's inputs for the recorded stand: the force and each accelerometer, with
+/// the noise level the session measured on it (its median over the steps).
+fn sim_channels(stand: &Stand, analysis: &SessionAnalysis) -> Vec<SimChannel> {
+    let median_noise = |name: &str| -> f64 {
+        let mut v: Vec<f64> = analysis
+            .steps
+            .iter()
+            .flat_map(|s| {
+                s.channels
+                    .iter()
+                    .filter(|c| c.name == name)
+                    .map(|c| c.noise_rms)
+            })
+            .filter(|x| x.is_finite())
+            .collect();
+        v.sort_by(f64::total_cmp);
+        v.get(v.len() / 2).copied().unwrap_or(0.0)
+    };
+    let mut sensor = 0;
+    stand
+        .channels
+        .iter()
+        .map(|c| {
+            let source = match c.kind {
+                ChannelKind::Force => Source::Force,
+                ChannelKind::Acceleration => {
+                    sensor += 1;
+                    Source::Sensor(sensor - 1)
+                }
+            };
+            SimChannel {
+                device_channel: c.device_channel,
+                source,
+                sensitivity: c.sensitivity,
+                noise_rms: median_noise(&c.name),
+            }
+        })
+        .collect()
 }
 
 #[cfg(test)]
