@@ -50,6 +50,43 @@ pub fn select_points(
     coherence: Option<&[f64]>,
     config: &SelectionConfig,
 ) -> Result<Vec<usize>> {
+    check_selection(freqs_hz, magnitude, coherence, config)?;
+    let (lo, hi) = config.band_hz;
+    let cand: Vec<usize> = (0..freqs_hz.len())
+        .filter(|&k| {
+            let f = freqs_hz[k];
+            f > 0.0
+                && f >= lo
+                && f <= hi
+                && magnitude[k].is_finite()
+                && coherence.is_none_or(|c| c[k] >= config.min_coherence)
+        })
+        .collect();
+    if cand.len() < config.count {
+        return Err(ProcessError::NotEnoughPoints {
+            name: name.into(),
+            usable: cand.len(),
+            wanted: config.count,
+            min_coherence: config.min_coherence,
+        });
+    }
+    let lf: Vec<f64> = cand.iter().map(|&k| freqs_hz[k].ln()).collect();
+    let w = (1.0 + config.resonance_width).ln();
+    let peaks = resonance_peaks(&cand, &lf, magnitude, w);
+    let cum = cumulative_weights(&lf, &peaks, w, config.resonance_weight);
+    let mut out = quantile_picks(&cand, &cum, config.count);
+    out.sort_unstable();
+    Ok(out)
+}
+
+/// One magnitude (and coherence) per frequency, at least one point, a valid resonance width
+/// and weight.
+fn check_selection(
+    freqs_hz: &[f64],
+    magnitude: &[f64],
+    coherence: Option<&[f64]>,
+    config: &SelectionConfig,
+) -> Result<()> {
     if magnitude.len() != freqs_hz.len() {
         return Err(ProcessError::ChannelCount {
             what: "magnitudes (one per frequency)",
@@ -80,29 +117,12 @@ pub fn select_points(
             "width > 0 and weight ≥ 0",
         ));
     }
-    let (lo, hi) = config.band_hz;
-    let cand: Vec<usize> = (0..freqs_hz.len())
-        .filter(|&k| {
-            let f = freqs_hz[k];
-            f > 0.0
-                && f >= lo
-                && f <= hi
-                && magnitude[k].is_finite()
-                && coherence.is_none_or(|c| c[k] >= config.min_coherence)
-        })
-        .collect();
-    if cand.len() < config.count {
-        return Err(ProcessError::NotEnoughPoints {
-            name: name.into(),
-            usable: cand.len(),
-            wanted: config.count,
-            min_coherence: config.min_coherence,
-        });
-    }
-    let lf: Vec<f64> = cand.iter().map(|&k| freqs_hz[k].ln()).collect();
-    let w = (1.0 + config.resonance_width).ln();
-    // Resonance peaks: a candidate that is the largest within ±width and clearly above the
-    // smallest there (a half-power drop).
+    Ok(())
+}
+
+/// Log-frequencies of the resonance peaks among the candidates: a candidate that is the largest
+/// within ±`w` (log-frequency) and clearly above the smallest there (a half-power drop).
+fn resonance_peaks(cand: &[usize], lf: &[f64], magnitude: &[f64], w: f64) -> Vec<f64> {
     let mut peaks = Vec::new();
     for (a, &k) in cand.iter().enumerate() {
         let (mut mx, mut mn) = (0.0f64, f64::INFINITY);
@@ -116,8 +136,13 @@ pub fn select_points(
             peaks.push(lf[a]);
         }
     }
-    // Weight of each candidate = its share of log-frequency × density there.
-    let n = cand.len();
+    peaks
+}
+
+/// Cumulative weights of the candidates: each one's share of log-frequency, raised near the
+/// resonance peaks.
+fn cumulative_weights(lf: &[f64], peaks: &[f64], w: f64, resonance_weight: f64) -> Vec<f64> {
+    let n = lf.len();
     let mut cum = Vec::with_capacity(n);
     let mut total = 0.0;
     for a in 0..n {
@@ -136,13 +161,21 @@ pub fn select_points(
             .iter()
             .map(|p| (-0.5 * ((lf[a] - p) / (w / 2.0)).powi(2)).exp())
             .sum();
-        total += span * (1.0 + config.resonance_weight * bump);
+        total += span * (1.0 + resonance_weight * bump);
         cum.push(total);
     }
+    cum
+}
+
+/// `count` candidates at evenly spaced quantiles of the cumulative weight, the nearest free
+/// one where a quantile's is taken.
+fn quantile_picks(cand: &[usize], cum: &[f64], count: usize) -> Vec<usize> {
+    let n = cand.len();
+    let total = cum.last().copied().unwrap_or(0.0);
     let mut taken = vec![false; n];
-    let mut out = Vec::with_capacity(config.count);
-    for q in 0..config.count {
-        let target = (q as f64 + 0.5) / config.count as f64 * total;
+    let mut out = Vec::with_capacity(count);
+    for q in 0..count {
+        let target = (q as f64 + 0.5) / count as f64 * total;
         let a = cum.partition_point(|c| *c < target).min(n - 1);
         // Nearest free candidate.
         let mut pick = None;
@@ -161,8 +194,7 @@ pub fn select_points(
             out.push(cand[p]);
         }
     }
-    out.sort_unstable();
-    Ok(out)
+    out
 }
 
 /// What one characteristic is, for [`to_measurement`].
