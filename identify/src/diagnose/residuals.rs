@@ -86,56 +86,11 @@ pub fn analyze(
     model: &Model,
     alpha: f64,
 ) -> ResidualAnalysis {
-    let points = crit.points();
-    let measured = crit.measured();
-    let freqs = crit.lines();
-    let np = points.len();
-    let complex = crit.fit() == FitKind::Complex;
-    let mut characteristics = Vec::new();
-    for (label, range) in &crit.groups {
-        let mut c = CharacteristicResiduals {
-            label: label.clone(),
-            freqs_hz: Vec::new(),
-            amplitude: Vec::new(),
-            phase: complex.then(Vec::new),
-            chi2: 0.0,
-            rms_relative: 0.0,
-            runs: 0,
-            runs_expected: 0.0,
-            runs_p: 1.0,
-        };
-        let mut rel = 0.0;
-        for i in range.clone() {
-            let (_, line, sigma) = points[i];
-            let z = measured[i];
-            c.freqs_hz.push(freqs[line]);
-            let (amp, q) = if complex {
-                let d = C64::new(e[i], e[np + i]);
-                let unit = if z.norm() > 0.0 {
-                    z.conj() / z.norm()
-                } else {
-                    C64::new(1.0, 0.0)
-                };
-                let rot = unit * d;
-                if let Some(p) = c.phase.as_mut() {
-                    p.push(rot.im);
-                }
-                c.chi2 += d.norm_sqr();
-                (rot.re, z - d * sigma)
-            } else {
-                c.chi2 += e[i] * e[i];
-                (e[i], C64::new(z.re - sigma * e[i], 0.0))
-            };
-            c.amplitude.push(amp);
-            if z.norm() > 0.0 {
-                rel += ((q.norm() - z.norm()) / z.norm()).powi(2);
-            }
-        }
-        let n = c.amplitude.len().max(1);
-        c.rms_relative = (rel / n as f64).sqrt();
-        (c.runs, c.runs_expected, c.runs_p) = runs_test(&c.amplitude);
-        characteristics.push(c);
-    }
+    let characteristics: Vec<CharacteristicResiduals> = crit
+        .groups
+        .iter()
+        .map(|(label, range)| characteristic_residuals(crit, e, label, range.clone()))
+        .collect();
     let m = e.len();
     let dof = m.saturating_sub(parameters).max(1);
     let two_j = e.norm_squared();
@@ -148,7 +103,92 @@ pub fn analyze(
         .collect();
     let chi2_bad = chi2_p.is_some_and(|p| p < alpha);
     let explained = !chi2_bad && structured.is_empty();
-    let verdict = if explained {
+    let verdict = verdict(
+        (two_j, dof, reduced_chi2, chi2_p),
+        alpha,
+        &structured,
+        &bands,
+    );
+    ResidualAnalysis {
+        criterion: 0.5 * two_j,
+        observations: m,
+        parameters,
+        chi2_p,
+        reduced_chi2,
+        characteristics,
+        bands,
+        explained,
+        verdict,
+    }
+}
+
+/// One characteristic's whitened residuals along frequency (rotated into amplitude and phase
+/// for a complex fit), χ², RMS relative amplitude error and runs test.
+fn characteristic_residuals(
+    crit: &Criterion,
+    e: &DVector<f64>,
+    label: &str,
+    range: std::ops::Range<usize>,
+) -> CharacteristicResiduals {
+    let points = crit.points();
+    let measured = crit.measured();
+    let freqs = crit.lines();
+    let np = points.len();
+    let complex = crit.fit() == FitKind::Complex;
+    let mut c = CharacteristicResiduals {
+        label: label.to_string(),
+        freqs_hz: Vec::new(),
+        amplitude: Vec::new(),
+        phase: complex.then(Vec::new),
+        chi2: 0.0,
+        rms_relative: 0.0,
+        runs: 0,
+        runs_expected: 0.0,
+        runs_p: 1.0,
+    };
+    let mut rel = 0.0;
+    for i in range {
+        let (_, line, sigma) = points[i];
+        let z = measured[i];
+        c.freqs_hz.push(freqs[line]);
+        let (amp, q) = if complex {
+            let d = C64::new(e[i], e[np + i]);
+            let unit = if z.norm() > 0.0 {
+                z.conj() / z.norm()
+            } else {
+                C64::new(1.0, 0.0)
+            };
+            let rot = unit * d;
+            if let Some(p) = c.phase.as_mut() {
+                p.push(rot.im);
+            }
+            c.chi2 += d.norm_sqr();
+            (rot.re, z - d * sigma)
+        } else {
+            c.chi2 += e[i] * e[i];
+            (e[i], C64::new(z.re - sigma * e[i], 0.0))
+        };
+        c.amplitude.push(amp);
+        if z.norm() > 0.0 {
+            rel += ((q.norm() - z.norm()) / z.norm()).powi(2);
+        }
+    }
+    let n = c.amplitude.len().max(1);
+    c.rms_relative = (rel / n as f64).sqrt();
+    (c.runs, c.runs_expected, c.runs_p) = runs_test(&c.amplitude);
+    c
+}
+
+/// The sentence that says whether the model explains the data, and if not why and where.
+fn verdict(
+    (two_j, dof, reduced_chi2, chi2_p): (f64, usize, f64, Option<f64>),
+    alpha: f64,
+    structured: &[&CharacteristicResiduals],
+    bands: &[Band],
+) -> String {
+    let chi2_bad = chi2_p.is_some_and(|p| p < alpha);
+    let explained = !chi2_bad && structured.is_empty();
+    if explained {
         match chi2_p {
             Some(p) => format!(
                 "the model explains the data to the noise level (2J = {two_j:.1} for {dof} degrees of freedom, χ² p = {p:.3}; no structure along frequency)"
@@ -165,7 +205,7 @@ pub fn analyze(
                 two_j / dof as f64
             ));
         }
-        for c in &structured {
+        for c in structured {
             why.push(format!(
                 "{} has {} runs where {:.1} were expected (p = {:.1e})",
                 c.label, c.runs, c.runs_expected, c.runs_p
@@ -179,17 +219,6 @@ pub fn analyze(
             "the model does NOT explain the data: {}{place}",
             why.join("; ")
         )
-    };
-    ResidualAnalysis {
-        criterion: 0.5 * two_j,
-        observations: m,
-        parameters,
-        chi2_p,
-        reduced_chi2,
-        characteristics,
-        bands,
-        explained,
-        verdict,
     }
 }
 
