@@ -98,6 +98,9 @@ pub enum IdentifyError {
     /// The model cannot be evaluated at the initial values.
     #[error("the model cannot be evaluated at the initial values: {0}")]
     Initial(EvalError),
+    /// The model cannot be evaluated at the estimate the minimizer returned.
+    #[error("the model cannot be evaluated at the estimate: {0}")]
+    Estimate(EvalError),
     /// No start point was given (`starts` = 0).
     #[error("no start point: give at least one start (--starts 1)")]
     NoStart,
@@ -265,8 +268,6 @@ pub fn identify(
     let mut crit = Criterion::new(model, data, vars, opts.fit, opts.noise, opts.frf_method)?;
     let x0 = vars.initial();
     let scale: Vec<f64> = vars.vars.iter().map(|v| v.scale).collect();
-    let lo = DVector::from_iterator(x0.len(), vars.vars.iter().map(|v| v.lower / v.scale));
-    let hi = DVector::from_iterator(x0.len(), vars.vars.iter().map(|v| v.upper / v.scale));
     let (e0, _) = crit
         .evaluate(&x0, None)
         .map_err(|e| IdentifyError::Initial(e.into()))?;
@@ -274,6 +275,60 @@ pub fn identify(
     let rms_initial = crit
         .rms_relative_error(&x0)
         .map_err(|e| IdentifyError::Initial(e.into()))?;
+    let (out, starts) = best_of_starts(&mut crit, vars, opts, progress)?;
+    let estimate: Vec<f64> = out.u.iter().zip(&scale).map(|(u, s)| u * s).collect();
+    let (e, jac) = crit
+        .evaluate(&estimate, Some(JacobianMode::Analytic))
+        .map_err(|e| IdentifyError::Estimate(e.into()))?;
+    let criterion = 0.5 * e.norm_squared();
+    let jac = jac.unwrap_or_else(|| DMatrix::zeros(e.len(), estimate.len()));
+    let unc = uncertainty::uncertainty(
+        vars,
+        &estimate,
+        &jac,
+        criterion,
+        crit.noise.scale_unknown(),
+        opts.weak_threshold,
+    );
+    let rms = crit
+        .rms_relative_error(&estimate)
+        .map_err(|e| IdentifyError::Estimate(e.into()))?;
+    let mut updated = model.clone();
+    vars.apply(&mut updated, &estimate);
+    Ok(Identification {
+        variables: vars.clone(),
+        initial: x0,
+        estimate,
+        criterion_initial,
+        criterion,
+        optimizer: opts.optimizer,
+        stop: out.stop,
+        iterations: out.iterations,
+        evaluations: crit.evaluations,
+        noise: crit.noise,
+        fit: opts.fit,
+        observations: crit.residual_count(),
+        uncertainty: unc,
+        rms_initial,
+        rms,
+        starts,
+        model: updated,
+    })
+}
+
+/// Minimizes from every start point (the initial values first); the best outcome and a summary
+/// of each start. The model must evaluate at the initial values; a later start that cannot is
+/// recorded as diverged.
+fn best_of_starts(
+    crit: &mut Criterion,
+    vars: &Variables,
+    opts: &Options,
+    progress: &mut dyn FnMut(usize, &Progress),
+) -> Result<(optimize::Outcome, Vec<StartSummary>), IdentifyError> {
+    let scale: Vec<f64> = vars.vars.iter().map(|v| v.scale).collect();
+    let n = scale.len();
+    let lo = DVector::from_iterator(n, vars.vars.iter().map(|v| v.lower / v.scale));
+    let hi = DVector::from_iterator(n, vars.vars.iter().map(|v| v.upper / v.scale));
     let mut best: Option<(optimize::Outcome, usize)> = None;
     let mut starts = Vec::new();
     for (k, xs) in start_points(vars, opts.starts, opts.seed)
@@ -282,7 +337,7 @@ pub fn identify(
     {
         let u0 = DVector::from_iterator(xs.len(), xs.iter().zip(&scale).map(|(x, s)| x / s));
         let mut obj = Scaled {
-            crit: &mut crit,
+            crit: &mut *crit,
             scale: scale.clone(),
             mode: opts.jacobian,
         };
@@ -323,44 +378,7 @@ pub fn identify(
     let Some((out, _)) = best else {
         return Err(IdentifyError::NoStart);
     };
-    let estimate: Vec<f64> = out.u.iter().zip(&scale).map(|(u, s)| u * s).collect();
-    let (e, jac) = crit
-        .evaluate(&estimate, Some(JacobianMode::Analytic))
-        .map_err(|e| IdentifyError::Initial(e.into()))?;
-    let criterion = 0.5 * e.norm_squared();
-    let jac = jac.unwrap_or_else(|| DMatrix::zeros(e.len(), estimate.len()));
-    let unc = uncertainty::uncertainty(
-        vars,
-        &estimate,
-        &jac,
-        criterion,
-        crit.noise.scale_unknown(),
-        opts.weak_threshold,
-    );
-    let rms = crit
-        .rms_relative_error(&estimate)
-        .map_err(|e| IdentifyError::Initial(e.into()))?;
-    let mut updated = model.clone();
-    vars.apply(&mut updated, &estimate);
-    Ok(Identification {
-        variables: vars.clone(),
-        initial: x0,
-        estimate,
-        criterion_initial,
-        criterion,
-        optimizer: opts.optimizer,
-        stop: out.stop,
-        iterations: out.iterations,
-        evaluations: crit.evaluations,
-        noise: crit.noise,
-        fit: opts.fit,
-        observations: crit.residual_count(),
-        uncertainty: unc,
-        rms_initial,
-        rms,
-        starts,
-        model: updated,
-    })
+    Ok((out, starts))
 }
 
 /// The Cramér-Rao uncertainty of `vars` at their initial values (no fit): what the data would
