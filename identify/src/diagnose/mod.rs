@@ -341,6 +341,32 @@ pub fn diagnose(
         );
         rounds.push(round);
     }
+    final_fit(
+        (model, vars, obs),
+        opts,
+        cur,
+        f_hi,
+        (before, rounds, accepted, not_tried),
+        progress,
+    )
+}
+
+/// The diagnosis at the final fit `cur`: the residual analysis after, the accepted effects'
+/// values and errors there (a later effect or a removal moved them), the final model.
+fn final_fit(
+    (model, vars, obs): (&Model, &Variables, &Observations),
+    opts: &Options,
+    cur: Current,
+    f_hi: f64,
+    (before, rounds, mut accepted, not_tried): (
+        ResidualAnalysis,
+        Vec<Round>,
+        Vec<Refit>,
+        Vec<NotTried>,
+    ),
+    progress: &mut dyn FnMut(&str),
+) -> Result<Diagnosis, DiagnoseError> {
+    let iopts = &opts.identification;
     let pf = Problem::new(model, vars, obs, iopts, cur.effects.clone(), f_hi);
     let after = analysis(&pf, &cur, opts)?;
     progress(&format!("after: {}", after.verdict));
