@@ -99,37 +99,13 @@ pub fn run(a: DemoArgs) -> anyhow::Result<ExitCode> {
     );
     let dir = pipeline::dated_folder(&a.out, "demo")?;
     let configs = materialize(&dir)?;
-    let mut stand = Stand::load(&configs.join("stands/fwd32j-model-sim.toml"))?;
-    let mut speed = 1.0;
-    if let Some(t) = stand.truth.as_mut() {
-        if let Some(s) = a.speed {
-            t.speed = s;
-        }
-        speed = t.speed;
-        if let Some(s) = a.seed {
-            t.seed = s;
-        }
-    }
+    let (stand, speed) = demo_stand(&configs, &a)?;
     let setup = Setup::load(
         &configs.join("models/fwd32j-no-actuator.toml"),
         &configs.join("identification/fwd32j-no-actuator.toml"),
     )?;
     let plan = plan(a.points);
-    println!(
-        "ident demo: simulated FWD-32J stand over simulated serial devices (pseudo-terminals)"
-    );
-    println!("  truth: configs/models/fwd32j.toml (the paper's identified values, with the hydraulic actuator SDE 34)");
-    println!(
-        "  identification model: configs/models/fwd32j-no-actuator.toml ({} bodies, {} SDEs, actuator missing), {} decision variables",
-        setup.model.bodies.len(),
-        setup.model.sdes.len(),
-        setup.vars.len()
-    );
-    println!(
-        "  sweep: {} log-spaced lines 20-400 Hz at 4 kN, simulated stand at {speed}x real time",
-        a.points
-    );
-
+    introduce(&setup, a.points, speed);
     let started = Instant::now();
     let progress: Box<dyn SweepProgress> = if a.quiet {
         Box::new(NoProgress)
@@ -186,4 +162,38 @@ pub fn run(a: DemoArgs) -> anyhow::Result<ExitCode> {
     println!("report: {}", dir.display());
     println!("open: {}", written.html.display());
     Ok(ExitCode::SUCCESS)
+}
+
+/// The simulated stand with the demo's speed and seed; and its speed.
+fn demo_stand(configs: &Path, a: &DemoArgs) -> anyhow::Result<(Stand, f64)> {
+    let mut stand = Stand::load(&configs.join("stands/fwd32j-model-sim.toml"))?;
+    let mut speed = 1.0;
+    if let Some(t) = stand.truth.as_mut() {
+        if let Some(s) = a.speed {
+            t.speed = s;
+        }
+        speed = t.speed;
+        if let Some(s) = a.seed {
+            t.seed = s;
+        }
+    }
+    Ok((stand, speed))
+}
+
+/// What the demo is about to do.
+fn introduce(setup: &Setup, points: usize, speed: f64) {
+    println!(
+        "ident demo: simulated FWD-32J stand over simulated serial devices (pseudo-terminals)"
+    );
+    println!("  truth: configs/models/fwd32j.toml (the paper's identified values, with the hydraulic actuator SDE 34)");
+    println!(
+        "  identification model: configs/models/fwd32j-no-actuator.toml ({} bodies, {} SDEs, actuator missing), {} decision variables",
+        setup.model.bodies.len(),
+        setup.model.sdes.len(),
+        setup.vars.len()
+    );
+    println!(
+        "  sweep: {} log-spaced lines 20-400 Hz at 4 kN, simulated stand at {speed}x real time",
+        points
+    );
 }
