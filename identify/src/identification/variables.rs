@@ -513,7 +513,24 @@ fn values(
             initial / unit.factor, unit.symbol, lower / unit.factor, upper / unit.factor, unit.symbol
         )));
     }
-    let scale = match &rv.scale {
+    let scale = natural_scale(cx, rv, (vdim, unit), initial, (lower, upper))?;
+    Ok(Values {
+        initial,
+        lower,
+        upper,
+        scale,
+    })
+}
+
+/// The variable's scale: `scale` if given, else |initial|, else the width of the bounds.
+fn natural_scale(
+    cx: &Ctx,
+    rv: &RawVariable,
+    (vdim, unit): (Dim, &DisplayUnit),
+    initial: f64,
+    (lower, upper): (f64, f64),
+) -> Result<f64, VarsError> {
+    Ok(match &rv.scale {
         Some(v) => {
             let s = cx.value(v, vdim, "scale")?;
             if s <= 0.0 {
@@ -534,12 +551,6 @@ fn values(
                 unit.symbol
             )));
         }
-    };
-    Ok(Values {
-        initial,
-        lower,
-        upper,
-        scale,
     })
 }
 
