@@ -614,12 +614,25 @@ fn replay_broadband(
     let e = averager
         .estimate(lo, hi)
         .map_err(|e| cx.inconsistent(format!("broadband estimate: {e}")))?;
+    out.steps = broadband_lines(&e, live, &stand.channels);
+    Ok(out)
+}
+
+/// Each line of the replayed broadband estimate `e` as a step (H1 per N, coherence as
+/// `fit_quality`, variance), with whether it equals the `live` record bit for bit.
+fn broadband_lines(
+    e: &crate::sweep::periodic::PeriodicFrf,
+    live: &BroadbandRecord,
+    channels: &[Channel],
+) -> Vec<StepAnalysis> {
+    let nch = channels.len();
+    let mut steps = Vec::with_capacity(e.freqs_hz.len());
     for (k, f) in e.freqs_hz.iter().enumerate() {
         let channels: Vec<ChannelResult> = (0..nch)
             .map(|c| {
                 let h = e.h1[c][k];
                 ChannelResult {
-                    name: stand.channels[c].name.clone(),
+                    name: channels[c].name.clone(),
                     // A broadband line has no response amplitude of its own: per N only.
                     amplitude: f64::NAN,
                     phase_rad: h.arg(),
@@ -638,7 +651,7 @@ fn replay_broadband(
                     && l.h1_re.get(k).map(|x| x.to_bits()) == Some(c.frf_re.to_bits())
                     && l.h1_im.get(k).map(|x| x.to_bits()) == Some(c.frf_im.to_bits())
             });
-        out.steps.push(StepAnalysis {
+        steps.push(StepAnalysis {
             step: k,
             frequency_hz: *f,
             first_sample: 0,
@@ -651,7 +664,7 @@ fn replay_broadband(
             matches_live,
         });
     }
-    Ok(out)
+    steps
 }
 
 /// Decodes record `r` as `R`, counting `R`'s records in `index` for the error.
