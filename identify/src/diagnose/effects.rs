@@ -465,36 +465,48 @@ impl Effect {
                 sdes,
                 parameter,
                 ..
-            } => {
-                let var = r
-                    .vars
-                    .vars
-                    .get_mut(*variable)
-                    .ok_or(EffectError::NoVariable(*variable))?;
-                let mut moved = Vec::new();
-                var.targets.retain(|t| {
-                    let hit = sdes.contains(&model.sdes[t.param.sde].name);
-                    if hit {
-                        moved.push(t.param);
-                    }
-                    !hit
-                });
-                if var.targets.is_empty() {
-                    return Err(EffectError::EmptyGroup);
-                }
-                for p in moved {
-                    model.set_param(
-                        ParamRef {
-                            sde: p.sde,
-                            name: *parameter,
-                        },
-                        gamma[0],
-                    );
-                }
-            }
+            } => split_damping(r, *variable, sdes, *parameter, gamma[0])?,
         }
         Ok(())
     }
+}
+
+/// Gives the SDEs `sdes` of ψ group `variable` their own value `psi` of `parameter`, taking
+/// them out of the group.
+fn split_damping(
+    r: &mut Realized,
+    variable: usize,
+    sdes: &[String],
+    parameter: ParamName,
+    psi: f64,
+) -> Result<(), EffectError> {
+    let model = &mut r.model;
+    let var = r
+        .vars
+        .vars
+        .get_mut(variable)
+        .ok_or(EffectError::NoVariable(variable))?;
+    let mut moved = Vec::new();
+    var.targets.retain(|t| {
+        let hit = sdes.contains(&model.sdes[t.param.sde].name);
+        if hit {
+            moved.push(t.param);
+        }
+        !hit
+    });
+    if var.targets.is_empty() {
+        return Err(EffectError::EmptyGroup);
+    }
+    for p in moved {
+        model.set_param(
+            ParamRef {
+                sde: p.sde,
+                name: parameter,
+            },
+            psi,
+        );
+    }
+    Ok(())
 }
 
 fn axes() -> [Vector3<f64>; 3] {
