@@ -346,96 +346,109 @@ pub fn to_bytes(functions: &[Function], encoding: Encoding) -> Result<Vec<u8>> {
             }
         }
         let values = f.values();
-        let width = if f.double { 8 } else { 4 };
-        let mut h = String::new();
-        h.push_str("    -1\n");
-        match encoding {
-            Encoding::Ascii => h.push_str(&format!("{:>6}{:74}\n", 58, "")),
-            Encoding::Binary => h.push_str(&format!(
-                "{:>6}b{:>6}{:>6}{:>12}{:>12}{:>6}{:>6}{:>12}{:>12}\n",
-                58,
-                1,
-                2,
-                11,
-                values.len() * width,
-                0,
-                0,
-                0,
-                0
-            )),
-        }
-        for id in &f.ids {
-            h.push_str(&format!("{:<80}\n", clip(id, 80)));
-        }
-        h.push_str(&format!(
-            "{:>5}{:>10}{:>5}{:>10} {:<10}{:>10}{:>4} {:<10}{:>10}{:>4}\n",
-            f.func_type,
-            f.func_id,
-            f.version,
-            f.load_case,
-            clip(&f.response_entity, 10),
-            f.response_node,
-            f.response_dir,
-            clip(&f.reference_entity, 10),
-            f.reference_node,
-            f.reference_dir
-        ));
-        let (even, min, inc) = match &f.abscissa {
-            Abscissa::Even { min, increment } => (1, *min, *increment),
-            Abscissa::Uneven(_) => (0, 0.0, 0.0),
-        };
-        h.push_str(&format!(
-            "{:>10}{:>10}{:>10}{}{}{}\n",
-            f.ord_type(),
-            n,
-            even,
-            fmt_e(min, 13, 5),
-            fmt_e(inc, 13, 5),
-            fmt_e(f.z_value, 13, 5)
-        ));
-        for a in &f.axes {
-            h.push_str(&format!(
-                "{:>10}{:>5}{:>5}{:>5} {:<20} {:<20}\n",
-                a.spec_data_type,
-                a.length_exp,
-                a.force_exp,
-                a.temperature_exp,
-                clip(&a.label, 20),
-                clip(&a.units, 20)
-            ));
-        }
-        out.extend_from_slice(h.as_bytes());
-        match encoding {
-            Encoding::Binary => {
-                for v in &values {
-                    if f.double {
-                        out.extend_from_slice(&v.to_le_bytes());
-                    } else {
-                        out.extend_from_slice(&(*v as f32).to_le_bytes());
-                    }
-                }
-            }
-            Encoding::Ascii => {
-                let mut s = String::new();
-                // Per line: a pattern of (width, decimals) fields.
-                let pattern: Vec<(usize, usize)> = match (f.double, even == 1, &f.data) {
-                    (false, _, _) => vec![(13, 5); 6],
-                    (true, true, _) => vec![(20, 12); 4],
-                    (true, false, Ordinate::Real(_)) => vec![(13, 5), (20, 12), (13, 5), (20, 12)],
-                    (true, false, Ordinate::Complex(_)) => vec![(13, 5), (20, 12), (20, 12)],
-                };
-                for chunk in values.chunks(pattern.len()) {
-                    for (v, (w, d)) in chunk.iter().zip(&pattern) {
-                        s.push_str(&fmt_e(*v, *w, *d));
-                    }
-                    s.push('\n');
-                }
-                out.extend_from_slice(s.as_bytes());
-            }
-        }
+        out.extend_from_slice(header(f, encoding, values.len()).as_bytes());
+        data_block(&mut out, f, encoding, &values);
         out.extend_from_slice(b"    -1\n");
     }
     Ok(out)
+}
+
+/// The delimiter and records 1-11 of one dataset 58 (58b: with the binary block's size).
+fn header(f: &Function, encoding: Encoding, n_values: usize) -> String {
+    let n = f.data.len();
+    let width = if f.double { 8 } else { 4 };
+    let mut h = String::new();
+    h.push_str("    -1\n");
+    match encoding {
+        Encoding::Ascii => h.push_str(&format!("{:>6}{:74}\n", 58, "")),
+        Encoding::Binary => h.push_str(&format!(
+            "{:>6}b{:>6}{:>6}{:>12}{:>12}{:>6}{:>6}{:>12}{:>12}\n",
+            58,
+            1,
+            2,
+            11,
+            n_values * width,
+            0,
+            0,
+            0,
+            0
+        )),
+    }
+    for id in &f.ids {
+        h.push_str(&format!("{:<80}\n", clip(id, 80)));
+    }
+    h.push_str(&format!(
+        "{:>5}{:>10}{:>5}{:>10} {:<10}{:>10}{:>4} {:<10}{:>10}{:>4}\n",
+        f.func_type,
+        f.func_id,
+        f.version,
+        f.load_case,
+        clip(&f.response_entity, 10),
+        f.response_node,
+        f.response_dir,
+        clip(&f.reference_entity, 10),
+        f.reference_node,
+        f.reference_dir
+    ));
+    let (even, min, inc) = match &f.abscissa {
+        Abscissa::Even { min, increment } => (1, *min, *increment),
+        Abscissa::Uneven(_) => (0, 0.0, 0.0),
+    };
+    h.push_str(&format!(
+        "{:>10}{:>10}{:>10}{}{}{}\n",
+        f.ord_type(),
+        n,
+        even,
+        fmt_e(min, 13, 5),
+        fmt_e(inc, 13, 5),
+        fmt_e(f.z_value, 13, 5)
+    ));
+    for a in &f.axes {
+        h.push_str(&format!(
+            "{:>10}{:>5}{:>5}{:>5} {:<20} {:<20}\n",
+            a.spec_data_type,
+            a.length_exp,
+            a.force_exp,
+            a.temperature_exp,
+            clip(&a.label, 20),
+            clip(&a.units, 20)
+        ));
+    }
+    h
+}
+
+/// The data block: little-endian IEEE values (58b) or fixed-width text lines (the format's
+/// E13.5 for single precision and uneven abscissas, E20.12 for double values).
+fn data_block(out: &mut Vec<u8>, f: &Function, encoding: Encoding, values: &[f64]) {
+    let even = matches!(f.abscissa, Abscissa::Even { .. });
+    match encoding {
+        Encoding::Binary => {
+            for v in values {
+                if f.double {
+                    out.extend_from_slice(&v.to_le_bytes());
+                } else {
+                    out.extend_from_slice(&(*v as f32).to_le_bytes());
+                }
+            }
+        }
+        Encoding::Ascii => {
+            let mut s = String::new();
+            // Per line: a pattern of (width, decimals) fields.
+            let pattern: Vec<(usize, usize)> = match (f.double, even, &f.data) {
+                (false, _, _) => vec![(13, 5); 6],
+                (true, true, _) => vec![(20, 12); 4],
+                (true, false, Ordinate::Real(_)) => vec![(13, 5), (20, 12), (13, 5), (20, 12)],
+                (true, false, Ordinate::Complex(_)) => vec![(13, 5), (20, 12), (20, 12)],
+            };
+            for chunk in values.chunks(pattern.len()) {
+                for (v, (w, d)) in chunk.iter().zip(&pattern) {
+                    s.push_str(&fmt_e(*v, *w, *d));
+                }
+                s.push('\n');
+            }
+            out.extend_from_slice(s.as_bytes());
+        }
+    }
 }
 
 /// Reader position over the file's bytes.
