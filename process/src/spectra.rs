@@ -374,98 +374,114 @@ impl Welch {
     }
 
     fn process_segment(&mut self) {
+        let channels = self.pending.len();
+        // Two real channels per complex FFT: z = a + jb.
+        let mut c = 0;
+        while c < channels {
+            self.spectra_of_pair(c);
+            c += 2;
+        }
+        self.accumulate();
+        self.segments += 1;
+    }
+
+    /// The one-sided spectra of pending channels `c` and `c + 1` (if there is one), detrended
+    /// and windowed, from one complex FFT, into `spectra`.
+    fn spectra_of_pair(&mut self, c: usize) {
         let n = self.config.segment_len;
         let nf = n / 2 + 1;
         let channels = self.pending.len();
         let r = self.references;
-        // Two real channels per complex FFT: z = a + jb.
-        let mut c = 0;
-        while c < channels {
-            let pair = c + 1 < channels;
-            let wa = if c < r {
-                &self.ref_window
-            } else {
-                &self.resp_window
-            };
-            let wb = if c + 1 < r {
-                &self.ref_window
-            } else {
-                &self.resp_window
-            };
-            let (ma, sa) = trend(&self.pending[c], self.config.detrend);
-            let (mb, sb) = if pair {
-                trend(&self.pending[c + 1], self.config.detrend)
-            } else {
-                (0.0, 0.0)
-            };
-            let centre = (n as f64 - 1.0) / 2.0;
-            if pair {
-                let (a, b) = (&self.pending[c], &self.pending[c + 1]);
-                if sa == 0.0 && sb == 0.0 {
-                    for i in 0..n {
-                        self.work[i] = C64::new((a[i] - ma) * wa[i], (b[i] - mb) * wb[i]);
-                    }
-                } else {
-                    for i in 0..n {
-                        let t = i as f64 - centre;
-                        self.work[i] =
-                            C64::new((a[i] - ma - sa * t) * wa[i], (b[i] - mb - sb * t) * wb[i]);
-                    }
+        let pair = c + 1 < channels;
+        let wa = if c < r {
+            &self.ref_window
+        } else {
+            &self.resp_window
+        };
+        let wb = if c + 1 < r {
+            &self.ref_window
+        } else {
+            &self.resp_window
+        };
+        let (ma, sa) = trend(&self.pending[c], self.config.detrend);
+        let (mb, sb) = if pair {
+            trend(&self.pending[c + 1], self.config.detrend)
+        } else {
+            (0.0, 0.0)
+        };
+        let centre = (n as f64 - 1.0) / 2.0;
+        if pair {
+            let (a, b) = (&self.pending[c], &self.pending[c + 1]);
+            if sa == 0.0 && sb == 0.0 {
+                for i in 0..n {
+                    self.work[i] = C64::new((a[i] - ma) * wa[i], (b[i] - mb) * wb[i]);
                 }
             } else {
-                let a = &self.pending[c];
                 for i in 0..n {
                     let t = i as f64 - centre;
-                    self.work[i] = C64::new((a[i] - ma - sa * t) * wa[i], 0.0);
+                    self.work[i] =
+                        C64::new((a[i] - ma - sa * t) * wa[i], (b[i] - mb - sb * t) * wb[i]);
                 }
             }
-            // Bring both packed channels to a similar magnitude by exact powers of two, so the
-            // round-off of a strong channel does not swamp a weak one sharing the FFT.
-            let (mut pa, mut pb) = (0.0f64, 0.0f64);
-            for z in &self.work {
-                pa = pa.max(z.re.abs());
-                pb = pb.max(z.im.abs());
+        } else {
+            let a = &self.pending[c];
+            for i in 0..n {
+                let t = i as f64 - centre;
+                self.work[i] = C64::new((a[i] - ma - sa * t) * wa[i], 0.0);
             }
-            let exponent = |m: f64| {
-                if m > 0.0 && m.is_finite() {
-                    m.log2().round().clamp(-1000.0, 1000.0) as i32
-                } else {
-                    0
-                }
-            };
-            let (ea, eb) = (exponent(pa), exponent(pb));
-            if ea != eb {
-                let (sa, sb) = (2f64.powi(-ea), 2f64.powi(-eb));
-                for z in &mut self.work {
-                    *z = C64::new(z.re * sa, z.im * sb);
-                }
-            }
-            self.fft
-                .process_with_scratch(&mut self.work, &mut self.scratch);
-            let (ua, ub) = if ea != eb {
-                (2f64.powi(ea) * 0.5, 2f64.powi(eb) * 0.5)
-            } else {
-                (0.5, 0.5)
-            };
-            let (head, tail) = self.spectra.split_at_mut((c + 1) * nf);
-            let sa = &mut head[c * nf..];
-            if pair {
-                let sb = &mut tail[..nf];
-                for k in 0..nf {
-                    let z = self.work[k];
-                    let zc = self.work[(n - k) % n].conj();
-                    sa[k] = (z + zc) * ua;
-                    let d = z - zc;
-                    sb[k] = C64::new(d.im * ub, -d.re * ub);
-                }
-            } else {
-                let u = ua * 2.0;
-                for (s, z) in sa.iter_mut().zip(&self.work[..nf]) {
-                    *s = z * u;
-                }
-            }
-            c += 2;
         }
+        // Bring both packed channels to a similar magnitude by exact powers of two, so the
+        // round-off of a strong channel does not swamp a weak one sharing the FFT.
+        let (mut pa, mut pb) = (0.0f64, 0.0f64);
+        for z in &self.work {
+            pa = pa.max(z.re.abs());
+            pb = pb.max(z.im.abs());
+        }
+        let exponent = |m: f64| {
+            if m > 0.0 && m.is_finite() {
+                m.log2().round().clamp(-1000.0, 1000.0) as i32
+            } else {
+                0
+            }
+        };
+        let (ea, eb) = (exponent(pa), exponent(pb));
+        if ea != eb {
+            let (sa, sb) = (2f64.powi(-ea), 2f64.powi(-eb));
+            for z in &mut self.work {
+                *z = C64::new(z.re * sa, z.im * sb);
+            }
+        }
+        self.fft
+            .process_with_scratch(&mut self.work, &mut self.scratch);
+        let (ua, ub) = if ea != eb {
+            (2f64.powi(ea) * 0.5, 2f64.powi(eb) * 0.5)
+        } else {
+            (0.5, 0.5)
+        };
+        let (head, tail) = self.spectra.split_at_mut((c + 1) * nf);
+        let sa = &mut head[c * nf..];
+        if pair {
+            let sb = &mut tail[..nf];
+            for k in 0..nf {
+                let z = self.work[k];
+                let zc = self.work[(n - k) % n].conj();
+                sa[k] = (z + zc) * ua;
+                let d = z - zc;
+                sb[k] = C64::new(d.im * ub, -d.re * ub);
+            }
+        } else {
+            let u = ua * 2.0;
+            for (s, z) in sa.iter_mut().zip(&self.work[..nf]) {
+                *s = z * u;
+            }
+        }
+    }
+
+    /// Adds the segment's auto- and cross-products to the accumulators.
+    fn accumulate(&mut self) {
+        let n = self.config.segment_len;
+        let nf = n / 2 + 1;
+        let r = self.references;
         let p = self.responses;
         let (x, y) = self.spectra.split_at(r * nf);
         for k in 0..nf {
@@ -485,7 +501,6 @@ impl Welch {
                 *g += y[j * nf + k].norm_sqr();
             }
         }
-        self.segments += 1;
     }
 
     /// Ends the record and returns the averaged spectra. Errors if no full segment was seen or a
