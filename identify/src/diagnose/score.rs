@@ -252,50 +252,11 @@ fn flexible_first_order(
         free.sdes[j].enabled = false;
     }
     let sys = crate::system::System::assemble(&free);
-    let mut joint_inv = Vec::with_capacity(2);
-    for (j, e) in joints.iter().zip(ends) {
-        let mut only = split.clone();
-        for (i, sde) in only.sdes.iter_mut().enumerate() {
-            sde.enabled = i == *j;
-        }
-        let sj = crate::system::System::assemble(&only);
-        let kj = nalgebra::Matrix6::<C64>::from_fn(|r, c| {
-            let (i, k) = (6 * e + r, 6 * e + c);
-            C64::new(sj.k[i * ns + k], sj.d[i * ns + k])
-        });
-        joint_inv.push(kj.try_inverse().ok_or(NotScored::SingularJoint)?);
-    }
+    let joint_inv = joint_inverses(&split, joints, ends)?;
     // Rigid motion of the body carried to the end thirds' centres (same axes).
-    let rot = model.bodies[b].rotation;
-    let expand: Vec<[[f64; 6]; 6]> = ends
-        .iter()
-        .map(|&e| {
-            let p = split.bodies[e].position;
-            let mut t = [[0.0; 6]; 6];
-            for (i, row) in t.iter_mut().enumerate().take(3) {
-                for (dof, v) in point_row(model, b, &p, &rot.column(i).into_owned()) {
-                    row[dof - 6 * b] = v;
-                }
-            }
-            for (i, row) in t.iter_mut().enumerate().skip(3) {
-                row[i] = 1.0;
-            }
-            t
-        })
-        .collect();
+    let expand = rigid_to_ends(model, b, &split, ends);
     // The end thirds' rows of A_free = K + jD (mass apart), sparse: only the SDEs attached to them.
-    let rows: Vec<Vec<(usize, C64)>> = ends
-        .iter()
-        .flat_map(|&e| (0..6).map(move |i| 6 * e + i))
-        .map(|r| {
-            (0..ns)
-                .filter_map(|c| {
-                    let v = C64::new(sys.k[r * ns + c], sys.d[r * ns + c]);
-                    (v != C64::new(0.0, 0.0)).then_some((c, v))
-                })
-                .collect()
-        })
-        .collect();
+    let rows = end_rows(&sys, ends);
     let mut full = vec![C64::new(0.0, 0.0); ns];
     // Generalized force on each end third with the rigid motion `x` (n DOFs) inserted: rhs − A_free x.
     let mut end_force =
@@ -341,6 +302,66 @@ fn flexible_first_order(
         }
     }
     Ok(())
+}
+
+/// The inverse of each split joint's complex stiffness block on its end third's DOFs.
+fn joint_inverses(
+    split: &Model,
+    joints: [usize; 2],
+    ends: [usize; 2],
+) -> Result<Vec<nalgebra::Matrix6<C64>>, NotScored> {
+    let ns = split.dof_count();
+    let mut joint_inv = Vec::with_capacity(2);
+    for (j, e) in joints.iter().zip(ends) {
+        let mut only = split.clone();
+        for (i, sde) in only.sdes.iter_mut().enumerate() {
+            sde.enabled = i == *j;
+        }
+        let sj = crate::system::System::assemble(&only);
+        let kj = nalgebra::Matrix6::<C64>::from_fn(|r, c| {
+            let (i, k) = (6 * e + r, 6 * e + c);
+            C64::new(sj.k[i * ns + k], sj.d[i * ns + k])
+        });
+        joint_inv.push(kj.try_inverse().ok_or(NotScored::SingularJoint)?);
+    }
+    Ok(joint_inv)
+}
+
+/// For each end third: its six DOFs as functions of body `b`'s six (a rigid motion carried to
+/// the third's centre, same axes).
+fn rigid_to_ends(model: &Model, b: usize, split: &Model, ends: [usize; 2]) -> Vec<[[f64; 6]; 6]> {
+    let rot = model.bodies[b].rotation;
+    ends.iter()
+        .map(|&e| {
+            let p = split.bodies[e].position;
+            let mut t = [[0.0; 6]; 6];
+            for (i, row) in t.iter_mut().enumerate().take(3) {
+                for (dof, v) in point_row(model, b, &p, &rot.column(i).into_owned()) {
+                    row[dof - 6 * b] = v;
+                }
+            }
+            for (i, row) in t.iter_mut().enumerate().skip(3) {
+                row[i] = 1.0;
+            }
+            t
+        })
+        .collect()
+}
+
+/// The end thirds' rows of `K + jD` of the split model with its joints disabled, sparse.
+fn end_rows(sys: &crate::system::System, ends: [usize; 2]) -> Vec<Vec<(usize, C64)>> {
+    let ns = sys.n;
+    ends.iter()
+        .flat_map(|&e| (0..6).map(move |i| 6 * e + i))
+        .map(|r| {
+            (0..ns)
+                .filter_map(|c| {
+                    let v = C64::new(sys.k[r * ns + c], sys.d[r * ns + c]);
+                    (v != C64::new(0.0, 0.0)).then_some((c, v))
+                })
+                .collect()
+        })
+        .collect()
 }
 
 /// One Jacobian of every ψ parameter the damping candidates split off.
