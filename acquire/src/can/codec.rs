@@ -222,26 +222,14 @@ impl Reassembler {
         }
     }
 
-    /// Takes one frame's data bytes.
-    pub fn push(&mut self, data: &[u8]) -> Pushed<'_> {
-        let Some((&control, payload)) = data.split_first() else {
-            return Pushed {
-                fault: Some(SegmentFault::Framing {
-                    detail: "empty frame (no control byte); ignored".into(),
-                }),
-                message: None,
-            };
-        };
-        let counter = control & 0x7F;
-        let som = control & SOM_FLAG != 0;
+    /// Checks frame counter `counter` against the last one: `Err` for a repeated frame (to be
+    /// ignored), `Ok(Some(gap))` when frames were lost (the message being collected is dropped).
+    fn check_counter(&mut self, counter: u8) -> Result<Option<SegmentFault>, SegmentFault> {
         let mut fault = None;
         if let Some(last) = self.last {
             let expected = (last + 1) & 0x7F;
             if counter == last {
-                return Pushed {
-                    fault: Some(SegmentFault::Duplicate { counter }),
-                    message: None,
-                };
+                return Err(SegmentFault::Duplicate { counter });
             }
             if counter != expected {
                 let lost = matches!(self.state, State::Collecting { .. });
@@ -256,6 +244,30 @@ impl Reassembler {
             }
         }
         self.last = Some(counter);
+        Ok(fault)
+    }
+
+    /// Takes one frame's data bytes.
+    pub fn push(&mut self, data: &[u8]) -> Pushed<'_> {
+        let Some((&control, payload)) = data.split_first() else {
+            return Pushed {
+                fault: Some(SegmentFault::Framing {
+                    detail: "empty frame (no control byte); ignored".into(),
+                }),
+                message: None,
+            };
+        };
+        let counter = control & 0x7F;
+        let som = control & SOM_FLAG != 0;
+        let mut fault = match self.check_counter(counter) {
+            Ok(gap) => gap,
+            Err(duplicate) => {
+                return Pushed {
+                    fault: Some(duplicate),
+                    message: None,
+                }
+            }
+        };
 
         if som {
             if let State::Collecting { need } = self.state {
