@@ -536,10 +536,10 @@ fn replay_steps(
                     s.retries = retries.get(&step).copied().unwrap_or(0);
                     out.steps.push(s);
                 }
-                Err(reason) => out.dropped.push(DroppedStep {
+                Err(e) => out.dropped.push(DroppedStep {
                     step,
                     frequency_hz: live.frequency_hz,
-                    reason,
+                    reason: format!("sine fit failed: {e}"),
                 }),
             }
         }
@@ -678,15 +678,13 @@ fn decode<R: TopicRecord>(
     Ok(r.decode().map_err(|e| rep.malformed::<R>(i, e))?)
 }
 
-/// The step `live` recomputed from the samples fed to `estimator`; `Err` says why it cannot be.
+/// The step `live` recomputed from the samples fed to `estimator`; `Err` when the sine fit fails.
 fn recompute_step(
     estimator: &mut StepEstimator,
     live: &StepResult,
     names: &[String],
-) -> Result<StepAnalysis, String> {
-    let est = estimator
-        .estimate(live.frequency_hz)
-        .map_err(|e| format!("sine fit failed: {e}"))?;
+) -> Result<StepAnalysis, process::ProcessError> {
+    let est = estimator.estimate(live.frequency_hz)?;
     let results = estimator.channel_results(&est, names);
     let matches_live = live.channels.len() == results.len()
         && live.channels.iter().zip(&results).all(|(a, b)| {

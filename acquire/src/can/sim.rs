@@ -52,6 +52,19 @@ enum BlockFault {
     Delay,
 }
 
+impl BlockFault {
+    /// The name injected faults are recorded under (`None` for no fault).
+    fn name(self) -> Option<&'static str> {
+        match self {
+            BlockFault::None => None,
+            BlockFault::Drop => Some("drop"),
+            BlockFault::Corrupt => Some("corrupt"),
+            BlockFault::Duplicate => Some("duplicate"),
+            BlockFault::Delay => Some("delay"),
+        }
+    }
+}
+
 /// How the simulated DAQ behaves.
 #[derive(Debug, Clone)]
 pub struct SimCanDaqSettings {
@@ -186,8 +199,7 @@ async fn serve_on(
     let per_block = settings.faults.per_block.clone();
     let mut rng = rand::rngs::StdRng::seed_from_u64(per_block.as_ref().map_or(0, |f| f.seed));
     let mut silent = false;
-    let interface = bus.interface().to_string();
-    let interface = interface.as_str();
+    let interface = bus.interface();
     let mut rx = Reassembler::new();
     let mut tx_status = Segmenter::new(settings.status_id, settings.frames);
     let mut tx_data = Segmenter::new(settings.data_id, settings.frames);
@@ -196,8 +208,7 @@ async fn serve_on(
     let mut streaming = false;
     let mut block_seq: u32 = 0;
     let mut frames: Vec<WireFrame> = Vec::new();
-    let mut body = Vec::new();
-    let mut counts: Vec<i32> = Vec::new();
+    let (mut body, mut counts) = (Vec::new(), Vec::<i32>::new());
     let mut ticker = tokio::time::interval(Duration::from_millis(10));
     ticker.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Burst);
     tokio::pin!(stop);
@@ -216,52 +227,19 @@ async fn serve_on(
                 let p = rx.push(f.data());
                 let Some(body_in) = p.message else { continue };
                 stats.commands += 1;
-                let answer = match Message::decode(body_in) {
-                    Ok(Message::Identify) => Message::Identity(settings.identity.to_idn()),
-                    Ok(Message::Configure { sample_rate_mhz, samples_per_block, channels }) => {
-                        let rate = sample_rate_mhz as f64 / 1000.0;
-                        if let Some(bad) = channels.iter().find(|&&c| c >= settings.channel_count) {
-                            Message::Nak { command: kind::CONFIGURE, code: 2, message: format!("no channel {bad} (device has {})", settings.channel_count) }
-                        } else if rate <= 0.0 || rate > settings.max_sample_rate_hz || samples_per_block == 0 || channels.is_empty() {
-                            Message::Nak { command: kind::CONFIGURE, code: 3, message: format!("rate {rate} Hz / block {samples_per_block} not supported") }
-                        } else {
-                            streaming = false;
-                            let announce = Message::Announce {
-                                sample_rate_mhz,
-                                samples_per_block,
-                                channels: channels.iter().map(|&c| WireChannel { device_channel: c, volts_per_count: settings.volts_per_count }).collect(),
-                            };
-                            stream = Some(Stream { channels, samples_per_block, sample_rate_hz: rate });
-                            announce
-                        }
-                    }
-                    Ok(Message::Start) => match &stream {
-                        None => Message::Nak { command: kind::START, code: 1, message: "not configured".into() },
-                        Some(s) => {
-                            streaming = true;
-                            block_seq = 0;
-                            let period = Duration::from_secs_f64(s.samples_per_block as f64 / s.sample_rate_hz / settings.speed.max(1e-6));
-                            ticker = tokio::time::interval(period.max(Duration::from_micros(1)));
-                            ticker.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Burst);
-                            Message::Ack { command: kind::START }
-                        }
-                    },
-                    Ok(Message::Stop) => {
-                        streaming = false;
-                        Message::Ack { command: kind::STOP }
-                    }
-                    Ok(other) => Message::Nak { command: 0, code: 4, message: format!("unexpected {}", other.name()) },
-                    Err(e) => Message::Nak { command: body_in.first().copied().unwrap_or(0), code: 5, message: e.to_string() },
-                };
+                let (answer, started) = answer(&settings, &mut stream, &mut streaming, body_in);
+                if let Some(period) = started {
+                    block_seq = 0;
+                    ticker = tokio::time::interval(period.max(Duration::from_micros(1)));
+                    ticker.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Burst);
+                }
                 let command = body_in.first().copied().unwrap_or(0);
                 if let Some(i) = settings.faults.lose_answers.iter().position(|&k| k == command) {
                     settings.faults.lose_answers.remove(i);
                     stats.answers_lost += 1;
                     continue;
                 }
-                answer.encode(&mut body).map_err(|source| CanError::Encode { interface: interface.into(), message: "answer", source })?;
-                frames.clear();
-                tx_status.segment(&body, &mut frames).map_err(|source| CanError::Encode { interface: interface.into(), message: "answer", source })?;
+                encode_frames(&answer, &mut tx_status, (&mut body, &mut frames), (interface, "answer"))?;
                 for f in &frames {
                     bus.send(f).await?;
                 }
@@ -271,87 +249,231 @@ async fn serve_on(
                 if settings.real_time { ticker.tick().await; } else { tokio::task::yield_now().await; }
             }, if streaming => {
                 let Some(s) = &stream else { continue };
-                let spb = s.samples_per_block as u64;
-                let first = block_seq as u64 * spb;
-                counts.clear();
-                let (lo, hi) = settings.format.range();
-                for i in 0..spb {
-                    for &c in &s.channels {
-                        counts.push(signal(c, first + i).clamp(lo, hi));
-                    }
-                }
+                let first = block_seq as u64 * s.samples_per_block as u64;
+                fill_counts(&mut signal, s, first, settings.format, &mut counts);
                 let this = block_seq as u64;
-                let mut fault = BlockFault::None;
-                if let Some(f) = &per_block {
-                    let pulled = f.cable_pull_after_blocks.is_some_and(|k| stats.blocks >= k);
-                    if pulled || f.daq_silent_after_blocks.is_some_and(|k| stats.blocks >= k) {
+                let fault = match block_fault(per_block.as_ref(), stats.blocks, &mut rng) {
+                    Ok(fault) => fault,
+                    Err(gone) => {
                         silent = true;
                         streaming = false;
-                        note(if pulled { "cable_pull" } else { "daq_silent" }, this);
+                        note(gone, this);
                         continue;
                     }
-                    let u: f64 = rng.random();
-                    fault = if u < f.drop {
-                        BlockFault::Drop
-                    } else if u < f.drop + f.corrupt {
-                        BlockFault::Corrupt
-                    } else if u < f.drop + f.corrupt + f.duplicate {
-                        BlockFault::Duplicate
-                    } else if u < f.drop + f.corrupt + f.duplicate + f.delay {
-                        BlockFault::Delay
-                    } else {
-                        BlockFault::None
-                    };
-                }
+                };
                 let block = Message::Block(WireBlock { seq: block_seq, format: settings.format, channel_count: s.channels.len() as u8, counts: std::mem::take(&mut counts) });
-                block.encode(&mut body).map_err(|source| CanError::Encode { interface: interface.into(), message: "block", source })?;
+                encode_frames(&block, &mut tx_data, (&mut body, &mut frames), (interface, "block"))?;
                 if let Message::Block(b) = block { counts = b.counts; }
-                frames.clear();
-                tx_data.segment(&body, &mut frames).map_err(|source| CanError::Encode { interface: interface.into(), message: "block", source })?;
                 // The frame a per-block fault hits.
                 let target = match fault {
                     BlockFault::Drop | BlockFault::Corrupt | BlockFault::Duplicate => Some(rng.random_range(0..frames.len())),
                     BlockFault::None | BlockFault::Delay => None,
                 };
-                match fault {
-                    BlockFault::None => {}
-                    BlockFault::Drop => note("drop", this),
-                    BlockFault::Corrupt => note("corrupt", this),
-                    BlockFault::Duplicate => note("duplicate", this),
-                    BlockFault::Delay => {
-                        note("delay", this);
-                        if let Some(f) = &per_block {
-                            tokio::time::sleep(f.delay_time).await;
-                        }
-                    }
+                if let Some(kind) = fault.name() {
+                    note(kind, this);
                 }
-                for (i, f) in frames.iter().enumerate() {
-                    let here = |kind: BlockFault| target == Some(i) && fault == kind;
-                    stats.data_frames += 1;
-                    let n = stats.data_frames;
-                    let hit = |every: Option<u64>| every.is_some_and(|e| e > 0 && n % e == 0);
-                    if hit(settings.faults.drop_every) || here(BlockFault::Drop) {
-                        stats.dropped += 1;
-                        continue;
-                    }
-                    let mut f = *f;
-                    let corrupt = hit(settings.faults.corrupt_every) || here(BlockFault::Corrupt);
-                    if corrupt && f.data().len() > 1 {
-                        let mut d = f.data().to_vec();
-                        let last = d.len() - 1;
-                        d[1 + n as usize % last] ^= 0x10;
-                        f = WireFrame::from_parts(f.id(), f.kind(), &d);
-                        stats.corrupted += 1;
-                    }
-                    bus.send(&f).await?;
-                    if hit(settings.faults.duplicate_every) || here(BlockFault::Duplicate) {
-                        bus.send(&f).await?;
-                        stats.duplicated += 1;
-                    }
+                if let (BlockFault::Delay, Some(f)) = (fault, &per_block) {
+                    tokio::time::sleep(f.delay_time).await;
                 }
+                send_block(&bus, &frames, (fault, target), &settings.faults, &mut stats).await?;
                 stats.blocks += 1;
                 block_seq = block_seq.wrapping_add(1);
             }
         }
     }
+}
+
+/// The answer to one command, and (for START) the block period the ticker must take.
+fn answer(
+    settings: &SimCanDaqSettings,
+    stream: &mut Option<Stream>,
+    streaming: &mut bool,
+    body_in: &[u8],
+) -> (Message, Option<Duration>) {
+    let mut started = None;
+    let answer = match Message::decode(body_in) {
+        Ok(Message::Identify) => Message::Identity(settings.identity.to_idn()),
+        Ok(Message::Configure {
+            sample_rate_mhz,
+            samples_per_block,
+            channels,
+        }) => {
+            let rate = sample_rate_mhz as f64 / 1000.0;
+            if let Some(bad) = channels.iter().find(|&&c| c >= settings.channel_count) {
+                Message::Nak {
+                    command: kind::CONFIGURE,
+                    code: 2,
+                    message: format!("no channel {bad} (device has {})", settings.channel_count),
+                }
+            } else if rate <= 0.0
+                || rate > settings.max_sample_rate_hz
+                || samples_per_block == 0
+                || channels.is_empty()
+            {
+                Message::Nak {
+                    command: kind::CONFIGURE,
+                    code: 3,
+                    message: format!("rate {rate} Hz / block {samples_per_block} not supported"),
+                }
+            } else {
+                *streaming = false;
+                let announce = Message::Announce {
+                    sample_rate_mhz,
+                    samples_per_block,
+                    channels: channels
+                        .iter()
+                        .map(|&c| WireChannel {
+                            device_channel: c,
+                            volts_per_count: settings.volts_per_count,
+                        })
+                        .collect(),
+                };
+                *stream = Some(Stream {
+                    channels,
+                    samples_per_block,
+                    sample_rate_hz: rate,
+                });
+                announce
+            }
+        }
+        Ok(Message::Start) => match stream {
+            None => Message::Nak {
+                command: kind::START,
+                code: 1,
+                message: "not configured".into(),
+            },
+            Some(s) => {
+                *streaming = true;
+                started = Some(Duration::from_secs_f64(
+                    s.samples_per_block as f64 / s.sample_rate_hz / settings.speed.max(1e-6),
+                ));
+                Message::Ack {
+                    command: kind::START,
+                }
+            }
+        },
+        Ok(Message::Stop) => {
+            *streaming = false;
+            Message::Ack {
+                command: kind::STOP,
+            }
+        }
+        Ok(other) => Message::Nak {
+            command: 0,
+            code: 4,
+            message: format!("unexpected {}", other.name()),
+        },
+        Err(e) => Message::Nak {
+            command: body_in.first().copied().unwrap_or(0),
+            code: 5,
+            message: e.to_string(),
+        },
+    };
+    (answer, started)
+}
+
+/// The fault the next block gets (after `blocks` blocks); `Err` names why the DAQ goes silent
+/// for good (`cable_pull`, `daq_silent`).
+fn block_fault(
+    f: Option<&crate::stand::Faults>,
+    blocks: u64,
+    rng: &mut rand::rngs::StdRng,
+) -> Result<BlockFault, &'static str> {
+    let Some(f) = f else {
+        return Ok(BlockFault::None);
+    };
+    if f.cable_pull_after_blocks.is_some_and(|k| blocks >= k) {
+        return Err("cable_pull");
+    }
+    if f.daq_silent_after_blocks.is_some_and(|k| blocks >= k) {
+        return Err("daq_silent");
+    }
+    Ok(draw_block_fault(f, rng))
+}
+
+/// A random per-block fault, with the stand's probabilities.
+fn draw_block_fault(f: &crate::stand::Faults, rng: &mut rand::rngs::StdRng) -> BlockFault {
+    let u: f64 = rng.random();
+    if u < f.drop {
+        BlockFault::Drop
+    } else if u < f.drop + f.corrupt {
+        BlockFault::Corrupt
+    } else if u < f.drop + f.corrupt + f.duplicate {
+        BlockFault::Duplicate
+    } else if u < f.drop + f.corrupt + f.duplicate + f.delay {
+        BlockFault::Delay
+    } else {
+        BlockFault::None
+    }
+}
+
+/// The block's ADC counts from sample `first` on, sample-major, clamped to the format's range.
+fn fill_counts(
+    signal: &mut Signal,
+    s: &Stream,
+    first: u64,
+    format: SampleFormat,
+    counts: &mut Vec<i32>,
+) {
+    counts.clear();
+    let (lo, hi) = format.range();
+    for i in 0..s.samples_per_block as u64 {
+        for &c in &s.channels {
+            counts.push(signal(c, first + i).clamp(lo, hi));
+        }
+    }
+}
+
+/// Sends a block's data frames, with the per-block fault (`fault`, on frame `target`) and the
+/// periodic frame faults of `faults`; counts them in `stats`.
+async fn send_block(
+    bus: &CanBus,
+    frames: &[WireFrame],
+    (fault, target): (BlockFault, Option<usize>),
+    faults: &SimFaults,
+    stats: &mut SimStats,
+) -> Result<(), CanError> {
+    for (i, f) in frames.iter().enumerate() {
+        let here = |kind: BlockFault| target == Some(i) && fault == kind;
+        stats.data_frames += 1;
+        let n = stats.data_frames;
+        let hit = |every: Option<u64>| every.is_some_and(|e| e > 0 && n.is_multiple_of(e));
+        if hit(faults.drop_every) || here(BlockFault::Drop) {
+            stats.dropped += 1;
+            continue;
+        }
+        let mut f = *f;
+        let corrupt = hit(faults.corrupt_every) || here(BlockFault::Corrupt);
+        if corrupt && f.data().len() > 1 {
+            let mut d = f.data().to_vec();
+            let last = d.len() - 1;
+            d[1 + n as usize % last] ^= 0x10;
+            f = WireFrame::from_parts(f.id(), f.kind(), &d);
+            stats.corrupted += 1;
+        }
+        bus.send(&f).await?;
+        if hit(faults.duplicate_every) || here(BlockFault::Duplicate) {
+            bus.send(&f).await?;
+            stats.duplicated += 1;
+        }
+    }
+    Ok(())
+}
+
+/// Encodes `message` and cuts it into `frames` (cleared first); `body` is the encoding buffer.
+fn encode_frames(
+    message: &Message,
+    segmenter: &mut Segmenter,
+    (body, frames): (&mut Vec<u8>, &mut Vec<WireFrame>),
+    (interface, what): (&str, &'static str),
+) -> Result<(), CanError> {
+    let err = |source| CanError::Encode {
+        interface: interface.into(),
+        message: what,
+        source,
+    };
+    message.encode(body).map_err(err)?;
+    frames.clear();
+    segmenter.segment(body, frames).map_err(err)?;
+    Ok(())
 }
