@@ -41,7 +41,51 @@ fn short_demo(out: &Path) -> PathBuf {
         "--quiet",
     ]);
     assert!(o.status.success(), "{}", text(&o));
-    report_dir(&o)
+    let dir = report_dir(&o);
+    assert_reads_cleanly(&text(&o), "demo output");
+    let html = std::fs::read_to_string(dir.join("report.html")).unwrap();
+    assert_reads_cleanly(&html, "report.html");
+    dir
+}
+
+/// No float noise (`3999.9999999999995`) and no relative error printed as `0.000`.
+fn assert_reads_cleanly(text: &str, what: &str) {
+    let around = |a: usize, b: usize| {
+        let (mut a, mut b) = (a.saturating_sub(80), (b + 20).min(text.len()));
+        while !text.is_char_boundary(a) {
+            a -= 1;
+        }
+        while !text.is_char_boundary(b) {
+            b += 1;
+        }
+        &text[a..b]
+    };
+    let bytes = text.as_bytes();
+    let mut i = 0;
+    while i < bytes.len() {
+        if !bytes[i].is_ascii_digit() || (i > 0 && (bytes[i - 1].is_ascii_alphanumeric())) {
+            i += 1;
+            continue;
+        }
+        let start = i;
+        while i < bytes.len() && (bytes[i].is_ascii_digit() || bytes[i] == b'.') {
+            i += 1;
+        }
+        let number = &text[start..i];
+        let exponent = bytes.get(i).is_some_and(|b| *b == b'e' || *b == b'E');
+        if let Some((_, fraction)) = number.split_once('.') {
+            assert!(
+                exponent || !(fraction.contains("999999") || fraction.contains("000000")),
+                "{what}: float noise {number:?} in …{}…",
+                around(start, i)
+            );
+        }
+        assert!(
+            number != "0.000",
+            "{what}: a number printed as 0.000 in …{}…",
+            around(start, i)
+        );
+    }
 }
 
 #[test]

@@ -273,7 +273,7 @@ pub fn characteristics(
             "stepped-sine steps"
         },
         replayed.dropped.len(),
-        geometry.nominal_force_n,
+        identify::display::sig(geometry.nominal_force_n, 6),
         geometry.source
     );
     Ok(SessionAnalysis {

@@ -30,6 +30,7 @@
 pub mod check;
 pub mod contract;
 pub mod diagnose;
+pub mod display;
 pub mod frf;
 pub mod identification;
 pub mod lines;

@@ -164,7 +164,11 @@ fn characteristics(h: &mut String, r: &Report) -> Result<(), ReportError> {
     for c in &r.characteristics {
         let _ = write!(h, "<tr><td class=\"l\">{}</td>", e(&c.label));
         for s in &c.stages {
-            let _ = write!(h, "<td>{:.2} %</td>", 100.0 * s.rms_relative_error);
+            let _ = write!(
+                h,
+                "<td>{}</td>",
+                identify::display::relative(s.rms_relative_error)
+            );
         }
         let _ = writeln!(
             h,
@@ -205,7 +209,7 @@ fn parameters(h: &mut String, r: &Report) -> Result<(), ReportError> {
             num(p.initial),
             num(p.identified),
             p.std_error.map(num).unwrap_or_else(|| "undetermined".into()),
-            p.variability.map(|v| format!("{v:.3}")).unwrap_or_else(|| "—".into()),
+            p.variability.map(identify::display::relative).unwrap_or_else(|| "—".into()),
             p.at_bound.as_ref().map(|b| format!("at {} bound", e(b))).unwrap_or_default()
         );
     }
@@ -253,9 +257,9 @@ fn diagnosis(h: &mut String, r: &Report) {
             for c in &d.candidates {
                 let _ = writeln!(
                     h,
-                    "<tr{}><td>{}</td><td class=\"l\">{}</td><td class=\"l\">{}</td><td>{}</td><td>{:.3e}</td><td class=\"l\">{}</td><td>{}</td><td>{}</td><td class=\"l\">{}</td></tr>",
+                    "<tr{}><td>{}</td><td class=\"l\">{}</td><td class=\"l\">{}</td><td>{}</td><td>{}</td><td class=\"l\">{}</td><td>{}</td><td>{}</td><td class=\"l\">{}</td></tr>",
                     if c.accepted { " class=\"accepted\"" } else { "" },
-                    c.round, e(&c.name), e(&c.location), num(c.statistic), c.p_value, if c.accepted { "yes" } else { "no" },
+                    c.round, e(&c.name), e(&c.location), num(c.statistic), identify::display::p_value(c.p_value), if c.accepted { "yes" } else { "no" },
                     opt(c.estimate), opt(c.std_error), e(&c.unit)
                 );
             }
@@ -267,7 +271,7 @@ fn diagnosis(h: &mut String, r: &Report) {
             for (name, q) in [("before", &d.before), ("after", &d.after)] {
                 let p = q
                     .chi2_p_value
-                    .map(|p| format!("{p:.3e}"))
+                    .map(identify::display::p_value)
                     .unwrap_or_else(|| "— (noise level unknown)".into());
                 let _ = write!(
                     h,
@@ -276,7 +280,7 @@ fn diagnosis(h: &mut String, r: &Report) {
                     q.reduced_chi2
                 );
                 for l in &q.rms_relative_error {
-                    let _ = write!(h, "<td>{:.2} %</td>", 100.0 * l.value);
+                    let _ = write!(h, "<td>{}</td>", identify::display::relative(l.value));
                 }
                 h.push_str("</tr>\n");
             }

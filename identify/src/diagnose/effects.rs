@@ -215,13 +215,13 @@ impl Effect {
                       d: &Vector3<f64>,
                       tail: &str| {
             format!(
-                "spring {}–{} {at} {} along ({:.3}, {:.3}, {:.3}){tail}",
+                "spring {}–{} {at} {} along ({}, {}, {}){tail}",
                 name(&bodies[0]),
                 name(&bodies[1]),
                 mm(point),
-                d.x,
-                d.y,
-                d.z
+                crate::display::sig(d.x, 3),
+                crate::display::sig(d.y, 3),
+                crate::display::sig(d.z, 3)
             )
         };
         match self {

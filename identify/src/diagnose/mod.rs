@@ -1135,7 +1135,12 @@ fn before_after_text(s: &mut String, d: &Diagnosis) {
         d.before.reduced_chi2, d.after.reduced_chi2
     );
     if let (Some(a), Some(b)) = (d.before.chi2_p, d.after.chi2_p) {
-        let _ = writeln!(s, "    χ² p-value      {a:.2e} → {b:.3}");
+        let _ = writeln!(
+            s,
+            "    χ² p-value      {} → {}",
+            crate::display::p_value(a),
+            crate::display::p_value(b)
+        );
     }
     for (a, b) in d
         .before
@@ -1145,10 +1150,10 @@ fn before_after_text(s: &mut String, d: &Diagnosis) {
     {
         let _ = writeln!(
             s,
-            "    RMS rel. error  {:<28} {:.2} % → {:.2} %",
+            "    RMS rel. error  {:<28} {} → {}",
             a.label,
-            100.0 * a.rms_relative,
-            100.0 * b.rms_relative
+            crate::display::relative(a.rms_relative),
+            crate::display::relative(b.rms_relative)
         );
     }
 }

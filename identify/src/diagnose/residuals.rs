@@ -191,7 +191,7 @@ fn verdict(
     if explained {
         match chi2_p {
             Some(p) => format!(
-                "the model explains the data to the noise level (2J = {two_j:.1} for {dof} degrees of freedom, χ² p = {p:.3}; no structure along frequency)"
+                "the model explains the data to the noise level (2J = {two_j:.1} for {dof} degrees of freedom, χ² p = {}; no structure along frequency)", crate::display::p_value(p)
             ),
             None => format!(
                 "no structure along frequency (runs tests pass); R is known only up to scale, so the χ² level cannot be tested (reduced χ² {reduced_chi2:.2} sets the scale)"

@@ -128,9 +128,9 @@ pub fn text(id: &Identification) -> String {
     s.push_str("\nRMS relative amplitude error per characteristic (initial -> identified):\n");
     for ((label, a), (_, b)) in id.rms_initial.iter().zip(&id.rms) {
         s.push_str(&format!(
-            "  {label}: {:.2} % -> {:.2} %\n",
-            100.0 * a,
-            100.0 * b
+            "  {label}: {} -> {}\n",
+            crate::display::relative(*a),
+            crate::display::relative(*b)
         ));
     }
     identifiability_text(&mut s, id);
@@ -163,7 +163,7 @@ fn parameter_table(s: &mut String, id: &Identification) {
                 .map(num)
                 .unwrap_or_else(|| "undetermined".into()),
             r.variability
-                .map(|v| format!("{v:.3}"))
+                .map(crate::display::relative)
                 .unwrap_or_else(|| "-".into()),
             r.at_bound
                 .as_ref()
