@@ -340,6 +340,8 @@ pub fn summary_text(a: &Analysis) -> String {
         Some((_, d)) => {
             s.push('\n');
             s.push_str(&diagnose::text(d));
+            s.push('\n');
+            s.push_str(&diagnose::final_text(&a.identification, d));
         }
         None => s.push_str("\ndiagnosis: not run (see the notes)\n"),
     }

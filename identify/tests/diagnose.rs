@@ -136,6 +136,38 @@ fn the_missing_hydraulic_actuator_is_found_added_and_the_fit_reaches_the_noise_f
         );
     }
     assert!(matches!(d.effects[0], Effect::Spring { .. }));
+    // The final model is what a reader gets first: its variables at the final fit, with their
+    // errors there. The first fit compensated for the missing actuator with nonsense; the final
+    // values of the screws' stiffnesses are the truth's within three standard errors.
+    let text = diagnose::final_text(&case.id, &d);
+    assert!(
+        text.starts_with("FINAL MODEL: the first fit above is superseded; 1 effect(s) added"),
+        "{text}"
+    );
+    assert!(text.contains("\n  + spring spindle head–"), "{text}");
+    assert_eq!(d.std_error.len(), case.vars.len());
+    for name in ["k 22", "k 29"] {
+        let i = case
+            .vars
+            .vars
+            .iter()
+            .position(|v| v.name == name)
+            .expect(name);
+        let t = case.vars.vars[i].targets[0];
+        let sde = &case.model.sdes[t.param.sde].name;
+        let want = truth.sdes[truth.sde_index(sde).expect("in the truth")]
+            .law
+            .get(t.param.name)
+            .expect("a parameter of the truth")
+            / t.ratio;
+        let (x, se) = (d.estimate[i], d.std_error[i]);
+        assert!(
+            se.is_finite() && se > 0.0 && (x - want).abs() < 3.0 * se,
+            "{name}: final {x} ± {se}, truth {want}; first fit {}",
+            case.id.estimate[i]
+        );
+        assert!(text.contains(&format!("\n  {name:<20}")), "{text}");
+    }
 }
 
 /// A support under the table the model lacks: a vertical spring (2 N/µm, ψ 0.3) from the ground
@@ -445,6 +477,14 @@ fn data_without_an_undeclared_effect_gets_nothing_added() {
         if !d.accepted.is_empty() {
             alarms += 1;
             println!("seed {seed}: added {}", d.accepted[0].effect);
+        } else {
+            // Nothing added: the final model is the first fit, and the text says so.
+            let text = diagnose::final_text(&case.id, &d);
+            assert!(
+                text.starts_with("FINAL MODEL = the first fit above: the diagnosis added nothing"),
+                "{text}"
+            );
+            assert!(d.std_error.is_empty());
         }
     }
     println!("false alarms: {alarms} of {seeds} at α = {}", opts.alpha);

@@ -212,6 +212,9 @@ pub struct Diagnosis {
     pub not_tried: Vec<NotTried>,
     /// Variable estimates after the last accepted effect (SI).
     pub estimate: Vec<f64>,
+    /// Their Cramér-Rao standard errors at that fit (SI; NaN where undetermined); empty when no
+    /// effect was accepted (the identification's errors stand).
+    pub std_error: Vec<f64>,
     /// The final model (effects added, estimates written in).
     #[serde(skip)]
     pub model: Model,
@@ -371,7 +374,8 @@ fn final_fit(
     let after = analysis(&pf, &cur, opts)?;
     progress(&format!("after: {}", after.verdict));
     // Effects refitted after their own round (a later effect, a removal) moved: report their
-    // values and errors at the final fit.
+    // values and errors at the final fit, and the variables' errors there.
+    let mut std_error = Vec::new();
     if !cur.effects.is_empty() {
         let crit_scale = residual_scale(
             &cur,
@@ -382,6 +386,7 @@ fn final_fit(
         for (a, params) in accepted.iter_mut().zip(finals) {
             a.params = params;
         }
+        std_error = variable_errors(&pf, &cur, crit_scale);
     }
     let (x, gamma) = pf.split(&cur.u);
     let realized = pf.realize(&gamma)?;
@@ -394,6 +399,7 @@ fn final_fit(
         accepted,
         not_tried,
         estimate: x,
+        std_error,
         model: final_model,
         effects: cur.effects,
     })
@@ -882,6 +888,22 @@ fn estimates(p: &Problem, cur: &Current, f_hi: f64, sigma2: f64) -> Vec<Vec<Para
         .collect()
 }
 
+/// The variables' Cramér-Rao standard errors (SI) at the extended fit `cur` of `p`.
+fn variable_errors(p: &Problem, cur: &Current, sigma2: f64) -> Vec<f64> {
+    let info = cur.jac.tr_mul(&cur.jac);
+    let cov = info
+        .clone()
+        .try_inverse()
+        .or_else(|| info.pseudo_inverse(1e-12).ok());
+    let (x, _) = p.split(&cur.u);
+    (0..x.len())
+        .map(|i| match &cov {
+            Some(c) => (c[(i, i)] * sigma2).max(0.0).sqrt() * p.scale[i],
+            None => f64::NAN,
+        })
+        .collect()
+}
+
 /// How far a refit's LR exceeds the critical value of its test at `threshold`.
 fn margin(r: &Refit, threshold: f64) -> f64 {
     let crit = ChiSquared::new(r.dof as f64)
@@ -1059,6 +1081,68 @@ pub fn text(d: &Diagnosis) -> String {
                 skipped.len() - 12
             );
         }
+    }
+    s
+}
+
+/// The final model in one block, to be read first: after an accepted effect, every variable's
+/// value at the final fit in its report unit with its Cramér-Rao error (bounds hit flagged) and
+/// each added effect's parameters; when nothing was accepted, that the first fit stands.
+pub fn final_text(id: &Identification, d: &Diagnosis) -> String {
+    use crate::display::{relative, sig};
+    use std::fmt::Write;
+    let mut s = String::new();
+    let converged = if id.stop.converged() {
+        String::new()
+    } else {
+        format!(" — the fit did NOT converge ({})", id.stop.describe())
+    };
+    if d.accepted.is_empty() {
+        let _ = writeln!(
+            s,
+            "FINAL MODEL = the first fit above: the diagnosis added nothing{converged}"
+        );
+        return s;
+    }
+    let _ = writeln!(
+        s,
+        "FINAL MODEL: the first fit above is superseded; {} effect(s) added{converged}",
+        d.accepted.len()
+    );
+    let _ = writeln!(
+        s,
+        "  {:<20} {:<8} {:>12} {:>12} {:>9}",
+        "variable", "unit", "value", "std error", "σ/x"
+    );
+    for (i, v) in id.variables.vars.iter().enumerate() {
+        let x = d.estimate[i];
+        let se = d.std_error.get(i).copied().unwrap_or(f64::NAN);
+        let f = v.unit.factor;
+        let tol = 1e-9 * v.scale;
+        let bound = if x <= v.lower + tol {
+            "  at lower bound"
+        } else if x >= v.upper - tol {
+            "  at upper bound"
+        } else {
+            ""
+        };
+        let _ = writeln!(
+            s,
+            "  {:<20} {:<8} {:>12} {:>12} {:>9}{bound}",
+            v.name,
+            v.unit.symbol,
+            sig(x / f, 5),
+            sig(se / f, 3),
+            if x != 0.0 {
+                relative(se / x)
+            } else {
+                "-".into()
+            }
+        );
+    }
+    for a in &d.accepted {
+        let ps: Vec<String> = a.params.iter().map(ParamEstimate::describe).collect();
+        let _ = writeln!(s, "  + {} ({})", a.effect, ps.join(", "));
     }
     s
 }
