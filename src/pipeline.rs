@@ -244,7 +244,7 @@ pub fn analyse(
         match diagnose::diagnose(&setup.model, &obs, &setup.vars, &id, &dopts, &mut |line| {
             tracing::info!("diagnose: {line}")
         }) {
-            Ok(d) => Some((report::build::diagnosis(&d, &setup.model_name()), d)),
+            Ok(d) => Some((report::build::diagnosis(&d, &setup.model_name(), &id), d)),
             Err(e) => {
                 messages.push(format!("diagnosis not run: {e}"));
                 None

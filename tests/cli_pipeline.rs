@@ -45,6 +45,23 @@ fn short_demo(out: &Path) -> PathBuf {
     assert_reads_cleanly(&text(&o), "demo output");
     let html = std::fs::read_to_string(dir.join("report.html")).unwrap();
     assert_reads_cleanly(&html, "report.html");
+    // The final model comes first: after the actuator is added, every variable at the final fit.
+    let r = json(&dir.join("report.json"));
+    let d = &r["diagnosis"];
+    let added = d["candidates"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .any(|c| c["accepted"] == true);
+    let finals = d["final_parameters"].as_array().unwrap();
+    let variables = r["identification"]["parameters"].as_array().unwrap().len();
+    assert_eq!(finals.len(), if added { variables } else { 0 }, "{d}");
+    let at = |needle: &str| html.find(needle).unwrap_or(usize::MAX);
+    assert!(
+        at("id=\"final\"") < at("id=\"identification\""),
+        "final model first"
+    );
+    assert!(text(&o).contains("FINAL MODEL"), "{}", text(&o));
     dir
 }
 

@@ -158,6 +158,43 @@ fn opt(x: f64) -> Option<f64> {
     x.is_finite().then_some(x)
 }
 
+/// The variables at the diagnosis' final fit (empty when it added nothing), in report units, the
+/// first fit's value as `initial`.
+fn final_parameters(d: &diagnose::Diagnosis, id: &Identification) -> Vec<Parameter> {
+    if d.accepted.is_empty() {
+        return Vec::new();
+    }
+    table::rows(id)
+        .into_iter()
+        .zip(&id.variables.vars)
+        .enumerate()
+        .map(|(i, (r, v))| {
+            let f = v.unit.factor;
+            let x = d.estimate[i];
+            let se = d.std_error.get(i).copied().unwrap_or(f64::NAN);
+            let tol = 1e-9 * v.scale;
+            let at_bound = if x <= v.lower + tol {
+                Some("lower".to_string())
+            } else if x >= v.upper - tol {
+                Some("upper".to_string())
+            } else {
+                None
+            };
+            Parameter {
+                variable: r.variable,
+                sdes: r.sdes,
+                parameter: r.parameter,
+                unit: r.unit,
+                initial: finite(r.identified),
+                identified: finite(x / f),
+                std_error: opt(se / f),
+                variability: if x != 0.0 { opt(se / x.abs()) } else { None },
+                at_bound,
+            }
+        })
+        .collect()
+}
+
 /// The identification summary and table.
 pub fn summary(id: &Identification) -> IdentificationSummary {
     let n = id.variables.len();
@@ -249,7 +286,7 @@ pub fn sensitivity_map(
 /// The diagnosis section from `identify::diagnose`'s result: every round's ranked candidates
 /// (strongest first), the accepted ones with their principal parameter in report units, the fit
 /// before and after, and what was not tried. `base` names the identified model.
-pub fn diagnosis(d: &diagnose::Diagnosis, base: &str) -> Diagnosis {
+pub fn diagnosis(d: &diagnose::Diagnosis, base: &str, id: &Identification) -> Diagnosis {
     let mut candidates = Vec::new();
     let removed_in = |effect: &str| {
         d.rounds
@@ -330,6 +367,7 @@ pub fn diagnosis(d: &diagnose::Diagnosis, base: &str) -> Diagnosis {
         before: fit(&d.before),
         after: fit(&d.after),
         final_model,
+        final_parameters: final_parameters(d, id),
         explained: d.after.explained,
         verdict: d.after.verdict.clone(),
         not_tried: d

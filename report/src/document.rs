@@ -206,6 +206,11 @@ pub struct Diagnosis {
     pub after: FitQuality,
     /// One line on the final model (e.g. `"fwd32j-no-actuator + spring spindle head–table"`).
     pub final_model: String,
+    /// The final model's variables when an effect was added: `identified` is the value at the
+    /// final (extended) fit with its Cramér-Rao error there, `initial` the superseded first fit's
+    /// value. Empty when nothing was added: the identification's table is final.
+    #[serde(default)]
+    pub final_parameters: Vec<Parameter>,
     /// Whether the final model explains the data to the noise level.
     pub explained: bool,
     /// The verdict on the final model in words.

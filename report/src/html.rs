@@ -73,6 +73,7 @@ pub fn failure_page(title: &str, created_utc: &str, error: &str, lines: &[String
 pub fn render(r: &Report) -> Result<String, ReportError> {
     let mut h = String::new();
     header(&mut h, r);
+    final_model(&mut h, r);
     identification_summary(&mut h, r);
     characteristics(&mut h, r)?;
     parameters(&mut h, r)?;
@@ -123,6 +124,48 @@ fn header(h: &mut String, r: &Report) {
         h.push_str("</ul>");
     }
     h.push_str("</div>\n");
+}
+
+/// The final model first: after diagnosis added an effect, the variables at the final fit with
+/// their Cramér-Rao errors there, next to the superseded first fit; otherwise a line saying the
+/// identification's table below is final.
+fn final_model(h: &mut String, r: &Report) {
+    let e = escape;
+    let Some(d) = &r.diagnosis else {
+        return;
+    };
+    h.push_str("<h2 id=\"final\">Final model</h2>\n");
+    if d.final_parameters.is_empty() {
+        let _ = writeln!(
+            h,
+            "<p>{}: the diagnosis added nothing, the identification below is final.</p>",
+            e(&d.final_model)
+        );
+        return;
+    }
+    let _ = writeln!(
+        h,
+        "<p><strong>{}</strong><br><span class=\"note\">Values at the final fit, with their \
+         Cramér-Rao standard errors there; the first fit's values (identification, below) are \
+         superseded.</span></p>",
+        e(&d.final_model)
+    );
+    h.push_str("<table><tr><th class=\"l\">variable</th><th class=\"l\">SDEs</th><th class=\"l\">unit</th><th>final</th><th>std error</th><th>σ/x</th><th>first fit (superseded)</th><th class=\"l\">note</th></tr>\n");
+    for p in &d.final_parameters {
+        let _ = writeln!(
+            h,
+            "<tr><td class=\"l\">{}</td><td class=\"l\">{}</td><td class=\"l\">{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td class=\"l\">{}</td></tr>",
+            e(&p.variable),
+            e(&p.sdes),
+            e(&p.unit),
+            identify::display::sig(p.identified, 5),
+            p.std_error.map(|s| identify::display::sig(s, 3)).unwrap_or_else(|| "—".into()),
+            p.variability.map(identify::display::relative).unwrap_or_else(|| "—".into()),
+            identify::display::sig(p.initial, 5),
+            p.at_bound.as_deref().map(|b| format!("at {b} bound")).unwrap_or_default()
+        );
+    }
+    h.push_str("</table>\n");
 }
 
 /// The identification in one paragraph.

@@ -109,6 +109,17 @@ pub fn diagnosis_section(f: &Fixture) -> Diagnosis {
             rms_relative_error: rms,
         },
         final_model: "two masses + spring k1-body–ground".into(),
+        final_parameters: vec![Parameter {
+            variable: "k1".into(),
+            sdes: "k1".into(),
+            parameter: "k".into(),
+            unit: "N/um".into(),
+            initial: 9.0,
+            identified: 10.5,
+            std_error: Some(0.2),
+            variability: Some(0.019),
+            at_bound: None,
+        }],
         explained: true,
         verdict: "the model explains the data to the noise level".into(),
         not_tried: vec![NotTried {
