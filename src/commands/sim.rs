@@ -56,17 +56,22 @@ pub fn run(a: SimArgs) -> anyhow::Result<ExitCode> {
 }
 
 /// Prints the served ports on stdout (`shaker PATH`, `daq PATH`: scripts read them), `hint` on
-/// stderr, and serves until Ctrl-C.
+/// stderr, and serves until Ctrl-C (or SIGTERM).
 pub async fn serve_until_ctrl_c(sim: SimStand, who: &str, hint: &str) -> anyhow::Result<ExitCode> {
+    use tokio::signal::unix::{signal, SignalKind};
+    // Listen before printing the ports: a script that reads them may signal at once.
+    let mut interrupt = signal(SignalKind::interrupt()).context("cannot listen for Ctrl-C")?;
+    let mut terminate = signal(SignalKind::terminate()).context("cannot listen for SIGTERM")?;
     let mut out = std::io::stdout().lock();
     writeln!(out, "shaker {}", sim.shaker_port)?;
     writeln!(out, "daq {}", sim.daq_port)?;
     out.flush()?;
     drop(out);
     eprintln!("{who}: {hint}");
-    tokio::signal::ctrl_c()
-        .await
-        .context("cannot wait for Ctrl-C")?;
+    tokio::select! {
+        _ = interrupt.recv() => {}
+        _ = terminate.recv() => {}
+    }
     sim.shutdown();
     eprintln!("{who}: stopped");
     Ok(ExitCode::SUCCESS)

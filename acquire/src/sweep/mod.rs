@@ -237,15 +237,26 @@ impl StopSignal {
     pub fn new() -> Self {
         Self::default()
     }
-    /// A signal set when the process receives Ctrl-C (SIGINT). Call inside a tokio runtime.
+    /// A signal set when the process receives Ctrl-C (SIGINT) or a polite stop (SIGTERM, as
+    /// systemd sends). Call inside a tokio runtime. The handlers are installed before this
+    /// returns, so a signal that arrives right after it is never lost to the default action
+    /// (which would kill the process with the drive on).
     pub fn on_ctrl_c() -> Self {
+        use tokio::signal::unix::{signal, SignalKind};
         let s = Self::new();
-        let t = s.clone();
-        tokio::spawn(async move {
-            if tokio::signal::ctrl_c().await.is_ok() {
-                t.set();
+        for kind in [SignalKind::interrupt(), SignalKind::terminate()] {
+            match signal(kind) {
+                Ok(mut stream) => {
+                    let t = s.clone();
+                    tokio::spawn(async move {
+                        if stream.recv().await.is_some() {
+                            t.set();
+                        }
+                    });
+                }
+                Err(e) => tracing::warn!("cannot listen for signal {kind:?}: {e}"),
             }
-        });
+        }
         s
     }
     /// Requests a stop.
