@@ -6,36 +6,21 @@
 // Test and benchmark helpers unwrap: a panic with its message is the failure report.
 #![allow(clippy::unwrap_used)]
 
-use std::path::PathBuf;
+mod common;
 
+use common::load_model;
 use identify::diagnose::{self, diagnose, Effect};
 use identify::frf::{self, Method};
-use identify::identification::{self as idn, data, synthetic, variables, Options};
+use identify::identification::{self as idn, data, variables, Options};
 use identify::measured::MeasuredData;
 use identify::model::Model;
 use rand::rngs::StdRng;
 use rand::SeedableRng;
-use rand_distr::{Distribution, StandardNormal};
-
-fn root() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..")
-}
-
-fn load_model(name: &str) -> Model {
-    let p = root().join("configs/models").join(name);
-    identify::modelfile::load(&p)
-        .unwrap_or_else(|e| panic!("{}: {e}", p.display()))
-        .model
-}
 
 /// The FWD-32J measurement (38 log-spaced lines, 20-400 Hz, per table characteristic), amplitude
 /// with relative noise `rel` and its stated variance.
 fn measure(truth: &Model, rel: f64, seed: u64) -> MeasuredData {
-    let mut rng = StdRng::seed_from_u64(seed);
-    synthetic::amplitude_data(truth, &synthetic::fwd32j_lines(), rel, || {
-        StandardNormal.sample(&mut rng)
-    })
-    .expect("truth FRF")
+    common::fwd32j_data(truth, rel, &mut StdRng::seed_from_u64(seed))
 }
 
 struct Case {
@@ -48,7 +33,9 @@ struct Case {
 fn fit(model_file: &str, vars_file: &str, data: &MeasuredData) -> Case {
     let model = load_model(model_file);
     let vars = variables::load(
-        &root().join("configs/identification").join(vars_file),
+        &common::repo()
+            .join("configs/identification")
+            .join(vars_file),
         &model,
     )
     .expect("variables");

@@ -6,44 +6,20 @@
 // Test and benchmark helpers unwrap: a panic with its message is the failure report.
 #![allow(clippy::unwrap_used)]
 
-use std::path::PathBuf;
+mod common;
 
+use common::load_model;
 use identify::identification::{self as idn, data, variables, Optimizer, Options, Settings};
-use identify::measured::MeasuredData;
 use identify::model::Model;
 use rand::rngs::StdRng;
 use rand::SeedableRng;
-use rand_distr::{Distribution, StandardNormal};
-
-fn root() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..")
-}
-
-fn load_model(name: &str) -> Model {
-    let p = root().join("configs/models").join(name);
-    identify::modelfile::load(&p)
-        .unwrap_or_else(|e| {
-            panic!(
-                "the FWD-32J model {} is needed by this test: {e}",
-                p.display()
-            )
-        })
-        .model
-}
-
-/// The synthetic FWD-32J measurement (`identification::synthetic`): 38 log-spaced lines over
-/// 20-400 Hz per characteristic, multiplicative Gaussian noise of relative σ `rel`, variances
-/// stated.
-fn synthetic(truth: &Model, rel: f64, rng: &mut StdRng) -> MeasuredData {
-    idn::synthetic::amplitude_data(truth, &idn::synthetic::fwd32j_lines(), rel, || {
-        StandardNormal.sample(&mut *rng)
-    })
-    .expect("truth model solves")
-}
 
 fn vars_for(model: &Model) -> variables::Variables {
-    variables::load(&root().join("configs/identification/fwd32j.toml"), model)
-        .expect("variables file loads")
+    variables::load(
+        &common::repo().join("configs/identification/fwd32j.toml"),
+        model,
+    )
+    .expect("variables file loads")
 }
 
 fn truth_values(truth: &Model, vars: &variables::Variables) -> Vec<f64> {
@@ -63,7 +39,7 @@ fn fwd32j_synthetic_recovery_from_the_initial_values() {
         .iter()
         .all(|c| truth.bodies[c.body].name == "table" && c.dof < 3));
     let mut rng = StdRng::seed_from_u64(32);
-    let d = synthetic(&truth, 0.01, &mut rng);
+    let d = common::fwd32j_data(&truth, 0.01, &mut rng);
     let obs = data::validate(&d, &initial, "synthetic").unwrap();
     assert_eq!(obs.points(), 114);
     let vars = vars_for(&initial);
@@ -130,7 +106,7 @@ fn fwd32j_synthetic_recovery_from_the_initial_values() {
     );
     // The updated model written back into fwd32j-initial.toml's text (units kept) loads to the
     // estimates.
-    let path = root().join("configs/models/fwd32j-initial.toml");
+    let path = common::repo().join("configs/models/fwd32j-initial.toml");
     let text = std::fs::read_to_string(&path).unwrap();
     let out = idn::report::update_toml(&text, "fwd32j-initial.toml", &id).unwrap();
     assert!(
@@ -168,7 +144,7 @@ fn fwd32j_cramer_rao_errors_are_calibrated() {
     let xt_all = truth_values(&truth, &vars);
     let rel = 0.01;
     let mut rng = StdRng::seed_from_u64(2026);
-    let d0 = synthetic(&truth, rel, &mut rng);
+    let d0 = common::fwd32j_data(&truth, rel, &mut rng);
     let obs0 = data::validate(&d0, &truth, "synthetic").unwrap();
     let mut at_truth = vars.clone();
     for (v, x) in at_truth.vars.iter_mut().zip(&xt_all) {
@@ -201,7 +177,7 @@ fn fwd32j_cramer_rao_errors_are_calibrated() {
     let mut inside = vec![0usize; vt.len()];
     let mut not_converged = 0;
     for _ in 0..runs {
-        let d = synthetic(&truth, rel, &mut rng);
+        let d = common::fwd32j_data(&truth, rel, &mut rng);
         let obs = data::validate(&d, &truth, "synthetic").unwrap();
         let id = idn::identify(&truth, &obs, &vt, &opts, &mut |_, _| {}).unwrap();
         if !id.stop.converged() {
@@ -241,7 +217,7 @@ fn fwd32j_cramer_rao_errors_are_calibrated() {
 fn fwd32j_group_damping_is_identifiable_individual_joint_damping_is_not() {
     let truth = load_model("fwd32j.toml");
     let mut rng = StdRng::seed_from_u64(7);
-    let d = synthetic(&truth, 0.01, &mut rng);
+    let d = common::fwd32j_data(&truth, 0.01, &mut rng);
     let obs = data::validate(&d, &truth, "synthetic").unwrap();
     let opts = Options::default();
     let group = vars_for(&truth);
@@ -252,7 +228,8 @@ fn fwd32j_group_damping_is_identifiable_individual_joint_damping_is_not() {
         .position(|v| v.name == "slideway psi_n")
         .unwrap();
     // The same problem with one ψn per slideway SDE instead of the group.
-    let text = std::fs::read_to_string(root().join("configs/identification/fwd32j.toml")).unwrap();
+    let text =
+        std::fs::read_to_string(common::repo().join("configs/identification/fwd32j.toml")).unwrap();
     let head = text
         .split("# --- slideway dissipation groups ---")
         .next()
