@@ -247,16 +247,7 @@ impl SineFitter {
         force: &[f64],
         responses: &[&[f64]],
     ) -> Result<Vec<Step>> {
-        for (j, r) in responses.iter().enumerate() {
-            if r.len() != force.len() {
-                return Err(ProcessError::LengthMismatch {
-                    channel: format!("response {j}"),
-                    samples: r.len(),
-                    first: "force".into(),
-                    expected: force.len(),
-                });
-            }
-        }
+        check_lengths(force, responses)?;
         let mut out = Vec::with_capacity(steps.len());
         let mut slices: Vec<&[f64]> = Vec::with_capacity(responses.len());
         for (i, s) in steps.iter().enumerate() {
@@ -317,6 +308,11 @@ fn check_step(
     if !(config.settle_s.is_finite() && config.settle_s >= 0.0) {
         return Err(invalid("settle_s", config.settle_s, "must be ≥ 0 s"));
     }
+    check_lengths(force, responses)
+}
+
+/// Every response has as many samples as the force.
+fn check_lengths(force: &[f64], responses: &[&[f64]]) -> Result<()> {
     for (j, r) in responses.iter().enumerate() {
         if r.len() != force.len() {
             return Err(ProcessError::LengthMismatch {
