@@ -105,16 +105,12 @@ fn assert_reads_cleanly(text: &str, what: &str) {
     }
 }
 
-#[test]
-fn replay_reproduces_the_live_run_bit_for_bit_and_reports_truncation() {
-    let dir = tempfile::tempdir().unwrap();
-    let live = short_demo(dir.path());
-    let session = live.join("session.mcap");
-    let (model, vars) = (
-        live.join("configs/models/fwd32j-no-actuator.toml"),
-        live.join("configs/identification/fwd32j-no-actuator.toml"),
-    );
-    let o = ident(&[
+/// `ident replay SESSION` with the demo's identification model and variables (copied into the
+/// demo's folder `live`), its report folder under `out`.
+fn replay_into(live: &Path, session: &Path, out: &Path) -> Output {
+    let model = live.join("configs/models/fwd32j-no-actuator.toml");
+    let vars = live.join("configs/identification/fwd32j-no-actuator.toml");
+    ident(&[
         "replay",
         session.to_str().unwrap(),
         "--model",
@@ -122,8 +118,17 @@ fn replay_reproduces_the_live_run_bit_for_bit_and_reports_truncation() {
         "--vars",
         vars.to_str().unwrap(),
         "--out",
-        dir.path().join("replays").to_str().unwrap(),
-    ]);
+        out.to_str().unwrap(),
+    ])
+}
+
+#[test]
+fn replay_reproduces_the_live_run_bit_for_bit_and_reports_truncation() {
+    let dir = tempfile::tempdir().unwrap();
+    let live = short_demo(dir.path());
+    let session = live.join("session.mcap");
+    let replays = dir.path().join("replays");
+    let o = replay_into(&live, &session, &replays);
     assert!(o.status.success(), "{}", text(&o));
     let replay = report_dir(&o);
     // Floats are written shortest-round-trip, so equal text means equal bits.
@@ -155,16 +160,7 @@ fn replay_reproduces_the_live_run_bit_for_bit_and_reports_truncation() {
     let bytes = std::fs::read(&session).unwrap();
     let cut = dir.path().join("cut.mcap");
     std::fs::write(&cut, &bytes[..bytes.len() * 2 / 3]).unwrap();
-    let o = ident(&[
-        "replay",
-        cut.to_str().unwrap(),
-        "--model",
-        model.to_str().unwrap(),
-        "--vars",
-        vars.to_str().unwrap(),
-        "--out",
-        dir.path().join("replays").to_str().unwrap(),
-    ]);
+    let o = replay_into(&live, &cut, &replays);
     let t = text(&o);
     assert!(o.status.success(), "{t}");
     assert!(t.contains("truncated") && t.contains("lost"), "{t}");

@@ -41,6 +41,23 @@ fn unit(rng: &mut impl Rng) -> Vector3<f64> {
     }
 }
 
+/// `n` sensors named `{prefix}0`, `{prefix}1`... at random points around the body's centre, each
+/// along a random direction.
+fn random_sensors(b: &Body, n: usize, prefix: &str, rng: &mut impl Rng) -> Vec<Sensor> {
+    (0..n)
+        .map(|i| Sensor {
+            name: format!("{prefix}{i}"),
+            position: b.position
+                + Vector3::new(
+                    rng.random_range(-0.8..0.8),
+                    rng.random_range(-0.5..0.5),
+                    rng.random_range(-0.3..0.3),
+                ),
+            direction: unit(rng),
+        })
+        .collect()
+}
+
 /// A channel's reading for rigid motion q, straight from the definition R(u + r × Rᵀ(x−c))·d.
 fn reading(b: &Body, s: &Sensor, q: &[C64; 6]) -> C64 {
     let sb = b.rotation.transpose() * (s.position - b.position);
@@ -72,18 +89,7 @@ fn rigid_motion_is_recovered_exactly_by_random_layouts() {
     for trial in 0..50 {
         let b = body(&mut rng);
         let n = 6 + trial % 7;
-        let sensors: Vec<Sensor> = (0..n)
-            .map(|i| Sensor {
-                name: format!("acc{i}"),
-                position: b.position
-                    + Vector3::new(
-                        rng.random_range(-0.8..0.8),
-                        rng.random_range(-0.5..0.5),
-                        rng.random_range(-0.3..0.3),
-                    ),
-                direction: unit(&mut rng),
-            })
-            .collect();
+        let sensors = random_sensors(&b, n, "acc", &mut rng);
         let fit = RigidFit::new(&b, &sensors, Dofs::Six).unwrap();
         assert_eq!(fit.dofs(), 6);
         let freqs = [10.0, 20.0, 30.0];
@@ -222,18 +228,7 @@ fn principal_axes_from_an_inertia_tensor_and_variance_propagation() {
     assert!(process::principal::body_from_inertia_tensor("t", 850.0, b.position, &asym).is_err());
 
     // Variance of the fitted DOFs: Monte-Carlo check of var(q) = Σ P² var(y).
-    let sensors: Vec<Sensor> = (0..9)
-        .map(|i| Sensor {
-            name: format!("a{i}"),
-            position: b.position
-                + Vector3::new(
-                    rng.random_range(-0.8..0.8),
-                    rng.random_range(-0.5..0.5),
-                    rng.random_range(-0.3..0.3),
-                ),
-            direction: unit(&mut rng),
-        })
-        .collect();
+    let sensors = random_sensors(&b, 9, "a", &mut rng);
     let fit = RigidFit::new(&b, &sensors, Dofs::Six).unwrap();
     let sd = 1e-3;
     let pred = fit.variance(&[sd * sd; 9]).unwrap();

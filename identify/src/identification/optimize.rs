@@ -719,29 +719,34 @@ mod tests {
         }
     }
 
+    const METHODS: [Optimizer; 3] = [
+        Optimizer::LevenbergMarquardt,
+        Optimizer::GaussNewton,
+        Optimizer::Bfgs,
+    ];
+
+    /// Minimizes Rosenbrock's function from (-1.2, 1) within `lo`..`hi`.
+    fn rosenbrock(m: Optimizer, lo: [f64; 2], hi: [f64; 2], max_iterations: usize) -> Outcome {
+        let set = Settings {
+            max_iterations,
+            ..Settings::default()
+        };
+        minimize(
+            m,
+            &mut Rosen,
+            &DVector::from_vec(vec![-1.2, 1.0]),
+            &DVector::from_row_slice(&lo),
+            &DVector::from_row_slice(&hi),
+            &set,
+            &mut |_| {},
+        )
+        .unwrap()
+    }
+
     #[test]
     fn every_method_solves_rosenbrock() {
-        let lo = DVector::from_element(2, -10.0);
-        let hi = DVector::from_element(2, 10.0);
-        for m in [
-            Optimizer::LevenbergMarquardt,
-            Optimizer::GaussNewton,
-            Optimizer::Bfgs,
-        ] {
-            let set = Settings {
-                max_iterations: 500,
-                ..Settings::default()
-            };
-            let o = minimize(
-                m,
-                &mut Rosen,
-                &DVector::from_vec(vec![-1.2, 1.0]),
-                &lo,
-                &hi,
-                &set,
-                &mut |_| {},
-            )
-            .unwrap();
+        for m in METHODS {
+            let o = rosenbrock(m, [-10.0; 2], [10.0; 2], 500);
             assert!(o.stop.converged(), "{m:?}: {:?}", o.stop);
             assert!(
                 (o.u[0] - 1.0).abs() < 1e-5 && (o.u[1] - 1.0).abs() < 1e-5,
@@ -754,27 +759,8 @@ mod tests {
     #[test]
     fn a_bound_is_respected_and_reported_by_position() {
         // Minimum at (1, 1) lies outside u0 ≤ 0.5: the solution is on the bound.
-        let lo = DVector::from_element(2, -10.0);
-        let hi = DVector::from_vec(vec![0.5, 10.0]);
-        for m in [
-            Optimizer::LevenbergMarquardt,
-            Optimizer::GaussNewton,
-            Optimizer::Bfgs,
-        ] {
-            let set = Settings {
-                max_iterations: 500,
-                ..Settings::default()
-            };
-            let o = minimize(
-                m,
-                &mut Rosen,
-                &DVector::from_vec(vec![-1.2, 1.0]),
-                &lo,
-                &hi,
-                &set,
-                &mut |_| {},
-            )
-            .unwrap();
+        for m in METHODS {
+            let o = rosenbrock(m, [-10.0; 2], [0.5, 10.0], 500);
             assert_eq!(o.u[0], 0.5, "{m:?}");
             assert!((o.u[1] - 0.25).abs() < 1e-5, "{m:?}: {:?}", o.u);
         }
@@ -782,22 +768,7 @@ mod tests {
 
     #[test]
     fn the_iteration_limit_is_reported() {
-        let lo = DVector::from_element(2, -10.0);
-        let hi = DVector::from_element(2, 10.0);
-        let set = Settings {
-            max_iterations: 2,
-            ..Settings::default()
-        };
-        let o = minimize(
-            Optimizer::Bfgs,
-            &mut Rosen,
-            &DVector::from_vec(vec![-1.2, 1.0]),
-            &lo,
-            &hi,
-            &set,
-            &mut |_| {},
-        )
-        .unwrap();
+        let o = rosenbrock(Optimizer::Bfgs, [-10.0; 2], [10.0; 2], 2);
         assert_eq!(o.stop, StopReason::IterationLimit);
         assert!(!o.stop.converged());
     }
