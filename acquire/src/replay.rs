@@ -230,6 +230,7 @@ pub fn prepare(session: &Path, speed: Option<f64>) -> Result<Served, ReplayError
         faults: Faults::default(),
         max_force_n: stand.shaker.max_force_n * 1.25,
         identities,
+        generator: None,
     };
     Ok(Served {
         stand,
