@@ -491,6 +491,20 @@ fn a_generator_stand_is_swept_and_served_over_a_local_tcp_port() {
         "{}",
         text(&o)
     );
+    // Processing the generator session recomputes every live estimate bit for bit.
+    let session = sessions(&dir.path().join("a")).remove(0);
+    let o = ident(&[
+        "process",
+        session.to_str().unwrap(),
+        "--out",
+        dir.path().join("p").to_str().unwrap(),
+    ]);
+    assert_eq!(o.status.code(), Some(0), "{}", text(&o));
+    assert!(
+        text(&o).contains("5 of 5 steps equal the live estimate bit for bit"),
+        "{}",
+        text(&o)
+    );
 
     // `ident sim` serves it on 127.0.0.1; a stand file pointing there is swept like a real one.
     let sim_stand = generator_stand_with(dir.path(), |t| {
