@@ -131,7 +131,8 @@ pub fn sweep(
         let bound = match &sim {
             Some(s) => {
                 let speed = stand.truth.as_ref().map(|t| t.speed).unwrap_or(1.0);
-                eprintln!("simulated stand at {speed}× real time: shaker {}, daq {}", s.shaker_port, s.daq_port);
+                let exciter = if stand.generator.is_some() { "generator" } else { "shaker" };
+                eprintln!("simulated stand at {speed}× real time: {exciter} {}, daq {}", s.shaker_port, s.daq_port);
                 s.bind(stand)
             }
             None => stand.clone(),

@@ -450,3 +450,99 @@ cp "$1"/*.mcap "$4/kept.mcap""#;
         "steps measured before the disk filled are usable: {t}"
     );
 }
+
+/// The generator stand's file, edited, with its model paths made absolute.
+fn generator_stand_with(dir: &Path, edit: impl Fn(String) -> String) -> String {
+    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
+    let text =
+        std::fs::read_to_string(root.join("configs/stands/fwd32j-generator-sim.toml")).unwrap();
+    let text = edit(text).replace("../models/", &format!("{}/configs/models/", root.display()));
+    let p = dir.join(format!("gen-{}.toml", std::process::id()));
+    std::fs::write(&p, text).unwrap();
+    p.display().to_string()
+}
+
+#[test]
+fn a_generator_stand_is_swept_and_served_over_a_local_tcp_port() {
+    let dir = tempfile::tempdir().unwrap();
+    let sweep = |stand: &str, out: &Path| {
+        ident(&[
+            "sweep",
+            "--stand",
+            stand,
+            "--out",
+            out.to_str().unwrap(),
+            "--points",
+            "5",
+            "--from",
+            "30",
+            "--to",
+            "300",
+        ])
+    };
+    // `ident sweep` starts the simulated generator itself (port = "sim").
+    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
+    let stand = root.join("configs/stands/fwd32j-generator-sim.toml");
+    let o = sweep(stand.to_str().unwrap(), &dir.path().join("a"));
+    assert_eq!(o.status.code(), Some(0), "{}", text(&o));
+    assert!(text(&o).contains("5 of 5 steps measured"), "{}", text(&o));
+    assert!(
+        text(&o).contains("generator settings per line"),
+        "{}",
+        text(&o)
+    );
+    // Processing the generator session recomputes every live estimate bit for bit.
+    let session = sessions(&dir.path().join("a")).remove(0);
+    let o = ident(&[
+        "process",
+        session.to_str().unwrap(),
+        "--out",
+        dir.path().join("p").to_str().unwrap(),
+    ]);
+    assert_eq!(o.status.code(), Some(0), "{}", text(&o));
+    assert!(
+        text(&o).contains("5 of 5 steps equal the live estimate bit for bit"),
+        "{}",
+        text(&o)
+    );
+
+    // `ident sim` serves it on 127.0.0.1; a stand file pointing there is swept like a real one.
+    let sim_stand = generator_stand_with(dir.path(), |t| {
+        t.replacen(
+            "port = \"sim\"\nidentity = \"IDENT-SIM,SIGGEN-2\"",
+            "port = \"sim:tcp\"\nidentity = \"IDENT-SIM,SIGGEN-2\"",
+            1,
+        )
+    });
+    let mut child = Command::new(env!("CARGO_BIN_EXE_ident"))
+        .args(["sim", "--stand", &sim_stand])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    let mut lines = BufReader::new(child.stdout.take().unwrap()).lines();
+    let generator = lines.next().unwrap().unwrap();
+    let daq = lines.next().unwrap().unwrap();
+    let address = generator
+        .strip_prefix("generator tcp:127.0.0.1:")
+        .unwrap_or_else(|| panic!("`{generator}` should be `generator tcp:127.0.0.1:PORT`"));
+    assert!(address.parse::<u16>().is_ok(), "{generator}");
+    let daq = daq.strip_prefix("daq ").unwrap().to_string();
+    let wired = generator_stand_with(dir.path(), |t| {
+        t.replacen(
+            "port = \"sim\"\nidentity = \"IDENT-SIM,SIGGEN-2\"",
+            &format!("port = \"tcp:127.0.0.1:{address}\"\nidentity = \"IDENT-SIM,SIGGEN-2\""),
+            1,
+        )
+        .replacen(
+            "[daq]\nport = \"sim\"",
+            &format!("[daq]\nport = \"{daq}\""),
+            1,
+        )
+    });
+    let o = sweep(&wired, &dir.path().join("b"));
+    sigint(child.id());
+    assert_eq!(child.wait().unwrap().code(), Some(0));
+    assert_eq!(o.status.code(), Some(0), "{}", text(&o));
+    assert!(text(&o).contains("5 of 5 steps measured"), "{}", text(&o));
+}

@@ -10,7 +10,9 @@
 //! configured; every byte tapped into the [`session`]) → [`sweep`] (stepped sine with closed-loop
 //! force control, broadband) → `session.mcap` (docs/mcap-session.md) → [`analysis`] (the
 //! session's measured characteristics, recomputed from its raw blocks with the `process` crate).
-//! Protocol specs: docs/shaker-scpi.md, docs/daq-serial.md, docs/daq-can.md.
+//! Protocol specs: docs/shaker-scpi.md, docs/scpi-generator.md (a SCPI signal generator and
+//! power amplifier, force loop closed by the host, [`generator`]), docs/daq-serial.md,
+//! docs/daq-can.md.
 //!
 //! ```
 //! use acquire::shaker::scpi::{parse_command, Command};
@@ -28,6 +30,7 @@ pub mod analysis;
 pub mod can;
 pub mod daq;
 pub mod device;
+pub mod generator;
 pub mod replay;
 pub mod rig;
 pub mod session;

@@ -220,6 +220,14 @@ pub fn prepare(session: &Path, speed: Option<f64>) -> Result<Served, ReplayError
             gain: 1.0,
             cutoff_hz: f64::INFINITY,
         });
+    // A generator stand's session is served by the simulated generator, answering with the
+    // recorded identity and without the recorded stand's injected faults.
+    let generator = crate::sim::SimGeneratorSetup::from_stand(&stand).map(|mut g| {
+        g.device.identity = identities.shaker.clone();
+        g.device.amplifier_trip_after_lines = None;
+        g.device.amplifier_surge_after_lines = None;
+        g
+    });
     let setup = SimSetup {
         plant: plant.clone(),
         interaction,
@@ -230,6 +238,7 @@ pub fn prepare(session: &Path, speed: Option<f64>) -> Result<Served, ReplayError
         faults: Faults::default(),
         max_force_n: stand.shaker.max_force_n * 1.25,
         identities,
+        generator,
     };
     Ok(Served {
         stand,

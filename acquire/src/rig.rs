@@ -1,15 +1,19 @@
-//! A connected stand: the shaker controller and DAQ named by a stand file, opened, identified
+//! A connected stand: the exciter (shaker controller, or signal generator + amplifier) and DAQ
+//! named by a stand file, opened, identified
 //! (checked against the stand file), configured, and recorded in the session.
 
 use std::sync::Arc;
 
 use crate::daq::{Daq, DaqError, DaqOptions, SerialDaq, StreamInfo};
 use crate::device::DeviceIdentity;
+use crate::generator::{GeneratorExciter, GeneratorOptions, ScpiGenerator};
 use crate::session::records::{DaqStreamRecord, DeviceIdentityRecord, Role, StandRecord};
 use crate::session::{SessionError, SessionHandle};
 use crate::shaker::{ScpiShaker, Shaker, ShakerError, ShakerOptions};
-use crate::stand::{PortSpec, Stand};
-use crate::transport::{open_serial, ByteTap, SerialSettings, Tapped, Transport};
+use crate::stand::{GeneratorAddress, GeneratorStand, PortSpec, Stand};
+use crate::transport::{
+    connect_tcp, open_serial, ByteTap, SerialSettings, Tapped, Transport, TransportError,
+};
 
 /// Why a stand could not be brought up.
 #[derive(Debug, thiserror::Error)]
@@ -35,6 +39,71 @@ pub enum RigError {
     /// The DAQ's CAN interface could not be opened.
     #[error(transparent)]
     Can(#[from] crate::can::CanError),
+}
+
+/// Opens a generator stand's signal generator (serial port or raw TCP socket, every byte tapped
+/// into `session`, reconnecting once when the connection drops) as the stand's exciter.
+async fn generator_exciter(
+    stand: &Stand,
+    g: &GeneratorStand,
+    session: Option<&SessionHandle>,
+) -> Result<GeneratorExciter, RigError> {
+    let mut open = open_generator(g.port.clone(), g.baud, g.timeout, session.cloned());
+    let io = open().await.map_err(|e| ShakerError::Generator(e.into()))?;
+    let gen = ScpiGenerator::new(
+        io,
+        GeneratorOptions {
+            channel: g.channel,
+            timeout: g.timeout,
+            retries: g.retries,
+            terminator: g.terminator.clone(),
+            dialect: g.dialect.clone(),
+            overrides: g.commands.clone(),
+        },
+    )
+    .with_reconnect(Box::new(open));
+    let speed = stand.truth.as_ref().map(|t| t.speed).unwrap_or(1.0);
+    Ok(GeneratorExciter::new(
+        Box::new(gen),
+        g.amplifier.clone(),
+        session.cloned(),
+        speed,
+    ))
+}
+
+/// Opens a generator's connection (again).
+type OpenGenerator = dyn FnMut() -> std::pin::Pin<
+        Box<dyn std::future::Future<Output = Result<Box<dyn Transport>, TransportError>> + Send>,
+    > + Send;
+
+/// The function that opens the generator's connection at `address` (again).
+fn open_generator(
+    address: GeneratorAddress,
+    baud: u32,
+    timeout: std::time::Duration,
+    session: Option<SessionHandle>,
+) -> Box<OpenGenerator> {
+    Box::new(move || {
+        let (address, session) = (address.clone(), session.clone());
+        Box::pin(async move {
+            match &address {
+                GeneratorAddress::Serial(p) => {
+                    let io = open_serial(p, &SerialSettings { baud })?;
+                    Ok(tapped(io, session.as_ref()))
+                }
+                GeneratorAddress::Tcp(a) => {
+                    // Connecting may take longer than an answer: a few answer timeouts.
+                    let wait = (timeout * 3).max(std::time::Duration::from_secs(1));
+                    let io = connect_tcp(a, wait).await?;
+                    Ok(tapped(io, session.as_ref()))
+                }
+                GeneratorAddress::Sim { .. } => Err(TransportError::Open {
+                    port: "sim".into(),
+                    detail: "the generator's port is still \"sim\"; start the simulated stand (`ident sim`) or give a device path or tcp:HOST".into(),
+                }),
+            }
+        })
+    })
 }
 
 /// A connected stand.
@@ -67,24 +136,29 @@ impl Rig {
             file: stand.file.clone(),
             role,
         };
-        let sp = match &stand.shaker.port {
-            PortSpec::Path(p) => p.clone(),
-            PortSpec::Sim | PortSpec::Can(_) => return Err(unbound("shaker")),
+        let shaker: Box<dyn Shaker> = match &stand.generator {
+            Some(g) => Box::new(generator_exciter(stand, g, session).await?),
+            None => {
+                let sp = match &stand.shaker.port {
+                    PortSpec::Path(p) => p.clone(),
+                    PortSpec::Sim | PortSpec::Can(_) => return Err(unbound("shaker")),
+                };
+                let s_io = open_serial(
+                    &sp,
+                    &SerialSettings {
+                        baud: stand.shaker.baud,
+                    },
+                )
+                .map_err(ShakerError::from)?;
+                Box::new(ScpiShaker::new(
+                    tapped(s_io, session),
+                    ShakerOptions {
+                        timeout: stand.shaker.timeout,
+                        retries: stand.shaker.retries,
+                    },
+                ))
+            }
         };
-        let s_io = open_serial(
-            &sp,
-            &SerialSettings {
-                baud: stand.shaker.baud,
-            },
-        )
-        .map_err(ShakerError::from)?;
-        let shaker = ScpiShaker::new(
-            tapped(s_io, session),
-            ShakerOptions {
-                timeout: stand.shaker.timeout,
-                retries: stand.shaker.retries,
-            },
-        );
         let daq: Box<dyn Daq> = match &stand.daq.port {
             PortSpec::Sim => return Err(unbound("daq")),
             PortSpec::Path(dp) => {
@@ -112,7 +186,7 @@ impl Rig {
                 })
             }
         };
-        Rig::from_devices(stand, Box::new(shaker), daq, session).await
+        Rig::from_devices(stand, shaker, daq, session).await
     }
 
     /// Identifies both devices (checking the stand file's expected identities), resets the

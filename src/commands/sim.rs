@@ -1,6 +1,6 @@
-//! `ident sim --stand FILE [--can IFACE]`: serve a stand's simulated shaker controller and DAQ
-//! (SCPI and the COBS/CRC stream over pseudo-terminals; the DAQ on a CAN interface with `--can`)
-//! until Ctrl-C, printing where they are. Their signals come from the stand's `[truth]`.
+//! `ident sim --stand FILE [--can IFACE]`: serve a stand's simulated shaker controller (or signal
+//! generator + amplifier, on a pty or a local TCP port) and DAQ (SCPI and the COBS/CRC stream over
+//! pseudo-terminals; the DAQ on a CAN interface with `--can`) until Ctrl-C, printing where they are. Their signals come from the stand's `[truth]`.
 
 use std::io::Write;
 use std::path::PathBuf;
@@ -47,8 +47,9 @@ pub fn run(a: SimArgs) -> anyhow::Result<ExitCode> {
             Some(iface) => SimStand::start_can(&stand, iface)?,
             None => SimStand::start(&stand)?,
         };
+        let exciter = if stand.generator.is_some() { "generator.port" } else { "shaker.port" };
         let hint = format!(
-            "{} at {speed}× real time; set the stand file's ports to these (shaker.port, daq.port = \"{}\") and run `ident sweep`; Ctrl-C stops",
+            "{} at {speed}× real time; set the stand file's ports to these ({exciter}, daq.port = \"{}\") and run `ident sweep`; Ctrl-C stops",
             stand.name, sim.daq_port
         );
         serve_until_ctrl_c(sim, "ident sim", &hint).await
@@ -63,7 +64,13 @@ pub async fn serve_until_ctrl_c(sim: SimStand, who: &str, hint: &str) -> anyhow:
     let mut interrupt = signal(SignalKind::interrupt()).context("cannot listen for Ctrl-C")?;
     let mut terminate = signal(SignalKind::terminate()).context("cannot listen for SIGTERM")?;
     let mut out = std::io::stdout().lock();
-    writeln!(out, "shaker {}", sim.shaker_port)?;
+    // A generator stand's exciter is its signal generator (a pty path or tcp:127.0.0.1:PORT).
+    let exciter = if sim.generator_state().is_some() {
+        "generator"
+    } else {
+        "shaker"
+    };
+    writeln!(out, "{exciter} {}", sim.shaker_port)?;
     writeln!(out, "daq {}", sim.daq_port)?;
     out.flush()?;
     drop(out);

@@ -124,6 +124,20 @@ pub fn run(a: SweepArgs) -> anyhow::Result<ExitCode> {
                 o.faults,
                 swept.messages
             );
+            let settings: Vec<u32> = o
+                .steps
+                .iter()
+                .filter_map(|s| s.generator_settings)
+                .collect();
+            if let (Some(lo), Some(hi)) = (settings.iter().min(), settings.iter().max()) {
+                let first = settings.first().copied().unwrap_or(0);
+                let later: Vec<u32> = settings.iter().skip(1).copied().collect();
+                let mean =
+                    later.iter().map(|&n| f64::from(n)).sum::<f64>() / later.len().max(1) as f64;
+                println!(
+                    "generator settings per line (frequency, ramp, corrections): {lo} to {hi}; first line {first}, later lines {mean:.1} on average"
+                );
+            }
             if o.stopped || measured < freqs.len() {
                 println!(
                     "the sweep is incomplete; continue it with: ident sweep --stand {} --resume {}",

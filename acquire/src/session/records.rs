@@ -265,6 +265,52 @@ impl TopicRecord for BroadbandRecord {
     const TOPIC: Topic = Topic::SweepBroadband;
 }
 
+/// What a `/drive` record reports.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
+#[serde(rename_all = "snake_case")]
+pub enum DriveKind {
+    /// A frequency sent to the signal generator.
+    Frequency,
+    /// An amplitude sent to the signal generator (a ramp increment or a force-loop correction).
+    Amplitude,
+    /// The generator's output switched on or off.
+    Output,
+    /// The force amplitude the DAQ measured with the drive then set.
+    Measurement,
+}
+
+/// `/drive`: every setting sent to a signal generator that drives the shaker through a power
+/// amplifier, and every force the closed loop measured (stands with `[generator]`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[schemars(title = "ident.Drive")]
+pub struct DriveRecord {
+    /// What happened.
+    pub kind: DriveKind,
+    /// The generator's port.
+    pub port: String,
+    /// Sweep step, for measurements.
+    #[serde(default)]
+    pub step: Option<usize>,
+    /// Sine frequency then set (Hz).
+    pub frequency_hz: f64,
+    /// Generator amplitude then set (V peak).
+    pub volts_peak: f64,
+    /// Output on after this record.
+    pub output_on: bool,
+    /// Force amplitude measured on the DAQ's force channel (N peak), for measurements.
+    #[serde(default)]
+    pub force_n: Option<f64>,
+    /// Force amplitude the sweep holds (N peak), for measurements.
+    #[serde(default)]
+    pub target_n: Option<f64>,
+    /// Generator settings sent since this frequency was set (this one included).
+    pub settings_this_line: u32,
+}
+
+impl TopicRecord for DriveRecord {
+    const TOPIC: Topic = Topic::Drive;
+}
+
 /// The JSON Schema (draft 2020-12) of the record type `R`.
 pub fn schema_of<R: TopicRecord>() -> serde_json::Value {
     serde_json::Value::from(schemars::schema_for!(R))

@@ -27,10 +27,12 @@ pub enum Topic {
     SweepStep,
     /// `/sweep/broadband`: H1 estimates and coherence of a broadband measurement.
     SweepBroadband,
+    /// `/drive`: signal-generator settings and the forces the host's loop measured.
+    Drive,
 }
 
 /// All topics, in channel-registration order.
-pub const ALL: [Topic; 10] = [
+pub const ALL: [Topic; 11] = [
     Topic::Session,
     Topic::Stand,
     Topic::Identity,
@@ -41,6 +43,7 @@ pub const ALL: [Topic; 10] = [
     Topic::SweepEvent,
     Topic::SweepStep,
     Topic::SweepBroadband,
+    Topic::Drive,
 ];
 
 impl Topic {
@@ -57,6 +60,7 @@ impl Topic {
             Topic::SweepEvent => "/sweep/event",
             Topic::SweepStep => "/sweep/step",
             Topic::SweepBroadband => "/sweep/broadband",
+            Topic::Drive => "/drive",
         }
     }
 
@@ -73,6 +77,7 @@ impl Topic {
             Topic::SweepEvent => "ident.SweepEvent",
             Topic::SweepStep => "ident.SweepStep",
             Topic::SweepBroadband => "ident.SweepBroadband",
+            Topic::Drive => "ident.Drive",
         }
     }
 
@@ -96,6 +101,7 @@ impl Topic {
             Topic::SweepEvent => schema_of::<SweepEvent>(),
             Topic::SweepStep => schema_of::<crate::sweep::StepResult>(),
             Topic::SweepBroadband => schema_of::<BroadbandRecord>(),
+            Topic::Drive => schema_of::<DriveRecord>(),
         }
     }
 }

@@ -34,6 +34,32 @@ pub trait Shaker: Send {
     async fn set_output(&mut self, on: bool) -> Result<(), ShakerError>;
     /// Output state, the controller's own force reading and its questionable-status flags.
     async fn status(&mut self) -> Result<ShakerStatus, ShakerError>;
+    /// The force the DAQ measured with the drive now set. An exciter whose force loop the host
+    /// closes (a signal generator driving a power amplifier, [`crate::generator`]) records it and
+    /// checks its limits (over-force, lost force signal); a controller with its own loop ignores it.
+    async fn force_measured(&mut self, _reading: &ForceReading) -> Result<(), ShakerError> {
+        Ok(())
+    }
+    /// Settings sent to the instrument since the frequency was last set, if the exciter counts
+    /// them (a signal generator does: ramp increments and loop corrections).
+    fn settings_this_line(&self) -> Option<u32> {
+        None
+    }
+}
+
+/// One force measurement of the sweep's closed loop (N peak, Hz).
+#[derive(Debug, Clone, PartialEq)]
+pub struct ForceReading {
+    /// Sweep step.
+    pub step: usize,
+    /// Frequency (Hz).
+    pub frequency_hz: f64,
+    /// Force amplitude held (N).
+    pub target_n: f64,
+    /// Drive commanded (N): the force the exciter's gain estimate expects.
+    pub commanded_n: f64,
+    /// Force amplitude measured on the DAQ's force channel (N).
+    pub measured_n: f64,
 }
 
 /// An excitation waveform. Frequencies in Hz, times in s.
@@ -159,6 +185,17 @@ pub enum ShakerError {
         message: String,
         /// Further queued errors, if any.
         more: String,
+    },
+    /// The signal generator of a generator-driven exciter.
+    #[error(transparent)]
+    Generator(#[from] crate::generator::GeneratorError),
+    /// A generator-driven exciter stopped the drive: over-force, over-voltage or lost force signal.
+    #[error("exciter on {port}: {detail}; the drive is ramped down and the output switched off")]
+    Limit {
+        /// Generator port.
+        port: String,
+        /// What was exceeded or lost, with the values.
+        detail: String,
     },
     /// A value outside what this driver may send (NaN, negative force).
     #[error("shaker controller on {port}: refusing to send {what} = {value}")]

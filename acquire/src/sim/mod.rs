@@ -3,6 +3,7 @@
 //! [`Plant`](plant::Plant), with sensor noise and configurable faults. Every injected fault is
 //! logged so tests can check that the host detected each one.
 
+pub mod generator;
 pub mod plant;
 pub mod signal;
 
@@ -47,6 +48,9 @@ pub enum SimError {
     /// The stand file has no truth section.
     #[error("{0}: the simulated stand needs a [truth] section")]
     NoTruth(String),
+    /// A generator was to be served but the setup has none.
+    #[error("the simulated stand has no [generator] to serve")]
+    NoGenerator,
 }
 
 /// Identity strings the simulated devices answer with (override to test identity checks).
@@ -93,6 +97,46 @@ pub struct SimSetup {
     pub max_force_n: f64,
     /// Identities.
     pub identities: SimIdentities,
+    /// A signal generator + amplifier instead of the shaker controller (generator stands).
+    pub generator: Option<SimGeneratorSetup>,
+}
+
+/// The simulated generator of a generator stand, and where it is served.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SimGeneratorSetup {
+    /// The instrument and its amplifier.
+    pub device: generator::SimGeneratorSetup,
+    /// Served on a local TCP port (127.0.0.1) rather than a pseudo-terminal.
+    pub tcp: bool,
+}
+
+impl SimGeneratorSetup {
+    /// The simulated generator a stand's `[generator]`, `[amplifier]`, `[truth]` and `[faults]`
+    /// describe (`None` for a shaker-controller stand).
+    pub fn from_stand(stand: &Stand) -> Option<SimGeneratorSetup> {
+        let g = stand.generator.as_ref()?;
+        let true_gain = stand
+            .truth
+            .as_ref()
+            .and_then(|t| t.amplifier_gain_n_per_v)
+            .unwrap_or(g.amplifier.gain_n_per_v);
+        Some(SimGeneratorSetup {
+            device: generator::SimGeneratorSetup {
+                identity: DeviceIdentity {
+                    manufacturer: "IDENT-SIM".into(),
+                    model: "SIGGEN-2".into(),
+                    serial: "G0001".into(),
+                    firmware: env!("CARGO_PKG_VERSION").into(),
+                },
+                channel: g.channel,
+                amplifier_gain_n_per_v: true_gain,
+                amplifier_trip_after_lines: stand.faults.amplifier_trip_after_lines,
+                amplifier_surge_after_lines: stand.faults.amplifier_surge_after_lines,
+                surge_factor: stand.faults.amplifier_surge_factor,
+            },
+            tcp: matches!(g.port, crate::stand::GeneratorAddress::Sim { tcp: true }),
+        })
+    }
 }
 
 impl SimSetup {
@@ -136,6 +180,7 @@ impl SimSetup {
             faults: stand.faults.clone(),
             max_force_n: stand.shaker.max_force_n * 1.25,
             identities: SimIdentities::default(),
+            generator: SimGeneratorSetup::from_stand(stand),
         })
     }
 }
@@ -161,6 +206,7 @@ pub struct SimStand {
     pub daq_port: String,
     shared: SharedRef,
     tasks: Vec<JoinHandle<()>>,
+    generator: Option<generator::SimGenerator>,
 }
 
 impl SimStand {
@@ -172,6 +218,21 @@ impl SimStand {
 
     /// Like [`SimStand::start`] with an explicit setup.
     pub fn start_with(setup: SimSetup) -> Result<SimStand, SimError> {
+        if setup.generator.is_some() {
+            let shared: SharedRef = Arc::new(Mutex::new(Shared::default()));
+            let (port, task, gen) = spawn_generator(&setup, shared.clone())?;
+            let daq = pty_pair("daq")?;
+            let daq_port = daq.path.clone();
+            let s2 = shared.clone();
+            let t2 = tokio::spawn(async move { serve_daq(daq.device, s2, setup).await });
+            return Ok(SimStand {
+                shaker_port: port,
+                daq_port,
+                shared,
+                tasks: vec![task, t2],
+                generator: Some(gen),
+            });
+        }
         let shaker = pty_pair("shaker")?;
         let daq = pty_pair("daq")?;
         let (shaker_port, daq_port) = (shaker.path.clone(), daq.path.clone());
@@ -208,6 +269,7 @@ impl SimStand {
             daq_port,
             shared,
             tasks: vec![t1, t2],
+            generator: None,
         }
     }
 
@@ -216,6 +278,18 @@ impl SimStand {
         let mut s = stand.clone();
         if s.shaker.port == PortSpec::Sim {
             s.shaker.port = PortSpec::Path(self.shaker_port.clone());
+        }
+        if let Some(g) = &mut s.generator {
+            if let crate::stand::GeneratorAddress::Sim { .. } = g.port {
+                g.port = match self
+                    .shaker_port
+                    .strip_prefix("tcp:")
+                    .and_then(crate::transport::SocketAddress::parse)
+                {
+                    Some(a) => crate::stand::GeneratorAddress::Tcp(a),
+                    None => crate::stand::GeneratorAddress::Serial(self.shaker_port.clone()),
+                };
+            }
         }
         if s.daq.port == PortSpec::Sim {
             s.daq.port = match self.daq_port.strip_prefix("can:") {
@@ -234,6 +308,11 @@ impl SimStand {
     /// What the simulated controller currently drives.
     pub fn excitation(&self) -> Excitation {
         lock(&self.shared).excitation.clone()
+    }
+
+    /// The simulated signal generator's state (generator stands).
+    pub fn generator_state(&self) -> Option<generator::GeneratorState> {
+        self.generator.as_ref().map(|g| g.state())
     }
 
     /// Serves the stand's simulated shaker controller on a pseudo-terminal and its DAQ on the CAN
@@ -277,15 +356,22 @@ impl SimStand {
         let t2 = tokio::spawn(async move {
             let _ = sim.serve(signal, None, stop_rx).await;
         });
-        let s1 = shared.clone();
-        let ids = setup.identities.clone();
-        let (faults, max_force, interaction) =
-            (setup.faults.clone(), setup.max_force_n, setup.interaction);
-        let shaker_port = shaker.path.clone();
-        let io = shaker.device;
-        let t1 = tokio::spawn(async move {
-            serve_shaker(io, s1, ids.shaker, faults, max_force, interaction).await
-        });
+        let (shaker_port, t1, generator) = if setup.generator.is_some() {
+            drop(shaker);
+            let (port, task, gen) = spawn_generator(&setup, shared.clone())?;
+            (port, task, Some(gen))
+        } else {
+            let s1 = shared.clone();
+            let ids = setup.identities.clone();
+            let (faults, max_force, interaction) =
+                (setup.faults.clone(), setup.max_force_n, setup.interaction);
+            let shaker_port = shaker.path.clone();
+            let io = shaker.device;
+            let t1 = tokio::spawn(async move {
+                serve_shaker(io, s1, ids.shaker, faults, max_force, interaction).await
+            });
+            (shaker_port, t1, None)
+        };
         // Dropping the sender stops the CAN simulator with the tasks.
         let keep = tokio::spawn(async move {
             std::future::pending::<()>().await;
@@ -296,6 +382,7 @@ impl SimStand {
             daq_port: format!("can:{iface}"),
             shared,
             tasks: vec![t1, t2, keep],
+            generator,
         })
     }
 
@@ -312,6 +399,39 @@ impl Drop for SimStand {
         for t in &self.tasks {
             t.abort();
         }
+    }
+}
+
+/// Serves the setup's simulated generator on a new pseudo-terminal or a local TCP port
+/// (127.0.0.1, a port the system picks): its port (`/dev/pts/N` or `tcp:127.0.0.1:PORT`), task
+/// and handle.
+fn spawn_generator(
+    setup: &SimSetup,
+    shared: SharedRef,
+) -> Result<(String, JoinHandle<()>, generator::SimGenerator), SimError> {
+    let Some(g) = &setup.generator else {
+        return Err(SimError::NoGenerator);
+    };
+    let gen = generator::SimGenerator::new(g.device.clone(), shared);
+    let served = gen.clone();
+    if g.tcp {
+        let socket_error = |e: std::io::Error| {
+            SimError::Transport(TransportError::Socket {
+                port: "tcp:127.0.0.1".into(),
+                detail: e.to_string(),
+            })
+        };
+        let std_listener = std::net::TcpListener::bind("127.0.0.1:0").map_err(socket_error)?;
+        std_listener.set_nonblocking(true).map_err(socket_error)?;
+        let port = std_listener.local_addr().map_err(socket_error)?.port();
+        let listener = tokio::net::TcpListener::from_std(std_listener).map_err(socket_error)?;
+        let task = tokio::spawn(async move { served.serve_tcp(listener).await });
+        Ok((format!("tcp:127.0.0.1:{port}"), task, gen))
+    } else {
+        let pty = pty_pair("generator")?;
+        let path = pty.path.clone();
+        let task = tokio::spawn(async move { served.serve(pty.device, true).await });
+        Ok((path, task, gen))
     }
 }
 

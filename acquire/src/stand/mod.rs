@@ -12,6 +12,9 @@ use serde_spanned::Spanned;
 use identify::source::{Located, Quantity as Value, SourceText};
 use identify::units::Dim;
 
+mod generator;
+pub use generator::{GeneratorAddress, GeneratorStand, GENERATOR_MAX_VOLTS_PEAK};
+
 /// How far (m) outside its body's equivalent box a sensor may sit (mounting blocks, rounding).
 pub const SENSOR_MOUNT_TOLERANCE_M: f64 = 0.005;
 
@@ -24,8 +27,12 @@ pub struct Stand {
     pub file: String,
     /// The file's text, recorded verbatim in each session.
     pub text: String,
-    /// The shaker controller.
+    /// The exciter as the sweep sees it: the shaker controller, or — on a stand with a
+    /// [`Stand::generator`] — the generator's port and identity with the amplifier's force limit.
     pub shaker: ShakerPort,
+    /// The signal generator and power amplifier (`[generator]`, `[amplifier]`), when the stand
+    /// drives its shaker that way instead of through a shaker controller.
+    pub generator: Option<GeneratorStand>,
     /// The DAQ.
     pub daq: DaqPort,
     /// DAQ channels in stream order.
@@ -240,6 +247,9 @@ pub struct Truth {
     pub speed: f64,
     /// Seed of the noise generator.
     pub seed: u64,
+    /// True force per generator volt of the simulated amplifier and shaker (N/V; generator
+    /// stands). Absent: the stand's `amplifier.gain` estimate, exact.
+    pub amplifier_gain_n_per_v: Option<f64>,
 }
 
 /// Structure models the simulated stand can use as truth.
@@ -264,7 +274,7 @@ pub enum TruthModel {
 }
 
 /// Faults injected by the simulated stand. Probabilities per frame (0-1).
-#[derive(Debug, Clone, PartialEq, Default, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct Faults {
     /// Seed of the fault generator.
     pub seed: u64,
@@ -284,6 +294,32 @@ pub struct Faults {
     pub shaker_silent_after_commands: Option<u64>,
     /// Both cables are pulled (ptys closed) after this many DAQ blocks.
     pub cable_pull_after_blocks: Option<u64>,
+    /// The simulated power amplifier trips (no force, generator output still on) once the
+    /// generator has received this many frequency settings (sweep lines).
+    pub amplifier_trip_after_lines: Option<u64>,
+    /// The simulated amplifier's gain surges by `amplifier_surge_factor` after this many lines.
+    pub amplifier_surge_after_lines: Option<u64>,
+    /// Gain factor of a surge (default 2).
+    pub amplifier_surge_factor: f64,
+}
+
+impl Default for Faults {
+    fn default() -> Self {
+        Faults {
+            seed: 0,
+            drop: 0.0,
+            corrupt: 0.0,
+            duplicate: 0.0,
+            delay: 0.0,
+            delay_time: Duration::ZERO,
+            daq_silent_after_blocks: None,
+            shaker_silent_after_commands: None,
+            cable_pull_after_blocks: None,
+            amplifier_trip_after_lines: None,
+            amplifier_surge_after_lines: None,
+            amplifier_surge_factor: 2.0,
+        }
+    }
 }
 
 /// A stand-file error: where and what (file:line:column: message).
@@ -293,7 +329,9 @@ pub type StandError = Located;
 #[serde(deny_unknown_fields)]
 struct RawStand {
     name: Option<String>,
-    shaker: Spanned<RawShaker>,
+    shaker: Option<Spanned<RawShaker>>,
+    generator: Option<Spanned<generator::RawGenerator>>,
+    amplifier: Option<Spanned<generator::RawAmplifier>>,
     daq: Spanned<RawDaq>,
     #[serde(default)]
     channel: Vec<Spanned<RawChannel>>,
@@ -366,6 +404,7 @@ struct RawTruth {
     noise_force: Option<Spanned<Value>>,
     speed: Option<Spanned<f64>>,
     seed: Option<u64>,
+    amplifier_gain: Option<Spanned<Value>>,
 }
 
 #[derive(Deserialize)]
@@ -390,6 +429,9 @@ struct RawFaults {
     daq_silent_after_blocks: Option<u64>,
     shaker_silent_after_commands: Option<u64>,
     cable_pull_after_blocks: Option<u64>,
+    amplifier_trip_after_lines: Option<u64>,
+    amplifier_surge_after_lines: Option<u64>,
+    amplifier_surge_factor: Option<Spanned<f64>>,
 }
 
 /// Reads the stand file's text: locates errors and converts quantities.
@@ -531,10 +573,10 @@ impl Stand {
             let span = e.span().unwrap_or(0..0);
             cx.at(span, e.message().to_string())
         })?;
-        let (rs, rd) = (raw.shaker.get_ref(), raw.daq.get_ref());
-        let shaker = shaker_port(&cx, rs)?;
+        let rd = raw.daq.get_ref();
+        let (shaker, generator, exciter_span) = exciter(&cx, &raw)?;
         let daq = daq_port(&cx, rd)?;
-        check_ports(&cx, &shaker, &daq, rs, rd)?;
+        check_ports(&cx, &shaker, &daq, exciter_span.clone(), rd)?;
         let channels = channel_map(&cx, &raw, &daq)?;
         let truth = match &raw.truth {
             None => None,
@@ -551,7 +593,7 @@ impl Stand {
         let uses_sim = shaker.port == PortSpec::Sim || daq.port == PortSpec::Sim;
         if uses_sim && truth.is_none() {
             return Err(cx.at(
-                raw.shaker.span(),
+                exciter_span,
                 "port = \"sim\" needs a [truth] section (the simulated structure)",
             ));
         }
@@ -560,6 +602,7 @@ impl Stand {
             file: file.to_string(),
             text: text.to_string(),
             shaker,
+            generator,
             daq,
             channels,
             truth,
@@ -673,6 +716,38 @@ impl Stand {
     }
 }
 
+/// The stand's exciter: `[shaker]`, or `[generator]` with `[amplifier]` (never both), and the
+/// span of its port for later messages.
+fn exciter(
+    cx: &Ctx<'_>,
+    raw: &RawStand,
+) -> Result<(ShakerPort, Option<GeneratorStand>, Range<usize>), StandError> {
+    match (&raw.shaker, &raw.generator) {
+        (Some(_), Some(g)) => Err(cx.at(
+            g.span(),
+            "the stand has both [shaker] and [generator]; it has one exciter: a shaker controller ([shaker]) or a signal generator driving a power amplifier ([generator] and [amplifier]); remove one",
+        )),
+        (None, None) => Err(cx.at(
+            0..0,
+            "the stand has no exciter: add [shaker] (a shaker controller) or [generator] and [amplifier] (a signal generator driving a power amplifier)",
+        )),
+        (Some(rs), None) => {
+            if let Some(a) = &raw.amplifier {
+                return Err(cx.at(
+                    a.span(),
+                    "[amplifier] belongs to a [generator] stand; a shaker controller holds its force itself (shaker.max_force); remove [amplifier]",
+                ));
+            }
+            let r = rs.get_ref();
+            Ok((shaker_port(cx, r)?, None, r.port.span()))
+        }
+        (None, Some(rg)) => {
+            let (g, shaker) = generator::generator_section(cx, rg, raw.amplifier.as_ref())?;
+            Ok((shaker, Some(g), rg.span()))
+        }
+    }
+}
+
 /// `[shaker]`: its port and settings.
 fn shaker_port(cx: &Ctx<'_>, rs: &RawShaker) -> Result<ShakerPort, StandError> {
     Ok(ShakerPort {
@@ -736,11 +811,11 @@ fn check_ports(
     cx: &Ctx<'_>,
     shaker: &ShakerPort,
     daq: &DaqPort,
-    rs: &RawShaker,
+    shaker_span: Range<usize>,
     rd: &RawDaq,
 ) -> Result<(), StandError> {
     if matches!(shaker.port, PortSpec::Can(_)) {
-        return Err(cx.at(rs.port.span(), "shaker.port: the shaker controller speaks SCPI over serial; give a device path (or \"sim\"), not a CAN interface"));
+        return Err(cx.at(shaker_span, "shaker.port: the shaker controller speaks SCPI over serial; give a device path (or \"sim\"), not a CAN interface"));
     }
     if let PortSpec::Can(iface) = &daq.port {
         if iface.is_empty() {
@@ -912,6 +987,16 @@ fn faults(cx: &Ctx<'_>, f: &RawFaults) -> Result<Faults, StandError> {
         daq_silent_after_blocks: f.daq_silent_after_blocks,
         shaker_silent_after_commands: f.shaker_silent_after_commands,
         cable_pull_after_blocks: f.cable_pull_after_blocks,
+        amplifier_trip_after_lines: f.amplifier_trip_after_lines,
+        amplifier_surge_after_lines: f.amplifier_surge_after_lines,
+        amplifier_surge_factor: match &f.amplifier_surge_factor {
+            None => 2.0,
+            Some(x) if *x.get_ref() > 0.0 && x.get_ref().is_finite() => *x.get_ref(),
+            Some(x) => return Err(cx.at(
+                x.span(),
+                "faults.amplifier_surge_factor must be > 0 (the amplifier's gain multiplies by it)",
+            )),
+        },
     })
 }
 
@@ -1050,6 +1135,17 @@ fn truth(cx: &Ctx<'_>, st: &Spanned<RawTruth>, channels: &[Channel]) -> Result<T
         },
         speed,
         seed: t.seed.unwrap_or(1),
+        amplifier_gain_n_per_v: match &t.amplifier_gain {
+            None => None,
+            Some(v) => Some(generator::per(
+                cx,
+                v,
+                Dim::FORCE,
+                &[("V", 1.0), ("mV", 1e-3)],
+                "truth.amplifier_gain",
+                "1040 N/V",
+            )?),
+        },
     })
 }
 

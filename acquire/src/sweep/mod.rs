@@ -23,7 +23,7 @@ use crate::session::records::{
     self, BlockRecord, BroadbandChannel, BroadbandRecord, FaultRecord, SessionStart, SweepEvent,
 };
 use crate::session::{self, SessionError, SessionHandle};
-use crate::shaker::{ShakerError, Waveform};
+use crate::shaker::{ForceReading, ShakerError, Waveform};
 use estimate::StepEstimator;
 
 /// Sweep errors. Device errors keep their port and advice.
@@ -310,6 +310,10 @@ pub struct StepResult {
     pub samples: u64,
     /// Closed-loop iterations used.
     pub iterations: u32,
+    /// Settings sent to a signal generator for this line (frequency, ramp increments, loop
+    /// corrections; generator stands only).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub generator_settings: Option<u32>,
     /// Per channel.
     pub channels: Vec<ChannelResult>,
 }
@@ -596,7 +600,7 @@ async fn stepped_inner(
     let sens: Vec<f64> = rig.stand.channels.iter().map(|c| c.sensitivity).collect();
     let names: Vec<String> = rig.stand.channels.iter().map(|c| c.name.clone()).collect();
     let mut estimator = StepEstimator::new(fs, &sens, force_ch);
-    let max_drive = rig.stand.shaker.max_force_n;
+    let max_drive = drive_limit(&rig.stand);
     let first = freqs
         .iter()
         .enumerate()
@@ -646,6 +650,7 @@ async fn stepped_inner(
             first_sample: m.first_sample,
             samples: m.samples,
             iterations: m.iterations,
+            generator_settings: pump.rig.shaker.settings_this_line(),
             channels,
         };
         session.record(&res)?;
@@ -654,7 +659,13 @@ async fn stepped_inner(
             "step_completed",
             Some(step),
             Some(f),
-            format!("force {:.1} N, {} corrections", m.force_n, m.iterations),
+            match res.generator_settings {
+                Some(n) => format!(
+                    "force {:.1} N, {} corrections, {n} generator settings",
+                    m.force_n, m.iterations
+                ),
+                None => format!("force {:.1} N, {} corrections", m.force_n, m.iterations),
+            },
         )?;
         session.check()?;
         progress.step(step, f, m.force_n, quality);
@@ -662,6 +673,17 @@ async fn stepped_inner(
     }
     outcome.faults = pump.faults;
     Ok(outcome)
+}
+
+/// The largest drive (N) the loop commands: a shaker controller's `max_force`. A generator
+/// stand's drive is volts times the amplifier's gain estimate, not a force: the exciter itself
+/// refuses a drive above its voltage limit (an over-voltage stops the sweep) and stops on a
+/// measured over-force, so the loop does not clip it.
+fn drive_limit(stand: &crate::stand::Stand) -> f64 {
+    match &stand.generator {
+        Some(_) => f64::INFINITY,
+        None => stand.shaker.max_force_n,
+    }
 }
 
 /// One step measured with the force held at the plan's target.
@@ -688,7 +710,12 @@ async fn measure_step(
 ) -> Result<Option<Measured>, SweepError> {
     let session = pump.session;
     let fs = pump.rig.stream.sample_rate_hz;
-    let max_drive = pump.rig.stand.shaker.max_force_n;
+    let max_drive = drive_limit(&pump.rig.stand);
+    // A generator stand holds its amplifier's tolerance (2 % by default), tighter or not.
+    let tolerance = match &pump.rig.stand.generator {
+        Some(g) => g.amplifier.tolerance,
+        None => plan.force_tolerance,
+    };
     pump.rig.shaker.set_frequency(f).await?;
     let mut drive = (plan.target_force_n / *gain).min(max_drive);
     pump.rig.shaker.set_force(drive).await?;
@@ -728,13 +755,23 @@ async fn measure_step(
                 source,
             })?;
         let famp = est.force.amplitude();
+        pump.rig
+            .shaker
+            .force_measured(&ForceReading {
+                step,
+                frequency_hz: f,
+                target_n: plan.target_force_n,
+                commanded_n: drive,
+                measured_n: famp,
+            })
+            .await?;
         let err = (famp - plan.target_force_n).abs() / plan.target_force_n;
         if famp > 0.0 {
             *gain = famp / drive;
         }
-        if err <= plan.force_tolerance || iterations >= plan.max_iterations || famp <= 0.0 {
-            if err > plan.force_tolerance {
-                event(session, "warning", Some(step), Some(f), format!("force {famp:.1} N not within {:.1} % of {} N after {iterations} corrections", plan.force_tolerance * 100.0, plan.target_force_n))?;
+        if err <= tolerance || iterations >= plan.max_iterations || famp <= 0.0 {
+            if err > tolerance {
+                event(session, "warning", Some(step), Some(f), format!("force {famp:.1} N not within {:.1} % of {} N after {iterations} corrections", tolerance * 100.0, plan.target_force_n))?;
             }
             return Ok(Some(Measured {
                 estimate: est,

@@ -1,11 +1,13 @@
-//! Byte-stream transports (serial ports, pseudo-terminals, in-memory pipes) behind one narrow
+//! Byte-stream transports (serial ports, pseudo-terminals, raw TCP sockets, in-memory pipes) behind one narrow
 //! trait, plus a tap that copies every byte to the session log.
 
 mod serial;
 mod tap;
+mod tcp;
 
 pub use serial::{open_serial, pty_pair, PtyDevice, SerialSettings, SerialTransport};
 pub use tap::{ByteTap, Direction, Tapped};
+pub use tcp::{connect_tcp, SocketAddress, TcpTransport, SCPI_RAW_PORT};
 
 use tokio::io::{AsyncRead, AsyncWrite};
 
@@ -122,6 +124,14 @@ pub enum TransportError {
     #[error("serial port {port}: cannot open: {detail}")]
     Open {
         /// Port path.
+        port: String,
+        /// What the operating system said.
+        detail: String,
+    },
+    /// A network socket (raw SCPI over TCP) could not be connected or configured.
+    #[error("instrument socket {port}: cannot connect: {detail}; check the address and port in the stand file, that the instrument is on and on the network (LAN settings: SCPI raw socket enabled, port 5025)")]
+    Socket {
+        /// `tcp:host:port`.
         port: String,
         /// What the operating system said.
         detail: String,

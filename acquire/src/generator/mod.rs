@@ -1,0 +1,162 @@
+//! Function/arbitrary generators driving a power amplifier and an electrodynamic shaker: the
+//! SCPI-99 / IEEE 488.2 command set such generators share ([`scpi::ScpiGenerator`]) with
+//! per-model command tables ([`dialect`]), the narrow [`Generator`] trait a sweep drives, and
+//! [`exciter::GeneratorExciter`], which makes generator + amplifier + shaker an exciter whose
+//! force loop is closed by the host on the DAQ's force channel (docs/scpi-generator.md).
+
+pub mod dialect;
+pub mod exciter;
+pub mod scpi;
+
+pub use exciter::{Amplifier, GeneratorExciter};
+pub use scpi::{GeneratorOptions, ScpiGenerator};
+
+use std::time::Duration;
+
+use async_trait::async_trait;
+
+use crate::device::DeviceIdentity;
+
+/// A signal generator's output channel, as a sweep needs it. Object safe; amplitudes are the
+/// sine's peak voltage (V) at the generator's output into a high-impedance load, frequencies Hz.
+/// Every setting is confirmed (`*OPC?`) and followed by reading the error queue; an error there
+/// fails the call with [`GeneratorError::Instrument`].
+#[async_trait]
+pub trait Generator: Send {
+    /// Where the instrument is connected (`/dev/ttyUSB0`, `tcp:192.168.1.20:5025`).
+    fn port(&self) -> &str;
+    /// Asks the instrument who it is (`*IDN?`) and selects its command table.
+    async fn identify(&mut self) -> Result<DeviceIdentity, GeneratorError>;
+    /// `*RST`, `*CLS`, then: output off, high-impedance load, sine, amplitude unit, zero offset,
+    /// the smallest amplitude. Call after [`Generator::identify`].
+    async fn prepare_sine(&mut self) -> Result<(), GeneratorError>;
+    /// Sine frequency (Hz).
+    async fn set_frequency(&mut self, hz: f64) -> Result<(), GeneratorError>;
+    /// Sine amplitude (V peak).
+    async fn set_amplitude(&mut self, volts_peak: f64) -> Result<(), GeneratorError>;
+    /// Switches the output on or off.
+    async fn set_output(&mut self, on: bool) -> Result<(), GeneratorError>;
+    /// Asks whether the output is on.
+    async fn output(&mut self) -> Result<bool, GeneratorError>;
+}
+
+/// Errors of a signal generator. Each names the instrument (its port, and its identity once
+/// known) and says what to check.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum GeneratorError {
+    /// The transport could not be opened.
+    #[error(transparent)]
+    Transport(#[from] crate::transport::TransportError),
+    /// Reading or writing failed.
+    #[error("signal generator {instrument}: I/O error: {detail}; check the cable or network and that the generator is on")]
+    Io {
+        /// Port and identity.
+        instrument: String,
+        /// What the operating system said.
+        detail: String,
+    },
+    /// The instrument went away and could not be reached again.
+    #[error("signal generator {instrument}: connection lost ({detail}); check the cable or network and the generator's power")]
+    Disconnected {
+        /// Port and identity.
+        instrument: String,
+        /// What was seen.
+        detail: String,
+    },
+    /// No answer within the timeout, after all retries.
+    #[error("signal generator {instrument}: no answer to `{command}` within {waited:?} ({attempts} attempts); check that the generator is on, the cable or address, the baud rate and the line terminator")]
+    Timeout {
+        /// Port and identity.
+        instrument: String,
+        /// Command sent.
+        command: String,
+        /// Timeout per attempt.
+        waited: Duration,
+        /// Attempts made.
+        attempts: u32,
+    },
+    /// The answer could not be understood.
+    #[error("signal generator {instrument}: answer to `{command}` is not understood: {got:?}; is this port really the generator (baud rate, terminator)?")]
+    Garbled {
+        /// Port and identity.
+        instrument: String,
+        /// Command sent.
+        command: String,
+        /// What came back.
+        got: String,
+    },
+    /// The instrument reported an error for a command (from its `SYSTem:ERRor?` queue).
+    #[error("signal generator {instrument}: `{command}` failed: {code},\"{message}\"{more}; check the command table (dialect) in the stand file and the value's range")]
+    Instrument {
+        /// Port and identity.
+        instrument: String,
+        /// Command that failed.
+        command: String,
+        /// SCPI error code.
+        code: i32,
+        /// The instrument's message.
+        message: String,
+        /// Further queued errors, if any.
+        more: String,
+    },
+    /// The instrument's model has no command table.
+    #[error("signal generator on {port}: `*IDN?` says `{idn}`, a model with no built-in command table (known: {known}); set `dialect = \"generic\"` in [generator] for plain SCPI-99 commands, or name a table and override commands in [generator.commands] (docs/scpi-generator.md)")]
+    UnknownModel {
+        /// Port.
+        port: String,
+        /// The identity received.
+        idn: String,
+        /// Built-in tables.
+        known: String,
+    },
+    /// The stand file names a command table that does not exist.
+    #[error("signal generator on {port}: no command table named `{name}` (known: {known}); fix `dialect` in [generator]")]
+    UnknownDialect {
+        /// Port.
+        port: String,
+        /// Name asked for.
+        name: String,
+        /// Built-in tables.
+        known: String,
+    },
+    /// The instrument identified itself as something else.
+    #[error("signal generator on {port}: identifies as `{got}`, stand file expects `{expected}`; check which instrument is on this port or address")]
+    WrongIdentity {
+        /// Port.
+        port: String,
+        /// Identity received.
+        got: String,
+        /// Identity expected.
+        expected: String,
+    },
+    /// A value this driver refuses to send (NaN, negative, above the stand's voltage limit).
+    #[error("signal generator {instrument}: refusing to send {what} = {value}{why}")]
+    InvalidValue {
+        /// Port and identity.
+        instrument: String,
+        /// Which quantity.
+        what: String,
+        /// The value.
+        value: f64,
+        /// Why.
+        why: String,
+    },
+    /// The output was switched off but the instrument still reports it on.
+    #[error("signal generator {instrument}: output still on after `{command}`; switch it off at the front panel and check the command table")]
+    OutputStillOn {
+        /// Port and identity.
+        instrument: String,
+        /// The command sent.
+        command: String,
+    },
+    /// A setting was used before [`Generator::identify`] chose the command table.
+    #[error("signal generator on {port}: not identified yet (the driver asks `*IDN?` first to choose its command table)")]
+    NotIdentified {
+        /// Port.
+        port: String,
+    },
+    /// The built-in command table is unreadable (a defect of this build).
+    #[error(transparent)]
+    Table(#[from] dialect::TableError),
+}

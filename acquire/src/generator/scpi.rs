@@ -1,0 +1,407 @@
+//! The host driver for SCPI function generators over any [`Transport`] (serial, raw TCP socket):
+//! line terminator, answer timeout and retries, one reconnect when the connection drops, `*OPC?`
+//! after every setting and the error queue read until it is empty.
+
+use std::collections::VecDeque;
+use std::future::Future;
+use std::pin::Pin;
+use std::time::Duration;
+
+use async_trait::async_trait;
+use tokio::io::{AsyncReadExt, AsyncWriteExt};
+use tokio::time::Instant;
+
+use super::dialect::{self, Dialect, DialectOverrides};
+use super::{Generator, GeneratorError};
+use crate::device::DeviceIdentity;
+use crate::shaker::scpi::{parse_bool_answer, parse_error_entry, Line, LineBuffer};
+use crate::transport::{Transport, TransportError};
+
+/// Opens the instrument's connection again after it dropped (a socket reset, a USB serial
+/// adapter re-enumerated).
+pub type Reconnect = Box<
+    dyn FnMut() -> Pin<Box<dyn Future<Output = Result<Box<dyn Transport>, TransportError>> + Send>>
+        + Send,
+>;
+
+/// Settings of the SCPI generator driver (the stand file's `[generator]`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct GeneratorOptions {
+    /// Output channel (1 for single-channel instruments).
+    pub channel: u8,
+    /// How long to wait for each answer line.
+    pub timeout: Duration,
+    /// Re-sends of a query after a timeout.
+    pub retries: u32,
+    /// Line terminator sent after each command (`"\n"`; answers may end in `\n` or `\r\n`).
+    pub terminator: String,
+    /// A command table by name; `None`: chosen from the `*IDN?` answer.
+    pub dialect: Option<String>,
+    /// Commands overridden by the stand file.
+    pub overrides: DialectOverrides,
+}
+
+impl Default for GeneratorOptions {
+    fn default() -> Self {
+        GeneratorOptions {
+            channel: 1,
+            timeout: Duration::from_millis(1000),
+            retries: 2,
+            terminator: "\n".into(),
+            dialect: None,
+            overrides: DialectOverrides::default(),
+        }
+    }
+}
+
+/// Most entries read from an error queue after one setting (SCPI queues hold 10-20).
+const MAX_QUEUE: usize = 32;
+
+/// A SCPI function generator.
+pub struct ScpiGenerator {
+    io: Box<dyn Transport>,
+    reconnect: Option<Reconnect>,
+    port: String,
+    /// `port` and, once known, `manufacturer model`.
+    instrument: String,
+    opts: GeneratorOptions,
+    dialect: Option<Dialect>,
+    lines: LineBuffer,
+    ready: VecDeque<Line>,
+    rx: Vec<u8>,
+}
+
+impl ScpiGenerator {
+    /// A driver over `io`. Nothing is sent until the first call.
+    pub fn new(io: Box<dyn Transport>, opts: GeneratorOptions) -> Self {
+        let port = io.port().to_string();
+        ScpiGenerator {
+            io,
+            reconnect: None,
+            instrument: port.clone(),
+            port,
+            opts,
+            dialect: None,
+            lines: LineBuffer::new(),
+            ready: VecDeque::new(),
+            rx: vec![0; 1024],
+        }
+    }
+
+    /// How to open the connection again when it drops (once per command).
+    pub fn with_reconnect(mut self, reconnect: Reconnect) -> Self {
+        self.reconnect = Some(reconnect);
+        self
+    }
+
+    /// The command table in use (after [`Generator::identify`]).
+    pub fn dialect(&self) -> Option<&Dialect> {
+        self.dialect.as_ref()
+    }
+
+    fn io_error(&self, e: std::io::Error) -> GeneratorError {
+        use std::io::ErrorKind as K;
+        let lost = matches!(
+            e.kind(),
+            K::UnexpectedEof | K::BrokenPipe | K::ConnectionReset | K::NotConnected
+        ) || e.raw_os_error() == Some(5);
+        if lost {
+            GeneratorError::Disconnected {
+                instrument: self.instrument.clone(),
+                detail: e.to_string(),
+            }
+        } else {
+            GeneratorError::Io {
+                instrument: self.instrument.clone(),
+                detail: e.to_string(),
+            }
+        }
+    }
+
+    async fn send(&mut self, line: &str) -> Result<(), GeneratorError> {
+        let mut bytes = Vec::with_capacity(line.len() + self.opts.terminator.len());
+        bytes.extend_from_slice(line.as_bytes());
+        bytes.extend_from_slice(self.opts.terminator.as_bytes());
+        if let Err(e) = self.io.write_all(&bytes).await {
+            return Err(self.io_error(e));
+        }
+        if let Err(e) = self.io.flush().await {
+            return Err(self.io_error(e));
+        }
+        Ok(())
+    }
+
+    /// One answer line before `deadline`; `Ok(None)` on timeout.
+    async fn read_line(&mut self, deadline: Instant) -> Result<Option<Line>, GeneratorError> {
+        loop {
+            if let Some(l) = self.ready.pop_front() {
+                return Ok(Some(l));
+            }
+            let n = match tokio::time::timeout_at(deadline, self.io.read(&mut self.rx)).await {
+                Err(_) => return Ok(None),
+                Ok(Err(e)) => return Err(self.io_error(e)),
+                Ok(Ok(0)) => {
+                    return Err(GeneratorError::Disconnected {
+                        instrument: self.instrument.clone(),
+                        detail: "end of stream".into(),
+                    })
+                }
+                Ok(Ok(n)) => n,
+            };
+            let ready = &mut self.ready;
+            self.lines.feed(&self.rx[..n], |l| ready.push_back(l));
+        }
+    }
+
+    /// Discards late answers of an attempt that timed out.
+    async fn drain(&mut self) -> Result<(), GeneratorError> {
+        self.ready.clear();
+        self.lines.clear();
+        while let Ok(r) =
+            tokio::time::timeout(Duration::from_millis(5), self.io.read(&mut self.rx)).await
+        {
+            match r {
+                Ok(0) => {
+                    return Err(GeneratorError::Disconnected {
+                        instrument: self.instrument.clone(),
+                        detail: "end of stream".into(),
+                    })
+                }
+                Ok(_) => continue,
+                Err(e) => return Err(self.io_error(e)),
+            }
+        }
+        Ok(())
+    }
+
+    /// Opens the connection again, if a way to do so was given; `false` if not.
+    async fn reopen(&mut self) -> Result<bool, GeneratorError> {
+        let Some(r) = self.reconnect.as_mut() else {
+            return Ok(false);
+        };
+        let io = r().await?;
+        tracing::warn!("signal generator {}: reconnected", self.instrument);
+        self.io = io;
+        self.ready.clear();
+        self.lines.clear();
+        Ok(true)
+    }
+
+    /// Sends `line` (no answer expected), reconnecting once if the connection dropped.
+    pub async fn write(&mut self, line: &str) -> Result<(), GeneratorError> {
+        match self.send(line).await {
+            Err(GeneratorError::Disconnected { .. }) if self.reopen().await? => {
+                self.send(line).await
+            }
+            r => r,
+        }
+    }
+
+    /// Sends a query and returns its answer line: re-sent after a timeout, and once after a
+    /// reconnect when the connection dropped.
+    pub async fn query(&mut self, line: &str) -> Result<String, GeneratorError> {
+        let mut reconnected = false;
+        loop {
+            match self.query_once(line).await {
+                Err(GeneratorError::Disconnected { .. })
+                    if !reconnected && self.reopen().await? =>
+                {
+                    reconnected = true;
+                }
+                r => return r,
+            }
+        }
+    }
+
+    async fn query_once(&mut self, line: &str) -> Result<String, GeneratorError> {
+        for attempt in 0..=self.opts.retries {
+            if attempt > 0 {
+                self.drain().await?;
+            }
+            self.send(line).await?;
+            let deadline = Instant::now() + self.opts.timeout;
+            match self.read_line(deadline).await? {
+                Some(Line::Text(t)) => return Ok(t),
+                Some(Line::Garbage(g)) => {
+                    return Err(GeneratorError::Garbled {
+                        instrument: self.instrument.clone(),
+                        command: line.to_string(),
+                        got: g,
+                    })
+                }
+                None => continue,
+            }
+        }
+        Err(GeneratorError::Timeout {
+            instrument: self.instrument.clone(),
+            command: line.to_string(),
+            waited: self.opts.timeout,
+            attempts: self.opts.retries + 1,
+        })
+    }
+
+    fn garbled(&self, command: &str, got: String) -> GeneratorError {
+        GeneratorError::Garbled {
+            instrument: self.instrument.clone(),
+            command: command.to_string(),
+            got,
+        }
+    }
+
+    /// Sends a setting, waits for it to complete (`*OPC?` answers `1`), then reads the error
+    /// queue until it says `0,"No error"`; any entry fails the call, naming the command.
+    pub async fn set(&mut self, line: &str) -> Result<(), GeneratorError> {
+        self.write(line).await?;
+        let opc = self.query("*OPC?").await?;
+        if opc.trim().trim_start_matches('+') != "1" {
+            return Err(self.garbled("*OPC?", opc));
+        }
+        self.check_errors(line).await
+    }
+
+    /// Reads the error queue until it is empty; errors are blamed on `command`.
+    pub async fn check_errors(&mut self, command: &str) -> Result<(), GeneratorError> {
+        let query = self
+            .dialect
+            .as_ref()
+            .map(|d| d.error_query.clone())
+            .unwrap_or_else(|| "SYST:ERR?".into());
+        let mut errors = Vec::new();
+        for _ in 0..MAX_QUEUE {
+            let answer = self.query(&query).await?;
+            let Some(e) = parse_error_entry(&answer) else {
+                return Err(self.garbled(&query, answer));
+            };
+            if e.code == 0 {
+                break;
+            }
+            errors.push(e);
+        }
+        let mut it = errors.into_iter();
+        let Some(first) = it.next() else {
+            return Ok(());
+        };
+        let more: Vec<String> = it.map(|e| e.to_string()).collect();
+        Err(GeneratorError::Instrument {
+            instrument: self.instrument.clone(),
+            command: command.to_string(),
+            code: first.code,
+            message: first.message,
+            more: if more.is_empty() {
+                String::new()
+            } else {
+                format!(" (also queued: {})", more.join("; "))
+            },
+        })
+    }
+
+    fn commands(&self) -> Result<&Dialect, GeneratorError> {
+        self.dialect
+            .as_ref()
+            .ok_or_else(|| GeneratorError::NotIdentified {
+                port: self.port.clone(),
+            })
+    }
+
+    fn check(&self, what: &str, value: f64) -> Result<(), GeneratorError> {
+        if value.is_finite() && value >= 0.0 {
+            Ok(())
+        } else {
+            Err(GeneratorError::InvalidValue {
+                instrument: self.instrument.clone(),
+                what: what.into(),
+                value,
+                why: String::new(),
+            })
+        }
+    }
+
+    /// The command table for `id`: the stand's named one, or the built-in one for its model,
+    /// with the stand's overrides.
+    fn choose_dialect(&self, id: &DeviceIdentity) -> Result<Dialect, GeneratorError> {
+        let known = || dialect::known_names().join(", ");
+        let base = match &self.opts.dialect {
+            Some(name) => {
+                dialect::by_name(name)?.ok_or_else(|| GeneratorError::UnknownDialect {
+                    port: self.port.clone(),
+                    name: name.clone(),
+                    known: known(),
+                })?
+            }
+            None => dialect::for_identity(id)?.ok_or_else(|| GeneratorError::UnknownModel {
+                port: self.port.clone(),
+                idn: id.to_idn(),
+                known: known(),
+            })?,
+        };
+        Ok(self.opts.overrides.apply(&base.commands))
+    }
+}
+
+#[async_trait]
+impl Generator for ScpiGenerator {
+    fn port(&self) -> &str {
+        &self.port
+    }
+
+    async fn identify(&mut self) -> Result<DeviceIdentity, GeneratorError> {
+        let answer = self.query("*IDN?").await?;
+        let id = DeviceIdentity::parse_idn(&answer).ok_or_else(|| self.garbled("*IDN?", answer))?;
+        self.instrument = format!("{} {} on {}", id.manufacturer, id.model, self.port);
+        self.dialect = Some(self.choose_dialect(&id)?);
+        Ok(id)
+    }
+
+    async fn prepare_sine(&mut self) -> Result<(), GeneratorError> {
+        let d = self.commands()?.clone();
+        let ch = self.opts.channel;
+        self.write("*CLS").await?;
+        self.set("*RST").await?;
+        self.set(&dialect::fill(&d.output, ch, &d.off)).await?;
+        self.set(&dialect::fill(&d.load, ch, &d.high_impedance))
+            .await?;
+        self.set(&dialect::fill(&d.function_sine, ch, "")).await?;
+        self.set(&dialect::fill(&d.voltage_unit, ch, d.unit.word()))
+            .await?;
+        self.set(&dialect::fill(&d.offset, ch, "0")).await?;
+        // The smallest amplitude every model accepts (1 mVpp).
+        self.set(&dialect::fill(
+            &d.amplitude,
+            ch,
+            &dialect::number(d.unit.from_peak(0.0005)),
+        ))
+        .await
+    }
+
+    async fn set_frequency(&mut self, hz: f64) -> Result<(), GeneratorError> {
+        self.check("frequency (Hz)", hz)?;
+        let d = self.commands()?;
+        let line = dialect::fill(&d.frequency, self.opts.channel, &dialect::number(hz));
+        self.set(&line).await
+    }
+
+    async fn set_amplitude(&mut self, volts_peak: f64) -> Result<(), GeneratorError> {
+        self.check("amplitude (V peak)", volts_peak)?;
+        let d = self.commands()?;
+        let value = dialect::number(d.unit.from_peak(volts_peak));
+        let line = dialect::fill(&d.amplitude, self.opts.channel, &value);
+        self.set(&line).await
+    }
+
+    async fn set_output(&mut self, on: bool) -> Result<(), GeneratorError> {
+        let d = self.commands()?;
+        let word = if on { &d.on } else { &d.off };
+        let line = dialect::fill(&d.output, self.opts.channel, word);
+        self.set(&line).await
+    }
+
+    async fn output(&mut self) -> Result<bool, GeneratorError> {
+        let d = self.commands()?;
+        let line = dialect::fill(&d.output_query, self.opts.channel, "");
+        let answer = self.query(&line).await?;
+        parse_bool_answer(&answer).ok_or_else(|| self.garbled(&line, answer))
+    }
+}
+
+#[cfg(test)]
+mod tests;
