@@ -857,7 +857,7 @@ pub fn differences(a: &Model, b: &Model, tol: f64) -> Vec<String> {
                 (f.body, xs)
             })
             .collect();
-        v.sort_by(|p, q| p.0.cmp(&q.0));
+        v.sort_by_key(|p| p.0);
         v
     };
     let (fa, fb) = (load(a), load(b));
