@@ -143,7 +143,7 @@ fn header(source: Source<'_>, id: &Identification, diagnosis: Option<&Diagnosis>
         String::new()
     } else {
         format!(
-            "\n# NOTE: the identification did not converge ({}); these are its best point's values.",
+            "\n# NOTE: the identification did not converge ({}); the values here start from its best point.",
             id.stop.describe()
         )
     };
