@@ -279,8 +279,10 @@ pub struct ReportContext<'a> {
 
 /// Builds the report and writes the report folder: `report.html`, `report.json`,
 /// `measured.json`, `identification.json`, `identification.csv`, `identified-model.json`, for TOML
-/// models `identified-model.toml`, and when diagnosis ran `diagnosis.json` (docs/diagnosis.md) and
-/// `diagnosed-model.json` (the identified model with the accepted effects).
+/// models `identified-model.toml` (the first fit), when diagnosis ran `diagnosis.json`
+/// (docs/diagnosis.md) and `diagnosed-model.json` (the identified model with the accepted
+/// effects), and `final-model.toml` (the final model in the model format) with
+/// `final-variables.toml` (the variables for the next run against it).
 pub fn write_report(
     dir: &Path,
     ctx: ReportContext<'_>,
@@ -326,12 +328,38 @@ pub fn write_report(
     }
     if let Some(text) = &setup.model_text {
         match table::update_toml(text, &setup.model_file, id) {
-            Ok(updated) => w("identified-model.toml", &updated)?,
+            Ok(updated) => w(
+                "identified-model.toml",
+                &format!("# The FIRST fit (before diagnosis) written back into the model's text. When the\n# diagnosis added an effect this fit is superseded: the final model is final-model.toml.\n\n{updated}"),
+            )?,
             Err(e) => tracing::warn!("identified-model.toml not written: {e}"),
         }
     }
+    let final_files = final_files(setup, a).and_then(|(model, vars)| {
+        Ok((
+            w("final-model.toml", &model)?,
+            w("final-variables.toml", &vars)?,
+        ))
+    });
+    if let Err(e) = final_files {
+        tracing::warn!("final-model.toml not written: {e:#}");
+    }
     let written = report::write(&r, dir)?;
     Ok((r, written))
+}
+
+/// The final model as TOML and the variables file for the next run (`identify::final_model`):
+/// the diagnosis's final fit when it ran, else the identification's.
+pub fn final_files(setup: &Setup, a: &Analysis) -> anyhow::Result<(String, String)> {
+    let id = &a.identification;
+    let d = a.diagnosis.as_ref().map(|(_, d)| d);
+    let source = identify::final_model::Source {
+        origin: &setup.model_file,
+        text: setup.model_text.as_deref(),
+    };
+    let model = identify::final_model::model_toml(source, id, d)?;
+    let vars = identify::final_model::variables_toml("final-model.toml", id, d)?;
+    Ok((model, vars))
 }
 
 /// The Table-1-like summary printed by the workflows.

@@ -411,6 +411,8 @@ fn demo_runs_the_whole_pipeline_over_the_simulated_devices() {
         "identified-model.json",
         "diagnosis.json",
         "diagnosed-model.json",
+        "final-model.toml",
+        "final-variables.toml",
     ] {
         assert!(
             Path::new(report).join(f).is_file(),

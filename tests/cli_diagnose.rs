@@ -47,6 +47,10 @@ fn diagnose_finds_the_missing_actuator_from_files() {
         .arg(&data)
         .arg("--json")
         .arg(&json)
+        .arg("--write-model")
+        .arg(dir.path().join("final.toml"))
+        .arg("--write-vars")
+        .arg(dir.path().join("next.toml"))
         .output()
         .expect("run ident");
     let stdout = String::from_utf8_lossy(&out.stdout);
@@ -68,6 +72,33 @@ fn diagnose_finds_the_missing_actuator_from_files() {
         d["rounds"][0]["candidates"].as_u64().unwrap_or(0) > 500,
         "hundreds of candidates: {}",
         d["rounds"][0]["candidates"]
+    );
+    // --write-model: the final model as TOML with the actuator as a spring SDE, which loads and
+    // is the diagnosis's; --write-vars: the next run's variables, which load against it.
+    let toml = std::fs::read_to_string(dir.path().join("final.toml")).expect("final model");
+    assert!(toml.contains("# Added by `ident diagnose`"), "{toml}");
+    let fin = identify::modelfile::parse_toml(&toml, "final.toml")
+        .expect("the final model loads")
+        .model;
+    let spring = fin
+        .sdes
+        .iter()
+        .find(|s| s.name == "diagnosed spring 1")
+        .expect("the actuator as an SDE");
+    let k = d["accepted"][0]["params"][0]["value"]
+        .as_f64()
+        .unwrap_or(0.0);
+    assert!(
+        (spring.law.stiffness()[0] - k).abs() <= 1e-9 * k,
+        "{:?} vs {k}",
+        spring.law
+    );
+    let vars = std::fs::read_to_string(dir.path().join("next.toml")).expect("next variables");
+    let next = identify::identification::variables::parse(&vars, "next.toml", &fin)
+        .expect("the next variables load");
+    assert!(
+        next.vars.iter().any(|v| v.name == "k diagnosed spring 1"),
+        "{vars}"
     );
 }
 

@@ -138,6 +138,8 @@ fn replay_reproduces_the_live_run_bit_for_bit_and_reports_truncation() {
         "identification.csv",
         "identified-model.json",
         "identified-model.toml",
+        "final-model.toml",
+        "final-variables.toml",
     ] {
         let (a, b) = (
             std::fs::read(live.join(f)).unwrap(),

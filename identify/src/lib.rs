@@ -14,6 +14,8 @@
 //! - [`modelfile`], [`contract`], [`units`], [`check`]: model files (TOML with units, resolved
 //!   JSON) and their validation;
 //! - [`diagnose`]: after a fit, residual analysis and the search for effects the model lacks;
+//! - [`final_model`]: the final model as a model file (values written back, accepted effects
+//!   added) and the variables file for the next run;
 //! - [`textbook`]: small models with closed-form answers.
 //!
 //! ```
@@ -31,6 +33,7 @@ pub mod check;
 pub mod contract;
 pub mod diagnose;
 pub mod display;
+pub mod final_model;
 pub mod frf;
 pub mod identification;
 pub mod lines;

@@ -10,7 +10,7 @@ use identify::diagnose::{self, diagnose};
 use identify::identification as idn;
 
 use super::emit;
-use super::identify::{setup, IdentifyArgs};
+use super::identify::{setup, write_final, IdentifyArgs};
 
 /// Arguments of `ident diagnose`: those of `ident identify`, plus the diagnosis' own.
 #[derive(clap::Args)]
@@ -70,6 +70,7 @@ pub fn run(a: DiagnoseArgs) -> anyhow::Result<ExitCode> {
             &(serde_json::to_string_pretty(&identify::contract::to_json(&d.model))? + "\n"),
         )?;
     }
+    write_final(&a.identify, &id, Some(&d))?;
     Ok(if d.after.explained && id.stop.converged() {
         ExitCode::SUCCESS
     } else {

@@ -119,6 +119,49 @@ pub struct IdentifyArgs {
     /// fitting: for external tools such as bench/python/ident_baseline.py.
     #[arg(long)]
     pub export_problem: Option<PathBuf>,
+    /// Write the final model to this file as TOML in the model format (docs/model-format.md):
+    /// the model's own text with the final estimates written back (after `ident diagnose`, the
+    /// accepted effects appended as elements, each with where it came from). A resolved JSON
+    /// model is written whole.
+    #[arg(long)]
+    pub write_model: Option<PathBuf>,
+    /// Write the identification variables file for the next run to this file: the same
+    /// variables with `initial` = the final estimates (after `ident diagnose`, plus the added
+    /// springs' k and ψ), to be used with the `--write-model` file.
+    #[arg(long)]
+    pub write_vars: Option<PathBuf>,
+}
+
+/// Writes `--write-model` and `--write-vars` for the final fit: the identification's, or the
+/// diagnosis's when `diagnosis` is given.
+pub fn write_final(
+    a: &IdentifyArgs,
+    id: &idn::Identification,
+    diagnosis: Option<&::identify::diagnose::Diagnosis>,
+) -> anyhow::Result<()> {
+    use ::identify::final_model;
+    if a.write_model.is_none() && a.write_vars.is_none() {
+        return Ok(());
+    }
+    let original = std::fs::read_to_string(&a.model)
+        .with_context(|| format!("cannot re-read {}", a.model.display()))?;
+    let origin = a.model.display().to_string();
+    let source = final_model::Source {
+        origin: &origin,
+        text: (!original.trim_start().starts_with('{')).then_some(original.as_str()),
+    };
+    if let Some(p) = &a.write_model {
+        let text = final_model::model_toml(source, id, diagnosis)
+            .context("--write-model: the final model")?;
+        emit(Some(p), &text)?;
+    }
+    if let Some(p) = &a.write_vars {
+        let model_file = a.write_model.as_ref().unwrap_or(&a.model);
+        let text = final_model::variables_toml(&model_file.display().to_string(), id, diagnosis)
+            .context("--write-vars: the next variables file")?;
+        emit(Some(p), &text)?;
+    }
+    Ok(())
 }
 
 /// Runs the identification. Exit 0: converged; 1: iteration limit or divergence (the best point
@@ -239,6 +282,7 @@ pub fn run(a: IdentifyArgs) -> anyhow::Result<ExitCode> {
             emit(Some(&dir.join("model.toml")), &updated)?;
         }
     }
+    write_final(&a, &id, None)?;
     if id.stop.converged() {
         Ok(ExitCode::SUCCESS)
     } else {

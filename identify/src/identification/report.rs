@@ -356,9 +356,10 @@ pub enum WriteBackError {
     },
 }
 
-/// Rounds to 10 significant digits so that written values read cleanly.
-fn round_sig(x: f64) -> f64 {
-    format!("{x:.9e}").parse().unwrap_or(x)
+/// Rounds to 12 significant digits so that written values read cleanly (and load back within
+/// 5e-12 relative).
+pub(crate) fn round_sig(x: f64) -> f64 {
+    format!("{x:.11e}").parse().unwrap_or(x)
 }
 
 /// `"0.05 MPa/um"` → `Some("MPa/um")`.
@@ -428,14 +429,7 @@ pub fn update_toml(
     };
     for &si in &touched {
         let sde = &model.sdes[si];
-        let table = sdes
-            .iter_mut()
-            .find(|t| match t.get("name").and_then(Item::as_value) {
-                Some(Value::Integer(i)) => i.value().to_string() == sde.name,
-                Some(Value::String(s)) => s.value().trim() == sde.name,
-                _ => false,
-            });
-        let Some(table) = table else {
+        let Some(table) = sde_table(sdes, &sde.name) else {
             return Err(WriteBackError::MissingSde {
                 origin: origin.into(),
                 sde: sde.name.clone(),
@@ -448,42 +442,61 @@ pub fn update_toml(
             .filter(|p| p.sde == si)
             .map(|p| p.name)
             .collect();
-        for p in params {
-            let value = sde.law.get(p).unwrap_or(0.0);
-            match (&sde.law, p) {
-                (SdeLaw::General { k, psi }, ParamName::Ki(_) | ParamName::PsiI(_)) => {
-                    let (key, vals) = if matches!(p, ParamName::Ki(_)) {
-                        ("k", k)
-                    } else {
-                        ("psi", psi)
-                    };
-                    let arr: toml_edit::Array = vals.iter().map(|v| round_sig(*v)).collect();
-                    table.insert(key, Item::Value(Value::Array(arr)));
-                }
-                (SdeLaw::Isolator { psi_n, psi_t, .. }, ParamName::PsiN | ParamName::PsiT)
-                    if table.contains_key("psi") =>
-                {
-                    let mut old = table.remove("psi").unwrap_or(Item::None);
-                    let mut other = old.clone();
-                    set_value(&mut old, *psi_n, Dim::NONE);
-                    set_value(&mut other, *psi_t, Dim::NONE);
-                    table.insert("psi_n", old);
-                    table.insert("psi_t", other);
-                }
-                _ => {
-                    let key = p.as_str();
-                    let dim = param_dim(&sde.law, p);
-                    match table.get_mut(&key) {
-                        Some(item) => set_value(item, value, dim),
-                        None => {
-                            table.insert(&key, Item::Value(Value::from(round_sig(value))));
-                        }
+        write_params(table, &sde.law, &params);
+    }
+    Ok(doc.to_string())
+}
+
+/// The `[[sde]]` table named `name` (an integer or a string name).
+pub(crate) fn sde_table<'a>(
+    sdes: &'a mut toml_edit::ArrayOfTables,
+    name: &str,
+) -> Option<&'a mut toml_edit::Table> {
+    sdes.iter_mut()
+        .find(|t| match t.get("name").and_then(Item::as_value) {
+            Some(Value::Integer(i)) => i.value().to_string() == name,
+            Some(Value::String(s)) => s.value().trim() == name,
+            _ => false,
+        })
+}
+
+/// Writes the parameters `params` of `law` into an `[[sde]]` table, each in the convention of
+/// the key it replaces (see [`update_toml`]).
+pub(crate) fn write_params(table: &mut toml_edit::Table, law: &SdeLaw, params: &[ParamName]) {
+    for &p in params {
+        let value = law.get(p).unwrap_or(0.0);
+        match (law, p) {
+            (SdeLaw::General { k, psi }, ParamName::Ki(_) | ParamName::PsiI(_)) => {
+                let (key, vals) = if matches!(p, ParamName::Ki(_)) {
+                    ("k", k)
+                } else {
+                    ("psi", psi)
+                };
+                let arr: toml_edit::Array = vals.iter().map(|v| round_sig(*v)).collect();
+                table.insert(key, Item::Value(Value::Array(arr)));
+            }
+            (SdeLaw::Isolator { psi_n, psi_t, .. }, ParamName::PsiN | ParamName::PsiT)
+                if table.contains_key("psi") =>
+            {
+                let mut old = table.remove("psi").unwrap_or(Item::None);
+                let mut other = old.clone();
+                set_value(&mut old, *psi_n, Dim::NONE);
+                set_value(&mut other, *psi_t, Dim::NONE);
+                table.insert("psi_n", old);
+                table.insert("psi_t", other);
+            }
+            _ => {
+                let key = p.as_str();
+                let dim = param_dim(law, p);
+                match table.get_mut(&key) {
+                    Some(item) => set_value(item, value, dim),
+                    None => {
+                        table.insert(&key, Item::Value(Value::from(round_sig(value))));
                     }
                 }
             }
         }
     }
-    Ok(doc.to_string())
 }
 
 #[cfg(test)]
