@@ -11,7 +11,8 @@
 //! - [`Report`] serialized as JSON (schema `ident.report/1`, `docs/report-json.md`).
 //!
 //! Modules: [`document`] (the data, = the JSON schema), [`build`] (from `identify`'s results),
-//! [`drift`] (history across runs and alarms), [`plot`] (the SVG charts), [`html`] (the page).
+//! [`drift`] (history across runs and alarms), [`plot`] (the SVG charts), [`picture`] (the model
+//! and its mode shapes as a drawing), [`html`] (the page).
 //!
 //! ```
 //! use identify::identification::{data, identify, variables, Options};
@@ -43,6 +44,7 @@ pub mod build;
 pub mod document;
 pub mod drift;
 pub mod html;
+pub mod picture;
 pub mod plot;
 
 use std::path::{Path, PathBuf};
