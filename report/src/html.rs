@@ -254,7 +254,7 @@ fn model_picture(h: &mut String, r: &Report) -> Result<(), ReportError> {
         h,
         "<p class=\"note\">{}: each body drawn as the uniform box with its mass and principal inertias{}; \
          SDEs at their points, linked to the bodies they join; the exciter and the measured DOFs at the bodies' centres of mass.</p>",
-        e(&p.model),
+        e(r.diagnosis.as_ref().map_or(&p.model, |d| &d.final_model)),
         if clamped.is_empty() {
             String::new()
         } else {

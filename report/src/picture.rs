@@ -708,6 +708,25 @@ fn spread(targets: &[f64], gap: f64, top: f64, bottom: f64) -> Vec<f64> {
     out
 }
 
+/// `SDE 34` for the paper's numbered SDEs, the name itself otherwise.
+fn sde_label(name: &str) -> String {
+    if name.starts_with(|c: char| c.is_ascii_digit()) {
+        format!("SDE {name}")
+    } else {
+        name.to_string()
+    }
+}
+
+/// A callout label that fits its column: at most 20 characters, cut with an ellipsis.
+fn short(name: &str) -> String {
+    if name.chars().count() <= 20 {
+        name.to_string()
+    } else {
+        let head: String = name.chars().take(19).collect();
+        format!("{head}…")
+    }
+}
+
 fn force_text(f: f64) -> String {
     if f >= 1000.0 {
         format!("{} kN", identify::display::sig(f / 1000.0, 3))
@@ -804,7 +823,8 @@ fn draw_view(
         if s.bodies.iter().any(Option::is_none) {
             ground(area, at, ADDED)?;
         }
-        label(area, &s.name, (at.0 - 9, at.1 - 9), 11, ADDED, HPos::Right)?;
+        let name = sde_label(&s.name);
+        label(area, &name, (at.0 - 9, at.1 - 14), 12, ADDED, HPos::Right)?;
     }
     // Measured points: the body centre and each measured DOF's direction.
     for (k, o) in p.outputs.iter().enumerate() {
@@ -858,7 +878,7 @@ fn draw_view(
             colour.mix(0.45).stroke_width(1),
         ))?;
         area.draw(&Circle::new(ipt(*c), 2, colour.filled()))?;
-        label(area, &b.name, (labels_x, y), 11, colour, HPos::Left)?;
+        label(area, &short(&b.name), (labels_x, y), 12, colour, HPos::Left)?;
     }
     Ok(())
 }
