@@ -62,6 +62,25 @@ fn short_demo(out: &Path) -> PathBuf {
         "final model first"
     );
     assert!(text(&o).contains("FINAL MODEL"), "{}", text(&o));
+    // The picture of the final model: an accepted spring (the actuator) is drawn highlighted,
+    // and every stored mode in the band has its figure.
+    let p = &r["picture"];
+    let springs = d["candidates"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .any(|c| c["accepted"] == true && c["name"] == "spring");
+    let drawn_added = p["sdes"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .any(|s| s["added"] == true && s["kind"] == "spring");
+    assert_eq!(drawn_added, springs, "{p}");
+    assert_eq!(html.matches("data-chart=\"model\"").count(), 1);
+    assert_eq!(
+        html.matches("data-chart=\"mode\"").count(),
+        p["modes"].as_array().unwrap().len()
+    );
     dir
 }
 

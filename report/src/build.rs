@@ -381,6 +381,19 @@ pub fn diagnosis(d: &diagnose::Diagnosis, base: &str, id: &Identification) -> Di
     }
 }
 
+/// The lowest and highest measured line (Hz); `[0, 0]` without data.
+fn measured_band(obs: &Observations) -> [f64; 2] {
+    let lines = obs.characteristics.iter().flat_map(|c| c.freqs_hz.iter());
+    let (lo, hi) = lines.fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), f| {
+        (lo.min(*f), hi.max(*f))
+    });
+    if lo <= hi {
+        [lo, hi]
+    } else {
+        [0.0, 0.0]
+    }
+}
+
 /// Builds the report.
 pub fn build(inputs: Inputs<'_>) -> Result<Report, ReportError> {
     let id = inputs.identification;
@@ -425,6 +438,15 @@ pub fn build(inputs: Inputs<'_>) -> Result<Report, ReportError> {
     } else {
         None
     };
+    // The final model as a drawing, its accepted effects marked against the identified model.
+    let picture = {
+        let final_model = inputs.diagnosis.as_ref().map_or(&id.model, |(_, m)| *m);
+        Some(crate::picture::describe(
+            final_model,
+            &id.model,
+            measured_band(inputs.observations),
+        )?)
+    };
     let mut messages = inputs.messages;
     if !id.stop.converged() {
         messages.push(format!(
@@ -449,6 +471,7 @@ pub fn build(inputs: Inputs<'_>) -> Result<Report, ReportError> {
         identification: summary(id),
         diagnosis: inputs.diagnosis.map(|(d, _)| d),
         sensitivity,
+        picture,
         drift: None,
     })
     .map(|mut r| {

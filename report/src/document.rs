@@ -32,6 +32,10 @@ pub struct Report {
     pub diagnosis: Option<Diagnosis>,
     /// Band sensitivity (relative MI, paper eq. 4.16) of the identified model.
     pub sensitivity: Option<SensitivityMap>,
+    /// The final model as a drawing: body boxes, SDEs, exciter, measured points and the mode
+    /// shapes in the band ([`crate::picture`]); `null` in reports written before it existed.
+    #[serde(default)]
+    pub picture: Option<crate::picture::ModelPicture>,
     /// Parameter history across runs (nightly).
     pub drift: Option<Drift>,
 }

@@ -76,6 +76,7 @@ pub fn render(r: &Report) -> Result<String, ReportError> {
     final_model(&mut h, r);
     identification_summary(&mut h, r);
     characteristics(&mut h, r)?;
+    model_picture(&mut h, r)?;
     parameters(&mut h, r)?;
     diagnosis(&mut h, r);
     sensitivity(&mut h, r)?;
@@ -233,6 +234,70 @@ fn characteristics(h: &mut String, r: &Report) -> Result<(), ReportError> {
             inline(plot::residual_chart(c)?)
         );
     }
+    Ok(())
+}
+
+/// The final model as a drawing and its mode shapes in the measured band (`picture`).
+fn model_picture(h: &mut String, r: &Report) -> Result<(), ReportError> {
+    let e = escape;
+    let Some(p) = &r.picture else {
+        return Ok(());
+    };
+    h.push_str("<h2 id=\"model\">Model and mode shapes</h2>\n");
+    let clamped: Vec<&str> = p
+        .bodies
+        .iter()
+        .filter(|b| b.clamped)
+        .map(|b| b.name.as_str())
+        .collect();
+    let _ = writeln!(
+        h,
+        "<p class=\"note\">{}: each body drawn as the uniform box with its mass and principal inertias{}; \
+         SDEs at their points, linked to the bodies they join; the exciter and the measured DOFs at the bodies' centres of mass.</p>",
+        e(r.diagnosis.as_ref().map_or(&p.model, |d| &d.final_model)),
+        if clamped.is_empty() {
+            String::new()
+        } else {
+            format!(
+                " (too thin or impossible sides drawn at 5 % of the longest: {})",
+                e(&clamped.join(", "))
+            )
+        }
+    );
+    let _ = writeln!(
+        h,
+        "<figure class=\"plot\" data-chart=\"model\">{}</figure>",
+        inline(crate::picture::model_svg(p)?)
+    );
+    let _ = write!(
+        h,
+        "<p>{} mode{} of the model between {} and {} Hz",
+        p.modes.len() + p.modes_omitted,
+        if p.modes.len() + p.modes_omitted == 1 {
+            ""
+        } else {
+            "s"
+        },
+        identify::display::sig(p.band_hz[0], 4),
+        identify::display::sig(p.band_hz[1], 4)
+    );
+    if p.modes_omitted > 0 {
+        let _ = write!(
+            h,
+            "; the lowest {} are drawn, {} omitted",
+            p.modes.len(),
+            p.modes_omitted
+        );
+    }
+    h.push_str(". Undeformed in grey, deformed in colour (the body that moves most in orange), the largest displacement drawn at 8 % of the machine's size.</p>\n<div class=\"modes\" style=\"display:flex;flex-wrap:wrap;gap:0 2%\">\n");
+    for i in 0..p.modes.len() {
+        let _ = writeln!(
+            h,
+            "<figure class=\"plot\" data-chart=\"mode\" style=\"width:48%;margin:.4em 0\">{}</figure>",
+            inline(crate::picture::mode_svg(p, i)?)
+        );
+    }
+    h.push_str("</div>\n");
     Ok(())
 }
 

@@ -3,7 +3,8 @@
 //! One run (demo, replay, nightly) becomes a [`Report`]: measured versus model amplitude-frequency
 //! characteristics at each stage (initial, identified, diagnosed), standardized residuals, the
 //! Table-1-like parameter table with Cramér-Rao errors, the diagnosis (ranked candidate effects, error before and after), the band
-//! sensitivity (MI) map and the drift of every parameter across nights. It is written twice:
+//! sensitivity (MI) map, a picture of the final model with its mode shapes in the band, and the
+//! drift of every parameter across nights. It is written twice:
 //!
 //! - [`html::render`]: one self-contained HTML file — inline CSS, inline SVG drawn with
 //!   `plotters` (text as SVG `<text>`, no font files, no scripts, no external resources); it
@@ -11,7 +12,8 @@
 //! - [`Report`] serialized as JSON (schema `ident.report/1`, `docs/report-json.md`).
 //!
 //! Modules: [`document`] (the data, = the JSON schema), [`build`] (from `identify`'s results),
-//! [`drift`] (history across runs and alarms), [`plot`] (the SVG charts), [`html`] (the page).
+//! [`drift`] (history across runs and alarms), [`plot`] (the SVG charts), [`picture`] (the model
+//! and its mode shapes as a drawing), [`html`] (the page).
 //!
 //! ```
 //! use identify::identification::{data, identify, variables, Options};
@@ -43,6 +45,7 @@ pub mod build;
 pub mod document;
 pub mod drift;
 pub mod html;
+pub mod picture;
 pub mod plot;
 
 use std::path::{Path, PathBuf};

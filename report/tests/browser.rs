@@ -102,8 +102,24 @@ fn report_renders_in_headless_chromium_with_its_plots_and_no_errors() {
     let v: Value = serde_json::from_str(&unescape(probe)).unwrap();
     eprintln!("{v}");
     assert_eq!(v["title"], r.title);
-    let expected = 2 * r.characteristics.len() + 3;
+    // amplitude + residual per characteristic, parameters, sensitivity, drift, the model
+    // picture and one figure per mode in the band
+    let modes = r.picture.as_ref().map_or(0, |p| p.modes.len());
+    assert!(modes > 0, "the fixture has modes in its band");
+    let expected = 2 * r.characteristics.len() + 3 + 1 + modes;
     assert_eq!(v["plots"], expected as u64, "{v}");
+    let charts: Vec<&str> = v["charts"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter_map(|c| c.as_str())
+        .collect();
+    assert_eq!(charts.iter().filter(|c| **c == "model").count(), 1, "{v}");
+    assert_eq!(
+        charts.iter().filter(|c| **c == "mode").count(),
+        modes,
+        "{v}"
+    );
     assert_eq!(
         v["drawn"], expected as u64,
         "every plot is drawn with its labels: {v}"

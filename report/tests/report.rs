@@ -174,8 +174,15 @@ fn html_is_self_contained_with_every_plot() {
         );
     }
     let svgs = html.matches("<svg").count();
-    // amplitude + residual per characteristic, parameters, sensitivity, drift
-    assert_eq!(svgs, 2 * r.characteristics.len() + 3, "plots: {svgs}");
+    // amplitude + residual per characteristic, parameters, sensitivity, drift, the model picture
+    // and one figure per mode in the band
+    let modes = r.picture.as_ref().map_or(0, |p| p.modes.len());
+    assert!(modes > 0);
+    assert_eq!(
+        svgs,
+        2 * r.characteristics.len() + 3 + 1 + modes,
+        "plots: {svgs}"
+    );
     assert!(
         html.contains("two masses &lt;test &amp; check&gt;"),
         "titles are escaped"
