@@ -177,10 +177,12 @@ fn replay_reproduces_the_live_run_bit_for_bit_and_reports_truncation() {
     assert_eq!(b["source"]["workflow"], "replay");
 
     // A recording cut short (the writer killed mid-sweep): the complete steps are used and the
-    // report says precisely what is lost.
+    // report says precisely what is lost. The low lines' long windows hold most of the bytes, so
+    // the cut is at 5/6 of the file: at 2/3 a loaded machine (more force corrections early on)
+    // left 6 of 10 lines, 18 observations for the 19 variables, which cannot be identified.
     let bytes = std::fs::read(&session).unwrap();
     let cut = dir.path().join("cut.mcap");
-    std::fs::write(&cut, &bytes[..bytes.len() * 2 / 3]).unwrap();
+    std::fs::write(&cut, &bytes[..bytes.len() * 5 / 6]).unwrap();
     let o = replay_into(&live, &cut, &replays);
     let t = text(&o);
     assert!(o.status.success(), "{t}");
