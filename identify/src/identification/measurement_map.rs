@@ -234,10 +234,7 @@ pub fn parse(text: &str, origin: &str, model: &Model) -> Result<MeasurementMap, 
             ),
         )
     })?;
-    let unit_of = |u: &Sp<String>, field: &str| {
-        FrfUnit::parse(u.get_ref()).map_err(|m| src.at(u.span(), format!("{field}: {m}")))
-    };
-    let unit = raw.unit.as_ref().map(|u| unit_of(u, "unit")).transpose()?;
+    let unit = raw.unit.as_ref().map(|u| unit_of(&src, u)).transpose()?;
     let reference = match &raw.reference {
         None => None,
         Some(r) => Some((
@@ -255,7 +252,7 @@ pub fn parse(text: &str, origin: &str, model: &Model) -> Result<MeasurementMap, 
     }
     let mut entries: Vec<Entry> = Vec::new();
     for c in &raw.channels {
-        let e = entry(&src, c, model, &unit_of)?;
+        let e = entry(&src, c, model)?;
         if let Some(o) = entries.iter().find(|o| o.name == e.name) {
             return Err(src.at(
                 c.body.span(),
@@ -281,13 +278,13 @@ pub fn parse(text: &str, origin: &str, model: &Model) -> Result<MeasurementMap, 
     })
 }
 
+/// A `unit = "..."` of the map, read as an FRF unit.
+fn unit_of(src: &SourceText, u: &Sp<String>) -> Result<FrfUnit, Located> {
+    FrfUnit::parse(u.get_ref()).map_err(|m| src.at(u.span(), format!("unit: {m}")))
+}
+
 /// One `[[channel]]` resolved: its name, body, DOF and sign.
-fn entry(
-    src: &SourceText,
-    c: &RawChannel,
-    model: &Model,
-    unit_of: &dyn Fn(&Sp<String>, &str) -> Result<FrfUnit, Located>,
-) -> Result<Entry, Located> {
+fn entry(src: &SourceText, c: &RawChannel, model: &Model) -> Result<Entry, Located> {
     let line = src.at(c.body.span(), "").line;
     let name = match (&c.node, &c.dir, &c.sensor) {
         (Some(n), Some(d), None) => ChannelName::Node {
@@ -339,37 +336,38 @@ fn entry(
             (k as u8, neg)
         }
         (None, given) => {
-            let (d, span) =
-                match (given, &name) {
-                    (Some(v), _) => {
-                        let x = v.get_ref();
-                        if x.len() != 3 || !x.iter().all(|c| c.is_finite()) {
-                            return Err(src.at(
-                                v.span(),
-                                "direction: three finite numbers [x, y, z] (global axes)",
-                            ));
-                        }
-                        (Vector3::new(x[0], x[1], x[2]), v.span())
+            let (d, span) = match (given, &name) {
+                (Some(v), _) => {
+                    let x = v.get_ref();
+                    if x.len() != 3 || !x.iter().all(|c| c.is_finite()) {
+                        return Err(src.at(
+                            v.span(),
+                            "direction: three finite numbers [x, y, z] (global axes)",
+                        ));
                     }
-                    (None, ChannelName::Node { dir, .. }) if (1..=3).contains(&dir.abs()) => {
-                        let mut d = Vector3::zeros();
-                        d[(dir.unsigned_abs() - 1) as usize] = dir.signum() as f64;
-                        (d, c.dir.as_ref().map(|d| d.span()).unwrap_or(c.body.span()))
-                    }
-                    (None, ChannelName::Node { dir, .. }) => return Err(src.at(
+                    (Vector3::new(x[0], x[1], x[2]), v.span())
+                }
+                (None, ChannelName::Node { dir, .. }) if (1..=3).contains(&dir.abs()) => {
+                    let mut d = Vector3::zeros();
+                    d[(dir.unsigned_abs() - 1) as usize] = dir.signum() as f64;
+                    (d, c.dir.as_ref().map(|d| d.span()).unwrap_or(c.body.span()))
+                }
+                (None, ChannelName::Node { dir, .. }) => {
+                    return Err(src.at(
                         c.dir.as_ref().map(|d| d.span()).unwrap_or(c.body.span()),
                         format!(
                             "dir: {} is a rotation; map translations (±X, ±Y, ±Z), or give `dof`",
                             dir_text(*dir)
                         ),
-                    )),
-                    (None, ChannelName::Sensor(_)) => {
-                        return Err(src.at(
-                            c.body.span(),
-                            "a sensor needs `direction = [x, y, z]` (global) or `dof = \"u1\"`",
-                        ))
-                    }
-                };
+                    ))
+                }
+                (None, ChannelName::Sensor(_)) => {
+                    return Err(src.at(
+                        c.body.span(),
+                        "a sensor needs `direction = [x, y, z]` (global) or `dof = \"u1\"`",
+                    ))
+                }
+            };
             let n = d.norm();
             if n == 0.0 {
                 return Err(src.at(span, "direction: the zero vector has no direction"));
@@ -418,7 +416,7 @@ fn entry(
             (k as u8, cos < 0.0)
         }
     };
-    let unit = c.unit.as_ref().map(|u| unit_of(u, "unit")).transpose()?;
+    let unit = c.unit.as_ref().map(|u| unit_of(src, u)).transpose()?;
     Ok(Entry {
         line,
         name,
