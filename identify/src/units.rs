@@ -73,6 +73,12 @@ impl Dim {
     pub const FORCE_SENSITIVITY: Dim = dim(0, 1, -1, -1);
     /// V/(m/s²): an accelerometer's sensitivity.
     pub const ACCELERATION_SENSITIVITY: Dim = dim(1, 1, -1, -1);
+    /// m/N: receptance (dynamic compliance), displacement per force.
+    pub const RECEPTANCE: Dim = dim(-1, 0, 2, 0);
+    /// (m/s)/N: mobility, velocity per force.
+    pub const MOBILITY: Dim = dim(-1, 0, 1, 0);
+    /// (m/s²)/N: accelerance (inertance), acceleration per force.
+    pub const ACCELERANCE: Dim = dim(-1, 0, 0, 0);
 
     fn pow(self, e: i8) -> Dim {
         dim(self.kg * e, self.m * e, self.s * e, self.a * e)
@@ -104,6 +110,9 @@ impl Dim {
             Dim::ACCELERATION_SENSITIVITY => {
                 "an accelerometer sensitivity, e.g. \"100 mV/g\" or \"10.2 mV/(m/s^2)\""
             }
+            Dim::RECEPTANCE => "a receptance, e.g. \"1e-6 mm/N\"",
+            Dim::MOBILITY => "a mobility, e.g. \"0.2 (mm/s)/N\"",
+            Dim::ACCELERANCE => "an accelerance, e.g. \"0.01 g/N\" or \"0.1 (m/s^2)/N\"",
             _ => "a quantity",
         }
     }

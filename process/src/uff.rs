@@ -15,6 +15,10 @@ use std::path::Path;
 
 use num_complex::Complex;
 
+use identify::identification::frf_units::FrfUnit;
+use identify::identification::measurement_map::{ChannelName, MeasuredChannel};
+use identify::model::Quantity;
+
 use crate::error::{ProcessError, Result};
 
 type C64 = Complex<f64>;
@@ -489,12 +493,22 @@ fn is_delimiter(line: &[u8]) -> bool {
     line.trim_ascii() == b"-1"
 }
 
-/// Fixed-width field `[start, start+w)` of a line (blank if the line is shorter).
-fn field(line: &str, start: usize, w: usize) -> &str {
-    let s = line
-        .get(start.min(line.len())..(start + w).min(line.len()))
-        .unwrap_or("");
-    s.trim()
+/// Fixed-width field of columns `[start, start+w)` of a header line, counted in characters
+/// (blank if the line is shorter): a header line written by a tool counts columns in characters,
+/// so a `Prüfstand` or `m/s²` earlier on the line must not shift the fields after it.
+fn field(line: &str, start: usize, w: usize) -> String {
+    let s: String = line.chars().skip(start).take(w).collect();
+    s.trim().to_string()
+}
+
+/// A header line as text: UTF-8 when it is valid UTF-8, else Latin-1 (ISO 8859-1, one byte per
+/// character, as older Windows tools write `Prüfstand` or `m/s²`); never a lossy replacement,
+/// which would turn one Latin-1 byte into three bytes and shift the columns after it.
+fn header_text(line: &[u8]) -> String {
+    match std::str::from_utf8(line) {
+        Ok(s) => s.to_string(),
+        Err(_) => line.iter().map(|&b| char::from(b)).collect(),
+    }
 }
 
 fn parse_f64(s: &str) -> Option<f64> {
@@ -532,8 +546,64 @@ fn tokens(line: &str, out: &mut Vec<String>) {
     }
 }
 
+/// A dataset of another type than 58/58b, skipped by the reader and reported.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct SkippedDataset {
+    /// Position of the dataset in the file (1-based).
+    pub dataset: usize,
+    /// Its type as written (`"151"`, `"164"`, `"2414"`, ...).
+    pub kind: String,
+    /// Line of its type record (1-based).
+    pub line: usize,
+}
+
+impl std::fmt::Display for SkippedDataset {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "dataset {} (line {}) is of type {}, not 58/58b: skipped",
+            self.dataset, self.line, self.kind
+        )
+    }
+}
+
+/// The datasets 58/58b of a file and the other datasets it skipped.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct UffFile {
+    /// Every dataset 58/58b, in file order.
+    pub functions: Vec<Function>,
+    /// Every other dataset, skipped (so a caller can say so rather than drop it silently).
+    pub skipped: Vec<SkippedDataset>,
+    /// For each of `functions`: its position in the file (1-based) and the line of its type
+    /// record, for messages.
+    pub positions: Vec<(usize, usize)>,
+}
+
 /// Parses all datasets 58/58b in `bytes`; `file` names the source in errors.
 pub fn parse(bytes: &[u8], file: &str) -> Result<Vec<Function>> {
+    parse_file(bytes, file).map(|u| u.functions)
+}
+
+/// Reads every dataset 58/58b of a file, with the datasets of other types it skipped.
+pub fn read_file(path: &Path) -> Result<UffFile> {
+    let bytes = std::fs::read(path).map_err(|source| ProcessError::Io {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    parse_file(&bytes, &path.display().to_string())
+}
+
+/// True when `bytes` look like a UFF file: the first non-blank line is the delimiter `-1`.
+pub fn looks_like_uff(bytes: &[u8]) -> bool {
+    bytes
+        .split(|b| *b == b'\n')
+        .map(<[u8]>::trim_ascii)
+        .find(|l| !l.is_empty())
+        .is_some_and(|l| l == b"-1")
+}
+
+/// Parses all datasets 58/58b in `bytes` and lists the datasets of other types it skipped.
+pub fn parse_file(bytes: &[u8], file: &str) -> Result<UffFile> {
     let mut c = Cursor {
         bytes,
         pos: 0,
@@ -541,12 +611,20 @@ pub fn parse(bytes: &[u8], file: &str) -> Result<Vec<Function>> {
         file,
     };
     let mut out = Vec::new();
+    let mut skipped = Vec::new();
+    let mut positions = Vec::new();
     let mut dataset = 0;
     loop {
         // Find the start delimiter.
         let line = loop {
             match c.next_line() {
-                None => return Ok(out),
+                None => {
+                    return Ok(UffFile {
+                        functions: out,
+                        skipped,
+                        positions,
+                    })
+                }
                 Some(l) if is_delimiter(l) => break l,
                 Some(l) if l.trim_ascii().is_empty() => continue,
                 Some(l) => {
@@ -566,6 +644,9 @@ pub fn parse(bytes: &[u8], file: &str) -> Result<Vec<Function>> {
             .next()
             .unwrap_or("")
             .to_ascii_lowercase();
+        if kind == "58" || kind == "58b" {
+            positions.push((dataset, c.line));
+        }
         match kind.as_str() {
             "58" => out.push(parse_58(&mut c, dataset, None)?),
             "58b" => {
@@ -601,7 +682,12 @@ pub fn parse(bytes: &[u8], file: &str) -> Result<Vec<Function>> {
                 )?);
             }
             _ => {
-                // Another dataset type: skip to its end delimiter.
+                // Another dataset type: skip to its end delimiter, and say so.
+                skipped.push(SkippedDataset {
+                    dataset,
+                    kind: header.split_whitespace().next().unwrap_or("").to_string(),
+                    line: c.line,
+                });
                 loop {
                     match c.next_line() {
                         None => {
@@ -643,8 +729,8 @@ fn parse_58(c: &mut Cursor, dataset: usize, binary: Option<(bool, usize)>) -> Re
             length_exp: int(l, 10, 5, "length units exponent", 8 + a, c)?,
             force_exp: int(l, 15, 5, "force units exponent", 8 + a, c)?,
             temperature_exp: int(l, 20, 5, "temperature units exponent", 8 + a, c)?,
-            label: field(l, 26, 20).to_string(),
-            units: field(l, 47, 20).to_string(),
+            label: field(l, 26, 20),
+            units: field(l, 47, 20),
         };
     }
     let values = match binary {
@@ -659,10 +745,10 @@ fn parse_58(c: &mut Cursor, dataset: usize, binary: Option<(bool, usize)>) -> Re
         func_id: int(r6, 5, 10, "function id", 6, c)?,
         version: int(r6, 15, 5, "version", 6, c)?,
         load_case: int(r6, 20, 10, "load case", 6, c)?,
-        response_entity: field(r6, 31, 10).to_string(),
+        response_entity: field(r6, 31, 10),
         response_node: int(r6, 41, 10, "response node", 6, c)?,
         response_dir: int(r6, 51, 4, "response direction", 6, c)?,
-        reference_entity: field(r6, 56, 10).to_string(),
+        reference_entity: field(r6, 56, 10),
         reference_node: int(r6, 66, 10, "reference node", 6, c)?,
         reference_dir: int(r6, 76, 4, "reference direction", 6, c)?,
         double: layout.double,
@@ -686,7 +772,7 @@ fn header_records(c: &mut Cursor, dataset: usize) -> Result<Vec<String>> {
         if is_delimiter(l) {
             return Err(c.err(dataset, format!("end delimiter where record {r} was expected: the header has only {} of 11 records", r - 1)));
         }
-        rec.push(String::from_utf8_lossy(l).into_owned());
+        rec.push(header_text(l));
     }
     Ok(rec)
 }
@@ -741,7 +827,7 @@ impl Layout {
             if s.is_empty() {
                 return Ok(0.0);
             }
-            parse_f64(s).ok_or_else(|| {
+            parse_f64(&s).ok_or_else(|| {
                 c.err(
                     dataset,
                     format!("record 7 field '{what}' is {s:?}, not a number"),
@@ -939,4 +1025,166 @@ fn ascii_values(c: &mut Cursor, dataset: usize, layout: &Layout) -> Result<Vec<f
         return Err(c.err(dataset, format!("{} values before the end delimiter, record 7 announces {expected} ({n} points, type {ord_type}): truncated or wrong record length", v.len())));
     }
     Ok(v)
+}
+
+/// The FRFs of a UFF file (function type 4) as measured channels for identification
+/// ([`identify::identification::measurement_map`] maps them onto a model): response node and
+/// direction, reference, abscissa converted to Hz (record 8's unit; Hz when it gives none, and
+/// noted), values as amplitude and phase, the unit from records 9-10 (the ordinate's numerator
+/// and denominator units labels, checked against the numerator's specific data type), and the
+/// coherence of a matching function type 6. Returns the channels and notes (datasets skipped,
+/// functions not used, what was assumed).
+pub fn measured_channels(
+    file: &UffFile,
+    origin: &str,
+) -> Result<(Vec<MeasuredChannel>, Vec<String>)> {
+    let mut notes: Vec<String> = file.skipped.iter().map(|s| s.to_string()).collect();
+    let mut channels = Vec::new();
+    let mut coherences = Vec::new();
+    for (f, &(dataset, line)) in file.functions.iter().zip(&file.positions) {
+        let item = format!("dataset {dataset} (line {line})");
+        let fail = |field: &str, message: String| ProcessError::Format {
+            file: origin.to_string(),
+            location: format!("{item}, {field}"),
+            message,
+        };
+        match f.func_type {
+            function_type::FRF => {}
+            function_type::COHERENCE => {
+                coherences.push((f, item));
+                continue;
+            }
+            t => {
+                notes.push(format!(
+                    "{item}: function type {t} is not an FRF (4): not used"
+                ));
+                continue;
+            }
+        }
+        let freqs =
+            frequencies_hz(f, &mut notes, &item).map_err(|m| fail("record 8 (abscissa)", m))?;
+        let (amplitude, phase_rad) = match &f.data {
+            Ordinate::Complex(v) => (
+                v.iter().map(|h| h.norm()).collect(),
+                Some(v.iter().map(|h| h.arg()).collect()),
+            ),
+            Ordinate::Real(v) => {
+                notes.push(format!(
+                    "{item}: real-valued FRF, used as amplitudes without phase"
+                ));
+                (v.iter().map(|x| x.abs()).collect(), None)
+            }
+        };
+        if !(1..=6).contains(&f.response_dir.abs()) {
+            return Err(fail(
+                "record 6 field 'response direction'",
+                format!("{} is not ±1..6 (X, Y, Z, RX, RY, RZ); the measurement map needs a node and direction", f.response_dir),
+            ));
+        }
+        let (num, den) = (f.axes[1].units.trim(), f.axes[2].units.trim());
+        channels.push(MeasuredChannel {
+            name: ChannelName::Node {
+                node: f.response_node,
+                dir: f.response_dir,
+            },
+            item: item.clone(),
+            reference: Some((f.reference_node, f.reference_dir)),
+            unit: ordinate_unit(f),
+            unit_source: format!("{item} records 9-10: \"{num}\" per \"{den}\""),
+            freqs_hz: freqs,
+            amplitude,
+            phase_rad,
+            coherence: None,
+        });
+    }
+    for (g, item) in coherences {
+        let key = (
+            g.response_node,
+            g.response_dir,
+            g.reference_node,
+            g.reference_dir,
+        );
+        let values = match &g.data {
+            Ordinate::Real(v) => v.clone(),
+            Ordinate::Complex(v) => v.iter().map(|c| c.re).collect(),
+        };
+        let target = channels.iter_mut().find(|c| {
+            matches!(c.name, ChannelName::Node { node, dir } if (node, dir) == (key.0, key.1))
+                && c.reference == Some((key.2, key.3))
+        });
+        match target {
+            Some(c) if c.freqs_hz.len() == values.len() && c.coherence.is_none() => {
+                c.coherence = Some(values);
+                notes.push(format!("{item}: coherence of {}", c.name));
+            }
+            _ => notes.push(format!("{item}: coherence without a matching FRF (same nodes, directions and lines): not used")),
+        }
+    }
+    Ok((channels, notes))
+}
+
+/// The abscissa in Hz: record 8's units label read by the one unit parser (`Hz`, `kHz`), `rad/s`
+/// divided by 2π, none given → Hz (noted); a time abscissa is an error.
+fn frequencies_hz(
+    f: &Function,
+    notes: &mut Vec<String>,
+    item: &str,
+) -> std::result::Result<Vec<f64>, String> {
+    let a = &f.axes[0];
+    if a.spec_data_type == 17 {
+        return Err("the abscissa is time (specific data type 17); an FRF needs frequency".into());
+    }
+    let label = a.units.trim();
+    let factor = if label.is_empty() || label.eq_ignore_ascii_case("none") {
+        notes.push(format!("{item}: record 8 gives no abscissa unit: Hz assumed (the UFF convention for frequency)"));
+        1.0
+    } else if label.eq_ignore_ascii_case("rad/s") {
+        1.0 / (2.0 * std::f64::consts::PI)
+    } else {
+        identify::units::parse_quantity(&format!("1 {label}"), identify::units::Dim::FREQUENCY)
+            .map_err(|e| format!("field 'units label' \"{label}\": {e}; use Hz, kHz or rad/s"))?
+    };
+    Ok(f.x().into_iter().map(|x| x * factor).collect())
+}
+
+/// The unit of an FRF's values from records 9 (numerator) and 10 (denominator), or why not.
+fn ordinate_unit(f: &Function) -> std::result::Result<FrfUnit, String> {
+    let (num, den) = (f.axes[1].units.trim(), f.axes[2].units.trim());
+    let empty = |s: &str| s.is_empty() || s.eq_ignore_ascii_case("none");
+    if empty(num) {
+        return Err(format!(
+            "record 9 (ordinate numerator, specific data type {}) has no units label",
+            f.axes[1].spec_data_type
+        ));
+    }
+    let unit = match FrfUnit::parse(num) {
+        Ok(u) if u.per_force => u,
+        _ if empty(den) => {
+            return Err(format!(
+                "record 10 (ordinate denominator) has no units label, so the force unit of \"{num}\" is unknown"
+            ))
+        }
+        _ => FrfUnit::parse(&format!("({num})/({den})"))
+            .map_err(|e| format!("records 9-10 units \"{num}\" per \"{den}\": {e}"))?,
+    };
+    if !unit.per_force {
+        return Err(format!(
+            "records 9-10 units \"{num}\" per \"{den}\" are not a response per force"
+        ));
+    }
+    let declared = match f.axes[1].spec_data_type {
+        8 => Some(Quantity::Displacement),
+        11 => Some(Quantity::Velocity),
+        12 => Some(Quantity::Acceleration),
+        _ => None,
+    };
+    if let Some(q) = declared.filter(|q| *q != unit.quantity) {
+        return Err(format!(
+            "record 9 says {} (specific data type {}) but its units \"{num}\" per \"{den}\" are a {}",
+            q.as_str(),
+            f.axes[1].spec_data_type,
+            unit.kind()
+        ));
+    }
+    Ok(unit)
 }

@@ -207,6 +207,76 @@ fn real_world_quirks_crlf_fortran_d_and_other_datasets_are_read() {
 }
 
 #[test]
+fn non_ascii_headers_are_read_by_character_in_utf8_and_latin1() {
+    // A response entity "Prüfstand" and a units label "m/s²" before the node, direction and
+    // exponent fields: read by byte, the extra UTF-8 byte (or a lossy Latin-1 replacement) shifts
+    // every field after it.
+    let mut f = Function::frf("Prüfstand FRF", 1.0, 1.0, vec![C64::new(1.0, -2.0); 3]);
+    f.response_entity = "Prüfstand".into();
+    f.response_node = 1234;
+    f.response_dir = -3;
+    f.reference_entity = "Kraft-µ".into();
+    f.reference_node = 77;
+    f.reference_dir = 2;
+    f.axes[1] = uff::Axis {
+        spec_data_type: 12,
+        length_exp: 1,
+        force_exp: 0,
+        temperature_exp: 0,
+        label: "Beschleunigung²".into(),
+        units: "m/s²".into(),
+    };
+    f.axes[2].units = "N".into();
+    let utf8 = uff::to_bytes(std::slice::from_ref(&f), Encoding::Ascii).unwrap();
+    let text = String::from_utf8(utf8.clone()).unwrap();
+    assert!(text.contains("Prüfstand") && text.contains("m/s²"));
+    let latin1: Vec<u8> = text
+        .chars()
+        .map(|c| u8::try_from(u32::from(c)).unwrap())
+        .collect();
+    assert_ne!(latin1.len(), utf8.len(), "the Latin-1 file is shorter");
+    for (bytes, what) in [(&utf8, "UTF-8"), (&latin1, "Latin-1")] {
+        let back = uff::parse(bytes, what).unwrap();
+        let g = &back[0];
+        assert_eq!(
+            (
+                g.response_entity.as_str(),
+                g.response_node,
+                g.response_dir,
+                g.reference_entity.as_str(),
+                g.reference_node,
+                g.reference_dir
+            ),
+            ("Prüfstand", 1234, -3, "Kraft-µ", 77, 2),
+            "{what}"
+        );
+        assert_eq!(g.axes[1], f.axes[1], "{what}");
+        assert_eq!(g.axes[2].units, "N", "{what}");
+        assert_eq!(g.ids[0], "Prüfstand FRF", "{what}");
+        assert_close(g, &f, 1e-12, what);
+    }
+}
+
+#[test]
+fn other_datasets_are_skipped_and_listed() {
+    let text = ascii_reference();
+    let other =
+        format!("    -1\n   164\n         1SI\n    -1\n{text}    -1\n  2414\n         1\n    -1\n");
+    assert!(uff::looks_like_uff(other.as_bytes()));
+    assert!(!uff::looks_like_uff(b"body,dof,freq_hz,amplitude\n"));
+    let u = uff::parse_file(other.as_bytes(), "mixed.unv").unwrap();
+    assert_eq!(u.functions.len(), 3);
+    let kinds: Vec<(usize, &str, usize)> = u
+        .skipped
+        .iter()
+        .map(|s| (s.dataset, s.kind.as_str(), s.line))
+        .collect();
+    let last_line = 4 + text.lines().count() + 2;
+    assert_eq!(kinds, vec![(1, "164", 2), (5, "2414", last_line)]);
+    assert!(u.skipped[1].to_string().contains("type 2414"));
+}
+
+#[test]
 fn malformed_files_give_clear_errors() {
     let text = ascii_reference();
     // Truncated in the data of the first dataset.

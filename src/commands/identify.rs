@@ -65,9 +65,13 @@ pub enum FormatArg {
 pub struct IdentifyArgs {
     /// Model file (TOML or resolved JSON).
     pub model: PathBuf,
-    /// Measured characteristics (JSON `MeasuredData` or CSV; docs/identification.md).
+    /// Measured data: JSON `MeasuredData`, CSV (optionally declaring its unit), or UFF58/58b
+    /// with --map (docs/identification.md).
     #[arg(long)]
     pub data: PathBuf,
+    /// Measurement map (TOML): which UFF node and direction is which body and DOF of the model.
+    #[arg(long)]
+    pub map: Option<PathBuf>,
     /// Decision variables (TOML; docs/identification.md).
     #[arg(long)]
     pub vars: PathBuf,
@@ -172,8 +176,9 @@ pub fn setup(
     a: &IdentifyArgs,
 ) -> anyhow::Result<(identify::Model, idn::Observations, idn::Variables, Options)> {
     let model = load_model(&a.model)?;
-    let measured = data::load(&a.data)?;
+    let measured = super::measured::load(&a.data, a.map.as_deref(), &model)?;
     let obs = data::validate(&measured, &model, &a.data.display().to_string())?;
+    super::measured::check(&model, &obs)?;
     let vars = variables::load(&a.vars, &model)?;
     anyhow::ensure!(
         a.relative_error.is_finite() && a.relative_error > 0.0,

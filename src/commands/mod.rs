@@ -5,6 +5,7 @@ pub mod diagnose;
 pub mod frf;
 pub mod identify;
 pub mod mcap;
+pub mod measured;
 pub mod model;
 pub mod modes;
 pub mod nightly;

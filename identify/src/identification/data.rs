@@ -7,6 +7,7 @@
 use std::collections::BTreeMap;
 use std::path::Path;
 
+use super::frf_units::{self, FrfUnit};
 use crate::measured::{MeasuredData, Measurement, QuantityName};
 use crate::model::{Characteristic, Model, Quantity, DOF_NAMES};
 
@@ -53,7 +54,152 @@ pub enum DataError {
     },
 }
 
+/// Reads a data file against the model it will be fitted with: JSON or CSV as [`load`], and a
+/// CSV whose header declares a unit (`# unit = g/N`, docs/identification.md) converted exactly
+/// to the model's convention (SI, the response to the model's excitation, the model output's
+/// quantity: [`frf_units::to_model_convention`]); data in another quantity than the model's
+/// output for that body and DOF are converted by (jω)^k. What was assumed and converted is
+/// appended to [`MeasuredData::source`], one `; `-separated note each, so reports can state it.
+pub fn load_for_model(path: &Path, model: &Model) -> Result<MeasuredData, DataError> {
+    let text = std::fs::read_to_string(path).map_err(|source| DataError::Io {
+        path: path.display().to_string(),
+        source,
+    })?;
+    let origin = path.display().to_string();
+    let mut notes = Vec::new();
+    let mut data = if text.trim_start().starts_with('{') {
+        notes.push("units: SI, the response to the model's excitation (JSON form)".to_string());
+        parse_json(&text, &origin)?
+    } else {
+        let (mut data, declared) = parse_csv_declared(&text, &origin)?;
+        match declared {
+            Some(d) => {
+                notes.push(format!("unit {} declared in line {}", d.unit.text, d.line));
+                for m in &mut data.characteristics {
+                    frf_units::to_model_convention(m, &d.unit, model, &mut notes)
+                        .map_err(|message| CsvErr { origin: &origin }.at(d.line, message))?;
+                }
+            }
+            None => notes.push(
+                "units: none declared (no `# unit = ...` line): SI, the response to the model's excitation"
+                    .to_string(),
+            ),
+        }
+        data
+    };
+    for (i, m) in data.characteristics.iter_mut().enumerate() {
+        frf_units::convert_quantity(m, model, &mut notes).map_err(|message| {
+            DataError::Invalid {
+                origin: origin.clone(),
+                item: format!("$.characteristics[{i}]"),
+                message,
+            }
+        })?;
+    }
+    data.source = std::iter::once(data.source.clone())
+        .chain(notes)
+        .collect::<Vec<_>>()
+        .join("; ");
+    Ok(data)
+}
+
+/// A unit declared in a CSV comment line before the header.
+#[derive(Debug, Clone, PartialEq)]
+pub struct DeclaredUnit {
+    /// The unit.
+    pub unit: FrfUnit,
+    /// Its line (1-based).
+    pub line: usize,
+}
+
+/// The `# unit = ...` and `# quantity = ...` declarations of a CSV file's comment lines before
+/// its header (`# quantity = accelerance, unit = g/N`); other comments are ignored.
+fn csv_declarations(text: &str, err: &CsvErr) -> Result<Option<DeclaredUnit>, DataError> {
+    let mut unit: Option<DeclaredUnit> = None;
+    let mut kind: Option<(String, usize)> = None;
+    for (i, l) in text.lines().enumerate() {
+        let l = l.trim();
+        if l.is_empty() {
+            continue;
+        }
+        let Some(c) = l.strip_prefix('#') else { break };
+        for part in c.split([',', ';']) {
+            let Some((k, v)) = part.split_once('=') else {
+                continue;
+            };
+            match k.trim().to_ascii_lowercase().as_str() {
+                "unit" | "units" => {
+                    if let Some(u) = &unit {
+                        return Err(err.at(
+                            i + 1,
+                            format!(
+                                "a second unit declaration; line {} already declares {}",
+                                u.line, u.unit.text
+                            ),
+                        ));
+                    }
+                    let u = FrfUnit::parse(v).map_err(|m| err.at(i + 1, format!("unit: {m}")))?;
+                    unit = Some(DeclaredUnit {
+                        unit: u,
+                        line: i + 1,
+                    });
+                }
+                "quantity" => kind = Some((v.trim().to_ascii_lowercase(), i + 1)),
+                _ => {}
+            }
+        }
+    }
+    if let Some((k, line)) = kind {
+        let Some(u) = &unit else {
+            return Err(err.at(line, format!("quantity = {k} is declared without a unit; add e.g. `# quantity = {k}, unit = ...` (m/N, (mm/s)/N, g/N, ...)")));
+        };
+        let kinds = [u.unit.kind(), u.unit.quantity.as_str()];
+        if !kinds.contains(&k.as_str()) {
+            return Err(err.at(
+                line,
+                format!(
+                    "quantity = {k}, but the unit {} is a {}; fix one of them",
+                    u.unit.text,
+                    u.unit.kind()
+                ),
+            ));
+        }
+    }
+    Ok(unit)
+}
+
+/// Parses the CSV form with its unit declaration, if any: the amplitudes (and variances) stay in
+/// the declared unit (apply [`frf_units::to_model_convention`]), and every characteristic takes
+/// the declared quantity (a `quantity` column must agree with it).
+pub fn parse_csv_declared(
+    text: &str,
+    origin: &str,
+) -> Result<(MeasuredData, Option<DeclaredUnit>), DataError> {
+    let text = crate::source::strip_bom(text);
+    let err = CsvErr { origin };
+    let declared = csv_declarations(text, &err)?;
+    let (mut data, has_quantity) = parse_csv_rows(text, origin)?;
+    if let Some(d) = &declared {
+        for m in &mut data.characteristics {
+            let q: QuantityName = d.unit.quantity.into();
+            if has_quantity && m.quantity != q {
+                return Err(err.at(d.line, format!(
+                    "{} {}: the quantity column says {}, but the declared unit {} is a {}; fix one of them",
+                    m.body,
+                    DOF_NAMES.get(m.dof as usize).copied().unwrap_or("?"),
+                    Quantity::from(m.quantity).as_str(),
+                    d.unit.text,
+                    d.unit.kind()
+                )));
+            }
+            m.quantity = q;
+        }
+    }
+    Ok((data, declared))
+}
+
 /// Reads a data file: JSON ([`MeasuredData`]) when the text starts with `{`, CSV otherwise.
+/// A CSV that declares a unit needs the model: use [`load_for_model`].
 pub fn load(path: &Path) -> Result<MeasuredData, DataError> {
     let text = std::fs::read_to_string(path).map_err(|source| DataError::Io {
         path: path.display().to_string(),
@@ -107,6 +253,18 @@ pub const CSV_COLUMNS: [&str; 9] = [
 pub fn parse_csv(text: &str, origin: &str) -> Result<MeasuredData, DataError> {
     let text = crate::source::strip_bom(text);
     let err = CsvErr { origin };
+    if let Some(d) = csv_declarations(text, &err)? {
+        return Err(err.at(d.line, format!(
+            "the file declares the unit {}; it is converted against a model (identify::identification::data::load_for_model), not read as SI",
+            d.unit.text
+        )));
+    }
+    parse_csv_rows(text, origin).map(|(d, _)| d)
+}
+
+/// The CSV rows as [`MeasuredData`], and whether the header has a `quantity` column.
+fn parse_csv_rows(text: &str, origin: &str) -> Result<(MeasuredData, bool), DataError> {
+    let err = CsvErr { origin };
     let mut lines = text
         .lines()
         .enumerate()
@@ -147,10 +305,13 @@ pub fn parse_csv(text: &str, origin: &str) -> Result<MeasuredData, DataError> {
         .zip(rows)
         .map(|(key, pts)| csv_characteristic(key, pts, hline, &err))
         .collect::<Result<_, _>>()?;
-    Ok(MeasuredData {
-        source: origin.to_string(),
-        characteristics,
-    })
+    Ok((
+        MeasuredData {
+            source: origin.to_string(),
+            characteristics,
+        },
+        col.contains_key("quantity"),
+    ))
 }
 
 /// Errors of a CSV file: its name and a line.
@@ -224,10 +385,11 @@ fn csv_row(
     let number = |name: &str| -> Result<Option<f64>, DataError> {
         match cell(name) {
             None => Ok(None),
-            Some(c) => c
-                .parse::<f64>()
-                .map(Some)
-                .map_err(|_| err.at(ln, format!("column {name}: \"{c}\" is not a number"))),
+            Some(c) => match c.parse::<f64>() {
+                Ok(x) if x.is_finite() => Ok(Some(x)),
+                Ok(_) => Err(err.at(ln, format!("column {name}: \"{c}\" is not a finite number; drop the line or give the value"))),
+                Err(_) => Err(err.at(ln, format!("column {name}: \"{c}\" is not a number"))),
+            },
         }
     };
     let body = cell("body")

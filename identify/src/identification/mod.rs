@@ -48,7 +48,11 @@
 
 pub mod criterion;
 pub mod data;
+pub mod frf_units;
+pub mod measurement_map;
+pub mod misfit;
 pub mod optimize;
+pub mod plausibility;
 pub mod problem;
 pub mod report;
 pub mod synthetic;

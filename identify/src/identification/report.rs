@@ -83,6 +83,9 @@ pub fn num(x: f64) -> String {
 pub fn text(id: &Identification) -> String {
     let mut s = String::new();
     let u = &id.uncertainty;
+    if let Some(m) = super::misfit::misfit(id) {
+        s.push_str(&format!("{}\n\n", m.message));
+    }
     s.push_str(&format!(
         "identification: {} variables, {} observations ({} fit), optimizer {}\n",
         id.variables.len(),
@@ -238,6 +241,9 @@ pub struct ReportJson {
     pub criterion: f64,
     /// 2J/(m − n_free).
     pub reduced_chi2: f64,
+    /// The headline verdict when the model does not explain the data (reduced χ² far above 1:
+    /// the standard errors are not to be trusted), `null` otherwise.
+    pub misfit: Option<super::misfit::Misfit>,
     /// Factor applied to the covariance.
     pub covariance_scale: f64,
     /// The table.
@@ -272,6 +278,7 @@ pub fn json(id: &Identification) -> ReportJson {
         criterion_initial: id.criterion_initial,
         criterion: id.criterion,
         reduced_chi2: id.uncertainty.reduced_chi2,
+        misfit: super::misfit::misfit(id),
         covariance_scale: id.uncertainty.covariance_scale,
         table: rows(id),
         correlation: (0..n)

@@ -1,0 +1,639 @@
+//! The measurement map (`--map FILE`, TOML): which measured channel — a UFF response node and
+//! direction, or a named sensor — is which body of the model and which of its principal-axis
+//! DOFs; the reference to use when a file holds several; the unit when a file gives none.
+//! [`MeasurementMap::apply`] turns the channels of a vendor file into [`MeasuredData`] in the
+//! model's convention (SI, the response to the model's excitation, the output's quantity).
+//!
+//! ```toml
+//! unit = "g/N"                 # optional: when the file's records give no units
+//! [reference]                  # optional: which excitation, when the file holds several
+//! node = 1
+//! dir = "+Z"
+//! [[channel]]
+//! node = 3                     # UFF response node ...
+//! dir = "+Z"                   # ... and direction (±X/Y/Z or ±1..3, global axes)
+//! body = "table"
+//! point = "0 0 450 mm"         # optional: where the sensor is (global), checked below
+//! [[channel]]
+//! sensor = "acc2"              # a named sensor (CSV `body` column or a UFF response entity)
+//! body = "column"
+//! direction = [0, 1, 0]        # global direction of its axis, or `dof = "u2"` / `"-u2"`
+//! ```
+//!
+//! A channel maps onto one principal-axis DOF u1-u3 of its body: its direction must lie within
+//! 1° of a principal axis (a negative axis flips the sign), and a sensor `point` must lie on the
+//! line through the body's centre of mass along that direction (within 1 mm), where the reading
+//! is that DOF alone; anywhere else it reads u + θ×(p − c), which mixes in the body's rotations
+//! and is an error (ident's outputs are principal-axis DOFs). Errors name the map's file, line
+//! and field.
+
+use std::collections::BTreeSet;
+use std::f64::consts::PI;
+use std::path::Path;
+
+use nalgebra::Vector3;
+use serde::Deserialize;
+use serde_spanned::Spanned;
+
+use super::data::DataError;
+use super::frf_units::{self, FrfUnit};
+use crate::measured::{MeasuredData, Measurement};
+use crate::model::{Model, DOF_NAMES};
+use crate::source::{Located, SourceText};
+use crate::units::{parse_quantities, Dim};
+
+/// Largest angle (degrees) between a channel's direction and the principal axis it maps to.
+pub const MAX_AXIS_ANGLE_DEG: f64 = 1.0;
+/// Largest distance (m) of a sensor's point from the line through the centre of mass along its
+/// direction.
+pub const MAX_LEVER_ARM_M: f64 = 1e-3;
+
+/// Why a map could not be read or applied.
+#[derive(Debug, thiserror::Error)]
+pub enum MapError {
+    /// The file could not be read.
+    #[error("{path}: cannot read the measurement map")]
+    Io {
+        /// File.
+        path: String,
+        /// Cause.
+        source: std::io::Error,
+    },
+    /// A problem at a place in the map.
+    #[error(transparent)]
+    Map(#[from] Located),
+    /// A problem with the measured data the map is applied to.
+    #[error(transparent)]
+    Data(#[from] DataError),
+}
+
+/// How a measured channel is named in its file.
+#[derive(Debug, Clone, PartialEq, Eq, PartialOrd, Ord)]
+pub enum ChannelName {
+    /// A UFF response node and direction (±1..±6 = ±X, Y, Z, RX, RY, RZ).
+    Node {
+        /// Node number.
+        node: i64,
+        /// Direction code.
+        dir: i64,
+    },
+    /// A named sensor.
+    Sensor(String),
+}
+
+impl std::fmt::Display for ChannelName {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            ChannelName::Node { node, dir } => write!(f, "node {node} {}", dir_text(*dir)),
+            ChannelName::Sensor(s) => write!(f, "sensor \"{s}\""),
+        }
+    }
+}
+
+/// `+X`, `-Z`, `+RY`, or the number.
+pub fn dir_text(dir: i64) -> String {
+    let axes = ["X", "Y", "Z", "RX", "RY", "RZ"];
+    match axes.get((dir.unsigned_abs() as usize).wrapping_sub(1)) {
+        Some(a) => format!("{}{a}", if dir < 0 { '-' } else { '+' }),
+        None => dir.to_string(),
+    }
+}
+
+/// One measured response of a file, before it is mapped onto the model.
+#[derive(Debug, Clone, PartialEq)]
+pub struct MeasuredChannel {
+    /// How the file names it.
+    pub name: ChannelName,
+    /// Where it is in the file, for messages: `dataset 3 (line 120)`.
+    pub item: String,
+    /// The reference (excitation) node and direction, if the file says.
+    pub reference: Option<(i64, i64)>,
+    /// The unit of its values as the file gives it, or why the file gives none usable.
+    pub unit: Result<FrfUnit, String>,
+    /// Where the unit came from, for notes: `records 9-10: "m/s^2" per "N"`.
+    pub unit_source: String,
+    /// Frequencies (Hz).
+    pub freqs_hz: Vec<f64>,
+    /// Amplitudes in `unit`.
+    pub amplitude: Vec<f64>,
+    /// Phases (rad), when the file has complex values.
+    pub phase_rad: Option<Vec<f64>>,
+    /// Coherence γ² per line, when the file has it.
+    pub coherence: Option<Vec<f64>>,
+}
+
+/// One `[[channel]]` of the map, resolved against the model.
+#[derive(Debug, Clone, PartialEq)]
+struct Entry {
+    line: usize,
+    name: ChannelName,
+    body: usize,
+    dof: u8,
+    negative: bool,
+    unit: Option<FrfUnit>,
+}
+
+/// A measurement map resolved against a model.
+#[derive(Debug, Clone, PartialEq)]
+pub struct MeasurementMap {
+    file: String,
+    reference: Option<(i64, i64)>,
+    unit: Option<FrfUnit>,
+    entries: Vec<Entry>,
+}
+
+type Sp<T> = Spanned<T>;
+
+#[derive(Deserialize)]
+#[serde(untagged)]
+enum Dir {
+    Int(i64),
+    Text(String),
+}
+
+#[derive(Deserialize)]
+#[serde(untagged)]
+enum Point {
+    Numbers(Vec<f64>),
+    Text(String),
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawMap {
+    unit: Option<Sp<String>>,
+    reference: Option<RawReference>,
+    #[serde(default, rename = "channel")]
+    channels: Vec<RawChannel>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawReference {
+    node: Sp<i64>,
+    dir: Sp<Dir>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawChannel {
+    node: Option<Sp<i64>>,
+    dir: Option<Sp<Dir>>,
+    sensor: Option<Sp<String>>,
+    body: Sp<String>,
+    dof: Option<Sp<String>>,
+    direction: Option<Sp<Vec<f64>>>,
+    point: Option<Sp<Point>>,
+    unit: Option<Sp<String>>,
+    #[allow(dead_code)]
+    note: Option<String>,
+}
+
+/// Reads a map file and resolves it against `model`.
+pub fn load(path: &Path, model: &Model) -> Result<MeasurementMap, MapError> {
+    let text = std::fs::read_to_string(path).map_err(|source| MapError::Io {
+        path: path.display().to_string(),
+        source,
+    })?;
+    Ok(parse(&text, &path.display().to_string(), model)?)
+}
+
+/// A UFF direction code from `+Z`, `Z-`, `y`, `3`, `-1`; `None` if it is none.
+fn parse_dir(d: &Dir) -> Option<i64> {
+    match d {
+        Dir::Int(i) => (1..=6).contains(&i.abs()).then_some(*i),
+        Dir::Text(t) => {
+            let t = t.trim().to_ascii_uppercase();
+            if let Ok(i) = t.parse::<i64>() {
+                return (1..=6).contains(&i.abs()).then_some(i);
+            }
+            let (sign, axis) = if let Some(a) = t.strip_prefix('-').or(t.strip_suffix('-')) {
+                (-1, a)
+            } else {
+                (1, t.strip_prefix('+').or(t.strip_suffix('+')).unwrap_or(&t))
+            };
+            let k = ["X", "Y", "Z", "RX", "RY", "RZ"]
+                .iter()
+                .position(|a| *a == axis)?;
+            Some(sign * (k as i64 + 1))
+        }
+    }
+}
+
+/// Parses a map's text (`origin` names it in errors) and resolves it against `model`.
+pub fn parse(text: &str, origin: &str, model: &Model) -> Result<MeasurementMap, Located> {
+    let text = crate::source::strip_bom(text);
+    let src = SourceText::new(origin, text);
+    let raw: RawMap = toml::from_str(text).map_err(|e| {
+        let span = e.span().unwrap_or(0..0);
+        src.at(
+            span,
+            format!(
+                "{} (see docs/identification.md, measurement map)",
+                e.message().trim()
+            ),
+        )
+    })?;
+    let unit = raw.unit.as_ref().map(|u| unit_of(&src, u)).transpose()?;
+    let reference = match &raw.reference {
+        None => None,
+        Some(r) => Some((
+            *r.node.get_ref(),
+            parse_dir(r.dir.get_ref()).ok_or_else(|| {
+                src.at(r.dir.span(), "reference.dir: use +X, -Y, Z, ... or ±1..6")
+            })?,
+        )),
+    };
+    if raw.channels.is_empty() {
+        return Err(src.at(
+            0..0,
+            "no [[channel]]: the map must say which measured channel is which body and direction",
+        ));
+    }
+    let mut entries: Vec<Entry> = Vec::new();
+    for c in &raw.channels {
+        let e = entry(&src, c, model)?;
+        if let Some(o) = entries.iter().find(|o| o.name == e.name) {
+            return Err(src.at(
+                c.body.span(),
+                format!("{} is mapped twice (line {} too)", e.name, o.line),
+            ));
+        }
+        if let Some(o) = entries.iter().find(|o| (o.body, o.dof) == (e.body, e.dof)) {
+            return Err(src.at(
+                c.body.span(),
+                format!(
+                    "{} {} is already measured by {} (line {}); one channel per body and DOF",
+                    model.bodies[e.body].name, DOF_NAMES[e.dof as usize], o.name, o.line
+                ),
+            ));
+        }
+        entries.push(e);
+    }
+    Ok(MeasurementMap {
+        file: origin.to_string(),
+        reference,
+        unit,
+        entries,
+    })
+}
+
+/// A `unit = "..."` of the map, read as an FRF unit.
+fn unit_of(src: &SourceText, u: &Sp<String>) -> Result<FrfUnit, Located> {
+    FrfUnit::parse(u.get_ref()).map_err(|m| src.at(u.span(), format!("unit: {m}")))
+}
+
+/// One `[[channel]]` resolved: its name, body, DOF and sign.
+fn entry(src: &SourceText, c: &RawChannel, model: &Model) -> Result<Entry, Located> {
+    let line = src.at(c.body.span(), "").line;
+    let name = match (&c.node, &c.dir, &c.sensor) {
+        (Some(n), Some(d), None) => ChannelName::Node {
+            node: *n.get_ref(),
+            dir: parse_dir(d.get_ref()).ok_or_else(|| {
+                src.at(d.span(), "dir: use +X, -Y, Z, ... (global axes) or ±1..6")
+            })?,
+        },
+        (None, None, Some(s)) => ChannelName::Sensor(s.get_ref().clone()),
+        (Some(n), None, None) => {
+            return Err(src.at(
+                n.span(),
+                "node without dir: give the response direction too, e.g. dir = \"+Z\"",
+            ))
+        }
+        _ => return Err(src.at(
+            c.body.span(),
+            "a channel is either `node` + `dir` (UFF) or `sensor` (a name), not both or neither",
+        )),
+    };
+    let body_name = c.body.get_ref();
+    let Some(body) = model.body_index(body_name) else {
+        let known: Vec<&str> = model.bodies.iter().map(|b| b.name.as_str()).collect();
+        return Err(src.at(
+            c.body.span(),
+            format!(
+                "body: the model has no body \"{body_name}\"; its bodies: {}",
+                known.join(", ")
+            ),
+        ));
+    };
+    let b = &model.bodies[body];
+    let (dof, negative) = match (&c.dof, &c.direction) {
+        (Some(_), Some(d)) => {
+            return Err(src.at(d.span(), "give `dof` or `direction`, not both"));
+        }
+        (Some(d), None) => {
+            let t = d.get_ref().trim();
+            let (neg, t) = match t.strip_prefix('-') {
+                Some(r) => (true, r),
+                None => (false, t.strip_prefix('+').unwrap_or(t)),
+            };
+            let k = DOF_NAMES[..3].iter().position(|n| *n == t).ok_or_else(|| {
+                src.at(
+                    d.span(),
+                    format!("dof: \"{t}\" is not u1, u2 or u3 (optionally with a sign: \"-u2\"); rotations are not mapped from sensors"),
+                )
+            })?;
+            (k as u8, neg)
+        }
+        (None, given) => {
+            let (d, span) = match (given, &name) {
+                (Some(v), _) => {
+                    let x = v.get_ref();
+                    if x.len() != 3 || !x.iter().all(|c| c.is_finite()) {
+                        return Err(src.at(
+                            v.span(),
+                            "direction: three finite numbers [x, y, z] (global axes)",
+                        ));
+                    }
+                    (Vector3::new(x[0], x[1], x[2]), v.span())
+                }
+                (None, ChannelName::Node { dir, .. }) if (1..=3).contains(&dir.abs()) => {
+                    let mut d = Vector3::zeros();
+                    d[(dir.unsigned_abs() - 1) as usize] = dir.signum() as f64;
+                    (d, c.dir.as_ref().map(|d| d.span()).unwrap_or(c.body.span()))
+                }
+                (None, ChannelName::Node { dir, .. }) => {
+                    return Err(src.at(
+                        c.dir.as_ref().map(|d| d.span()).unwrap_or(c.body.span()),
+                        format!(
+                            "dir: {} is a rotation; map translations (±X, ±Y, ±Z), or give `dof`",
+                            dir_text(*dir)
+                        ),
+                    ))
+                }
+                (None, ChannelName::Sensor(_)) => {
+                    return Err(src.at(
+                        c.body.span(),
+                        "a sensor needs `direction = [x, y, z]` (global) or `dof = \"u1\"`",
+                    ))
+                }
+            };
+            let n = d.norm();
+            if n == 0.0 {
+                return Err(src.at(span, "direction: the zero vector has no direction"));
+            }
+            let d = d / n;
+            let (k, cos) = (0..3)
+                .map(|k| (k, d.dot(&b.rotation.column(k))))
+                .max_by(|a, b| a.1.abs().total_cmp(&b.1.abs()))
+                .unwrap_or((0, 0.0));
+            let angle = cos.abs().min(1.0).acos() * 180.0 / PI;
+            if angle > MAX_AXIS_ANGLE_DEG {
+                return Err(src.at(
+                    span,
+                    format!(
+                        "direction ({:.4}, {:.4}, {:.4}) is {angle:.2}° from the nearest principal axis ({}) of body \"{}\"; ident's outputs are the principal-axis DOFs u1-u3, so a channel must be within {MAX_AXIS_ANGLE_DEG}° of one (outputs along other directions are not supported yet)",
+                        d.x, d.y, d.z, DOF_NAMES[k], b.name
+                    ),
+                ));
+            }
+            if let Some(p) = &c.point {
+                let xs = match p.get_ref() {
+                    Point::Numbers(v) => v.clone(),
+                    Point::Text(t) => parse_quantities(t, Dim::LENGTH)
+                        .map_err(|e| src.at(p.span(), format!("point: {e}")))?,
+                };
+                if xs.len() != 3 || !xs.iter().all(|x| x.is_finite()) {
+                    return Err(src.at(
+                        p.span(),
+                        "point: three coordinates, e.g. \"0 0 450 mm\" or [0, 0, 0.45] (m)",
+                    ));
+                }
+                let r = Vector3::new(xs[0], xs[1], xs[2]) - b.position;
+                let off = r.cross(&d).norm();
+                if off > MAX_LEVER_ARM_M {
+                    return Err(src.at(
+                        p.span(),
+                        format!(
+                            "point: the sensor is {:.1} mm off the line through the centre of mass of \"{}\" along its direction; there it reads u + θ×(p − c), which mixes in the body's rotations, and ident's outputs are the principal-axis DOFs at the centre of mass (point outputs are not supported yet): place the sensor on that line, or omit `point` if its reading is the body's {} by construction",
+                            off * 1e3,
+                            b.name,
+                            DOF_NAMES[k]
+                        ),
+                    ));
+                }
+            }
+            (k as u8, cos < 0.0)
+        }
+    };
+    let unit = c.unit.as_ref().map(|u| unit_of(src, u)).transpose()?;
+    Ok(Entry {
+        line,
+        name,
+        body,
+        dof,
+        negative,
+        unit,
+    })
+}
+
+impl MeasurementMap {
+    /// The channels of a data file (`origin`) mapped onto the model: every map entry must find
+    /// its channel (for the chosen reference), channels the map does not name are left out
+    /// with a note, units come from the map's entry, the map, or the file (else an error), and
+    /// everything is converted to the model's convention. The notes end up in `source`.
+    pub fn apply(
+        &self,
+        channels: &[MeasuredChannel],
+        origin: &str,
+        model: &Model,
+    ) -> Result<MeasuredData, MapError> {
+        let bad = |item: &str, message: String| {
+            MapError::Data(DataError::Invalid {
+                origin: origin.to_string(),
+                item: item.to_string(),
+                message,
+            })
+        };
+        let mut notes = vec![format!("channels mapped by {}", self.file)];
+        let reference = self.reference(channels, origin)?;
+        if let Some((n, d)) = reference {
+            notes.push(format!("reference node {n} {}", dir_text(d)));
+        }
+        let of_reference = |c: &&MeasuredChannel| {
+            reference.is_none() || c.reference.is_none() || c.reference == reference
+        };
+        let mut characteristics = Vec::new();
+        for e in &self.entries {
+            let found: Vec<&MeasuredChannel> = channels
+                .iter()
+                .filter(of_reference)
+                .filter(|c| c.name == e.name)
+                .collect();
+            let c = match found.as_slice() {
+                [c] => *c,
+                [] => {
+                    let names: BTreeSet<String> = channels
+                        .iter()
+                        .filter(of_reference)
+                        .map(|c| c.name.to_string())
+                        .collect();
+                    return Err(MapError::Map(Located {
+                        file: self.file.clone(),
+                        line: e.line,
+                        column: 1,
+                        message: format!(
+                            "{} is not in {origin}{}; its channels: {}",
+                            e.name,
+                            reference
+                                .map(|(n, d)| format!(" for reference node {n} {}", dir_text(d)))
+                                .unwrap_or_default(),
+                            names.into_iter().collect::<Vec<_>>().join(", ")
+                        ),
+                    }));
+                }
+                [a, b, ..] => {
+                    return Err(bad(
+                        &b.item,
+                        format!("{} appears twice (also {}); keep one", e.name, a.item),
+                    ))
+                }
+            };
+            let (unit, from) = match (&e.unit, &self.unit, &c.unit) {
+                (Some(u), _, _) => (u.clone(), format!("{} line {}", self.file, e.line)),
+                (None, Some(u), _) => (u.clone(), format!("{} (top-level unit)", self.file)),
+                (None, None, Ok(u)) => (u.clone(), c.unit_source.clone()),
+                (None, None, Err(why)) => {
+                    return Err(bad(
+                        &c.item,
+                        format!("{why}; the file does not say what unit {} is in: give it in the map, e.g. unit = \"g/N\" (top level, or in this [[channel]])", e.name),
+                    ))
+                }
+            };
+            check_lines(c, &bad)?;
+            let body = &model.bodies[e.body].name;
+            let mut phase = c.phase_rad.clone();
+            if e.negative {
+                if let Some(p) = &mut phase {
+                    for x in p.iter_mut() {
+                        *x = (*x + 2.0 * PI).rem_euclid(2.0 * PI) - PI;
+                    }
+                }
+            }
+            let mut m = Measurement {
+                body: body.clone(),
+                dof: e.dof,
+                quantity: unit.quantity.into(),
+                freqs_hz: c.freqs_hz.clone(),
+                amplitude: c.amplitude.clone(),
+                phase_rad: phase,
+                variance: None,
+                coherence: c.coherence.clone(),
+                averages: None,
+            };
+            notes.push(format!(
+                "{} ({}) is {body} {}{}, unit from {from}",
+                e.name,
+                c.item,
+                if e.negative { "-" } else { "" },
+                DOF_NAMES[e.dof as usize]
+            ));
+            frf_units::to_model_convention(&mut m, &unit, model, &mut notes)
+                .map_err(|message| bad(&c.item, message))?;
+            characteristics.push(m);
+        }
+        let unused: Vec<String> = channels
+            .iter()
+            .filter(|c| !self.entries.iter().any(|e| e.name == c.name) || !of_reference(c))
+            .map(|c| format!("{} ({})", c.name, c.item))
+            .collect();
+        if !unused.is_empty() {
+            notes.push(format!(
+                "{} channel(s) not in the map or of another reference, not used: {}{}",
+                unused.len(),
+                unused
+                    .iter()
+                    .take(5)
+                    .cloned()
+                    .collect::<Vec<_>>()
+                    .join(", "),
+                if unused.len() > 5 { ", ..." } else { "" }
+            ));
+        }
+        Ok(MeasuredData {
+            source: std::iter::once(origin.to_string())
+                .chain(notes)
+                .collect::<Vec<_>>()
+                .join("; "),
+            characteristics,
+        })
+    }
+
+    /// The reference to use: the map's, or the one reference of the channels the map names.
+    fn reference(
+        &self,
+        channels: &[MeasuredChannel],
+        origin: &str,
+    ) -> Result<Option<(i64, i64)>, MapError> {
+        if self.reference.is_some() {
+            return Ok(self.reference);
+        }
+        let refs: BTreeSet<(i64, i64)> = channels
+            .iter()
+            .filter(|c| self.entries.iter().any(|e| e.name == c.name))
+            .filter_map(|c| c.reference)
+            .collect();
+        if refs.len() > 1 {
+            let list: Vec<String> = refs
+                .iter()
+                .map(|(n, d)| format!("node {n} {}", dir_text(*d)))
+                .collect();
+            return Err(MapError::Data(DataError::Invalid {
+                origin: origin.to_string(),
+                item: "references".into(),
+                message: format!(
+                    "the file holds FRFs of {} references ({}); choose one in the map: [reference] node = ..., dir = \"...\" (several references in one fit are not supported yet)",
+                    refs.len(),
+                    list.join(", ")
+                ),
+            }));
+        }
+        Ok(refs.into_iter().next())
+    }
+}
+
+/// Finite, non-negative, strictly increasing frequencies; finite amplitudes and phases.
+fn check_lines(
+    c: &MeasuredChannel,
+    bad: &dyn Fn(&str, String) -> MapError,
+) -> Result<(), MapError> {
+    let n = c.freqs_hz.len();
+    if n == 0 || c.amplitude.len() != n {
+        return Err(bad(
+            &c.item,
+            format!("{} frequencies, {} values", n, c.amplitude.len()),
+        ));
+    }
+    for k in 0..n {
+        let f = c.freqs_hz[k];
+        let at = format!("{}, line {k} of the function ({f} Hz)", c.item);
+        if !(f.is_finite() && f >= 0.0) {
+            return Err(bad(
+                &at,
+                format!("abscissa {f} is not a finite frequency ≥ 0"),
+            ));
+        }
+        if k > 0 && f <= c.freqs_hz[k - 1] {
+            let what = if f == c.freqs_hz[k - 1] {
+                "repeats"
+            } else {
+                "is below"
+            };
+            return Err(bad(
+                &at,
+                format!(
+                    "frequency {f} Hz {what} the previous one ({} Hz); frequencies must increase",
+                    c.freqs_hz[k - 1]
+                ),
+            ));
+        }
+        let phase_ok = c.phase_rad.as_ref().is_none_or(|p| p[k].is_finite());
+        if !c.amplitude[k].is_finite() || !phase_ok {
+            return Err(bad(
+                &at,
+                "value is NaN or infinite; drop the line or fix the file".into(),
+            ));
+        }
+    }
+    Ok(())
+}
