@@ -77,16 +77,6 @@ fn log_range(values: impl Iterator<Item = f64>) -> (f64, f64) {
     (lo / 1.5, hi * 1.5)
 }
 
-fn sci(v: f64) -> String {
-    if v == 0.0 {
-        "0".into()
-    } else if (1e-2..1e4).contains(&v.abs()) {
-        format!("{v}")
-    } else {
-        format!("{v:.0e}")
-    }
-}
-
 /// The series legend, upper right, on a translucent box.
 fn legend<'a, DB: DrawingBackend + 'a, CT: CoordTranslate>(
     chart: &mut ChartContext<'a, DB, CT>,
@@ -225,14 +215,9 @@ macro_rules! on_axes {
 /// A chart on the SVG canvas with f64 axes of either kind.
 type Chart<'a, 'b, X, Y> = ChartContext<'a, SVGBackend<'b>, Cartesian2d<X, Y>>;
 
-/// Label of a value on an axis: plain numbers in 1e-2..1e4, else one significant digit with an
-/// exponent.
-fn tick(v: f64, log: bool) -> String {
-    if log {
-        sci(v)
-    } else {
-        identify::display::sig(v, 3)
-    }
+/// Label of a tick on a frequency or ratio axis: three significant digits, no float noise.
+fn tick(v: f64) -> String {
+    identify::display::sig(v, 3)
 }
 
 /// The frequency axis of a characteristic's charts.
@@ -286,7 +271,7 @@ where
         .configure_mesh()
         .x_desc("frequency (Hz)")
         .y_desc(format!("|{}| ({})", c.quantity, c.unit))
-        .x_label_formatter(&|v| tick(*v, x.log))
+        .x_label_formatter(&|v| tick(*v))
         .y_label_formatter(&|v| {
             if y.log {
                 format!("{v:.0e}")
@@ -427,7 +412,7 @@ where
         .configure_mesh()
         .x_desc("frequency (Hz)")
         .y_desc("phase (°)")
-        .x_label_formatter(&|v| tick(*v, x.log))
+        .x_label_formatter(&|v| tick(*v))
         .y_label_formatter(&|v| format!("{v:.0}"))
         .label_style((FONT, 12))
         .draw()?;
@@ -527,7 +512,7 @@ where
         .configure_mesh()
         .x_desc("frequency (Hz)")
         .y_desc("(measured − model) / σ")
-        .x_label_formatter(&|v| tick(*v, x.log))
+        .x_label_formatter(&|v| tick(*v))
         .y_label_formatter(&|v| format!("{}σ", identify::display::sig(*v, 2)))
         .label_style((FONT, 12))
         .draw()?;
@@ -645,7 +630,7 @@ where
             }
             SegmentValue::Last => String::new(),
         })
-        .x_label_formatter(&|v| tick(*v, x.log))
+        .x_label_formatter(&|v| tick(*v))
         .x_desc("identified / initial")
         .label_style((FONT, 11))
         .draw()?;
