@@ -277,6 +277,34 @@ pub struct ReportContext<'a> {
     pub created_utc: String,
 }
 
+/// Builds the report (`report::build`) of an identification and, when it ran, its diagnosis
+/// (the section and the final model): `ctx` gives the headline, workflow, stand, drift, messages
+/// and time stamp, `source` the files (its `workflow`, `stand` and `software` are filled here).
+/// Shared by the workflows' report folders and `ident identify|diagnose --out`.
+pub fn build_report(
+    ctx: ReportContext<'_>,
+    source: report::document::Source,
+    observations: &Observations,
+    id: &Identification,
+    diagnosis: Option<(report::Diagnosis, &Model)>,
+) -> anyhow::Result<report::Report> {
+    let mut inputs = report::build::Inputs::new(ctx.title, observations, id);
+    inputs.source = report::document::Source {
+        workflow: ctx.workflow.into(),
+        stand: ctx.stand,
+        software: inputs.source.software,
+        ..source
+    };
+    inputs.diagnosis = diagnosis;
+    inputs.drift = ctx.drift;
+    inputs.created_utc = ctx.created_utc;
+    inputs.messages = ctx.messages;
+    let started = std::time::Instant::now();
+    let r = report::build::build(inputs)?;
+    tracing::info!(seconds = started.elapsed().as_secs_f64(), "report built");
+    Ok(r)
+}
+
 /// Builds the report and writes the report folder: `report.html`, `report.json`,
 /// `measured.json`, `identification.json`, `identification.csv`, `identified-model.json`, for TOML
 /// models `identified-model.toml` (the first fit), when diagnosis ran `diagnosis.json`
@@ -290,21 +318,23 @@ pub fn write_report(
     a: &Analysis,
 ) -> anyhow::Result<(report::Report, report::Written)> {
     let id = &a.identification;
-    let mut inputs = report::build::Inputs::new(ctx.title, &a.observations, id);
-    inputs.source.workflow = ctx.workflow.into();
-    inputs.source.session = Some(a.session.session.clone());
-    inputs.source.stand = ctx.stand.or_else(|| Some(a.session.stand.clone()));
-    inputs.source.model = setup.model_file.clone();
-    inputs.source.variables = setup.vars_file.clone();
-    inputs.source.measurement = a.session.measured.source.clone();
-    inputs.diagnosis = a
+    let ctx = ReportContext {
+        stand: ctx.stand.or_else(|| Some(a.session.stand.clone())),
+        messages: a.messages.iter().cloned().chain(ctx.messages).collect(),
+        ..ctx
+    };
+    let source = report::document::Source {
+        session: Some(a.session.session.clone()),
+        model: setup.model_file.clone(),
+        variables: setup.vars_file.clone(),
+        measurement: a.session.measured.source.clone(),
+        ..report::document::Source::default()
+    };
+    let diagnosis = a
         .diagnosis
         .as_ref()
         .map(|(d, full)| (d.clone(), &full.model));
-    inputs.drift = ctx.drift;
-    inputs.created_utc = ctx.created_utc;
-    inputs.messages = a.messages.iter().cloned().chain(ctx.messages).collect();
-    let r = report::build::build(inputs)?;
+    let r = build_report(ctx, source, &a.observations, id, diagnosis)?;
     let w = |name: &str, text: &str| report::write_atomic(&dir.join(name), text.as_bytes());
     w(
         "measured.json",

@@ -51,6 +51,8 @@ fn diagnose_finds_the_missing_actuator_from_files() {
         .arg(dir.path().join("final.toml"))
         .arg("--write-vars")
         .arg(dir.path().join("next.toml"))
+        .arg("--out")
+        .arg(dir.path().join("report"))
         .output()
         .expect("run ident");
     let stdout = String::from_utf8_lossy(&out.stdout);
@@ -100,6 +102,48 @@ fn diagnose_finds_the_missing_actuator_from_files() {
         next.vars.iter().any(|v| v.name == "k diagnosed spring 1"),
         "{vars}"
     );
+    // --out: the report with its diagnosis section, the final model's curves and modes.
+    let r: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(dir.path().join("report/report.json")).expect("report.json"),
+    )
+    .expect("valid JSON");
+    assert_eq!(r["source"]["workflow"], "diagnose");
+    let candidates = r["diagnosis"]["candidates"].as_array().expect("candidates");
+    assert!(candidates.len() > 10 && candidates.iter().any(|c| c["accepted"] == true));
+    let stages = r["characteristics"][0]["stages"]
+        .as_array()
+        .expect("stages");
+    let diagnosed = stages
+        .iter()
+        .find(|s| s["stage"] == "diagnosed")
+        .expect("diagnosed stage");
+    assert!(
+        diagnosed["dense"]["freqs_hz"]
+            .as_array()
+            .map_or(0, Vec::len)
+            >= 400
+    );
+    assert!(r["natural_frequencies"]
+        .as_array()
+        .expect("natural_frequencies")
+        .iter()
+        .any(|m| m["stage"] == "diagnosed" && !m["modes"].as_array().expect("modes").is_empty()));
+    let html = std::fs::read_to_string(dir.path().join("report/report.html")).expect("report.html");
+    let (top, rest) = html
+        .split_once("<details>")
+        .expect("the long ranking is collapsed");
+    let table = top
+        .split("<table class=\"candidates\">")
+        .nth(1)
+        .and_then(|t| t.split("</table>").next())
+        .expect("the candidate table");
+    assert_eq!(
+        table.matches("<tr").count(),
+        1 + 10,
+        "header and ten candidates"
+    );
+    assert!(rest.contains("<table class=\"candidates\">"));
+    assert!(!html.contains("<script"));
 }
 
 #[test]

@@ -114,6 +114,32 @@ fn a_converged_fit_reports_the_table_and_writes_the_updated_model() {
         text(&o.stderr)
     );
 
+    // report.json and report.html: the identify workflow's report with the dense model curves.
+    let r: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out_dir.join("report.json")).unwrap())
+            .unwrap();
+    assert_eq!(r["source"]["workflow"], "identify");
+    assert!(r["diagnosis"].is_null());
+    let chars = r["characteristics"].as_array().unwrap();
+    assert_eq!(chars.len(), 2);
+    for ch in chars {
+        let identified = ch["stages"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|s| s["stage"] == "identified")
+            .unwrap();
+        let dense = identified["dense"]["freqs_hz"].as_array().unwrap();
+        assert!(dense.len() >= 400, "{}", dense.len());
+        assert_eq!(
+            dense[0], ch["freqs_hz"][0],
+            "the curve starts at the first line"
+        );
+    }
+    let html = std::fs::read_to_string(out_dir.join("report.html")).unwrap();
+    assert_eq!(html.matches("data-chart=\"amplitude\"").count(), 2);
+    assert!(html.contains("model, identified") && !html.contains("<script"));
+
     // table.json: the estimates within 3 standard errors of the truth, J decreased.
     let j: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out_dir.join("table.json")).unwrap())

@@ -1,9 +1,10 @@
-//! From `identify`'s results to a [`Report`]: model curves per stage at the measured lines,
-//! standardized residuals, the parameter table and the sensitivity map.
+//! From `identify`'s results to a [`Report`]: model curves per stage at the measured lines and on
+//! a dense log grid across the band (with the model's resonances on it), the natural frequencies
+//! in the band, standardized residuals, the parameter table and the sensitivity map.
 
 use identify::identification::data::{Observations, Observed};
 use identify::identification::{report as table, Identification};
-use identify::{diagnose, frf, sensitivity, Model, Quantity};
+use identify::{diagnose, frf, modes, sensitivity, Model, Quantity};
 
 use crate::document::*;
 use crate::ReportError;
@@ -11,6 +12,10 @@ use crate::ReportError;
 /// Relative σ used for standardized residuals when the data carry neither variances nor
 /// coherence (the identification's own relative-error default).
 pub const RELATIVE_SIGMA: f64 = 0.01;
+
+/// Log-spaced lines of the dense model curves across the measured band (the measured lines and
+/// the model's resonances are added to them).
+pub const DENSE_LINES: usize = 400;
 
 /// Everything a report is built from.
 pub struct Inputs<'a> {
@@ -140,7 +145,132 @@ fn stage_curve(
         amplitude: q.into_iter().map(finite).collect(),
         standardized_residual: residual,
         rms_relative_error: finite(if n > 0 { (s2 / n as f64).sqrt() } else { 0.0 }),
+        dense: None,
     })
+}
+
+/// The band of the measured lines over every characteristic (Hz): the lowest positive and the
+/// highest line; `None` without a positive line.
+pub fn measured_band(obs: &Observations) -> Option<(f64, f64)> {
+    let lines = || {
+        obs.characteristics
+            .iter()
+            .flat_map(|c| c.freqs_hz.iter().copied())
+            .filter(|f| f.is_finite() && *f > 0.0)
+    };
+    let lo = lines().min_by(f64::total_cmp)?;
+    let hi = lines().max_by(f64::total_cmp)?;
+    Some((lo, hi))
+}
+
+/// The modes of `model` (`identify::modes::complex`, with their loss factors) whose natural
+/// frequency lies in `band` (Hz), numbered as `ident modes` numbers them.
+pub fn modes_in_band(
+    model: &Model,
+    (lo, hi): (f64, f64),
+) -> Result<Vec<NaturalMode>, frf::SolveError> {
+    Ok(modes::complex(model)?
+        .into_iter()
+        .enumerate()
+        .filter(|(_, m)| m.freq_hz >= lo && m.freq_hz <= hi)
+        .map(|(i, m)| NaturalMode {
+            number: i + 1,
+            freq_hz: m.freq_hz,
+            loss_factor: finite(m.loss_factor),
+        })
+        .collect())
+}
+
+/// The dense frequency grid (Hz, strictly increasing) of a model curve over `band`: `lines`
+/// log-spaced lines from end to end, every `measured` line inside the band, and each mode's
+/// natural frequency with the points where a single hysteretic mode's response falls to 1/√2
+/// and to 1/√(5/4) of its peak (`f_n √(1 ± η)`, `f_n √(1 ± η/2)`), so no peak is cut between
+/// grid lines.
+pub fn dense_grid(
+    (lo, hi): (f64, f64),
+    lines: usize,
+    measured: &[f64],
+    modes: &[NaturalMode],
+) -> Vec<f64> {
+    let mut grid: Vec<f64> = Vec::with_capacity(lines + measured.len() + 5 * modes.len());
+    if lo > 0.0 && hi > lo && lines >= 2 {
+        let ratio = (hi / lo).ln();
+        grid.extend((0..lines).map(|i| lo * (ratio * i as f64 / (lines - 1) as f64).exp()));
+        // The end points exactly.
+        grid[0] = lo;
+        grid[lines - 1] = hi;
+    } else if lo > 0.0 {
+        grid.push(lo);
+        grid.push(hi);
+    }
+    grid.extend(measured.iter().copied());
+    for m in modes {
+        let eta = m.loss_factor.max(0.0);
+        grid.push(m.freq_hz);
+        for s in [-1.0, -0.5, 0.5, 1.0] {
+            let x = 1.0 + s * eta;
+            if x > 0.0 {
+                grid.push(m.freq_hz * x.sqrt());
+            }
+        }
+    }
+    grid.retain(|f| f.is_finite() && *f > 0.0 && *f >= lo && *f <= hi);
+    grid.sort_by(f64::total_cmp);
+    grid.dedup_by(|b, a| (*b - *a).abs() <= 1e-12 * a.abs());
+    grid
+}
+
+/// One stage's model on its dense grid over `band`: the grid, the response of every output on
+/// it, and the model's modes in the band.
+struct DenseStage {
+    grid: Vec<f64>,
+    response: frf::Response,
+    modes: Vec<NaturalMode>,
+}
+
+fn dense_stage(
+    stage: &str,
+    model: &Model,
+    obs: &Observations,
+    band: (f64, f64),
+) -> Result<DenseStage, ReportError> {
+    let err = |source| ReportError::Model {
+        stage: stage.into(),
+        source,
+    };
+    let modes = modes_in_band(model, band).map_err(err)?;
+    let measured: Vec<f64> = obs
+        .characteristics
+        .iter()
+        .flat_map(|c| c.freqs_hz.iter().copied())
+        .collect();
+    let grid = dense_grid(band, DENSE_LINES, &measured, &modes);
+    let response = frf::response(model, &grid, &[], frf::Method::Auto).map_err(err)?;
+    Ok(DenseStage {
+        grid,
+        response,
+        modes,
+    })
+}
+
+/// The part of a stage's dense curve inside characteristic `c`'s own band.
+fn dense_curve(d: &DenseStage, c: &Observed) -> DenseCurve {
+    let (lo, hi) = (
+        c.freqs_hz.first().copied().unwrap_or(0.0),
+        c.freqs_hz.last().copied().unwrap_or(0.0),
+    );
+    let values = d.response.output(c.output);
+    let inside: Vec<usize> = (0..d.grid.len())
+        .filter(|&k| d.grid[k] >= lo && d.grid[k] <= hi)
+        .collect();
+    DenseCurve {
+        freqs_hz: inside.iter().map(|&k| d.grid[k]).collect(),
+        amplitude: inside.iter().map(|&k| finite(values[k].norm())).collect(),
+        phase_rad: c
+            .phase_rad
+            .as_ref()
+            .map(|_| inside.iter().map(|&k| finite(values[k].arg())).collect()),
+    }
 }
 
 /// JSON has no infinities: clamp them (a report must still be written when a model explodes).
@@ -403,13 +533,27 @@ pub fn build(inputs: Inputs<'_>) -> Result<Report, ReportError> {
     if let Some((_, m)) = &inputs.diagnosis {
         stages.push(("diagnosed", m));
     }
+    // The first fit and the final model on dense grids (the initial model only at the lines).
+    let band = measured_band(inputs.observations);
+    let dense: Vec<Option<DenseStage>> = stages
+        .iter()
+        .map(|(s, m)| match band {
+            Some(b) if *s != "initial" => dense_stage(s, m, inputs.observations, b).map(Some),
+            _ => Ok(None),
+        })
+        .collect::<Result<_, _>>()?;
     let mut characteristics = Vec::new();
     for c in &inputs.observations.characteristics {
         let (sigma, kind) = sigmas(c);
         let curves = stages
             .iter()
-            .map(|(s, m)| stage_curve(s, m, c, &sigma))
-            .collect::<Result<Vec<_>, _>>()?;
+            .zip(&dense)
+            .map(|((s, m), d)| {
+                let mut curve = stage_curve(s, m, c, &sigma)?;
+                curve.dense = d.as_ref().map(|d| dense_curve(d, c));
+                Ok(curve)
+            })
+            .collect::<Result<Vec<_>, ReportError>>()?;
         characteristics.push(CharacteristicReport {
             label: c.label.clone(),
             body: id
@@ -425,6 +569,7 @@ pub fn build(inputs: Inputs<'_>) -> Result<Report, ReportError> {
             measured: c.amplitude.clone(),
             sigma: sigma.into_iter().map(finite).collect(),
             sigma_kind: kind.into(),
+            measured_phase_rad: c.phase_rad.clone(),
             stages: curves,
         });
     }
@@ -473,6 +618,17 @@ pub fn build(inputs: Inputs<'_>) -> Result<Report, ReportError> {
         sensitivity,
         picture,
         drift: None,
+        natural_frequencies: stages
+            .iter()
+            .zip(dense)
+            .filter_map(|((s, _), d)| {
+                Some(StageModes {
+                    stage: (*s).into(),
+                    band_hz: band.map(|(lo, hi)| [lo, hi])?,
+                    modes: d?.modes,
+                })
+            })
+            .collect(),
     })
     .map(|mut r| {
         if let Some(d) = inputs.drift {
@@ -485,6 +641,68 @@ pub fn build(inputs: Inputs<'_>) -> Result<Report, ReportError> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn dense_grid_is_log_spaced_across_the_band_with_lines_and_resonances() {
+        let measured = [20.0, 31.7, 55.5, 400.0, 401.0, 10.0];
+        let modes = [NaturalMode {
+            number: 7,
+            freq_hz: 47.3,
+            loss_factor: 0.1,
+        }];
+        let g = dense_grid((20.0, 400.0), 400, &measured, &modes);
+        assert_eq!(g.first(), Some(&20.0));
+        assert_eq!(g.last(), Some(&400.0));
+        assert!(g.windows(2).all(|w| w[1] > w[0]), "strictly increasing");
+        // 400 log lines + 31.7, 55.5 + the mode and its four neighbours (20 and 400 are grid ends;
+        // lines outside the band are left out).
+        assert_eq!(g.len(), 400 + 2 + 5, "{}", g.len());
+        for f in [
+            31.7,
+            55.5,
+            47.3,
+            47.3 * 1.1f64.sqrt(),
+            47.3 * 0.95f64.sqrt(),
+        ] {
+            assert!(
+                g.iter().any(|x| (x - f).abs() < 1e-12 * f),
+                "{f} on the grid"
+            );
+        }
+        // Log-spaced: the ratio between neighbours never exceeds the log step (20^(1/399)).
+        let step = (400.0f64 / 20.0).powf(1.0 / 399.0);
+        let worst = g.windows(2).map(|w| w[1] / w[0]).fold(0.0, f64::max);
+        assert!(worst <= step * (1.0 + 1e-12), "{worst} vs {step}");
+        // A degenerate band gives its one line.
+        assert_eq!(dense_grid((50.0, 50.0), 400, &[50.0], &[]), vec![50.0]);
+        assert!(dense_grid((0.0, 0.0), 400, &[0.0], &[]).is_empty());
+    }
+
+    #[test]
+    fn modes_in_band_number_like_ident_modes() {
+        let m = identify::textbook::two_in_series(400.0, 120.0, 2.0e7, 5.0e6, 0.5);
+        let all = modes::complex(&m).unwrap();
+        let elastic: Vec<f64> = all.iter().map(|x| x.freq_hz).filter(|f| *f > 1.0).collect();
+        assert!(elastic.len() >= 2, "{elastic:?}");
+        let (lo, hi) = (elastic[0] * 0.99, elastic[1] * 1.01);
+        let inside = modes_in_band(&m, (lo, hi)).unwrap();
+        let expected = all
+            .iter()
+            .filter(|x| x.freq_hz >= lo && x.freq_hz <= hi)
+            .count();
+        assert!(inside.len() >= 2 && inside.len() == expected, "{inside:?}");
+        assert!(inside.windows(2).all(|w| w[1].number > w[0].number));
+        for x in &inside {
+            assert!((all[x.number - 1].freq_hz - x.freq_hz).abs() < 1e-12);
+            assert!(
+                x.loss_factor > 0.0,
+                "hysteretic damping gives a loss factor"
+            );
+        }
+        assert!(modes_in_band(&m, (elastic[0] * 0.5, elastic[0] * 0.9))
+            .unwrap()
+            .is_empty());
+    }
 
     #[test]
     fn utc_dates_match_known_instants() {

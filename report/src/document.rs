@@ -38,13 +38,17 @@ pub struct Report {
     pub picture: Option<crate::picture::ModelPicture>,
     /// Parameter history across runs (nightly).
     pub drift: Option<Drift>,
+    /// Natural frequencies of the identified and the diagnosed model inside the measured band
+    /// (marked on the amplitude charts).
+    #[serde(default)]
+    pub natural_frequencies: Vec<StageModes>,
 }
 
 /// Provenance.
 #[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Source {
-    /// `demo`, `replay`, `nightly` or `identify`.
+    /// `demo`, `replay`, `nightly`, `identify` or `diagnose`.
     pub workflow: String,
     /// Session recording (MCAP) the measurement came from, if any.
     pub session: Option<String>,
@@ -116,6 +120,9 @@ pub struct CharacteristicReport {
     pub sigma: Vec<f64>,
     /// `variance`, `coherence` or `relative`.
     pub sigma_kind: String,
+    /// Measured phase (rad) at `freqs_hz`, when the data have phase.
+    #[serde(default)]
+    pub measured_phase_rad: Option<Vec<f64>>,
     /// Model amplitude per stage (`initial`, `identified`, `diagnosed`).
     pub stages: Vec<StageCurve>,
 }
@@ -132,6 +139,50 @@ pub struct StageCurve {
     pub standardized_residual: Vec<f64>,
     /// RMS of (model − measured) / measured over the points.
     pub rms_relative_error: f64,
+    /// The model on a dense log grid across the measured band (the identified and diagnosed
+    /// stages; `null` for `initial`), drawn as the smooth model curve.
+    #[serde(default)]
+    pub dense: Option<DenseCurve>,
+}
+
+/// A model curve on a dense frequency grid.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct DenseCurve {
+    /// Frequencies (Hz), strictly increasing: [`crate::build::DENSE_LINES`] log-spaced lines
+    /// from the lowest to the highest measured line, the measured lines themselves, and each
+    /// natural frequency of the stage's model in the band with its half-power points, so
+    /// resonance peaks are not clipped between grid lines.
+    pub freqs_hz: Vec<f64>,
+    /// Model amplitudes at `freqs_hz` (the characteristic's `unit`).
+    pub amplitude: Vec<f64>,
+    /// Model phase (rad, in (−π, π]) at `freqs_hz`, when the measurement has phase.
+    pub phase_rad: Option<Vec<f64>>,
+}
+
+/// The natural frequencies of one stage's model inside the measured band.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct StageModes {
+    /// `identified` or `diagnosed`.
+    pub stage: String,
+    /// The band (Hz): lowest and highest measured line.
+    pub band_hz: [f64; 2],
+    /// The modes in the band, ascending.
+    pub modes: Vec<NaturalMode>,
+}
+
+/// One mode of a model (`identify::modes::complex`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct NaturalMode {
+    /// 1-based number among all the model's modes, ascending in frequency (rigid-body modes
+    /// included), as `ident modes` numbers them.
+    pub number: usize,
+    /// Natural frequency (Hz).
+    pub freq_hz: f64,
+    /// Loss factor η (dimensionless; ψ = 2πη for a single SDE).
+    pub loss_factor: f64,
 }
 
 /// One row of the Table-1-like table, in the variable's display unit.

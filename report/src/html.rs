@@ -194,7 +194,7 @@ fn identification_summary(h: &mut String, r: &Report) {
 fn characteristics(h: &mut String, r: &Report) -> Result<(), ReportError> {
     let e = escape;
     h.push_str("<h2 id=\"characteristics\">Amplitude-frequency characteristics</h2>\n");
-    h.push_str("<p class=\"note\">Measured points with ± one standard deviation; the model before identification (initial), after it (identified) and, when diagnosis ran, after the diagnosed effects were added and refitted (diagnosed).</p>\n");
+    h.push_str("<p class=\"note\">Measured points with ± one standard deviation; the model before identification (initial, through the measured lines), after it (identified) and, when diagnosis ran, after the diagnosed effects were added and refitted (diagnosed), as smooth curves on a dense grid; the final model's natural frequencies in the band marked. Residuals in units of σ.</p>\n");
     h.push_str("<table><tr><th class=\"l\">characteristic</th>");
     let stages: Vec<&str> = r
         .characteristics
@@ -222,12 +222,20 @@ fn characteristics(h: &mut String, r: &Report) -> Result<(), ReportError> {
         );
     }
     h.push_str("</table>\n");
+    let modes = final_modes(r);
     for c in &r.characteristics {
         let _ = writeln!(
             h,
             "<figure class=\"plot\" data-chart=\"amplitude\">{}</figure>",
-            inline(plot::amplitude_chart(c)?)
+            inline(plot::amplitude_chart(c, modes)?)
         );
+        if c.measured_phase_rad.is_some() {
+            let _ = writeln!(
+                h,
+                "<figure class=\"plot\" data-chart=\"phase\">{}</figure>",
+                inline(plot::phase_chart(c)?)
+            );
+        }
         let _ = writeln!(
             h,
             "<figure class=\"plot\" data-chart=\"residual\">{}</figure>",
@@ -301,6 +309,16 @@ fn model_picture(h: &mut String, r: &Report) -> Result<(), ReportError> {
     Ok(())
 }
 
+/// The final model's natural frequencies in the band: the diagnosed stage's when diagnosis ran,
+/// else the identified one's.
+fn final_modes(r: &Report) -> &[NaturalMode] {
+    let of = |stage: &str| r.natural_frequencies.iter().find(|m| m.stage == stage);
+    of("diagnosed")
+        .or_else(|| of("identified"))
+        .map(|m| m.modes.as_slice())
+        .unwrap_or(&[])
+}
+
 /// The parameter table (Table-1-like) and the poorly identifiable directions.
 fn parameters(h: &mut String, r: &Report) -> Result<(), ReportError> {
     let e = escape;
@@ -361,17 +379,8 @@ fn diagnosis(h: &mut String, r: &Report) {
                 },
                 e(&d.verdict)
             );
-            h.push_str("<table><tr><th>round</th><th class=\"l\">candidate effect</th><th class=\"l\">what and where</th><th>score statistic</th><th>p-value</th><th class=\"l\">accepted</th><th>estimate</th><th>std error</th><th class=\"l\">unit</th></tr>\n");
-            for c in &d.candidates {
-                let _ = writeln!(
-                    h,
-                    "<tr{}><td>{}</td><td class=\"l\">{}</td><td class=\"l\">{}</td><td>{}</td><td>{}</td><td class=\"l\">{}</td><td>{}</td><td>{}</td><td class=\"l\">{}</td></tr>",
-                    if c.accepted { " class=\"accepted\"" } else { "" },
-                    c.round, e(&c.name), e(&c.location), num(c.statistic), identify::display::p_value(c.p_value), if c.accepted { "yes" } else { "no" },
-                    opt(c.estimate), opt(c.std_error), e(&c.unit)
-                );
-            }
-            h.push_str("</table>\n<table><tr><th class=\"l\"></th><th>criterion J</th><th>reduced χ²</th><th>χ² p-value</th>");
+            candidates(h, &d.candidates);
+            h.push_str("<table><tr><th class=\"l\"></th><th>criterion J</th><th>reduced χ²</th><th>χ² p-value</th>");
             for l in &d.before.rms_relative_error {
                 let _ = write!(h, "<th>RMS {}</th>", e(&l.label));
             }
@@ -394,13 +403,83 @@ fn diagnosis(h: &mut String, r: &Report) {
             }
             let _ = writeln!(h, "</table>\n<p>Final model: {}</p>", e(&d.final_model));
             if !d.not_tried.is_empty() {
-                h.push_str("<p>Not tried:</p><ul>");
+                h.push_str("<p>Tried but not evaluated, or not testable with these data, and why:</p><ul class=\"not-tried\">");
                 for n in &d.not_tried {
                     let _ = write!(h, "<li>{}: {}</li>", e(&n.effect), e(&n.reason));
                 }
                 h.push_str("</ul>\n");
             }
         }
+    }
+}
+
+/// Candidates shown outside the collapsible rest of the ranking.
+pub const TOP_CANDIDATES: usize = 10;
+
+/// The candidates in the compact table: the [`TOP_CANDIDATES`] strongest by score statistic,
+/// every accepted one among them, in (round, strongest first) order; then the rest.
+pub fn top_candidates(c: &[Candidate]) -> (Vec<&Candidate>, Vec<&Candidate>) {
+    let mut order: Vec<usize> = (0..c.len()).collect();
+    // Accepted first, then by statistic: the cut keeps every accepted candidate.
+    order.sort_by(|&a, &b| {
+        c[b].accepted
+            .cmp(&c[a].accepted)
+            .then(c[b].statistic.total_cmp(&c[a].statistic))
+    });
+    let mut top: Vec<usize> = order.iter().copied().take(TOP_CANDIDATES).collect();
+    let mut rest: Vec<usize> = order.iter().copied().skip(TOP_CANDIDATES).collect();
+    top.sort_unstable();
+    rest.sort_unstable();
+    (
+        top.into_iter().map(|i| &c[i]).collect(),
+        rest.into_iter().map(|i| &c[i]).collect(),
+    )
+}
+
+/// The ranking: the top candidates as a compact table, the rest behind a `<details>` element
+/// (no script needed).
+fn candidates(h: &mut String, all: &[Candidate]) {
+    let e = escape;
+    let head = "<table class=\"candidates\"><tr><th>round</th><th class=\"l\">candidate effect</th><th class=\"l\">what and where</th><th>score statistic</th><th>p-value</th><th class=\"l\">accepted</th><th>estimate</th><th>std error</th><th class=\"l\">unit</th></tr>\n";
+    let row = |h: &mut String, c: &Candidate| {
+        let _ = writeln!(
+            h,
+            "<tr{}><td>{}</td><td class=\"l\">{}</td><td class=\"l\">{}</td><td>{}</td><td>{}</td><td class=\"l\">{}</td><td>{}</td><td>{}</td><td class=\"l\">{}</td></tr>",
+            if c.accepted { " class=\"accepted\"" } else { "" },
+            c.round,
+            e(&c.name),
+            e(&c.location),
+            identify::display::sig(c.statistic, 3),
+            identify::display::p_value(c.p_value),
+            if c.accepted { "<strong>yes</strong>" } else { "no" },
+            c.estimate.map(|v| identify::display::sig(v, 4)).unwrap_or_else(|| "—".into()),
+            c.std_error.map(|v| identify::display::sig(v, 2)).unwrap_or_else(|| "—".into()),
+            e(&c.unit)
+        );
+    };
+    let (top, rest) = top_candidates(all);
+    let _ = writeln!(
+        h,
+        "<p>Candidate effects ranked by the score test ({} in all; the {} strongest here, every accepted one among them):</p>",
+        all.len(),
+        top.len()
+    );
+    h.push_str(head);
+    for c in top {
+        row(h, c);
+    }
+    h.push_str("</table>\n");
+    if !rest.is_empty() {
+        let _ = writeln!(
+            h,
+            "<details><summary>the other {} candidates</summary>",
+            rest.len()
+        );
+        h.push_str(head);
+        for c in rest {
+            row(h, c);
+        }
+        h.push_str("</table></details>\n");
     }
 }
 

@@ -3,7 +3,10 @@
 
 use plotters::prelude::*;
 
-use crate::document::{CharacteristicReport, Drift, Parameter, SensitivityMap};
+use plotters::coord::ranged1d::{SegmentedCoord, ValueFormatter};
+use plotters::coord::types::RangedCoordi32;
+
+use crate::document::{CharacteristicReport, Drift, NaturalMode, Parameter, SensitivityMap};
 use crate::drift::deviation;
 use crate::ReportError;
 
@@ -74,16 +77,6 @@ fn log_range(values: impl Iterator<Item = f64>) -> (f64, f64) {
     (lo / 1.5, hi * 1.5)
 }
 
-fn sci(v: f64) -> String {
-    if v == 0.0 {
-        "0".into()
-    } else if (1e-2..1e4).contains(&v.abs()) {
-        format!("{v}")
-    } else {
-        format!("{v:.0e}")
-    }
-}
-
 /// The series legend, upper right, on a translucent box.
 fn legend<'a, DB: DrawingBackend + 'a, CT: CoordTranslate>(
     chart: &mut ChartContext<'a, DB, CT>,
@@ -117,201 +110,569 @@ fn log_ticks(lo: f64, hi: f64) -> Vec<f64> {
     out
 }
 
-/// Measured amplitudes (with ±σ bars) and the model at each stage, log-log.
-pub fn amplitude_chart(c: &CharacteristicReport) -> Result<String, ReportError> {
+/// The range of one chart axis and whether it is logarithmic.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Axis {
+    /// Lower end (same unit as the data).
+    pub lo: f64,
+    /// Upper end.
+    pub hi: f64,
+    /// Logarithmic.
+    pub log: bool,
+}
+
+impl Axis {
+    /// The axis for `values`: logarithmic (with a margin of ×1.5) when the positive finite values
+    /// span at least a decade, linear (with a 5 % margin) otherwise.
+    pub fn for_values(values: impl Iterator<Item = f64>) -> Axis {
+        let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+        for v in values.filter(|v| v.is_finite()) {
+            lo = lo.min(v);
+            hi = hi.max(v);
+        }
+        if !lo.is_finite() || !hi.is_finite() {
+            return Axis {
+                lo: 0.0,
+                hi: 1.0,
+                log: false,
+            };
+        }
+        if lo > 0.0 && hi >= 10.0 * lo {
+            let (lo, hi) = log_range([lo, hi].into_iter());
+            return Axis { lo, hi, log: true };
+        }
+        let pad = if hi > lo {
+            0.05 * (hi - lo)
+        } else {
+            0.05 * hi.abs().max(1e-300)
+        };
+        Axis {
+            lo: lo - pad,
+            hi: hi + pad,
+            log: false,
+        }
+    }
+
+    /// The value a fraction `t` (0 bottom/left, 1 top/right) along the axis.
+    pub fn at(&self, t: f64) -> f64 {
+        if self.log {
+            self.lo * (self.hi / self.lo).powf(t)
+        } else {
+            self.lo + t * (self.hi - self.lo)
+        }
+    }
+
+    /// Where `v` lies along the axis (0 at `lo`, 1 at `hi`): the inverse of [`Axis::at`].
+    pub fn fraction(&self, v: f64) -> f64 {
+        if self.log {
+            (v / self.lo).ln() / (self.hi / self.lo).ln()
+        } else {
+            (v - self.lo) / (self.hi - self.lo)
+        }
+    }
+
+    /// `v` clamped into the axis.
+    fn clamp(&self, v: f64) -> f64 {
+        v.clamp(self.lo, self.hi)
+    }
+
+    /// Whether `v` can be drawn on the axis (positive on a log axis).
+    fn shows(&self, v: f64) -> bool {
+        v.is_finite() && (!self.log || v > 0.0)
+    }
+}
+
+/// Builds a 2-D chart with `x` and `y` linear or logarithmic as each says (log frequency axes
+/// get 1-2-5 ticks) and runs the generic drawing function `$draw(&mut chart, args...)` on it.
+macro_rules! on_axes {
+    ($builder:expr, $x:expr, $y:expr, $draw:ident ( $($arg:expr),* )) => {{
+        let (x, y): (Axis, Axis) = ($x, $y);
+        let b = &mut $builder;
+        match (x.log, y.log) {
+            (true, true) => $draw(
+                &mut b.build_cartesian_2d(
+                    (x.lo..x.hi).log_scale().with_key_points(log_ticks(x.lo, x.hi)),
+                    (y.lo..y.hi).log_scale(),
+                )?,
+                $($arg),*
+            ),
+            (true, false) => $draw(
+                &mut b.build_cartesian_2d(
+                    (x.lo..x.hi).log_scale().with_key_points(log_ticks(x.lo, x.hi)),
+                    y.lo..y.hi,
+                )?,
+                $($arg),*
+            ),
+            (false, true) => $draw(
+                &mut b.build_cartesian_2d(x.lo..x.hi, (y.lo..y.hi).log_scale())?,
+                $($arg),*
+            ),
+            (false, false) => $draw(&mut b.build_cartesian_2d(x.lo..x.hi, y.lo..y.hi)?, $($arg),*),
+        }
+    }};
+}
+
+/// A chart on the SVG canvas with f64 axes of either kind.
+type Chart<'a, 'b, X, Y> = ChartContext<'a, SVGBackend<'b>, Cartesian2d<X, Y>>;
+
+/// Label of a tick on a frequency or ratio axis: three significant digits, no float noise.
+fn tick(v: f64) -> String {
+    identify::display::sig(v, 3)
+}
+
+/// The frequency axis of a characteristic's charts.
+fn frequency_axis(c: &CharacteristicReport) -> Axis {
+    Axis::for_values(c.freqs_hz.iter().copied().filter(|f| *f > 0.0))
+}
+
+/// Measured amplitudes (with ±σ bars), the model at each stage — smooth curves on the dense grid
+/// for the identified and diagnosed models, a thin polyline through the measured lines for the
+/// initial one — and the final model's natural frequencies as labelled vertical markers.
+/// Frequency and amplitude axes are logarithmic where the data span a decade or more.
+pub fn amplitude_chart(
+    c: &CharacteristicReport,
+    modes: &[NaturalMode],
+) -> Result<String, ReportError> {
     svg("amplitude", (760, 380), |root| {
-        let (f0, f1) = log_range(c.freqs_hz.iter().copied());
-        let (a0, a1) = log_range(
+        let x = frequency_axis(c);
+        let y = Axis::for_values(
             c.measured
                 .iter()
                 .copied()
-                .chain(c.stages.iter().flat_map(|s| s.amplitude.iter().copied())),
+                .chain(c.stages.iter().flat_map(|s| {
+                    let dense = s.dense.iter().flat_map(|d| d.amplitude.iter().copied());
+                    s.amplitude.iter().copied().chain(dense)
+                })),
         );
-        let mut chart = ChartBuilder::on(root)
-            .caption(
-                format!("{} — amplitude-frequency characteristic", c.label),
-                (FONT, 16),
-            )
-            .margin(10)
-            .x_label_area_size(40)
-            .y_label_area_size(80)
-            .build_cartesian_2d(
-                (f0..f1).log_scale().with_key_points(log_ticks(f0, f1)),
-                (a0..a1).log_scale(),
-            )?;
+        let mut b = ChartBuilder::on(root);
+        b.caption(
+            format!("{} — amplitude-frequency characteristic", c.label),
+            (FONT, 16),
+        )
+        .margin(10)
+        .x_label_area_size(40)
+        .y_label_area_size(80);
+        on_axes!(b, x, y, draw_amplitude(c, modes, x, y))
+    })
+}
+
+fn draw_amplitude<'a, 'b: 'a, X, Y>(
+    chart: &mut Chart<'a, 'b, X, Y>,
+    c: &CharacteristicReport,
+    modes: &[NaturalMode],
+    x: Axis,
+    y: Axis,
+) -> Result<(), DrawError>
+where
+    X: Ranged<ValueType = f64> + ValueFormatter<f64>,
+    Y: Ranged<ValueType = f64> + ValueFormatter<f64>,
+{
+    chart
+        .configure_mesh()
+        .x_desc("frequency (Hz)")
+        .y_desc(format!("|{}| ({})", c.quantity, c.unit))
+        .x_label_formatter(&|v| tick(*v))
+        .y_label_formatter(&|v| {
+            if y.log {
+                format!("{v:.0e}")
+            } else {
+                format!("{v:.2e}")
+            }
+        })
+        .label_style((FONT, 12))
+        .draw()?;
+    // The final model's natural frequencies: thin vertical markers, labelled along them.
+    let grey = RGBColor(120, 120, 120);
+    let in_view: Vec<&NaturalMode> = modes
+        .iter()
+        .filter(|m| m.freq_hz >= x.lo && m.freq_hz <= x.hi && x.shows(m.freq_hz))
+        .collect();
+    chart.draw_series(in_view.iter().map(|m| {
+        PathElement::new(
+            vec![(m.freq_hz, y.lo), (m.freq_hz, y.hi)],
+            grey.mix(0.6).stroke_width(1),
+        )
+    }))?;
+    let label = (FONT, 10)
+        .into_font()
+        .transform(FontTransform::Rotate270)
+        .color(&grey);
+    // Labels where they do not overlap the previous one (2 % of the width apart).
+    let mut last = f64::NEG_INFINITY;
+    let labelled: Vec<&&NaturalMode> = in_view
+        .iter()
+        .filter(|m| {
+            let t = x.fraction(m.freq_hz);
+            let free = t - last >= 0.02;
+            if free {
+                last = t;
+            }
+            free
+        })
+        .collect();
+    chart.draw_series(labelled.iter().map(|m| {
+        Text::new(
+            format!(
+                "mode {} · {} Hz",
+                m.number,
+                identify::display::sig(m.freq_hz, 3)
+            ),
+            (m.freq_hz, y.at(0.03)),
+            label.clone(),
+        )
+    }))?;
+    for s in &c.stages {
+        let col = stage_colour(&s.stage);
+        let (points, style): (Vec<(f64, f64)>, ShapeStyle) = match &s.dense {
+            Some(d) => (
+                d.freqs_hz
+                    .iter()
+                    .zip(&d.amplitude)
+                    .map(|(f, a)| (*f, *a))
+                    .collect(),
+                col.stroke_width(2),
+            ),
+            None => (
+                c.freqs_hz
+                    .iter()
+                    .zip(&s.amplitude)
+                    .map(|(f, a)| (*f, *a))
+                    .collect(),
+                col.stroke_width(1),
+            ),
+        };
+        let width = style.stroke_width;
         chart
-            .configure_mesh()
-            .x_desc("frequency (Hz)")
-            .y_desc(format!("|{}| ({})", c.quantity, c.unit))
-            .x_label_formatter(&|v| sci(*v))
-            .y_label_formatter(&|v| format!("{v:.0e}"))
-            .label_style((FONT, 12))
-            .draw()?;
-        for s in &c.stages {
-            let col = stage_colour(&s.stage);
-            chart
-                .draw_series(LineSeries::new(
-                    c.freqs_hz
-                        .iter()
-                        .zip(&s.amplitude)
-                        .filter(|(_, a)| **a > 0.0)
-                        .map(|(f, a)| (*f, *a)),
-                    col.stroke_width(2),
-                ))?
-                .label(format!("model, {}", s.stage))
-                .legend(move |(x, y)| {
-                    PathElement::new(vec![(x, y), (x + 20, y)], col.stroke_width(2))
-                });
+            .draw_series(LineSeries::new(
+                points
+                    .into_iter()
+                    .filter(|(f, a)| x.shows(*f) && y.shows(*a))
+                    .map(|(f, a)| (f, y.clamp(a))),
+                style,
+            ))?
+            .label(format!("model, {}", s.stage))
+            .legend(move |(x, y)| {
+                PathElement::new(vec![(x, y), (x + 20, y)], col.stroke_width(width))
+            });
+    }
+    let measured = || {
+        c.freqs_hz
+            .iter()
+            .zip(&c.measured)
+            .zip(&c.sigma)
+            .filter(|((f, a), _)| x.shows(**f) && y.shows(**a))
+    };
+    // Error bars (±σ, clipped to the axis) then the points.
+    chart.draw_series(measured().map(|((f, a), s)| {
+        let low = if y.log && a - s <= 0.0 {
+            y.lo
+        } else {
+            y.clamp(a - s)
+        };
+        PathElement::new(vec![(*f, low), (*f, y.clamp(a + s))], BLACK.stroke_width(1))
+    }))?;
+    chart
+        .draw_series(
+            measured().map(|((f, a), _)| Circle::new((*f, y.clamp(*a)), 3, BLACK.filled())),
+        )?
+        .label("measured ± σ")
+        .legend(|(x, y)| Circle::new((x + 10, y), 3, BLACK.filled()));
+    legend(chart)
+}
+
+/// Measured and model phase (degrees) where the data have phase: the dense model curves of the
+/// identified and diagnosed stages (broken where they wrap at ±180°) over the measured points.
+pub fn phase_chart(c: &CharacteristicReport) -> Result<String, ReportError> {
+    svg("phase", (760, 260), |root| {
+        let x = frequency_axis(c);
+        let y = Axis {
+            lo: -180.0,
+            hi: 180.0,
+            log: false,
+        };
+        let mut b = ChartBuilder::on(root);
+        b.caption(format!("{} — phase", c.label), (FONT, 14))
+            .margin(10)
+            .x_label_area_size(35)
+            .y_label_area_size(80);
+        on_axes!(b, x, y, draw_phase(c, x))
+    })
+}
+
+fn draw_phase<'a, 'b: 'a, X, Y>(
+    chart: &mut Chart<'a, 'b, X, Y>,
+    c: &CharacteristicReport,
+    x: Axis,
+) -> Result<(), DrawError>
+where
+    X: Ranged<ValueType = f64> + ValueFormatter<f64>,
+    Y: Ranged<ValueType = f64> + ValueFormatter<f64>,
+{
+    chart
+        .configure_mesh()
+        .x_desc("frequency (Hz)")
+        .y_desc("phase (°)")
+        .x_label_formatter(&|v| tick(*v))
+        .y_label_formatter(&|v| format!("{v:.0}"))
+        .label_style((FONT, 12))
+        .draw()?;
+    let deg = |r: f64| r.to_degrees().clamp(-180.0, 180.0);
+    for s in &c.stages {
+        let Some((d, phase)) = s
+            .dense
+            .as_ref()
+            .and_then(|d| Some((d, d.phase_rad.as_ref()?)))
+        else {
+            continue;
+        };
+        let col = stage_colour(&s.stage);
+        // One polyline per stretch between wraps.
+        let mut pieces: Vec<Vec<(f64, f64)>> = vec![Vec::new()];
+        for (f, p) in d.freqs_hz.iter().zip(phase).filter(|(f, _)| x.shows(**f)) {
+            let v = deg(*p);
+            let wrap = pieces
+                .last()
+                .and_then(|l| l.last())
+                .is_some_and(|(_, last)| (v - last).abs() > 180.0);
+            if wrap {
+                pieces.push(Vec::new());
+            }
+            if let Some(l) = pieces.last_mut() {
+                l.push((*f, v));
+            }
         }
-        // Error bars (±σ, clipped to the axis) then the points.
-        chart.draw_series(
-            c.freqs_hz
-                .iter()
-                .zip(&c.measured)
-                .zip(&c.sigma)
-                .filter(|((_, a), _)| **a > 0.0)
-                .map(|((f, a), s)| {
-                    PathElement::new(
-                        vec![(*f, (a - s).max(a0)), (*f, (a + s).min(a1))],
-                        BLACK.stroke_width(1),
-                    )
-                }),
-        )?;
+        for (i, piece) in pieces.into_iter().enumerate() {
+            let series = chart.draw_series(LineSeries::new(piece, col.stroke_width(2)))?;
+            if i == 0 {
+                series
+                    .label(format!("model, {}", s.stage))
+                    .legend(move |(x, y)| {
+                        PathElement::new(vec![(x, y), (x + 20, y)], col.stroke_width(2))
+                    });
+            }
+        }
+    }
+    if let Some(p) = &c.measured_phase_rad {
         chart
             .draw_series(
                 c.freqs_hz
                     .iter()
-                    .zip(&c.measured)
-                    .filter(|(_, a)| **a > 0.0)
-                    .map(|(f, a)| Circle::new((*f, *a), 3, BLACK.filled())),
+                    .zip(p)
+                    .filter(|(f, _)| x.shows(**f))
+                    .map(|(f, p)| Circle::new((*f, deg(*p)), 3, BLACK.filled())),
             )?
-            .label("measured ± σ")
+            .label("measured")
             .legend(|(x, y)| Circle::new((x + 10, y), 3, BLACK.filled()));
-        legend(&mut chart)
-    })
+    }
+    legend(chart)
 }
 
-/// Standardized residuals (measured − model)/σ of every stage but `initial`, with ±2 lines.
+/// Standardized residuals (measured − model)/σ, in units of σ, of every stage but `initial`, with
+/// the ±2σ guides.
 pub fn residual_chart(c: &CharacteristicReport) -> Result<String, ReportError> {
     svg("residual", (760, 260), |root| {
-        let (f0, f1) = log_range(c.freqs_hz.iter().copied());
-        let shown: Vec<_> = c.stages.iter().filter(|s| s.stage != "initial").collect();
-        let m = shown
+        let x = frequency_axis(c);
+        let m = c
+            .stages
             .iter()
+            .filter(|s| s.stage != "initial")
             .flat_map(|s| s.standardized_residual.iter().copied())
             .filter(|v| v.is_finite())
             .fold(3.0f64, |m, v| m.max(v.abs()))
             .min(1e6)
             * 1.1;
-        let mut chart = ChartBuilder::on(root)
-            .caption(format!("{} — standardized residuals", c.label), (FONT, 14))
-            .margin(10)
-            .x_label_area_size(35)
-            .y_label_area_size(80)
-            .build_cartesian_2d(
-                (f0..f1).log_scale().with_key_points(log_ticks(f0, f1)),
-                -m..m,
-            )?;
-        chart
-            .configure_mesh()
-            .x_desc("frequency (Hz)")
-            .y_desc("(measured − model) / σ")
-            .x_label_formatter(&|v| sci(*v))
-            .label_style((FONT, 12))
-            .draw()?;
-        for lim in [-2.0, 2.0] {
-            chart.draw_series(std::iter::once(PathElement::new(
-                vec![(f0, lim), (f1, lim)],
-                RGBColor(200, 80, 80).stroke_width(1),
-            )))?;
-        }
-        for s in shown {
-            let col = stage_colour(&s.stage);
-            chart
-                .draw_series(
-                    c.freqs_hz
-                        .iter()
-                        .zip(&s.standardized_residual)
-                        .map(|(f, r)| Circle::new((*f, r.clamp(-m, m)), 3, col.filled())),
-                )?
-                .label(s.stage.clone())
-                .legend(move |(x, y)| Circle::new((x + 10, y), 3, col.filled()));
-        }
-        legend(&mut chart)
+        let y = Axis {
+            lo: -m,
+            hi: m,
+            log: false,
+        };
+        let mut b = ChartBuilder::on(root);
+        b.caption(
+            format!("{} — standardized residuals (units of σ)", c.label),
+            (FONT, 14),
+        )
+        .margin(10)
+        .x_label_area_size(35)
+        .y_label_area_size(80);
+        on_axes!(b, x, y, draw_residuals(c, x, m))
     })
 }
 
-/// Identified / initial per parameter with ±σ bars (a forest plot of the table).
+fn draw_residuals<'a, 'b: 'a, X, Y>(
+    chart: &mut Chart<'a, 'b, X, Y>,
+    c: &CharacteristicReport,
+    x: Axis,
+    m: f64,
+) -> Result<(), DrawError>
+where
+    X: Ranged<ValueType = f64> + ValueFormatter<f64>,
+    Y: Ranged<ValueType = f64> + ValueFormatter<f64>,
+{
+    chart
+        .configure_mesh()
+        .x_desc("frequency (Hz)")
+        .y_desc("(measured − model) / σ")
+        .x_label_formatter(&|v| tick(*v))
+        .y_label_formatter(&|v| format!("{}σ", identify::display::sig(*v, 2)))
+        .label_style((FONT, 12))
+        .draw()?;
+    let red = RGBColor(200, 80, 80);
+    for lim in [-2.0, 2.0] {
+        chart.draw_series(std::iter::once(PathElement::new(
+            vec![(x.lo, lim), (x.hi, lim)],
+            red.stroke_width(1),
+        )))?;
+        chart.draw_series(std::iter::once(Text::new(
+            format!("{lim:+}σ"),
+            (x.at(0.005), lim),
+            (FONT, 10).into_font().color(&red),
+        )))?;
+    }
+    for s in c.stages.iter().filter(|s| s.stage != "initial") {
+        let col = stage_colour(&s.stage);
+        chart
+            .draw_series(
+                c.freqs_hz
+                    .iter()
+                    .zip(&s.standardized_residual)
+                    .filter(|(f, _)| x.shows(**f))
+                    .map(|(f, r)| Circle::new((*f, r.clamp(-m, m)), 3, col.filled())),
+            )?
+            .label(s.stage.clone())
+            .legend(move |(x, y)| Circle::new((x + 10, y), 3, col.filled()));
+    }
+    legend(chart)
+}
+
+/// Identified / initial per parameter with ±σ bars (a forest plot of the table). The ratio axis
+/// is logarithmic when the ratios span a decade or more (a first fit far from its start is drawn,
+/// not clipped); a ratio that cannot be drawn there (zero or negative) is an open circle at the
+/// left edge.
 pub fn parameter_chart(params: &[Parameter]) -> Result<String, ReportError> {
     let n = params.len().max(1);
     svg("parameter", (760, 60 + 22 * n as u32), |root| {
         let ratio = |p: &Parameter| (p.initial != 0.0).then(|| p.identified / p.initial);
-        let bar = |p: &Parameter| {
-            p.std_error
-                .zip(ratio(p))
-                .map(|(s, r)| (r, s / p.initial.abs()))
+        let ratios: Vec<f64> = params
+            .iter()
+            .filter_map(ratio)
+            .filter(|r| r.is_finite())
+            .collect();
+        let positive = ratios.iter().copied().filter(|r| *r > 0.0);
+        let spans = {
+            let lo = positive.clone().fold(f64::INFINITY, f64::min);
+            let hi = positive.clone().fold(0.0f64, f64::max);
+            lo.is_finite() && hi >= 10.0 * lo
         };
-        let hi = params
-            .iter()
-            .filter_map(bar)
-            .map(|(r, s)| r + s)
-            .chain(params.iter().filter_map(ratio))
-            .filter(|v| v.is_finite())
-            .fold(2.0f64, f64::max)
-            .min(100.0);
-        let lo = params
-            .iter()
-            .filter_map(bar)
-            .map(|(r, s)| r - s)
-            .chain(params.iter().filter_map(ratio))
-            .filter(|v| v.is_finite())
-            .fold(0.0f64, f64::min)
-            .max(-100.0);
+        let x = if spans {
+            let (lo, hi) = log_range(positive.chain([1.0]));
+            Axis { lo, hi, log: true }
+        } else {
+            let bars = params.iter().filter_map(|p| {
+                let r = ratio(p)?;
+                let s = p.std_error? / p.initial.abs();
+                Some([r - s, r + s])
+            });
+            let v: Vec<f64> = ratios
+                .iter()
+                .copied()
+                .chain(bars.flatten())
+                .chain([0.0, 2.0])
+                .filter(|v| v.is_finite())
+                .collect();
+            Axis {
+                lo: v.iter().copied().fold(0.0, f64::min),
+                hi: v.iter().copied().fold(2.0, f64::max),
+                log: false,
+            }
+        };
         let names: Vec<String> = params.iter().map(|p| p.variable.clone()).collect();
-        let mut chart = ChartBuilder::on(root)
-            .caption(
-                "identified / initial (bars: ± one standard error)",
-                (FONT, 14),
-            )
-            .margin(10)
-            .x_label_area_size(35)
-            .y_label_area_size(150)
-            .build_cartesian_2d(lo..hi, (0..n as i32).into_segmented())?;
-        chart
-            .configure_mesh()
-            .y_labels(n)
-            .y_label_formatter(&|v| match v {
-                SegmentValue::CenterOf(i) | SegmentValue::Exact(i) => {
-                    names.get(*i as usize).cloned().unwrap_or_default()
-                }
-                SegmentValue::Last => String::new(),
-            })
-            .x_desc("identified / initial")
-            .label_style((FONT, 11))
-            .draw()?;
-        chart.draw_series(std::iter::once(PathElement::new(
-            vec![(1.0, SegmentValue::Exact(0)), (1.0, SegmentValue::Last)],
-            RGBColor(150, 150, 150).stroke_width(1),
-        )))?;
-        let blue = stage_colour("identified");
-        for (i, p) in params.iter().enumerate() {
-            let y = SegmentValue::CenterOf(i as i32);
-            if let Some((r, s)) = bar(p) {
-                chart.draw_series(std::iter::once(PathElement::new(
-                    vec![((r - s).max(lo), y.clone()), ((r + s).min(hi), y.clone())],
-                    blue.stroke_width(2),
-                )))?;
-            }
-            if let Some(r) = ratio(p).filter(|r| r.is_finite()) {
-                chart.draw_series(std::iter::once(Circle::new(
-                    (r.clamp(lo, hi), y),
-                    4,
-                    blue.filled(),
-                )))?;
-            }
+        let mut b = ChartBuilder::on(root);
+        b.caption(
+            if x.log {
+                "identified / initial, log scale (bars: ± one standard error)"
+            } else {
+                "identified / initial (bars: ± one standard error)"
+            },
+            (FONT, 14),
+        )
+        .margin(10)
+        .x_label_area_size(35)
+        .y_label_area_size(150);
+        let y = (0..n as i32).into_segmented();
+        match x.log {
+            true => draw_parameters(
+                &mut b.build_cartesian_2d((x.lo..x.hi).log_scale(), y)?,
+                params,
+                &names,
+                x,
+            ),
+            false => draw_parameters(&mut b.build_cartesian_2d(x.lo..x.hi, y)?, params, &names, x),
         }
-        Ok(())
     })
+}
+
+fn draw_parameters<'a, 'b: 'a, X>(
+    chart: &mut Chart<'a, 'b, X, SegmentedCoord<RangedCoordi32>>,
+    params: &[Parameter],
+    names: &[String],
+    x: Axis,
+) -> Result<(), DrawError>
+where
+    X: Ranged<ValueType = f64> + ValueFormatter<f64>,
+{
+    let n = params.len().max(1);
+    chart
+        .configure_mesh()
+        .y_labels(n)
+        .y_label_formatter(&|v| match v {
+            SegmentValue::CenterOf(i) | SegmentValue::Exact(i) => {
+                names.get(*i as usize).cloned().unwrap_or_default()
+            }
+            SegmentValue::Last => String::new(),
+        })
+        .x_label_formatter(&|v| tick(*v))
+        .x_desc("identified / initial")
+        .label_style((FONT, 11))
+        .draw()?;
+    chart.draw_series(std::iter::once(PathElement::new(
+        vec![(1.0, SegmentValue::Exact(0)), (1.0, SegmentValue::Last)],
+        RGBColor(150, 150, 150).stroke_width(1),
+    )))?;
+    let blue = stage_colour("identified");
+    for (i, p) in params.iter().enumerate() {
+        let y = SegmentValue::CenterOf(i as i32);
+        let Some(r) = (p.initial != 0.0)
+            .then(|| p.identified / p.initial)
+            .filter(|r| r.is_finite())
+        else {
+            continue;
+        };
+        if let Some(s) = p.std_error.map(|s| s / p.initial.abs()) {
+            let low = if x.log && r - s <= 0.0 {
+                x.lo
+            } else {
+                x.clamp(r - s)
+            };
+            chart.draw_series(std::iter::once(PathElement::new(
+                vec![(low, y.clone()), (x.clamp(r + s), y.clone())],
+                blue.stroke_width(2),
+            )))?;
+        }
+        if x.shows(r) {
+            chart.draw_series(std::iter::once(Circle::new(
+                (x.clamp(r), y),
+                4,
+                blue.filled(),
+            )))?;
+        } else {
+            chart.draw_series(std::iter::once(Circle::new(
+                (x.lo, y),
+                4,
+                blue.stroke_width(1),
+            )))?;
+        }
+    }
+    Ok(())
 }
 
 /// Relative MI per parameter (rows) and characteristic (columns), log colour scale.
@@ -460,6 +821,49 @@ pub fn drift_chart(d: &Drift) -> Result<String, ReportError> {
 
 #[cfg(test)]
 mod tests {
+    use super::*;
+
+    #[test]
+    fn axes_are_logarithmic_where_the_data_span_a_decade() {
+        let a = Axis::for_values([20.0, 55.0, 400.0].into_iter());
+        assert!(a.log && a.lo < 20.0 && a.hi > 400.0, "{a:?}");
+        let a = Axis::for_values([2e-7, 9e-7].into_iter());
+        assert!(!a.log && a.lo < 2e-7 && a.hi > 9e-7, "{a:?}");
+        // Zero or negative values keep an axis linear.
+        assert!(!Axis::for_values([0.0, 1.0, 500.0].into_iter()).log);
+        let a = Axis::for_values(std::iter::empty());
+        assert!(!a.log && a.hi > a.lo);
+        assert!((Axis::for_values([1.0, 100.0].into_iter()).at(0.5) - 10.0).abs() < 1e-9);
+    }
+
+    fn param(initial: f64, identified: f64) -> Parameter {
+        Parameter {
+            variable: format!("k{identified}"),
+            sdes: "1".into(),
+            parameter: "k".into(),
+            unit: "N/um".into(),
+            initial,
+            identified,
+            std_error: Some(0.1 * identified.abs().max(1.0)),
+            variability: None,
+            at_bound: None,
+        }
+    }
+
+    #[test]
+    fn a_fit_far_from_its_start_is_drawn_on_a_log_axis_not_clipped() {
+        // 1919 / 10: the demo's first fit of k22 (the old linear axis stopped at 100).
+        let far =
+            parameter_chart(&[param(10.0, 1919.0), param(9.0, 0.0), param(5.0, 5.5)]).unwrap();
+        assert!(far.contains("log scale"), "a log ratio axis");
+        assert!(
+            far.contains(">\n100\n</text>"),
+            "the axis reaches beyond 100"
+        );
+        let near = parameter_chart(&[param(10.0, 12.0), param(5.0, 4.0)]).unwrap();
+        assert!(!near.contains("log scale"));
+    }
+
     #[test]
     fn frequency_ticks_are_1_2_5_per_decade_inside_the_range() {
         assert_eq!(

@@ -1,6 +1,7 @@
 //! The HTML report in a real browser: headless Chromium (Debian's `chromium`, installed by
 //! `.ci/setup`) loads a full report from disk with networking disabled and a probe script that
-//! records errors, rendered plots and resource loads into the DOM; the test reads the DOM back.
+//! records errors, rendered plots (with the mode markers and the dense model curves) and resource
+//! loads into the DOM; the test reads the DOM back.
 
 // Test and benchmark helpers unwrap: a panic with its message is the failure report.
 #![allow(clippy::unwrap_used)]
@@ -25,6 +26,11 @@ window.addEventListener('load', () => {
     drawn: drawn.length,
     charts: svgs.map(s => s.closest('figure').dataset.chart),
     texts: document.querySelectorAll('svg text').length,
+    marks: [...document.querySelectorAll('figure[data-chart=amplitude] svg text')]
+      .filter(t => t.textContent.trim().startsWith('mode '))
+      .map(t => { const b = t.getBBox(); return b.width > 0 && b.height > 0; }),
+    curves: [...document.querySelectorAll('figure[data-chart=amplitude] svg polyline')]
+      .filter(p => p.points.numberOfItems >= 400).length,
     rows: document.querySelectorAll('#parameters ~ table tr').length,
     resources: performance.getEntriesByType('resource').map(r => r.name),
     errors: window.__errors,
@@ -102,24 +108,29 @@ fn report_renders_in_headless_chromium_with_its_plots_and_no_errors() {
     let v: Value = serde_json::from_str(&unescape(probe)).unwrap();
     eprintln!("{v}");
     assert_eq!(v["title"], r.title);
-    // amplitude + residual per characteristic, parameters, sensitivity, drift, the model
-    // picture and one figure per mode in the band
-    let modes = r.picture.as_ref().map_or(0, |p| p.modes.len());
-    assert!(modes > 0, "the fixture has modes in its band");
-    let expected = 2 * r.characteristics.len() + 3 + 1 + modes;
+    // Amplitude, phase and residuals per characteristic; parameters, sensitivity, drift; the
+    // model picture and one figure per mode in the band.
+    let n = r.characteristics.len();
+    let shapes = r.picture.as_ref().map_or(0, |p| p.modes.len());
+    assert!(shapes > 0, "the fixture has modes in its band");
+    let expected = 3 * n + 3 + 1 + shapes;
     assert_eq!(v["plots"], expected as u64, "{v}");
-    let charts: Vec<&str> = v["charts"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .filter_map(|c| c.as_str())
-        .collect();
-    assert_eq!(charts.iter().filter(|c| **c == "model").count(), 1, "{v}");
-    assert_eq!(
-        charts.iter().filter(|c| **c == "mode").count(),
-        modes,
+    let charts = v["charts"].as_array().unwrap();
+    for chart in ["amplitude", "phase", "residual"] {
+        assert_eq!(charts.iter().filter(|c| *c == chart).count(), n, "{v}");
+    }
+    assert_eq!(charts.iter().filter(|c| *c == "model").count(), 1, "{v}");
+    assert_eq!(charts.iter().filter(|c| *c == "mode").count(), shapes, "{v}");
+    // The final model's modes marked on every amplitude chart, each label drawn.
+    let modes = r.natural_frequencies.last().unwrap().modes.len();
+    assert!(modes > 0);
+    let marks = v["marks"].as_array().unwrap();
+    assert!(
+        marks.len() >= n && marks.len() <= modes * n && marks.iter().all(|m| m == true),
         "{v}"
     );
+    // Two smooth model curves (identified, diagnosed) of at least 400 points per chart.
+    assert_eq!(v["curves"], (2 * n) as u64, "{v}");
     assert_eq!(
         v["drawn"], expected as u64,
         "every plot is drawn with its labels: {v}"

@@ -12,6 +12,7 @@ use std::path::PathBuf;
 use std::process::Command;
 
 use common::*;
+use identify::frf;
 use serde_json::Value;
 
 fn docs() -> PathBuf {
@@ -174,14 +175,26 @@ fn html_is_self_contained_with_every_plot() {
         );
     }
     let svgs = html.matches("<svg").count();
-    // amplitude + residual per characteristic, parameters, sensitivity, drift, the model picture
-    // and one figure per mode in the band
-    let modes = r.picture.as_ref().map_or(0, |p| p.modes.len());
-    assert!(modes > 0);
+    // amplitude + phase (the fixture has phases) + residual per characteristic, parameters,
+    // sensitivity, drift, the model picture and one figure per mode in the band
+    let shapes = r.picture.as_ref().map_or(0, |p| p.modes.len());
+    assert!(shapes > 0);
     assert_eq!(
         svgs,
-        2 * r.characteristics.len() + 3 + 1 + modes,
+        3 * r.characteristics.len() + 3 + 1 + shapes,
         "plots: {svgs}"
+    );
+    assert_eq!(
+        html.matches("data-chart=\"phase\"").count(),
+        r.characteristics.len()
+    );
+    // The final model's modes in the band are marked on every amplitude chart.
+    let modes = &r.natural_frequencies.last().unwrap().modes;
+    assert!(!modes.is_empty());
+    let labels = html.matches("\nmode ").count();
+    assert!(
+        labels >= r.characteristics.len() && labels <= modes.len() * r.characteristics.len(),
+        "labelled mode markers: {labels}"
     );
     assert!(
         html.contains("two masses &lt;test &amp; check&gt;"),
@@ -192,6 +205,95 @@ fn html_is_self_contained_with_every_plot() {
     for p in &r.identification.parameters {
         assert!(html.contains(&format!("<td class=\"l\">{}</td>", p.variable)));
     }
+}
+
+#[test]
+fn dense_curves_are_log_spaced_cover_the_band_keep_the_peaks_and_match_a_direct_solve() {
+    let f = fixture(7);
+    let r = full_report(&f, 1.0);
+    let stages_with_modes: Vec<&str> = r
+        .natural_frequencies
+        .iter()
+        .map(|m| m.stage.as_str())
+        .collect();
+    assert_eq!(stages_with_modes, ["identified", "diagnosed"]);
+    let modes = &r.natural_frequencies[0].modes;
+    assert!(!modes.is_empty(), "the two-mass chain resonates in 8-80 Hz");
+    for (c, obs) in r.characteristics.iter().zip(&f.obs.characteristics) {
+        let (lo, hi) = (c.freqs_hz[0], *c.freqs_hz.last().unwrap());
+        for s in &c.stages {
+            let Some(d) = &s.dense else {
+                assert_eq!(
+                    s.stage, "initial",
+                    "only the initial model has no dense curve"
+                );
+                continue;
+            };
+            let g = &d.freqs_hz;
+            // Dense, log-spaced, across the band, with every measured line and resonance on it.
+            assert!(g.len() >= report::build::DENSE_LINES, "{}", g.len());
+            assert_eq!((g[0], *g.last().unwrap()), (lo, hi));
+            assert!(g.windows(2).all(|w| w[1] > w[0]));
+            let step = (hi / lo).powf(1.0 / (report::build::DENSE_LINES - 1) as f64);
+            assert!(g.windows(2).all(|w| w[1] / w[0] <= step * (1.0 + 1e-9)));
+            for x in c.freqs_hz.iter().chain(modes.iter().map(|m| &m.freq_hz)) {
+                assert!(
+                    g.iter().any(|y| (y - x).abs() <= 1e-12 * x),
+                    "{x} Hz on the grid"
+                );
+            }
+            // No peak lost between grid lines: the curve reaches every per-line model value.
+            let line_max = s.amplitude.iter().copied().fold(0.0, f64::max);
+            let dense_max = d.amplitude.iter().copied().fold(0.0, f64::max);
+            assert!(dense_max >= line_max, "{dense_max} < {line_max}");
+            // The same numbers as a direct solve of the identified model (the fixture's diagnosed
+            // model is the identified one) at a few grid points.
+            let picks = [0, g.len() / 3, g.len() / 2, g.len() - 1];
+            let hz: Vec<f64> = picks.iter().map(|&k| g[k]).collect();
+            let direct = frf::response(&f.id.model, &hz, &[], frf::Method::Direct).unwrap();
+            let phase = d.phase_rad.as_ref().expect("the data have phase");
+            for (j, &k) in picks.iter().enumerate() {
+                let v = direct.output(obs.output)[j];
+                assert!(
+                    (d.amplitude[k] - v.norm()).abs() <= 1e-9 * v.norm(),
+                    "line {k}"
+                );
+                let z = identify::C64::from_polar(d.amplitude[k], phase[k]);
+                assert!((z - v).norm() <= 1e-9 * v.norm(), "phase at line {k}");
+            }
+        }
+    }
+}
+
+#[test]
+fn candidate_table_shows_ten_with_every_accepted_and_collapses_the_rest() {
+    let f = fixture(8);
+    let mut r = full_report(&f, 1.0);
+    let d = r.diagnosis.as_mut().unwrap();
+    d.candidates = many_candidates(30);
+    let html = report::html::render(&r).unwrap();
+    let (top, rest) = html
+        .split_once("<details>")
+        .expect("the rest is collapsed behind <details>");
+    let table = top
+        .split("<table class=\"candidates\">")
+        .nth(1)
+        .and_then(|t| t.split("</table>").next())
+        .unwrap();
+    assert_eq!(table.matches("<tr").count(), 1 + 10, "header and ten rows");
+    // Both accepted candidates are in the top table, though round 1's ranks 15th by statistic.
+    assert_eq!(table.matches("class=\"accepted\"").count(), 2);
+    assert!(table.contains("candidate 14<") && table.contains("candidate 15<"));
+    assert!(table.contains("candidate 0<") && !table.contains("candidate 9<"));
+    // A p-value of 0 is not printed as 0.
+    assert!(!table.contains("<td>0</td>"), "{table}");
+    let (details, _) = rest.split_once("</details>").unwrap();
+    assert_eq!(details.matches("<tr").count(), 1 + 20);
+    assert!(!html.contains("<script"));
+    // Few candidates: one table, nothing collapsed.
+    r.diagnosis.as_mut().unwrap().candidates = many_candidates(6);
+    let html = report::html::render(&r).unwrap();
+    assert!(!html.contains("<details>"));
 }
 
 #[test]

@@ -64,6 +64,25 @@ pub fn run(a: DiagnoseArgs) -> anyhow::Result<ExitCode> {
     if let Some(p) = &a.json {
         emit(Some(p), &(serde_json::to_string_pretty(&d)? + "\n"))?;
     }
+    if let Some(dir) = &a.identify.out {
+        std::fs::create_dir_all(dir)
+            .with_context(|| format!("cannot create the output directory {}", dir.display()))?;
+        let model_name = a
+            .identify
+            .model
+            .file_stem()
+            .map(|s| s.to_string_lossy().into_owned())
+            .unwrap_or_default();
+        let section = ::report::build::diagnosis(&d, &model_name, &id);
+        super::identify::write_report(
+            dir,
+            &a.identify,
+            "diagnose",
+            &obs,
+            &id,
+            Some((section, &d.model)),
+        )?;
+    }
     if let Some(p) = &a.out_model {
         emit(
             Some(p),

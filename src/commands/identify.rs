@@ -1,7 +1,7 @@
 //! `ident identify MODEL --data DATA --vars VARS`: maximum-likelihood identification of SDE
 //! parameters with Cramér-Rao errors (docs/identification.md).
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 use anyhow::Context;
@@ -11,6 +11,7 @@ use identify::identification::{
 };
 
 use super::{emit, load_model, MethodArg};
+use crate::pipeline::{build_report, ReportContext};
 
 /// `--method`.
 #[derive(clap::ValueEnum, Clone, Copy, Debug, Default)]
@@ -106,7 +107,8 @@ pub struct IdentifyArgs {
     #[arg(long, value_enum, default_value_t = FormatArg::Text)]
     pub format: FormatArg,
     /// Also write report.txt, table.json, table.csv, model.json (and model.toml for a TOML model)
-    /// into this directory.
+    /// into this directory, and the report (report.html, report.json: docs/report-json.md) with
+    /// the model curves (`ident diagnose --out` writes only the report, with its diagnosis).
     #[arg(long)]
     pub out: Option<PathBuf>,
     /// Relative standard error above which a direction of the information matrix is reported as
@@ -225,6 +227,43 @@ pub fn setup(
     Ok((model, obs, vars, opts))
 }
 
+/// Writes report.html and report.json (docs/report-json.md) of an identification, and of its
+/// diagnosis when given, into `dir` (which exists), built as the workflows build theirs
+/// (`pipeline::build_report`).
+pub fn write_report(
+    dir: &Path,
+    a: &IdentifyArgs,
+    workflow: &str,
+    obs: &idn::Observations,
+    id: &idn::Identification,
+    diagnosis: Option<(::report::Diagnosis, &identify::Model)>,
+) -> anyhow::Result<::report::Written> {
+    let model_name = a
+        .model
+        .file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_else(|| a.model.display().to_string());
+    let title = format!("ident {workflow}: {model_name}");
+    let ctx = ReportContext {
+        title: &title,
+        workflow,
+        stand: None,
+        drift: None,
+        messages: Vec::new(),
+        created_utc: String::new(),
+    };
+    let source = ::report::document::Source {
+        model: a.model.display().to_string(),
+        variables: a.vars.display().to_string(),
+        measurement: format!("data file {}", a.data.display()),
+        ..::report::document::Source::default()
+    };
+    let r = build_report(ctx, source, obs, id, diagnosis)?;
+    let written = ::report::write(&r, dir)?;
+    tracing::info!("report: {}", written.html.display());
+    Ok(written)
+}
+
 pub fn run(a: IdentifyArgs) -> anyhow::Result<ExitCode> {
     let (model, obs, vars, opts) = setup(&a)?;
     if let Some(path) = &a.export_problem {
@@ -286,6 +325,7 @@ pub fn run(a: IdentifyArgs) -> anyhow::Result<ExitCode> {
             let updated = report::update_toml(&original, &a.model.display().to_string(), &id)?;
             emit(Some(&dir.join("model.toml")), &updated)?;
         }
+        write_report(dir, &a, "identify", &obs, &id, None)?;
     }
     write_final(&a, &id, None)?;
     if id.stop.converged() {

@@ -132,6 +132,10 @@ pub struct Refit {
     pub params: Vec<ParamEstimate>,
     /// Why the refit stopped.
     pub stop: String,
+    /// Whether the refit converged (`stop` says why not); a refit that did not is also listed in
+    /// [`Diagnosis::not_tried`].
+    #[serde(skip)]
+    pub converged: bool,
     /// Placements the data cannot tell from this one (see [`Ranked::equivalent`]).
     pub equivalent: Vec<String>,
 }
@@ -628,6 +632,15 @@ fn refit_leading(
                 if r.p_value < *threshold && better {
                     best = Some((refits.len(), next));
                 }
+                if !r.converged {
+                    not_tried.push(NotTried {
+                        effect: format!("refit of {}", r.effect),
+                        reason: format!(
+                            "{}; its likelihood-ratio test used the best point reached",
+                            r.stop
+                        ),
+                    });
+                }
                 refits.push(r);
             }
             Err(reason) => not_tried.push(NotTried {
@@ -1041,6 +1054,7 @@ fn refit(
         bic_change: -lr + q as f64 * n.ln(),
         params,
         stop,
+        converged: out.stop.converged(),
         equivalent: Vec::new(),
     };
     Ok((r, next))

@@ -1,5 +1,6 @@
-//! A real report for the tests: a two-mass textbook model measured with 1 % seeded noise,
-//! identified, with a diagnosis section and a drift history attached.
+//! A real report for the tests: a two-mass textbook model measured with 1 % seeded noise on the
+//! amplitudes (and the exact phases), identified, with a diagnosis section and a drift history
+//! attached.
 
 #![allow(dead_code)]
 
@@ -37,7 +38,7 @@ pub fn fixture(seed: u64) -> Fixture {
                     .iter()
                     .map(|v| v.norm() + eps * v.norm() * n.sample(&mut rng))
                     .collect(),
-                phase_rad: None,
+                phase_rad: Some(r.output(o).iter().map(|v| v.arg()).collect()),
                 variance: Some(
                     r.output(o)
                         .iter()
@@ -58,6 +59,28 @@ pub fn fixture(seed: u64) -> Fixture {
     .unwrap();
     let id = identify(&truth, &obs, &vars, &Options::default(), &mut |_, _| {}).unwrap();
     Fixture { truth, obs, id }
+}
+
+/// `n` ranked candidates of two rounds, strongest first in each, one accepted per round: the
+/// accepted one of round 1 weak enough to rank beyond the top ten by statistic.
+pub fn many_candidates(n: usize) -> Vec<Candidate> {
+    (0..n)
+        .map(|i| {
+            let round = if i < n / 2 { 1 } else { 2 };
+            let accepted = i == n / 2 - 1 || i == n / 2;
+            Candidate {
+                round,
+                name: "spring".into(),
+                location: format!("candidate {i}"),
+                statistic: 1000.0 / (1.0 + i as f64),
+                p_value: if i == 0 { 0.0 } else { 1e-3 * i as f64 },
+                accepted,
+                estimate: accepted.then_some(2.5),
+                std_error: accepted.then_some(0.1),
+                unit: "N/um".into(),
+            }
+        })
+        .collect()
 }
 
 /// A diagnosis section as the pipeline would pass it (values are illustrative inputs to the
