@@ -511,19 +511,6 @@ pub fn diagnosis(d: &diagnose::Diagnosis, base: &str, id: &Identification) -> Di
     }
 }
 
-/// The lowest and highest measured line (Hz); `[0, 0]` without data.
-fn measured_band(obs: &Observations) -> [f64; 2] {
-    let lines = obs.characteristics.iter().flat_map(|c| c.freqs_hz.iter());
-    let (lo, hi) = lines.fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), f| {
-        (lo.min(*f), hi.max(*f))
-    });
-    if lo <= hi {
-        [lo, hi]
-    } else {
-        [0.0, 0.0]
-    }
-}
-
 /// Builds the report.
 pub fn build(inputs: Inputs<'_>) -> Result<Report, ReportError> {
     let id = inputs.identification;
@@ -589,7 +576,7 @@ pub fn build(inputs: Inputs<'_>) -> Result<Report, ReportError> {
         Some(crate::picture::describe(
             final_model,
             &id.model,
-            measured_band(inputs.observations),
+            band.map_or([0.0, 0.0], |(lo, hi)| [lo, hi]),
         )?)
     };
     let mut messages = inputs.messages;

@@ -120,7 +120,11 @@ fn report_renders_in_headless_chromium_with_its_plots_and_no_errors() {
         assert_eq!(charts.iter().filter(|c| *c == chart).count(), n, "{v}");
     }
     assert_eq!(charts.iter().filter(|c| *c == "model").count(), 1, "{v}");
-    assert_eq!(charts.iter().filter(|c| *c == "mode").count(), shapes, "{v}");
+    assert_eq!(
+        charts.iter().filter(|c| *c == "mode").count(),
+        shapes,
+        "{v}"
+    );
     // The final model's modes marked on every amplitude chart, each label drawn.
     let modes = r.natural_frequencies.last().unwrap().modes.len();
     assert!(modes > 0);
