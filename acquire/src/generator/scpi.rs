@@ -2,20 +2,18 @@
 //! line terminator, answer timeout and retries, one reconnect when the connection drops, `*OPC?`
 //! after every setting and the error queue read until it is empty.
 
-use std::collections::VecDeque;
 use std::future::Future;
 use std::pin::Pin;
 use std::time::Duration;
 
 use async_trait::async_trait;
-use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use tokio::time::Instant;
 
 use super::dialect::{self, Dialect, DialectOverrides};
 use super::{Generator, GeneratorError};
 use crate::device::DeviceIdentity;
-use crate::shaker::scpi::{parse_bool_answer, parse_error_entry, Line, LineBuffer};
-use crate::transport::{Transport, TransportError};
+use crate::shaker::scpi::{parse_bool_answer, parse_error_entry, Line};
+use crate::transport::{LineLink, LinkError, Transport, TransportError};
 
 /// Opens the instrument's connection again after it dropped (a socket reset, a USB serial
 /// adapter re-enumerated).
@@ -59,16 +57,13 @@ const MAX_QUEUE: usize = 32;
 
 /// A SCPI function generator.
 pub struct ScpiGenerator {
-    io: Box<dyn Transport>,
+    link: LineLink<Box<dyn Transport>>,
     reconnect: Option<Reconnect>,
     port: String,
     /// `port` and, once known, `manufacturer model`.
     instrument: String,
     opts: GeneratorOptions,
     dialect: Option<Dialect>,
-    lines: LineBuffer,
-    ready: VecDeque<Line>,
-    rx: Vec<u8>,
 }
 
 impl ScpiGenerator {
@@ -76,15 +71,12 @@ impl ScpiGenerator {
     pub fn new(io: Box<dyn Transport>, opts: GeneratorOptions) -> Self {
         let port = io.port().to_string();
         ScpiGenerator {
-            io,
+            link: LineLink::new(io),
             reconnect: None,
             instrument: port.clone(),
             port,
             opts,
             dialect: None,
-            lines: LineBuffer::new(),
-            ready: VecDeque::new(),
-            rx: vec![0; 1024],
         }
     }
 
@@ -119,59 +111,30 @@ impl ScpiGenerator {
     }
 
     async fn send(&mut self, line: &str) -> Result<(), GeneratorError> {
-        let mut bytes = Vec::with_capacity(line.len() + self.opts.terminator.len());
-        bytes.extend_from_slice(line.as_bytes());
-        bytes.extend_from_slice(self.opts.terminator.as_bytes());
-        if let Err(e) = self.io.write_all(&bytes).await {
-            return Err(self.io_error(e));
+        let r = self.link.send(line, &self.opts.terminator).await;
+        r.map_err(|e| self.io_error(e))
+    }
+
+    fn link_error(&self, e: LinkError) -> GeneratorError {
+        match e {
+            LinkError::Io(e) => self.io_error(e),
+            LinkError::Closed => GeneratorError::Disconnected {
+                instrument: self.instrument.clone(),
+                detail: "end of stream".into(),
+            },
         }
-        if let Err(e) = self.io.flush().await {
-            return Err(self.io_error(e));
-        }
-        Ok(())
     }
 
     /// One answer line before `deadline`; `Ok(None)` on timeout.
     async fn read_line(&mut self, deadline: Instant) -> Result<Option<Line>, GeneratorError> {
-        loop {
-            if let Some(l) = self.ready.pop_front() {
-                return Ok(Some(l));
-            }
-            let n = match tokio::time::timeout_at(deadline, self.io.read(&mut self.rx)).await {
-                Err(_) => return Ok(None),
-                Ok(Err(e)) => return Err(self.io_error(e)),
-                Ok(Ok(0)) => {
-                    return Err(GeneratorError::Disconnected {
-                        instrument: self.instrument.clone(),
-                        detail: "end of stream".into(),
-                    })
-                }
-                Ok(Ok(n)) => n,
-            };
-            let ready = &mut self.ready;
-            self.lines.feed(&self.rx[..n], |l| ready.push_back(l));
-        }
+        let r = self.link.read_line(deadline).await;
+        r.map_err(|e| self.link_error(e))
     }
 
     /// Discards late answers of an attempt that timed out.
     async fn drain(&mut self) -> Result<(), GeneratorError> {
-        self.ready.clear();
-        self.lines.clear();
-        while let Ok(r) =
-            tokio::time::timeout(Duration::from_millis(5), self.io.read(&mut self.rx)).await
-        {
-            match r {
-                Ok(0) => {
-                    return Err(GeneratorError::Disconnected {
-                        instrument: self.instrument.clone(),
-                        detail: "end of stream".into(),
-                    })
-                }
-                Ok(_) => continue,
-                Err(e) => return Err(self.io_error(e)),
-            }
-        }
-        Ok(())
+        let r = self.link.drain().await;
+        r.map_err(|e| self.link_error(e))
     }
 
     /// Opens the connection again, if a way to do so was given; `false` if not.
@@ -181,9 +144,7 @@ impl ScpiGenerator {
         };
         let io = r().await?;
         tracing::warn!("signal generator {}: reconnected", self.instrument);
-        self.io = io;
-        self.ready.clear();
-        self.lines.clear();
+        self.link.replace(io);
         Ok(true)
     }
 

@@ -5,13 +5,12 @@
 use std::time::Duration;
 
 use async_trait::async_trait;
-use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use tokio::time::Instant;
 
-use super::scpi::{self, Command, Function, Line, LineBuffer};
+use super::scpi::{self, Command, Function, Line};
 use super::{Shaker, ShakerError, ShakerStatus, Waveform};
 use crate::device::DeviceIdentity;
-use crate::transport::Transport;
+use crate::transport::{LineLink, LinkError, Transport};
 
 /// Timeouts and retries of the SCPI driver.
 #[derive(Debug, Clone, PartialEq)]
@@ -33,12 +32,9 @@ impl Default for ShakerOptions {
 
 /// A shaker controller speaking the SCPI dialect.
 pub struct ScpiShaker<T: Transport = Box<dyn Transport>> {
-    io: T,
+    link: LineLink<T>,
     port: String,
     opts: ShakerOptions,
-    lines: LineBuffer,
-    ready: std::collections::VecDeque<Line>,
-    rx: Vec<u8>,
 }
 
 impl<T: Transport> ScpiShaker<T> {
@@ -46,70 +42,39 @@ impl<T: Transport> ScpiShaker<T> {
     pub fn new(io: T, opts: ShakerOptions) -> Self {
         let port = io.port().to_string();
         ScpiShaker {
-            io,
+            link: LineLink::new(io),
             port,
             opts,
-            lines: LineBuffer::new(),
-            ready: Default::default(),
-            rx: vec![0; 1024],
         }
     }
 
     async fn send(&mut self, line: &str) -> Result<(), ShakerError> {
-        let mut bytes = Vec::with_capacity(line.len() + 1);
-        bytes.extend_from_slice(line.as_bytes());
-        bytes.push(b'\n');
-        self.io
-            .write_all(&bytes)
-            .await
-            .map_err(|e| ShakerError::from_io(&self.port, e))?;
-        self.io
-            .flush()
+        self.link
+            .send(line, "\n")
             .await
             .map_err(|e| ShakerError::from_io(&self.port, e))
     }
 
+    fn link_error(&self, e: LinkError) -> ShakerError {
+        match e {
+            LinkError::Io(e) => ShakerError::from_io(&self.port, e),
+            LinkError::Closed => ShakerError::Disconnected {
+                port: self.port.clone(),
+                detail: "end of stream".into(),
+            },
+        }
+    }
+
     /// Reads one answer line before `deadline`; `Ok(None)` on timeout.
     async fn read_line(&mut self, deadline: Instant) -> Result<Option<Line>, ShakerError> {
-        loop {
-            if let Some(l) = self.ready.pop_front() {
-                return Ok(Some(l));
-            }
-            let n = match tokio::time::timeout_at(deadline, self.io.read(&mut self.rx)).await {
-                Err(_) => return Ok(None),
-                Ok(Err(e)) => return Err(ShakerError::from_io(&self.port, e)),
-                Ok(Ok(0)) => {
-                    return Err(ShakerError::Disconnected {
-                        port: self.port.clone(),
-                        detail: "end of stream".into(),
-                    })
-                }
-                Ok(Ok(n)) => n,
-            };
-            let ready = &mut self.ready;
-            self.lines.feed(&self.rx[..n], |l| ready.push_back(l));
-        }
+        let r = self.link.read_line(deadline).await;
+        r.map_err(|e| self.link_error(e))
     }
 
     /// Discards anything already received (late answers to an attempt that timed out).
     async fn drain(&mut self) -> Result<(), ShakerError> {
-        self.ready.clear();
-        self.lines.clear();
-        while let Ok(r) =
-            tokio::time::timeout(Duration::from_millis(5), self.io.read(&mut self.rx)).await
-        {
-            match r {
-                Ok(0) => {
-                    return Err(ShakerError::Disconnected {
-                        port: self.port.clone(),
-                        detail: "end of stream".into(),
-                    })
-                }
-                Ok(_) => continue,
-                Err(e) => return Err(ShakerError::from_io(&self.port, e)),
-            }
-        }
-        Ok(())
+        let r = self.link.drain().await;
+        r.map_err(|e| self.link_error(e))
     }
 
     /// Sends a query and returns its answer line, re-sending after a timeout.
@@ -132,7 +97,7 @@ impl<T: Transport> ScpiShaker<T> {
                     })
                 }
                 None => {
-                    let p = self.lines.pending();
+                    let p = self.link.pending();
                     if !p.is_empty() {
                         garbage = Some(p);
                     }

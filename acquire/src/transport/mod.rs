@@ -1,10 +1,12 @@
 //! Byte-stream transports (serial ports, pseudo-terminals, raw TCP sockets, in-memory pipes) behind one narrow
 //! trait, plus a tap that copies every byte to the session log.
 
+mod line;
 mod serial;
 mod tap;
 mod tcp;
 
+pub use line::{LineLink, LinkError};
 pub use serial::{open_serial, pty_pair, PtyDevice, SerialSettings, SerialTransport};
 pub use tap::{ByteTap, Direction, Tapped};
 pub use tcp::{connect_tcp, SocketAddress, TcpTransport, SCPI_RAW_PORT};

@@ -2,7 +2,9 @@
 //! instruments give, as their programming manuals show them.
 
 use super::*;
+use crate::shaker::scpi::LineBuffer;
 use crate::transport::MemoryTransport;
+use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use tokio::task::JoinHandle;
 
 /// One exchange: the line the host must send, and the lines the instrument answers.
