@@ -1,13 +1,9 @@
 //! Serial ports (`tokio-serial`, built on `serialport` without libudev) and pseudo-terminal pairs
 //! for the simulated stand.
 
-use std::pin::Pin;
-use std::task::{Context, Poll};
-
-use tokio::io::{AsyncRead, AsyncWrite, ReadBuf};
 use tokio_serial::{SerialPort, SerialPortBuilderExt, SerialStream};
 
-use super::{Transport, TransportError};
+use super::TransportError;
 
 /// Line settings of a serial port. Pseudo-terminals ignore the baud rate.
 #[derive(Debug, Clone, PartialEq)]
@@ -98,37 +94,7 @@ pub(crate) fn classify_open_error(port: &str, e: &tokio_serial::Error) -> Transp
     }
 }
 
-impl Transport for SerialTransport {
-    fn port(&self) -> &str {
-        &self.name
-    }
-}
-
-impl AsyncRead for SerialTransport {
-    fn poll_read(
-        mut self: Pin<&mut Self>,
-        cx: &mut Context<'_>,
-        buf: &mut ReadBuf<'_>,
-    ) -> Poll<std::io::Result<()>> {
-        Pin::new(&mut self.inner).poll_read(cx, buf)
-    }
-}
-
-impl AsyncWrite for SerialTransport {
-    fn poll_write(
-        mut self: Pin<&mut Self>,
-        cx: &mut Context<'_>,
-        buf: &[u8],
-    ) -> Poll<std::io::Result<usize>> {
-        Pin::new(&mut self.inner).poll_write(cx, buf)
-    }
-    fn poll_flush(mut self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<std::io::Result<()>> {
-        Pin::new(&mut self.inner).poll_flush(cx)
-    }
-    fn poll_shutdown(mut self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<std::io::Result<()>> {
-        Pin::new(&mut self.inner).poll_shutdown(cx)
-    }
-}
+stream_transport!(SerialTransport);
 
 /// A pseudo-terminal: the device side (served by a simulator) and the path a host program opens
 /// like a real serial port. Dropping the device end closes the port ("cable pulled").

@@ -1,14 +1,11 @@
 //! Raw TCP sockets (LXI "SCPI-raw", port 5025 by default): an instrument's SCPI session over the
 //! network, opened with a connect timeout and `TCP_NODELAY` (every command is one short line).
 
-use std::pin::Pin;
-use std::task::{Context, Poll};
 use std::time::Duration;
 
-use tokio::io::{AsyncRead, AsyncWrite, ReadBuf};
 use tokio::net::TcpStream;
 
-use super::{Transport, TransportError};
+use super::TransportError;
 
 /// The IANA/LXI port of a raw SCPI socket.
 pub const SCPI_RAW_PORT: u16 = 5025;
@@ -123,37 +120,7 @@ impl TcpTransport {
     }
 }
 
-impl Transport for TcpTransport {
-    fn port(&self) -> &str {
-        &self.name
-    }
-}
-
-impl AsyncRead for TcpTransport {
-    fn poll_read(
-        mut self: Pin<&mut Self>,
-        cx: &mut Context<'_>,
-        buf: &mut ReadBuf<'_>,
-    ) -> Poll<std::io::Result<()>> {
-        Pin::new(&mut self.inner).poll_read(cx, buf)
-    }
-}
-
-impl AsyncWrite for TcpTransport {
-    fn poll_write(
-        mut self: Pin<&mut Self>,
-        cx: &mut Context<'_>,
-        buf: &[u8],
-    ) -> Poll<std::io::Result<usize>> {
-        Pin::new(&mut self.inner).poll_write(cx, buf)
-    }
-    fn poll_flush(mut self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<std::io::Result<()>> {
-        Pin::new(&mut self.inner).poll_flush(cx)
-    }
-    fn poll_shutdown(mut self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<std::io::Result<()>> {
-        Pin::new(&mut self.inner).poll_shutdown(cx)
-    }
-}
+stream_transport!(TcpTransport);
 
 #[cfg(test)]
 mod tests {
