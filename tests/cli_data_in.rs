@@ -3,46 +3,16 @@
 //! UFF file without a map.
 #![allow(clippy::unwrap_used, missing_docs)]
 
-use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+mod common;
+
+use common::{ident, p, root, utf8, TWO_MASS};
 
 use identify::frf::{self, Method};
 use process::uff;
 use process::C64;
 
-fn root() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-}
-
-fn ident(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_ident"))
-        .args(args)
-        .env_remove("IDENT_LOG")
-        .output()
-        .expect("run ident")
-}
-
-fn text(b: &[u8]) -> String {
-    String::from_utf8_lossy(b).into_owned()
-}
-
-fn p(path: &Path) -> &str {
-    path.to_str().expect("utf-8 path")
-}
-
-const TWO_MASS: &str = "configs/models/textbook-two-mass.toml";
-
-const VARS: &str = r#"
-[[variable]]
-sdes = "k1"
-parameter = "k"
-initial = "14 N/um"
-
-[[variable]]
-sdes = "k2"
-parameter = "k"
-initial = "7 N/um"
-"#;
+/// k1 and k2 of the two-mass chain started at 14 and 7 N/µm.
+const VARS: &str = include_str!("../configs/identification/textbook-two-mass.toml");
 
 const MAP: &str = r#"
 [[channel]]
@@ -113,14 +83,14 @@ fn a_uff_file_in_g_per_newton_with_a_map_is_identified() {
     let mut args = base.to_vec();
     args.extend(["--map", p(&map), "--format", "json"]);
     let o = ident(&args);
-    assert_eq!(o.status.code(), Some(0), "{}", text(&o.stderr));
-    let err = text(&o.stderr);
+    assert_eq!(o.status.code(), Some(0), "{}", utf8(&o.stderr));
+    let err = utf8(&o.stderr);
     assert!(
         err.contains("data: first u3: accelerance in (g)/(N) converted to (m/s²)/N (× 9.80665)")
             && err.contains("acceleration converted to the model's displacement output by (jω)^-2"),
         "{err}"
     );
-    let j: serde_json::Value = serde_json::from_str(&text(&o.stdout)).unwrap();
+    let j: serde_json::Value = serde_json::from_str(&utf8(&o.stdout)).unwrap();
     let table = j["table"].as_array().unwrap();
     for (row, truth) in table.iter().zip([20.0, 5.0]) {
         let v = row["identified"].as_f64().unwrap();
@@ -131,9 +101,9 @@ fn a_uff_file_in_g_per_newton_with_a_map_is_identified() {
     let o = ident(&base);
     assert_eq!(o.status.code(), Some(2));
     assert!(
-        text(&o.stderr).contains("give --map FILE"),
+        utf8(&o.stderr).contains("give --map FILE"),
         "{}",
-        text(&o.stderr)
+        utf8(&o.stderr)
     );
 }
 
@@ -165,8 +135,8 @@ fn frequencies_in_khz_under_freq_hz_stop_before_a_confident_wrong_fit() {
         "--vars",
         p(&vars),
     ]);
-    assert_eq!(o.status.code(), Some(2), "{}", text(&o.stdout));
-    let err = text(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{}", utf8(&o.stdout));
+    let err = utf8(&o.stderr);
     assert!(
         err.contains("khz.csv: frequencies:") && err.contains("kHz"),
         "{err}"
@@ -192,12 +162,12 @@ fn frequencies_in_khz_under_freq_hz_stop_before_a_confident_wrong_fit() {
         "--vars",
         p(&vars),
     ]);
-    let err = text(&o.stderr);
+    let err = utf8(&o.stderr);
     assert!(
         err.contains("warning: second u3 displacement") && err.contains("g read as m/s²"),
         "{err}"
     );
-    let out = text(&o.stdout);
+    let out = utf8(&o.stdout);
     assert!(
         out.starts_with("THE MODEL DOES NOT EXPLAIN THE DATA"),
         "{out}"

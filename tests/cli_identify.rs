@@ -3,8 +3,12 @@
 //! truth, exit codes (0 converged, 1 iteration limit with the best point kept, 2 bad input naming
 //! the file and item), progress lines, the weak-direction threshold and the problem export.
 
-use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+mod common;
+
+use std::path::PathBuf;
+use std::process::Output;
+
+use common::{ident, ident_with, p, root, utf8, TWO_MASS};
 
 use identify::identification::{data, synthetic};
 use identify::measured::MeasuredData;
@@ -12,45 +16,12 @@ use rand::rngs::StdRng;
 use rand::SeedableRng;
 use rand_distr::{Distribution, StandardNormal};
 
-fn root() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-}
-
-fn ident(args: &[&str], env: &[(&str, &str)]) -> Output {
-    let mut c = Command::new(env!("CARGO_BIN_EXE_ident"));
-    c.args(args).env_remove("IDENT_LOG");
-    for (k, v) in env {
-        c.env(k, v);
-    }
-    c.output().expect("run ident")
-}
-
-fn text(b: &[u8]) -> String {
-    String::from_utf8_lossy(b).into_owned()
-}
-
-fn p(path: &Path) -> &str {
-    path.to_str().expect("utf-8 path")
-}
-
-const TWO_MASS: &str = "configs/models/textbook-two-mass.toml";
-
 /// Truth of the two-mass chain: k1 = 20 N/µm, k2 = 5 N/µm (the model file's values).
 const K1: f64 = 2.0e7;
 const K2: f64 = 5.0e6;
 
-/// Variables: k1 and k2 of the two-mass chain, started at 14 and 7 N/µm.
-const TWO_MASS_VARS: &str = r#"
-[[variable]]
-sdes = "k1"
-parameter = "k"
-initial = "14 N/um"
-
-[[variable]]
-sdes = "k2"
-parameter = "k"
-initial = "7 N/um"
-"#;
+/// k1 and k2 of the two-mass chain started at 14 and 7 N/µm.
+const TWO_MASS_VARS: &str = include_str!("../configs/identification/textbook-two-mass.toml");
 
 /// 1 % noise on both outputs of the two-mass chain, 40 lines over 10-60 Hz, seeded.
 fn two_mass_data(seed: u64) -> MeasuredData {
@@ -82,6 +53,31 @@ impl Case {
     fn path(&self, name: &str) -> PathBuf {
         self.dir.path().join(name)
     }
+    /// A case with the two-mass chain's seeded data (`data.json`) and variables (`vars.toml`).
+    fn two_mass(seed: u64) -> Case {
+        let c = Case::new();
+        c.file("data.json", &json_data(&two_mass_data(seed)));
+        c.file("vars.toml", TWO_MASS_VARS);
+        c
+    }
+    /// `ident identify` of the two-mass model on this case's `data` and `vars.toml`, then `extra`.
+    fn identify(&self, data: &str, extra: &[&str], env: &[(&str, &str)]) -> Output {
+        let (model, data, vars) = (
+            root().join(TWO_MASS),
+            self.path(data),
+            self.path("vars.toml"),
+        );
+        let mut args = vec![
+            "identify",
+            p(&model),
+            "--data",
+            p(&data),
+            "--vars",
+            p(&vars),
+        ];
+        args.extend_from_slice(extra);
+        ident_with(&args, env)
+    }
 }
 
 fn json_data(d: &MeasuredData) -> String {
@@ -90,19 +86,13 @@ fn json_data(d: &MeasuredData) -> String {
 
 #[test]
 fn a_converged_fit_reports_the_table_and_writes_the_updated_model() {
-    let c = Case::new();
-    let d = c.file("data.json", &json_data(&two_mass_data(3)));
-    let v = c.file("vars.toml", TWO_MASS_VARS);
-    let model = root().join(TWO_MASS);
+    let c = Case::two_mass(3);
     let out_dir = c.path("out");
-    let base = ["identify", p(&model), "--data", p(&d), "--vars", p(&v)];
 
     // Text on stdout, files in --out.
-    let mut args = base.to_vec();
-    args.extend(["--out", p(&out_dir)]);
-    let o = ident(&args, &[]);
-    assert_eq!(o.status.code(), Some(0), "{}", text(&o.stderr));
-    let report = text(&o.stdout);
+    let o = c.identify("data.json", &["--out", p(&out_dir)], &[]);
+    assert_eq!(o.status.code(), Some(0), "{}", utf8(&o.stderr));
+    let report = utf8(&o.stdout);
     assert!(
         report.contains("k k1") && report.contains("k k2") && report.contains("N/um"),
         "{report}"
@@ -111,7 +101,7 @@ fn a_converged_fit_reports_the_table_and_writes_the_updated_model() {
     assert!(
         o.stderr.is_empty(),
         "no progress lines without --progress or -v: {}",
-        text(&o.stderr)
+        utf8(&o.stderr)
     );
 
     // report.json and report.html: the identify workflow's report with the dense model curves.
@@ -160,20 +150,16 @@ fn a_converged_fit_reports_the_table_and_writes_the_updated_model() {
         identified.push(x);
     }
     // --format json on stdout is the same report.
-    let mut args = base.to_vec();
-    args.extend(["--format", "json"]);
-    let o = ident(&args, &[]);
+    let o = c.identify("data.json", &["--format", "json"], &[]);
     assert_eq!(o.status.code(), Some(0));
     let j2: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
     assert_eq!(j2["table"], j["table"]);
 
     // table.csv and --format csv: a header and one row per variable, the same numbers.
     let csv = std::fs::read_to_string(out_dir.join("table.csv")).unwrap();
-    let mut args = base.to_vec();
-    args.extend(["--format", "csv"]);
-    let o = ident(&args, &[]);
+    let o = c.identify("data.json", &["--format", "csv"], &[]);
     assert_eq!(o.status.code(), Some(0));
-    assert_eq!(text(&o.stdout), csv);
+    assert_eq!(utf8(&o.stdout), csv);
     let lines: Vec<&str> = csv.lines().collect();
     assert_eq!(
         lines[0],
@@ -208,8 +194,8 @@ fn a_converged_fit_reports_the_table_and_writes_the_updated_model() {
         }
     }
     // `ident model check` accepts the written model.
-    let o = ident(&["model", "check", p(&out_dir.join("model.toml"))], &[]);
-    assert_eq!(o.status.code(), Some(0), "{}", text(&o.stderr));
+    let o = ident(&["model", "check", p(&out_dir.join("model.toml"))]);
+    assert_eq!(o.status.code(), Some(0), "{}", utf8(&o.stderr));
 }
 
 #[test]
@@ -240,19 +226,18 @@ fn the_fwd32j_problem_is_identified_from_the_papers_initial_values() {
             p(&out_dir),
             "--progress",
         ],
-        &[],
     );
-    assert_eq!(o.status.code(), Some(0), "{}", text(&o.stderr));
+    assert_eq!(o.status.code(), Some(0), "{}", utf8(&o.stderr));
     let j: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out_dir.join("table.json")).unwrap())
             .unwrap();
     // One plain progress line per iteration.
     let iterations = j["iterations"].as_u64().unwrap() as usize;
-    let progress = text(&o.stderr)
+    let progress = utf8(&o.stderr)
         .lines()
         .filter(|l| l.starts_with("iteration "))
         .count();
-    assert_eq!(progress, iterations, "{}", text(&o.stderr));
+    assert_eq!(progress, iterations, "{}", utf8(&o.stderr));
     let rows = j["table"].as_array().unwrap();
     assert_eq!(rows.len(), 20);
     let kn6 = rows.iter().find(|r| r["sdes"] == "6").unwrap();
@@ -278,19 +263,11 @@ fn the_fwd32j_problem_is_identified_from_the_papers_initial_values() {
 
 #[test]
 fn the_iteration_limit_exits_1_and_keeps_the_best_point() {
-    let c = Case::new();
-    let d = c.file("data.json", &json_data(&two_mass_data(5)));
-    let v = c.file("vars.toml", TWO_MASS_VARS);
-    let model = root().join(TWO_MASS);
+    let c = Case::two_mass(5);
     let out_dir = c.path("out");
-    let o = ident(
+    let o = c.identify(
+        "data.json",
         &[
-            "identify",
-            p(&model),
-            "--data",
-            p(&d),
-            "--vars",
-            p(&v),
             "--max-iterations",
             "1",
             "--format",
@@ -300,8 +277,8 @@ fn the_iteration_limit_exits_1_and_keeps_the_best_point() {
         ],
         &[],
     );
-    assert_eq!(o.status.code(), Some(1), "{}", text(&o.stderr));
-    let err = text(&o.stderr);
+    assert_eq!(o.status.code(), Some(1), "{}", utf8(&o.stderr));
+    let err = utf8(&o.stderr);
     assert!(
         err.contains("NOT converged")
             && err.contains("iteration limit")
@@ -338,20 +315,10 @@ fn the_iteration_limit_exits_1_and_keeps_the_best_point() {
 /// format) and returns stderr, asserting exit status 2.
 fn bad_input(vars: &str, data_name: &str, data: &str) -> (String, Case) {
     let c = Case::new();
-    let d = c.file(data_name, data);
-    let v = c.file("vars.toml", vars);
-    let o = ident(
-        &[
-            "identify",
-            p(&root().join(TWO_MASS)),
-            "--data",
-            p(&d),
-            "--vars",
-            p(&v),
-        ],
-        &[],
-    );
-    let err = text(&o.stderr);
+    c.file(data_name, data);
+    c.file("vars.toml", vars);
+    let o = c.identify(data_name, &[], &[]);
+    let err = utf8(&o.stderr);
     assert_eq!(o.status.code(), Some(2), "{err}");
     assert!(o.stdout.is_empty(), "no report on bad input");
     assert!(err.starts_with("error: "), "{err}");
@@ -436,21 +403,8 @@ fn bad_data_exit_2_naming_the_file_characteristic_and_point() {
 
 #[test]
 fn progress_is_logged_with_verbose_or_ident_log() {
-    let c = Case::new();
-    let d = c.file("data.json", &json_data(&two_mass_data(2)));
-    let v = c.file("vars.toml", TWO_MASS_VARS);
-    let model = root().join(TWO_MASS);
-    let args = [
-        "identify",
-        p(&model),
-        "--data",
-        p(&d),
-        "--vars",
-        p(&v),
-        "--format",
-        "json",
-    ];
-    let quiet = ident(&args, &[]);
+    let c = Case::two_mass(2);
+    let quiet = c.identify("data.json", &["--format", "json"], &[]);
     assert_eq!(quiet.status.code(), Some(0));
     let iterations = serde_json::from_slice::<serde_json::Value>(&quiet.stdout).unwrap()
         ["iterations"]
@@ -458,45 +412,30 @@ fn progress_is_logged_with_verbose_or_ident_log() {
         .unwrap() as usize;
     assert!(iterations >= 2);
     let count = |o: &Output| {
-        text(&o.stderr)
+        utf8(&o.stderr)
             .lines()
             .filter(|l| l.contains("INFO") && l.contains("gradient="))
             .count()
     };
-    let mut verbose = args.to_vec();
-    verbose.push("-v");
-    let o = ident(&verbose, &[]);
+    let o = c.identify("data.json", &["--format", "json", "-v"], &[]);
     assert_eq!(o.status.code(), Some(0));
-    assert_eq!(count(&o), iterations, "{}", text(&o.stderr));
-    assert!(text(&o.stderr).contains("criterion="));
-    let o = ident(&args, &[("IDENT_LOG", "info")]);
-    assert_eq!(count(&o), iterations, "{}", text(&o.stderr));
+    assert_eq!(count(&o), iterations, "{}", utf8(&o.stderr));
+    assert!(utf8(&o.stderr).contains("criterion="));
+    let o = c.identify("data.json", &["--format", "json"], &[("IDENT_LOG", "info")]);
+    assert_eq!(count(&o), iterations, "{}", utf8(&o.stderr));
     assert_eq!(count(&quiet), 0);
 }
 
 #[test]
 fn the_weak_direction_threshold_is_a_flag() {
-    let c = Case::new();
-    let d = c.file("data.json", &json_data(&two_mass_data(2)));
-    let v = c.file("vars.toml", TWO_MASS_VARS);
-    let model = root().join(TWO_MASS);
+    let c = Case::two_mass(2);
     let weak = |t: &str| {
-        let o = ident(
-            &[
-                "identify",
-                p(&model),
-                "--data",
-                p(&d),
-                "--vars",
-                p(&v),
-                "--format",
-                "json",
-                "--weak-threshold",
-                t,
-            ],
+        let o = c.identify(
+            "data.json",
+            &["--format", "json", "--weak-threshold", t],
             &[],
         );
-        assert_eq!(o.status.code(), Some(0), "{}", text(&o.stderr));
+        assert_eq!(o.status.code(), Some(0), "{}", utf8(&o.stderr));
         serde_json::from_slice::<serde_json::Value>(&o.stdout).unwrap()["weak_directions"]
             .as_array()
             .unwrap()
@@ -506,47 +445,21 @@ fn the_weak_direction_threshold_is_a_flag() {
     // is "weak".
     assert_eq!(weak("0.5"), 0);
     assert_eq!(weak("1e-9"), 2);
-    let o = ident(
-        &[
-            "identify",
-            p(&model),
-            "--data",
-            p(&d),
-            "--vars",
-            p(&v),
-            "--weak-threshold=-1",
-        ],
-        &[],
-    );
+    let o = c.identify("data.json", &["--weak-threshold=-1"], &[]);
     assert_eq!(o.status.code(), Some(2));
     assert!(
-        text(&o.stderr).contains("--weak-threshold -1"),
+        utf8(&o.stderr).contains("--weak-threshold -1"),
         "{}",
-        text(&o.stderr)
+        utf8(&o.stderr)
     );
 }
 
 #[test]
 fn the_problem_export_holds_what_an_external_fit_needs() {
-    let c = Case::new();
-    let d = c.file("data.json", &json_data(&two_mass_data(2)));
-    let v = c.file("vars.toml", TWO_MASS_VARS);
-    let model = root().join(TWO_MASS);
+    let c = Case::two_mass(2);
     let out = c.path("problem.json");
-    let o = ident(
-        &[
-            "identify",
-            p(&model),
-            "--data",
-            p(&d),
-            "--vars",
-            p(&v),
-            "--export-problem",
-            p(&out),
-        ],
-        &[],
-    );
-    assert_eq!(o.status.code(), Some(0), "{}", text(&o.stderr));
+    let o = c.identify("data.json", &["--export-problem", p(&out)], &[]);
+    assert_eq!(o.status.code(), Some(0), "{}", utf8(&o.stderr));
     assert!(o.stdout.is_empty(), "no fit, no report");
     let j: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
@@ -575,21 +488,10 @@ fn the_problem_export_holds_what_an_external_fit_needs() {
 #[test]
 fn a_missing_file_is_named_once_with_its_cause() {
     let c = Case::new();
-    let v = c.file("vars.toml", TWO_MASS_VARS);
-    let missing = c.path("nothere.json");
-    let o = ident(
-        &[
-            "identify",
-            p(&root().join(TWO_MASS)),
-            "--data",
-            p(&missing),
-            "--vars",
-            p(&v),
-        ],
-        &[],
-    );
+    c.file("vars.toml", TWO_MASS_VARS);
+    let o = c.identify("nothere.json", &[], &[]);
     assert_eq!(o.status.code(), Some(2));
-    let err = text(&o.stderr);
+    let err = utf8(&o.stderr);
     assert!(
         err.contains("nothere.json: cannot read the data file"),
         "{err}"

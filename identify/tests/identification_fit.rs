@@ -61,23 +61,8 @@ fn measured(model: &Model, rel: f64, seed: u64) -> MeasuredData {
     }
 }
 
-const VARS: &str = r#"
-[[variable]]
-sdes = "k1"
-parameter = "k"
-initial = "14 N/um"   # truth 20 N/um
-
-[[variable]]
-sdes = "k2"
-parameter = "k"
-initial = "7 N/um"    # truth 5 N/um
-
-[[variable]]
-name = "psi"
-sdes = ["k1", "k2"]
-parameter = "psi"
-initial = 0.3         # truth 0.5
-"#;
+/// k1 and k2 of the two-mass chain started at 14 and 7 N/µm, and their common ψ at 0.3.
+const VARS: &str = include_str!("../../configs/identification/textbook-two-mass-psi.toml");
 
 fn setup(rel: f64, seed: u64) -> (Model, data::Observations, variables::Variables) {
     let m = truth();

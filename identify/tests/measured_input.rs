@@ -327,23 +327,8 @@ fn bands_that_do_not_overlap_are_an_error_and_levels_off_by_g_are_named() {
     assert!(w.contains("m read as mm"), "{w}");
 }
 
-const VARS: &str = r#"
-[[variable]]
-sdes = "k1"
-parameter = "k"
-initial = "14 N/um"
-
-[[variable]]
-sdes = "k2"
-parameter = "k"
-initial = "7 N/um"
-
-[[variable]]
-name = "psi"
-sdes = ["k1", "k2"]
-parameter = "psi"
-initial = 0.3
-"#;
+/// k1 and k2 of the two-mass chain started at 14 and 7 N/µm, and their common ψ at 0.3.
+const VARS: &str = include_str!("../../configs/identification/textbook-two-mass-psi.toml");
 
 #[test]
 fn a_fit_the_model_cannot_explain_says_so_in_its_headline() {

@@ -29,23 +29,8 @@ dir = "Z"
 body = "second"
 "#;
 
-const VARS: &str = r#"
-[[variable]]
-sdes = "k1"
-parameter = "k"
-initial = "14 N/um"
-
-[[variable]]
-sdes = "k2"
-parameter = "k"
-initial = "7 N/um"
-
-[[variable]]
-name = "psi"
-sdes = ["k1", "k2"]
-parameter = "psi"
-initial = 0.3
-"#;
+/// k1 and k2 of the two-mass chain started at 14 and 7 N/µm, and their common ψ at 0.3.
+const VARS: &str = include_str!("../../configs/identification/textbook-two-mass-psi.toml");
 
 /// The textbook chain with a 4 kN excitation (so "per N" must be scaled), and its measured
 /// receptances per N at 60 uneven lines with 1 % seeded noise.

@@ -4,15 +4,36 @@
 // Each test crate uses some of them.
 #![allow(dead_code)]
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
+
+/// The textbook two-mass chain, relative to the repository's root.
+pub const TWO_MASS: &str = "configs/models/textbook-two-mass.toml";
 
 /// Runs the `ident` binary with `args` and waits for it.
 pub fn ident(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_ident"))
-        .args(args)
-        .output()
-        .expect("run ident")
+    ident_with(args, &[])
+}
+
+/// Runs the `ident` binary with `args` and the environment variables `env` added (`IDENT_LOG`
+/// from the caller's environment removed, so logging is what the test asks for).
+pub fn ident_with(args: &[&str], env: &[(&str, &str)]) -> Output {
+    let mut c = Command::new(env!("CARGO_BIN_EXE_ident"));
+    c.args(args).env_remove("IDENT_LOG");
+    for (k, v) in env {
+        c.env(k, v);
+    }
+    c.output().expect("run ident")
+}
+
+/// Bytes a run printed, as text.
+pub fn utf8(b: &[u8]) -> String {
+    String::from_utf8_lossy(b).into_owned()
+}
+
+/// A path as a command-line argument.
+pub fn p(path: &Path) -> &str {
+    path.to_str().expect("utf-8 path")
 }
 
 /// What a run printed: stdout, a newline, stderr.
