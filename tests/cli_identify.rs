@@ -214,19 +214,17 @@ fn the_fwd32j_problem_is_identified_from_the_papers_initial_values() {
     let model = root().join("configs/models/fwd32j-initial.toml");
     let vars = root().join("configs/identification/fwd32j.toml");
     let out_dir = c.path("out");
-    let o = ident(
-        &[
-            "identify",
-            p(&model),
-            "--data",
-            p(&data),
-            "--vars",
-            p(&vars),
-            "--out",
-            p(&out_dir),
-            "--progress",
-        ],
-    );
+    let o = ident(&[
+        "identify",
+        p(&model),
+        "--data",
+        p(&data),
+        "--vars",
+        p(&vars),
+        "--out",
+        p(&out_dir),
+        "--progress",
+    ]);
     assert_eq!(o.status.code(), Some(0), "{}", utf8(&o.stderr));
     let j: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out_dir.join("table.json")).unwrap())

@@ -97,6 +97,16 @@ async fn run_sweep(
     (r, sim)
 }
 
+/// [`run_sweep`] with nothing skipped, no stop and no progress display.
+async fn sweep_to_the_end(
+    stand: &Stand,
+    plan: &SteppedSine,
+    path: &std::path::Path,
+) -> (Result<sweep::SweepOutcome, SweepError>, SimStand) {
+    let none = BTreeSet::new();
+    run_sweep(stand, plan, path, &StopSignal::new(), &none, &NoProgress).await
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn stepped_sine_over_ptys_recovers_the_truth_frf_from_the_session_file() {
     bounded(120, async {
@@ -113,15 +123,7 @@ async fn stepped_sine_over_ptys_recovers_the_truth_frf_from_the_session_file() {
             ..quick_plan(0)
         };
         let (_d, path) = temp_file("e2e.mcap");
-        let (r, _sim) = run_sweep(
-            &stand,
-            &plan,
-            &path,
-            &StopSignal::new(),
-            &BTreeSet::new(),
-            &NoProgress,
-        )
-        .await;
+        let (r, _sim) = sweep_to_the_end(&stand, &plan, &path).await;
         let outcome = r.unwrap();
         assert_eq!(outcome.steps.len(), 9);
         assert_eq!(stand.force_channel(), 0);
@@ -218,15 +220,7 @@ async fn every_injected_stream_fault_is_detected_and_recorded() {
         stand.faults.seed = 42;
         let plan = quick_plan(5);
         let (_d, path) = temp_file("faults.mcap");
-        let (r, sim) = run_sweep(
-            &stand,
-            &plan,
-            &path,
-            &StopSignal::new(),
-            &BTreeSet::new(),
-            &NoProgress,
-        )
-        .await;
+        let (r, sim) = sweep_to_the_end(&stand, &plan, &path).await;
         let outcome = r.unwrap();
         assert_eq!(
             outcome.steps.len(),
@@ -308,15 +302,7 @@ async fn expect_sweep_error(
 ) -> (SweepError, Vec<acquire::session::Record>) {
     set(&mut stand.faults);
     let (_d, path) = temp_file("fail.mcap");
-    let (r, _sim) = run_sweep(
-        &stand,
-        &quick_plan(6),
-        &path,
-        &StopSignal::new(),
-        &BTreeSet::new(),
-        &NoProgress,
-    )
-    .await;
+    let (r, _sim) = sweep_to_the_end(&stand, &quick_plan(6), &path).await;
     let e = r.expect_err("the sweep must fail");
     let rs = records(&path); // the file is still complete
     assert!(
@@ -742,15 +728,7 @@ async fn rfe_model_truth_is_recovered_by_a_stepped_sine() {
             ..quick_plan(0)
         };
         let (_d, path) = temp_file("rfe.mcap");
-        let (r, _sim) = run_sweep(
-            &stand,
-            &plan,
-            &path,
-            &StopSignal::new(),
-            &BTreeSet::new(),
-            &NoProgress,
-        )
-        .await;
+        let (r, _sim) = sweep_to_the_end(&stand, &plan, &path).await;
         let o = r.unwrap();
         let t = stand.truth.as_ref().unwrap();
         let plant = acquire::sim::plant::plant_for(t, &stand.channels).unwrap();

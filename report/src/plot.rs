@@ -220,6 +220,42 @@ fn tick(v: f64) -> String {
     identify::display::sig(v, 3)
 }
 
+/// Draws the mesh of a chart over frequency: the x axis in Hz with [`tick`] labels, `y_desc` and
+/// `y_label` on the y axis.
+fn frequency_mesh<'a, 'b: 'a, X, Y>(
+    chart: &mut Chart<'a, 'b, X, Y>,
+    y_desc: &str,
+    y_label: &dyn Fn(&f64) -> String,
+) -> Result<(), DrawError>
+where
+    X: Ranged<ValueType = f64> + ValueFormatter<f64>,
+    Y: Ranged<ValueType = f64> + ValueFormatter<f64>,
+{
+    chart
+        .configure_mesh()
+        .x_desc("frequency (Hz)")
+        .y_desc(y_desc)
+        .x_label_formatter(&|v| tick(*v))
+        .y_label_formatter(y_label)
+        .label_style((FONT, 12))
+        .draw()
+}
+
+/// The builder of a chart over frequency: its caption, margins and label areas.
+fn frequency_chart<'a, 'b>(
+    root: &'a DrawingArea<SVGBackend<'b>, plotters::coord::Shift>,
+    caption: String,
+    caption_size: u32,
+    x_label_area: u32,
+) -> ChartBuilder<'a, 'b, SVGBackend<'b>> {
+    let mut b = ChartBuilder::on(root);
+    b.caption(caption, (FONT, caption_size))
+        .margin(10)
+        .x_label_area_size(x_label_area)
+        .y_label_area_size(80);
+    b
+}
+
 /// The frequency axis of a characteristic's charts.
 fn frequency_axis(c: &CharacteristicReport) -> Axis {
     Axis::for_values(c.freqs_hz.iter().copied().filter(|f| *f > 0.0))
@@ -244,14 +280,8 @@ pub fn amplitude_chart(
                     s.amplitude.iter().copied().chain(dense)
                 })),
         );
-        let mut b = ChartBuilder::on(root);
-        b.caption(
-            format!("{} — amplitude-frequency characteristic", c.label),
-            (FONT, 16),
-        )
-        .margin(10)
-        .x_label_area_size(40)
-        .y_label_area_size(80);
+        let caption = format!("{} — amplitude-frequency characteristic", c.label);
+        let mut b = frequency_chart(root, caption, 16, 40);
         on_axes!(b, x, y, draw_amplitude(c, modes, x, y))
     })
 }
@@ -267,20 +297,14 @@ where
     X: Ranged<ValueType = f64> + ValueFormatter<f64>,
     Y: Ranged<ValueType = f64> + ValueFormatter<f64>,
 {
-    chart
-        .configure_mesh()
-        .x_desc("frequency (Hz)")
-        .y_desc(format!("|{}| ({})", c.quantity, c.unit))
-        .x_label_formatter(&|v| tick(*v))
-        .y_label_formatter(&|v| {
-            if y.log {
-                format!("{v:.0e}")
-            } else {
-                format!("{v:.2e}")
-            }
-        })
-        .label_style((FONT, 12))
-        .draw()?;
+    let y_label = |v: &f64| {
+        if y.log {
+            format!("{v:.0e}")
+        } else {
+            format!("{v:.2e}")
+        }
+    };
+    frequency_mesh(chart, &format!("|{}| ({})", c.quantity, c.unit), &y_label)?;
     // The final model's natural frequencies: thin vertical markers, labelled along them.
     let grey = RGBColor(120, 120, 120);
     let in_view: Vec<&NaturalMode> = modes
@@ -390,11 +414,7 @@ pub fn phase_chart(c: &CharacteristicReport) -> Result<String, ReportError> {
             hi: 180.0,
             log: false,
         };
-        let mut b = ChartBuilder::on(root);
-        b.caption(format!("{} — phase", c.label), (FONT, 14))
-            .margin(10)
-            .x_label_area_size(35)
-            .y_label_area_size(80);
+        let mut b = frequency_chart(root, format!("{} — phase", c.label), 14, 35);
         on_axes!(b, x, y, draw_phase(c, x))
     })
 }
@@ -408,14 +428,7 @@ where
     X: Ranged<ValueType = f64> + ValueFormatter<f64>,
     Y: Ranged<ValueType = f64> + ValueFormatter<f64>,
 {
-    chart
-        .configure_mesh()
-        .x_desc("frequency (Hz)")
-        .y_desc("phase (°)")
-        .x_label_formatter(&|v| tick(*v))
-        .y_label_formatter(&|v| format!("{v:.0}"))
-        .label_style((FONT, 12))
-        .draw()?;
+    frequency_mesh(chart, "phase (°)", &|v| format!("{v:.0}"))?;
     let deg = |r: f64| r.to_degrees().clamp(-180.0, 180.0);
     for s in &c.stages {
         let Some((d, phase)) = s
@@ -486,14 +499,8 @@ pub fn residual_chart(c: &CharacteristicReport) -> Result<String, ReportError> {
             hi: m,
             log: false,
         };
-        let mut b = ChartBuilder::on(root);
-        b.caption(
-            format!("{} — standardized residuals (units of σ)", c.label),
-            (FONT, 14),
-        )
-        .margin(10)
-        .x_label_area_size(35)
-        .y_label_area_size(80);
+        let caption = format!("{} — standardized residuals (units of σ)", c.label);
+        let mut b = frequency_chart(root, caption, 14, 35);
         on_axes!(b, x, y, draw_residuals(c, x, m))
     })
 }
@@ -508,14 +515,9 @@ where
     X: Ranged<ValueType = f64> + ValueFormatter<f64>,
     Y: Ranged<ValueType = f64> + ValueFormatter<f64>,
 {
-    chart
-        .configure_mesh()
-        .x_desc("frequency (Hz)")
-        .y_desc("(measured − model) / σ")
-        .x_label_formatter(&|v| tick(*v))
-        .y_label_formatter(&|v| format!("{}σ", identify::display::sig(*v, 2)))
-        .label_style((FONT, 12))
-        .draw()?;
+    frequency_mesh(chart, "(measured − model) / σ", &|v| {
+        format!("{}σ", identify::display::sig(*v, 2))
+    })?;
     let red = RGBColor(200, 80, 80);
     for lim in [-2.0, 2.0] {
         chart.draw_series(std::iter::once(PathElement::new(
