@@ -53,30 +53,19 @@ pub enum LoadError {
 
 /// Loads a model file: resolved JSON if the file starts with `{`, TOML otherwise.
 pub fn load(path: &Path) -> Result<Loaded, LoadError> {
-    let text = std::fs::read_to_string(path).map_err(|source| LoadError::Io {
+    let io = |source| LoadError::Io {
         path: path.display().to_string(),
         source,
-    })?;
-    let origin = path.display().to_string();
-    if text.trim_start().starts_with('{') {
-        parse_json(&text, &origin)
-    } else {
-        parse_toml(&text, &origin)
-    }
+    };
+    crate::source::read_json_or(path, io, parse_json, parse_toml)
 }
 
 /// Parses the resolved JSON form.
 pub fn parse_json(text: &str, origin: &str) -> Result<Loaded, LoadError> {
-    let de = &mut serde_json::Deserializer::from_str(text);
-    let raw: ModelJson = serde_path_to_error::deserialize(de).map_err(|e| {
-        let inner = e.inner();
-        LoadError::Json {
-            origin: origin.into(),
-            path: format!("$.{}", e.path())
-                .replace("$.?", "$")
-                .replace(".[", "["),
-            message: format!("{inner} (line {}, column {})", inner.line(), inner.column()),
-        }
+    let raw: ModelJson = crate::source::from_json(text).map_err(|e| LoadError::Json {
+        origin: origin.into(),
+        path: e.path,
+        message: e.message,
     })?;
     let model = from_json(&raw).map_err(|p| LoadError::Json {
         origin: origin.into(),

@@ -80,6 +80,46 @@ impl<'a> SourceText<'a> {
     }
 }
 
+/// A JSON text that does not deserialize: where and what.
+#[derive(Debug, Clone, PartialEq)]
+pub struct JsonProblem {
+    /// Path of the bad item, e.g. `$.sdes[3].k`.
+    pub path: String,
+    /// What is wrong, with its line and column.
+    pub message: String,
+}
+
+/// Deserializes a JSON text, naming the path of the item where it fails.
+pub fn from_json<T: serde::de::DeserializeOwned>(text: &str) -> Result<T, JsonProblem> {
+    let de = &mut serde_json::Deserializer::from_str(text);
+    serde_path_to_error::deserialize(de).map_err(|e| {
+        let inner = e.inner();
+        JsonProblem {
+            path: format!("$.{}", e.path())
+                .replace("$.?", "$")
+                .replace(".[", "["),
+            message: format!("{inner} (line {}, column {})", inner.line(), inner.column()),
+        }
+    })
+}
+
+/// Reads a file that is JSON when its text starts with `{` and another format otherwise, and
+/// parses it with `json` or `other` (each given the text and the file's name).
+pub fn read_json_or<T, E>(
+    path: &std::path::Path,
+    io: impl FnOnce(std::io::Error) -> E,
+    json: impl FnOnce(&str, &str) -> Result<T, E>,
+    other: impl FnOnce(&str, &str) -> Result<T, E>,
+) -> Result<T, E> {
+    let text = std::fs::read_to_string(path).map_err(io)?;
+    let origin = path.display().to_string();
+    if text.trim_start().starts_with('{') {
+        json(&text, &origin)
+    } else {
+        other(&text, &origin)
+    }
+}
+
 /// `text` without a leading UTF-8 byte-order mark (spreadsheet programs and Windows editors write
 /// one); every text reader of the project starts with this.
 pub fn strip_bom(text: &str) -> &str {

@@ -311,15 +311,12 @@ fn final_parameters(d: &diagnose::Diagnosis, id: &Identification) -> Vec<Paramet
                 None
             };
             Parameter {
-                variable: r.variable,
-                sdes: r.sdes,
-                parameter: r.parameter,
-                unit: r.unit,
                 initial: finite(r.identified),
                 identified: finite(x / f),
                 std_error: opt(se / f),
                 variability: if x != 0.0 { opt(se / x.abs()) } else { None },
                 at_bound,
+                ..r
             }
         })
         .collect()
@@ -342,15 +339,11 @@ pub fn summary(id: &Identification) -> IdentificationSummary {
         parameters: table::rows(id)
             .into_iter()
             .map(|r| Parameter {
-                variable: r.variable,
-                sdes: r.sdes,
-                parameter: r.parameter,
-                unit: r.unit,
                 initial: finite(r.initial),
                 identified: finite(r.identified),
                 std_error: r.std_error.and_then(opt),
                 variability: r.variability.and_then(opt),
-                at_bound: r.at_bound,
+                ..r
             })
             .collect(),
         correlation: (0..n)

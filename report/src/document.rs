@@ -185,29 +185,9 @@ pub struct NaturalMode {
     pub loss_factor: f64,
 }
 
-/// One row of the Table-1-like table, in the variable's display unit.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct Parameter {
-    /// Variable name (unique in the variables file; the key of the drift history).
-    pub variable: String,
-    /// SDE names (`"2-10, 13-17"`).
-    pub sdes: String,
-    /// Parameter (`kn`, `psi_n`, ...).
-    pub parameter: String,
-    /// Display unit (`MPa/um`, `N/um`, `-`).
-    pub unit: String,
-    /// Initial value.
-    pub initial: f64,
-    /// Identified value.
-    pub identified: f64,
-    /// Cramér-Rao standard error; `null` when undetermined.
-    pub std_error: Option<f64>,
-    /// std_error / |identified|; `null` when undefined.
-    pub variability: Option<f64>,
-    /// `lower` / `upper` when the estimate is at a bound.
-    pub at_bound: Option<String>,
-}
+/// One row of the Table-1-like table, in the variable's display unit: the record `ident identify`
+/// writes as its table, so the two cannot drift apart.
+pub use identify::identification::report::Row as Parameter;
 
 /// The identification's outcome.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

@@ -201,34 +201,19 @@ pub fn parse_csv_declared(
 /// Reads a data file: JSON ([`MeasuredData`]) when the text starts with `{`, CSV otherwise.
 /// A CSV that declares a unit needs the model: use [`load_for_model`].
 pub fn load(path: &Path) -> Result<MeasuredData, DataError> {
-    let text = std::fs::read_to_string(path).map_err(|source| DataError::Io {
+    let io = |source| DataError::Io {
         path: path.display().to_string(),
         source,
-    })?;
-    let origin = path.display().to_string();
-    if text.trim_start().starts_with('{') {
-        parse_json(&text, &origin)
-    } else {
-        parse_csv(&text, &origin)
-    }
+    };
+    crate::source::read_json_or(path, io, parse_json, parse_csv)
 }
 
 /// Parses the JSON form (the [`MeasuredData`] serialization).
 pub fn parse_json(text: &str, origin: &str) -> Result<MeasuredData, DataError> {
-    let de = &mut serde_json::Deserializer::from_str(text);
-    serde_path_to_error::deserialize(de).map_err(|e| {
-        let inner = e.inner();
-        DataError::Json {
-            origin: origin.into(),
-            path: format!("$.{}", e.path())
-                .replace("$.?", "$")
-                .replace(".[", "["),
-            message: format!(
-                "{inner} (line {}, column {}); see docs/identification.md for the format",
-                inner.line(),
-                inner.column()
-            ),
-        }
+    crate::source::from_json(text).map_err(|e| DataError::Json {
+        origin: origin.into(),
+        path: e.path,
+        message: format!("{}; see docs/identification.md for the format", e.message),
     })
 }
 

@@ -2,7 +2,7 @@
 //! identified, standard error) as text, JSON and CSV, and the updated model written back into
 //! the original TOML text (comments and layout kept, via `toml_edit`).
 
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 use toml_edit::{DocumentMut, Item, Value};
 
 use super::uncertainty::AtBound;
@@ -11,8 +11,10 @@ use super::Identification;
 use crate::model::{ParamName, SdeLaw};
 use crate::units::{parse_quantity, Dim};
 
-/// One row of the table, in the variable's display unit.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+/// One row of the table, in the variable's display unit. The same record is a row of
+/// report.json's parameter tables (`report::document::Parameter`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct Row {
     /// Variable name.
     pub variable: String,
