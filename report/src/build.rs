@@ -368,13 +368,7 @@ pub fn sensitivity_map(
     id: &Identification,
     obs: &Observations,
 ) -> Result<SensitivityMap, ReportError> {
-    let mut freqs: Vec<f64> = obs
-        .characteristics
-        .iter()
-        .flat_map(|c| c.freqs_hz.iter().copied())
-        .collect();
-    freqs.sort_by(f64::total_cmp);
-    freqs.dedup();
+    let freqs = obs.lines_hz();
     let params = id.variables.params();
     let s = sensitivity::band_sensitivity(model, &freqs, &params, frf::Method::Auto).map_err(
         |source| ReportError::Model {

@@ -9,9 +9,7 @@ use std::collections::VecDeque;
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
-use tokio::io::{AsyncReadExt, AsyncWriteExt};
-
-use super::{lock, InjectedFault, SharedRef};
+use super::{lock, read_lines, send_answer, InjectedFault, SharedRef};
 use crate::device::DeviceIdentity;
 use crate::shaker::scpi::{Function, Line, LineBuffer};
 use crate::transport::Transport;
@@ -124,21 +122,10 @@ impl SimGenerator {
         let mut lines = LineBuffer::new();
         let mut buf = vec![0u8; 512];
         loop {
-            if lock(&self.shared).cable_pulled {
+            let Some(got) = read_lines(&mut io, &mut lines, &mut buf, &self.shared, pty).await
+            else {
                 return;
-            }
-            let n = match tokio::time::timeout(Duration::from_millis(20), io.read(&mut buf)).await {
-                Err(_) => continue,
-                Ok(Ok(0)) | Ok(Err(_)) if !pty => return,
-                // No host has the pty open (reads fail with EIO): wait for one.
-                Ok(Ok(0)) | Ok(Err(_)) => {
-                    tokio::time::sleep(Duration::from_millis(10)).await;
-                    continue;
-                }
-                Ok(Ok(n)) => n,
             };
-            let mut got = Vec::new();
-            lines.feed(&buf[..n], |l| got.push(l));
             for line in got {
                 let answer = match line {
                     Line::Text(t) => self.handle(&t),
@@ -147,11 +134,8 @@ impl SimGenerator {
                         None
                     }
                 };
-                if let Some(mut a) = answer {
-                    a.push('\n');
-                    if io.write_all(a.as_bytes()).await.is_err() {
-                        return;
-                    }
+                if !send_answer(&mut io, answer).await {
+                    return;
                 }
             }
         }

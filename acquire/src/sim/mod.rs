@@ -449,20 +449,9 @@ async fn serve_shaker<T: Transport>(
     let mut count: u64 = 0;
     let mut silent = false;
     loop {
-        if lock(&shared).cable_pulled {
+        let Some(got) = read_lines(&mut io, &mut lines, &mut buf, &shared, true).await else {
             return;
-        }
-        let n = match tokio::time::timeout(Duration::from_millis(20), io.read(&mut buf)).await {
-            Err(_) => continue,
-            // No host has the port open (pty master reads EIO): wait for one.
-            Ok(Ok(0)) | Ok(Err(_)) => {
-                tokio::time::sleep(Duration::from_millis(10)).await;
-                continue;
-            }
-            Ok(Ok(n)) => n,
         };
-        let mut got = Vec::new();
-        lines.feed(&buf[..n], |l| got.push(l));
         for line in got {
             count += 1;
             if !silent
@@ -509,14 +498,48 @@ async fn serve_shaker<T: Transport>(
                     }
                 }
             };
-            if let Some(mut a) = answer {
-                a.push('\n');
-                if io.write_all(a.as_bytes()).await.is_err() {
-                    return;
-                }
+            if !send_answer(&mut io, answer).await {
+                return;
             }
         }
     }
+}
+
+/// Waits up to 20 ms for bytes from the host and returns the complete lines they finish. `None`
+/// when the device stops serving this connection: its cable is pulled, or the host left a
+/// connection that is not a pty (`pty == false`: a TCP client). On a pty, a port no host has open
+/// (reads fail with EIO) is waited out.
+async fn read_lines<T: Transport>(
+    io: &mut T,
+    lines: &mut LineBuffer,
+    buf: &mut [u8],
+    shared: &SharedRef,
+    pty: bool,
+) -> Option<Vec<Line>> {
+    if lock(shared).cable_pulled {
+        return None;
+    }
+    let n = match tokio::time::timeout(Duration::from_millis(20), io.read(buf)).await {
+        Err(_) => return Some(Vec::new()),
+        Ok(Ok(0)) | Ok(Err(_)) if !pty => return None,
+        Ok(Ok(0)) | Ok(Err(_)) => {
+            tokio::time::sleep(Duration::from_millis(10)).await;
+            return Some(Vec::new());
+        }
+        Ok(Ok(n)) => n,
+    };
+    let mut got = Vec::new();
+    lines.feed(&buf[..n], |l| got.push(l));
+    Some(got)
+}
+
+/// Sends an answer line (when there is one); false when the host can no longer be written to.
+async fn send_answer<T: Transport>(io: &mut T, answer: Option<String>) -> bool {
+    let Some(mut a) = answer else {
+        return true;
+    };
+    a.push('\n');
+    io.write_all(a.as_bytes()).await.is_ok()
 }
 
 fn push_error(q: &mut std::collections::VecDeque<ScpiError>, e: ScpiError) {

@@ -243,13 +243,7 @@ impl Criterion {
         noise: NoiseChoice,
         method: Method,
     ) -> Result<Criterion, IdentifyError> {
-        let mut freqs: Vec<f64> = data
-            .characteristics
-            .iter()
-            .flat_map(|c| c.freqs_hz.iter().copied())
-            .collect();
-        freqs.sort_by(f64::total_cmp);
-        freqs.dedup();
+        let freqs = data.lines_hz();
         let source = noise_source(data, noise)?;
         let mut work = model.clone();
         work.outputs = data

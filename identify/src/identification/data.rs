@@ -553,6 +553,18 @@ impl Observations {
     pub fn points(&self) -> usize {
         self.characteristics.iter().map(|c| c.freqs_hz.len()).sum()
     }
+
+    /// Every frequency measured on any characteristic (Hz), ascending, each once.
+    pub fn lines_hz(&self) -> Vec<f64> {
+        let mut freqs: Vec<f64> = self
+            .characteristics
+            .iter()
+            .flat_map(|c| c.freqs_hz.iter().copied())
+            .collect();
+        freqs.sort_by(f64::total_cmp);
+        freqs.dedup();
+        freqs
+    }
 }
 
 /// Validates measured data against a model: every characteristic must be one of the model's
