@@ -5,7 +5,7 @@
 
 mod common;
 
-use common::{ident, p, root, utf8, TWO_MASS};
+use common::{identify_two_mass, p, root, utf8, TWO_MASS};
 
 use identify::frf::{self, Method};
 use process::uff;
@@ -71,18 +71,7 @@ fn a_uff_file_in_g_per_newton_with_a_map_is_identified() {
     std::fs::write(&map, MAP).unwrap();
     let vars = dir.path().join("vars.toml");
     std::fs::write(&vars, VARS).unwrap();
-    let model = root().join(TWO_MASS);
-    let base = [
-        "identify",
-        p(&model),
-        "--data",
-        p(&data),
-        "--vars",
-        p(&vars),
-    ];
-    let mut args = base.to_vec();
-    args.extend(["--map", p(&map), "--format", "json"]);
-    let o = ident(&args);
+    let o = identify_two_mass(&data, &vars, &["--map", p(&map), "--format", "json"], &[]);
     assert_eq!(o.status.code(), Some(0), "{}", utf8(&o.stderr));
     let err = utf8(&o.stderr);
     assert!(
@@ -98,7 +87,7 @@ fn a_uff_file_in_g_per_newton_with_a_map_is_identified() {
     }
     assert!(j["misfit"].is_null());
     // Without the map: what to give.
-    let o = ident(&base);
+    let o = identify_two_mass(&data, &vars, &[], &[]);
     assert_eq!(o.status.code(), Some(2));
     assert!(
         utf8(&o.stderr).contains("give --map FILE"),
@@ -126,15 +115,7 @@ fn frequencies_in_khz_under_freq_hz_stop_before_a_confident_wrong_fit() {
     std::fs::write(&data, &csv).unwrap();
     let vars = dir.path().join("vars.toml");
     std::fs::write(&vars, VARS).unwrap();
-    let model = root().join(TWO_MASS);
-    let o = ident(&[
-        "identify",
-        p(&model),
-        "--data",
-        p(&data),
-        "--vars",
-        p(&vars),
-    ]);
+    let o = identify_two_mass(&data, &vars, &[], &[]);
     assert_eq!(o.status.code(), Some(2), "{}", utf8(&o.stdout));
     let err = utf8(&o.stderr);
     assert!(
@@ -154,14 +135,7 @@ fn frequencies_in_khz_under_freq_hz_stop_before_a_confident_wrong_fit() {
         }
     }
     std::fs::write(&data, &csv).unwrap();
-    let o = ident(&[
-        "identify",
-        p(&model),
-        "--data",
-        p(&data),
-        "--vars",
-        p(&vars),
-    ]);
+    let o = identify_two_mass(&data, &vars, &[], &[]);
     let err = utf8(&o.stderr);
     assert!(
         err.contains("warning: second u3 displacement") && err.contains("g read as m/s²"),

@@ -8,7 +8,7 @@ mod common;
 use std::path::PathBuf;
 use std::process::Output;
 
-use common::{ident, ident_with, p, root, utf8, TWO_MASS};
+use common::{ident, identify_two_mass, p, root, utf8, TWO_MASS};
 
 use identify::identification::{data, synthetic};
 use identify::measured::MeasuredData;
@@ -62,21 +62,7 @@ impl Case {
     }
     /// `ident identify` of the two-mass model on this case's `data` and `vars.toml`, then `extra`.
     fn identify(&self, data: &str, extra: &[&str], env: &[(&str, &str)]) -> Output {
-        let (model, data, vars) = (
-            root().join(TWO_MASS),
-            self.path(data),
-            self.path("vars.toml"),
-        );
-        let mut args = vec![
-            "identify",
-            p(&model),
-            "--data",
-            p(&data),
-            "--vars",
-            p(&vars),
-        ];
-        args.extend_from_slice(extra);
-        ident_with(&args, env)
+        identify_two_mass(&self.path(data), &self.path("vars.toml"), extra, env)
     }
 }
 

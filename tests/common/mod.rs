@@ -26,6 +26,15 @@ pub fn ident_with(args: &[&str], env: &[(&str, &str)]) -> Output {
     c.output().expect("run ident")
 }
 
+/// Runs `ident identify` on the two-mass model with the data file `data` and the variables file
+/// `vars`, then the flags `extra`, with the environment variables `env` added.
+pub fn identify_two_mass(data: &Path, vars: &Path, extra: &[&str], env: &[(&str, &str)]) -> Output {
+    let model = root().join(TWO_MASS);
+    let mut args = vec!["identify", p(&model), "--data", p(data), "--vars", p(vars)];
+    args.extend_from_slice(extra);
+    ident_with(&args, env)
+}
+
 /// Bytes a run printed, as text.
 pub fn utf8(b: &[u8]) -> String {
     String::from_utf8_lossy(b).into_owned()
