@@ -28,6 +28,7 @@
 
 pub mod analysis;
 pub mod can;
+pub mod canopen;
 pub mod daq;
 pub mod device;
 pub mod generator;
