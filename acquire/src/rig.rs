@@ -179,7 +179,7 @@ impl Rig {
                 ))
             }
             PortSpec::Can(iface) if stand.daq.canopen.is_some() => {
-                // A CANopen node (docs/canopen.md); its frames are not tapped into the session.
+                // A CANopen node (docs/canopen.md); every frame is tapped into the session.
                 let settings = match stand.daq.canopen.as_ref().map(|c| c.settings()) {
                     Some(Ok(s)) => s,
                     Some(Err(e)) => {
@@ -188,7 +188,11 @@ impl Rig {
                     }
                     None => crate::canopen::CanOpenSettings::default(),
                 };
-                Box::new(crate::canopen::CanOpenDaq::open(iface, settings)?)
+                let d = crate::canopen::CanOpenDaq::open(iface, settings)?;
+                Box::new(match session {
+                    Some(s) => d.with_tap(Arc::new(s.clone()) as Arc<dyn ByteTap>),
+                    None => d,
+                })
             }
             PortSpec::Can(iface) => {
                 let d = crate::can::CanDaq::open(iface, stand.daq.can.clone())?;

@@ -1240,4 +1240,12 @@ fn stepped_sine_through_the_canopen_stand_file() {
             s.step
         );
     }
+    // Every CANopen frame (SDO configuration, SYNC, TPDOs, heartbeats) is in the session, and so
+    // is every stream fault the emulated VM's load may cause.
+    let records = acquire::session::read(&path).expect("read").records;
+    for r in records.iter().filter(|r| r.topic == "/daq/fault") {
+        eprintln!("stream fault: {}", r.value);
+    }
+    let raw = records.iter().filter(|r| r.topic == "/raw").count();
+    assert!(raw > 100, "{raw} /raw records");
 }

@@ -310,6 +310,17 @@ impl CanOpenDaq {
         })
     }
 
+    /// Copies every frame sent and received (NMT, SDO, SYNC, PDO, heartbeat, EMCY) to `tap`, one
+    /// line per frame in `cansend` notation.
+    pub fn with_tap(mut self, tap: std::sync::Arc<dyn crate::transport::ByteTap>) -> CanOpenDaq {
+        let link = std::mem::replace(
+            &mut self.link,
+            Box::new(crate::canopen::MemoryBus::new("-").endpoint()),
+        );
+        self.link = Box::new(crate::canopen::TappedLink::new(link, tap));
+        self
+    }
+
     /// Every EMCY received so far, in order.
     pub fn emergencies(&self) -> &[Emergency] {
         &self.monitor.emergencies
@@ -890,6 +901,7 @@ impl Daq for CanOpenDaq {
         }
         // Blocks and faults of the stopped stream are discarded; EMCY stay in `emergencies()`.
         self.monitor.pending.clear();
+        self.link.flush();
         Ok(())
     }
 }

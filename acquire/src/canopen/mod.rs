@@ -139,6 +139,8 @@ pub trait CanLink: Send {
     async fn send(&mut self, frame: &WireFrame) -> Result<(), CanError>;
     /// Receives the next frame or error frame sent by another node.
     async fn recv(&mut self) -> Result<BusEvent, CanError>;
+    /// Hands over whatever a recording link still holds (nothing to do for a plain link).
+    fn flush(&mut self) {}
 }
 
 #[async_trait]
@@ -223,6 +225,80 @@ impl CanLink for MemoryEndpoint {
                     })
                 }
             }
+        }
+    }
+}
+
+/// A [`CanLink`] whose every frame, sent and received, is copied to a [`ByteTap`] in
+/// `cansend`/`candump -L` lines (`605#4018100100000000\n`), as the DAQ-over-CAN driver records its
+/// frames into the session. CANopen frames are small and many (SYNC and TPDOs per sample), so
+/// consecutive lines of one direction are handed over together, up to 4 KiB: on a change of
+/// direction, at [`CanLink::flush`] and when dropped.
+pub struct TappedLink {
+    inner: Box<dyn CanLink>,
+    tap: std::sync::Arc<dyn crate::transport::ByteTap>,
+    pending: Vec<u8>,
+    direction: crate::transport::Direction,
+}
+
+impl TappedLink {
+    /// Copies `inner`'s traffic to `tap`.
+    pub fn new(
+        inner: Box<dyn CanLink>,
+        tap: std::sync::Arc<dyn crate::transport::ByteTap>,
+    ) -> TappedLink {
+        TappedLink {
+            inner,
+            tap,
+            pending: Vec::with_capacity(4096),
+            direction: crate::transport::Direction::Tx,
+        }
+    }
+
+    fn record(&mut self, direction: crate::transport::Direction, f: &WireFrame) {
+        if direction != self.direction {
+            self.flush();
+            self.direction = direction;
+        }
+        self.pending.extend_from_slice(f.to_cansend().as_bytes());
+        self.pending.push(b'\n');
+        if self.pending.len() >= 4096 {
+            self.flush();
+        }
+    }
+}
+
+impl Drop for TappedLink {
+    fn drop(&mut self) {
+        self.flush();
+    }
+}
+
+#[async_trait]
+impl CanLink for TappedLink {
+    fn interface(&self) -> &str {
+        self.inner.interface()
+    }
+
+    async fn send(&mut self, frame: &WireFrame) -> Result<(), CanError> {
+        self.inner.send(frame).await?;
+        self.record(crate::transport::Direction::Tx, frame);
+        Ok(())
+    }
+
+    async fn recv(&mut self) -> Result<BusEvent, CanError> {
+        let ev = self.inner.recv().await?;
+        if let BusEvent::Frame(f) = &ev {
+            self.record(crate::transport::Direction::Rx, f);
+        }
+        Ok(ev)
+    }
+
+    fn flush(&mut self) {
+        if !self.pending.is_empty() {
+            self.tap
+                .bytes(self.inner.interface(), self.direction, &self.pending);
+            self.pending.clear();
         }
     }
 }

@@ -588,3 +588,44 @@ async fn requests_beyond_the_node_or_the_bus_are_refused_before_any_frame() {
     let e = daq.start().await.expect_err("not configured");
     assert!(e.to_string().contains("start before configure"), "{e}");
 }
+
+#[derive(Default)]
+struct Lines(std::sync::Mutex<Vec<(crate::transport::Direction, String)>>);
+
+impl crate::transport::ByteTap for Lines {
+    fn bytes(&self, port: &str, direction: crate::transport::Direction, data: &[u8]) {
+        assert_eq!(port, "mem0");
+        let text = String::from_utf8_lossy(data).to_string();
+        assert!(text.ends_with('\n'), "whole lines only: {text:?}");
+        let mut v = self.0.lock().expect("lock");
+        v.extend(text.lines().map(|l| (direction, l.to_string())));
+    }
+}
+
+#[tokio::test]
+async fn the_tap_records_every_frame_both_ways_in_cansend_notation() {
+    use crate::transport::Direction;
+    let bus = MemoryBus::new("mem0");
+    let node = start_node(&bus, 5, SimNodeFaults::default());
+    let tap = std::sync::Arc::new(Lines::default());
+    let mut daq = master(&bus, settings(5)).with_tap(tap.clone());
+    daq.configure(&config(vec![0])).await.expect("configure");
+    daq.start().await.expect("start");
+    collect(&mut daq, 1).await;
+    daq.stop().await.expect("stop");
+    stop_node(node).await;
+    let lines = tap.0.lock().expect("lock").clone();
+    let has = |d: Direction, l: &str| lines.iter().any(|(x, y)| *x == d && y == l);
+    assert!(has(Direction::Tx, "000#8005"), "NMT pre-operational");
+    assert!(
+        has(Direction::Tx, "605#23061000F4010000"),
+        "0x1006 = 500 µs: {lines:?}"
+    );
+    assert!(has(Direction::Rx, "585#6006100000000000"), "its answer");
+    assert!(has(Direction::Tx, "000#0105"), "NMT start");
+    assert!(has(Direction::Tx, "080#"), "SYNC");
+    let tpdo = lines
+        .iter()
+        .any(|(d, l)| *d == Direction::Rx && l.starts_with("185#0000"));
+    assert!(tpdo, "TPDO1 of sample 0 (counter 0000 first)");
+}
