@@ -328,7 +328,8 @@ impl SimStand {
     /// dropped or corrupted block loses or damages one of its CAN frames; a pulled cable closes
     /// the shaker's pty and silences the DAQ). Every injected fault is in [`SimStand::injected`].
     /// A stand whose DAQ is a CANopen node (`[daq.canopen]`) gets the simulated CANopen node of
-    /// [`crate::canopen::sim`] instead (the per-block faults do not apply to it).
+    /// [`crate::canopen::sim`] instead; of the stand's `[faults]` only `daq_silent_after_blocks`
+    /// applies to it (the node falls silent: a lost heartbeat).
     pub fn start_can(stand: &Stand, iface: &str) -> Result<SimStand, SimError> {
         use crate::can::sim::{SimCanDaq, SimCanDaqSettings};
         let setup = SimSetup::from_stand(stand)?;
@@ -368,6 +369,13 @@ impl SimStand {
                     None => crate::canopen::sim::SimCanOpenNode::new(c.node_id),
                 }
                 .map_err(|e| config(e.to_string()))?;
+                // Of the stand's [faults], a DAQ falling silent applies: the node stops (no
+                // heartbeat, PDO or SDO answer) after that many blocks' SYNCs.
+                let spb = stand.daq.samples_per_block as u64;
+                let node = node.with_faults(crate::canopen::sim::SimNodeFaults {
+                    silent_after_syncs: setup.faults.daq_silent_after_blocks.map(|b| b * spb),
+                    ..Default::default()
+                });
                 let bus = crate::can::CanBus::open(iface)?;
                 let mut counts = can_signal(&setup, shared.clone());
                 let per_count = (10.0 / 32_768.0) / VOLTS_PER_COUNT;
