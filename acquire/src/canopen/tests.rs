@@ -48,7 +48,8 @@ fn settings(node: u8) -> CanOpenSettings {
         sdo_timeout: Duration::from_millis(200),
         data_timeout: Duration::from_millis(1500),
         heartbeat_ms: 20,
-        heartbeat_timeout: Duration::from_millis(300),
+        // Generous: a test runner under load must not see a live node as lost.
+        heartbeat_timeout: Duration::from_millis(500),
         ..CanOpenSettings::default()
     }
 }
