@@ -12,7 +12,7 @@
 //! session's measured characteristics, recomputed from its raw blocks with the `process` crate).
 //! Protocol specs: docs/shaker-scpi.md, docs/scpi-generator.md (a SCPI signal generator and
 //! power amplifier, force loop closed by the host, [`generator`]), docs/daq-serial.md,
-//! docs/daq-can.md.
+//! docs/daq-can.md, docs/canopen.md (the DAQ as a CANopen node, ident as master, [`canopen`]).
 //!
 //! ```
 //! use acquire::shaker::scpi::{parse_command, Command};
@@ -28,6 +28,7 @@
 
 pub mod analysis;
 pub mod can;
+pub mod canopen;
 pub mod daq;
 pub mod device;
 pub mod generator;

@@ -178,6 +178,22 @@ impl Rig {
                     },
                 ))
             }
+            PortSpec::Can(iface) if stand.daq.canopen.is_some() => {
+                // A CANopen node (docs/canopen.md); every frame is tapped into the session.
+                let settings = match stand.daq.canopen.as_ref().map(|c| c.settings()) {
+                    Some(Ok(s)) => s,
+                    Some(Err(e)) => {
+                        let detail = format!("daq.canopen.eds: {e}");
+                        return Err(crate::can::CanError::Config { detail }.into());
+                    }
+                    None => crate::canopen::CanOpenSettings::default(),
+                };
+                let d = crate::canopen::CanOpenDaq::open(iface, settings)?;
+                Box::new(match session {
+                    Some(s) => d.with_tap(Arc::new(s.clone()) as Arc<dyn ByteTap>),
+                    None => d,
+                })
+            }
             PortSpec::Can(iface) => {
                 let d = crate::can::CanDaq::open(iface, stand.daq.can.clone())?;
                 Box::new(match session {

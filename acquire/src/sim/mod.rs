@@ -213,6 +213,12 @@ impl SimStand {
     /// Serves the stand's simulated devices on two new pseudo-terminals. Call inside a tokio
     /// runtime; the devices run until [`SimStand::shutdown`] or drop.
     pub fn start(stand: &Stand) -> Result<SimStand, SimError> {
+        if stand.daq.canopen.is_some() {
+            return Err(crate::can::CanError::Config {
+                detail: format!("{}: the DAQ is a CANopen node ([daq.canopen]): serve it on a CAN interface (`ident sim --can vcan0`, SimStand::start_can)", stand.file),
+            }
+            .into());
+        }
         Self::start_with(SimSetup::from_stand(stand)?)
     }
 
@@ -321,6 +327,9 @@ impl SimStand {
     /// are the stand's `[faults]`, per block ([`crate::can::sim::SimFaults::per_block`]: a
     /// dropped or corrupted block loses or damages one of its CAN frames; a pulled cable closes
     /// the shaker's pty and silences the DAQ). Every injected fault is in [`SimStand::injected`].
+    /// A stand whose DAQ is a CANopen node (`[daq.canopen]`) gets the simulated CANopen node of
+    /// [`crate::canopen::sim`] instead; of the stand's `[faults]` only `daq_silent_after_blocks`
+    /// applies to it (the node falls silent: a lost heartbeat).
     pub fn start_can(stand: &Stand, iface: &str) -> Result<SimStand, SimError> {
         use crate::can::sim::{SimCanDaq, SimCanDaqSettings};
         let setup = SimSetup::from_stand(stand)?;
@@ -345,17 +354,50 @@ impl SimStand {
             .max()
             .unwrap_or(1);
         dev.faults.per_block = Some(setup.faults.clone());
-        let s0 = shared.clone();
-        let sim = SimCanDaq::bind(iface, dev)?.on_fault(Box::new(move |kind, seq| {
-            let mut sh = lock(&s0);
-            sh.injected.push(InjectedFault { kind, seq });
-            sh.cable_pulled |= kind == "cable_pull";
-        }));
-        let signal = can_signal(&setup, shared.clone());
         let (stop_tx, stop_rx) = tokio::sync::oneshot::channel::<()>();
-        let t2 = tokio::spawn(async move {
-            let _ = sim.serve(signal, None, stop_rx).await;
-        });
+        let t2 = match &stand.daq.canopen {
+            // A CANopen node (docs/canopen.md) instead of the DAQ-over-CAN protocol. Its inputs
+            // are 16-bit: the 24-bit counts of the signal scaled to the EDS's 10 V / 32768.
+            Some(c) => {
+                let config = |e: String| crate::can::CanError::Config { detail: e };
+                let node = match &c.eds {
+                    Some(p) => {
+                        crate::canopen::eds::ObjectDictionary::load(p, c.node_id).map(|od| {
+                            crate::canopen::sim::SimCanOpenNode::with_dictionary(c.node_id, od)
+                        })
+                    }
+                    None => crate::canopen::sim::SimCanOpenNode::new(c.node_id),
+                }
+                .map_err(|e| config(e.to_string()))?;
+                // Of the stand's [faults], a DAQ falling silent applies: the node stops (no
+                // heartbeat, PDO or SDO answer) after that many blocks' SYNCs.
+                let spb = stand.daq.samples_per_block as u64;
+                let node = node.with_faults(crate::canopen::sim::SimNodeFaults {
+                    silent_after_syncs: setup.faults.daq_silent_after_blocks.map(|b| b * spb),
+                    ..Default::default()
+                });
+                let bus = crate::can::CanBus::open(iface)?;
+                let mut counts = can_signal(&setup, shared.clone());
+                let per_count = (10.0 / 32_768.0) / VOLTS_PER_COUNT;
+                let signal: crate::can::sim::Signal =
+                    Box::new(move |ch, k| (counts(ch, k) as f64 / per_count).round() as i32);
+                tokio::spawn(async move {
+                    let _ = node.serve(Box::new(bus), signal, stop_rx).await;
+                })
+            }
+            None => {
+                let s0 = shared.clone();
+                let sim = SimCanDaq::bind(iface, dev)?.on_fault(Box::new(move |kind, seq| {
+                    let mut sh = lock(&s0);
+                    sh.injected.push(InjectedFault { kind, seq });
+                    sh.cable_pulled |= kind == "cable_pull";
+                }));
+                let signal = can_signal(&setup, shared.clone());
+                tokio::spawn(async move {
+                    let _ = sim.serve(signal, None, stop_rx).await;
+                })
+            }
+        };
         let (shaker_port, t1, generator) = if setup.generator.is_some() {
             drop(shaker);
             let (port, task, gen) = spawn_generator(&setup, shared.clone())?;

@@ -12,7 +12,10 @@ use serde_spanned::Spanned;
 use identify::source::{Located, Quantity as Value, SourceText};
 use identify::units::Dim;
 
+mod canopen;
 mod generator;
+
+pub use canopen::CanOpenPort;
 pub use generator::{GeneratorAddress, GeneratorStand, GENERATOR_MAX_VOLTS_PEAK};
 
 /// How far (m) outside its body's equivalent box a sensor may sit (mounting blocks, rounding).
@@ -196,6 +199,10 @@ pub struct DaqPort {
     pub retries: u32,
     /// Identifiers and frames when the DAQ is on CAN (`[daq.can]`).
     pub can: crate::can::CanDaqSettings,
+    /// The DAQ is a CANopen node (`[daq.canopen]`, docs/canopen.md) rather than the DAQ-over-CAN
+    /// protocol of docs/daq-can.md.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub canopen: Option<CanOpenPort>,
 }
 
 /// What a channel measures.
@@ -379,6 +386,7 @@ struct RawDaq {
     timeout: Option<Spanned<Value>>,
     retries: Option<u32>,
     can: Option<Spanned<RawCan>>,
+    canopen: Option<Spanned<canopen::RawCanOpen>>,
 }
 
 #[derive(Deserialize)]
@@ -560,6 +568,20 @@ impl Stand {
             if p.is_relative() {
                 *p = dir.join(&*p);
             }
+        }
+        if let Some(c) = &mut stand.daq.canopen {
+            if let Some(p) = &mut c.eds {
+                if p.is_relative() {
+                    *p = dir.join(&*p);
+                }
+            }
+            // The EDS must be readable now, not when the sweep opens the DAQ.
+            c.settings().map_err(|e| StandError {
+                file: file.clone(),
+                line: 0,
+                column: 0,
+                message: format!("daq.canopen.eds: {e}"),
+            })?;
         }
         stand.resolve_geometry(SENSOR_MOUNT_TOLERANCE_M)?;
         Ok(stand)
@@ -796,7 +818,12 @@ fn daq_port(cx: &Ctx<'_>, rd: &RawDaq) -> Result<DaqPort, StandError> {
         },
         retries: rd.retries.unwrap_or(2),
         can: can_settings(cx, rd.can.as_ref())?,
+        canopen: None,
     };
+    if let Some(c) = &rd.canopen {
+        let on_can = matches!(daq.port, PortSpec::Can(_) | PortSpec::Sim);
+        daq.canopen = Some(canopen::canopen_port(cx, c, rd.port.span(), on_can)?);
+    }
     // `daq.timeout` and `daq.retries` hold for a DAQ on CAN too (when given: a CAN DAQ's own
     // default answer timeout is 1 s).
     if rd.timeout.is_some() {
