@@ -5,6 +5,8 @@
 
 mod common;
 
+use std::path::{Path, PathBuf};
+
 use common::{identify_two_mass, p, root, utf8, TWO_MASS};
 
 use identify::frf::{self, Method};
@@ -146,4 +148,83 @@ fn frequencies_in_khz_under_freq_hz_stop_before_a_confident_wrong_fit() {
         out.starts_with("THE MODEL DOES NOT EXPLAIN THE DATA"),
         "{out}"
     );
+}
+
+/// A dense CSV of the two-mass chain (mm/N, 0.05 Hz lines over 2-80 Hz) with what real spectra
+/// carry: a mains line at 50 Hz and its neighbours 20× too high, and junk below 5 Hz.
+fn dense_with_disturbances(dir: &Path) -> PathBuf {
+    let f: Vec<f64> = (40..=1600).map(|i| i as f64 * 0.05).collect();
+    let h = receptances(&f);
+    let mut csv = String::from("# unit = mm/N\nbody,dof,freq_hz,amplitude\n");
+    for (k, body) in ["first", "second"].iter().enumerate() {
+        for (i, fk) in f.iter().enumerate() {
+            let disturbed = (fk - 50.0).abs() <= 0.3 || *fk < 5.0;
+            let a = h[k][i].norm() * 1e3 * if disturbed { 20.0 } else { 1.0 };
+            csv.push_str(&format!("{body},u3,{fk:?},{a:?}\n"));
+        }
+    }
+    let data = dir.join("dense.csv");
+    std::fs::write(&data, csv).unwrap();
+    data
+}
+
+#[test]
+fn band_mains_and_decimation_choose_the_lines_and_say_so() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = dense_with_disturbances(dir.path());
+    let vars = dir.path().join("vars.toml");
+    std::fs::write(&vars, VARS).unwrap();
+    let estimates = |extra: &[&str]| {
+        let mut args = vec!["--format", "json"];
+        args.extend_from_slice(extra);
+        let o = identify_two_mass(&data, &vars, &args, &[]);
+        assert_eq!(o.status.code(), Some(0), "{}", utf8(&o.stderr));
+        let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+        let k: Vec<f64> = j["table"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|r| r["identified"].as_f64().unwrap())
+            .collect();
+        (k, utf8(&o.stderr), j["fit"].as_str().unwrap().to_string())
+    };
+    // All 1561 lines, disturbances included: the estimates are pulled off the truth.
+    let (k, _, fit) = estimates(&[]);
+    assert_eq!(fit, "log-amplitude", "magnitudes without variances");
+    let off = (k[0] / 20.0 - 1.0).abs().max((k[1] / 5.0 - 1.0).abs());
+    assert!(off > 1e-3, "the disturbances should bias the fit: {k:?}");
+    // Band from 5 Hz, mains harmonics out, decimated to 150 lines: the truth.
+    let (k, err, _) = estimates(&["--band", "5:", "--mains", "50", "--points", "150"]);
+    for (v, truth) in k.iter().zip([20.0, 5.0]) {
+        assert!((v / truth - 1.0).abs() < 1e-6, "{k:?}\n{err}");
+    }
+    assert!(
+        err.contains(
+            "lines: first u3: 1480 of 1561 lines kept (dropped 60 outside the band, 21 near excluded lines)"
+        ),
+        "{err}"
+    );
+    assert!(
+        err.contains("decimated from") && err.contains("to 150 lines"),
+        "{err}"
+    );
+
+    // Bad choices: exit 2, the option and the fix named.
+    for (args, want) in [
+        (
+            vec!["--band", "90:10"],
+            "--band 90:10: the lower edge must be below the upper one",
+        ),
+        (
+            vec!["--band", "500:"],
+            "none of its 1561 lines (2-80 Hz) is left",
+        ),
+        (vec!["--band", "x"], "give LO:HI in Hz"),
+        (vec!["--points", "1"], "--points 1: give at least 2"),
+    ] {
+        let o = identify_two_mass(&data, &vars, &args, &[]);
+        let e = utf8(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{args:?}: {e}");
+        assert!(e.contains(want), "{args:?}: {e}");
+    }
 }

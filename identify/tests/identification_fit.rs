@@ -75,7 +75,7 @@ fn setup(rel: f64, seed: u64) -> (Model, data::Observations, variables::Variable
 #[test]
 fn the_criterion_jacobian_matches_finite_differences() {
     let (m, obs, vars) = setup(0.02, 1);
-    for fit in [FitKind::Amplitude, FitKind::Complex] {
+    for fit in [FitKind::Amplitude, FitKind::LogAmplitude, FitKind::Complex] {
         let mut c =
             Criterion::new(&m, &obs, &vars, fit, NoiseChoice::Variance, Method::Direct).unwrap();
         let x = vars.initial();
@@ -106,7 +106,7 @@ fn every_optimizer_recovers_exact_data() {
         Optimizer::GaussNewton,
         Optimizer::Bfgs,
     ] {
-        for fit in [FitKind::Amplitude, FitKind::Complex] {
+        for fit in [FitKind::Amplitude, FitKind::LogAmplitude, FitKind::Complex] {
             let opts = Options {
                 optimizer,
                 fit,
@@ -139,8 +139,80 @@ fn every_optimizer_recovers_exact_data() {
                 "no variances → relative model"
             );
             assert!(id.rms.iter().all(|(_, r)| *r < 1e-6));
+            assert!(
+                id.rms_db.iter().all(|(_, _, db)| *db < 1e-4),
+                "{:?}",
+                id.rms_db
+            );
         }
     }
+}
+
+/// Amplitudes with multiplicative (log-normal) noise of `rel`, and nothing else: no phases, no
+/// variances, no coherence, as in a vendor file of measured magnitudes.
+fn magnitudes_only(model: &Model, rel: f64, seed: u64) -> data::Observations {
+    let mut d = measured(model, 0.0, seed);
+    let mut rng = StdRng::seed_from_u64(seed);
+    for c in &mut d.characteristics {
+        for a in &mut c.amplitude {
+            let n: f64 = StandardNormal.sample(&mut rng);
+            *a *= (rel * n).exp();
+        }
+        c.phase_rad = None;
+    }
+    data::validate(&d, model, "magnitudes.json").unwrap()
+}
+
+#[test]
+fn the_log_amplitude_fit_is_unbiased_where_the_amplitude_fit_lowers_the_peaks() {
+    // 15 % multiplicative noise, σ known only relative to the level: the amplitude criterion
+    // weights each point by 1/|z|², so points that came out low pull the model down and ψ up;
+    // the log-amplitude criterion sees symmetric noise.
+    let m = truth();
+    let vars = variables::parse(VARS, "vars.toml", &m).unwrap();
+    let runs = 80;
+    let bias = |fit: FitKind| {
+        let psi: Vec<f64> = (0..runs)
+            .map(|seed| {
+                let obs = magnitudes_only(&m, 0.15, 100 + seed);
+                let opts = Options {
+                    fit,
+                    noise: NoiseChoice::Relative(0.15),
+                    ..Options::default()
+                };
+                let id = idn::identify(&m, &obs, &vars, &opts, &mut |_, _| {}).unwrap();
+                assert!(id.stop.converged(), "{fit:?}: {}", id.stop.describe());
+                id.estimate[2] / 0.5 - 1.0
+            })
+            .collect();
+        let mean = psi.iter().sum::<f64>() / runs as f64;
+        let sd = (psi.iter().map(|p| (p - mean).powi(2)).sum::<f64>() / (runs - 1) as f64).sqrt();
+        (mean, sd / (runs as f64).sqrt())
+    };
+    let (amp, amp_se) = bias(FitKind::Amplitude);
+    let (log, log_se) = bias(FitKind::LogAmplitude);
+    eprintln!(
+        "relative ψ bias: amplitude {amp:+.4} ± {amp_se:.4}, log-amplitude {log:+.4} ± {log_se:.4}"
+    );
+    assert!(
+        log.abs() < 3.0 * log_se,
+        "log-amplitude ψ bias {log} ± {log_se}"
+    );
+    assert!(
+        amp > 3.0 * amp_se,
+        "amplitude ψ bias {amp} ± {amp_se}: expected upward"
+    );
+    // And the automatic choice picks the log fit for such data.
+    let obs = magnitudes_only(&m, 0.1, 1);
+    assert_eq!(
+        FitKind::for_data(&obs, NoiseChoice::Auto),
+        FitKind::LogAmplitude
+    );
+    let with_variances = setup(0.02, 1).1;
+    assert_eq!(
+        FitKind::for_data(&with_variances, NoiseChoice::Auto),
+        FitKind::Amplitude
+    );
 }
 
 #[test]

@@ -122,6 +122,8 @@ fn stage_curve(
     let q: Vec<f64> = r.output(c.output).iter().map(|v| v.norm()).collect();
     let mut s2 = 0.0;
     let mut n = 0usize;
+    let mut db2 = 0.0;
+    let mut ndb = 0usize;
     let residual = c
         .amplitude
         .iter()
@@ -131,6 +133,10 @@ fn stage_curve(
             if *z > 0.0 {
                 s2 += ((q - z) / z).powi(2);
                 n += 1;
+            }
+            if *z > 0.0 && *q > 0.0 {
+                db2 += (20.0 * (q / z).log10()).powi(2);
+                ndb += 1;
             }
             if *s > 0.0 {
                 (z - q) / s
@@ -145,6 +151,11 @@ fn stage_curve(
         amplitude: q.into_iter().map(finite).collect(),
         standardized_residual: residual,
         rms_relative_error: finite(if n > 0 { (s2 / n as f64).sqrt() } else { 0.0 }),
+        rms_db_error: finite(if ndb > 0 {
+            (db2 / ndb as f64).sqrt()
+        } else {
+            0.0
+        }),
         dense: None,
     })
 }

@@ -139,6 +139,10 @@ pub struct StageCurve {
     pub standardized_residual: Vec<f64>,
     /// RMS of (model − measured) / measured over the points.
     pub rms_relative_error: f64,
+    /// RMS of 20·log10(model / measured) over the points (dB): not dominated by the
+    /// anti-resonance lines as the relative error is. 0 in reports written before it existed.
+    #[serde(default)]
+    pub rms_db_error: f64,
     /// The model on a dense log grid across the measured band (the identified and diagnosed
     /// stages; `null` for `initial`), drawn as the smooth model curve.
     #[serde(default)]

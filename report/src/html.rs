@@ -202,7 +202,7 @@ fn characteristics(h: &mut String, r: &Report) -> Result<(), ReportError> {
         .map(|c| c.stages.iter().map(|s| s.stage.as_str()).collect())
         .unwrap_or_default();
     for s in &stages {
-        let _ = write!(h, "<th>RMS rel. error, {}</th>", e(s));
+        let _ = write!(h, "<th>RMS error, {}: dB (relative)</th>", e(s));
     }
     h.push_str("<th>points</th><th class=\"l\">σ from</th></tr>\n");
     for c in &r.characteristics {
@@ -210,7 +210,8 @@ fn characteristics(h: &mut String, r: &Report) -> Result<(), ReportError> {
         for s in &c.stages {
             let _ = write!(
                 h,
-                "<td>{}</td>",
+                "<td>{:.2} dB ({})</td>",
+                s.rms_db_error,
                 identify::display::relative(s.rms_relative_error)
             );
         }

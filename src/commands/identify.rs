@@ -28,9 +28,15 @@ pub enum OptimizerArg {
 /// `--fit`.
 #[derive(clap::ValueEnum, Clone, Copy, Debug, Default)]
 pub enum FitArg {
-    /// Amplitudes only (the paper's A-F characteristics).
+    /// Log-amplitude where the data have no variances or coherence (σ known only relative to
+    /// the level), amplitude otherwise.
     #[default]
+    Auto,
+    /// Amplitudes only (the paper's A-F characteristics).
     Amplitude,
+    /// Log-amplitudes, residual ln|z| − ln|q| (a misplaced resonance costs as much as a model
+    /// too low everywhere).
+    LogAmplitude,
     /// Real and imaginary parts (needs phases).
     Complex,
 }
@@ -76,11 +82,32 @@ pub struct IdentifyArgs {
     /// Decision variables (TOML; docs/identification.md).
     #[arg(long)]
     pub vars: PathBuf,
+    /// Fit only the lines in this band, `LO:HI` in Hz (either side may be empty: `20:`, `:400`).
+    #[arg(long, value_parser = parse_band)]
+    pub band: Option<(Option<f64>, Option<f64>)>,
+    /// Drop the lines near these frequencies (Hz, comma-separated), ± --exclude-width.
+    #[arg(long, value_delimiter = ',')]
+    pub exclude: Vec<f64>,
+    /// Drop the lines near every harmonic of the mains frequency (Hz, e.g. 50 or 60).
+    #[arg(long)]
+    pub mains: Option<f64>,
+    /// Half-width (Hz) of the neighbourhood --exclude and --mains drop.
+    #[arg(long, default_value_t = 0.5)]
+    pub exclude_width: f64,
+    /// Drop the lines whose coherence is below this (0..1), where the data have coherence.
+    #[arg(long)]
+    pub min_coherence: Option<f64>,
+    /// Decimate each characteristic to at most this many lines, spread log-uniformly with extra
+    /// density at the resonance peaks (the paper's characteristic points; dense spectra of
+    /// thousands of lines fit as well and much faster).
+    #[arg(long)]
+    pub points: Option<usize>,
     /// Minimizer.
     #[arg(long, value_enum, default_value_t = OptimizerArg::Lm)]
     pub method: OptimizerArg,
-    /// Amplitude-only or complex fit.
-    #[arg(long, value_enum, default_value_t = FitArg::Amplitude)]
+    /// What is fitted: amplitudes, log-amplitudes or complex values (auto: log-amplitude for
+    /// data without variances or coherence, amplitude otherwise).
+    #[arg(long, value_enum, default_value_t = FitArg::Auto)]
     pub fit: FitArg,
     /// Where the observation covariance R comes from.
     #[arg(long, value_enum, default_value_t = NoiseArg::Auto)]
@@ -170,6 +197,34 @@ pub fn write_final(
     Ok(())
 }
 
+/// `--band LO:HI` in Hz, either side may be empty.
+fn parse_band(text: &str) -> Result<(Option<f64>, Option<f64>), String> {
+    let (lo, hi) = text
+        .split_once(':')
+        .ok_or_else(|| format!("{text:?}: give LO:HI in Hz, e.g. 20:400 (or 20: / :400)"))?;
+    let edge = |s: &str| -> Result<Option<f64>, String> {
+        let s = s.trim();
+        if s.is_empty() {
+            return Ok(None);
+        }
+        s.parse::<f64>()
+            .map(Some)
+            .map_err(|_| format!("{s:?} is not a frequency in Hz (LO:HI, e.g. 20:400)"))
+    };
+    Ok((edge(lo)?, edge(hi)?))
+}
+
+/// The line choice of `--band`, `--exclude`, `--mains`, `--exclude-width`, `--min-coherence`.
+fn line_choice(a: &IdentifyArgs) -> idn::line_choice::LineChoice {
+    idn::line_choice::LineChoice {
+        band_hz: a.band.unwrap_or((None, None)),
+        exclude_hz: a.exclude.clone(),
+        mains_hz: a.mains,
+        exclude_width_hz: a.exclude_width,
+        min_coherence: a.min_coherence,
+    }
+}
+
 /// Runs the identification. Exit 0: converged; 1: iteration limit or divergence (the best point
 /// is still reported and written).
 /// Loads and checks the model, data and variables, and the options, of `a` (shared by
@@ -179,6 +234,7 @@ pub fn setup(
 ) -> anyhow::Result<(identify::Model, idn::Observations, idn::Variables, Options)> {
     let model = load_model(&a.model)?;
     let measured = super::measured::load(&a.data, a.map.as_deref(), &model)?;
+    let measured = super::measured::choose_lines(&measured, &line_choice(a), a.points, &a.data)?;
     let obs = data::validate(&measured, &model, &a.data.display().to_string())?;
     super::measured::check(&model, &obs)?;
     let vars = variables::load(&a.vars, &model)?;
@@ -194,17 +250,20 @@ pub fn setup(
         "--weak-threshold {} must be a relative standard error > 0 (e.g. 0.5 for 50 %)",
         a.weak_threshold
     );
+    let noise = match a.noise {
+        NoiseArg::Auto => NoiseChoice::Auto,
+        NoiseArg::Variance => NoiseChoice::Variance,
+        NoiseArg::Coherence => NoiseChoice::Coherence,
+        NoiseArg::Relative => NoiseChoice::Relative(a.relative_error),
+    };
     let opts = Options {
         fit: match a.fit {
+            FitArg::Auto => FitKind::for_data(&obs, noise),
             FitArg::Amplitude => FitKind::Amplitude,
+            FitArg::LogAmplitude => FitKind::LogAmplitude,
             FitArg::Complex => FitKind::Complex,
         },
-        noise: match a.noise {
-            NoiseArg::Auto => NoiseChoice::Auto,
-            NoiseArg::Variance => NoiseChoice::Variance,
-            NoiseArg::Coherence => NoiseChoice::Coherence,
-            NoiseArg::Relative => NoiseChoice::Relative(a.relative_error),
-        },
+        noise,
         optimizer: match a.method {
             OptimizerArg::Lm => Optimizer::LevenbergMarquardt,
             OptimizerArg::Gn => Optimizer::GaussNewton,

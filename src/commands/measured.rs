@@ -7,6 +7,7 @@
 use std::path::Path;
 
 use anyhow::Context;
+use identify::identification::line_choice::LineChoice;
 use identify::identification::{data, measurement_map, plausibility, Observations};
 use identify::{MeasuredData, Model};
 
@@ -46,6 +47,70 @@ pub fn load(path: &Path, map: Option<&Path>, model: &Model) -> anyhow::Result<Me
         }
     }
     Ok(measured)
+}
+
+/// Keeps the lines `choice` keeps and, with `points`, decimates each characteristic to at most
+/// that many (log-uniform plus resonance peaks, `process::selection`); what was dropped is said on
+/// stderr, one line per characteristic.
+pub fn choose_lines(
+    measured: &MeasuredData,
+    choice: &LineChoice,
+    points: Option<usize>,
+    path: &Path,
+) -> anyhow::Result<MeasuredData> {
+    let origin = path.display().to_string();
+    let mut out = measured.clone();
+    if !choice.is_all() {
+        let (chosen, accounts) = choice.apply(measured, &origin)?;
+        for a in accounts {
+            eprintln!("lines: {} ({})", a.describe(), choice.describe());
+        }
+        out = chosen;
+    }
+    if let Some(n) = points {
+        anyhow::ensure!(
+            n >= 2,
+            "--points {n}: give at least 2 lines per characteristic"
+        );
+        for m in &mut out.characteristics {
+            decimate(m, n, &origin)?;
+        }
+    }
+    Ok(out)
+}
+
+/// Decimates one characteristic to at most `n` lines (`process::selection::select_points`).
+fn decimate(m: &mut identify::Measurement, n: usize, origin: &str) -> anyhow::Result<()> {
+    let before = m.freqs_hz.len();
+    if before <= n {
+        return Ok(());
+    }
+    let config = process::selection::SelectionConfig {
+        count: n,
+        min_coherence: 0.0,
+        ..Default::default()
+    };
+    let dof = identify::model::DOF_NAMES
+        .get(m.dof as usize)
+        .copied()
+        .unwrap_or("?");
+    let label = format!("{origin}: {} {dof}", m.body);
+    let keep = process::selection::select_points(&label, &m.freqs_hz, &m.amplitude, None, &config)?;
+    let pick = |v: &Vec<f64>| keep.iter().map(|&k| v[k]).collect::<Vec<f64>>();
+    m.freqs_hz = pick(&m.freqs_hz);
+    m.amplitude = pick(&m.amplitude);
+    for column in [&mut m.phase_rad, &mut m.variance, &mut m.coherence]
+        .into_iter()
+        .flatten()
+    {
+        *column = pick(column);
+    }
+    eprintln!(
+        "lines: {} {dof}: decimated from {before} to {} lines (log-uniform, denser at the resonance peaks)",
+        m.body,
+        m.freqs_hz.len()
+    );
+    Ok(())
 }
 
 /// The band check (an error) and the level check (warnings on stderr).

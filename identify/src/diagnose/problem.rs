@@ -8,7 +8,9 @@
 use nalgebra::{DMatrix, DVector};
 
 use super::effects::{Effect, EffectParam, Realized};
-use crate::identification::{self, Criterion, EvalError, JacobianMode, Observations, Variables};
+use crate::identification::{
+    self, Criterion, EvalError, FitKind, JacobianMode, Observations, Variables,
+};
 use crate::model::Model;
 
 /// The extended fit problem. Optimizers see `u = value / scale`: the variables first, then
@@ -122,15 +124,21 @@ impl<'a> Problem<'a> {
         .map_err(|e| EvalError::Setup(Box::new(e)))
     }
 
-    /// Whitened residuals with the gains applied: `e' = (1 − G) z/σ + G e`.
+    /// Whitened residuals with the gains applied: `e' = (1 − G) z/σ + G e`, i.e. `(z − G q)/σ`
+    /// (log-amplitude fit: `e − ln G / σ`).
     fn gained(crit: &Criterion, e: &mut DVector<f64>, gains: &[f64]) {
         if gains.iter().all(|g| *g == 1.0) {
             return;
         }
         let z = crit.measured();
         let np = z.len();
+        let log = crit.fit() == FitKind::LogAmplitude;
         for (i, (o, _, sigma)) in crit.points().into_iter().enumerate() {
             let g = gains[o];
+            if log {
+                e[i] -= g.ln() / sigma;
+                continue;
+            }
             e[i] = (1.0 - g) * z[i].re / sigma + g * e[i];
             if e.len() > np {
                 e[np + i] = (1.0 - g) * z[i].im / sigma + g * e[np + i];
@@ -157,10 +165,14 @@ impl<'a> Problem<'a> {
         let (m, nx) = (e.len(), x.len());
         let mut jac = DMatrix::zeros(m, nx + gamma.len());
         let points = crit.points();
+        // A gain scales the response, so the amplitude residuals' derivatives; a log-amplitude
+        // residual's derivative does not change with it.
+        let log = crit.fit() == FitKind::LogAmplitude;
         for c in 0..nx {
             for i in 0..m {
                 let o = points[i % points.len()].0;
-                jac[(i, c)] = jx[(i, c)] * r.gains[o] * self.scale[c];
+                let g = if log { 1.0 } else { r.gains[o] };
+                jac[(i, c)] = jx[(i, c)] * g * self.scale[c];
             }
         }
         let mut g = gamma.to_vec();

@@ -166,7 +166,12 @@ fn characteristic_residuals(
             (rot.re, z - d * sigma)
         } else {
             c.chi2 += e[i] * e[i];
-            (e[i], C64::new(z.re - sigma * e[i], 0.0))
+            let q = if crit.fit() == FitKind::LogAmplitude {
+                z.re * (-sigma * e[i]).exp()
+            } else {
+                z.re - sigma * e[i]
+            };
+            (e[i], C64::new(q, 0.0))
         };
         c.amplitude.push(amp);
         if z.norm() > 0.0 {

@@ -19,11 +19,36 @@ use crate::C64;
 /// What is fitted.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum FitKind {
-    /// Amplitudes only (the paper's A-F characteristics).
+    /// Amplitudes only (the paper's A-F characteristics), residual `|z| − |q|`.
     #[default]
     Amplitude,
+    /// Log-amplitudes, residual `ln|z| − ln|q|` with σ_ln = σ/|z|: a resonance placed too low
+    /// and a model low everywhere cost alike, so a misplaced peak is not "fixed" by lowering the
+    /// whole curve (the bias of the amplitude criterion with σ = ε|z|). Needs |z| > 0.
+    LogAmplitude,
     /// Real and imaginary parts (needs measured phase).
     Complex,
+}
+
+impl FitKind {
+    /// The fit for data and a noise choice when the user did not choose: log-amplitude where σ
+    /// is only known relative to the level (no variances, no coherence: the relative-error model
+    /// σ = ε|z|), amplitude otherwise.
+    pub fn for_data(data: &Observations, noise: NoiseChoice) -> FitKind {
+        match noise_source(data, noise) {
+            Ok(NoiseSource::Relative(_)) => FitKind::LogAmplitude,
+            _ => FitKind::Amplitude,
+        }
+    }
+
+    /// Its name in reports and on the command line.
+    pub fn as_str(&self) -> &'static str {
+        match self {
+            FitKind::Amplitude => "amplitude",
+            FitKind::LogAmplitude => "log-amplitude",
+            FitKind::Complex => "complex",
+        }
+    }
 }
 
 /// Where the observation covariance `R` comes from.
@@ -93,7 +118,8 @@ struct Obs {
     line: usize,
     /// Measured value: amplitude, or the complex value.
     z: C64,
-    /// Standard deviation of each real component.
+    /// Standard deviation of each real component of the residual (for a log-amplitude fit, of
+    /// ln|z|: σ/|z|).
     sigma: f64,
 }
 
@@ -184,11 +210,23 @@ fn observations(
                 (FitKind::Complex, Some(p)) => C64::from_polar(a, p[k]),
                 _ => C64::new(a, 0.0),
             };
+            let sigma = match fit {
+                FitKind::LogAmplitude if !(a > 0.0 && a.is_finite()) => {
+                    return Err(IdentifyError::Noise {
+                        item: format!("{item}, point {k} ({} Hz)", c.freqs_hz[k]),
+                        message: format!(
+                            "amplitude {a}: a log-amplitude fit needs amplitudes > 0; drop the point or choose --fit amplitude"
+                        ),
+                    });
+                }
+                FitKind::LogAmplitude => var.sqrt() / a,
+                _ => var.sqrt(),
+            };
             obs.push(Obs {
                 output: o,
                 line,
                 z,
-                sigma: var.sqrt(),
+                sigma,
             });
         }
         groups.push((c.label.clone(), start..obs.len()));
@@ -230,6 +268,23 @@ fn point_variance(
         });
     }
     Ok(var)
+}
+
+/// Whitened log-amplitude residual `(ln|z| − ln|q|)/σ_ln`; a model response of exactly zero
+/// counts as the smallest positive amplitude (a huge but finite residual).
+fn log_residual(o: &Obs, q: C64) -> f64 {
+    (o.z.re.ln() - q.norm().max(f64::MIN_POSITIVE).ln()) / o.sigma
+}
+
+/// `∂/∂x` of [`log_residual`] for a change `dq` of the response: `−Re(q̄ dq)/|q|² / σ_ln`
+/// (0 where q = 0, the subgradient).
+fn log_derivative(o: &Obs, q: C64, dq: C64) -> f64 {
+    let q2 = q.norm_sqr();
+    if q2 > 0.0 {
+        -(q.conj() * dq).re / q2 / o.sigma
+    } else {
+        0.0
+    }
 }
 
 impl Criterion {
@@ -293,7 +348,7 @@ impl Criterion {
     /// Number of whitened residuals (points, ×2 for a complex fit).
     pub fn residual_count(&self) -> usize {
         match self.fit {
-            FitKind::Amplitude => self.obs.len(),
+            FitKind::Amplitude | FitKind::LogAmplitude => self.obs.len(),
             FitKind::Complex => 2 * self.obs.len(),
         }
     }
@@ -368,6 +423,7 @@ impl Criterion {
             let q = r.output(o.output)[o.line];
             match self.fit {
                 FitKind::Amplitude => e[i] = (o.z.re - q.norm()) / o.sigma,
+                FitKind::LogAmplitude => e[i] = log_residual(o, q),
                 FitKind::Complex => {
                     let d = (o.z - q) / o.sigma;
                     e[i] = d.re;
@@ -396,6 +452,7 @@ impl Criterion {
             let qa = q.norm();
             match self.fit {
                 FitKind::Amplitude => e[i] = (o.z.re - qa) / o.sigma,
+                FitKind::LogAmplitude => e[i] = log_residual(o, q),
                 FitKind::Complex => {
                     let d = (o.z - q) / o.sigma;
                     e[i] = d.re;
@@ -418,6 +475,7 @@ impl Criterion {
                         };
                         jac[(i, v)] = -da / o.sigma;
                     }
+                    FitKind::LogAmplitude => jac[(i, v)] = log_derivative(o, q, dq),
                     FitKind::Complex => {
                         jac[(i, v)] = -dq.re / o.sigma;
                         jac[(np + i, v)] = -dq.im / o.sigma;
@@ -468,6 +526,7 @@ impl Criterion {
                         0.0
                     };
                 }
+                FitKind::LogAmplitude => col[i] = log_derivative(o, qv, d),
                 FitKind::Complex => {
                     col[i] = -d.re / o.sigma;
                     col[np + i] = -d.im / o.sigma;
@@ -475,6 +534,31 @@ impl Criterion {
             }
         }
         col
+    }
+
+    /// RMS amplitude error in dB, `sqrt(mean((20·log10(|q|/|z|))²))`, per characteristic at `x`
+    /// (points with |z| = 0 or |q| = 0 are skipped). Unlike the relative error it is not
+    /// dominated by the anti-resonance lines, where |z| is small.
+    pub fn rms_db_error(&mut self, x: &[f64]) -> Result<Vec<(String, f64)>, frf::SolveError> {
+        let q = self.predicted(x)?;
+        Ok(self
+            .groups
+            .iter()
+            .map(|(label, range)| {
+                let db: Vec<f64> = range
+                    .clone()
+                    .filter_map(|i| {
+                        let (z, qa) = (self.obs[i].z.norm(), q[i].norm());
+                        (z > 0.0 && qa > 0.0).then(|| 20.0 * (qa / z).log10())
+                    })
+                    .collect();
+                let ms = db.iter().map(|d| d * d).sum::<f64>() / db.len() as f64;
+                (
+                    label.clone(),
+                    if db.is_empty() { f64::NAN } else { ms.sqrt() },
+                )
+            })
+            .collect())
     }
 
     /// RMS relative amplitude error `sqrt(mean(((|q| − |z|)/|z|)²))` per characteristic at `x`

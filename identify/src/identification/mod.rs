@@ -2,6 +2,7 @@
 //! fit of the paper's section 4 with Cramér-Rao errors.
 //!
 //! - [`data`]: measured characteristics (JSON, CSV), validated against the model;
+//! - [`line_choice`]: which measured lines enter the fit (band, excluded lines, coherence);
 //! - [`variables`]: the decision variables (variables TOML: single parameters, groups, ratio ties,
 //!   bounds, scaling);
 //! - [`criterion`]: `J = ½ rᵀR⁻¹r` (eq. 4.4), amplitude or complex residuals, the noise model R,
@@ -49,6 +50,7 @@
 pub mod criterion;
 pub mod data;
 pub mod frf_units;
+pub mod line_choice;
 pub mod measurement_map;
 pub mod misfit;
 pub mod optimize;
@@ -197,6 +199,8 @@ pub struct Identification {
     pub rms_initial: Vec<(String, f64)>,
     /// RMS relative amplitude error per characteristic at the estimate.
     pub rms: Vec<(String, f64)>,
+    /// RMS amplitude error in dB per characteristic: (initial, estimate).
+    pub rms_db: Vec<(String, f64, f64)>,
     /// Every start (the first from the initial values).
     pub starts: Vec<StartSummary>,
     /// The model with the estimates written in.
@@ -279,6 +283,9 @@ pub fn identify(
     let rms_initial = crit
         .rms_relative_error(&x0)
         .map_err(|e| IdentifyError::Initial(e.into()))?;
+    let db_initial = crit
+        .rms_db_error(&x0)
+        .map_err(|e| IdentifyError::Initial(e.into()))?;
     let (out, starts) = best_of_starts(&mut crit, vars, opts, progress)?;
     let estimate: Vec<f64> = out.u.iter().zip(&scale).map(|(u, s)| u * s).collect();
     let (e, jac) = crit
@@ -297,6 +304,13 @@ pub fn identify(
     let rms = crit
         .rms_relative_error(&estimate)
         .map_err(|e| IdentifyError::Estimate(e.into()))?;
+    let rms_db = crit
+        .rms_db_error(&estimate)
+        .map_err(|e| IdentifyError::Estimate(e.into()))?
+        .into_iter()
+        .zip(db_initial)
+        .map(|((label, b), (_, a))| (label, a, b))
+        .collect();
     let mut updated = model.clone();
     vars.apply(&mut updated, &estimate);
     Ok(Identification {
@@ -315,6 +329,7 @@ pub fn identify(
         uncertainty: unc,
         rms_initial,
         rms,
+        rms_db,
         starts,
         model: updated,
     })

@@ -96,7 +96,7 @@ pub fn to_json(
         .collect();
     Ok(json!({
         "format": FORMAT,
-        "fit": match crit.fit() { FitKind::Amplitude => "amplitude", FitKind::Complex => "complex" },
+        "fit": crit.fit().as_str(),
         "noise": crit.noise.describe(),
         "model": contract::to_json(&at_initial),
         "lines_hz": crit.lines(),

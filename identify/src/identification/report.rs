@@ -92,10 +92,7 @@ pub fn text(id: &Identification) -> String {
         "identification: {} variables, {} observations ({} fit), optimizer {}\n",
         id.variables.len(),
         id.observations,
-        match id.fit {
-            super::FitKind::Amplitude => "amplitude",
-            super::FitKind::Complex => "complex",
-        },
+        id.fit.as_str(),
         id.optimizer.as_str()
     ));
     s.push_str(&format!("noise model: {}\n", id.noise.describe()));
@@ -130,10 +127,14 @@ pub fn text(id: &Identification) -> String {
         }
     ));
     parameter_table(&mut s, id);
-    s.push_str("\nRMS relative amplitude error per characteristic (initial -> identified):\n");
-    for ((label, a), (_, b)) in id.rms_initial.iter().zip(&id.rms) {
+    s.push_str(
+        "\nRMS amplitude error per characteristic, in dB and relative (initial -> identified):\n",
+    );
+    for (((label, a), (_, b)), (_, da, db)) in id.rms_initial.iter().zip(&id.rms).zip(&id.rms_db) {
         s.push_str(&format!(
-            "  {label}: {} -> {}\n",
+            "  {label}: {:.2} dB -> {:.2} dB   ({} -> {})\n",
+            da,
+            db,
             crate::display::relative(*a),
             crate::display::relative(*b)
         ));
@@ -254,6 +255,8 @@ pub struct ReportJson {
     pub correlation: Vec<Vec<Option<f64>>>,
     /// RMS relative amplitude errors: `[label, initial, identified]`.
     pub rms_relative_error: Vec<(String, f64, f64)>,
+    /// RMS amplitude errors in dB: `[label, initial, identified]`.
+    pub rms_db_error: Vec<(String, f64, f64)>,
     /// Poorly identifiable combinations: `[combination, relative σ]`.
     pub weak_directions: Vec<(String, Option<f64>)>,
     /// Criterion per start.
@@ -271,10 +274,7 @@ pub fn json(id: &Identification) -> ReportJson {
         iterations: id.iterations,
         model_evaluations: id.evaluations.model,
         jacobian_evaluations: id.evaluations.with_jacobian,
-        fit: match id.fit {
-            super::FitKind::Amplitude => "amplitude".into(),
-            super::FitKind::Complex => "complex".into(),
-        },
+        fit: id.fit.as_str().into(),
         noise: id.noise.describe(),
         observations: id.observations,
         criterion_initial: id.criterion_initial,
@@ -296,6 +296,7 @@ pub fn json(id: &Identification) -> ReportJson {
             .zip(&id.rms)
             .map(|((l, a), (_, b))| (l.clone(), *a, *b))
             .collect(),
+        rms_db_error: id.rms_db.clone(),
         weak_directions: id
             .uncertainty
             .weak
