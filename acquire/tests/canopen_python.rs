@@ -142,8 +142,10 @@ fn settings() -> CanOpenSettings {
     CanOpenSettings {
         node_id: NODE,
         dictionary: Some(ObjectDictionary::load(&eds, NODE).expect("shipped EDS")),
-        sdo_timeout: Duration::from_secs(2),
-        data_timeout: Duration::from_secs(3),
+        // Generous: python under a loaded machine (CI shares 2 cores) can take seconds to
+        // start its PDO loop; a lost node is still detected by the heartbeat.
+        sdo_timeout: Duration::from_secs(5),
+        data_timeout: Duration::from_secs(10),
         heartbeat_ms: 50,
         heartbeat_timeout: Duration::from_millis(600),
         ..CanOpenSettings::default()

@@ -578,6 +578,15 @@ pub fn build(inputs: Inputs<'_>) -> Result<Report, ReportError> {
         )?)
     };
     let mut messages = inputs.messages;
+    // The misfit headline first, unless a diagnosis went on to add effects (its verdict then
+    // speaks for the final model).
+    let diagnosed = inputs
+        .diagnosis
+        .as_ref()
+        .is_some_and(|(d, _)| !d.final_parameters.is_empty());
+    if let Some(m) = identify::identification::misfit::misfit(id).filter(|_| !diagnosed) {
+        messages.insert(0, m.message);
+    }
     if !id.stop.converged() {
         messages.push(format!(
             "the identification did not converge: {}",

@@ -49,7 +49,7 @@ pub fn misfit(id: &Identification) -> Option<Misfit> {
         ""
     };
     let message = format!(
-        "THE MODEL DOES NOT EXPLAIN THE DATA: reduced chi^2 = {} (p {} for {dof} degrees of freedom): the residuals are {}x the noise level{noise}, so they are systematic and the standard errors below are NOT to be trusted. Likely causes: units (g vs m/s^2, mm vs m, kHz vs Hz, per N vs per the model's excitation: see the data notes), the band (lines the model cannot represent), or the model form (a joint stiffness missing, masses off, a flexible body).",
+        "THE MODEL DOES NOT EXPLAIN THE DATA: reduced χ² = {} (p {} for {dof} degrees of freedom): the residuals are {}x the noise level{noise}, so they are systematic and the standard errors below are NOT to be trusted. Likely causes: units (g vs m/s², mm vs m, kHz vs Hz, per N vs per the model's excitation: see the data notes), the band (lines the model cannot represent), or the model form (a joint stiffness missing, masses off, a flexible body).",
         sig(reduced, 3),
         match p_value(p) {
             s if s.starts_with('<') => s,
