@@ -137,7 +137,8 @@ fn frequencies_in_khz_under_freq_hz_stop_before_a_confident_wrong_fit() {
         }
     }
     std::fs::write(&data, &csv).unwrap();
-    let o = identify_two_mass(&data, &vars, &[], &[]);
+    let report = dir.path().join("report");
+    let o = identify_two_mass(&data, &vars, &["--out", p(&report)], &[]);
     let err = utf8(&o.stderr);
     assert!(
         err.contains("warning: second u3 displacement") && err.contains("g read as m/s²"),
@@ -148,6 +149,16 @@ fn frequencies_in_khz_under_freq_hz_stop_before_a_confident_wrong_fit() {
         out.starts_with("THE MODEL DOES NOT EXPLAIN THE DATA"),
         "{out}"
     );
+    // The report says it first too, in its status, and the page shows it.
+    let json = std::fs::read_to_string(report.join("report.json")).unwrap();
+    let r: serde_json::Value = serde_json::from_str(&json).unwrap();
+    let first = r["status"]["messages"][0].as_str().unwrap();
+    assert!(
+        first.starts_with("THE MODEL DOES NOT EXPLAIN THE DATA: reduced χ²"),
+        "{first}"
+    );
+    let html = std::fs::read_to_string(report.join("report.html")).unwrap();
+    assert!(html.contains("<li>THE MODEL DOES NOT EXPLAIN THE DATA"));
 }
 
 /// A dense CSV of the two-mass chain (mm/N, 0.05 Hz lines over 2-80 Hz) with what real spectra
