@@ -365,3 +365,29 @@ fn a_fit_the_model_cannot_explain_says_so_in_its_headline() {
     assert!(!report::text(&id).contains("DOES NOT EXPLAIN"));
     assert!(serde_json::to_value(report::json(&id)).unwrap()["misfit"].is_null());
 }
+
+#[test]
+fn the_mass_line_names_a_unit_error_that_misplaced_resonances_hide_from_the_band_level() {
+    // The structure's stiffnesses are 2.5x and 0.4x the model's, so its resonances sit far
+    // from the model's and the level over the band says nothing clear; its second output is
+    // in g read as m/s² (9.81x). Above every resonance both follow the mass line, which the
+    // model's masses fix: there the factor shows.
+    let m = model();
+    let truth = textbook::two_in_series(400.0, 120.0, 5.0e7, 2.0e6, 0.5);
+    let f: Vec<f64> = (0..120).map(|i| 2.0 * 1.04f64.powi(i)).collect();
+    let obs = data::validate(&exact(&truth, &f, 1, 9.80665), &m, "g.csv").unwrap();
+    let levels = plausibility::check_level(&m, &obs);
+    let w = levels[1].warning.clone().unwrap_or_default();
+    assert!(
+        w.contains("above the model's resonances (the mass line)") && w.contains("g read as m/s²"),
+        "{w}"
+    );
+    assert!(
+        (levels[1].median_log10 - 9.80665f64.log10()).abs() > 0.12,
+        "the band level alone would not have named g: {}",
+        levels[1].median_log10
+    );
+    // The unscaled output: no unit warning.
+    let w0 = levels[0].warning.clone().unwrap_or_default();
+    assert!(!w0.contains("looks like"), "{w0}");
+}

@@ -1,9 +1,12 @@
 //! Is the measured data plausible for this model before fitting? Two checks against the initial
 //! model: the **band** (data lines more than a decade away from every natural frequency of the
 //! model — frequencies in kHz under a `freq_hz` column, or the wrong model — are an error), and
-//! the **level** (the median of log10 |data/model| over each characteristic's lines; a level
-//! 9.81× or 1000× off — g read as m/s², mm as m, kN as N — is warned about, naming the likely
-//! mistake). Nothing is ever rescaled: the user fixes the unit.
+//! the **level** (the median of log10 |data/model|; a level 9.81× or 1000× off — g read as m/s²,
+//! mm as m, kN as N — is warned about, naming the likely mistake). The level is judged first on
+//! the lines above the model's resonances (the mass line, fixed by the masses, which drawings
+//! give well), then below them (the static compliance), then over the whole band: misplaced
+//! resonances blur the band's level but not the asymptotes. Nothing is ever rescaled: the user
+//! fixes the unit.
 
 use super::data::{DataError, Observations};
 use crate::display::sig;
@@ -20,18 +23,7 @@ const LEVEL_TOLERANCE_DECADES: f64 = 0.12;
 /// The band check: an error when every measured line lies more than [`BAND_FACTOR`] below the
 /// model's first natural frequency or above its last (rigid-body modes aside).
 pub fn check_band(model: &Model, obs: &Observations) -> Result<(), DataError> {
-    let Ok(modes) = crate::modes::undamped(model) else {
-        return Ok(());
-    };
-    let f: Vec<f64> = modes
-        .iter()
-        .map(|m| m.freq_hz)
-        .filter(|f| f.is_finite() && *f > 0.0)
-        .collect();
-    let (Some(first), Some(last)) = (
-        f.iter().copied().reduce(f64::min),
-        f.iter().copied().reduce(f64::max),
-    ) else {
+    let Some((first, last)) = resonance_range(model) else {
         return Ok(());
     };
     let lines = obs
@@ -89,6 +81,10 @@ pub fn check_level(model: &Model, obs: &Observations) -> Vec<Level> {
         (1e6, "µm read as m"),
         (1e-6, "m read as µm"),
     ];
+    // The model's resonance range: lines well above it follow the mass line, lines well below
+    // the static compliance; both are far less sensitive to misplaced resonances than the
+    // level across the band, and the mass line depends only on masses, which the drawings give.
+    let (first, last) = resonance_range(model).unwrap_or((f64::NAN, f64::NAN));
     let mut out = Vec::new();
     for c in &obs.characteristics {
         let mut single = model.clone();
@@ -96,27 +92,54 @@ pub fn check_level(model: &Model, obs: &Observations) -> Vec<Level> {
         let Ok(r) = response(&single, &c.freqs_hz, &[], Method::Auto) else {
             continue;
         };
-        let mut ratios: Vec<f64> = r
+        let ratios: Vec<(f64, f64)> = r
             .output(0)
             .iter()
             .zip(&c.amplitude)
-            .filter(|(z, a)| z.norm() > 0.0 && **a > 0.0)
-            .map(|(z, a)| (a / z.norm()).log10())
-            .filter(|x| x.is_finite())
+            .zip(&c.freqs_hz)
+            .filter(|((z, a), _)| z.norm() > 0.0 && **a > 0.0)
+            .map(|((z, a), f)| (*f, (a / z.norm()).log10()))
+            .filter(|(_, x)| x.is_finite())
             .collect();
-        if ratios.is_empty() {
+        let Some(median) = median_of(ratios.iter().map(|(_, x)| *x), 1) else {
             continue;
-        }
-        ratios.sort_by(f64::total_cmp);
-        let median = ratios[ratios.len() / 2];
-        let warning = suspects
-            .iter()
-            .find(|(f, _)| (median - f.log10()).abs() < LEVEL_TOLERANCE_DECADES)
-            .map(|(_, why)| {
+        };
+        let regions = [
+            (
+                "above the model's resonances (the mass line)",
+                median_of(
+                    ratios
+                        .iter()
+                        .filter(|(f, _)| *f > 2.0 * last)
+                        .map(|(_, x)| *x),
+                    3,
+                ),
+            ),
+            (
+                "below the model's resonances (the static compliance)",
+                median_of(
+                    ratios
+                        .iter()
+                        .filter(|(f, _)| *f < 0.5 * first)
+                        .map(|(_, x)| *x),
+                    3,
+                ),
+            ),
+            ("over the band", Some(median)),
+        ];
+        let suspect = regions.iter().find_map(|(region, m)| {
+            let m = (*m)?;
+            suspects
+                .iter()
+                .find(|(f, _)| (m - f.log10()).abs() < LEVEL_TOLERANCE_DECADES)
+                .map(|(_, why)| (region, m, why))
+        });
+        let warning = suspect
+            .map(|(region, m, why)| {
                 format!(
-                    "{}: the data lie {}x the initial model's level (median over {} lines) — that looks like {why}. Check the unit; nothing was rescaled",
+                    "{}: the data lie {}x the initial model's level {region} (median over {} lines in all) — that looks like {why}. Check the unit; nothing was rescaled",
                     c.label,
-                    sig(10f64.powf(median), 3),
+                    sig(10f64.powf(m), 3),
                     ratios.len(),
                 )
             })
@@ -137,4 +160,25 @@ pub fn check_level(model: &Model, obs: &Observations) -> Vec<Level> {
         });
     }
     out
+}
+
+/// The model's lowest and highest natural frequency (Hz), rigid-body modes aside.
+fn resonance_range(model: &Model) -> Option<(f64, f64)> {
+    let modes = crate::modes::undamped(model).ok()?;
+    let f = modes
+        .iter()
+        .map(|m| m.freq_hz)
+        .filter(|f| f.is_finite() && *f > 0.0);
+    let first = f.clone().reduce(f64::min)?;
+    Some((first, f.reduce(f64::max)?))
+}
+
+/// The median of at least `min` values, `None` with fewer.
+fn median_of(values: impl Iterator<Item = f64>, min: usize) -> Option<f64> {
+    let mut v: Vec<f64> = values.collect();
+    if v.len() < min.max(1) {
+        return None;
+    }
+    v.sort_by(f64::total_cmp);
+    Some(v[v.len() / 2])
 }
