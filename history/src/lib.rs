@@ -38,6 +38,7 @@
 
 pub mod error;
 pub mod import;
+pub mod judge;
 pub mod record;
 pub mod store;
 
