@@ -132,7 +132,14 @@ fn a_step_is_a_shewhart_alarm_with_its_size_and_start() {
         .iter()
         .map(|r| r.parameters[0].in_unit())
         .collect();
-    let (centre, scatter) = robust_scatter(&base);
+    let (centre, mad) = robust_scatter(&base);
+    // The scatter: standard deviation about the median of the runs within 5 MAD scatters.
+    let kept: Vec<f64> = base
+        .iter()
+        .map(|x| x - centre)
+        .filter(|r| r.abs() <= 5.0 * mad)
+        .collect();
+    let scatter = (kept.iter().map(|r| r * r).sum::<f64>() / (kept.len() - 1) as f64).sqrt();
     for (k, x) in [(21, &j[21]), (22, &j[22])] {
         let a = x.alarms.iter().find(|a| a.rule == Rule::Shewhart).unwrap();
         assert_eq!(a.subject, "k1");
