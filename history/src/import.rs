@@ -88,12 +88,25 @@ pub struct ImportSummary {
 /// report names when it can still be read, else `path:` and its name (such runs compare only with
 /// each other).
 pub fn run_from_report(path: &Path, run_id: &str) -> Result<RunRecord, HistoryError> {
+    let text = std::fs::read_to_string(path).map_err(|e| HistoryError::Import {
+        path: path.to_path_buf(),
+        detail: e.to_string(),
+    })?;
+    run_from_report_text(&text, path, run_id)
+}
+
+/// [`run_from_report`] of a report's JSON text (`path` names it in errors): a nightly records
+/// the report it is about to write.
+pub fn run_from_report_text(
+    text: &str,
+    path: &Path,
+    run_id: &str,
+) -> Result<RunRecord, HistoryError> {
     let bad = |detail: String| HistoryError::Import {
         path: path.to_path_buf(),
         detail,
     };
-    let text = std::fs::read_to_string(path).map_err(|e| bad(e.to_string()))?;
-    let r: Report = serde_json::from_str(&text)
+    let r: Report = serde_json::from_str(text)
         .map_err(|e| bad(format!("line {}: {e}; not an ident report", e.line())))?;
     let hash = std::fs::read(&r.source.model)
         .map(|b| model_hash(&b))

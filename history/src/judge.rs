@@ -577,7 +577,7 @@ fn judge_one(
                 rule: Rule::NewEffect,
                 subject: e.clone(),
                 message: format!(
-                    "new effect: diagnosis accepted \"{e}\", which none of the {n} baseline runs needed (a loosened joint, a new contact?), since run {since}"
+                    "drift alarm (new effect): diagnosis accepted \"{e}\", which none of the {n} baseline runs needed (a loosened joint, a new contact?), since run {since}"
                 ),
                 since_run: since,
                 change: None,

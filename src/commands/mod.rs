@@ -10,6 +10,7 @@ pub mod model;
 pub mod modes;
 pub mod nightly;
 pub mod process;
+pub mod prometheus;
 pub mod replay;
 pub mod sensitivity;
 pub mod sim;

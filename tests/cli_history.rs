@@ -1,0 +1,173 @@
+//! `ident nightly` with a run history (`[history]`, issue 18): every run is recorded, too few
+//! baseline runs are said so, a step against the learned normal is an alarm (exit 1) with the
+//! rule and size, a corrupt history database is reported and left untouched while the run's
+//! report is still written, and the Prometheus textfile follows each run.
+
+#![allow(clippy::unwrap_used)]
+
+mod common;
+
+use std::path::{Path, PathBuf};
+
+use common::{ident, text};
+use history::store::Store;
+
+fn report_dir(o: &std::process::Output) -> PathBuf {
+    PathBuf::from(
+        String::from_utf8_lossy(&o.stdout)
+            .lines()
+            .find_map(|l| l.strip_prefix("report: "))
+            .unwrap_or_else(|| panic!("no report path: {}", text(o))),
+    )
+}
+
+fn json(p: &Path) -> serde_json::Value {
+    serde_json::from_str(&std::fs::read_to_string(p).unwrap()).unwrap()
+}
+
+fn messages(r: &serde_json::Value) -> Vec<String> {
+    r["status"]["messages"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|m| m.as_str().unwrap().to_string())
+        .collect()
+}
+
+fn write_job(dir: &Path, live: &Path, database: &str) -> PathBuf {
+    let cfg = dir.join("nightly.toml");
+    let c = live.join("configs");
+    std::fs::write(
+        &cfg,
+        format!(
+            "name = \"test job\"\nmeasure = \"newest-session\"\nmodel = \"{}\"\nvariables = \"{}\"\nsessions = \"{}\"\nreports = \"reports\"\nlog = \"nightly.log\"\nlock = \"nightly.lock\"\nprometheus = \"metrics/ident.prom\"\n[history]\ndatabase = \"{database}\"\nbaseline_runs = 6\n",
+            c.join("models/fwd32j-no-actuator.toml").display(),
+            c.join("identification/fwd32j-no-actuator.toml").display(),
+            live.display()
+        ),
+    )
+    .unwrap();
+    cfg
+}
+
+#[test]
+fn nightly_records_every_run_and_judges_drift_from_the_history() {
+    let dir = tempfile::tempdir().unwrap();
+    let o = ident(&[
+        "demo",
+        "--out",
+        dir.path().to_str().unwrap(),
+        "--points",
+        "10",
+        "--speed",
+        "8",
+        "--quiet",
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+    let live = report_dir(&o);
+    let cfg = write_job(dir.path(), &live, "history.sqlite");
+    let cfg_s = cfg.to_str().unwrap();
+    let db = dir.path().join("history.sqlite");
+    let prom = dir.path().join("metrics/ident.prom");
+
+    // First night: recorded, not judged yet, and the report says why.
+    let o = ident(&["nightly", cfg_s]);
+    assert_eq!(o.status.code(), Some(0), "{}", text(&o));
+    let r = json(&report_dir(&o).join("report.json"));
+    assert!(
+        messages(&r)
+            .iter()
+            .any(|m| m.contains("drift not judged") && m.contains("0 of the 6")),
+        "{:?}",
+        messages(&r)
+    );
+    let runs = Store::open_read_only(&db).unwrap().runs().unwrap();
+    assert_eq!(runs.len(), 1);
+    let first = runs[0].clone();
+    assert_eq!(
+        first.run_id,
+        report_dir(&o).file_name().unwrap().to_string_lossy()
+    );
+    assert_eq!(first.outcome, "ok");
+    assert!(!first.parameters.is_empty() && first.reduced_chi2.is_some());
+    let p = std::fs::read_to_string(&prom).unwrap();
+    assert!(
+        p.contains("ident_nightly_exit_code{job_name=\"test job\"} 0"),
+        "{p}"
+    );
+    assert!(
+        p.contains("ident_nightly_drift_judged{job_name=\"test job\"} 0"),
+        "{p}"
+    );
+    assert!(!dir.path().join("metrics/ident.prom.partial").exists());
+
+    // Six earlier nights on which the first parameter was 20 % stiffer (normal scatter 0.3 %):
+    // tonight, the same measurement again, is a step down.
+    {
+        let mut s = Store::open(&db).unwrap();
+        for i in 0..6 {
+            let mut run = first.clone();
+            run.run_id = format!("earlier-{i}");
+            run.time_utc = format!("2000-01-0{}T02:00:00Z", i + 1);
+            for (k, p) in run.parameters.iter_mut().enumerate() {
+                let wobble = 1.0 + 0.003 * (((i * 7 + k * 3) % 5) as f64 - 2.0);
+                p.estimate *= wobble * if k == 0 { 1.2 } else { 1.0 };
+            }
+            s.append(&run).unwrap();
+        }
+    }
+    let o = ident(&["nightly", cfg_s]);
+    assert_eq!(o.status.code(), Some(1), "{}", text(&o));
+    let r = json(&report_dir(&o).join("report.json"));
+    assert_eq!(r["status"]["outcome"], "alarm");
+    let name = first.parameters[0].variable.clone();
+    let ms = messages(&r);
+    let step = ms
+        .iter()
+        .find(|m| m.starts_with("drift alarm (Shewhart)") && m.contains(&name))
+        .unwrap_or_else(|| panic!("{ms:?}"));
+    assert!(
+        step.contains(&first.parameters[0].unit) && step.contains("normal scatter"),
+        "{step}"
+    );
+    // The k_sigma comparison against the first run (identical) raises nothing and says it is shown for reference.
+    assert!(
+        ms.iter().any(|m| m.contains("shown for reference")),
+        "{ms:?}"
+    );
+    let log = std::fs::read_to_string(dir.path().join("nightly.log")).unwrap();
+    assert!(log.contains("ALARM: drift alarm (Shewhart)"), "{log}");
+    let runs = Store::open_read_only(&db).unwrap().runs().unwrap();
+    assert_eq!(runs.len(), 8);
+    assert_eq!(runs.last().unwrap().outcome, "alarm");
+    let p = std::fs::read_to_string(&prom).unwrap();
+    assert!(
+        p.contains("ident_nightly_exit_code{job_name=\"test job\"} 1"),
+        "{p}"
+    );
+    assert!(
+        p.contains("ident_nightly_outcome{job_name=\"test job\",outcome=\"alarm\"} 1"),
+        "{p}"
+    );
+
+    // A corrupt history database: said so, left untouched, the report still written.
+    let junk = b"not a database\n".repeat(200);
+    std::fs::write(dir.path().join("broken.sqlite"), &junk).unwrap();
+    let cfg = write_job(dir.path(), &live, "broken.sqlite");
+    let o = ident(&["nightly", cfg.to_str().unwrap()]);
+    assert_eq!(o.status.code(), Some(0), "{}", text(&o));
+    let r = json(&report_dir(&o).join("report.json"));
+    assert!(
+        messages(&r)
+            .iter()
+            .any(|m| m.contains("run history is not used")
+                && m.contains("broken.sqlite")
+                && m.contains("damaged")),
+        "{:?}",
+        messages(&r)
+    );
+    assert_eq!(
+        std::fs::read(dir.path().join("broken.sqlite")).unwrap(),
+        junk
+    );
+}
