@@ -171,3 +171,96 @@ fn nightly_records_every_run_and_judges_drift_from_the_history() {
         junk
     );
 }
+
+fn synthetic_run(i: usize, k1: f64) -> history::record::RunRecord {
+    history::record::RunRecord {
+        run_id: format!("2026-01-{:02}T020000Z", i + 1),
+        time_utc: format!("2026-01-{:02}T02:00:00Z", i + 1),
+        stand: Some("FWD-32J".into()),
+        model_hash: "00000000000000aa".into(),
+        session: None,
+        outcome: "ok".into(),
+        reduced_chi2: Some(1.0),
+        parameters: vec![history::record::ParameterRecord {
+            variable: "kn 2".into(),
+            unit: "MPa/um".into(),
+            unit_factor: 1e12,
+            estimate: k1 * 1e12,
+            std_error: Some(1e8),
+        }],
+        characteristics: vec![],
+        effects: vec![],
+        covariates: vec![],
+    }
+}
+
+#[test]
+fn history_lists_shows_a_series_exports_csv_and_draws_the_trend_page() {
+    let dir = tempfile::tempdir().unwrap();
+    let db = dir.path().join("h.sqlite");
+    {
+        let mut s = Store::open(&db).unwrap();
+        for i in 0..12 {
+            let wobble = 0.0005 * (((i * 7) % 5) as f64 - 2.0);
+            s.append(&synthetic_run(i, 0.05 + wobble)).unwrap();
+        }
+        s.append(&synthetic_run(12, 0.04)).unwrap();
+    }
+    let db_s = db.to_str().unwrap();
+    let o = ident(&["history", db_s, "list"]);
+    assert!(o.status.success(), "{}", text(&o));
+    assert_eq!(String::from_utf8_lossy(&o.stdout).lines().count(), 14);
+
+    let o = ident(&["history", db_s, "series", "kn 2", "--baseline-runs", "10"]);
+    assert!(o.status.success(), "{}", text(&o));
+    let out = String::from_utf8_lossy(&o.stdout).to_string();
+    let last = out.lines().last().unwrap();
+    assert!(
+        last.starts_with("2026-01-13T020000Z\t") && last.contains("Shewhart"),
+        "{out}"
+    );
+    assert!(!out.lines().nth(11).unwrap().contains("Shewhart"), "{out}");
+    let o = ident(&["history", db_s, "series", "kn 9"]);
+    assert!(
+        !o.status.success() && text(&o).contains("no run in"),
+        "{}",
+        text(&o)
+    );
+
+    let csv = dir.path().join("h.csv");
+    let o = ident(&["history", db_s, "csv", "--out", csv.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", text(&o));
+    let t = std::fs::read_to_string(&csv).unwrap();
+    assert_eq!(t.lines().count(), 14);
+    assert!(
+        t.lines().last().unwrap().contains(",\"MPa/um\",0.04,"),
+        "{t}"
+    );
+
+    let html = dir.path().join("trend.html");
+    let o = ident(&[
+        "history",
+        db_s,
+        "html",
+        html.to_str().unwrap(),
+        "--baseline-runs",
+        "10",
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+    assert!(text(&o).contains("13 runs, 1 with alarms"), "{}", text(&o));
+    let page = std::fs::read_to_string(&html).unwrap();
+    assert_eq!(page.matches("data-chart=\"trend\"").count(), 1);
+    assert!(page.contains("<svg") && page.contains("drift alarm (Shewhart)"));
+
+    // A database from a newer ident: a clear error naming the file, nothing changed.
+    let c = rusqlite::Connection::open(&db).unwrap();
+    c.pragma_update(None, "user_version", 99).unwrap();
+    drop(c);
+    let o = ident(&["history", db_s, "list"]);
+    assert!(!o.status.success());
+    assert!(
+        text(&o).contains("schema version 99") && text(&o).contains("h.sqlite"),
+        "{}",
+        text(&o)
+    );
+}

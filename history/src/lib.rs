@@ -41,5 +41,6 @@ pub mod import;
 pub mod judge;
 pub mod record;
 pub mod store;
+pub mod trend;
 
 pub use error::HistoryError;

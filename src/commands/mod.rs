@@ -3,6 +3,7 @@
 pub mod demo;
 pub mod diagnose;
 pub mod frf;
+pub mod history;
 pub mod identify;
 pub mod mcap;
 pub mod measured;
