@@ -150,6 +150,34 @@ fn nightly_records_every_run_and_judges_drift_from_the_history() {
         "{p}"
     );
 
+    // `ident identify --record-history`: the same model hashes alike; two runs, two records.
+    let c = live.join("configs");
+    let model = c.join("models/fwd32j-no-actuator.toml");
+    let vars = c.join("identification/fwd32j-no-actuator.toml");
+    let db2 = dir.path().join("manual.sqlite");
+    for _ in 0..2 {
+        let o = ident(&[
+            "identify",
+            model.to_str().unwrap(),
+            "--data",
+            live.join("measured.json").to_str().unwrap(),
+            "--vars",
+            vars.to_str().unwrap(),
+            "--record-history",
+            db2.to_str().unwrap(),
+        ]);
+        assert!(
+            text(&o).contains("recorded as run identify-"),
+            "{}",
+            text(&o)
+        );
+    }
+    let manual = Store::open_read_only(&db2).unwrap().runs().unwrap();
+    assert_eq!(manual.len(), 2);
+    assert_ne!(manual[0].run_id, manual[1].run_id);
+    assert_eq!(manual[0].model_hash, first.model_hash);
+    assert_eq!(manual[0].parameters.len(), first.parameters.len());
+
     // A corrupt history database: said so, left untouched, the report still written.
     let junk = b"not a database\n".repeat(200);
     std::fs::write(dir.path().join("broken.sqlite"), &junk).unwrap();
