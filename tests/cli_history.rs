@@ -1,7 +1,8 @@
 //! `ident nightly` with a run history (`[history]`, issue 18): every run is recorded, too few
 //! baseline runs are said so, a step against the learned normal is an alarm (exit 1) with the
 //! rule and size, a corrupt history database is reported and left untouched while the run's
-//! report is still written, and the Prometheus textfile follows each run.
+//! report is still written, the Prometheus textfile follows each run, and an unfinished session
+//! (a nightly killed mid-sweep) is skipped and said so.
 
 #![allow(clippy::unwrap_used)]
 
