@@ -2,10 +2,14 @@
 //!
 //! Takes a lock (a second run exits 2; the kernel releases it when a run dies, even by `kill -9`), runs the sweep
 //! (or takes the newest session), processes, identifies, diagnoses, compares every parameter with
-//! its history (drift beyond k standard errors from the baseline run is an alarm) and writes a
-//! dated report folder (HTML, JSON, identification files, `status.json`). Logs to a file and to
-//! stderr; never prompts. Exit status: 0 ok, 1 alarm, 2 failure. On failure the partial session is
-//! kept and `status.json` says what happened.
+//! its history and writes a dated report folder (HTML, JSON, identification files,
+//! `status.json`). Drift: with `[history]` every run is appended to the run history database and
+//! judged against the normal run-to-run scatter of a baseline window (`history::judge`,
+//! `docs/nightly.md`); without it, beyond k standard errors from the baseline run is an alarm.
+//! `newest-session` skips sessions their writer did not finish (a sweep killed with `kill -9`).
+//! `prometheus` writes the status as a node_exporter textfile. Logs to a file and to stderr; never
+//! prompts. Exit status: 0 ok, 1 alarm, 2 failure. On failure the partial session is kept and
+//! `status.json` says what happened.
 
 use std::fs::{File, OpenOptions};
 use std::io::{Read, Seek, SeekFrom, Write};
