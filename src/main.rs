@@ -42,6 +42,8 @@ enum Command {
     Replay(commands::replay::ReplayArgs),
     /// Unattended identification of a stand (cron/systemd): exit 0 ok, 1 drift alarm, 2 failure.
     Nightly(commands::nightly::NightlyArgs),
+    /// The nightly run history: list, one parameter's series, CSV, import, HTML trend page.
+    History(commands::history::HistoryArgs),
     /// Session files: recover a truncated recording.
     Mcap(commands::mcap::McapArgs),
     /// Serve a stand's simulated shaker controller and DAQ (pseudo-terminals or CAN) until Ctrl-C.
@@ -74,6 +76,7 @@ fn main() -> ExitCode {
         Command::Mcap(a) => commands::mcap::run(a),
         Command::Replay(a) => commands::replay::run(a),
         Command::Nightly(a) => commands::nightly::run(a),
+        Command::History(a) => commands::history::run(a),
         Command::Sim(a) => commands::sim::run(a),
         Command::Sweep(a) => commands::sweep::run(a),
         Command::Process(a) => commands::process::run(a),

@@ -83,6 +83,23 @@ pub fn run(a: DiagnoseArgs) -> anyhow::Result<ExitCode> {
             Some((section, &d.model)),
         )?;
     }
+    if let Some(db) = &a.identify.record_history {
+        let model_name = a
+            .identify
+            .model
+            .file_stem()
+            .map(|s| s.to_string_lossy().into_owned())
+            .unwrap_or_default();
+        let section = ::report::build::diagnosis(&d, &model_name, &id);
+        super::identify::record_history(
+            db,
+            &a.identify,
+            "diagnose",
+            &obs,
+            &id,
+            Some((section, &d.model)),
+        )?;
+    }
     if let Some(p) = &a.out_model {
         emit(
             Some(p),

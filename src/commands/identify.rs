@@ -138,6 +138,10 @@ pub struct IdentifyArgs {
     /// the model curves (`ident diagnose --out` writes only the report, with its diagnosis).
     #[arg(long)]
     pub out: Option<PathBuf>,
+    /// Append this run to a run history database (SQLite, `docs/nightly.md`; created when
+    /// missing) for `ident history` and the nightly's drift judgement.
+    #[arg(long, value_name = "DB")]
+    pub record_history: Option<PathBuf>,
     /// Relative standard error above which a direction of the information matrix is reported as
     /// poorly identifiable (0.5 = 50 %).
     #[arg(long, default_value_t = 0.5)]
@@ -323,6 +327,54 @@ pub fn write_report(
     Ok(written)
 }
 
+/// Appends this run to the history database `db` (`--record-history`): the run as its report
+/// describes it, named `WORKFLOW-<UTC>`, the model hash of the model file's bytes.
+pub fn record_history(
+    db: &Path,
+    a: &IdentifyArgs,
+    workflow: &str,
+    obs: &idn::Observations,
+    id: &idn::Identification,
+    diagnosis: Option<(::report::Diagnosis, &identify::Model)>,
+) -> anyhow::Result<()> {
+    let ctx = ReportContext {
+        title: workflow,
+        workflow,
+        stand: None,
+        drift: None,
+        messages: Vec::new(),
+        created_utc: String::new(),
+    };
+    let source = ::report::document::Source {
+        model: a.model.display().to_string(),
+        variables: a.vars.display().to_string(),
+        measurement: format!("data file {}", a.data.display()),
+        ..::report::document::Source::default()
+    };
+    let r = build_report(ctx, source, obs, id, diagnosis)?;
+    let run_id = format!("{workflow}-{}", r.created_utc.replace(':', ""));
+    let mut run =
+        history::import::run_from_report_text(&serde_json::to_string(&r)?, &a.data, &run_id)?;
+    let model =
+        std::fs::read(&a.model).with_context(|| format!("cannot re-read {}", a.model.display()))?;
+    run.model_hash = history::record::model_hash(&model);
+    run.session = Some(a.data.display().to_string());
+    if !id.stop.converged() {
+        run.outcome = "failure".into();
+    }
+    let mut store = history::store::Store::open(db)?;
+    // Two runs in the same second: the later gets a suffix rather than overwriting.
+    let base = run.run_id.clone();
+    let mut n = 1;
+    while store.contains(&run.run_id)? {
+        n += 1;
+        run.run_id = format!("{base}-{n}");
+    }
+    store.append(&run)?;
+    eprintln!("recorded as run {} in {}", run.run_id, db.display());
+    Ok(())
+}
+
 pub fn run(a: IdentifyArgs) -> anyhow::Result<ExitCode> {
     let (model, obs, vars, opts) = setup(&a)?;
     if let Some(path) = &a.export_problem {
@@ -385,6 +437,9 @@ pub fn run(a: IdentifyArgs) -> anyhow::Result<ExitCode> {
             emit(Some(&dir.join("model.toml")), &updated)?;
         }
         write_report(dir, &a, "identify", &obs, &id, None)?;
+    }
+    if let Some(db) = &a.record_history {
+        record_history(db, &a, "identify", &obs, &id, None)?;
     }
     write_final(&a, &id, None)?;
     if id.stop.converged() {

@@ -3,6 +3,7 @@
 pub mod demo;
 pub mod diagnose;
 pub mod frf;
+pub mod history;
 pub mod identify;
 pub mod mcap;
 pub mod measured;
@@ -10,6 +11,7 @@ pub mod model;
 pub mod modes;
 pub mod nightly;
 pub mod process;
+pub mod prometheus;
 pub mod replay;
 pub mod sensitivity;
 pub mod sim;

@@ -2,10 +2,14 @@
 //!
 //! Takes a lock (a second run exits 2; the kernel releases it when a run dies, even by `kill -9`), runs the sweep
 //! (or takes the newest session), processes, identifies, diagnoses, compares every parameter with
-//! its history (drift beyond k standard errors from the baseline run is an alarm) and writes a
-//! dated report folder (HTML, JSON, identification files, `status.json`). Logs to a file and to
-//! stderr; never prompts. Exit status: 0 ok, 1 alarm, 2 failure. On failure the partial session is
-//! kept and `status.json` says what happened.
+//! its history and writes a dated report folder (HTML, JSON, identification files,
+//! `status.json`). Drift: with `[history]` every run is appended to the run history database and
+//! judged against the normal run-to-run scatter of a baseline window (`history::judge`,
+//! `docs/nightly.md`); without it, beyond k standard errors from the baseline run is an alarm.
+//! `newest-session` skips sessions their writer did not finish (a sweep killed with `kill -9`).
+//! `prometheus` writes the status as a node_exporter textfile. Logs to a file and to stderr; never
+//! prompts. Exit status: 0 ok, 1 alarm, 2 failure. On failure the partial session is kept and
+//! `status.json` says what happened.
 
 use std::fs::{File, OpenOptions};
 use std::io::{Read, Seek, SeekFrom, Write};
@@ -55,6 +59,57 @@ pub struct Config {
     /// Drift rule.
     #[serde(default)]
     pub drift: DriftConfig,
+    /// Run history and drift judged from it; without it, the `[drift]` k_sigma rule alone.
+    pub history: Option<HistoryConfig>,
+    /// Prometheus textfile (node_exporter's textfile collector) with the last run's status.
+    pub prometheus: Option<PathBuf>,
+}
+
+/// `[history]`: every run is appended to `database` and judged against a baseline window of
+/// earlier runs of the same model (`history::judge`).
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct HistoryConfig {
+    /// The SQLite history database (created when missing).
+    pub database: PathBuf,
+    /// Runs in the baseline window.
+    #[serde(default = "default_baseline_runs")]
+    pub baseline_runs: usize,
+    /// `first` (the first `baseline_runs` runs) or `rolling` (the runs just before).
+    #[serde(default)]
+    pub window: Window,
+    /// Covariate to compensate (a channel recorded with the session, e.g. `temperature`).
+    pub covariate: Option<String>,
+}
+
+fn default_baseline_runs() -> usize {
+    20
+}
+
+/// The baseline window's kind.
+#[derive(Debug, Default, Clone, Copy, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Window {
+    /// The first runs.
+    #[default]
+    First,
+    /// The runs just before the judged one.
+    Rolling,
+}
+
+impl HistoryConfig {
+    /// The judgement's settings.
+    pub fn judge(&self) -> history::judge::JudgeConfig {
+        use history::judge::BaselineWindow;
+        history::judge::JudgeConfig {
+            baseline: match self.window {
+                Window::First => BaselineWindow::First(self.baseline_runs),
+                Window::Rolling => BaselineWindow::Rolling(self.baseline_runs),
+            },
+            covariate: self.covariate.clone(),
+            ..Default::default()
+        }
+    }
 }
 
 /// What a run measures.
@@ -150,9 +205,23 @@ impl Config {
                 *p = dir.join(&*p);
             }
         }
-        if let Some(p) = c.stand.as_mut().filter(|p| p.is_relative()) {
-            *p = dir.join(&*p);
+        for p in [
+            c.stand.as_mut(),
+            c.prometheus.as_mut(),
+            c.history.as_mut().map(|h| &mut h.database),
+        ]
+        .into_iter()
+        .flatten()
+        {
+            if p.is_relative() {
+                *p = dir.join(&*p);
+            }
         }
+        anyhow::ensure!(
+            c.history.as_ref().is_none_or(|h| h.baseline_runs >= 3),
+            "{}: [history] baseline_runs must be at least 3 (20 or more learns normal scatter well)",
+            at("baseline_runs")
+        );
         anyhow::ensure!(
             c.measure != Measure::Sweep || c.stand.is_some(),
             "{}: measure = \"sweep\" needs `stand = \"stands/NAME.toml\"`",
@@ -315,29 +384,57 @@ impl Log {
     }
 }
 
-/// The newest `*.mcap` in `dir` by modification time.
-fn newest_session(dir: &Path) -> anyhow::Result<PathBuf> {
+/// The magic that ends every finished MCAP file (MCAP specification); a session whose writer was
+/// killed (`kill -9`, power loss) ends without it.
+const MCAP_MAGIC: &[u8; 8] = b"\x89MCAP0\r\n";
+
+/// Whether a session file was finished by its writer (ends with the MCAP magic).
+fn session_finished(path: &Path) -> std::io::Result<bool> {
+    let mut f = File::open(path)?;
+    let len = f.metadata()?.len();
+    if len < 16 {
+        return Ok(false);
+    }
+    f.seek(SeekFrom::Start(len - 8))?;
+    let mut tail = [0u8; 8];
+    f.read_exact(&mut tail)?;
+    Ok(&tail == MCAP_MAGIC)
+}
+
+/// The newest finished `*.mcap` in `dir` by modification time. Newer unfinished sessions (a sweep
+/// killed mid-way, or one still being written) are skipped, each with a note saying so and how to
+/// recover it: a partial session is never identified as if complete.
+fn newest_session(dir: &Path, notes: &mut Vec<String>) -> anyhow::Result<PathBuf> {
     let entries = std::fs::read_dir(dir)
         .with_context(|| format!("cannot read the session folder {}", dir.display()))?;
-    let mut best: Option<(std::time::SystemTime, PathBuf)> = None;
-    for e in entries.flatten() {
-        let p = e.path();
-        if p.extension().is_some_and(|x| x == "mcap") {
-            let t = e
-                .metadata()
+    let mut all: Vec<(std::time::SystemTime, PathBuf)> = entries
+        .flatten()
+        .map(|e| e.path())
+        .filter(|p| p.extension().is_some_and(|x| x == "mcap"))
+        .map(|p| {
+            let t = std::fs::metadata(&p)
                 .and_then(|m| m.modified())
                 .unwrap_or(std::time::UNIX_EPOCH);
-            if best.as_ref().is_none_or(|(b, bp)| (t, &p) > (*b, bp)) {
-                best = Some((t, p));
-            }
+            (t, p)
+        })
+        .collect();
+    all.sort();
+    let any = !all.is_empty();
+    while let Some((_, p)) = all.pop() {
+        match session_finished(&p) {
+            Ok(true) => return Ok(p),
+            Ok(false) => notes.push(format!(
+                "skipped the unfinished session {} (its writer did not finish it: a sweep killed mid-way, or one still running); `ident mcap recover` makes a readable copy, which `ident process` reports as truncated",
+                p.display()
+            )),
+            Err(e) => notes.push(format!("skipped the session {}: cannot read it: {e}", p.display())),
         }
     }
-    best.map(|(_, p)| p).with_context(|| {
-        format!(
-            "no *.mcap session in {}; record one with `ident sweep` or set measure = \"sweep\"",
-            dir.display()
-        )
-    })
+    anyhow::bail!(
+        "no {}*.mcap session in {}; record one with `ident sweep` or set measure = \"sweep\"",
+        if any { "finished " } else { "" },
+        dir.display()
+    )
 }
 
 /// Runs the job.
@@ -395,6 +492,19 @@ pub fn run(a: NightlyArgs) -> anyhow::Result<ExitCode> {
             if let Err(e) = report::write_atomic(&dir.join("report.html"), page.as_bytes()) {
                 log.line(&format!("cannot write report.html: {e}"));
             }
+            if let Some(p) = &cfg.prometheus {
+                let status = super::prometheus::RunStatus {
+                    job: &cfg.name,
+                    outcome: "failure",
+                    exit_code: 2,
+                    end_unix: now_unix(),
+                    judgement: None,
+                    record: None,
+                };
+                if let Err(e) = super::prometheus::write(p, &status) {
+                    log.line(&format!("cannot write the Prometheus textfile: {e}"));
+                }
+            }
             2
         }
     };
@@ -408,13 +518,19 @@ fn job(
     dir: &Path,
     log: &mut Log,
     session: &mut Option<PathBuf>,
-    notes: Vec<String>,
+    mut notes: Vec<String>,
 ) -> anyhow::Result<u8> {
     let setup = Setup::load(&cfg.model, &cfg.variables)?;
     let mut stand_name = None;
     let path = match cfg.measure {
         Measure::NewestSession => {
-            let p = newest_session(&cfg.sessions)?;
+            let mut skipped = Vec::new();
+            let found = newest_session(&cfg.sessions, &mut skipped);
+            for m in &skipped {
+                log.line(m);
+            }
+            notes.extend(skipped);
+            let p = found?;
             log.line(&format!("newest session: {}", p.display()));
             p
         }
@@ -448,17 +564,64 @@ fn job(
         i.sensitivity = false;
         i
     })?;
-    let drift = report::drift::compare(&history, &probe, &cfg.baseline(), cfg.drift.k_sigma)
+    let mut drift = report::drift::compare(&history, &probe, &cfg.baseline(), cfg.drift.k_sigma)
         .map_err(|e| anyhow::anyhow!("[drift] baseline: {e}"))?;
+    let mut messages: Vec<String> = notes.into_iter().chain(hist_msgs).collect();
+    // The run history: this run as a record, judged against the baseline window.
+    let mut recorded = None;
+    if let Some(h) = &cfg.history {
+        match judge_from_history(cfg, h, dir, &probe, &path, stand_name.clone()) {
+            Ok((judgement, record, store)) => {
+                if let Some(d) = drift.as_mut() {
+                    for p in &mut d.parameters {
+                        p.alarm = false;
+                    }
+                    messages.push(format!(
+                    "the deviations from the baseline run in Cramér-Rao errors (k_sigma {}) are shown for reference; alarms are judged from the run history {}",
+                    cfg.drift.k_sigma,
+                    h.database.display()
+                ));
+                }
+                log.line(&judgement.summary());
+                messages.push(judgement.summary());
+                messages.extend(judgement.alarms.iter().map(|a| a.message.clone()));
+                messages.extend(judgement.notes.iter().map(|n| format!("drift: {n}")));
+                recorded = Some((judgement, record, store));
+            }
+            Err(e) => {
+                let m = format!("the run history is not used tonight: {e:#}; this run is not recorded and drift is not judged from the history (the k_sigma comparison still is)");
+                log.line(&m);
+                messages.push(m);
+            }
+        }
+    }
     let ctx = ReportContext {
         title: &cfg.name,
         workflow: "nightly",
         stand: stand_name,
         drift,
-        messages: notes.into_iter().chain(hist_msgs).collect(),
+        messages,
         created_utc: probe.created_utc.clone(),
     };
-    let (r, written) = pipeline::write_report(dir, ctx, &setup, &analysis)?;
+    let (mut r, mut written) = pipeline::write_report(dir, ctx, &setup, &analysis)?;
+    if let Some((judgement, record, store)) = &mut recorded {
+        if judgement.alarm() && r.status.outcome == report::Outcome::Ok {
+            r.status.outcome = report::Outcome::Alarm;
+            written = report::write(&r, dir)?;
+        }
+        record.outcome = r.status.outcome.as_str().into();
+        match store.append(record) {
+            Ok(()) => log.line(&format!(
+                "recorded in the history {}",
+                store.path().display()
+            )),
+            Err(e) => {
+                let m = format!("this run could not be recorded in the history: {e}");
+                log.line(&m);
+                r.status.messages.push(m);
+            }
+        }
+    }
     for m in r
         .status
         .messages
@@ -473,13 +636,71 @@ fn job(
     println!("{}", pipeline::summary_text(&analysis));
     println!("outcome: {}", r.status.outcome.as_str());
     println!("report: {}", dir.display());
-    Ok(match r.status.outcome {
+    let code = match r.status.outcome {
         report::Outcome::Ok => 0,
         report::Outcome::Alarm => 1,
         report::Outcome::Failure => 2,
-    })
+    };
+    if let Some(p) = &cfg.prometheus {
+        let status = super::prometheus::RunStatus {
+            job: &cfg.name,
+            outcome: r.status.outcome.as_str(),
+            exit_code: code,
+            end_unix: now_unix(),
+            judgement: recorded.as_ref().map(|(j, _, _)| j),
+            record: recorded.as_ref().map(|(_, r, _)| r),
+        };
+        if let Err(e) = super::prometheus::write(p, &status) {
+            log.line(&format!("cannot write the Prometheus textfile: {e}"));
+        }
+    }
+    Ok(code)
 }
 
+fn now_unix() -> i64 {
+    std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map(|d| d.as_secs() as i64)
+        .unwrap_or(0)
+}
+
+/// Opens the history, makes this run's record (named after its report folder) and judges it
+/// against the earlier runs. The record is appended by the caller once the report is written.
+fn judge_from_history(
+    cfg: &Config,
+    h: &HistoryConfig,
+    dir: &Path,
+    probe: &report::Report,
+    session: &Path,
+    stand: Option<String>,
+) -> anyhow::Result<(
+    history::judge::Judgement,
+    history::record::RunRecord,
+    history::store::Store,
+)> {
+    if let Some(parent) = h.database.parent() {
+        std::fs::create_dir_all(parent)
+            .with_context(|| format!("cannot create the folder of {}", h.database.display()))?;
+    }
+    let store = history::store::Store::open(&h.database)?;
+    let run_id = dir
+        .file_name()
+        .map(|f| f.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    let mut record = history::import::run_from_report_text(
+        &serde_json::to_string(probe)?,
+        &dir.join("report.json"),
+        &run_id,
+    )?;
+    let model = std::fs::read(&cfg.model)
+        .with_context(|| format!("cannot read the model {}", cfg.model.display()))?;
+    record.model_hash = history::record::model_hash(&model);
+    record.session = Some(session.display().to_string());
+    record.stand = stand;
+    let earlier = store.runs()?;
+    let judgement = history::judge::judge_latest(&earlier, &record, &h.judge());
+    Ok((judgement, record, store))
+}
 /// Sweeps the job's stand into a new session named after the report folder `dir`; returns the
 /// session and the stand's name. The session path is set in `session` as soon as it exists.
 fn sweep_session(
