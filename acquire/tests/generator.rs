@@ -293,6 +293,51 @@ async fn fault_ends_safely(tcp: bool, fault: &str, expect: &str, injected_kind: 
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_clipped_force_channel_ends_with_the_output_off() {
+    bounded(180, async {
+        // A load cell twice as sensitive: the DAQ's ±10 V input clips at 10 V / 4.5 mV/N = 2.2 kN,
+        // below the 4 kN target and below force_limit (4.4 kN), so the clipped force reads low
+        // and never trips the over-force: only the clipping check stops the loop driving harder.
+        let mut stand = generator_stand(true);
+        let force = stand.force_channel();
+        stand.channels[force].sensitivity = 4.5e-3;
+        assert_eq!(stand.daq.input_range_v, 10.0, "the default input range");
+        let (_d, path) = temp_file("clip.mcap");
+        let (r, state, injected) = run(&stand, &plan(4), &path).await;
+        let e = r.unwrap_err();
+        assert!(
+            e.contains("force channel `force` clipped") && e.contains("±10 V input range"),
+            "{e}"
+        );
+        assert!(e.contains("output switched off"), "{e}");
+        assert!(injected.is_empty(), "{injected:?}");
+        assert!(!state.output_on, "the generator's output was left on");
+        assert!(state.volts_peak <= IDLE_V + 1e-9, "not ramped down");
+        let (drive, steps, events) = drive_and_steps(&path);
+        assert!(
+            steps.is_empty(),
+            "no line measured on a clipped force is kept"
+        );
+        assert!(events
+            .iter()
+            .any(|e| e.kind == "error" && e.detail.contains("clipped")));
+        // The clipped reading is recorded, and stayed below the over-force limit.
+        let m: Vec<f64> = drive
+            .iter()
+            .filter(|d| d.kind == DriveKind::Measurement)
+            .filter_map(|d| d.force_n)
+            .collect();
+        let last = *m.last().unwrap();
+        assert!(last < 4400.0 && last > 1500.0, "{m:?}");
+        assert_eq!(
+            drive.last().map(|d| (d.kind, d.output_on)),
+            Some((DriveKind::Output, false))
+        );
+    })
+    .await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn an_amplifier_trip_mid_sweep_ends_with_the_output_off() {
     bounded(
         180,
@@ -431,6 +476,18 @@ fn bad_generator_stand_files_name_the_field_and_the_fix() {
         "port = \"usbtmc:\"\nidentity = \"IDENT-SIM,SIGGEN-2\"",
     );
     assert!(m.contains("usbtmc:/dev/usbtmc0"), "{m}");
+    let (_, m) = err(
+        "samples_per_block = 64",
+        "samples_per_block = 64\ninput_range = \"-5 V\"",
+    );
+    assert!(m.contains("daq.input_range"), "{m}");
+    let ranged = good.replacen(
+        "samples_per_block = 64",
+        "samples_per_block = 64\ninput_range = \"5 V\"",
+        1,
+    );
+    let d = parse(&ranged).unwrap_or_else(|e| panic!("{e}")).daq;
+    assert_eq!(d.input_range_v, 5.0);
     let usb = good.replacen("port = \"sim\"", "port = \"usbtmc:/dev/usbtmc0\"", 1);
     let g = parse(&usb)
         .unwrap_or_else(|e| panic!("{e}"))
