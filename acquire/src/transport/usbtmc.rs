@@ -8,8 +8,10 @@
 //! drivers use: the bytes written up to a flush are one message per line (one `write()` each),
 //! and the device is read only after a message holding a query (`?`), until the answer line is
 //! complete. The device file is blocking, so a worker thread owns it; the async side exchanges
-//! messages with it over channels. The answer timeout is the driver's (the host's own, shorter
-//! timeout governs; a late `ETIMEDOUT` is logged and dropped). Reconnecting means opening the
+//! messages with it over channels. The host's answer timeout governs: a flush does not wait for
+//! the worker (which may sit in the read of an unanswered query until the driver's timeout), a
+//! failed `write()` surfaces at the next flush or read, and a late `ETIMEDOUT` is logged and
+//! dropped. Reconnecting means opening the
 //! path again (the generator driver's reconnect does so).
 //!
 //! What the tests use instead of the kernel driver: an in-memory device with the driver's
@@ -205,6 +207,33 @@ fn serve(
     }
 }
 
+fn worker_gone() -> std::io::Error {
+    std::io::Error::new(
+        std::io::ErrorKind::NotConnected,
+        "the USBTMC worker thread has ended",
+    )
+}
+
+impl UsbtmcTransport {
+    /// Collects the `write()` confirmations that are in; the first failure, if any.
+    fn written(&mut self, cx: &mut Context<'_>) -> std::io::Result<()> {
+        while let Some(ack) = self.acks.front_mut() {
+            match Pin::new(ack).poll(cx) {
+                Poll::Pending => return Ok(()),
+                Poll::Ready(r) => {
+                    self.acks.pop_front();
+                    match r {
+                        Ok(Ok(())) => {}
+                        Ok(Err(e)) => return Err(e),
+                        Err(_) => return Err(worker_gone()),
+                    }
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
 impl Transport for UsbtmcTransport {
     fn port(&self) -> &str {
         &self.name
@@ -217,6 +246,9 @@ impl AsyncRead for UsbtmcTransport {
         cx: &mut Context<'_>,
         buf: &mut ReadBuf<'_>,
     ) -> Poll<std::io::Result<()>> {
+        if let Err(e) = self.written(cx) {
+            return Poll::Ready(Err(e));
+        }
         if self.unread.is_empty() {
             match self.from_device.poll_recv(cx) {
                 Poll::Pending => return Poll::Pending,
@@ -254,32 +286,15 @@ impl AsyncWrite for UsbtmcTransport {
             let message: Vec<u8> = self.out.drain(..end).collect();
             let (tx, rx) = oneshot::channel();
             if self.to_device.send((message, tx)).is_err() {
-                return Poll::Ready(Err(std::io::Error::new(
-                    std::io::ErrorKind::NotConnected,
-                    "the USBTMC worker thread has ended",
-                )));
+                return Poll::Ready(Err(worker_gone()));
             }
             self.acks.push_back(rx);
         }
-        while let Some(ack) = self.acks.front_mut() {
-            match Pin::new(ack).poll(cx) {
-                Poll::Pending => return Poll::Pending,
-                Poll::Ready(r) => {
-                    self.acks.pop_front();
-                    match r {
-                        Ok(Ok(())) => {}
-                        Ok(Err(e)) => return Poll::Ready(Err(e)),
-                        Err(_) => {
-                            return Poll::Ready(Err(std::io::Error::new(
-                                std::io::ErrorKind::NotConnected,
-                                "the USBTMC worker thread has ended",
-                            )))
-                        }
-                    }
-                }
-            }
-        }
-        Poll::Ready(Ok(()))
+        // Confirmations already in: a failed write() fails this flush. Those still pending are
+        // not waited for: the worker may be blocked in the read of an earlier query the device
+        // never answers (until the driver's timeout), and the host's answer timeout must govern.
+        // Their errors surface at the next flush or read.
+        Poll::Ready(self.written(cx))
     }
 
     fn poll_shutdown(self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<std::io::Result<()>> {
@@ -422,6 +437,45 @@ mod tests {
         t.write_all(b"*IDN?\n").await.unwrap();
         t.flush().await.unwrap();
         assert!(line(&mut t).await.contains("33512B"));
+    }
+
+    /// A device whose `write()` fails as an unplugged instrument's does (`ENODEV`).
+    struct Unplugged;
+
+    impl Write for Unplugged {
+        fn write(&mut self, _: &[u8]) -> std::io::Result<usize> {
+            Err(std::io::Error::from_raw_os_error(19))
+        }
+        fn flush(&mut self) -> std::io::Result<()> {
+            Ok(())
+        }
+    }
+
+    impl Read for Unplugged {
+        fn read(&mut self, _: &mut [u8]) -> std::io::Result<usize> {
+            Err(std::io::Error::from_raw_os_error(19))
+        }
+    }
+
+    #[tokio::test]
+    async fn a_failed_write_surfaces_as_a_lost_connection() {
+        let mut t = UsbtmcTransport::over("usbtmc:gone", Unplugged);
+        t.write_all(b"*IDN?\n").await.unwrap();
+        // The flush may return before the worker's confirmation; the error then comes with the
+        // next flush or read, within the host's own timeout.
+        let r = match t.flush().await {
+            Err(e) => Err(e),
+            Ok(()) => {
+                let mut b = [0u8; 8];
+                tokio::time::timeout(Duration::from_secs(5), t.read(&mut b))
+                    .await
+                    .expect("the error arrives")
+                    .map(|_| ())
+            }
+        };
+        let e = r.unwrap_err();
+        assert_eq!(e.kind(), std::io::ErrorKind::NotConnected, "{e}");
+        assert!(e.to_string().contains("USB cable"), "{e}");
     }
 
     #[test]
