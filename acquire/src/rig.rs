@@ -12,7 +12,8 @@ use crate::session::{SessionError, SessionHandle};
 use crate::shaker::{ScpiShaker, Shaker, ShakerError, ShakerOptions};
 use crate::stand::{GeneratorAddress, GeneratorStand, PortSpec, Stand};
 use crate::transport::{
-    connect_tcp, open_serial, ByteTap, SerialSettings, Tapped, Transport, TransportError,
+    connect_tcp, open_serial, open_usbtmc, ByteTap, SerialSettings, Tapped, Transport,
+    TransportError,
 };
 
 /// Why a stand could not be brought up.
@@ -95,6 +96,10 @@ fn open_generator(
                     // Connecting may take longer than an answer: a few answer timeouts.
                     let wait = (timeout * 3).max(std::time::Duration::from_secs(1));
                     let io = connect_tcp(a, wait).await?;
+                    Ok(tapped(io, session.as_ref()))
+                }
+                GeneratorAddress::Usbtmc(p) => {
+                    let io = open_usbtmc(p)?;
                     Ok(tapped(io, session.as_ref()))
                 }
                 GeneratorAddress::Sim { .. } => Err(TransportError::Open {

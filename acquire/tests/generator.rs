@@ -58,8 +58,33 @@ async fn run(
     GeneratorState,
     Vec<&'static str>,
 ) {
+    run_over(stand, plan, path, false).await
+}
+
+/// [`run`], with the pty-served generator opened through the USBTMC transport when `usbtmc`
+/// (the pty stands in for `/dev/usbtmc0`: see `acquire::transport::UsbtmcTransport`).
+async fn run_over(
+    stand: &Stand,
+    plan: &SteppedSine,
+    path: &Path,
+    usbtmc: bool,
+) -> (
+    Result<sweep::SweepOutcome, String>,
+    GeneratorState,
+    Vec<&'static str>,
+) {
     let sim = SimStand::start(stand).unwrap();
-    let bound = sim.bind(stand);
+    let mut bound = sim.bind(stand);
+    if usbtmc {
+        let g = bound.generator.as_mut().unwrap();
+        let GeneratorAddress::Serial(pty) = &g.port else {
+            panic!(
+                "the USBTMC run needs the pty-served generator, got {}",
+                g.port
+            )
+        };
+        g.port = GeneratorAddress::Usbtmc(pty.clone());
+    }
     let session = Session::create(path, SessionOptions::default()).unwrap();
     let h = session.handle();
     sweep::log_session_start(&h, &stand.file, plan, None, &BTreeSet::new()).unwrap();
@@ -133,10 +158,14 @@ fn drive_and_steps(path: &Path) -> (Vec<DriveRecord>, Vec<StepResult>, Vec<Sweep
 }
 
 async fn holds_every_line(tcp: bool) {
+    holds_every_line_over(tcp, false).await
+}
+
+async fn holds_every_line_over(tcp: bool, usbtmc: bool) {
     let stand = generator_stand(tcp);
     let plan = plan(10);
     let (_d, path) = temp_file("gen.mcap");
-    let (r, state, injected) = run(&stand, &plan, &path).await;
+    let (r, state, injected) = run_over(&stand, &plan, &path, usbtmc).await;
     let o = r.unwrap_or_else(|e| panic!("{e}"));
     assert!(injected.is_empty(), "{injected:?}");
     assert_eq!(o.steps.len(), 10);
@@ -199,6 +228,13 @@ async fn holds_every_line(tcp: bool) {
     );
     let last = drive.last().unwrap();
     assert_eq!((last.kind, last.output_on), (DriveKind::Output, false));
+    if usbtmc {
+        assert!(
+            drive.iter().all(|d| d.port.starts_with("usbtmc:/dev/")),
+            "drive records name the USBTMC port: {}",
+            last.port
+        );
+    }
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
@@ -209,6 +245,13 @@ async fn force_control_over_tcp_holds_every_line_within_tolerance() {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn force_control_over_a_pty_holds_every_line_within_tolerance() {
     bounded(180, holds_every_line(false)).await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn force_control_over_usbtmc_holds_every_line_within_tolerance() {
+    // The simulated generator's pty opened as a USBTMC device: one write per command, reads only
+    // after a query. The session names the port `usbtmc:/dev/pts/N`.
+    bounded(180, holds_every_line_over(false, true)).await;
 }
 
 /// A fault mid-sweep ends the sweep with an error containing `expect`, the output off, the
@@ -247,6 +290,51 @@ async fn fault_ends_safely(tcp: bool, fault: &str, expect: &str, injected_kind: 
         drive.last().map(|d| (d.kind, d.output_on)),
         Some((DriveKind::Output, false))
     );
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_clipped_force_channel_ends_with_the_output_off() {
+    bounded(180, async {
+        // A load cell twice as sensitive: the DAQ's ±10 V input clips at 10 V / 4.5 mV/N = 2.2 kN,
+        // below the 4 kN target and below force_limit (4.4 kN), so the clipped force reads low
+        // and never trips the over-force: only the clipping check stops the loop driving harder.
+        let mut stand = generator_stand(true);
+        let force = stand.force_channel();
+        stand.channels[force].sensitivity = 4.5e-3;
+        assert_eq!(stand.daq.input_range_v, 10.0, "the default input range");
+        let (_d, path) = temp_file("clip.mcap");
+        let (r, state, injected) = run(&stand, &plan(4), &path).await;
+        let e = r.unwrap_err();
+        assert!(
+            e.contains("force channel `force` clipped") && e.contains("±10 V input range"),
+            "{e}"
+        );
+        assert!(e.contains("output switched off"), "{e}");
+        assert!(injected.is_empty(), "{injected:?}");
+        assert!(!state.output_on, "the generator's output was left on");
+        assert!(state.volts_peak <= IDLE_V + 1e-9, "not ramped down");
+        let (drive, steps, events) = drive_and_steps(&path);
+        assert!(
+            steps.is_empty(),
+            "no line measured on a clipped force is kept"
+        );
+        assert!(events
+            .iter()
+            .any(|e| e.kind == "error" && e.detail.contains("clipped")));
+        // The clipped reading is recorded, and stayed below the over-force limit.
+        let m: Vec<f64> = drive
+            .iter()
+            .filter(|d| d.kind == DriveKind::Measurement)
+            .filter_map(|d| d.force_n)
+            .collect();
+        let last = *m.last().unwrap();
+        assert!(last < 4400.0 && last > 1500.0, "{m:?}");
+        assert_eq!(
+            drive.last().map(|d| (d.kind, d.output_on)),
+            Some((DriveKind::Output, false))
+        );
+    })
+    .await;
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
@@ -383,6 +471,30 @@ fn bad_generator_stand_files_name_the_field_and_the_fix() {
         "port = \"tcp:\"\nidentity = \"IDENT-SIM,SIGGEN-2\"",
     );
     assert!(m.contains("tcp:HOST:PORT"), "{m}");
+    let (_, m) = err(
+        "port = \"sim\"\nidentity = \"IDENT-SIM,SIGGEN-2\"",
+        "port = \"usbtmc:\"\nidentity = \"IDENT-SIM,SIGGEN-2\"",
+    );
+    assert!(m.contains("usbtmc:/dev/usbtmc0"), "{m}");
+    let (_, m) = err(
+        "samples_per_block = 64",
+        "samples_per_block = 64\ninput_range = \"-5 V\"",
+    );
+    assert!(m.contains("daq.input_range"), "{m}");
+    let ranged = good.replacen(
+        "samples_per_block = 64",
+        "samples_per_block = 64\ninput_range = \"5 V\"",
+        1,
+    );
+    let d = parse(&ranged).unwrap_or_else(|e| panic!("{e}")).daq;
+    assert_eq!(d.input_range_v, 5.0);
+    let usb = good.replacen("port = \"sim\"", "port = \"usbtmc:/dev/usbtmc0\"", 1);
+    let g = parse(&usb)
+        .unwrap_or_else(|e| panic!("{e}"))
+        .generator
+        .unwrap();
+    assert_eq!(g.port, GeneratorAddress::Usbtmc("/dev/usbtmc0".into()));
+    assert_eq!(g.port.to_string(), "usbtmc:/dev/usbtmc0");
     let (_, m) = err("channel = 1", "channel = 0\ndialect = \"Keysight 99\"");
     assert!(m.contains("generator.channel counts from 1"), "{m}");
     let (_, m) = err("channel = 1", "dialect = \"Keysight 99\"");

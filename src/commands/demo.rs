@@ -10,6 +10,10 @@
 //! candidate effects, the accepted one, the error before and after) are printed and
 //! the report folder (HTML, JSON, the session and the configs that ran) is written.
 //!
+//! With `--generator` the exciter is the simulated SCPI signal generator + power amplifier of
+//! `configs/stands/fwd32j-generator-sim.toml` (same structure, sensors and truth), the force loop
+//! closed by ident on the DAQ's force channel (docs/scpi-generator.md).
+//!
 //! The configs are built in and written into the report folder, so the demo runs from anywhere
 //! and the folder says exactly what ran.
 
@@ -25,10 +29,14 @@ use crate::pipeline::{self, ReportContext, Setup};
 
 /// The built-in configs, at their paths relative to `configs/` (the stand file refers to the
 /// models by relative path).
-const CONFIGS: [(&str, &str); 4] = [
+const CONFIGS: [(&str, &str); 5] = [
     (
         "stands/fwd32j-model-sim.toml",
         include_str!("../../configs/stands/fwd32j-model-sim.toml"),
+    ),
+    (
+        GENERATOR_STAND,
+        include_str!("../../configs/stands/fwd32j-generator-sim.toml"),
     ),
     (
         "models/fwd32j.toml",
@@ -43,6 +51,9 @@ const CONFIGS: [(&str, &str); 4] = [
         include_str!("../../configs/identification/fwd32j-no-actuator.toml"),
     ),
 ];
+
+/// The generator stand's file under `configs/` (`ident demo --generator`).
+const GENERATOR_STAND: &str = "stands/fwd32j-generator-sim.toml";
 
 /// Arguments of `ident demo`.
 #[derive(clap::Args)]
@@ -63,6 +74,11 @@ pub struct DemoArgs {
     /// No progress bar.
     #[arg(long)]
     pub quiet: bool,
+    /// Drive the simulated stand the way real stands are: a SCPI signal generator and power
+    /// amplifier, the force loop closed by ident (configs/stands/fwd32j-generator-sim.toml,
+    /// docs/scpi-generator.md) instead of the shaker controller.
+    #[arg(long)]
+    pub generator: bool,
 }
 
 /// The demo's sweep plan.
@@ -105,7 +121,7 @@ pub fn run(a: DemoArgs) -> anyhow::Result<ExitCode> {
         &configs.join("identification/fwd32j-no-actuator.toml"),
     )?;
     let plan = plan(a.points);
-    introduce(&setup, a.points, speed);
+    introduce(&setup, a.points, speed, a.generator);
     let started = Instant::now();
     let progress: Box<dyn SweepProgress> = if a.quiet {
         Box::new(NoProgress)
@@ -166,7 +182,12 @@ pub fn run(a: DemoArgs) -> anyhow::Result<ExitCode> {
 
 /// The simulated stand with the demo's speed and seed; and its speed.
 fn demo_stand(configs: &Path, a: &DemoArgs) -> anyhow::Result<(Stand, f64)> {
-    let mut stand = Stand::load(&configs.join("stands/fwd32j-model-sim.toml"))?;
+    let file = if a.generator {
+        GENERATOR_STAND
+    } else {
+        "stands/fwd32j-model-sim.toml"
+    };
+    let mut stand = Stand::load(&configs.join(file))?;
     let mut speed = 1.0;
     if let Some(t) = stand.truth.as_mut() {
         if let Some(s) = a.speed {
@@ -181,10 +202,14 @@ fn demo_stand(configs: &Path, a: &DemoArgs) -> anyhow::Result<(Stand, f64)> {
 }
 
 /// What the demo is about to do.
-fn introduce(setup: &Setup, points: usize, speed: f64) {
-    println!(
-        "ident demo: simulated FWD-32J stand over simulated serial devices (pseudo-terminals)"
-    );
+fn introduce(setup: &Setup, points: usize, speed: f64, generator: bool) {
+    if generator {
+        println!("ident demo: simulated FWD-32J stand driven by a SCPI signal generator + power amplifier (force loop closed by ident; pseudo-terminals)");
+    } else {
+        println!(
+            "ident demo: simulated FWD-32J stand over simulated serial devices (pseudo-terminals)"
+        );
+    }
     println!("  truth: configs/models/fwd32j.toml (the paper's identified values, with the hydraulic actuator SDE 34)");
     println!(
         "  identification model: configs/models/fwd32j-no-actuator.toml ({} bodies, {} SDEs, actuator missing), {} decision variables",

@@ -1,5 +1,5 @@
 //! The stand file's `[generator]` and `[amplifier]` sections: a SCPI signal generator (serial
-//! port or raw TCP socket) driving a power amplifier and shaker, with the limits the host's
+//! port, raw TCP socket or USBTMC device) driving a power amplifier and shaker, with the limits the host's
 //! force loop holds (docs/scpi-generator.md).
 
 use std::ops::Range;
@@ -33,6 +33,8 @@ pub enum GeneratorAddress {
     Serial(String),
     /// `"tcp:HOST[:PORT]"`: a raw SCPI socket (port 5025 by default).
     Tcp(SocketAddress),
+    /// `"usbtmc:/dev/usbtmcN"`: the Linux `usbtmc` driver's device (the path).
+    Usbtmc(String),
 }
 
 impl std::fmt::Display for GeneratorAddress {
@@ -42,6 +44,7 @@ impl std::fmt::Display for GeneratorAddress {
             GeneratorAddress::Sim { tcp: true } => write!(f, "sim:tcp"),
             GeneratorAddress::Serial(p) => write!(f, "{p}"),
             GeneratorAddress::Tcp(a) => write!(f, "{a}"),
+            GeneratorAddress::Usbtmc(p) => write!(f, "usbtmc:{p}"),
         }
     }
 }
@@ -192,9 +195,16 @@ fn address(cx: &Ctx<'_>, p: &Spanned<String>) -> Result<GeneratorAddress, StandE
         _ if text.starts_with("can:") => {
             return Err(cx.at(
                 p.span(),
-                "generator.port: a signal generator speaks SCPI over a serial port or a TCP socket; give a device path, \"tcp:HOST[:PORT]\" or \"sim\", not a CAN interface",
+                "generator.port: a signal generator speaks SCPI over a serial port or a TCP socket; give a device path, \"tcp:HOST[:PORT]\", \"usbtmc:/dev/usbtmcN\" or \"sim\", not a CAN interface",
             ))
         }
+        _ if text.starts_with("usbtmc:") => match text["usbtmc:".len()..].trim() {
+            "" => return Err(cx.at(
+                p.span(),
+                format!("generator.port = {text:?}: name the usbtmc driver's device, e.g. \"usbtmc:/dev/usbtmc0\""),
+            )),
+            path => GeneratorAddress::Usbtmc(path.to_string()),
+        },
         _ => match text.strip_prefix("tcp:") {
             Some(rest) => GeneratorAddress::Tcp(SocketAddress::parse(rest).ok_or_else(|| {
                 cx.at(

@@ -197,6 +197,9 @@ pub struct DaqPort {
     pub timeout: Duration,
     /// Retries after a timeout.
     pub retries: u32,
+    /// The inputs' range (V, ±): a force sample at [`CLIP_FRACTION`] of it or beyond is a clipped
+    /// force signal, which stops a sweep (`daq.input_range`, default 10 V).
+    pub input_range_v: f64,
     /// Identifiers and frames when the DAQ is on CAN (`[daq.can]`).
     pub can: crate::can::CanDaqSettings,
     /// The DAQ is a CANopen node (`[daq.canopen]`, docs/canopen.md) rather than the DAQ-over-CAN
@@ -204,6 +207,14 @@ pub struct DaqPort {
     #[serde(skip_serializing_if = "Option::is_none")]
     pub canopen: Option<CanOpenPort>,
 }
+
+/// The DAQ input range assumed when the stand file gives no `daq.input_range` (V, ±): what most
+/// measurement DAQs' inputs take.
+pub const DEFAULT_INPUT_RANGE_V: f64 = 10.0;
+
+/// A force sample at this fraction of `daq.input_range` or beyond counts as clipped (the ADC at
+/// its last codes).
+pub const CLIP_FRACTION: f64 = 0.999;
 
 /// What a channel measures.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, schemars::JsonSchema)]
@@ -385,6 +396,7 @@ struct RawDaq {
     samples_per_block: Option<Spanned<u16>>,
     timeout: Option<Spanned<Value>>,
     retries: Option<u32>,
+    input_range: Option<Spanned<Value>>,
     can: Option<Spanned<RawCan>>,
     canopen: Option<Spanned<canopen::RawCanOpen>>,
 }
@@ -817,6 +829,10 @@ fn daq_port(cx: &Ctx<'_>, rd: &RawDaq) -> Result<DaqPort, StandError> {
             None => Duration::from_millis(500),
         },
         retries: rd.retries.unwrap_or(2),
+        input_range_v: match &rd.input_range {
+            Some(r) => cx.positive(r, Dim::VOLTAGE, "daq.input_range")?,
+            None => DEFAULT_INPUT_RANGE_V,
+        },
         can: can_settings(cx, rd.can.as_ref())?,
         canopen: None,
     };

@@ -68,6 +68,17 @@ impl StepEstimator {
         }
     }
 
+    /// The largest force-channel sample of the window in volts (absolute value): what the DAQ
+    /// input saw, to compare with its range.
+    pub fn force_peak_volts(&self) -> f64 {
+        let s = self
+            .sensitivity
+            .get(self.force_channel)
+            .copied()
+            .unwrap_or(1.0);
+        self.force.iter().fold(0.0f64, |m, x| m.max((x * s).abs()))
+    }
+
     /// Fits the window at `freq_hz` (Hz). Phases refer to the window's first sample.
     pub fn estimate(&mut self, freq_hz: f64) -> Result<Step, ProcessError> {
         let responses: Vec<&[f64]> = self.responses.iter().map(Vec::as_slice).collect();

@@ -52,6 +52,21 @@ pub enum SweepError {
         /// Why.
         source: process::ProcessError,
     },
+    /// The force channel reached the DAQ input's range: the force read from a clipped signal is
+    /// too low (the loop would drive harder) and an over-force could go unseen.
+    #[error("step {step} ({frequency_hz:.2} Hz): force channel `{channel}` clipped: {peak_v:.3} V peak at the DAQ's ±{range_v} V input range (daq.input_range); output switched off. Lower the target force, or give the force channel more headroom (a load cell or conditioning of lower sensitivity, a larger input range)")]
+    ForceClipped {
+        /// Step index.
+        step: usize,
+        /// Frequency (Hz).
+        frequency_hz: f64,
+        /// Force channel name.
+        channel: String,
+        /// Largest force sample of the window (V).
+        peak_v: f64,
+        /// The DAQ's input range (V, ±).
+        range_v: f64,
+    },
     /// The previous session cannot be resumed.
     #[error("cannot resume from {path}: {detail}")]
     Resume {
@@ -765,6 +780,9 @@ async fn measure_step(
                 measured_n: famp,
             })
             .await?;
+        // After the exciter's own checks (an over-force reads as such even when clipped): a
+        // clipped force that still reads below the limit would make the loop drive harder.
+        check_clipping(pump, estimator, step, f)?;
         let err = (famp - plan.target_force_n).abs() / plan.target_force_n;
         if famp > 0.0 {
             *gain = famp / drive;
@@ -794,6 +812,34 @@ async fn measure_step(
         drive = new_drive;
         pump.rig.shaker.set_force(drive).await?;
     }
+}
+
+/// Stops the step when the window's force samples reached the DAQ's input range
+/// ([`crate::stand::CLIP_FRACTION`] of `daq.input_range`).
+fn check_clipping(
+    pump: &Pump<'_>,
+    estimator: &StepEstimator,
+    step: usize,
+    f: f64,
+) -> Result<(), SweepError> {
+    let stand = &pump.rig.stand;
+    let range_v = stand.daq.input_range_v;
+    let peak_v = estimator.force_peak_volts();
+    if peak_v < crate::stand::CLIP_FRACTION * range_v {
+        return Ok(());
+    }
+    let channel = stand
+        .channels
+        .get(stand.force_channel())
+        .map(|c| c.name.clone())
+        .unwrap_or_default();
+    Err(SweepError::ForceClipped {
+        step,
+        frequency_hz: f,
+        channel,
+        peak_v,
+        range_v,
+    })
 }
 
 /// How a measurement window ended.

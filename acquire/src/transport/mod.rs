@@ -1,4 +1,4 @@
-//! Byte-stream transports (serial ports, pseudo-terminals, raw TCP sockets, in-memory pipes) behind one narrow
+//! Byte-stream transports (serial ports, pseudo-terminals, raw TCP sockets, USBTMC devices, in-memory pipes) behind one narrow
 //! trait, plus a tap that copies every byte to the session log.
 
 /// Implements [`Transport`], `AsyncRead` and `AsyncWrite` for a transport struct that holds its
@@ -49,11 +49,13 @@ mod line;
 mod serial;
 mod tap;
 mod tcp;
+mod usbtmc;
 
 pub use line::{LineLink, LinkError};
 pub use serial::{open_serial, pty_pair, PtyDevice, SerialSettings, SerialTransport};
 pub use tap::{ByteTap, Direction, Tapped};
 pub use tcp::{connect_tcp, SocketAddress, TcpTransport, SCPI_RAW_PORT};
+pub use usbtmc::{open_usbtmc, UsbtmcTransport};
 
 use tokio::io::{AsyncRead, AsyncWrite};
 
@@ -144,6 +146,26 @@ pub enum TransportError {
         /// `tcp:host:port`.
         port: String,
         /// What the operating system said.
+        detail: String,
+    },
+    /// The `usbtmc` driver's device does not exist.
+    #[error("USBTMC device {port}: no such device; check that the generator is connected by USB and switched on, that its USB interface is set to USBTMC (not a virtual serial port), that the kernel module is loaded (`modprobe usbtmc`), and the device number (ls /dev/usbtmc*)")]
+    UsbtmcNotFound {
+        /// `usbtmc:PATH`.
+        port: String,
+    },
+    /// The operating system refused access to the `usbtmc` device.
+    #[error("USBTMC device {port}: permission denied; install a udev rule such as `SUBSYSTEM==\"usbmisc\", KERNEL==\"usbtmc*\", GROUP=\"plugdev\", MODE=\"0660\"` (e.g. /etc/udev/rules.d/60-usbtmc.rules, then `udevadm control --reload` and re-plug), add your user to that group and log in again (docs/scpi-generator.md)")]
+    UsbtmcPermission {
+        /// `usbtmc:PATH`.
+        port: String,
+    },
+    /// The path exists but is not the driver's character device.
+    #[error("USBTMC device {port}: not a USBTMC device ({detail}); give the `usbtmc` driver's device, e.g. \"usbtmc:/dev/usbtmc0\"")]
+    NotUsbtmc {
+        /// `usbtmc:PATH`.
+        port: String,
+        /// What it is instead.
         detail: String,
     },
     /// Creating a pseudo-terminal pair failed.
