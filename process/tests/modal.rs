@@ -1,6 +1,6 @@
 //! Modal extraction (pLSCF + stabilization + LSFD) on FRFs built from known poles and residues:
 //! exact data give the poles to 1e-6, noisy data within a stated tolerance, shapes by MAC.
-#![allow(clippy::unwrap_used, missing_docs)]
+#![allow(clippy::unwrap_used, clippy::needless_range_loop, missing_docs)]
 
 use process::modal::{
     self, lscf, lsfd, select_auto, select_near, stabilize, FrfKind, LscfSettings, ModalData, Pole,

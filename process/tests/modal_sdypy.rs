@@ -2,7 +2,7 @@
 //! `.ci/requirements.txt`) on the same FRFs, a synthetic 3-mode set (exact and noisy) and the real
 //! hammer-impact records in `data/pyfrf-impact` (H1 of five impacts). Frequencies and damping
 //! ratios of the selected poles must agree to the precision the data allow.
-#![allow(clippy::unwrap_used, missing_docs)]
+#![allow(clippy::unwrap_used, clippy::needless_range_loop, missing_docs)]
 
 mod common;
 
