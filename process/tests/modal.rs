@@ -266,3 +266,20 @@ fn bad_input_is_named() {
     .to_string();
     assert!(e.contains("too few"), "{e}");
 }
+
+#[test]
+fn mac_and_complexity_of_known_shapes() {
+    let a = vec![C64::new(1.0, 0.0), C64::new(-2.0, 0.0), C64::new(0.5, 0.0)];
+    // the same shape scaled by a complex factor: MAC 1; an orthogonal one: MAC 0.
+    let b: Vec<C64> = a.iter().map(|v| v * C64::new(-0.3, 2.0)).collect();
+    let c = vec![C64::new(2.0, 0.0), C64::new(1.0, 0.0), C64::new(0.0, 0.0)];
+    let m = modal::mac(std::slice::from_ref(&a), &[b.clone(), c]);
+    assert!(
+        (m[0][0] - 1.0).abs() < 1e-14 && m[0][1].abs() < 1e-14,
+        "{m:?}"
+    );
+    // rotated real shape: complexity 0; equal, orthogonal real and imaginary parts: 1.
+    assert!(modal::complexity(&b) < 1e-14);
+    let wave = vec![C64::new(1.0, 0.0), C64::new(0.0, 1.0)];
+    assert!((modal::complexity(&wave) - 1.0).abs() < 1e-14);
+}
