@@ -30,6 +30,8 @@ enum Command {
     Frf(commands::frf::FrfArgs),
     /// Natural frequencies and mode shapes (undamped and complex).
     Modes(commands::modes::ModesArgs),
+    /// Natural frequencies, damping and mode shapes extracted from measured FRFs (pLSCF).
+    ModesFromData(commands::modes_from_data::ModesFromDataArgs),
     /// Band sensitivity MI of each characteristic to each SDE parameter (paper eq. 4.16).
     Sensitivity(commands::sensitivity::SensitivityArgs),
     /// Identify SDE parameters from measured characteristics (maximum likelihood).
@@ -69,6 +71,7 @@ fn main() -> ExitCode {
         Command::Model(a) => commands::model::run(a),
         Command::Frf(a) => commands::frf::run(a),
         Command::Modes(a) => commands::modes::run(a),
+        Command::ModesFromData(a) => commands::modes_from_data::run(a),
         Command::Sensitivity(a) => commands::sensitivity::run(a),
         Command::Identify(a) => commands::identify::run(a),
         Command::Diagnose(a) => commands::diagnose::run(a),

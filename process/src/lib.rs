@@ -39,6 +39,7 @@
 pub mod calibration;
 pub mod error;
 pub mod estimate;
+pub mod modal;
 pub mod npy;
 pub mod principal;
 pub mod selection;

@@ -47,6 +47,7 @@ pub mod drift;
 pub mod html;
 pub mod picture;
 pub mod plot;
+pub mod stabilization;
 
 use std::path::{Path, PathBuf};
 

@@ -9,6 +9,7 @@ pub mod mcap;
 pub mod measured;
 pub mod model;
 pub mod modes;
+pub mod modes_from_data;
 pub mod nightly;
 pub mod process;
 pub mod prometheus;
