@@ -202,7 +202,7 @@ pub fn write_final(
 }
 
 /// `--band LO:HI` in Hz, either side may be empty.
-fn parse_band(text: &str) -> Result<(Option<f64>, Option<f64>), String> {
+pub fn parse_band(text: &str) -> Result<(Option<f64>, Option<f64>), String> {
     let (lo, hi) = text
         .split_once(':')
         .ok_or_else(|| format!("{text:?}: give LO:HI in Hz, e.g. 20:400 (or 20: / :400)"))?;

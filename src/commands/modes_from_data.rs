@@ -19,7 +19,7 @@ pub struct ModesFromDataArgs {
     /// response node/direction × reference node/direction, on common lines.
     pub file: PathBuf,
     /// Frequency band, `LO:HI` in Hz (either side may be empty: `20:`, `:400`).
-    #[arg(long, value_parser = parse_band)]
+    #[arg(long, value_parser = super::identify::parse_band)]
     pub band: Option<(Option<f64>, Option<f64>)>,
     /// Highest model order of the estimator (each order gives order × references poles).
     #[arg(long, default_value_t = 40)]
@@ -53,23 +53,6 @@ pub struct ModesFromDataArgs {
     /// Write the poles, shapes and the whole diagram here (JSON).
     #[arg(long)]
     pub json: Option<PathBuf>,
-}
-
-/// `--band LO:HI` in Hz, either side may be empty.
-fn parse_band(text: &str) -> Result<(Option<f64>, Option<f64>), String> {
-    let (lo, hi) = text
-        .split_once(':')
-        .ok_or_else(|| format!("{text:?}: give LO:HI in Hz, e.g. 20:400 (or 20: / :400)"))?;
-    let edge = |s: &str| -> Result<Option<f64>, String> {
-        let s = s.trim();
-        if s.is_empty() {
-            return Ok(None);
-        }
-        s.parse::<f64>()
-            .map(Some)
-            .map_err(|_| format!("{s:?} is not a frequency in Hz (LO:HI, e.g. 20:400)"))
-    };
-    Ok((edge(lo)?, edge(hi)?))
 }
 
 fn parse_kind(text: &str) -> Result<FrfKind, String> {
