@@ -23,6 +23,7 @@
 //! # }
 //! ```
 
+pub mod blind;
 pub mod effects;
 pub mod generate;
 pub mod problem;
@@ -156,6 +157,9 @@ pub struct Ranked {
     /// Other placements the data cannot tell from this one (their directions agree to
     /// |cos| ≥ 0.99 after the fit's own directions are projected out), best first.
     pub equivalent: Vec<String>,
+    /// The family's effects, this one first, then the equivalent ones.
+    #[serde(skip)]
+    pub family: Vec<Effect>,
 }
 
 /// Candidates whose projected directions agree to this |cos| form one family in the ranking.
@@ -225,6 +229,32 @@ pub struct Diagnosis {
     /// The effects added, in order (with `accepted[i].params` their values).
     #[serde(skip)]
     pub effects: Vec<Effect>,
+    /// Where the diagnosis's wall time went.
+    pub timing: Timing,
+}
+
+/// Wall time of a diagnosis's parts (seconds).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize)]
+pub struct Timing {
+    /// Unit of every figure: `"s"`.
+    pub unit: &'static str,
+    /// The base fit the diagnosis starts from (its convergence check and extra starts).
+    pub base_fit: f64,
+    /// Candidate generation and ranking, every round.
+    pub ranking: f64,
+    /// The candidates' refits, every round.
+    pub refits: f64,
+    /// Placement refinement, backward checks and the final analysis.
+    pub other: f64,
+}
+
+/// The time split of a diagnosis, one line.
+pub fn timing_text(d: &Diagnosis) -> String {
+    let t = &d.timing;
+    format!(
+        "time: base fit {:.2} s, ranking {:.2} s, refits {:.2} s, placement and checks {:.2} s",
+        t.base_fit, t.ranking, t.refits, t.other
+    )
 }
 
 /// Why a diagnosis could not run.
@@ -282,8 +312,14 @@ pub fn diagnose(
         .iter()
         .map(|c| c.label.clone())
         .collect();
+    let clock = std::time::Instant::now();
+    let mut timing = Timing {
+        unit: "s",
+        ..Timing::default()
+    };
     let mut p0 = Problem::new(model, vars, obs, iopts, Vec::new(), f_hi);
     let mut cur = base_fit(&mut p0, &id.estimate)?;
+    timing.base_fit = clock.elapsed().as_secs_f64();
     let before = analysis(&p0, &cur, opts)?;
     progress(&format!("before: {}", before.verdict));
 
@@ -291,6 +327,7 @@ pub fn diagnose(
     let mut accepted = Vec::new();
     let mut not_tried = untestable();
     for _ in 0..opts.max_effects {
+        let t = std::time::Instant::now();
         let pc = Problem::new(model, vars, obs, iopts, cur.effects.clone(), f_hi);
         let ranking = rank(&pc, &cur, &labels, (f_lo, f_hi), opts.alpha, &mut not_tried)?;
         progress(&format!(
@@ -302,6 +339,8 @@ pub fn diagnose(
                 .map(|s| ranking.candidates[s.candidate].describe())
                 .unwrap_or_default()
         ));
+        timing.ranking += t.elapsed().as_secs_f64();
+        let t = std::time::Instant::now();
         let (refits, best) = refit_leading(
             (model, vars, obs),
             opts,
@@ -311,6 +350,7 @@ pub fn diagnose(
             &mut not_tried,
             progress,
         );
+        timing.refits += t.elapsed().as_secs_f64();
         let mut round = Round {
             candidates: ranking.scored.len(),
             ranked: ranking.ranked.clone(),
@@ -348,14 +388,17 @@ pub fn diagnose(
         );
         rounds.push(round);
     }
-    final_fit(
+    let mut d = final_fit(
         (model, vars, obs),
         opts,
         cur,
         f_hi,
         (before, rounds, accepted, not_tried),
         progress,
-    )
+    )?;
+    timing.other = clock.elapsed().as_secs_f64() - timing.base_fit - timing.ranking - timing.refits;
+    d.timing = timing;
+    Ok(d)
 }
 
 /// The diagnosis at the final fit `cur`: the residual analysis after, the accepted effects'
@@ -406,6 +449,7 @@ fn final_fit(
         std_error,
         model: final_model,
         effects: cur.effects,
+        timing: Timing::default(),
     })
 }
 
@@ -554,6 +598,10 @@ fn rank(
                 equivalent: f[1..]
                     .iter()
                     .map(|&j| candidates[scored[j].candidate].describe())
+                    .collect(),
+                family: f
+                    .iter()
+                    .map(|&j| candidates[scored[j].candidate].clone())
                     .collect(),
             }
         })
