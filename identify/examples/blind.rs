@@ -3,7 +3,8 @@
 //!
 //! `cargo run -p identify --profile test --example blind -- [CASES] [FIRST_SEED]` (default 200
 //! cases from seed 1). Each case: FWD-32J with one or two hidden effects (or none), 0.5-3 %
-//! noise, the identification started ±30 % away (`identify::diagnose::blind`).
+//! noise, the identification started ±30 % away (`identify::diagnose::blind`). One case prints its
+//! diagnosis; ten or more also the demo's time split.
 
 // An example unwraps: a panic with its message is the failure report.
 #![allow(clippy::unwrap_used, clippy::expect_used)]
@@ -29,7 +30,10 @@ fn main() {
     for seed in first..first + n {
         let case = blind::draw(&model, &vars, &lines, seed, None).expect("case");
         match blind::run(&model, &case, &opts) {
-            Ok((o, _)) => {
+            Ok((o, d)) => {
+                if n == 1 {
+                    println!("{}", diagnose::text(&d));
+                }
                 let truth: Vec<String> = case
                     .injected
                     .iter()
@@ -70,7 +74,9 @@ fn main() {
         r.median_seconds,
         r.median_diagnosis_seconds
     );
-    demo_split(&root);
+    if n >= 10 {
+        demo_split(&root);
+    }
 }
 
 /// The FWD-32J demo case (truth with the actuator, model without), seeded 1 % noise: the time of
