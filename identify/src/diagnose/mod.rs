@@ -569,15 +569,18 @@ fn base_fit(
         }
     };
     continued(p0, &mut u, &mut info);
+    // A converged fit that does not explain the data may be a local minimum when the start was
+    // far off (its misfit would then be "explained" by effects that do nothing): the extra
+    // starts are tried then too.
     let explained = {
-        let (e, jac) = p0.eval(&u, true)?;
+        let (e, _) = p0.eval(&u, false)?;
         let cur = Current {
             effects: Vec::new(),
             u: u.clone(),
             e,
-            jac: jac.unwrap_or_else(|| DMatrix::zeros(0, 0)),
+            jac: DMatrix::zeros(0, 0),
         };
-        analysis(p0, &cur, opts).map(|a| a.explained).unwrap_or(false)
+        analysis(p0, &cur, opts).is_ok_and(|a| a.explained)
     };
     if !info.converged || !explained {
         let mopts = identification::Options {
@@ -603,11 +606,7 @@ fn base_fit(
     }
     progress(&format!(
         "base fit: J {:.1} → {:.1} ({}; {} continuation(s), {} start(s))",
-        info.criterion_identification,
-        info.criterion,
-        info.stop,
-        info.continuations,
-        info.starts
+        info.criterion_identification, info.criterion, info.stop, info.continuations, info.starts
     ));
     let (e, jac) = p0.eval(&u, true)?;
     let jac = jac.unwrap_or_else(|| DMatrix::zeros(e.len(), 0));
@@ -820,7 +819,17 @@ fn refit_leading(
                 }
             })
             .collect();
-        match refit(model, vars, obs, opts, cur, cand, &start, f_hi, *sigma2) {
+        match refit(
+            model,
+            vars,
+            obs,
+            opts,
+            cur,
+            cand,
+            (&start, true),
+            f_hi,
+            *sigma2,
+        ) {
             Ok((mut r, next)) => {
                 r.equivalent = ranked[f].equivalent.clone();
                 progress(&format!(
@@ -895,7 +904,11 @@ fn unidentifiable(params: &[EffectParam], est: &[ParamEstimate]) -> Option<Strin
                 ..pe.clone()
             };
             let (b, _, u) = bound.display();
-            let u = if u == "-" { String::new() } else { format!(" {u}") };
+            let u = if u == "-" {
+                String::new()
+            } else {
+                format!(" {u}")
+            };
             return Some(format!(
                 "{} at its {} bound {}{u}",
                 pe.describe(),
@@ -1121,7 +1134,18 @@ fn place(
         .iter()
         .filter_map(|o| {
             let st: Vec<f64> = start.iter().chain(o).copied().collect();
-            refit(model, vars, obs, opts, base, &cand, &st, f_hi, sigma2).ok()
+            refit(
+                model,
+                vars,
+                obs,
+                opts,
+                base,
+                &cand,
+                (&st, false),
+                f_hi,
+                sigma2,
+            )
+            .ok()
         })
         .min_by(|a, b| a.1.e.norm_squared().total_cmp(&b.1.e.norm_squared()))?;
     let lr = ((fixed.e.norm_squared() - next.e.norm_squared()) / sigma2).max(0.0);
@@ -1241,13 +1265,57 @@ fn analysis(p: &Problem, cur: &Current, opts: &Options) -> Result<ResidualAnalys
     ))
 }
 
+/// Tuning frequencies of a resonator's starting grid across its range.
+const RESONATOR_GRID: usize = 24;
+
+/// A resonator's starting point (its mass and tuning frequency, the last two of `u0`): the tuning
+/// frequency on a log grid across its range at the current mass, then the mass over decades of
+/// its scale at the best frequency, then the frequency refined around the best by halving steps.
+fn tune_resonator(p: &mut Problem, u0: &mut DVector<f64>, mut j_best: f64) {
+    let n = u0.len();
+    if n < 2 {
+        return;
+    }
+    let (lo, hi) = p.bounds();
+    let (im, i_f) = (n - 2, n - 1);
+    let try_at = |p: &mut Problem, u0: &mut DVector<f64>, i: usize, v: f64, j_best: &mut f64| {
+        let mut u = u0.clone();
+        u[i] = v.clamp(lo[i], hi[i]);
+        if let Ok((e, _)) = p.eval(&u, false) {
+            let j = e.norm_squared();
+            if j < *j_best {
+                *j_best = j;
+                *u0 = u;
+            }
+        }
+    };
+    let (f_lo, f_hi) = (lo[i_f].max(1e-9), hi[i_f]);
+    let ratio = (f_hi / f_lo).powf(1.0 / (RESONATOR_GRID - 1) as f64);
+    for k in 0..RESONATOR_GRID {
+        try_at(p, u0, i_f, f_lo * ratio.powi(k as i32), &mut j_best);
+    }
+    for d in REFIT_SIZE_DECADES {
+        try_at(p, u0, im, 10f64.powi(d), &mut j_best);
+    }
+    let mut step = ratio.sqrt();
+    for _ in 0..4 {
+        let f = u0[i_f];
+        try_at(p, u0, i_f, f * step, &mut j_best);
+        try_at(p, u0, i_f, f / step, &mut j_best);
+        step = step.sqrt();
+    }
+}
+
 /// A refit starts where the new parameters are this fraction of the way from their nested values
 /// to the given start, whichever fits best.
 const REFIT_START_FRACTIONS: [f64; 4] = [1.0, 0.3, 0.1, 0.03];
 /// And where the effect's size is its nested value ± its scale times ten to these powers.
 const REFIT_SIZE_DECADES: [i32; 6] = [-2, -1, 0, 1, 2, 3];
 
-/// Refits the current effects plus `cand` with every parameter free.
+/// Refits the current effects plus `cand` with every parameter free, from `start` (the new
+/// parameters' values) or, with `explore`, from the best of the starts around it (see
+/// [`REFIT_START_FRACTIONS`], [`REFIT_SIZE_DECADES`]; a resonator's tuning frequency also on a
+/// grid across its range, refined around the best).
 #[allow(clippy::too_many_arguments)]
 fn refit(
     model: &Model,
@@ -1256,7 +1324,7 @@ fn refit(
     opts: &Options,
     cur: &Current,
     cand: &Effect,
-    start: &[f64],
+    (start, explore): (&[f64], bool),
     f_hi: f64,
     sigma2: f64,
 ) -> Result<(Refit, Current), RefitError> {
@@ -1287,14 +1355,22 @@ fn refit(
     let mut j_start = f64::INFINITY;
     // The first parameter (the effect's size) also from a grid of decades of its scale on
     // either side of the nested value: for a large effect the score step is no guide.
-    let size_grid = new_params.first().map_or(Vec::new(), |np| {
-        REFIT_SIZE_DECADES
-            .iter()
-            .flat_map(|d| [1.0, -1.0].map(|sign| np.nested + sign * np.scale * 10f64.powi(*d)))
-            .filter(|x| *x > np.lower && *x < np.upper)
-            .collect()
-    });
-    let starts = REFIT_START_FRACTIONS
+    let size_grid = new_params
+        .first()
+        .filter(|_| explore)
+        .map_or(Vec::new(), |np| {
+            REFIT_SIZE_DECADES
+                .iter()
+                .flat_map(|d| [1.0, -1.0].map(|sign| np.nested + sign * np.scale * 10f64.powi(*d)))
+                .filter(|x| *x > np.lower && *x < np.upper)
+                .collect()
+        });
+    let fractions: &[f64] = if explore {
+        &REFIT_START_FRACTIONS
+    } else {
+        &REFIT_START_FRACTIONS[..1]
+    };
+    let starts = fractions
         .iter()
         .map(|t| {
             new_params
@@ -1318,18 +1394,23 @@ fn refit(
         let u = DVector::from_vec(u);
         // A start that cannot be evaluated is skipped (the first is kept so that the
         // minimizer reports why).
-        let j = p.eval(&u, false).map_or(f64::INFINITY, |(e, _)| e.norm_squared());
+        let j = p
+            .eval(&u, false)
+            .map_or(f64::INFINITY, |(e, _)| e.norm_squared());
         if u0.is_none() || j < j_start {
             j_start = j;
             u0 = Some(u);
         }
     }
-    let Some(u0) = u0 else {
+    let Some(mut u0) = u0 else {
         return Err(RefitError::TooFewObservations {
             observations: m,
             parameters: p.scale.len(),
         });
     };
+    if explore && matches!(cand, Effect::Resonator { .. }) {
+        tune_resonator(&mut p, &mut u0, j_start);
+    }
     let settings = opts.identification.settings;
     let out = optimize::minimize(
         opts.identification.optimizer,
