@@ -238,7 +238,13 @@ pub struct Diagnosis {
     pub timing: Timing,
     /// The base fit the diagnosis started from.
     pub base: BaseFit,
+    /// The units of the JSON form: [`JSON_UNITS`].
+    pub units: &'static str,
 }
+
+/// What the numbers of a diagnosis's JSON form are in (the text report uses the paper's units:
+/// N/µm, µm/N, mm).
+pub const JSON_UNITS: &str = "SI throughout: each effect parameter's unit is its params[].unit (N/m, m/N, m, kg, Hz, - ); estimate[] and std_error[] in each variable's SI unit, in variables-file order; frequencies in Hz (freqs_hz, mode_hz, from_hz, to_hz); criteria, statistics, p-values, shares and residuals dimensionless; timing in s";
 
 /// Wall time of a diagnosis's parts (seconds).
 #[derive(Debug, Clone, Copy, Default, PartialEq, Serialize)]
@@ -469,6 +475,7 @@ fn final_fit(
         model: final_model,
         effects: cur.effects,
         timing: Timing::default(),
+        units: JSON_UNITS,
         base: BaseFit {
             unit: "-",
             criterion_identification: f64::NAN,
