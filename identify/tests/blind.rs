@@ -15,7 +15,7 @@ use identify::identification::{synthetic, variables};
 
 /// The seeds of the subset (the first of the 200 the example runs).
 const SEEDS: std::ops::RangeInclusive<u64> = 1..=SUBSET;
-const SUBSET: u64 = 20;
+const SUBSET: u64 = 10;
 
 #[test]
 fn the_blind_subset_is_diagnosed_at_the_asserted_rates() {
@@ -42,16 +42,16 @@ fn the_blind_subset_is_diagnosed_at_the_asserted_rates() {
     }
     let r = blind::rates(&outcomes);
     println!("{r:?}");
-    assert!(r.clean >= 3 && r.with_effects >= 10, "{r:?}");
+    assert!(r.clean >= 3 && r.with_effects >= 5, "{r:?}");
     assert_eq!(r.false_add, 0.0, "something added to clean data: {r:?}");
     assert!(r.right_first >= RIGHT_FIRST, "{r:?}");
     assert!(r.exact >= EXACT, "{r:?}");
 }
 
 /// Share of the subset's cases with effects whose first added effect is an injected one.
-const RIGHT_FIRST: f64 = 0.5;
+const RIGHT_FIRST: f64 = 0.6;
 /// Share of the subset's cases that end with exactly the injected set.
-const EXACT: f64 = 0.6;
+const EXACT: f64 = 0.7;
 
 #[test]
 fn the_judge_matches_effects_by_kind_and_place() {
@@ -70,7 +70,9 @@ fn the_judge_matches_effects_by_kind_and_place() {
         .iter()
         .map(|v| model.param(v.targets[0].param).unwrap() / v.targets[0].ratio)
         .collect();
-    for (v, x) in clean.vars.vars.iter().zip(&truth) {
+    // (A variable whose truth is 0 starts from its file's initial value, perturbed.)
+    for ((v, x), v0) in clean.vars.vars.iter().zip(&truth).zip(&vars.vars) {
+        let x = if *x != 0.0 { x } else { &v0.initial };
         assert!(
             (v.initial - x).abs() <= blind::PERTURBATION * x.abs() + 1e-12,
             "{}: {} vs {x}",
