@@ -61,7 +61,11 @@ pub fn run(a: DiagnoseArgs) -> anyhow::Result<ExitCode> {
     })
     .context("diagnosis")?;
     print!("{}", diagnose::text(&d));
-    println!("diagnosed in {:.2} s", started.elapsed().as_secs_f64());
+    println!(
+        "diagnosed in {:.2} s ({})",
+        started.elapsed().as_secs_f64(),
+        diagnose::timing_text(&d)
+    );
     if let Some(p) = &a.json {
         emit(Some(p), &(serde_json::to_string_pretty(&d)? + "\n"))?;
     }
