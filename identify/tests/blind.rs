@@ -27,19 +27,39 @@ fn the_blind_subset_is_diagnosed_at_the_asserted_rates() {
     .expect("variables");
     let lines = synthetic::fwd32j_lines();
     let opts = diagnose::Options::default();
-    let mut outcomes = Vec::new();
-    for seed in SEEDS {
-        let case = blind::draw(&model, &vars, &lines, seed, None).expect("a blind case");
-        // The generator injects what it says: a case with effects has data that differ from
-        // the model's.
-        assert!(case
-            .injected
-            .iter()
-            .all(|i| i.signal >= blind::SIGNAL.0 * 0.9));
-        let (o, _) = blind::run(&model, &case, &opts).expect("identification and diagnosis");
-        println!("{o:?}");
-        outcomes.push(o);
-    }
+    // The cases are independent: two at a time (CI has two cores).
+    let seeds: Vec<u64> = SEEDS.collect();
+    let outcomes: Vec<_> = std::thread::scope(|scope| {
+        let workers: Vec<_> = seeds
+            .chunks(seeds.len().div_ceil(2))
+            .map(|chunk| {
+                let (model, vars, lines, opts) = (&model, &vars, &lines, &opts);
+                scope.spawn(move || {
+                    chunk
+                        .iter()
+                        .map(|&seed| {
+                            let case =
+                                blind::draw(model, vars, lines, seed, None).expect("a blind case");
+                            // The generator injects what it says: a case with effects has data
+                            // that differ from the model's.
+                            assert!(case
+                                .injected
+                                .iter()
+                                .all(|i| i.signal >= blind::SIGNAL.0 * 0.9));
+                            let (o, _) = blind::run(model, &case, opts)
+                                .expect("identification and diagnosis");
+                            println!("seed {seed}: {o:?}");
+                            o
+                        })
+                        .collect::<Vec<_>>()
+                })
+            })
+            .collect();
+        workers
+            .into_iter()
+            .flat_map(|w| w.join().expect("a blind worker"))
+            .collect()
+    });
     let r = blind::rates(&outcomes);
     println!("{r:?}");
     assert!(r.clean >= 3 && r.with_effects >= 5, "{r:?}");

@@ -113,7 +113,7 @@ pub fn text(id: &Identification) -> String {
         }
     }
     s.push_str(&format!(
-        "criterion J: initial {} -> identified {}; reduced chi^2 {:.3}{}\n",
+        "criterion J: initial {} -> identified {}; reduced χ² {:.3}{}\n",
         num(id.criterion_initial),
         num(id.criterion),
         u.reduced_chi2,
