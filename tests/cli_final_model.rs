@@ -8,20 +8,13 @@
 
 mod common;
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
-use common::{ident, root, text};
+use common::{ident, json, root, text};
 use identify::identification::synthetic;
 use rand::rngs::StdRng;
 use rand::SeedableRng;
 use rand_distr::{Distribution, StandardNormal};
-
-fn json(p: &Path) -> serde_json::Value {
-    serde_json::from_str(
-        &std::fs::read_to_string(p).unwrap_or_else(|e| panic!("{}: {e}", p.display())),
-    )
-    .unwrap()
-}
 
 fn floats(v: &serde_json::Value) -> Vec<f64> {
     v.as_array()
@@ -40,23 +33,7 @@ const CURVE_TOLERANCE: f64 = 1e-6;
 #[test]
 fn the_demos_final_model_file_reproduces_the_reports_final_curves() {
     let dir = tempfile::tempdir().unwrap();
-    let o = ident(&[
-        "demo",
-        "--out",
-        dir.path().to_str().unwrap(),
-        "--points",
-        "10",
-        "--speed",
-        "8",
-        "--quiet",
-    ]);
-    assert!(o.status.success(), "{}", text(&o));
-    let report = PathBuf::from(
-        String::from_utf8_lossy(&o.stdout)
-            .lines()
-            .find_map(|l| l.strip_prefix("report: "))
-            .unwrap_or_else(|| panic!("no report path: {}", text(&o))),
-    );
+    let (_, report) = common::short_demo(dir.path());
     let model_file = report.join("final-model.toml");
     let toml = std::fs::read_to_string(&model_file).unwrap();
     let r = json(&report.join("report.json"));

@@ -10,21 +10,8 @@ mod common;
 
 use std::path::{Path, PathBuf};
 
-use common::{ident, text};
+use common::{ident, json, report_dir, text};
 use history::store::Store;
-
-fn report_dir(o: &std::process::Output) -> PathBuf {
-    PathBuf::from(
-        String::from_utf8_lossy(&o.stdout)
-            .lines()
-            .find_map(|l| l.strip_prefix("report: "))
-            .unwrap_or_else(|| panic!("no report path: {}", text(o))),
-    )
-}
-
-fn json(p: &Path) -> serde_json::Value {
-    serde_json::from_str(&std::fs::read_to_string(p).unwrap()).unwrap()
-}
 
 fn messages(r: &serde_json::Value) -> Vec<String> {
     r["status"]["messages"]
@@ -36,36 +23,16 @@ fn messages(r: &serde_json::Value) -> Vec<String> {
 }
 
 fn write_job(dir: &Path, live: &Path, database: &str) -> PathBuf {
-    let cfg = dir.join("nightly.toml");
-    let c = live.join("configs");
-    std::fs::write(
-        &cfg,
-        format!(
-            "name = \"test job\"\nmeasure = \"newest-session\"\nmodel = \"{}\"\nvariables = \"{}\"\nsessions = \"{}\"\nreports = \"reports\"\nlog = \"nightly.log\"\nlock = \"nightly.lock\"\nprometheus = \"metrics/ident.prom\"\n[history]\ndatabase = \"{database}\"\nbaseline_runs = 6\n",
-            c.join("models/fwd32j-no-actuator.toml").display(),
-            c.join("identification/fwd32j-no-actuator.toml").display(),
-            live.display()
-        ),
-    )
-    .unwrap();
-    cfg
+    let extra = format!(
+        "prometheus = \"metrics/ident.prom\"\n[history]\ndatabase = \"{database}\"\nbaseline_runs = 6\n"
+    );
+    common::nightly_job(dir, "nightly.toml", live, "newest-session", live, &extra)
 }
 
 #[test]
 fn nightly_records_every_run_and_judges_drift_from_the_history() {
     let dir = tempfile::tempdir().unwrap();
-    let o = ident(&[
-        "demo",
-        "--out",
-        dir.path().to_str().unwrap(),
-        "--points",
-        "10",
-        "--speed",
-        "8",
-        "--quiet",
-    ]);
-    assert!(o.status.success(), "{}", text(&o));
-    let live = report_dir(&o);
+    let (_, live) = common::short_demo(dir.path());
     let cfg = write_job(dir.path(), &live, "history.sqlite");
     let cfg_s = cfg.to_str().unwrap();
     let db = dir.path().join("history.sqlite");

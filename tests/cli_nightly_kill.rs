@@ -17,42 +17,15 @@ use common::{ident, text};
 use rand::{Rng, SeedableRng};
 
 fn job(dir: &Path, live: &Path, measure: &str, sessions: &Path) -> PathBuf {
-    let cfg = dir.join(format!("{measure}.toml"));
-    let c = live.join("configs");
-    std::fs::write(
-        &cfg,
-        format!(
-            "name = \"kill test\"\nmeasure = \"{measure}\"\nstand = \"{}\"\nmodel = \"{}\"\nvariables = \"{}\"\nsessions = \"{}\"\nreports = \"reports\"\nlog = \"nightly.log\"\nlock = \"nightly.lock\"\n[sweep]\npoints = 10\nspeed = 8.0\n[history]\ndatabase = \"history.sqlite\"\n",
-            c.join("stands/fwd32j-model-sim.toml").display(),
-            c.join("models/fwd32j-no-actuator.toml").display(),
-            c.join("identification/fwd32j-no-actuator.toml").display(),
-            sessions.display()
-        ),
-    )
-    .unwrap();
-    cfg
+    let extra = "[sweep]\npoints = 10\nspeed = 8.0\n[history]\ndatabase = \"history.sqlite\"\n";
+    let file = format!("{measure}.toml");
+    common::nightly_job(dir, &file, live, measure, sessions, extra)
 }
 
 #[test]
 fn twenty_concurrent_pairs_killed_mid_run_lose_and_misread_nothing() {
     let dir = tempfile::tempdir().unwrap();
-    let o = ident(&[
-        "demo",
-        "--out",
-        dir.path().to_str().unwrap(),
-        "--points",
-        "10",
-        "--speed",
-        "8",
-        "--quiet",
-    ]);
-    assert!(o.status.success(), "{}", text(&o));
-    let live = PathBuf::from(
-        String::from_utf8_lossy(&o.stdout)
-            .lines()
-            .find_map(|l| l.strip_prefix("report: "))
-            .unwrap(),
-    );
+    let (_, live) = common::short_demo(dir.path());
     let sessions = dir.path().join("sessions");
     std::fs::create_dir_all(&sessions).unwrap();
     let finished = std::fs::read_dir(&live)

@@ -10,38 +10,11 @@ mod common;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
-use common::{ident, text};
-
-fn report_dir(o: &Output) -> PathBuf {
-    PathBuf::from(
-        String::from_utf8_lossy(&o.stdout)
-            .lines()
-            .find_map(|l| l.strip_prefix("report: "))
-            .unwrap_or_else(|| panic!("no report path: {}", text(o))),
-    )
-}
-
-fn json(p: &Path) -> serde_json::Value {
-    serde_json::from_str(
-        &std::fs::read_to_string(p).unwrap_or_else(|e| panic!("{}: {e}", p.display())),
-    )
-    .unwrap()
-}
+use common::{ident, json, report_dir, text};
 
 /// A short demo (10 lines, 8x real time): the live run that records a session.
 fn short_demo(out: &Path) -> PathBuf {
-    let o = ident(&[
-        "demo",
-        "--out",
-        out.to_str().unwrap(),
-        "--points",
-        "10",
-        "--speed",
-        "8",
-        "--quiet",
-    ]);
-    assert!(o.status.success(), "{}", text(&o));
-    let dir = report_dir(&o);
+    let (o, dir) = common::short_demo(out);
     assert_reads_cleanly(&text(&o), "demo output");
     let html = std::fs::read_to_string(dir.join("report.html")).unwrap();
     assert_reads_cleanly(&html, "report.html");
@@ -204,20 +177,7 @@ fn replay_reproduces_the_live_run_bit_for_bit_and_reports_truncation() {
 }
 
 fn write_job(dir: &Path, live: &Path, extra: &str) -> PathBuf {
-    let cfg = dir.join("nightly.toml");
-    let c = live.join("configs");
-    std::fs::write(
-        &cfg,
-        format!(
-            "name = \"test job\"\nmeasure = \"newest-session\"\nstand = \"{}\"\nmodel = \"{}\"\nvariables = \"{}\"\nsessions = \"{}\"\nreports = \"reports\"\nlog = \"nightly.log\"\nlock = \"nightly.lock\"\n{extra}",
-            c.join("stands/fwd32j-model-sim.toml").display(),
-            c.join("models/fwd32j-no-actuator.toml").display(),
-            c.join("identification/fwd32j-no-actuator.toml").display(),
-            live.display()
-        ),
-    )
-    .unwrap();
-    cfg
+    common::nightly_job(dir, "nightly.toml", live, "newest-session", live, extra)
 }
 
 #[test]

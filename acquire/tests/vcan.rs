@@ -934,10 +934,7 @@ fn throughput_benchmark() {
 #[test]
 #[ignore = "needs vcan0: run by vcan_suite (in the qemu VM when the host has no CAN)"]
 fn stepped_sine_over_vcan_recovers_the_truth_characteristics() {
-    use acquire::analysis::{characteristics, AnalysisOptions};
-    use acquire::session::{Session, SessionOptions};
-    use acquire::sim::SimStand;
-    use acquire::sweep::{self, FrequencyList, NoProgress, SteppedSine, StopSignal};
+    use acquire::sweep::{FrequencyList, SteppedSine};
     require_vcan();
     let dir = tempfile::tempdir().expect("temp dir");
     let stand = can_stand(dir.path(), 2.0, 0x300, FrameKind::Fd);
@@ -951,37 +948,7 @@ fn stepped_sine_over_vcan_recovers_the_truth_characteristics() {
     };
     let path = dir.path().join("vcan.mcap");
     let started = Instant::now();
-    let live = runtime().block_on(async {
-        tokio::time::timeout(Duration::from_secs(90), async {
-            let sim =
-                SimStand::start_can(&stand, IFACE).expect("simulated stand with its DAQ on vcan0");
-            let bound = sim.bind(&stand);
-            assert_eq!(bound.daq.port, acquire::stand::PortSpec::Can(IFACE.into()));
-            let session = Session::create(&path, SessionOptions::default()).expect("session");
-            let h = session.handle();
-            sweep::log_session_start(&h, &stand.file, &plan, None, &Default::default())
-                .expect("log");
-            let mut rig = acquire::rig::Rig::connect(&bound, Some(&h))
-                .await
-                .expect("connect shaker (pty) and DAQ (vcan0)");
-            assert_eq!(rig.daq.port(), IFACE);
-            let o = sweep::stepped_sine(
-                &mut rig,
-                &plan,
-                &h,
-                &NoProgress,
-                &StopSignal::new(),
-                &Default::default(),
-            )
-            .await
-            .expect("sweep");
-            session.finish().expect("finish");
-            sim.shutdown();
-            o
-        })
-        .await
-        .expect("sweep over vcan0 finishes within 90 s")
-    });
+    let live = sweep_over_vcan(&stand, &plan, &path, IFACE, 90);
     eprintln!(
         "vcan sweep: {} steps in {:.1} s, {} stream faults",
         live.steps.len(),
@@ -989,15 +956,7 @@ fn stepped_sine_over_vcan_recovers_the_truth_characteristics() {
         live.faults
     );
     assert_eq!(live.steps.len(), 6);
-    let a = characteristics(&path, &AnalysisOptions::default()).expect("characteristics");
-    assert_eq!(a.steps.len(), 6, "dropped: {:?}", a.dropped);
-    for (s, l) in a.steps.iter().zip(&live.steps) {
-        assert!(
-            s.matches_live && s.channels == l.channels,
-            "step {}: replay differs from live",
-            s.step
-        );
-    }
+    let a = assert_replay_equals_live(&path, &live);
     // The CAN frames themselves are in the session (every byte received and sent).
     let raw = acquire::session::read(&path)
         .expect("read")
@@ -1158,10 +1117,7 @@ fn canopen_node_over_vcan_streams_loss_free_and_reports_emcy_and_lost_heartbeat(
 #[test]
 #[ignore = "needs vcan0: run by vcan_suite (in the qemu VM when the host has no CAN)"]
 fn stepped_sine_through_the_canopen_stand_file() {
-    use acquire::analysis::{characteristics, AnalysisOptions};
-    use acquire::session::{Session, SessionOptions};
-    use acquire::sim::SimStand;
-    use acquire::sweep::{self, FrequencyList, NoProgress, SteppedSine, StopSignal};
+    use acquire::sweep::{FrequencyList, SteppedSine};
     require_vcan();
     let dir = tempfile::tempdir().expect("temp dir");
     let stand = canopen_stand_in(dir.path());
@@ -1175,35 +1131,7 @@ fn stepped_sine_through_the_canopen_stand_file() {
     };
     let path = dir.path().join("canopen.mcap");
     let started = Instant::now();
-    let live = runtime().block_on(async {
-        tokio::time::timeout(Duration::from_secs(120), async {
-            let sim = SimStand::start_can(&stand, IFACE).expect("simulated CANopen stand");
-            let bound = sim.bind(&stand);
-            let session = Session::create(&path, SessionOptions::default()).expect("session");
-            let h = session.handle();
-            sweep::log_session_start(&h, &stand.file, &plan, None, &Default::default())
-                .expect("log");
-            let mut rig = acquire::rig::Rig::connect(&bound, Some(&h))
-                .await
-                .expect("connect shaker (pty) and CANopen DAQ (vcan0)");
-            assert_eq!(rig.daq.port(), format!("{IFACE} node 5"));
-            let o = sweep::stepped_sine(
-                &mut rig,
-                &plan,
-                &h,
-                &NoProgress,
-                &StopSignal::new(),
-                &Default::default(),
-            )
-            .await
-            .expect("sweep");
-            session.finish().expect("finish");
-            sim.shutdown();
-            o
-        })
-        .await
-        .expect("sweep over CANopen finishes within 120 s")
-    });
+    let live = sweep_over_vcan(&stand, &plan, &path, &format!("{IFACE} node 5"), 120);
     eprintln!(
         "canopen sweep: {} steps in {:.1} s, {} stream faults",
         live.steps.len(),
@@ -1211,15 +1139,7 @@ fn stepped_sine_through_the_canopen_stand_file() {
         live.faults
     );
     assert_eq!(live.steps.len(), 4);
-    let a = characteristics(&path, &AnalysisOptions::default()).expect("characteristics");
-    assert_eq!(a.steps.len(), 4, "dropped: {:?}", a.dropped);
-    for (s, l) in a.steps.iter().zip(&live.steps) {
-        assert!(
-            s.matches_live && s.channels == l.channels,
-            "step {}: replay differs from live",
-            s.step
-        );
-    }
+    let _ = assert_replay_equals_live(&path, &live);
     // Every CANopen frame (SDO configuration, SYNC, TPDOs, heartbeats) is in the session, and so
     // is every stream fault the emulated VM's load may cause.
     let records = acquire::session::read(&path).expect("read").records;
@@ -1328,4 +1248,67 @@ fn a_canopen_node_lost_mid_sweep_ends_it_with_the_session_intact() {
             && r.value["detail"].as_str() == Some(msg.as_str())),
         "the error is in the session"
     );
+}
+
+/// A stepped sine over the simulated stand whose DAQ is on vcan0 (the rig's DAQ must report
+/// `daq_port`), recorded to `path`, within `limit_s` seconds.
+fn sweep_over_vcan(
+    stand: &acquire::stand::Stand,
+    plan: &acquire::sweep::SteppedSine,
+    path: &Path,
+    daq_port: &str,
+    limit_s: u64,
+) -> acquire::sweep::SweepOutcome {
+    use acquire::session::{Session, SessionOptions};
+    use acquire::sim::SimStand;
+    use acquire::sweep::{self, NoProgress, StopSignal};
+    runtime().block_on(async {
+        tokio::time::timeout(Duration::from_secs(limit_s), async {
+            let sim =
+                SimStand::start_can(stand, IFACE).expect("simulated stand with its DAQ on vcan0");
+            let bound = sim.bind(stand);
+            let session = Session::create(path, SessionOptions::default()).expect("session");
+            let h = session.handle();
+            sweep::log_session_start(&h, &stand.file, plan, None, &Default::default())
+                .expect("log");
+            let mut rig = acquire::rig::Rig::connect(&bound, Some(&h))
+                .await
+                .expect("connect shaker (pty) and DAQ (vcan0)");
+            assert_eq!(rig.daq.port(), daq_port);
+            let o = sweep::stepped_sine(
+                &mut rig,
+                plan,
+                &h,
+                &NoProgress,
+                &StopSignal::new(),
+                &Default::default(),
+            )
+            .await
+            .expect("sweep");
+            session.finish().expect("finish");
+            sim.shutdown();
+            o
+        })
+        .await
+        .unwrap_or_else(|_| panic!("sweep over vcan0 finishes within {limit_s} s"))
+    })
+}
+
+/// The session's steps recomputed from its raw blocks equal the live estimates, bit for bit;
+/// returns the recomputation.
+fn assert_replay_equals_live(
+    path: &Path,
+    live: &acquire::sweep::SweepOutcome,
+) -> acquire::analysis::SessionAnalysis {
+    use acquire::analysis::{characteristics, AnalysisOptions};
+    let a = characteristics(path, &AnalysisOptions::default()).expect("characteristics");
+    assert_eq!(a.steps.len(), live.steps.len(), "dropped: {:?}", a.dropped);
+    for (s, l) in a.steps.iter().zip(&live.steps) {
+        assert!(
+            s.matches_live && s.channels == l.channels,
+            "step {}: replay differs from live",
+            s.step
+        );
+    }
+    a
 }

@@ -69,41 +69,16 @@ pub fn run(a: DiagnoseArgs) -> anyhow::Result<ExitCode> {
     if let Some(p) = &a.json {
         emit(Some(p), &(serde_json::to_string_pretty(&d)? + "\n"))?;
     }
+    let section = || ::report::build::diagnosis(&d, &super::identify::model_name(&a.identify), &id);
     if let Some(dir) = &a.identify.out {
         std::fs::create_dir_all(dir)
             .with_context(|| format!("cannot create the output directory {}", dir.display()))?;
-        let model_name = a
-            .identify
-            .model
-            .file_stem()
-            .map(|s| s.to_string_lossy().into_owned())
-            .unwrap_or_default();
-        let section = ::report::build::diagnosis(&d, &model_name, &id);
-        super::identify::write_report(
-            dir,
-            &a.identify,
-            "diagnose",
-            &obs,
-            &id,
-            Some((section, &d.model)),
-        )?;
+        let diagnosis = Some((section(), &d.model));
+        super::identify::write_report(dir, &a.identify, "diagnose", &obs, &id, diagnosis)?;
     }
     if let Some(db) = &a.identify.record_history {
-        let model_name = a
-            .identify
-            .model
-            .file_stem()
-            .map(|s| s.to_string_lossy().into_owned())
-            .unwrap_or_default();
-        let section = ::report::build::diagnosis(&d, &model_name, &id);
-        super::identify::record_history(
-            db,
-            &a.identify,
-            "diagnose",
-            &obs,
-            &id,
-            Some((section, &d.model)),
-        )?;
+        let diagnosis = Some((section(), &d.model));
+        super::identify::record_history(db, &a.identify, "diagnose", &obs, &id, diagnosis)?;
     }
     if let Some(p) = &a.out_model {
         emit(

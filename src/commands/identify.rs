@@ -290,23 +290,16 @@ pub fn setup(
     Ok((model, obs, vars, opts))
 }
 
-/// Writes report.html and report.json (docs/report-json.md) of an identification, and of its
-/// diagnosis when given, into `dir` (which exists), built as the workflows build theirs
-/// (`pipeline::build_report`).
-pub fn write_report(
-    dir: &Path,
+/// The report of an identification, and of its diagnosis when given, built as the workflows
+/// build theirs (`pipeline::build_report`).
+fn build(
     a: &IdentifyArgs,
     workflow: &str,
     obs: &idn::Observations,
     id: &idn::Identification,
     diagnosis: Option<(::report::Diagnosis, &identify::Model)>,
-) -> anyhow::Result<::report::Written> {
-    let model_name = a
-        .model
-        .file_stem()
-        .map(|s| s.to_string_lossy().into_owned())
-        .unwrap_or_else(|| a.model.display().to_string());
-    let title = format!("ident {workflow}: {model_name}");
+) -> anyhow::Result<::report::Report> {
+    let title = format!("ident {workflow}: {}", model_name(a));
     let ctx = ReportContext {
         title: &title,
         workflow,
@@ -321,7 +314,28 @@ pub fn write_report(
         measurement: format!("data file {}", a.data.display()),
         ..::report::document::Source::default()
     };
-    let r = build_report(ctx, source, obs, id, diagnosis)?;
+    build_report(ctx, source, obs, id, diagnosis)
+}
+
+/// The model file's name without its extension (the whole path if it has none).
+pub fn model_name(a: &IdentifyArgs) -> String {
+    a.model
+        .file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_else(|| a.model.display().to_string())
+}
+
+/// Writes report.html and report.json (docs/report-json.md) of an identification, and of its
+/// diagnosis when given, into `dir` (which exists).
+pub fn write_report(
+    dir: &Path,
+    a: &IdentifyArgs,
+    workflow: &str,
+    obs: &idn::Observations,
+    id: &idn::Identification,
+    diagnosis: Option<(::report::Diagnosis, &identify::Model)>,
+) -> anyhow::Result<::report::Written> {
+    let r = build(a, workflow, obs, id, diagnosis)?;
     let written = ::report::write(&r, dir)?;
     tracing::info!("report: {}", written.html.display());
     Ok(written)
@@ -337,21 +351,7 @@ pub fn record_history(
     id: &idn::Identification,
     diagnosis: Option<(::report::Diagnosis, &identify::Model)>,
 ) -> anyhow::Result<()> {
-    let ctx = ReportContext {
-        title: workflow,
-        workflow,
-        stand: None,
-        drift: None,
-        messages: Vec::new(),
-        created_utc: String::new(),
-    };
-    let source = ::report::document::Source {
-        model: a.model.display().to_string(),
-        variables: a.vars.display().to_string(),
-        measurement: format!("data file {}", a.data.display()),
-        ..::report::document::Source::default()
-    };
-    let r = build_report(ctx, source, obs, id, diagnosis)?;
+    let r = build(a, workflow, obs, id, diagnosis)?;
     let run_id = format!("{workflow}-{}", r.created_utc.replace(':', ""));
     let mut run =
         history::import::run_from_report_text(&serde_json::to_string(&r)?, &a.data, &run_id)?;

@@ -58,3 +58,63 @@ pub fn text(o: &Output) -> String {
 pub fn root() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
 }
+
+/// The report folder a run printed (`report: DIR`).
+pub fn report_dir(o: &Output) -> PathBuf {
+    PathBuf::from(
+        String::from_utf8_lossy(&o.stdout)
+            .lines()
+            .find_map(|l| l.strip_prefix("report: "))
+            .unwrap_or_else(|| panic!("no report path: {}", text(o))),
+    )
+}
+
+/// A JSON file, read and parsed.
+pub fn json(p: &Path) -> serde_json::Value {
+    serde_json::from_str(
+        &std::fs::read_to_string(p).unwrap_or_else(|e| panic!("{}: {e}", p.display())),
+    )
+    .unwrap_or_else(|e| panic!("{}: {e}", p.display()))
+}
+
+/// Runs a short demo (10 lines, 8x real time) into `out`, asserting it succeeded; returns the
+/// run and its report folder (which holds the session and a copy of the configs).
+pub fn short_demo(out: &Path) -> (Output, PathBuf) {
+    let o = ident(&[
+        "demo",
+        "--out",
+        out.to_str().expect("utf-8 path"),
+        "--points",
+        "10",
+        "--speed",
+        "8",
+        "--quiet",
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+    let dir = report_dir(&o);
+    (o, dir)
+}
+
+/// Writes a nightly job file `dir/FILE` for the demo's stand, identification model and variables
+/// (from the configs a demo copied into `live`), with `measure`, the `sessions` folder, and
+/// `extra` TOML appended.
+pub fn nightly_job(
+    dir: &Path,
+    file: &str,
+    live: &Path,
+    measure: &str,
+    sessions: &Path,
+    extra: &str,
+) -> PathBuf {
+    let cfg = dir.join(file);
+    let c = live.join("configs");
+    let text = format!(
+        "name = \"test job\"\nmeasure = \"{measure}\"\nstand = \"{}\"\nmodel = \"{}\"\nvariables = \"{}\"\nsessions = \"{}\"\nreports = \"reports\"\nlog = \"nightly.log\"\nlock = \"nightly.lock\"\n{extra}",
+        c.join("stands/fwd32j-model-sim.toml").display(),
+        c.join("models/fwd32j-no-actuator.toml").display(),
+        c.join("identification/fwd32j-no-actuator.toml").display(),
+        sessions.display()
+    );
+    std::fs::write(&cfg, text).expect("write the job file");
+    cfg
+}
