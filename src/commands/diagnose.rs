@@ -35,8 +35,7 @@ pub struct DiagnoseArgs {
 }
 
 /// Runs identification and diagnosis. Exit 0: the final model explains the data to the noise
-/// level; 1: it does not (or even the diagnosis's continued, multi-start base fit did not
-/// converge); 2: bad input.
+/// level; 1: it does not (or the identification did not converge); 2: bad input.
 pub fn run(a: DiagnoseArgs) -> anyhow::Result<ExitCode> {
     anyhow::ensure!(
         a.alpha > 0.0 && a.alpha < 1.0,
@@ -61,11 +60,7 @@ pub fn run(a: DiagnoseArgs) -> anyhow::Result<ExitCode> {
     })
     .context("diagnosis")?;
     print!("{}", diagnose::text(&d));
-    println!(
-        "diagnosed in {:.2} s ({})",
-        started.elapsed().as_secs_f64(),
-        diagnose::timing_text(&d)
-    );
+    println!("diagnosed in {:.2} s", started.elapsed().as_secs_f64());
     if let Some(p) = &a.json {
         emit(Some(p), &(serde_json::to_string_pretty(&d)? + "\n"))?;
     }
@@ -87,9 +82,7 @@ pub fn run(a: DiagnoseArgs) -> anyhow::Result<ExitCode> {
         )?;
     }
     write_final(&a.identify, &id, Some(&d))?;
-    // The diagnosis's base fit is the identification continued until it converged: its verdict
-    // after is the answer (docs/diagnosis.md).
-    Ok(if d.after.explained && d.base.converged {
+    Ok(if d.after.explained && id.stop.converged() {
         ExitCode::SUCCESS
     } else {
         ExitCode::from(1)
