@@ -356,14 +356,8 @@ fn demo_runs_the_whole_pipeline_over_the_simulated_devices() {
     // identification alone leaves structure far above the noise; diagnosis must add a spring
     // between spindle head and table along the actuator's axis, with the truth's stiffness
     // (0.5639 N/µm) within 4 standard errors, and bring the fit to the noise floor.
-    let reduced: Vec<f64> = stdout
-        .lines()
-        .find(|l| l.trim_start().starts_with("reduced χ²"))
-        .expect("before/after table")
-        .split_whitespace()
-        .filter_map(|w| w.parse().ok())
-        .collect();
-    assert_eq!(reduced.len(), 2, "{stdout}");
+    let (before, after) = common::reduced_chi2_before_after(&stdout);
+    let reduced = [before, after];
     assert!(
         reduced[0] > 100.0,
         "identification alone should not explain the stand: {reduced:?}"

@@ -36,14 +36,8 @@ fn demo_through_the_generator_stand_finds_the_actuator() {
         .filter(|l| l.trim_start().starts_with("added: "))
         .collect();
     assert_eq!(added.len(), 1, "{out}");
-    let reduced: Vec<f64> = out
-        .lines()
-        .find(|l| l.trim_start().starts_with("reduced χ²"))
-        .expect("before/after table")
-        .split_whitespace()
-        .filter_map(|w| w.parse().ok())
-        .collect();
-    assert_eq!(reduced.len(), 2, "{out}");
+    let (before, after) = common::reduced_chi2_before_after(&out);
+    let reduced = [before, after];
     assert!(reduced[0] > 100.0 && reduced[1] < 1.5, "{reduced:?}\n{out}");
     assert!(added[0].contains("spring spindle head"), "{}", added[0]);
 

@@ -118,3 +118,17 @@ pub fn nightly_job(
     std::fs::write(&cfg, text).expect("write the job file");
     cfg
 }
+
+/// The reduced χ² before and after diagnosis, from the `reduced χ²  a → b` row of the
+/// diagnosis' before/after table in `out`.
+pub fn reduced_chi2_before_after(out: &str) -> (f64, f64) {
+    let reduced: Vec<f64> = out
+        .lines()
+        .find(|l| l.trim_start().starts_with("reduced χ²"))
+        .unwrap_or_else(|| panic!("no before/after table: {out}"))
+        .split_whitespace()
+        .filter_map(|w| w.parse().ok())
+        .collect();
+    assert_eq!(reduced.len(), 2, "{out}");
+    (reduced[0], reduced[1])
+}
