@@ -333,6 +333,16 @@ struct Transfer<'a> {
 }
 
 impl Transfer<'_> {
+    /// Aborts the transfer (unknown command specifier) and returns the error for an answer `f`
+    /// that is not the `expected` kind.
+    async fn unexpected(&mut self, f: &[u8; 8], expected: &str) -> SdoError {
+        self.abort(AbortCode::UnknownCommand).await;
+        self.malformed(
+            f,
+            format!("command specifier 0x{:02X}, expected {expected}", f[0]),
+        )
+    }
+
     fn malformed(&self, f: &[u8; 8], detail: impl Into<String>) -> SdoError {
         SdoError::Malformed {
             node: self.node,
@@ -427,14 +437,9 @@ impl Transfer<'_> {
             .exchange([cs::INITIATE_UPLOAD, m[0], m[1], m[2], 0, 0, 0, 0])
             .await?;
         if d[0] & 0xE0 != 0x40 {
-            self.abort(AbortCode::UnknownCommand).await;
-            return Err(self.malformed(
-                &d,
-                format!(
-                    "command specifier 0x{:02X}, expected an initiate upload response (0x4_)",
-                    d[0]
-                ),
-            ));
+            return Err(self
+                .unexpected(&d, "an initiate upload response (0x4_)")
+                .await);
         }
         if let Err(e) = self.check_mux(&d) {
             self.abort(AbortCode::General).await;
@@ -457,14 +462,7 @@ impl Transfer<'_> {
                 .exchange([cs::UPLOAD_SEGMENT | toggle, 0, 0, 0, 0, 0, 0, 0])
                 .await?;
             if s[0] & 0xE0 != 0x00 {
-                self.abort(AbortCode::UnknownCommand).await;
-                return Err(self.malformed(
-                    &s,
-                    format!(
-                        "command specifier 0x{:02X}, expected an upload segment (0x0_/0x1_)",
-                        s[0]
-                    ),
-                ));
+                return Err(self.unexpected(&s, "an upload segment (0x0_/0x1_)").await);
             }
             if s[0] & cs::TOGGLE != toggle {
                 self.abort(AbortCode::ToggleNotAlternated).await;
@@ -560,8 +558,9 @@ impl Transfer<'_> {
             req[1..1 + chunk.len()].copy_from_slice(chunk);
             let s = self.exchange(req).await?;
             if s[0] & 0xE0 != cs::SEGMENT_DOWNLOAD_RESPONSE {
-                self.abort(AbortCode::UnknownCommand).await;
-                return Err(self.malformed(&s, format!("command specifier 0x{:02X}, expected a download segment response (0x20/0x30)", s[0])));
+                return Err(self
+                    .unexpected(&s, "a download segment response (0x20/0x30)")
+                    .await);
             }
             if s[0] & cs::TOGGLE != toggle {
                 self.abort(AbortCode::ToggleNotAlternated).await;
@@ -579,14 +578,9 @@ impl Transfer<'_> {
 
     async fn download_response(&mut self, d: &[u8; 8]) -> Result<(), SdoError> {
         if d[0] != cs::DOWNLOAD_RESPONSE {
-            self.abort(AbortCode::UnknownCommand).await;
-            return Err(self.malformed(
-                d,
-                format!(
-                    "command specifier 0x{:02X}, expected an initiate download response (0x60)",
-                    d[0]
-                ),
-            ));
+            return Err(self
+                .unexpected(d, "an initiate download response (0x60)")
+                .await);
         }
         if let Err(e) = self.check_mux(d) {
             self.abort(AbortCode::General).await;
