@@ -6,12 +6,22 @@
 use process::uff::{self, Encoding, Function};
 use process::C64;
 use std::f64::consts::PI;
-use std::process::Command;
+use std::process::{Command, Output};
 
 const FREQS: [f64; 3] = [42.0, 97.5, 161.0];
 const ZETAS: [f64; 3] = [0.015, 0.02, 0.03];
 const PHI: [[f64; 3]; 3] = [[0.33, 0.59, 0.74], [0.74, 0.33, -0.59], [0.59, -0.74, 0.33]];
 const PART: [[f64; 2]; 3] = [[0.33, 0.74], [0.74, -0.59], [0.59, 0.33]];
+
+/// `ident modes-from-data FILE --band 20:220 --max-order 20`, then `extra`.
+fn modes_in_band(file: &std::path::Path, extra: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_ident"))
+        .args(["modes-from-data", file.to_str().unwrap()])
+        .args(["--band", "20:220", "--max-order", "20"])
+        .args(extra)
+        .output()
+        .unwrap()
+}
 
 fn write_uff(path: &std::path::Path, spec_data_type: i64) {
     let (f0, df, n) = (0.0, 0.25, 1001);
@@ -52,23 +62,15 @@ fn modes_from_uff_file() {
     let file = dir.path().join("frf.uff");
     write_uff(&file, 8);
     let (svg, json) = (dir.path().join("stab.svg"), dir.path().join("modes.json"));
-    let out = Command::new(env!("CARGO_BIN_EXE_ident"))
-        .args([
-            "modes-from-data",
-            file.to_str().unwrap(),
-            "--band",
-            "20:220",
-            "--max-order",
-            "20",
-        ])
-        .args([
+    let out = modes_in_band(
+        &file,
+        &[
             "--svg",
             svg.to_str().unwrap(),
             "--json",
             json.to_str().unwrap(),
-        ])
-        .output()
-        .unwrap();
+        ],
+    );
     let stdout = String::from_utf8_lossy(&out.stdout);
     assert!(
         out.status.success(),
@@ -108,18 +110,7 @@ fn modes_from_uff_file() {
     assert!(svg.starts_with("<svg") && svg.contains("Stabilization diagram"));
 
     // The user's override picks the same poles.
-    let out = Command::new(env!("CARGO_BIN_EXE_ident"))
-        .args([
-            "modes-from-data",
-            file.to_str().unwrap(),
-            "--band",
-            "20:220",
-            "--max-order",
-            "20",
-        ])
-        .args(["--freqs", "40,100,158"])
-        .output()
-        .unwrap();
+    let out = modes_in_band(&file, &["--freqs", "40,100,158"]);
     let stdout = String::from_utf8_lossy(&out.stdout);
     assert!(out.status.success(), "{stdout}");
     for f in FREQS {
