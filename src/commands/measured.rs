@@ -95,16 +95,13 @@ fn decimate(m: &mut identify::Measurement, n: usize, origin: &str) -> anyhow::Re
         .copied()
         .unwrap_or("?");
     let label = format!("{origin}: {} {dof}", m.body);
-    let keep = process::selection::select_points(&label, &m.freqs_hz, &m.amplitude, None, &config)?;
-    let pick = |v: &Vec<f64>| keep.iter().map(|&k| v[k]).collect::<Vec<f64>>();
-    m.freqs_hz = pick(&m.freqs_hz);
-    m.amplitude = pick(&m.amplitude);
-    for column in [&mut m.phase_rad, &mut m.variance, &mut m.coherence]
-        .into_iter()
-        .flatten()
-    {
-        *column = pick(column);
+    let chosen =
+        process::selection::select_points(&label, &m.freqs_hz, &m.amplitude, None, &config)?;
+    let mut keep = vec![false; before];
+    for k in chosen {
+        keep[k] = true;
     }
+    identify::identification::line_choice::retain(m, &keep);
     eprintln!(
         "lines: {} {dof}: decimated from {before} to {} lines (log-uniform, denser at the resonance peaks)",
         m.body,

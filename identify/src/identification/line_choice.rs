@@ -287,8 +287,9 @@ enum Reason {
     Coherence,
 }
 
-/// Keeps the points of `m` where `keep` is true, in every per-point column.
-fn retain(m: &mut Measurement, keep: &[bool]) {
+/// Keeps the points of `m` where `keep` is true, in every per-point column (frequencies,
+/// amplitudes, phases, variances, coherences).
+pub fn retain(m: &mut Measurement, keep: &[bool]) {
     fn filter(v: &mut Vec<f64>, keep: &[bool]) {
         let mut k = keep.iter();
         v.retain(|_| k.next().copied().unwrap_or(true));
