@@ -70,6 +70,15 @@ impl From<Quantity> for QuantityName {
 }
 
 impl Measurement {
+    /// Its name in messages: the body and the DOF, e.g. `table u3`.
+    pub fn label(&self) -> String {
+        let dof = crate::model::DOF_NAMES
+            .get(self.dof as usize)
+            .copied()
+            .unwrap_or("?");
+        format!("{} {dof}", self.body)
+    }
+
     /// The characteristic this measurement is of, with the body resolved in `model`;
     /// `None` if the model has no body of that name or the DOF is out of range.
     pub fn resolve(&self, model: &crate::Model) -> Option<Characteristic> {

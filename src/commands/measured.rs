@@ -90,11 +90,7 @@ fn decimate(m: &mut identify::Measurement, n: usize, origin: &str) -> anyhow::Re
         min_coherence: 0.0,
         ..Default::default()
     };
-    let dof = identify::model::DOF_NAMES
-        .get(m.dof as usize)
-        .copied()
-        .unwrap_or("?");
-    let label = format!("{origin}: {} {dof}", m.body);
+    let label = format!("{origin}: {}", m.label());
     let chosen =
         process::selection::select_points(&label, &m.freqs_hz, &m.amplitude, None, &config)?;
     let mut keep = vec![false; before];
@@ -103,8 +99,8 @@ fn decimate(m: &mut identify::Measurement, n: usize, origin: &str) -> anyhow::Re
     }
     identify::identification::line_choice::retain(m, &keep);
     eprintln!(
-        "lines: {} {dof}: decimated from {before} to {} lines (log-uniform, denser at the resonance peaks)",
-        m.body,
+        "lines: {}: decimated from {before} to {} lines (log-uniform, denser at the resonance peaks)",
+        m.label(),
         m.freqs_hz.len()
     );
     Ok(())

@@ -19,7 +19,7 @@
 use std::f64::consts::{FRAC_PI_2, PI};
 
 use crate::measured::Measurement;
-use crate::model::{Characteristic, Model, Quantity, DOF_NAMES};
+use crate::model::{Characteristic, Model, Quantity};
 use crate::units::{parse_quantity, Dim};
 
 /// The unit of measured values of a translational response.
@@ -131,8 +131,7 @@ pub fn to_model_convention(
     model: &Model,
     notes: &mut Vec<String>,
 ) -> Result<(), String> {
-    let dof = DOF_NAMES.get(m.dof as usize).copied().unwrap_or("?");
-    let label = format!("{} {dof}", m.body);
+    let label = m.label();
     if m.dof >= 3 {
         return Err(format!(
             "{label}: a unit ({}) is declared for a rotation; declared units are for \
@@ -214,14 +213,13 @@ pub fn convert_quantity(
         return Ok(());
     };
     let k = order(want) - order(have);
-    let dof = DOF_NAMES.get(m.dof as usize).copied().unwrap_or("?");
+    let label = m.label();
     for (i, f) in m.freqs_hz.iter().enumerate() {
         let omega = 2.0 * PI * f;
         if k < 0 && omega == 0.0 {
             return Err(format!(
-                "{} {dof}: point {i} is at 0 Hz, where {} cannot be converted to the model's {} \
+                "{label}: point {i} is at 0 Hz, where {} cannot be converted to the model's {} \
                  output; drop that line",
-                m.body,
                 have.as_str(),
                 want.as_str()
             ));
@@ -237,8 +235,7 @@ pub fn convert_quantity(
     }
     m.quantity = want.into();
     notes.push(format!(
-        "{} {dof}: {} converted to the model's {} output by (jω)^{k}",
-        m.body,
+        "{label}: {} converted to the model's {} output by (jω)^{k}",
         have.as_str(),
         want.as_str()
     ));

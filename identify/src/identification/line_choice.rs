@@ -229,11 +229,7 @@ impl LineChoice {
         let mut out = data.clone();
         let mut accounts = Vec::new();
         for m in &mut out.characteristics {
-            let dof = crate::model::DOF_NAMES
-                .get(m.dof as usize)
-                .copied()
-                .unwrap_or("?");
-            let label = format!("{} {dof}", m.body);
+            let label = m.label();
             let mut account = Account {
                 label: label.clone(),
                 measured: m.freqs_hz.len(),
