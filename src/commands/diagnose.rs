@@ -35,7 +35,8 @@ pub struct DiagnoseArgs {
 }
 
 /// Runs identification and diagnosis. Exit 0: the final model explains the data to the noise
-/// level; 1: it does not (or the identification did not converge); 2: bad input.
+/// level; 1: it does not (or even the diagnosis's continued, multi-start base fit did not
+/// converge); 2: bad input.
 pub fn run(a: DiagnoseArgs) -> anyhow::Result<ExitCode> {
     anyhow::ensure!(
         a.alpha > 0.0 && a.alpha < 1.0,
@@ -60,7 +61,11 @@ pub fn run(a: DiagnoseArgs) -> anyhow::Result<ExitCode> {
     })
     .context("diagnosis")?;
     print!("{}", diagnose::text(&d));
-    println!("diagnosed in {:.2} s", started.elapsed().as_secs_f64());
+    println!(
+        "diagnosed in {:.2} s ({})",
+        started.elapsed().as_secs_f64(),
+        diagnose::timing_text(&d)
+    );
     if let Some(p) = &a.json {
         emit(Some(p), &(serde_json::to_string_pretty(&d)? + "\n"))?;
     }
@@ -82,7 +87,9 @@ pub fn run(a: DiagnoseArgs) -> anyhow::Result<ExitCode> {
         )?;
     }
     write_final(&a.identify, &id, Some(&d))?;
-    Ok(if d.after.explained && id.stop.converged() {
+    // The diagnosis's base fit is the identification continued until it converged: its verdict
+    // after is the answer (docs/diagnosis.md).
+    Ok(if d.after.explained && d.base.converged {
         ExitCode::SUCCESS
     } else {
         ExitCode::from(1)

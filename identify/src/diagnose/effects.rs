@@ -33,6 +33,10 @@ const POINT_RADIUS: f64 = 0.01;
 /// Loss ψ of the stiff mounts and of a flexible body's internal joints (structural steel/cast
 /// iron, loss factor ≈ 1 %).
 const STRUCTURAL_PSI: f64 = 0.06;
+/// Name stem of the bodies of added point masses.
+const ADDED_MASS: &str = "diagnosed mass";
+/// Name stem of the bodies of added resonators.
+const ADDED_RESONATOR: &str = "diagnosed resonator";
 
 /// Why an effect cannot be applied to a model.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -201,6 +205,21 @@ impl Effect {
             Effect::Flexible { .. } => "flexible body",
             Effect::Gain { .. } => "sensor gain",
             Effect::Damping { .. } => "joint damping",
+        }
+    }
+
+    /// Whether the effect acts on a body the diagnosis added (a point mass's or resonator's).
+    pub fn on_added_body(&self) -> bool {
+        let added = |b: &str| b.starts_with(ADDED_MASS) || b.starts_with(ADDED_RESONATOR);
+        match self {
+            Effect::Spring { bodies, .. } | Effect::PlacedSpring { bodies, .. } => {
+                bodies.iter().flatten().any(|b| added(b))
+            }
+            Effect::Mass { body, .. }
+            | Effect::PlacedMass { body, .. }
+            | Effect::Resonator { body, .. }
+            | Effect::Flexible { body, .. } => added(body),
+            Effect::Gain { .. } | Effect::Damping { .. } => false,
         }
     }
 
@@ -417,7 +436,7 @@ impl Effect {
                         gamma[0],
                         MOUNT_ABOVE_BAND * f_max,
                         STRUCTURAL_PSI,
-                        "diagnosed mass",
+                        ADDED_MASS,
                     )?;
                 }
             }
@@ -431,7 +450,7 @@ impl Effect {
                         gamma[0],
                         MOUNT_ABOVE_BAND * f_max,
                         STRUCTURAL_PSI,
-                        "diagnosed mass",
+                        ADDED_MASS,
                     )?;
                 }
             }
@@ -444,7 +463,7 @@ impl Effect {
                         gamma[0],
                         gamma[1],
                         STRUCTURAL_PSI,
-                        "diagnosed resonator",
+                        ADDED_RESONATOR,
                     )?;
                 }
             }

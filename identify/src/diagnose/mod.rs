@@ -23,6 +23,7 @@
 //! # }
 //! ```
 
+pub mod blind;
 pub mod effects;
 pub mod generate;
 pub mod problem;
@@ -34,6 +35,7 @@ use serde::Serialize;
 use statrs::distribution::{ChiSquared, ContinuousCDF};
 
 pub use effects::Effect;
+use effects::EffectParam;
 pub use residuals::ResidualAnalysis;
 
 use crate::identification::optimize::{self, Residuals as _};
@@ -156,6 +158,9 @@ pub struct Ranked {
     /// Other placements the data cannot tell from this one (their directions agree to
     /// |cos| ≥ 0.99 after the fit's own directions are projected out), best first.
     pub equivalent: Vec<String>,
+    /// The family's effects, this one first, then the equivalent ones.
+    #[serde(skip)]
+    pub family: Vec<Effect>,
 }
 
 /// Candidates whose projected directions agree to this |cos| form one family in the ranking.
@@ -179,6 +184,10 @@ pub struct Round {
     /// The accepted point mass or spring refitted with its place free, when the data prefer the
     /// fitted place (it then replaces the candidate placement).
     pub placed: Option<Refit>,
+    /// Refits significant by their LR test but not added: an estimate at a bound of its
+    /// parameter or a confidence interval that includes the nested value ("indicated but not
+    /// identifiable").
+    pub not_identifiable: Vec<NotTried>,
 }
 
 /// An effect accepted in an earlier round and dropped by the backward check.
@@ -225,6 +234,40 @@ pub struct Diagnosis {
     /// The effects added, in order (with `accepted[i].params` their values).
     #[serde(skip)]
     pub effects: Vec<Effect>,
+    /// Where the diagnosis's wall time went.
+    pub timing: Timing,
+    /// The base fit the diagnosis started from.
+    pub base: BaseFit,
+    /// The units of the JSON form: [`JSON_UNITS`].
+    pub units: &'static str,
+}
+
+/// What the numbers of a diagnosis's JSON form are in (the text report uses the paper's units:
+/// N/µm, µm/N, mm).
+pub const JSON_UNITS: &str = "SI throughout: each effect parameter's unit is its params[].unit (N/m, m/N, m, kg, Hz, - ); estimate[] and std_error[] in each variable's SI unit, in variables-file order; frequencies in Hz (freqs_hz, mode_hz, from_hz, to_hz); criteria, statistics, p-values, shares and residuals dimensionless; timing in s";
+
+/// Wall time of a diagnosis's parts (seconds).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize)]
+pub struct Timing {
+    /// Unit of every figure: `"s"`.
+    pub unit: &'static str,
+    /// The base fit the diagnosis starts from (its convergence check and extra starts).
+    pub base_fit: f64,
+    /// Candidate generation and ranking, every round.
+    pub ranking: f64,
+    /// The candidates' refits, every round.
+    pub refits: f64,
+    /// Placement refinement, backward checks and the final analysis.
+    pub other: f64,
+}
+
+/// The time split of a diagnosis, one line.
+pub fn timing_text(d: &Diagnosis) -> String {
+    let t = &d.timing;
+    format!(
+        "time: base fit {:.2} s, ranking {:.2} s, refits {:.2} s, placement and checks {:.2} s",
+        t.base_fit, t.ranking, t.refits, t.other
+    )
 }
 
 /// Why a diagnosis could not run.
@@ -282,8 +325,14 @@ pub fn diagnose(
         .iter()
         .map(|c| c.label.clone())
         .collect();
+    let clock = std::time::Instant::now();
+    let mut timing = Timing {
+        unit: "s",
+        ..Timing::default()
+    };
     let mut p0 = Problem::new(model, vars, obs, iopts, Vec::new(), f_hi);
-    let mut cur = base_fit(&mut p0, &id.estimate)?;
+    let (mut cur, base) = base_fit((model, vars, obs), &mut p0, id, opts, progress)?;
+    timing.base_fit = clock.elapsed().as_secs_f64();
     let before = analysis(&p0, &cur, opts)?;
     progress(&format!("before: {}", before.verdict));
 
@@ -291,6 +340,7 @@ pub fn diagnose(
     let mut accepted = Vec::new();
     let mut not_tried = untestable();
     for _ in 0..opts.max_effects {
+        let t = std::time::Instant::now();
         let pc = Problem::new(model, vars, obs, iopts, cur.effects.clone(), f_hi);
         let ranking = rank(&pc, &cur, &labels, (f_lo, f_hi), opts.alpha, &mut not_tried)?;
         progress(&format!(
@@ -302,7 +352,9 @@ pub fn diagnose(
                 .map(|s| ranking.candidates[s.candidate].describe())
                 .unwrap_or_default()
         ));
-        let (refits, best) = refit_leading(
+        timing.ranking += t.elapsed().as_secs_f64();
+        let t = std::time::Instant::now();
+        let (refits, best, not_identifiable) = refit_leading(
             (model, vars, obs),
             opts,
             &cur,
@@ -311,6 +363,7 @@ pub fn diagnose(
             &mut not_tried,
             progress,
         );
+        timing.refits += t.elapsed().as_secs_f64();
         let mut round = Round {
             candidates: ranking.scored.len(),
             ranked: ranking.ranked.clone(),
@@ -319,6 +372,7 @@ pub fn diagnose(
             accepted: best.as_ref().map(|(i, _)| *i),
             removed: Vec::new(),
             placed: None,
+            not_identifiable,
         };
         let Some((i, next)) = best else {
             rounds.push(round);
@@ -348,14 +402,18 @@ pub fn diagnose(
         );
         rounds.push(round);
     }
-    final_fit(
+    let mut d = final_fit(
         (model, vars, obs),
         opts,
         cur,
         f_hi,
         (before, rounds, accepted, not_tried),
         progress,
-    )
+    )?;
+    timing.other = clock.elapsed().as_secs_f64() - timing.base_fit - timing.ranking - timing.refits;
+    d.timing = timing;
+    d.base = base;
+    Ok(d)
 }
 
 /// The diagnosis at the final fit `cur`: the residual analysis after, the accepted effects'
@@ -374,6 +432,16 @@ fn final_fit(
     progress: &mut dyn FnMut(&str),
 ) -> Result<Diagnosis, DiagnoseError> {
     let iopts = &opts.identification;
+    // A refit that stopped short but was accepted all the same is not "not tried".
+    let not_tried: Vec<NotTried> = not_tried
+        .into_iter()
+        .filter(|n| {
+            !accepted
+                .iter()
+                .chain(rounds.iter().flat_map(|r| r.placed.iter()))
+                .any(|a| n.effect == format!("refit of {}", a.effect) || n.effect == a.effect)
+        })
+        .collect();
     let pf = Problem::new(model, vars, obs, iopts, cur.effects.clone(), f_hi);
     let after = analysis(&pf, &cur, opts)?;
     progress(&format!("after: {}", after.verdict));
@@ -406,24 +474,158 @@ fn final_fit(
         std_error,
         model: final_model,
         effects: cur.effects,
+        timing: Timing::default(),
+        units: JSON_UNITS,
+        base: BaseFit {
+            unit: "-",
+            criterion_identification: f64::NAN,
+            criterion: f64::NAN,
+            converged: false,
+            stop: String::new(),
+            continuations: 0,
+            starts: 0,
+            iterations: 0,
+        },
     })
 }
 
-/// The identification's fit `estimate` as the starting state: no effect, its residuals and
-/// Jacobian.
-fn base_fit(p0: &mut Problem, estimate: &[f64]) -> Result<Current, DiagnoseError> {
-    let u0 = DVector::from_iterator(
-        estimate.len(),
-        estimate.iter().zip(&p0.scale).map(|(x, s)| x / s),
-    );
-    let (e, jac) = p0.eval(&u0, true)?;
+/// Continuations of the base fit from its own best point before extra starts are tried.
+const BASE_CONTINUATIONS: usize = 3;
+/// Starts of the multi-start base fit (the identification's starting point and points spread
+/// over the bounds) when the continued fit does not converge or does not explain the data.
+const BASE_STARTS: usize = 4;
+
+/// How the base fit the diagnosis starts from was reached: the identification's estimate
+/// continued until converged and, when it did not converge or does not explain the data, the
+/// best of a multi-start fit. Every candidate is then judged against this fit, refitted with
+/// the same optimizer and settings.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct BaseFit {
+    /// Unit of the criteria: `"-"` (J = ½ Σe², dimensionless residuals).
+    pub unit: &'static str,
+    /// Criterion J of the identification's estimate.
+    pub criterion_identification: f64,
+    /// Criterion J of the base fit.
+    pub criterion: f64,
+    /// Whether the base fit converged.
+    pub converged: bool,
+    /// Why it stopped.
+    pub stop: String,
+    /// Continuations run from the identification's estimate.
+    pub continuations: usize,
+    /// Starts of the multi-start fit (0: not needed).
+    pub starts: usize,
+    /// Optimizer iterations spent on the base fit in all.
+    pub iterations: usize,
+}
+
+/// The converged base fit as the starting state: no effect, its residuals and Jacobian. From the
+/// identification's estimate, continued up to [`BASE_CONTINUATIONS`] times until the optimizer
+/// converges; when it does not, or the fit does not explain the data (a local minimum explains
+/// nothing either), the best of a [`BASE_STARTS`]-start fit is taken too.
+fn base_fit(
+    (model, vars, obs): (&Model, &Variables, &Observations),
+    p0: &mut Problem,
+    id: &Identification,
+    opts: &Options,
+    progress: &mut dyn FnMut(&str),
+) -> Result<(Current, BaseFit), DiagnoseError> {
+    let iopts = &opts.identification;
+    let scaled = |x: &[f64], scale: &[f64]| {
+        DVector::from_iterator(x.len(), x.iter().zip(scale).map(|(x, s)| x / s))
+    };
+    let (lo, hi) = p0.bounds();
+    let u_id = scaled(&id.estimate, &p0.scale);
+    let (e_id, _) = p0.eval(&u_id, false)?;
+    let j_id = 0.5 * e_id.norm_squared();
+    let mut info = BaseFit {
+        unit: "-",
+        criterion_identification: j_id,
+        criterion: j_id,
+        converged: false,
+        stop: id.stop.describe(),
+        continuations: 0,
+        starts: 0,
+        iterations: 0,
+    };
+    let mut u = u_id;
+    let continued = |p0: &mut Problem, u: &mut DVector<f64>, info: &mut BaseFit| {
+        for _ in 0..BASE_CONTINUATIONS {
+            let Ok(out) = optimize::minimize(
+                iopts.optimizer,
+                p0,
+                u,
+                &lo,
+                &hi,
+                &iopts.settings,
+                &mut |_| {},
+            ) else {
+                break;
+            };
+            info.continuations += 1;
+            info.iterations += out.iterations;
+            if out.criterion <= info.criterion {
+                info.criterion = out.criterion;
+                *u = out.u;
+            }
+            info.stop = out.stop.describe();
+            info.converged = out.stop.converged();
+            if info.converged {
+                break;
+            }
+        }
+    };
+    continued(p0, &mut u, &mut info);
+    // A converged fit that does not explain the data may be a local minimum when the start was
+    // far off (its misfit would then be "explained" by effects that do nothing): the extra
+    // starts are tried then too.
+    let explained = {
+        let (e, _) = p0.eval(&u, false)?;
+        let cur = Current {
+            effects: Vec::new(),
+            u: u.clone(),
+            e,
+            jac: DMatrix::zeros(0, 0),
+        };
+        analysis(p0, &cur, opts).is_ok_and(|a| a.explained)
+    };
+    if !info.converged || !explained {
+        let mopts = identification::Options {
+            starts: iopts.starts.max(BASE_STARTS),
+            ..*iopts
+        };
+        if let Ok(ms) = identification::identify(model, obs, vars, &mopts, &mut |_, _| {}) {
+            info.starts = mopts.starts;
+            info.iterations += ms.starts.iter().map(|s| s.iterations).sum::<usize>();
+            let um = scaled(&ms.estimate, &p0.scale);
+            let (em, _) = p0.eval(&um, false)?;
+            let jm = 0.5 * em.norm_squared();
+            if jm < info.criterion * (1.0 - 1e-9) {
+                info.criterion = jm;
+                info.converged = ms.stop.converged();
+                info.stop = ms.stop.describe();
+                u = um;
+                if !info.converged {
+                    continued(p0, &mut u, &mut info);
+                }
+            }
+        }
+    }
+    progress(&format!(
+        "base fit: J {:.1} → {:.1} ({}; {} continuation(s), {} start(s))",
+        info.criterion_identification, info.criterion, info.stop, info.continuations, info.starts
+    ));
+    let (e, jac) = p0.eval(&u, true)?;
     let jac = jac.unwrap_or_else(|| DMatrix::zeros(e.len(), 0));
-    Ok(Current {
-        effects: Vec::new(),
-        u: u0,
-        e,
-        jac,
-    })
+    Ok((
+        Current {
+            effects: Vec::new(),
+            u,
+            e,
+            jac,
+        },
+        info,
+    ))
 }
 
 /// Backward elimination after an acceptance: drops, one at a time, every earlier effect the
@@ -512,8 +714,13 @@ fn rank(
     let free = free_columns(pc, &cur.u);
     let jfree = DMatrix::from_fn(cur.jac.nrows(), free.len(), |r, c| cur.jac[(r, free[c])]);
     let sigma2 = residual_scale(cur, free.len(), crit.noise.scale_unknown());
-    let candidates =
-        generate::candidates(&crit.model_at(&x), &realized.vars, &x, labels, f_lo, f_hi);
+    // Candidates live on the structure's bodies, not on the masses and resonators the diagnosis
+    // added itself.
+    let candidates: Vec<Effect> =
+        generate::candidates(&crit.model_at(&x), &realized.vars, &x, labels, f_lo, f_hi)
+            .into_iter()
+            .filter(|c| !c.on_added_body())
+            .collect();
     let fit = score::FitPoint {
         crit: &crit,
         x: &x,
@@ -555,6 +762,10 @@ fn rank(
                     .iter()
                     .map(|&j| candidates[scored[j].candidate].describe())
                     .collect(),
+                family: f
+                    .iter()
+                    .map(|&j| candidates[scored[j].candidate].clone())
+                    .collect(),
             }
         })
         .collect();
@@ -578,7 +789,7 @@ fn refit_leading(
     f_hi: f64,
     not_tried: &mut Vec<NotTried>,
     progress: &mut dyn FnMut(&str),
-) -> (Vec<Refit>, Option<(usize, Current)>) {
+) -> (Vec<Refit>, Option<(usize, Current)>, Vec<NotTried>) {
     let Ranking {
         candidates,
         scored,
@@ -589,6 +800,7 @@ fn refit_leading(
     } = ranking;
     let mut refits: Vec<Refit> = Vec::new();
     let mut best: Option<(usize, Current)> = None;
+    let mut not_identifiable = Vec::new();
     // Refit only what the score makes plausible: the score and LR statistics agree for small
     // effects and the score understates large ones, so a loose gate (1000× the LR's
     // threshold) loses nothing and saves the refits when there is nothing to find.
@@ -614,7 +826,17 @@ fn refit_leading(
                 }
             })
             .collect();
-        match refit(model, vars, obs, opts, cur, cand, &start, f_hi, *sigma2) {
+        match refit(
+            model,
+            vars,
+            obs,
+            opts,
+            cur,
+            cand,
+            (&start, true),
+            f_hi,
+            *sigma2,
+        ) {
             Ok((mut r, next)) => {
                 r.equivalent = ranked[f].equivalent.clone();
                 progress(&format!(
@@ -629,8 +851,22 @@ fn refit_leading(
                 let better = best
                     .as_ref()
                     .is_none_or(|(b, _)| margin(&r, *threshold) > margin(&refits[*b], *threshold));
-                if r.p_value < *threshold && better {
-                    best = Some((refits.len(), next));
+                let why = unidentifiable(&cand.params(f_hi), &r.params);
+                if r.p_value < *threshold {
+                    match why {
+                        None if better => best = Some((refits.len(), next)),
+                        None => {}
+                        Some(reason) => {
+                            progress(&format!(
+                                "indicated but not identifiable: {} ({reason})",
+                                r.effect
+                            ));
+                            not_identifiable.push(NotTried {
+                                effect: r.effect.clone(),
+                                reason,
+                            });
+                        }
+                    }
                 }
                 if !r.converged {
                     not_tried.push(NotTried {
@@ -649,7 +885,53 @@ fn refit_leading(
             }),
         }
     }
-    (refits, best)
+    (refits, best, not_identifiable)
+}
+
+/// Two-sided 95 % normal quantile: an effect's confidence interval is `estimate ± Z95 σ`.
+const Z95: f64 = 1.96;
+
+/// Why an effect's refitted estimates `est` (of parameters `params`) do not make it a physical,
+/// identified effect, or `None` when they do: every parameter away from its bounds (but the
+/// nested bound of its size, and a ψ of zero), and the size parameter's 95 % confidence
+/// interval excluding its nested value (the data tell the effect from its absence).
+fn unidentifiable(params: &[EffectParam], est: &[ParamEstimate]) -> Option<String> {
+    for (j, (np, pe)) in params.iter().zip(est).enumerate() {
+        let v = pe.value;
+        let tol = 1e-3 * np.scale;
+        let size = j == 0;
+        let lower_hit = np.lower.is_finite()
+            && v <= np.lower + tol
+            && !(size && np.lower == np.nested)
+            && np.lower != 0.0;
+        let upper_hit = np.upper.is_finite() && v >= np.upper - tol;
+        if lower_hit || upper_hit {
+            let bound = ParamEstimate {
+                value: if upper_hit { np.upper } else { np.lower },
+                ..pe.clone()
+            };
+            let (b, _, u) = bound.display();
+            let u = if u == "-" {
+                String::new()
+            } else {
+                format!(" {u}")
+            };
+            return Some(format!(
+                "{} at its {} bound {}{u}",
+                pe.describe(),
+                if upper_hit { "upper" } else { "lower" },
+                crate::display::sig(b, 4),
+            ));
+        }
+        if size && !(pe.std_error.is_finite() && (v - np.nested).abs() > Z95 * pe.std_error) {
+            return Some(format!(
+                "{}: its 95 % confidence interval includes {}",
+                pe.describe(),
+                crate::display::sig(np.nested, 4)
+            ));
+        }
+    }
+    None
 }
 
 /// The accepted refit with its location refined where that is significantly better (recorded
@@ -854,16 +1136,30 @@ fn place(
         _ => return None,
     };
     let dof = offsets[0].len() as f64;
+    let cand_params = cand.params(f_hi);
     let (r, next) = offsets
         .iter()
         .filter_map(|o| {
             let st: Vec<f64> = start.iter().chain(o).copied().collect();
-            refit(model, vars, obs, opts, base, &cand, &st, f_hi, sigma2).ok()
+            refit(
+                model,
+                vars,
+                obs,
+                opts,
+                base,
+                &cand,
+                (&st, false),
+                f_hi,
+                sigma2,
+            )
+            .ok()
         })
         .min_by(|a, b| a.1.e.norm_squared().total_cmp(&b.1.e.norm_squared()))?;
     let lr = ((fixed.e.norm_squared() - next.e.norm_squared()) / sigma2).max(0.0);
     let p = residuals::chi2_tail(dof, lr);
-    (p < threshold).then_some((r, next))
+    // A place at the edge of its reach, or a size the data cannot tell from zero, is not a
+    // placement: the candidate's stays.
+    (p < threshold && unidentifiable(&cand_params, &r.params).is_none()).then_some((r, next))
 }
 
 /// The effects' parameter estimates and Cramér-Rao errors at the fit `cur` of `p`.
@@ -976,7 +1272,57 @@ fn analysis(p: &Problem, cur: &Current, opts: &Options) -> Result<ResidualAnalys
     ))
 }
 
-/// Refits the current effects plus `cand` with every parameter free.
+/// Tuning frequencies of a resonator's starting grid across its range.
+const RESONATOR_GRID: usize = 24;
+
+/// A resonator's starting point (its mass and tuning frequency, the last two of `u0`): the tuning
+/// frequency on a log grid across its range at the current mass, then the mass over decades of
+/// its scale at the best frequency, then the frequency refined around the best by halving steps.
+fn tune_resonator(p: &mut Problem, u0: &mut DVector<f64>, mut j_best: f64) {
+    let n = u0.len();
+    if n < 2 {
+        return;
+    }
+    let (lo, hi) = p.bounds();
+    let (im, i_f) = (n - 2, n - 1);
+    let try_at = |p: &mut Problem, u0: &mut DVector<f64>, i: usize, v: f64, j_best: &mut f64| {
+        let mut u = u0.clone();
+        u[i] = v.clamp(lo[i], hi[i]);
+        if let Ok((e, _)) = p.eval(&u, false) {
+            let j = e.norm_squared();
+            if j < *j_best {
+                *j_best = j;
+                *u0 = u;
+            }
+        }
+    };
+    let (f_lo, f_hi) = (lo[i_f].max(1e-9), hi[i_f]);
+    let ratio = (f_hi / f_lo).powf(1.0 / (RESONATOR_GRID - 1) as f64);
+    for k in 0..RESONATOR_GRID {
+        try_at(p, u0, i_f, f_lo * ratio.powi(k as i32), &mut j_best);
+    }
+    for d in REFIT_SIZE_DECADES {
+        try_at(p, u0, im, 10f64.powi(d), &mut j_best);
+    }
+    let mut step = ratio.sqrt();
+    for _ in 0..4 {
+        let f = u0[i_f];
+        try_at(p, u0, i_f, f * step, &mut j_best);
+        try_at(p, u0, i_f, f / step, &mut j_best);
+        step = step.sqrt();
+    }
+}
+
+/// A refit starts where the new parameters are this fraction of the way from their nested values
+/// to the given start, whichever fits best.
+const REFIT_START_FRACTIONS: [f64; 4] = [1.0, 0.3, 0.1, 0.03];
+/// And where the effect's size is its nested value ± its scale times ten to these powers.
+const REFIT_SIZE_DECADES: [i32; 6] = [-2, -1, 0, 1, 2, 3];
+
+/// Refits the current effects plus `cand` with every parameter free, from `start` (the new
+/// parameters' values) or, with `explore`, from the best of the starts around it (see
+/// [`REFIT_START_FRACTIONS`], [`REFIT_SIZE_DECADES`]; a resonator's tuning frequency also on a
+/// grid across its range, refined around the best).
 #[allow(clippy::too_many_arguments)]
 fn refit(
     model: &Model,
@@ -985,7 +1331,7 @@ fn refit(
     opts: &Options,
     cur: &Current,
     cand: &Effect,
-    start: &[f64],
+    (start, explore): (&[f64], bool),
     f_hi: f64,
     sigma2: f64,
 ) -> Result<(Refit, Current), RefitError> {
@@ -1008,13 +1354,70 @@ fn refit(
             parameters: p.scale.len(),
         });
     }
-    // Start: the current point, the new parameters at `start`.
-    let mut u0: Vec<f64> = cur.u.iter().copied().collect();
-    for (np, v) in new_params.iter().zip(start) {
-        u0.push(v.clamp(np.lower, np.upper) / np.scale);
-    }
+    // Start: the current point, the new parameters at `start` or on the way there from their
+    // nested values, whichever fits best: a score step far outside the linear range (a large
+    // effect) must not start the refit in a worse valley than the current fit's.
     let (lo, hi) = p.bounds();
-    let u0 = DVector::from_vec(u0);
+    let mut u0: Option<DVector<f64>> = None;
+    let mut j_start = f64::INFINITY;
+    // The first parameter (the effect's size) also from a grid of decades of its scale on
+    // either side of the nested value: for a large effect the score step is no guide.
+    let size_grid = new_params
+        .first()
+        .filter(|_| explore)
+        .map_or(Vec::new(), |np| {
+            REFIT_SIZE_DECADES
+                .iter()
+                .flat_map(|d| [1.0, -1.0].map(|sign| np.nested + sign * np.scale * 10f64.powi(*d)))
+                .filter(|x| *x > np.lower && *x < np.upper)
+                .collect()
+        });
+    let fractions: &[f64] = if explore {
+        &REFIT_START_FRACTIONS
+    } else {
+        &REFIT_START_FRACTIONS[..1]
+    };
+    let starts = fractions
+        .iter()
+        .map(|t| {
+            new_params
+                .iter()
+                .zip(start)
+                .map(|(np, v)| np.nested + t * (v - np.nested))
+                .collect::<Vec<f64>>()
+        })
+        .chain(size_grid.iter().map(|x0| {
+            let mut v = start.to_vec();
+            if let Some(first) = v.first_mut() {
+                *first = *x0;
+            }
+            v
+        }));
+    for st in starts {
+        let mut u: Vec<f64> = cur.u.iter().copied().collect();
+        for (np, x) in new_params.iter().zip(&st) {
+            u.push(x.clamp(np.lower, np.upper) / np.scale);
+        }
+        let u = DVector::from_vec(u);
+        // A start that cannot be evaluated is skipped (the first is kept so that the
+        // minimizer reports why).
+        let j = p
+            .eval(&u, false)
+            .map_or(f64::INFINITY, |(e, _)| e.norm_squared());
+        if u0.is_none() || j < j_start {
+            j_start = j;
+            u0 = Some(u);
+        }
+    }
+    let Some(mut u0) = u0 else {
+        return Err(RefitError::TooFewObservations {
+            observations: m,
+            parameters: p.scale.len(),
+        });
+    };
+    if explore && matches!(cand, Effect::Resonator { .. }) {
+        tune_resonator(&mut p, &mut u0, j_start);
+    }
     let settings = opts.identification.settings;
     let out = optimize::minimize(
         opts.identification.optimizer,
@@ -1106,10 +1509,17 @@ pub fn final_text(id: &Identification, d: &Diagnosis) -> String {
     use crate::display::{relative, sig};
     use std::fmt::Write;
     let mut s = String::new();
-    let converged = if id.stop.converged() {
+    // The diagnosis continued the identification (and tried more starts) until it converged;
+    // say so when even that did not converge.
+    let converged = if d.base.converged || (d.base.stop.is_empty() && id.stop.converged()) {
         String::new()
     } else {
-        format!(" — the fit did NOT converge ({})", id.stop.describe())
+        let stop = if d.base.stop.is_empty() {
+            id.stop.describe()
+        } else {
+            d.base.stop.clone()
+        };
+        format!(" — the fit did NOT converge ({stop})")
     };
     if d.accepted.is_empty() {
         let _ = writeln!(
@@ -1207,6 +1617,13 @@ fn round_text(s: &mut String, i: usize, r: &Round) {
             p.effect,
             ps.join(", "),
             p.lr
+        );
+    }
+    for x in &r.not_identifiable {
+        let _ = writeln!(
+            s,
+            "    indicated but not identifiable, not added: {} ({})",
+            x.effect, x.reason
         );
     }
     for x in &r.removed {

@@ -1,0 +1,466 @@
+//! The blind suite of the closed loop: a seeded generator of truths — a model with one or two
+//! undeclared effects drawn across every kind of the candidate library (or none), placed across
+//! the model's bodies and body pairs, sized from barely detectable to dominant — their noisy data,
+//! an identification started from parameters perturbed ±30 %, and the judgement of a diagnosis of
+//! it (the right effect first? exactly the injected set? anything added to clean data?).
+//!
+//! One generator for the CI test (`identify/tests/blind.rs`, a few dozen seeded cases asserting
+//! the rates) and the example that measures them over hundreds (`identify/examples/blind.rs`).
+//!
+//! Sizes are set by what the effect does to the data, not by its parameter: each effect's
+//! parameter is chosen (bisection on a log scale) so that its noise-free change of the data is
+//! `signal` in χ² units (Σ((|q₁| − |q₀|)/(ε|q₀|))² over every point), with `signal` drawn
+//! log-uniform over [`SIGNAL`]: from about twice the Bonferroni critical value of one candidate
+//! among a thousand (barely detectable once the fitted variables absorb part of it) to
+//! dominant (a misfit of reduced χ² in the hundreds).
+
+use std::time::Instant;
+
+use rand::rngs::StdRng;
+use rand::{Rng, SeedableRng};
+use rand_distr::{Distribution, StandardNormal};
+
+use super::effects::{Effect, EffectError, Realized};
+use super::{diagnose, DiagnoseError, Diagnosis, Options};
+use crate::frf::{self, Method};
+use crate::identification::{self, data, synthetic, IdentifyError, Variables};
+use crate::measured::MeasuredData;
+use crate::model::Model;
+
+/// Range of an injected effect's signal: its noise-free change of the data in χ² units.
+pub const SIGNAL: (f64, f64) = (100.0, 1.0e5);
+/// Range of the relative noise σ/|q| of the data (0.5-3 %).
+pub const NOISE: (f64, f64) = (0.005, 0.03);
+/// The identification starts from the truth's values times a factor in 1 ± this.
+pub const PERTURBATION: f64 = 0.3;
+/// Share of cases with no effect (clean data).
+pub const CLEAN_SHARE: f64 = 0.25;
+/// Share of the cases with effects that have two.
+pub const TWO_SHARE: f64 = 0.3;
+
+/// One injected effect and its parameter values (SI, in [`Effect::params`] order).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Injected {
+    /// What and where.
+    pub effect: Effect,
+    /// Its parameters.
+    pub values: Vec<f64>,
+    /// Its noise-free change of the data (χ² units).
+    pub signal: f64,
+}
+
+/// One blind case: the truth's hidden effects, the noisy data and the perturbed start.
+#[derive(Debug, Clone)]
+pub struct BlindCase {
+    /// The seed it was drawn from.
+    pub seed: u64,
+    /// The effects the identification model lacks (empty: clean data).
+    pub injected: Vec<Injected>,
+    /// Relative noise σ/|q| of the data.
+    pub noise: f64,
+    /// The data (amplitude characteristics of the truth with the effects, noise, variances).
+    pub data: MeasuredData,
+    /// The identification variables with their initial values perturbed.
+    pub vars: Variables,
+}
+
+/// What a diagnosis of a blind case got right.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Outcome {
+    /// The case's seed.
+    pub seed: u64,
+    /// Number of injected effects.
+    pub injected: usize,
+    /// The first effect the diagnosis accepted is one of the injected ones (same kind and place,
+    /// see [`same_site`]); false on clean data.
+    pub right_first: bool,
+    /// The first family of the first round's ranking holds an injected effect.
+    pub ranked_first: bool,
+    /// The final set of added effects is the injected set, one to one (on clean data: nothing).
+    pub exact: bool,
+    /// Clean data and something was added.
+    pub false_add: bool,
+    /// The effects added, described.
+    pub added: Vec<String>,
+    /// Wall time of the identification and the diagnosis (s).
+    pub seconds: f64,
+    /// Wall time of the diagnosis alone (s).
+    pub diagnosis_seconds: f64,
+}
+
+/// Why a blind case could not be drawn or run.
+#[derive(Debug, thiserror::Error)]
+pub enum BlindError {
+    /// An effect could not be applied to the truth.
+    #[error(transparent)]
+    Effect(#[from] EffectError),
+    /// The truth cannot be solved at a line.
+    #[error(transparent)]
+    Solve(#[from] frf::SolveError),
+    /// The data do not fit the model.
+    #[error(transparent)]
+    Data(#[from] data::DataError),
+    /// The identification could not start.
+    #[error(transparent)]
+    Identify(#[from] IdentifyError),
+    /// The diagnosis could not run.
+    #[error(transparent)]
+    Diagnose(#[from] DiagnoseError),
+    /// The library has no candidate of any kind for this model.
+    #[error("the candidate library is empty for this model")]
+    NoCandidates,
+}
+
+/// Whether `a` and `b` are the same effect for the suite: the same kind at the same place — a
+/// spring between the same two bodies (or body and ground), a mass, resonator or flexibility of
+/// the same body, the gain of the same characteristic, the damping of the same joint. (Point and
+/// direction are not compared: the fitted placement refines them.)
+pub fn same_site(a: &Effect, b: &Effect) -> bool {
+    use Effect::*;
+    let pair = |x: &[Option<String>; 2]| {
+        let mut v = x.to_vec();
+        v.sort();
+        v
+    };
+    match (a, b) {
+        (
+            Spring { bodies: x, .. } | PlacedSpring { bodies: x, .. },
+            Spring { bodies: y, .. } | PlacedSpring { bodies: y, .. },
+        ) => pair(x) == pair(y),
+        (
+            Mass { body: x, .. } | PlacedMass { body: x, .. },
+            Mass { body: y, .. } | PlacedMass { body: y, .. },
+        ) => x == y,
+        (Resonator { body: x, .. }, Resonator { body: y, .. }) => x == y,
+        (
+            Flexible {
+                body: x, axis: i, ..
+            },
+            Flexible {
+                body: y, axis: j, ..
+            },
+        ) => x == y && i == j,
+        (Gain { output: x, .. }, Gain { output: y, .. }) => x == y,
+        (
+            Damping {
+                variable: x,
+                sdes: s,
+                ..
+            },
+            Damping {
+                variable: y,
+                sdes: t,
+                ..
+            },
+        ) => x == y && s == t,
+        _ => false,
+    }
+}
+
+/// The amplitude of every characteristic of `r` at `lines` (gains applied), flattened.
+fn amplitudes(r: &Realized, lines: &[f64]) -> Result<Vec<f64>, frf::SolveError> {
+    let resp = frf::response(&r.model, lines, &[], Method::Auto)?;
+    Ok((0..r.model.outputs.len())
+        .flat_map(|o| {
+            let g = r.gains.get(o).copied().unwrap_or(1.0);
+            resp.output(o)
+                .iter()
+                .map(move |v| g * v.norm())
+                .collect::<Vec<_>>()
+        })
+        .collect())
+}
+
+/// The effect's first parameter as a function of a size `t ∈ (0, ∞)` (t → 0: nested), the
+/// others fixed; `extra` is a second parameter drawn once (a resonator's frequency, a spring's ψ).
+fn values_at(effect: &Effect, nested: &[f64], t: f64, sign: f64, extra: f64) -> Vec<f64> {
+    let mut v = nested.to_vec();
+    match effect {
+        Effect::Gain { .. } => v[0] = sign * t.min(0.45),
+        Effect::Damping { value, .. } => v[0] = value * (sign * t).exp(),
+        Effect::Spring { .. } => {
+            v[0] = t;
+            v[1] = extra;
+        }
+        Effect::Resonator { .. } => {
+            v[0] = t;
+            v[1] = extra;
+        }
+        _ => v[0] = t,
+    }
+    v
+}
+
+/// Injects `effect` into `r` with a size such that its noise-free change of the data `q0` is
+/// `signal` (χ² units at relative noise `noise`); returns the values used.
+#[allow(clippy::too_many_arguments)]
+fn sized(
+    r: &Realized,
+    effect: &Effect,
+    q0: &[f64],
+    lines: &[f64],
+    (noise, f_max): (f64, f64),
+    signal: f64,
+    rng: &mut StdRng,
+) -> Result<Option<(Vec<f64>, f64)>, BlindError> {
+    let params = effect.params(f_max);
+    let nested: Vec<f64> = params.iter().map(|p| p.nested).collect();
+    let sign = if rng.random_bool(0.5) { 1.0 } else { -1.0 };
+    let extra = match effect {
+        Effect::Spring { .. } => rng.random_range(0.05..0.6),
+        Effect::Resonator { .. } => {
+            let (lo, hi) = (lines[0] * 1.2, lines[lines.len() - 1] / 1.2);
+            lo * (hi / lo).powf(rng.random::<f64>())
+        }
+        _ => 0.0,
+    };
+    let chi2 = |t: f64| -> Result<Option<f64>, BlindError> {
+        let mut x = r.clone();
+        let v = values_at(effect, &nested, t, sign, extra);
+        effect.apply(&mut x, &v, f_max)?;
+        let Ok(q) = amplitudes(&x, lines) else {
+            return Ok(None);
+        };
+        Ok(Some(
+            q.iter()
+                .zip(q0)
+                .map(|(a, b)| ((a - b) / (noise * b)).powi(2))
+                .sum(),
+        ))
+    };
+    // Bracket on a log scale from the parameter's own scale, then bisect.
+    let (mut lo, mut hi) = match effect {
+        Effect::Gain { .. } => (1e-6, 0.45),
+        Effect::Damping { .. } => (1e-6, 3.0),
+        _ => (params[0].scale * 1e-8, params[0].scale * 1e8),
+    };
+    match chi2(hi)? {
+        Some(c) if c >= signal => {}
+        _ => return Ok(None),
+    }
+    for _ in 0..60 {
+        let mid = (lo * hi).sqrt();
+        match chi2(mid)? {
+            Some(c) if c < signal => lo = mid,
+            Some(_) => hi = mid,
+            None => return Ok(None),
+        }
+        if hi / lo < 1.02 {
+            break;
+        }
+    }
+    let v = values_at(effect, &nested, hi, sign, extra);
+    Ok(Some((v, chi2(hi)?.unwrap_or(signal))))
+}
+
+/// Draws blind case `seed` on `model` (the truth without effects, its values the truth's) with
+/// identification variables `vars`, measured at `lines` (Hz). `clean` forces a case without
+/// effects; otherwise one in four is clean.
+pub fn draw(
+    model: &Model,
+    vars: &Variables,
+    lines: &[f64],
+    seed: u64,
+    clean: Option<bool>,
+) -> Result<BlindCase, BlindError> {
+    let mut rng = StdRng::seed_from_u64(seed);
+    let f_max = lines.iter().copied().fold(0.0, f64::max);
+    let f_min = lines.iter().copied().fold(f64::INFINITY, f64::min);
+    let noise = rng.random_range(NOISE.0..NOISE.1);
+    let clean = clean.unwrap_or_else(|| rng.random_bool(CLEAN_SHARE));
+    let n_effects = if clean {
+        0
+    } else if rng.random_bool(TWO_SHARE) {
+        2
+    } else {
+        1
+    };
+    let x: Vec<f64> = vars
+        .vars
+        .iter()
+        .map(|v| {
+            v.targets
+                .first()
+                .and_then(|t| model.param(t.param).map(|p| p / t.ratio))
+                .unwrap_or(v.initial)
+        })
+        .collect();
+    let labels: Vec<String> = (0..model.outputs.len()).map(|o| format!("#{o}")).collect();
+    let library = super::generate::candidates(model, vars, &x, &labels, f_min, f_max);
+    let mut kinds: Vec<&'static str> = library.iter().map(Effect::kind).collect();
+    kinds.dedup();
+    kinds.sort();
+    kinds.dedup();
+    if kinds.is_empty() {
+        return Err(BlindError::NoCandidates);
+    }
+    let mut truth = Realized {
+        model: model.clone(),
+        vars: vars.clone(),
+        gains: vec![1.0; model.outputs.len()],
+    };
+    let mut injected: Vec<Injected> = Vec::new();
+    let mut attempts = 0;
+    while injected.len() < n_effects && attempts < 200 {
+        attempts += 1;
+        let kind = kinds[rng.random_range(0..kinds.len())];
+        let of_kind: Vec<&Effect> = library.iter().filter(|e| e.kind() == kind).collect();
+        let effect = of_kind[rng.random_range(0..of_kind.len())].clone();
+        if injected.iter().any(|i| same_site(&i.effect, &effect)) {
+            continue;
+        }
+        let q0 = amplitudes(&truth, lines)?;
+        let signal = SIGNAL.0 * (SIGNAL.1 / SIGNAL.0).powf(rng.random::<f64>());
+        let Some((values, got)) = sized(
+            &truth,
+            &effect,
+            &q0,
+            lines,
+            (noise, f_max),
+            signal,
+            &mut rng,
+        )?
+        else {
+            continue;
+        };
+        effect.apply(&mut truth, &values, f_max)?;
+        injected.push(Injected {
+            effect,
+            values,
+            signal: got,
+        });
+    }
+    let mut data = synthetic::amplitude_data(&truth.model, lines, noise, || {
+        StandardNormal.sample(&mut rng)
+    })?;
+    for (c, g) in data.characteristics.iter_mut().zip(&truth.gains) {
+        c.amplitude.iter_mut().for_each(|a| *a *= g);
+        if let Some(v) = c.variance.as_mut() {
+            v.iter_mut().for_each(|s| *s *= g * g);
+        }
+    }
+    let mut vars = vars.clone();
+    for (v, xi) in vars.vars.iter_mut().zip(&x) {
+        let f = 1.0 + rng.random_range(-PERTURBATION..PERTURBATION);
+        let x0 = if *xi != 0.0 { xi * f } else { v.initial * f };
+        v.initial = x0.clamp(v.lower, v.upper);
+    }
+    Ok(BlindCase {
+        seed,
+        injected,
+        noise,
+        data,
+        vars,
+    })
+}
+
+/// Identifies `case` on `model` (default options but `identification`), diagnoses it with
+/// `opts`, and judges the diagnosis.
+pub fn run(
+    model: &Model,
+    case: &BlindCase,
+    opts: &Options,
+) -> Result<(Outcome, Diagnosis), BlindError> {
+    let t0 = Instant::now();
+    let obs = data::validate(&case.data, model, "blind case")?;
+    let id = identification::identify(
+        model,
+        &obs,
+        &case.vars,
+        &opts.identification,
+        &mut |_, _| {},
+    )?;
+    let t1 = Instant::now();
+    let d = diagnose(model, &obs, &case.vars, &id, opts, &mut |_| {})?;
+    let t2 = Instant::now();
+    let outcome = judge(case, &d, (t2 - t0).as_secs_f64(), (t2 - t1).as_secs_f64());
+    Ok((outcome, d))
+}
+
+/// Judges diagnosis `d` of `case`.
+pub fn judge(case: &BlindCase, d: &Diagnosis, seconds: f64, diagnosis_seconds: f64) -> Outcome {
+    let hit = |e: &Effect| case.injected.iter().any(|i| same_site(&i.effect, e));
+    let right_first = d.effects.first().is_some_and(hit);
+    let ranked_first = d
+        .rounds
+        .first()
+        .and_then(|r| r.ranked.first())
+        .is_some_and(|r| r.family.iter().any(hit));
+    // One to one: every injected effect matched by a distinct added one and nothing else added.
+    let mut used = vec![false; d.effects.len()];
+    let all_found = case.injected.iter().all(|i| {
+        match d
+            .effects
+            .iter()
+            .enumerate()
+            .find(|(k, e)| !used[*k] && same_site(&i.effect, e))
+        {
+            Some((k, _)) => {
+                used[k] = true;
+                true
+            }
+            None => false,
+        }
+    });
+    let exact = all_found && used.iter().all(|u| *u);
+    Outcome {
+        seed: case.seed,
+        injected: case.injected.len(),
+        right_first,
+        ranked_first,
+        exact,
+        false_add: case.injected.is_empty() && !d.effects.is_empty(),
+        added: d.effects.iter().map(Effect::describe).collect(),
+        seconds,
+        diagnosis_seconds,
+    }
+}
+
+/// The rates of a set of outcomes.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Rates {
+    /// Cases with effects.
+    pub with_effects: usize,
+    /// Clean cases.
+    pub clean: usize,
+    /// Share of the cases with effects whose first accepted effect is an injected one.
+    pub right_first: f64,
+    /// Share of the cases with effects whose first ranked family holds an injected one.
+    pub ranked_first: f64,
+    /// Share of all cases whose final set is exactly the injected one.
+    pub exact: f64,
+    /// Share of the clean cases where something was added.
+    pub false_add: f64,
+    /// Median wall time per case, identification included (s).
+    pub median_seconds: f64,
+    /// Median wall time of the diagnosis alone (s).
+    pub median_diagnosis_seconds: f64,
+}
+
+/// The rates over `outcomes` (NaN where a share has no cases).
+pub fn rates(outcomes: &[Outcome]) -> Rates {
+    let share = |n: usize, d: usize| {
+        if d == 0 {
+            f64::NAN
+        } else {
+            n as f64 / d as f64
+        }
+    };
+    let with: Vec<&Outcome> = outcomes.iter().filter(|o| o.injected > 0).collect();
+    let clean = outcomes.len() - with.len();
+    let median = |f: &dyn Fn(&Outcome) -> f64| {
+        let mut t: Vec<f64> = outcomes.iter().map(f).collect();
+        t.sort_by(f64::total_cmp);
+        t.get(t.len() / 2).copied().unwrap_or(f64::NAN)
+    };
+    Rates {
+        with_effects: with.len(),
+        clean,
+        right_first: share(with.iter().filter(|o| o.right_first).count(), with.len()),
+        ranked_first: share(with.iter().filter(|o| o.ranked_first).count(), with.len()),
+        exact: share(outcomes.iter().filter(|o| o.exact).count(), outcomes.len()),
+        false_add: share(outcomes.iter().filter(|o| o.false_add).count(), clean),
+        median_seconds: median(&|o| o.seconds),
+        median_diagnosis_seconds: median(&|o| o.diagnosis_seconds),
+    }
+}

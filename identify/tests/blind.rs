@@ -1,0 +1,120 @@
+//! The blind suite's fast subset (`identify::diagnose::blind`): seeded FWD-32J cases with one or
+//! two hidden effects of every kind in the candidate library (or none), 0.5-3 % noise, the
+//! identification started ±30 % away — the closed loop must put the right effect first, end with
+//! exactly the injected set, and add nothing to clean data, at the rates asserted below. The
+//! rates over 200 cases come from `cargo run -p identify --profile test --example blind`.
+
+// Test helpers unwrap: a panic with its message is the failure report.
+#![allow(clippy::unwrap_used)]
+
+mod common;
+
+use common::load_model;
+use identify::diagnose::{self, blind};
+use identify::identification::{synthetic, variables};
+
+/// The seeds of the subset (the first of the 200 the example runs).
+const SEEDS: std::ops::RangeInclusive<u64> = 1..=SUBSET;
+const SUBSET: u64 = 10;
+
+#[test]
+fn the_blind_subset_is_diagnosed_at_the_asserted_rates() {
+    let model = load_model("fwd32j.toml");
+    let vars = variables::load(
+        &common::repo().join("configs/identification/fwd32j.toml"),
+        &model,
+    )
+    .expect("variables");
+    let lines = synthetic::fwd32j_lines();
+    let opts = diagnose::Options::default();
+    // The cases are independent: two at a time (CI has two cores).
+    let seeds: Vec<u64> = SEEDS.collect();
+    let outcomes: Vec<_> = std::thread::scope(|scope| {
+        let workers: Vec<_> = seeds
+            .chunks(seeds.len().div_ceil(2))
+            .map(|chunk| {
+                let (model, vars, lines, opts) = (&model, &vars, &lines, &opts);
+                scope.spawn(move || {
+                    chunk
+                        .iter()
+                        .map(|&seed| {
+                            let case =
+                                blind::draw(model, vars, lines, seed, None).expect("a blind case");
+                            // The generator injects what it says: a case with effects has data
+                            // that differ from the model's.
+                            assert!(case
+                                .injected
+                                .iter()
+                                .all(|i| i.signal >= blind::SIGNAL.0 * 0.9));
+                            let (o, _) = blind::run(model, &case, opts)
+                                .expect("identification and diagnosis");
+                            println!("seed {seed}: {o:?}");
+                            o
+                        })
+                        .collect::<Vec<_>>()
+                })
+            })
+            .collect();
+        workers
+            .into_iter()
+            .flat_map(|w| w.join().expect("a blind worker"))
+            .collect()
+    });
+    let r = blind::rates(&outcomes);
+    println!("{r:?}");
+    assert!(r.clean >= 3 && r.with_effects >= 5, "{r:?}");
+    assert_eq!(r.false_add, 0.0, "something added to clean data: {r:?}");
+    assert!(r.right_first >= RIGHT_FIRST, "{r:?}");
+    assert!(r.exact >= EXACT, "{r:?}");
+}
+
+/// Share of the subset's cases with effects whose first added effect is an injected one.
+const RIGHT_FIRST: f64 = 0.6;
+/// Share of the subset's cases that end with exactly the injected set.
+const EXACT: f64 = 0.7;
+
+#[test]
+fn the_judge_matches_effects_by_kind_and_place() {
+    let model = load_model("fwd32j.toml");
+    let vars = variables::load(
+        &common::repo().join("configs/identification/fwd32j.toml"),
+        &model,
+    )
+    .expect("variables");
+    let lines = synthetic::fwd32j_lines();
+    let clean = blind::draw(&model, &vars, &lines, 5, Some(true)).unwrap();
+    assert!(clean.injected.is_empty());
+    // Starts perturbed within ±30 % of the truth, inside the bounds.
+    let truth: Vec<f64> = vars
+        .vars
+        .iter()
+        .map(|v| model.param(v.targets[0].param).unwrap() / v.targets[0].ratio)
+        .collect();
+    // (A variable whose truth is 0 starts from its file's initial value, perturbed.)
+    for ((v, x), v0) in clean.vars.vars.iter().zip(&truth).zip(&vars.vars) {
+        let x = if *x != 0.0 { x } else { &v0.initial };
+        assert!(
+            (v.initial - x).abs() <= blind::PERTURBATION * x.abs() + 1e-12,
+            "{}: {} vs {x}",
+            v.name,
+            v.initial
+        );
+    }
+    assert!((blind::NOISE.0..blind::NOISE.1).contains(&clean.noise));
+    let with = blind::draw(&model, &vars, &lines, 5, Some(false)).unwrap();
+    assert!(!with.injected.is_empty());
+    for i in &with.injected {
+        assert!(blind::same_site(&i.effect, &i.effect));
+        assert!(
+            (blind::SIGNAL.0 * 0.9..blind::SIGNAL.1 * 1.1).contains(&i.signal),
+            "{i:?}"
+        );
+    }
+    // A case drawn twice from its seed is the same case.
+    let again = blind::draw(&model, &vars, &lines, 5, Some(false)).unwrap();
+    assert_eq!(again.injected, with.injected);
+    assert_eq!(
+        again.data.characteristics[0].amplitude,
+        with.data.characteristics[0].amplitude
+    );
+}
