@@ -794,7 +794,7 @@ fn refit_leading(
         candidates,
         scored,
         families,
-        ranked,
+        ranked: _,
         threshold,
         sigma2,
     } = ranking;
@@ -804,41 +804,29 @@ fn refit_leading(
     // Refit only what the score makes plausible: the score and LR statistics agree for small
     // effects and the score understates large ones, so a loose gate (1000× the LR's
     // threshold) loses nothing and saves the refits when there is nothing to find.
-    for (f, family) in families
+    for family in families
         .iter()
-        .enumerate()
         .take(opts.refit)
-        .filter(|(_, f)| scored[f[0]].p_value < (1000.0 * threshold).min(1.0))
+        .filter(|f| scored[f[0]].p_value < (1000.0 * threshold).min(1.0))
     {
-        let s = &scored[family[0]];
-        let cand = &candidates[s.candidate];
-        // The first parameter starts at the score's Gauss-Newton step, the others at their
-        // initial values.
-        let start: Vec<f64> = cand
-            .params(f_hi)
+        let members: Vec<(&Effect, f64)> = family
             .iter()
-            .enumerate()
-            .map(|(j, np)| {
-                if j == 0 {
-                    np.nested + s.step
-                } else {
-                    np.initial
-                }
-            })
+            .map(|&j| (&candidates[scored[j].candidate], scored[j].step))
             .collect();
-        match refit(
-            model,
-            vars,
-            obs,
+        match refit_family(
+            (model, vars, obs),
             opts,
             cur,
-            cand,
-            (&start, true),
+            &members,
             f_hi,
             *sigma2,
         ) {
-            Ok((mut r, next)) => {
-                r.equivalent = ranked[f].equivalent.clone();
+            Ok((mut r, next, cand)) => {
+                r.equivalent = members
+                    .iter()
+                    .map(|(c, _)| c.describe())
+                    .filter(|d| *d != r.effect)
+                    .collect();
                 progress(&format!(
                     "refit {}: ΔJ = {:.1}, LR = {:.1}, p = {:.2e}",
                     r.effect,
@@ -880,12 +868,63 @@ fn refit_leading(
                 refits.push(r);
             }
             Err(reason) => not_tried.push(NotTried {
-                effect: format!("refit of {}", cand.describe()),
+                effect: format!("refit of {}", members[0].0.describe()),
                 reason: reason.to_string(),
             }),
         }
     }
     (refits, best, not_identifiable)
+}
+
+/// Members of a ranking family refitted besides its leader when the leader's refit leaves the
+/// data unexplained.
+const FAMILY_REFITS: usize = 4;
+
+/// Refits a family's leader (exploring starts) and, when that leaves the misfit well above the
+/// noise, up to [`FAMILY_REFITS`] of the members the score test could not tell from it: the score
+/// is a small-effect statistic, and for a large effect the place matters (a spring at the body's
+/// centre and one at its corner differ by the moment arm). The best refit, and its effect.
+fn refit_family<'a>(
+    (model, vars, obs): (&Model, &Variables, &Observations),
+    opts: &Options,
+    cur: &Current,
+    members: &[(&'a Effect, f64)],
+    f_hi: f64,
+    sigma2: f64,
+) -> Result<(Refit, Current, &'a Effect), RefitError> {
+    let Some(((leader, step), others)) = members.split_first() else {
+        return Err(RefitError::TooFewObservations {
+            observations: cur.e.len(),
+            parameters: 0,
+        });
+    };
+    let start = score_start(leader, *step, f_hi);
+    let (r, next) = refit(model, vars, obs, opts, cur, leader, (&start, true), f_hi, sigma2)?;
+    let mut best = (r, next, *leader);
+    let explained = |r: &Refit| 2.0 * r.criterion_after / sigma2 < 1.5 * cur.e.len() as f64;
+    if explained(&best.0) {
+        return Ok(best);
+    }
+    for (cand, step) in others.iter().take(FAMILY_REFITS) {
+        let start = score_start(cand, *step, f_hi);
+        if let Ok((r, next)) = refit(model, vars, obs, opts, cur, cand, (&start, false), f_hi, sigma2)
+        {
+            if r.criterion_after < best.0.criterion_after {
+                best = (r, next, *cand);
+            }
+        }
+    }
+    Ok(best)
+}
+
+/// A refit's start for `cand`'s parameters: the first (its size) at the score's Gauss-Newton
+/// `step` from its nested value, the others at their initial values.
+fn score_start(cand: &Effect, step: f64, f_hi: f64) -> Vec<f64> {
+    cand.params(f_hi)
+        .iter()
+        .enumerate()
+        .map(|(j, np)| if j == 0 { np.nested + step } else { np.initial })
+        .collect()
 }
 
 /// Two-sided 95 % normal quantile: an effect's confidence interval is `estimate ± Z95 σ`.
@@ -1393,6 +1432,10 @@ fn refit(
             }
             v
         }));
+    // The score step itself (the first start) is always refitted: the best-fitting start is a
+    // better valley for a large effect but can be a worse one for a small effect (a start that
+    // fits best before the refit is not the one that fits best after it). The better end wins.
+    let mut score_step: Option<DVector<f64>> = None;
     for st in starts {
         let mut u: Vec<f64> = cur.u.iter().copied().collect();
         for (np, x) in new_params.iter().zip(&st) {
@@ -1404,12 +1447,15 @@ fn refit(
         let j = p
             .eval(&u, false)
             .map_or(f64::INFINITY, |(e, _)| e.norm_squared());
+        if score_step.is_none() {
+            score_step = Some(u.clone());
+        }
         if u0.is_none() || j < j_start {
             j_start = j;
             u0 = Some(u);
         }
     }
-    let Some(mut u0) = u0 else {
+    let (Some(mut u0), Some(score_step)) = (u0, score_step) else {
         return Err(RefitError::TooFewObservations {
             observations: m,
             parameters: p.scale.len(),
@@ -1419,15 +1465,40 @@ fn refit(
         tune_resonator(&mut p, &mut u0, j_start);
     }
     let settings = opts.identification.settings;
-    let out = optimize::minimize(
-        opts.identification.optimizer,
-        &mut p,
-        &u0,
-        &lo,
-        &hi,
-        &settings,
-        &mut |_| {},
-    )?;
+    let scale = p.scale.clone();
+    let mut minimize_from = |u: &DVector<f64>| {
+        optimize::minimize(
+            opts.identification.optimizer,
+            &mut p,
+            u,
+            &lo,
+            &hi,
+            &settings,
+            &mut |_| {},
+        )
+    };
+    let mut out = minimize_from(&u0)?;
+    let mut others = Vec::new();
+    if score_step != u0 {
+        others.push(score_step);
+    }
+    // A large missing effect bends the fit's own parameters to mimic it, and the refit can stay
+    // in that valley: the variables' initial values, with the effect at its best start, are a
+    // start outside it.
+    if explore {
+        let mut fresh = u0.clone();
+        for (i, x) in vars.initial().iter().enumerate() {
+            fresh[i] = x / scale[i];
+        }
+        others.push(fresh);
+    }
+    for u in others {
+        if let Ok(other) = minimize_from(&u) {
+            if other.criterion < out.criterion {
+                out = other;
+            }
+        }
+    }
     let (e, jac) = p.eval(&out.u, true)?;
     let jac = jac.ok_or(EvalError::NoJacobian)?;
     let j0 = 0.5 * cur.e.norm_squared();
