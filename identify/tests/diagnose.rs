@@ -103,6 +103,10 @@ fn the_missing_hydraulic_actuator_is_found_added_and_the_fit_reaches_the_noise_f
         k.std_error
     );
     assert_eq!(d.accepted.len(), 1, "nothing else should be added");
+    assert_eq!(
+        d.outside_library, None,
+        "explained: no outside-the-library verdict"
+    );
     assert!(
         d.after.chi2_p.expect("R is known") > 0.001,
         "after: {}",
@@ -505,5 +509,36 @@ fn a_table_that_is_not_rigid_is_found_and_the_refit_reaches_the_noise_floor() {
         d.after.chi2_p.expect("R known") > 0.001,
         "after: {}",
         d.after.verdict
+    );
+}
+
+/// Data whose amplitudes carry a ripple along frequency that no element of a rigid-body model
+/// makes (a sensor's own resonance-free frequency response, say): the diagnosis must end by saying
+/// plainly that an effect outside its library remains, where, and on which characteristics —
+/// whatever partial fixes it tried.
+#[test]
+fn a_misfit_no_candidate_explains_is_reported_as_outside_the_library() {
+    let truth = load_model("fwd32j.toml");
+    let mut data = measure(&truth, 0.01, 5);
+    for c in &mut data.characteristics {
+        for (a, f) in c.amplitude.iter_mut().zip(&c.freqs_hz) {
+            *a *= 1.0 + 0.2 * (2.0 * std::f64::consts::PI * f.log10() / 0.25).sin();
+        }
+    }
+    let case = fit("fwd32j.toml", "fwd32j.toml", &data);
+    let d = run(&case);
+    assert!(!d.after.explained, "after: {}", d.after.verdict);
+    let verdict = d
+        .outside_library
+        .as_deref()
+        .expect("an outside-the-library verdict");
+    assert!(verdict.starts_with("OUTSIDE THE LIBRARY"), "{verdict}");
+    assert!(
+        verdict.contains("table u"),
+        "names the characteristics: {verdict}"
+    );
+    assert!(
+        diagnose::final_text(&case.id, &d).contains("OUTSIDE THE LIBRARY"),
+        "the final-model lines say it too"
     );
 }

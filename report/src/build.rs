@@ -497,7 +497,10 @@ pub fn diagnosis(d: &diagnose::Diagnosis, base: &str, id: &Identification) -> Di
         final_model,
         final_parameters: final_parameters(d, id),
         explained: d.after.explained,
-        verdict: d.after.verdict.clone(),
+        verdict: match &d.outside_library {
+            Some(v) => format!("{} {v}", d.after.verdict),
+            None => d.after.verdict.clone(),
+        },
         not_tried: d
             .not_tried
             .iter()

@@ -240,6 +240,61 @@ pub struct Diagnosis {
     pub base: BaseFit,
     /// The units of the JSON form: [`JSON_UNITS`].
     pub units: &'static str,
+    /// When the final model still does not explain the data: the plain verdict that an effect
+    /// the candidate library lacks remains, where in frequency and on which characteristics.
+    pub outside_library: Option<String>,
+}
+
+/// The verdict when the diagnosis ends with the data unexplained: no candidate of the library
+/// (or none that is significant and physical) brings the fit to the noise level, so an effect the
+/// library lacks remains. Names the band with the largest excess of misfit and the
+/// characteristics carrying most of it, so an engineer knows where to look.
+fn outside_library(after: &ResidualAnalysis, added: usize) -> Option<String> {
+    if after.explained {
+        return None;
+    }
+    let total: f64 = after.characteristics.iter().map(|c| c.chi2).sum();
+    let mut chars: Vec<(&str, f64)> = after
+        .characteristics
+        .iter()
+        .map(|c| (c.label.as_str(), c.chi2 / total.max(f64::MIN_POSITIVE)))
+        .collect();
+    chars.sort_by(|a, b| b.1.total_cmp(&a.1));
+    let mut on: Vec<String> = Vec::new();
+    let mut covered = 0.0;
+    for (label, share) in chars {
+        on.push(format!("{label} ({:.0} %)", 100.0 * share));
+        covered += share;
+        if covered >= 0.6 || on.len() == 3 {
+            break;
+        }
+    }
+    let band = after
+        .bands
+        .iter()
+        .find(|b| b.share > b.points_share)
+        .map(|b| {
+            format!(
+                " at {:.0}-{:.0} Hz (the {:.0} Hz mode, mostly {}: {:.0} % of the misfit on {:.0} % of the lines)",
+                b.from_hz,
+                b.to_hz,
+                b.mode_hz,
+                b.body,
+                100.0 * b.share,
+                100.0 * b.points_share
+            )
+        })
+        .unwrap_or_default();
+    let partial = if added > 0 {
+        format!(" The {added} effect(s) added are partial fixes; judge them with this in mind.")
+    } else {
+        String::new()
+    };
+    Some(format!(
+        "OUTSIDE THE LIBRARY: no candidate effect brings the model to the noise level (reduced χ² {:.3} after); an effect the library lacks remains{band}, on {}.{partial} Check the model form there (a joint's held-stiff direction, a flexible body, a missing element) and the data (units, band, sensor placement).",
+        after.reduced_chi2,
+        on.join(", ")
+    ))
 }
 
 /// What the numbers of a diagnosis's JSON form are in (the text report uses the paper's units:
@@ -464,9 +519,11 @@ fn final_fit(
     let realized = pf.realize(&gamma)?;
     let mut final_model = realized.model;
     realized.vars.apply(&mut final_model, &x);
+    let outside_library = outside_library(&after, accepted.len());
     Ok(Diagnosis {
         before,
         after,
+        outside_library,
         rounds,
         accepted,
         not_tried,
@@ -803,24 +860,25 @@ fn refit_leading(
     let mut not_identifiable = Vec::new();
     // Refit only what the score makes plausible: the score and LR statistics agree for small
     // effects and the score understates large ones, so a loose gate (1000× the LR's
-    // threshold) loses nothing and saves the refits when there is nothing to find.
-    for family in families
+    // threshold) loses nothing and saves the refits when there is nothing to find. The families
+    // are refitted in parallel.
+    let count = opts.refit;
+    let jobs: Vec<Vec<(&Effect, f64)>> = families
         .iter()
-        .take(opts.refit)
+        .take(count)
         .filter(|f| scored[f[0]].p_value < (1000.0 * threshold).min(1.0))
-    {
-        let members: Vec<(&Effect, f64)> = family
-            .iter()
-            .map(|&j| (&candidates[scored[j].candidate], scored[j].step))
-            .collect();
-        match refit_family(
-            (model, vars, obs),
-            opts,
-            cur,
-            &members,
-            f_hi,
-            *sigma2,
-        ) {
+        .map(|family| {
+            family
+                .iter()
+                .map(|&j| (&candidates[scored[j].candidate], scored[j].step))
+                .collect()
+        })
+        .collect();
+    let results = in_parallel(&jobs, |members| {
+        refit_family((model, vars, obs), opts, cur, members, f_hi, *sigma2)
+    });
+    for (members, result) in jobs.iter().zip(results) {
+        match result {
             Ok((mut r, next, cand)) => {
                 r.equivalent = members
                     .iter()
@@ -839,16 +897,14 @@ fn refit_leading(
                 let better = best
                     .as_ref()
                     .is_none_or(|(b, _)| margin(&r, *threshold) > margin(&refits[*b], *threshold));
-                let why = unidentifiable(&cand.params(f_hi), &r.params);
+                let why = unidentifiable(&cand.params(f_hi), &r.params)
+                    .or_else(|| partial_fix(&r, cur, *sigma2));
                 if r.p_value < *threshold {
                     match why {
                         None if better => best = Some((refits.len(), next)),
                         None => {}
                         Some(reason) => {
-                            progress(&format!(
-                                "indicated but not identifiable: {} ({reason})",
-                                r.effect
-                            ));
+                            progress(&format!("indicated but not added: {} ({reason})", r.effect));
                             not_identifiable.push(NotTried {
                                 effect: r.effect.clone(),
                                 reason,
@@ -876,12 +932,46 @@ fn refit_leading(
     (refits, best, not_identifiable)
 }
 
+/// `f` over `jobs` on the machine's cores (scoped threads taking the next job in turn); the
+/// results in the jobs' order.
+fn in_parallel<J: Sync, R: Send>(jobs: &[J], f: impl Fn(&J) -> R + Sync) -> Vec<R> {
+    use std::sync::atomic::{AtomicUsize, Ordering};
+    use std::sync::Mutex;
+    let threads = std::thread::available_parallelism()
+        .map_or(1, |n| n.get())
+        .min(jobs.len());
+    if threads <= 1 {
+        return jobs.iter().map(&f).collect();
+    }
+    let next = AtomicUsize::new(0);
+    let results: Mutex<Vec<Option<R>>> = Mutex::new((0..jobs.len()).map(|_| None).collect());
+    std::thread::scope(|scope| {
+        for _ in 0..threads {
+            scope.spawn(|| loop {
+                let i = next.fetch_add(1, Ordering::Relaxed);
+                let Some(job) = jobs.get(i) else { break };
+                let r = f(job);
+                if let Ok(mut all) = results.lock() {
+                    all[i] = Some(r);
+                }
+            });
+        }
+    });
+    results
+        .into_inner()
+        .unwrap_or_else(|poisoned| poisoned.into_inner())
+        .into_iter()
+        .flatten()
+        .collect()
+}
+
 /// Members of a ranking family refitted besides its leader when the leader's refit leaves the
 /// data unexplained.
 const FAMILY_REFITS: usize = 4;
 
-/// Refits a family's leader (exploring starts) and, when that leaves the misfit well above the
-/// noise, up to [`FAMILY_REFITS`] of the members the score test could not tell from it: the score
+/// Refits a family's leader (exploring starts) and, when that is more than a partial fix but leaves
+/// the misfit well above the noise, up to [`FAMILY_REFITS`] members of its kind that the score test
+/// could not tell from it: the score
 /// is a small-effect statistic, and for a large effect the place matters (a spring at the body's
 /// centre and one at its corner differ by the moment arm). The best refit, and its effect.
 fn refit_family<'a>(
@@ -899,16 +989,38 @@ fn refit_family<'a>(
         });
     };
     let start = score_start(leader, *step, f_hi);
-    let (r, next) = refit(model, vars, obs, opts, cur, leader, (&start, true), f_hi, sigma2)?;
+    let (r, next) = refit(
+        model,
+        vars,
+        obs,
+        opts,
+        cur,
+        leader,
+        (&start, true),
+        f_hi,
+        sigma2,
+    )?;
     let mut best = (r, next, *leader);
+    // Only a leader that is a real part of the answer (not a partial fix) but leaves the data
+    // unexplained makes its place worth refining; members of the leader's kind only.
     let explained = |r: &Refit| 2.0 * r.criterion_after / sigma2 < 1.5 * cur.e.len() as f64;
-    if explained(&best.0) {
+    if explained(&best.0) || partial_fix(&best.0, cur, sigma2).is_some() {
         return Ok(best);
     }
-    for (cand, step) in others.iter().take(FAMILY_REFITS) {
+    let same_kind = others.iter().filter(|(c, _)| c.kind() == leader.kind());
+    for (cand, step) in same_kind.take(FAMILY_REFITS) {
         let start = score_start(cand, *step, f_hi);
-        if let Ok((r, next)) = refit(model, vars, obs, opts, cur, cand, (&start, false), f_hi, sigma2)
-        {
+        if let Ok((r, next)) = refit(
+            model,
+            vars,
+            obs,
+            opts,
+            cur,
+            cand,
+            (&start, false),
+            f_hi,
+            sigma2,
+        ) {
             if r.criterion_after < best.0.criterion_after {
                 best = (r, next, *cand);
             }
@@ -925,6 +1037,25 @@ fn score_start(cand: &Effect, step: f64, f_hi: f64) -> Vec<f64> {
         .enumerate()
         .map(|(j, np)| if j == 0 { np.nested + step } else { np.initial })
         .collect()
+}
+
+/// Least share of the misfit above the noise level an effect must explain to be added.
+const MIN_EXCESS_SHARE: f64 = 0.1;
+
+/// Why a significant refit is only a partial fix, or `None`: an effect that removes less than
+/// [`MIN_EXCESS_SHARE`] of the misfit above the noise level (`2J/σ² − m`) is significant because
+/// the misfit is large, not because it is the effect the data lack — stacking such fixes hides an
+/// effect outside the library instead of naming it.
+fn partial_fix(r: &Refit, cur: &Current, sigma2: f64) -> Option<String> {
+    let m = cur.e.len() as f64;
+    let excess = 2.0 * r.criterion_before / sigma2 - m;
+    let removed = 2.0 * (r.criterion_before - r.criterion_after) / sigma2;
+    (excess > 0.0 && removed < MIN_EXCESS_SHARE * excess).then(|| {
+        format!(
+            "removes only {:.0} % of the misfit above the noise level: a partial fix",
+            100.0 * removed / excess
+        )
+    })
 }
 
 /// Two-sided 95 % normal quantile: an effect's confidence interval is `estimate ± Z95 σ`.
@@ -1545,9 +1676,15 @@ pub fn text(d: &Diagnosis) -> String {
     }
     let _ = writeln!(s);
     if d.accepted.is_empty() {
+        let indicated = d.rounds.iter().any(|r| !r.not_identifiable.is_empty());
         let _ = writeln!(
             s,
-            "  no effect added: nothing significant at the chosen level"
+            "  no effect added: {}",
+            if indicated {
+                "the significant ones were not physical, not identifiable or only partial fixes"
+            } else {
+                "nothing significant at the chosen level"
+            }
         );
     }
     for a in &d.accepted {
@@ -1556,6 +1693,9 @@ pub fn text(d: &Diagnosis) -> String {
     }
     before_after_text(&mut s, d);
     let _ = writeln!(s, "  after: {}", d.after.verdict);
+    if let Some(v) = &d.outside_library {
+        let _ = writeln!(s, "  {v}");
+    }
     let skipped: Vec<&NotTried> = d.not_tried.iter().collect();
     if !skipped.is_empty() {
         let _ = writeln!(s, "\n  not tried ({}):", skipped.len());
@@ -1597,6 +1737,9 @@ pub fn final_text(id: &Identification, d: &Diagnosis) -> String {
             s,
             "FINAL MODEL = the first fit above: the diagnosis added nothing{converged}"
         );
+        if let Some(v) = &d.outside_library {
+            let _ = writeln!(s, "  {v}");
+        }
         return s;
     }
     let _ = writeln!(
@@ -1604,6 +1747,9 @@ pub fn final_text(id: &Identification, d: &Diagnosis) -> String {
         "FINAL MODEL: the first fit above is superseded; {} effect(s) added{converged}",
         d.accepted.len()
     );
+    if let Some(v) = &d.outside_library {
+        let _ = writeln!(s, "  {v}");
+    }
     let _ = writeln!(
         s,
         "  {:<20} {:<8} {:>12} {:>12} {:>9}",
@@ -1693,7 +1839,7 @@ fn round_text(s: &mut String, i: usize, r: &Round) {
     for x in &r.not_identifiable {
         let _ = writeln!(
             s,
-            "    indicated but not identifiable, not added: {} ({})",
+            "    indicated but not added: {} ({})",
             x.effect, x.reason
         );
     }
