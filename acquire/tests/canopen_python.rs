@@ -279,13 +279,7 @@ async fn python_canopen_emcy_and_heartbeat_loss_are_detected() {
             Err(e) => break e,
         }
     };
-    let device: Vec<&str> = events
-        .iter()
-        .filter_map(|e| match e {
-            DaqEvent::Fault(f) if f.kind == FaultKind::Device => Some(f.detail.as_str()),
-            _ => None,
-        })
-        .collect();
+    let device: Vec<&str> = events.iter().filter_map(DaqEvent::device_fault).collect();
     assert_eq!(device.len(), 2, "{device:?}");
     assert!(
         device[0]

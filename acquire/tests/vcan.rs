@@ -1089,10 +1089,8 @@ fn canopen_node_over_vcan_streams_loss_free_and_reports_emcy_and_lost_heartbeat(
         };
         let device: Vec<String> = events
             .iter()
-            .filter_map(|e| match e {
-                DaqEvent::Fault(f) if f.kind == FaultKind::Device => Some(f.detail.clone()),
-                _ => None,
-            })
+            .filter_map(DaqEvent::device_fault)
+            .map(str::to_owned)
             .collect();
         assert_eq!(device.len(), 2, "{device:?}");
         assert!(device[0].contains("0x4210 (temperature)"), "{device:?}");

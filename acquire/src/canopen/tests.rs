@@ -507,10 +507,8 @@ async fn a_lost_heartbeat_is_a_device_fault_then_the_stream_times_out() {
     };
     let lost: Vec<_> = events
         .iter()
-        .filter_map(|e| match e {
-            DaqEvent::Fault(f) if f.kind == FaultKind::Device => Some(f.detail.clone()),
-            _ => None,
-        })
+        .filter_map(DaqEvent::device_fault)
+        .map(str::to_owned)
         .collect();
     assert_eq!(lost.len(), 1, "{lost:?}");
     assert!(lost[0].contains("node 5 lost: no heartbeat"), "{lost:?}");

@@ -127,6 +127,16 @@ pub enum DaqEvent {
     Fault(StreamFault),
 }
 
+impl DaqEvent {
+    /// The detail of a device fault (a lost node, an EMCY, an instrument error), else `None`.
+    pub fn device_fault(&self) -> Option<&str> {
+        match self {
+            DaqEvent::Fault(f) if f.kind == FaultKind::Device => Some(&f.detail),
+            _ => None,
+        }
+    }
+}
+
 /// A detected stream fault. Recorded in the session; never silently dropped.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct StreamFault {

@@ -427,22 +427,15 @@ impl Effect {
                 let at = point + frame.column(1) * gamma[2] + frame.column(2) * gamma[3];
                 add_spring(model, bodies, &at, direction, gamma[0], gamma[1])?;
             }
-            Effect::Mass { body, point, .. } => {
+            Effect::Mass { body, point, .. } | Effect::PlacedMass { body, point, .. } => {
                 if gamma[0] > 0.0 {
-                    attach_mass(
-                        model,
-                        body,
-                        point,
-                        gamma[0],
-                        MOUNT_ABOVE_BAND * f_max,
-                        STRUCTURAL_PSI,
-                        ADDED_MASS,
-                    )?;
-                }
-            }
-            Effect::PlacedMass { body, point, .. } => {
-                if gamma[0] > 0.0 {
-                    let at = point + Vector3::new(gamma[1], gamma[2], gamma[3]);
+                    // A placed mass's offset from its candidate point is parameters 1-3.
+                    let at = match self {
+                        Effect::PlacedMass { .. } => {
+                            point + Vector3::new(gamma[1], gamma[2], gamma[3])
+                        }
+                        _ => *point,
+                    };
                     attach_mass(
                         model,
                         body,
