@@ -385,6 +385,30 @@ fn a_fixture_mass_on_the_table_is_found_and_the_refit_reaches_the_noise_floor() 
             p.unit
         );
     }
+    // The reported place is the fitted point (not the corner it started from), and its 95 %
+    // region holds the truth's point to within its half-widths (1.5× for a 3-axis box at 95 %).
+    let place = first
+        .place
+        .as_deref()
+        .expect("a placed mass reports its fitted place");
+    let numbers = |text: &str| -> Vec<f64> {
+        text.split(|c: char| !(c.is_ascii_digit() || c == '.' || c == '-'))
+            .filter_map(|v| v.parse::<f64>().ok())
+            .collect()
+    };
+    let fitted = numbers(place.split(" mm").next().unwrap());
+    let region = numbers(place.split('±').nth(1).unwrap());
+    assert_eq!((fitted.len(), region.len()), (3, 3), "{place}");
+    for ((at, half), truth) in fitted.iter().zip(&region).zip([550.0, 1020.0, 950.0]) {
+        assert!(
+            (at - truth).abs() <= 1.5 * half,
+            "{place}: truth {truth} mm"
+        );
+    }
+    assert!(
+        diagnose::text(&d).contains(place),
+        "the added: line names the place"
+    );
     assert!(
         d.after.chi2_p.expect("R known") > 0.001,
         "after: {}",

@@ -19,6 +19,9 @@ use nalgebra::{Matrix3, Vector3};
 use crate::identification::variables::Variables;
 use crate::model::{Body, Model, ParamName, ParamRef, Sde, SdeKind, SdeLaw};
 use crate::modelfile::frame_from_axis;
+
+/// Two-sided 95 % normal quantile.
+const Z95: f64 = 1.96;
 use crate::system::generalized_force;
 use crate::C64;
 
@@ -220,6 +223,45 @@ impl Effect {
             | Effect::Resonator { body, .. }
             | Effect::Flexible { body, .. } => added(body),
             Effect::Gain { .. } | Effect::Damping { .. } => false,
+        }
+    }
+
+    /// Where a placed effect was fitted, with its 95 % confidence region, from its parameter
+    /// `values` and their standard `errors` (SI): a point mass's point ± per global axis, a
+    /// spring's line of action ± across it along the two directions the offsets move it. `None`
+    /// for effects whose place is not a parameter.
+    pub fn fitted_place(&self, values: &[f64], errors: &[f64]) -> Option<String> {
+        let mm =
+            |v: &Vector3<f64>| format!("({:.0}, {:.0}, {:.0}) mm", 1e3 * v.x, 1e3 * v.y, 1e3 * v.z);
+        let half = |i: usize| 1e3 * Z95 * errors.get(i).copied().unwrap_or(f64::NAN);
+        match self {
+            Effect::PlacedMass { point, .. } if values.len() >= 4 => {
+                let at = point + Vector3::new(values[1], values[2], values[3]);
+                Some(format!(
+                    "fitted at {}, 95 % region ±({:.0}, {:.0}, {:.0}) mm",
+                    mm(&at),
+                    half(1),
+                    half(2),
+                    half(3)
+                ))
+            }
+            Effect::PlacedSpring {
+                point, direction, ..
+            } if values.len() >= 4 => {
+                let frame = frame_from_axis(direction);
+                let (e1, e2) = (frame.column(1).into_owned(), frame.column(2).into_owned());
+                let at = point + e1 * values[2] + e2 * values[3];
+                let dir = |v: &Vector3<f64>| format!("({:.3}, {:.3}, {:.3})", v.x, v.y, v.z);
+                Some(format!(
+                    "line of action fitted through {}, 95 % region ±{:.0} mm along {} and ±{:.0} mm along {}",
+                    mm(&at),
+                    half(2),
+                    dir(&e1),
+                    half(3),
+                    dir(&e2)
+                ))
+            }
+            _ => None,
         }
     }
 

@@ -140,6 +140,10 @@ pub struct Refit {
     pub converged: bool,
     /// Placements the data cannot tell from this one (see [`Ranked::equivalent`]).
     pub equivalent: Vec<String>,
+    /// For an accepted effect whose place was fitted: where, with its 95 % confidence region
+    /// (mm, set at the final fit).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub place: Option<String>,
 }
 
 /// One ranked candidate.
@@ -510,7 +514,10 @@ fn final_fit(
             after.chi2_p.is_none(),
         );
         let finals = estimates(&pf, &cur, f_hi, crit_scale);
-        for (a, params) in accepted.iter_mut().zip(finals) {
+        for ((a, params), effect) in accepted.iter_mut().zip(finals).zip(&cur.effects) {
+            let values: Vec<f64> = params.iter().map(|p| p.value).collect();
+            let errors: Vec<f64> = params.iter().map(|p| p.std_error).collect();
+            a.place = effect.fitted_place(&values, &errors);
             a.params = params;
         }
         std_error = variable_errors(&pf, &cur, crit_scale);
@@ -1661,6 +1668,7 @@ fn refit(
         stop,
         converged: out.stop.converged(),
         equivalent: Vec::new(),
+        place: None,
     };
     Ok((r, next))
 }
@@ -1690,6 +1698,9 @@ pub fn text(d: &Diagnosis) -> String {
     for a in &d.accepted {
         let ps: Vec<String> = a.params.iter().map(ParamEstimate::describe).collect();
         let _ = writeln!(s, "  added: {} ({})", a.effect, ps.join(", "));
+        if let Some(place) = &a.place {
+            let _ = writeln!(s, "         {place}");
+        }
     }
     before_after_text(&mut s, d);
     let _ = writeln!(s, "  after: {}", d.after.verdict);
@@ -1784,6 +1795,9 @@ pub fn final_text(id: &Identification, d: &Diagnosis) -> String {
     for a in &d.accepted {
         let ps: Vec<String> = a.params.iter().map(ParamEstimate::describe).collect();
         let _ = writeln!(s, "  + {} ({})", a.effect, ps.join(", "));
+        if let Some(place) = &a.place {
+            let _ = writeln!(s, "    {place}");
+        }
     }
     s
 }
