@@ -1,8 +1,8 @@
 //! The blind suite over many cases: right effect first, exactly the injected set, false adds on
 //! clean data, median wall time; then the FWD-32J demo case's time split.
 //!
-//! `cargo run -p identify --profile test --example blind -- [CASES] [FIRST_SEED]` (default 200
-//! cases from seed 1). Each case: FWD-32J with one or two hidden effects (or none), 0.5-3 %
+//! `cargo run -p identify --profile test --example blind -- [CASES] [FIRST_SEED] [KIND]` (default
+//! 200 cases from seed 1; with KIND, e.g. `resonator`, only the cases that inject that kind). Each case: FWD-32J with one or two hidden effects (or none), 0.5-3 %
 //! noise, the identification started ±30 % away (`identify::diagnose::blind`). One case prints its
 //! diagnosis; none or ten or more also the demo's time split.
 
@@ -18,6 +18,7 @@ fn main() {
     let args: Vec<String> = std::env::args().collect();
     let n: u64 = args.get(1).and_then(|a| a.parse().ok()).unwrap_or(200);
     let first: u64 = args.get(2).and_then(|a| a.parse().ok()).unwrap_or(1);
+    let kind = args.get(3).cloned();
     let root = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..");
     let model = identify::modelfile::load(&root.join("configs/models/fwd32j.toml"))
         .expect("model")
@@ -29,6 +30,11 @@ fn main() {
     let mut outcomes = Vec::new();
     for seed in first..first + n {
         let case = blind::draw(&model, &vars, &lines, seed, None).expect("case");
+        if let Some(kind) = &kind {
+            if !case.injected.iter().any(|i| i.effect.kind() == kind) {
+                continue;
+            }
+        }
         match blind::run(&model, &case, &opts) {
             Ok((o, d)) => {
                 if n == 1 {
