@@ -1,0 +1,1 @@
+//! The arbitrary-waveform upload against recorded transcripts of two vendors' manuals.
