@@ -145,7 +145,7 @@ impl ArbitraryDialect {
                 .map(|w| w.trim().parse::<i32>().ok())
                 .collect(),
             DataFormat::BinaryBlock => {
-                if data.len() % 2 != 0 {
+                if !data.len().is_multiple_of(2) {
                     return None;
                 }
                 let signed = self.code_min < 0;

@@ -228,7 +228,7 @@ impl SimGenerator {
         if name.is_empty() || name.len() > 12 || !args.trim().ends_with(',') {
             return Err((-109, "Missing parameter;name,<block>".into()));
         }
-        if block.len() % 2 != 0 {
+        if !block.len().is_multiple_of(2) {
             return Err((-161, "Invalid block data;odd byte count".into()));
         }
         let points = block.len() / 2;

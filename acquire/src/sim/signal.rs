@@ -362,7 +362,7 @@ fn played(samples: &[f64], n: usize, planner: &mut FftPlanner<f64>) -> Vec<C64> 
         out[k] = spec[k] * scale;
         out[n - k] = out[k].conj();
     }
-    if m == n && m % 2 == 0 {
+    if m == n && m.is_multiple_of(2) {
         out[m / 2] = spec[m / 2] * scale;
     }
     planner.plan_fft_inverse(n).process(&mut out);

@@ -13,14 +13,12 @@ use tokio::task::JoinHandle;
 /// and the lines the instrument answers.
 type Exchange = (String, Option<Vec<u8>>, Vec<&'static str>);
 
+/// A command as received: its text and its binary block.
+type Received = (String, Option<Vec<u8>>);
+
 /// A scripted instrument that frames binary blocks as IEEE 488.2 instruments do; on an
 /// unexpected command it falls silent. Returns every command (text, block) it received.
-fn instrument(
-    script: Vec<Exchange>,
-) -> (
-    Box<dyn Transport>,
-    JoinHandle<Vec<(String, Option<Vec<u8>>)>>,
-) {
+fn instrument(script: Vec<Exchange>) -> (Box<dyn Transport>, JoinHandle<Vec<Received>>) {
     let (host, mut dev) = MemoryTransport::pair("gen", "gen-dev", 1 << 16);
     let task = tokio::spawn(async move {
         let mut framer = CommandFramer::new();
@@ -73,7 +71,7 @@ fn setting(text: &str, err: &str, no_error: &'static str) -> Vec<Exchange> {
     vec![cmd(text, &[]), cmd("*OPC?", &["1"]), cmd(err, &[no_error])]
 }
 
-fn sent(script: &[Exchange]) -> Vec<(String, Option<Vec<u8>>)> {
+fn sent(script: &[Exchange]) -> Vec<Received> {
     script
         .iter()
         .map(|(t, b, _)| (t.clone(), b.clone()))
