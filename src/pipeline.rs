@@ -15,7 +15,9 @@ use acquire::rig::Rig;
 use acquire::session::{Session, SessionOptions};
 use acquire::sim::SimStand;
 use acquire::stand::{PortSpec, Stand};
-use acquire::sweep::{self, SteppedSine, StopSignal, SweepOutcome, SweepProgress};
+use acquire::sweep::{
+    self, Broadband, BroadbandResult, SteppedSine, StopSignal, SweepOutcome, SweepProgress,
+};
 use anyhow::Context;
 use identify::diagnose;
 use identify::identification::{
@@ -117,26 +119,12 @@ pub fn sweep(
     let rt = runtime()?;
     rt.block_on(async {
         // The Ctrl-C handler needs the runtime.
-        let stop = if opts.ctrl_c { StopSignal::on_ctrl_c() } else { StopSignal::new() };
-        let uses_sim = stand.shaker.port == PortSpec::Sim || stand.daq.port == PortSpec::Sim;
-        let sim = match (uses_sim, opts.can) {
-            (true, Some(iface)) => Some(SimStand::start_can(stand, iface)?),
-            (true, None) => Some(SimStand::start(stand)?),
-            (false, Some(_)) => anyhow::bail!(
-                "the CAN interface serves the simulated DAQ; {} has no port = \"sim\" (give daq.port = \"can:IFACE\" for a real CAN DAQ)",
-                stand.file
-            ),
-            (false, None) => None,
+        let stop = if opts.ctrl_c {
+            StopSignal::on_ctrl_c()
+        } else {
+            StopSignal::new()
         };
-        let bound = match &sim {
-            Some(s) => {
-                let speed = stand.truth.as_ref().map(|t| t.speed).unwrap_or(1.0);
-                let exciter = if stand.generator.is_some() { "generator" } else { "shaker" };
-                eprintln!("simulated stand at {speed}× real time: {exciter} {}, daq {}", s.shaker_port, s.daq_port);
-                s.bind(stand)
-            }
-            None => stand.clone(),
-        };
+        let (sim, bound) = start_sim(stand, opts.can)?;
         let file = Session::create(session, SessionOptions::default())
             .with_context(|| format!("cannot create the session file {}", session.display()))?;
         eprintln!("recording {}", session.display());
@@ -144,7 +132,9 @@ pub fn sweep(
         let outcome = async {
             sweep::log_session_start(&h, &stand.file, plan, opts.resume, &opts.done)?;
             let mut rig = Rig::connect(&bound, Some(&h)).await?;
-            Ok::<_, anyhow::Error>(sweep::stepped_sine(&mut rig, plan, &h, progress, &stop, &opts.done).await?)
+            Ok::<_, anyhow::Error>(
+                sweep::stepped_sine(&mut rig, plan, &h, progress, &stop, &opts.done).await?,
+            )
         }
         .await
         .map_err(|e| format!("{e:#}"));
@@ -155,7 +145,99 @@ pub fn sweep(
         if let Some(s) = sim {
             s.shutdown();
         }
-        Ok(Swept { session: session.to_path_buf(), planned, outcome, messages, finish_error })
+        Ok(Swept {
+            session: session.to_path_buf(),
+            planned,
+            outcome,
+            messages,
+            finish_error,
+        })
+    })
+}
+
+/// The simulated stand serving `stand`'s `"sim"` ports (announced on stderr; its DAQ on CAN with
+/// `can`), and the stand bound to them. Call inside the runtime.
+fn start_sim(stand: &Stand, can: Option<&str>) -> anyhow::Result<(Option<SimStand>, Stand)> {
+    let uses_sim = stand.shaker.port == PortSpec::Sim || stand.daq.port == PortSpec::Sim;
+    let sim = match (uses_sim, can) {
+        (true, Some(iface)) => Some(SimStand::start_can(stand, iface)?),
+        (true, None) => Some(SimStand::start(stand)?),
+        (false, Some(_)) => anyhow::bail!(
+            "the CAN interface serves the simulated DAQ; {} has no port = \"sim\" (give daq.port = \"can:IFACE\" for a real CAN DAQ)",
+            stand.file
+        ),
+        (false, None) => None,
+    };
+    let bound = match &sim {
+        Some(s) => {
+            let speed = stand.truth.as_ref().map(|t| t.speed).unwrap_or(1.0);
+            let exciter = if stand.generator.is_some() {
+                "generator"
+            } else {
+                "shaker"
+            };
+            eprintln!(
+                "simulated stand at {speed}× real time: {exciter} {}, daq {}",
+                s.shaker_port, s.daq_port
+            );
+            s.bind(stand)
+        }
+        None => stand.clone(),
+    };
+    Ok((sim, bound))
+}
+
+/// A broadband measurement that ended, completely or not.
+#[derive(Debug)]
+pub struct BroadbandSwept {
+    /// The estimate, or why the measurement failed.
+    pub outcome: Result<BroadbandResult, String>,
+    /// Messages in the completed session file.
+    pub messages: u64,
+    /// Why the session file could not be completed.
+    pub finish_error: Option<String>,
+}
+
+/// Runs a broadband measurement (`stand`'s `[broadband]` plan) into a new session file, like
+/// [`sweep`] does a stepped sine.
+pub fn broadband_sweep(
+    stand: &Stand,
+    plan: &Broadband,
+    session: &Path,
+    opts: &SweepOptions<'_>,
+    progress: &dyn SweepProgress,
+) -> anyhow::Result<BroadbandSwept> {
+    let rt = runtime()?;
+    rt.block_on(async {
+        let stop = if opts.ctrl_c {
+            StopSignal::on_ctrl_c()
+        } else {
+            StopSignal::new()
+        };
+        let (sim, bound) = start_sim(stand, opts.can)?;
+        let file = Session::create(session, SessionOptions::default())
+            .with_context(|| format!("cannot create the session file {}", session.display()))?;
+        eprintln!("recording {}", session.display());
+        let h = file.handle();
+        let outcome = async {
+            sweep::log_session_start(&h, &stand.file, plan, None, &BTreeSet::new())?;
+            let mut rig = Rig::connect(&bound, Some(&h)).await?;
+            Ok::<_, anyhow::Error>(sweep::broadband(&mut rig, plan, &h, progress, &stop).await?)
+        }
+        .await
+        .map_err(|e| format!("{e:#}"));
+        let (messages, finish_error) = match file.finish() {
+            Ok(summary) => (summary.total(), None),
+            Err(e) => (0, Some(e.to_string())),
+        };
+        if let Some(s) = sim {
+            s.shutdown();
+        }
+        Ok(BroadbandSwept {
+            outcome,
+            messages,
+            finish_error,
+        })
     })
 }
 

@@ -64,12 +64,10 @@ async fn generator_exciter(
     )
     .with_reconnect(Box::new(open));
     let speed = stand.truth.as_ref().map(|t| t.speed).unwrap_or(1.0);
-    Ok(GeneratorExciter::new(
-        Box::new(gen),
-        g.amplifier.clone(),
-        session.cloned(),
-        speed,
-    ))
+    Ok(
+        GeneratorExciter::new(Box::new(gen), g.amplifier.clone(), session.cloned(), speed)
+            .with_sample_rate(stand.daq.sample_rate_hz),
+    )
 }
 
 /// Opens a generator's connection (again).

@@ -4,6 +4,10 @@
 //! `--resume` continues. Ports given as `"sim"` are served by the simulated stand (`--can IFACE`
 //! puts its DAQ on CAN).
 //!
+//! `--broadband` runs the stand file's `[broadband]` measurement instead (periodic random, burst
+//! random or chirp, averaged period by period; on a generator stand uploaded as an arbitrary
+//! waveform, docs/scpi-generator.md) and prints the averages, the band and the mean coherence.
+//!
 //! Exit status: 0 every step measured; 1 the sweep is incomplete (stopped; resume it);
 //! 2 failure (device, file or plan; the session file is still complete and says what happened).
 
@@ -49,6 +53,9 @@ pub struct SweepArgs {
     /// Simulated stand only: serve its DAQ on this CAN interface.
     #[arg(long)]
     pub can: Option<String>,
+    /// Run the stand file's `[broadband]` measurement instead of the stepped sine.
+    #[arg(long, conflicts_with_all = ["resume", "from", "to", "points", "force"])]
+    pub broadband: bool,
 }
 
 /// The plan `ident sweep` runs (also what `--resume` checks against).
@@ -85,6 +92,9 @@ pub fn run(a: SweepArgs) -> anyhow::Result<ExitCode> {
         );
         let t = stand.truth.as_mut().with_context(|| format!("--speed: {} has no [truth] section (only the simulated stand runs faster than real time)", a.stand.display()))?;
         t.speed = s;
+    }
+    if a.broadband {
+        return broadband(&a, &stand);
     }
     let plan = plan(&a);
     let freqs = plan.frequencies.frequencies()?;
@@ -144,6 +154,72 @@ pub fn run(a: SweepArgs) -> anyhow::Result<ExitCode> {
                     a.stand.display(),
                     path.display()
                 );
+                Ok(ExitCode::from(1))
+            } else {
+                Ok(ExitCode::SUCCESS)
+            }
+        }
+        Err(e) => {
+            eprintln!(
+                "session (complete, records the failure): {}",
+                path.display()
+            );
+            Err(anyhow::anyhow!(e))
+        }
+    }
+}
+
+/// `ident sweep --broadband`: the stand's `[broadband]` plan into a new session.
+fn broadband(a: &SweepArgs, stand: &Stand) -> anyhow::Result<ExitCode> {
+    let plan = stand.broadband.clone().with_context(|| {
+        format!(
+            "--broadband: {} has no [broadband] section; add one, e.g.\n[broadband]\nwaveform = \"random\"\nfrom = \"20 Hz\"\nto = \"400 Hz\"\nforce = \"500 N\"\naverages = 8\nsettle_periods = 4",
+            a.stand.display()
+        )
+    })?;
+    std::fs::create_dir_all(&a.out)
+        .with_context(|| format!("cannot create the session folder {}", a.out.display()))?;
+    let path = session_path(&a.out, &a.stand);
+    let opts = pipeline::SweepOptions {
+        can: a.can.as_deref(),
+        ctrl_c: true,
+        ..Default::default()
+    };
+    let started = Instant::now();
+    let swept = pipeline::broadband_sweep(stand, &plan, &path, &opts, &IndicatifProgress::new())?;
+    let elapsed = started.elapsed().as_secs_f64();
+    if let Some(e) = &swept.finish_error {
+        anyhow::bail!(
+            "the session file {} could not be completed: {e}",
+            path.display()
+        );
+    }
+    match swept.outcome {
+        Ok(r) => {
+            let force = stand
+                .channels
+                .iter()
+                .position(|c| c.kind == acquire::stand::ChannelKind::Force);
+            let coherence: Vec<f64> = r
+                .coherence
+                .iter()
+                .enumerate()
+                .filter(|(c, _)| Some(*c) != force)
+                .flat_map(|(_, v)| v.iter().copied())
+                .collect();
+            let mean = coherence.iter().sum::<f64>() / coherence.len().max(1) as f64;
+            println!("session: {}", path.display());
+            println!(
+                "broadband {:?}: {} averages of {} lines ({:.1} to {:.1} Hz) in {elapsed:.1} s, mean coherence {mean:.3}, {} messages",
+                plan.waveform,
+                r.averages,
+                r.freqs_hz.len(),
+                r.freqs_hz.first().copied().unwrap_or(0.0),
+                r.freqs_hz.last().copied().unwrap_or(0.0),
+                swept.messages
+            );
+            if r.stopped {
+                println!("stopped before all {} averages", plan.averages);
                 Ok(ExitCode::from(1))
             } else {
                 Ok(ExitCode::SUCCESS)

@@ -138,7 +138,7 @@ impl DialectOverrides {
 }
 
 /// One entry of the built-in table.
-#[derive(Debug, Clone, PartialEq, Eq, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct ModelEntry {
     /// Name a stand file selects it by (`dialect = "Rigol DG800/DG1000Z"`).
@@ -149,6 +149,9 @@ pub struct ModelEntry {
     pub model_prefixes: Vec<String>,
     /// Its commands.
     pub commands: Dialect,
+    /// Its arbitrary-waveform upload, if it has one.
+    #[serde(default)]
+    pub arbitrary: Option<super::arbitrary::ArbitraryDialect>,
 }
 
 #[derive(Deserialize)]
@@ -261,6 +264,15 @@ mod tests {
         assert_eq!(name("Keysight Technologies", "34461A"), None, "a DMM");
         assert_eq!(name("ACME", "FG-1"), None);
         assert!(by_name("generic").unwrap().is_some());
+        // Arbitrary waveforms: every named model but the plain SCPI-99 table.
+        for m in &t {
+            assert_eq!(m.arbitrary.is_some(), m.name != "generic", "{}", m.name);
+            if let Some(a) = &m.arbitrary {
+                assert!(a.upload.contains("{block}"), "{}", m.name);
+                assert!(a.code_min < a.code_max && a.min_points < a.max_points);
+                assert!(a.check(5120, 5120.0).is_ok(), "{}", m.name);
+            }
+        }
         assert!(by_name("nonsense").unwrap().is_none());
     }
 

@@ -4,9 +4,11 @@
 //! [`exciter::GeneratorExciter`], which makes generator + amplifier + shaker an exciter whose
 //! force loop is closed by the host on the DAQ's force channel (docs/scpi-generator.md).
 
+pub mod arbitrary;
 pub mod dialect;
 pub mod exciter;
 pub mod scpi;
+pub mod waveform;
 
 pub use exciter::{Amplifier, GeneratorExciter};
 pub use scpi::{GeneratorOptions, ScpiGenerator};
@@ -38,6 +40,29 @@ pub trait Generator: Send {
     async fn set_output(&mut self, on: bool) -> Result<(), GeneratorError>;
     /// Asks whether the output is on.
     async fn output(&mut self) -> Result<bool, GeneratorError>;
+    /// The name of the command table in use (after [`Generator::identify`]).
+    fn model_name(&self) -> &str {
+        ""
+    }
+    /// The model's arbitrary-waveform upload and its limits (after [`Generator::identify`]);
+    /// `None` if the model has none.
+    fn arbitrary(&self) -> Option<&arbitrary::ArbitraryDialect> {
+        None
+    }
+    /// Uploads `samples` (−1..1 = the amplitude's full scale) as the model's arbitrary waveform,
+    /// played at `sample_rate_hz` and repeated, and selects it; the amplitude set afterwards is
+    /// the waveform's full-scale peak. Returns the DAC codes sent. The output should be off.
+    async fn play_arbitrary(
+        &mut self,
+        samples: &[f64],
+        sample_rate_hz: f64,
+    ) -> Result<Vec<i32>, GeneratorError> {
+        let _ = (samples, sample_rate_hz);
+        Err(GeneratorError::NoArbitrary {
+            instrument: self.port().to_string(),
+            model: "this generator".into(),
+        })
+    }
 }
 
 /// Errors of a signal generator. Each names the instrument (its port, and its identity once
@@ -155,6 +180,26 @@ pub enum GeneratorError {
     NotIdentified {
         /// Port.
         port: String,
+    },
+    /// The model's command table has no arbitrary-waveform upload.
+    #[error("signal generator {instrument}: the command table `{model}` has no arbitrary-waveform upload, so it drives sines only; use a stepped sine, or a model with [model.arbitrary] in acquire/src/generator/models.toml (Keysight 33500B/33600A, Rigol DG800/DG1000Z, Tektronix AFG31000; set `dialect` in [generator]) (docs/scpi-generator.md)")]
+    NoArbitrary {
+        /// Port and identity.
+        instrument: String,
+        /// The command table's name.
+        model: String,
+    },
+    /// A waveform beyond what the model plays.
+    #[error("signal generator {instrument}: the {model} cannot play this arbitrary waveform: {detail}; {fix}")]
+    ArbitraryLimit {
+        /// Port and identity.
+        instrument: String,
+        /// The command table's name.
+        model: String,
+        /// What is exceeded.
+        detail: String,
+        /// What to change.
+        fix: String,
     },
     /// The built-in command table is unreadable (a defect of this build).
     #[error(transparent)]

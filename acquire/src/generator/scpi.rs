@@ -9,6 +9,7 @@ use std::time::Duration;
 use async_trait::async_trait;
 use tokio::time::Instant;
 
+use super::arbitrary::{ArbitraryDialect, RateSetting};
 use super::dialect::{self, Dialect, DialectOverrides};
 use super::{Generator, GeneratorError};
 use crate::device::DeviceIdentity;
@@ -64,6 +65,9 @@ pub struct ScpiGenerator {
     instrument: String,
     opts: GeneratorOptions,
     dialect: Option<Dialect>,
+    /// The command table's name and its arbitrary-waveform upload.
+    model: String,
+    arbitrary: Option<ArbitraryDialect>,
 }
 
 impl ScpiGenerator {
@@ -77,6 +81,8 @@ impl ScpiGenerator {
             port,
             opts,
             dialect: None,
+            model: String::new(),
+            arbitrary: None,
         }
     }
 
@@ -209,6 +215,33 @@ impl ScpiGenerator {
         }
     }
 
+    /// Sends raw bytes (a command with a binary block), reconnecting once if the connection
+    /// dropped.
+    async fn write_bytes(&mut self, bytes: &[u8]) -> Result<(), GeneratorError> {
+        match self.send_bytes(bytes).await {
+            Err(GeneratorError::Disconnected { .. }) if self.reopen().await? => {
+                self.send_bytes(bytes).await
+            }
+            r => r,
+        }
+    }
+
+    async fn send_bytes(&mut self, bytes: &[u8]) -> Result<(), GeneratorError> {
+        let r = self.link.send_bytes(bytes, &self.opts.terminator).await;
+        r.map_err(|e| self.io_error(e))
+    }
+
+    /// Like [`ScpiGenerator::set`] for a command carrying data: `text` (for messages) and its
+    /// bytes.
+    async fn set_raw(&mut self, text: &str, bytes: &[u8]) -> Result<(), GeneratorError> {
+        self.write_bytes(bytes).await?;
+        let opc = self.query("*OPC?").await?;
+        if opc.trim().trim_start_matches('+') != "1" {
+            return Err(self.garbled("*OPC?", opc));
+        }
+        self.check_errors(text).await
+    }
+
     /// Sends a setting, waits for it to complete (`*OPC?` answers `1`), then reads the error
     /// queue until it says `0,"No error"`; any entry fails the call, naming the command.
     pub async fn set(&mut self, line: &str) -> Result<(), GeneratorError> {
@@ -278,8 +311,11 @@ impl ScpiGenerator {
     }
 
     /// The command table for `id`: the stand's named one, or the built-in one for its model,
-    /// with the stand's overrides.
-    fn choose_dialect(&self, id: &DeviceIdentity) -> Result<Dialect, GeneratorError> {
+    /// with the stand's overrides; its name and arbitrary-waveform upload.
+    fn choose_dialect(
+        &self,
+        id: &DeviceIdentity,
+    ) -> Result<(Dialect, String, Option<ArbitraryDialect>), GeneratorError> {
         let known = || dialect::known_names().join(", ");
         let base = match &self.opts.dialect {
             Some(name) => {
@@ -295,7 +331,11 @@ impl ScpiGenerator {
                 known: known(),
             })?,
         };
-        Ok(self.opts.overrides.apply(&base.commands))
+        Ok((
+            self.opts.overrides.apply(&base.commands),
+            base.name,
+            base.arbitrary,
+        ))
     }
 }
 
@@ -309,7 +349,10 @@ impl Generator for ScpiGenerator {
         let answer = self.query("*IDN?").await?;
         let id = DeviceIdentity::parse_idn(&answer).ok_or_else(|| self.garbled("*IDN?", answer))?;
         self.instrument = format!("{} {} on {}", id.manufacturer, id.model, self.port);
-        self.dialect = Some(self.choose_dialect(&id)?);
+        let (d, model, arbitrary) = self.choose_dialect(&id)?;
+        self.dialect = Some(d);
+        self.model = model;
+        self.arbitrary = arbitrary;
         Ok(id)
     }
 
@@ -362,7 +405,65 @@ impl Generator for ScpiGenerator {
         let answer = self.query(&line).await?;
         parse_bool_answer(&answer).ok_or_else(|| self.garbled(&line, answer))
     }
+
+    fn model_name(&self) -> &str {
+        &self.model
+    }
+
+    fn arbitrary(&self) -> Option<&ArbitraryDialect> {
+        self.arbitrary.as_ref()
+    }
+
+    async fn play_arbitrary(
+        &mut self,
+        samples: &[f64],
+        sample_rate_hz: f64,
+    ) -> Result<Vec<i32>, GeneratorError> {
+        self.commands()?;
+        let Some(a) = self.arbitrary.clone() else {
+            return Err(GeneratorError::NoArbitrary {
+                instrument: self.instrument.clone(),
+                model: self.model.clone(),
+            });
+        };
+        a.check(samples.len(), sample_rate_hz).map_err(|detail| {
+            GeneratorError::ArbitraryLimit {
+                instrument: self.instrument.clone(),
+                model: self.model.clone(),
+                detail,
+                fix: "use fewer points (a shorter period) or a lower sample rate".into(),
+            }
+        })?;
+        let ch = self.opts.channel;
+        for c in &a.before_upload {
+            self.set(&dialect::fill(c, ch, "")).await?;
+        }
+        let codes = a.codes(samples);
+        let (head, tail) = a.upload.split_once("{block}").unwrap_or((&a.upload, ""));
+        let head = dialect::fill(head, ch, "");
+        let tail = dialect::fill(tail, ch, "");
+        let data = a.data_bytes(&codes);
+        let mut bytes = Vec::with_capacity(head.len() + data.len() + tail.len());
+        bytes.extend_from_slice(head.as_bytes());
+        bytes.extend_from_slice(&data);
+        bytes.extend_from_slice(tail.as_bytes());
+        let text = format!("{head}<{} points>{tail}", codes.len());
+        self.set_raw(&text, &bytes).await?;
+        for c in &a.select {
+            self.set(&dialect::fill(c, ch, "")).await?;
+        }
+        let value = match a.rate_is {
+            RateSetting::SampleRate => sample_rate_hz,
+            RateSetting::RepetitionFrequency => sample_rate_hz / samples.len() as f64,
+        };
+        self.set(&dialect::fill(&a.rate, ch, &dialect::number(value)))
+            .await?;
+        Ok(codes)
+    }
 }
 
 #[cfg(test)]
 mod tests;
+
+#[cfg(test)]
+mod arbitrary_tests;

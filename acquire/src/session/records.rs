@@ -275,8 +275,12 @@ pub enum DriveKind {
     Amplitude,
     /// The generator's output switched on or off.
     Output,
-    /// The force amplitude the DAQ measured with the drive then set.
+    /// The force amplitude the DAQ measured with the drive then set (for a broadband drive:
+    /// the RMS over one period, `step` = the period).
     Measurement,
+    /// An arbitrary waveform uploaded and selected (broadband drive): `waveform`,
+    /// `sample_rate_hz`, `seed` and the DAC `codes` sent.
+    Waveform,
 }
 
 /// `/drive`: every setting sent to a signal generator that drives the shaker through a power
@@ -305,6 +309,22 @@ pub struct DriveRecord {
     pub target_n: Option<f64>,
     /// Generator settings sent since this frequency was set (this one included).
     pub settings_this_line: u32,
+    /// The broadband drive the uploaded waveform makes (kind `waveform`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub waveform: Option<Waveform>,
+    /// Rate the uploaded points are played at (Sa/s; kind `waveform`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sample_rate_hz: Option<f64>,
+    /// Seed of the random phases (kind `waveform`, random and burst random).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub seed: Option<u64>,
+    /// The DAC codes uploaded, one period, in the model's code range (kind `waveform`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub codes: Option<Vec<i32>>,
+    /// The DAC codes of negative and positive full scale (kind `waveform`): code `c` is
+    /// `volts_peak × (2c − min − max) / (max − min)` volts.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub code_range: Option<(i32, i32)>,
 }
 
 impl TopicRecord for DriveRecord {

@@ -45,6 +45,28 @@ pub trait Shaker: Send {
     fn settings_this_line(&self) -> Option<u32> {
         None
     }
+    /// The force the DAQ measured over one whole period of a broadband drive. An exciter whose
+    /// force loop the host closes records it, checks its limits (over-force, lost force signal)
+    /// and, while `may_adjust`, corrects its amplitude towards the target; returns whether it
+    /// changed the drive. A controller with its own loop ignores it.
+    async fn period_force_measured(&mut self, _reading: &PeriodForce) -> Result<bool, ShakerError> {
+        Ok(false)
+    }
+}
+
+/// The force over one whole period of a broadband drive, measured on the DAQ's force channel.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PeriodForce {
+    /// Period number since the stream's start.
+    pub period: u64,
+    /// The plan's force: RMS for random and burst random, peak for a chirp (N).
+    pub target_n: f64,
+    /// RMS of the measured force over the period (N).
+    pub rms_n: f64,
+    /// Largest |force| sample in the period (N).
+    pub peak_n: f64,
+    /// The period is a settling one whose successor is also settling: the drive may change.
+    pub may_adjust: bool,
 }
 
 /// One force measurement of the sweep's closed loop (N peak, Hz).

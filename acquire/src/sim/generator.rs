@@ -2,17 +2,27 @@
 //! command set (long and short forms, the manuals' optional nodes, channel suffixes, an error
 //! queue) on a pseudo-terminal or a local TCP port, and turns the generator's volts into the
 //! exciter's force through the amplifier's true gain — which the simulated DAQ then measures
-//! through the shaker–structure interaction like any other force. Injectable faults: the
-//! amplifier trips (force drops to nothing, the generator's output stays on) or surges.
+//! through the shaker–structure interaction like any other force. An arbitrary waveform uploaded
+//! as a binary block (`SOUR:DATA:ARB:DAC name,#...`) is played at the sample rate set, looping.
+//! Injectable faults: the amplifier trips (force drops to nothing, the generator's output stays
+//! on) or surges.
 
 use std::collections::VecDeque;
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
-use super::{lock, read_lines, send_answer, InjectedFault, SharedRef};
+use super::signal::ArbitraryDrive;
+use super::{lock, send_answer, InjectedFault, SharedRef};
 use crate::device::DeviceIdentity;
-use crate::shaker::scpi::{Function, Line, LineBuffer};
+use crate::generator::arbitrary::{CommandFramer, FramedCommand};
+use crate::shaker::scpi::Function;
 use crate::transport::Transport;
+
+/// Most points the simulated generator's arbitrary memory holds.
+pub const MAX_ARBITRARY_POINTS: usize = 65_536;
+
+/// Highest arbitrary sample rate of the simulated generator (Sa/s).
+pub const MAX_SAMPLE_RATE_HZ: f64 = 1e6;
 
 /// Largest peak voltage the simulated generator delivers into a high-impedance load (V), like
 /// the 20 Vpp of the real instruments.
@@ -71,6 +81,16 @@ pub struct GeneratorState {
     pub gain_factor: f64,
     /// Frequency settings received.
     pub lines: u64,
+    /// The arbitrary function selected (`FUNC ARB`).
+    pub arbitrary: bool,
+    /// The waveform in volatile memory (name, its samples −1..1), once uploaded.
+    pub uploaded: Option<(String, Arc<ArbitraryDrive>)>,
+    /// The waveform `FUNC:ARB` selected.
+    pub selected: Option<String>,
+    /// Arbitrary sample rate (Sa/s).
+    pub sample_rate_hz: f64,
+    /// Binary blocks least-significant byte first (`FORM:BORD SWAP`).
+    pub swapped: bool,
     /// Every accepted setting of the amplifier's channel.
     pub log: Vec<Accepted>,
     errors: VecDeque<(i32, String)>,
@@ -89,6 +109,11 @@ impl Default for GeneratorState {
             amplifier_tripped: false,
             gain_factor: 1.0,
             lines: 0,
+            arbitrary: false,
+            uploaded: None,
+            selected: None,
+            sample_rate_hz: 40_000.0,
+            swapped: false,
             log: Vec::new(),
             errors: VecDeque::new(),
         }
@@ -119,20 +144,19 @@ impl SimGenerator {
 
     /// Serves one connection until it closes (a TCP client leaving) or, on a pty, forever.
     pub(super) async fn serve<T: Transport>(&self, mut io: T, pty: bool) {
-        let mut lines = LineBuffer::new();
-        let mut buf = vec![0u8; 512];
+        let mut framer = CommandFramer::new();
+        let mut buf = vec![0u8; 4096];
         loop {
-            let Some(got) = read_lines(&mut io, &mut lines, &mut buf, &self.shared, pty).await
+            let Some(got) = read_commands(&mut io, &mut framer, &mut buf, &self.shared, pty).await
             else {
                 return;
             };
-            for line in got {
-                let answer = match line {
-                    Line::Text(t) => self.handle(&t),
-                    Line::Garbage(_) => {
-                        self.push_error(-100, "Command error");
-                        None
-                    }
+            for c in got {
+                let answer = if c.garbage {
+                    self.push_error(-100, "Command error");
+                    None
+                } else {
+                    self.handle(&c)
                 };
                 if !send_answer(&mut io, answer).await {
                     return;
@@ -170,15 +194,74 @@ impl SimGenerator {
         }
     }
 
-    /// One command line; the answer line for a query.
-    fn handle(&self, line: &str) -> Option<String> {
-        match self.apply(line) {
+    /// One command; the answer line for a query.
+    fn handle(&self, c: &FramedCommand) -> Option<String> {
+        let r = match &c.block {
+            Some(block) => self.upload(&c.text, block),
+            None => self.apply(&c.text),
+        };
+        match r {
             Ok(answer) => answer,
             Err((code, message)) => {
                 self.push_error(code, &message);
                 None
             }
         }
+    }
+
+    /// `SOUR{ch}:DATA:ARB:DAC name,<block>`: signed 16-bit codes, most-significant byte first
+    /// unless `FORM:BORD SWAP`.
+    fn upload(&self, text: &str, block: &[u8]) -> Result<Option<String>, (i32, String)> {
+        let (header, args) = text
+            .trim()
+            .split_once(char::is_whitespace)
+            .unwrap_or((text, ""));
+        let (path, channel) = canonical(header)?;
+        if path != ["DATA", "ARB", "DAC"] {
+            return Err((-113, "Undefined header".into()));
+        }
+        let name = args
+            .trim()
+            .trim_end_matches(',')
+            .trim()
+            .to_ascii_uppercase();
+        if name.is_empty() || name.len() > 12 || !args.trim().ends_with(',') {
+            return Err((-109, "Missing parameter;name,<block>".into()));
+        }
+        if !block.len().is_multiple_of(2) {
+            return Err((-161, "Invalid block data;odd byte count".into()));
+        }
+        let points = block.len() / 2;
+        if points > MAX_ARBITRARY_POINTS {
+            return Err((-223, "Too much data".into()));
+        }
+        if points < 8 {
+            return Err((-222, "Data out of range;at least 8 points".into()));
+        }
+        let mut st = self.state.lock().unwrap_or_else(|p| p.into_inner());
+        let samples = block
+            .chunks_exact(2)
+            .map(|b| {
+                let w = if st.swapped {
+                    i16::from_le_bytes([b[0], b[1]])
+                } else {
+                    i16::from_be_bytes([b[0], b[1]])
+                };
+                f64::from(w.max(-32767)) / 32767.0
+            })
+            .collect();
+        if channel != self.setup.channel {
+            return Ok(None);
+        }
+        st.uploaded = Some((
+            name,
+            Arc::new(ArbitraryDrive {
+                samples,
+                sample_rate_hz: st.sample_rate_hz,
+            }),
+        ));
+        self.drive(&st);
+        Ok(None)
     }
 
     fn apply(&self, line: &str) -> Result<Option<String>, (i32, String)> {
@@ -209,15 +292,62 @@ impl SimGenerator {
         let s: &mut GeneratorState = if ours { &mut st } else { &mut scratch };
         let answer = match (path.as_slice(), query) {
             (["FUNC"], false) => {
-                s.sine = match word(args).as_str() {
+                let w = word(args);
+                s.sine = match w.as_str() {
                     "SIN" | "SINUSOID" => true,
                     "SQU" | "SQUARE" | "RAMP" | "PULS" | "PULSE" | "NOIS" | "NOISE" | "DC"
-                    | "ARB" | "PRBS" | "TRI" | "TRIANGLE" => false,
+                    | "ARB" | "ARBITRARY" | "PRBS" | "TRI" | "TRIANGLE" => false,
+                    _ => return Err((-224, "Illegal parameter value".into())),
+                };
+                s.arbitrary = matches!(w.as_str(), "ARB" | "ARBITRARY");
+                None
+            }
+            (["FUNC"], true) => Some(
+                if s.sine {
+                    "SIN"
+                } else if s.arbitrary {
+                    "ARB"
+                } else {
+                    "NOIS"
+                }
+                .into(),
+            ),
+            (["FUNC", "ARB"], false) => {
+                let name = args.trim().trim_matches('"').to_ascii_uppercase();
+                if s.uploaded.as_ref().map(|(n, _)| n) != Some(&name) {
+                    return Err((-224, "Illegal parameter value;no such arb waveform".into()));
+                }
+                s.selected = Some(name);
+                None
+            }
+            (["FUNC", "ARB", "SRAT"], false) => {
+                let r = number(args)?;
+                if !(1e-6..=MAX_SAMPLE_RATE_HZ).contains(&r) {
+                    return Err((-222, "Data out of range".into()));
+                }
+                s.sample_rate_hz = r;
+                if let Some((_, a)) = &mut s.uploaded {
+                    *a = Arc::new(ArbitraryDrive {
+                        samples: a.samples.clone(),
+                        sample_rate_hz: r,
+                    });
+                }
+                None
+            }
+            (["FUNC", "ARB", "SRAT"], true) => Some(format!("{:E}", s.sample_rate_hz)),
+            (["DATA", "VOL", "CLE"], false) => {
+                s.uploaded = None;
+                s.selected = None;
+                None
+            }
+            (["FORM", "BORD"], false) => {
+                s.swapped = match word(args).as_str() {
+                    "NORM" | "NORMAL" => false,
+                    "SWAP" | "SWAPPED" => true,
                     _ => return Err((-224, "Illegal parameter value".into())),
                 };
                 None
             }
-            (["FUNC"], true) => Some(if s.sine { "SIN" } else { "ARB" }.into()),
             (["FREQ"], false) => {
                 let f = number(args)?;
                 if !(1e-6..=20e6).contains(&f) {
@@ -391,13 +521,50 @@ impl SimGenerator {
         } else {
             st.volts_peak * load_factor * self.setup.amplifier_gain_n_per_v * st.gain_factor
         };
+        let playing = match (&st.uploaded, &st.selected) {
+            (Some((name, a)), Some(sel)) if st.arbitrary && name == sel => Some(a.clone()),
+            _ => None,
+        };
         let mut sh = lock(&self.shared);
         let exc = &mut sh.excitation;
-        exc.output_on = st.output_on && st.sine;
-        exc.function = Function::Sine;
+        exc.output_on = st.output_on && (st.sine || playing.is_some());
+        exc.function = if st.sine || playing.is_none() {
+            Function::Sine
+        } else {
+            Function::Random
+        };
+        exc.arbitrary = if st.sine { None } else { playing };
         exc.freq_hz = st.frequency_hz;
         exc.force_n = force;
     }
+}
+
+/// Waits up to 20 ms for bytes from the host and returns the complete commands they finish
+/// (binary blocks whole); `None` when the device stops serving this connection, as
+/// [`super::read_lines`] does.
+async fn read_commands<T: Transport>(
+    io: &mut T,
+    framer: &mut CommandFramer,
+    buf: &mut [u8],
+    shared: &SharedRef,
+    pty: bool,
+) -> Option<Vec<FramedCommand>> {
+    use tokio::io::AsyncReadExt;
+    if lock(shared).cable_pulled {
+        return None;
+    }
+    let n = match tokio::time::timeout(Duration::from_millis(20), io.read(buf)).await {
+        Err(_) => return Some(Vec::new()),
+        Ok(Ok(0)) | Ok(Err(_)) if !pty => return None,
+        Ok(Ok(0)) | Ok(Err(_)) => {
+            tokio::time::sleep(Duration::from_millis(10)).await;
+            return Some(Vec::new());
+        }
+        Ok(Ok(n)) => n,
+    };
+    let mut got = Vec::new();
+    framer.feed(&buf[..n], |c| got.push(c));
+    Some(got)
 }
 
 /// The first word of `args`, upper case.
@@ -422,7 +589,7 @@ fn number(args: &str) -> Result<f64, (i32, String)> {
 
 /// Long form, short form of the mnemonics this generator knows; `None` = an optional node the
 /// manuals allow and that changes nothing (`SOURce`, `LEVel`, `IMMediate`, …).
-const MNEMONICS: [(&str, &str, Option<&str>); 19] = [
+const MNEMONICS: [(&str, &str, Option<&str>); 27] = [
     ("NEXT", "NEXT", None),
     ("SOURCE", "SOUR", None),
     ("LEVEL", "LEV", None),
@@ -442,6 +609,14 @@ const MNEMONICS: [(&str, &str, Option<&str>); 19] = [
     ("IMPEDANCE", "IMP", Some("IMP")),
     ("SYSTEM", "SYST", Some("SYST")),
     ("ERROR", "ERR", Some("ERR")),
+    ("DATA", "DATA", Some("DATA")),
+    ("ARBITRARY", "ARB", Some("ARB")),
+    ("DAC", "DAC", Some("DAC")),
+    ("VOLATILE", "VOL", Some("VOL")),
+    ("CLEAR", "CLE", Some("CLE")),
+    ("SRATE", "SRAT", Some("SRAT")),
+    ("FORMAT", "FORM", Some("FORM")),
+    ("BORDER", "BORD", Some("BORD")),
 ];
 
 /// A header as its canonical short-form path and channel (`SOURce2:VOLTage:LEVel:IMMediate:

@@ -31,6 +31,18 @@ pub struct Excitation {
     pub duty: f64,
     /// Period of the broadband waveforms (s).
     pub period_s: f64,
+    /// An arbitrary waveform a signal generator plays (looping); when set, it is the drive
+    /// (`force_n` is then the force at full scale) and `function` is ignored unless it is a sine.
+    pub arbitrary: Option<Arc<ArbitraryDrive>>,
+}
+
+/// Samples a simulated signal generator plays, repeated.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ArbitraryDrive {
+    /// One period, −1..1 (full scale).
+    pub samples: Vec<f64>,
+    /// Rate they are played at (Sa/s).
+    pub sample_rate_hz: f64,
 }
 
 impl Default for Excitation {
@@ -43,6 +55,7 @@ impl Default for Excitation {
             band_hz: (10.0, 500.0),
             duty: 0.5,
             period_s: 1.0,
+            arbitrary: None,
         }
     }
 }
@@ -71,6 +84,7 @@ pub struct SimChannel {
 
 struct Periodic {
     key: (u8, u64, u64, u64, u64, u64),
+    arbitrary: Option<Arc<ArbitraryDrive>>,
     /// Per channel, one period of the physical signal per newton of command.
     data: Vec<Vec<f64>>,
 }
@@ -214,10 +228,23 @@ impl SignalGenerator {
             exc.period_s.to_bits(),
             self.fs.to_bits(),
         );
-        if self.periodic.as_ref().is_some_and(|p| p.key == key) {
+        let same_arbitrary = |p: &Periodic| match (&p.arbitrary, &exc.arbitrary) {
+            (None, None) => true,
+            (Some(a), Some(b)) => Arc::ptr_eq(a, b),
+            _ => false,
+        };
+        if self
+            .periodic
+            .as_ref()
+            .is_some_and(|p| p.key == key && same_arbitrary(p))
+        {
             return Ok(());
         }
-        let n = ((exc.period_s * self.fs).round() as usize).clamp(64, 1 << 20);
+        let period_s = match &exc.arbitrary {
+            Some(a) => a.samples.len() as f64 / a.sample_rate_hz,
+            None => exc.period_s,
+        };
+        let n = ((period_s * self.fs).round() as usize).clamp(64, 1 << 20);
         let (lo, hi) = (
             exc.band_hz.0.min(exc.band_hz.1),
             exc.band_hz.0.max(exc.band_hz.1),
@@ -226,8 +253,13 @@ impl SignalGenerator {
         let mut planner = FftPlanner::<f64>::new();
         let fft = planner.plan_fft_forward(n);
         let ifft = planner.plan_fft_inverse(n);
-        // Commanded waveform per newton (RMS for random/burst, peak for chirp).
+        // Commanded waveform per newton (RMS for random/burst, peak for chirp, full scale for an
+        // arbitrary waveform).
         let mut u: Vec<C64> = match exc.function {
+            _ if exc.arbitrary.is_some() => {
+                let a = exc.arbitrary.as_deref().map(|a| a.samples.as_slice());
+                played(a.unwrap_or_default(), n, &mut planner)
+            }
             Function::Random | Function::Burst => {
                 let mut spec = vec![C64::new(0.0, 0.0); n];
                 let mut rng = rand::rngs::StdRng::seed_from_u64(0x5eed ^ n as u64);
@@ -272,7 +304,20 @@ impl SignalGenerator {
         };
         fft.process(&mut u);
         let freqs: Vec<f64> = (0..=n / 2).map(|k| k as f64 * df).collect();
-        let h = self.plant.response(&freqs)?;
+        // The structure's response only where the drive has energy (a band-limited drive leaves
+        // most lines empty, and the truth model's response is the expensive part).
+        let peak = u
+            .iter()
+            .take(n / 2 + 1)
+            .fold(0.0_f64, |m, c| m.max(c.norm()));
+        let driven: Vec<usize> = (0..=n / 2)
+            .filter(|&k| u[k].norm() > 1e-12 * peak)
+            .collect();
+        let at: Vec<f64> = driven.iter().map(|&k| freqs[k]).collect();
+        let mut h = vec![Vec::new(); n / 2 + 1];
+        for (k, r) in driven.iter().zip(self.plant.response(&at)?) {
+            h[*k] = r;
+        }
         let mut data = Vec::with_capacity(self.channels.len());
         for ch in &self.channels {
             let mut y = vec![C64::new(0.0, 0.0); n];
@@ -280,9 +325,7 @@ impl SignalGenerator {
                 let g = self.interaction.at(freqs[k]);
                 let coef = match ch.source {
                     Source::Force => g,
-                    Source::Sensor(i) => {
-                        g * h.get(k).and_then(|v| v.get(i)).copied().unwrap_or_default()
-                    }
+                    Source::Sensor(i) => g * h[k].get(i).copied().unwrap_or_default(),
                 };
                 y[k] = u[k] * coef;
                 if k > 0 && k < n - k {
@@ -292,9 +335,38 @@ impl SignalGenerator {
             ifft.process(&mut y);
             data.push(y.iter().map(|c| c.re / n as f64).collect());
         }
-        self.periodic = Some(Periodic { key, data });
+        self.periodic = Some(Periodic {
+            key,
+            arbitrary: exc.arbitrary.clone(),
+            data,
+        });
         Ok(())
     }
+}
+
+/// What a DAC playing `samples` (one period) and its reconstruction filter put out, sampled `n`
+/// times over the same period: the samples' own Fourier series, band-limited to the lower of the
+/// two Nyquist frequencies (the identity when `n` is the number of samples).
+fn played(samples: &[f64], n: usize, planner: &mut FftPlanner<f64>) -> Vec<C64> {
+    let m = samples.len();
+    if m == 0 {
+        return vec![C64::new(0.0, 0.0); n];
+    }
+    let mut spec: Vec<C64> = samples.iter().map(|x| C64::new(*x, 0.0)).collect();
+    planner.plan_fft_forward(m).process(&mut spec);
+    let mut out = vec![C64::new(0.0, 0.0); n];
+    let half = m.min(n).div_ceil(2);
+    let scale = 1.0 / m as f64;
+    out[0] = spec[0] * scale;
+    for k in 1..half {
+        out[k] = spec[k] * scale;
+        out[n - k] = out[k].conj();
+    }
+    if m == n && m.is_multiple_of(2) {
+        out[m / 2] = spec[m / 2] * scale;
+    }
+    planner.plan_fft_inverse(n).process(&mut out);
+    out.iter().map(|c| C64::new(c.re, 0.0)).collect()
 }
 
 #[cfg(test)]
@@ -373,6 +445,51 @@ mod tests {
         let rms = (f.iter().map(|x| x * x).sum::<f64>() / f.len() as f64).sqrt();
         assert!((rms - 2.0).abs() < 0.1, "{rms}");
         assert!(out.iter().skip(1).step_by(2).all(|c| *c == 0));
+    }
+
+    #[test]
+    fn an_arbitrary_waveform_is_played_sample_for_sample_and_looped() {
+        let mut g = gen(0.0);
+        let samples: Vec<f64> = (0..2048)
+            .map(|i| (2.0 * std::f64::consts::PI * 37.0 * i as f64 / 2048.0).sin())
+            .collect();
+        let exc = Excitation {
+            output_on: true,
+            function: Function::Random,
+            force_n: 100.0,
+            arbitrary: Some(Arc::new(ArbitraryDrive {
+                samples: samples.clone(),
+                sample_rate_hz: 2048.0,
+            })),
+            ..Default::default()
+        };
+        // Played at half the DAQ's rate: one period (1 s) is 4096 DAQ samples, and the 37 cycles
+        // in it are a 37 Hz sine.
+        let mut out = Vec::new();
+        g.block(&exc, 8192, &mut out).unwrap();
+        let force: Vec<f64> = out
+            .iter()
+            .step_by(2)
+            .map(|c| *c as f64 * VOLTS_PER_COUNT / 1e-3)
+            .collect();
+        let want = 100.0
+            * Interaction {
+                gain: 0.9,
+                cutoff_hz: 300.0,
+            }
+            .at(37.0)
+            .norm();
+        let peak = force.iter().fold(0.0_f64, |m, v| m.max(v.abs()));
+        assert!((peak - want).abs() < 1e-3 * want, "{peak} vs {want}");
+        // Looping: the second period equals the first.
+        for i in 0..4096 {
+            assert!((force[i] - force[i + 4096]).abs() < 1e-3, "sample {i}");
+        }
+        let same = played(&samples, 2048, &mut FftPlanner::new());
+        assert!(same
+            .iter()
+            .zip(&samples)
+            .all(|(a, b)| (a.re - b).abs() < 1e-12));
     }
 
     #[test]

@@ -12,6 +12,7 @@ use serde_spanned::Spanned;
 use identify::source::{Located, Quantity as Value, SourceText};
 use identify::units::Dim;
 
+mod broadband;
 mod canopen;
 mod generator;
 
@@ -51,6 +52,8 @@ pub struct Stand {
     pub geometry_model: Option<PathBuf>,
     /// The geometry read from `geometry_model` by [`Stand::load`] (recorded in every session).
     pub geometry: Option<Geometry>,
+    /// `[broadband]`: the broadband measurement `ident sweep --broadband` runs.
+    pub broadband: Option<crate::sweep::Broadband>,
 }
 
 /// Mass properties of the bodies the accelerometers are on, and the nominal excitation: what
@@ -356,6 +359,7 @@ struct RawStand {
     truth: Option<Spanned<RawTruth>>,
     faults: Option<RawFaults>,
     geometry: Option<Spanned<RawGeometry>>,
+    broadband: Option<Spanned<broadband::RawBroadband>>,
 }
 
 #[derive(Deserialize)]
@@ -624,6 +628,16 @@ impl Stand {
             .geometry
             .as_ref()
             .map(|g| PathBuf::from(g.get_ref().model.get_ref()));
+        let broadband = match &raw.broadband {
+            None => None,
+            Some(rb) => Some(broadband::broadband_section(
+                &cx,
+                rb,
+                daq.sample_rate_hz,
+                shaker.max_force_n,
+                generator.as_ref(),
+            )?),
+        };
         let uses_sim = shaker.port == PortSpec::Sim || daq.port == PortSpec::Sim;
         if uses_sim && truth.is_none() {
             return Err(cx.at(
@@ -643,6 +657,7 @@ impl Stand {
             faults,
             geometry_model,
             geometry: None,
+            broadband,
         })
     }
 

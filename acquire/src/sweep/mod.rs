@@ -4,6 +4,7 @@
 //! recorded in the session; the sweep drives `dyn Shaker` and `dyn Daq` and does not know which.
 
 pub mod estimate;
+pub mod period_force;
 pub mod periodic;
 mod progress;
 
@@ -23,7 +24,7 @@ use crate::session::records::{
     self, BlockRecord, BroadbandChannel, BroadbandRecord, FaultRecord, SessionStart, SweepEvent,
 };
 use crate::session::{self, SessionError, SessionHandle};
-use crate::shaker::{ForceReading, ShakerError, Waveform};
+use crate::shaker::{ForceReading, PeriodForce, ShakerError, Waveform};
 use estimate::StepEstimator;
 
 /// Sweep errors. Device errors keep their port and advice.
@@ -1069,6 +1070,19 @@ async fn broadband_inner(
 ) -> Result<BroadbandResult, SweepError> {
     let (mut averager, lo, hi) =
         period_averager(plan, rig.stream.sample_rate_hz, &rig.stand.channels)?;
+    let (period_samples, _, _) = broadband_period(plan, rig.stream.sample_rate_hz)?;
+    let force_channel = rig
+        .stand
+        .channels
+        .iter()
+        .position(|c| c.kind == crate::stand::ChannelKind::Force)
+        .unwrap_or(0);
+    let mut force = period_force::PeriodForceMonitor::new(
+        period_samples,
+        force_channel,
+        rig.stand.channels.len(),
+        rig.stand.channels[force_channel].sensitivity,
+    );
     rig.shaker.set_waveform(&plan.waveform).await?;
     rig.shaker.set_force(plan.force_n).await?;
     rig.shaker.set_output(true).await?;
@@ -1088,6 +1102,28 @@ async fn broadband_inner(
         let completed = averager
             .push_block(b.first_sample, &b.volts)
             .map_err(|e| SweepError::Plan(format!("broadband estimate: {e}")))?;
+        // Every whole period's force to the exciter: limits, and the loop while settling.
+        for p in force.push_block(b.first_sample, &b.volts) {
+            let reading = PeriodForce {
+                period: p.period,
+                target_n: plan.force_n,
+                rms_n: p.rms_n,
+                peak_n: p.peak_n,
+                may_adjust: p.period + 2 <= u64::from(plan.settle_periods),
+            };
+            if pump.rig.shaker.period_force_measured(&reading).await? {
+                event(
+                    session,
+                    "force_control",
+                    None,
+                    None,
+                    format!(
+                        "period {}: force {:.1} N RMS, drive corrected",
+                        p.period, p.rms_n
+                    ),
+                )?;
+            }
+        }
         if completed > 0 {
             let done = averager.averages();
             let coh = averager.mean_coherence(lo, hi);

@@ -68,6 +68,20 @@ impl<T: Transport> LineLink<T> {
         self.io.flush().await
     }
 
+    /// Sends raw `bytes` (a command carrying a binary block) followed by `terminator`, and
+    /// flushes.
+    pub async fn send_bytes(
+        &mut self,
+        bytes: &[u8],
+        terminator: &str,
+    ) -> Result<(), std::io::Error> {
+        let mut all = Vec::with_capacity(bytes.len() + terminator.len());
+        all.extend_from_slice(bytes);
+        all.extend_from_slice(terminator.as_bytes());
+        self.io.write_all(&all).await?;
+        self.io.flush().await
+    }
+
     /// The next answer line before `deadline`; `Ok(None)` on timeout.
     pub async fn read_line(&mut self, deadline: Instant) -> Result<Option<Line>, LinkError> {
         loop {
