@@ -6,13 +6,28 @@
 #   IDENT_VCAN_KERNEL_DIR  where to keep it (default /var/cache/ident-vcan)
 set -euo pipefail
 kdir=${IDENT_VCAN_KERNEL_DIR:-/var/cache/ident-vcan}
-modules=(kernel/net/can/can.ko kernel/net/can/can-raw.ko kernel/drivers/net/can/dev/can-dev.ko
-         kernel/drivers/net/can/vcan.ko)
+# CAN (raw, and the broadcast manager python-can uses for periodic frames) + vcan; virtio-pci and 9p for the host's root shared read-only (python-canopen in the VM).
+modules=(kernel/net/can/can.ko kernel/net/can/can-raw.ko kernel/net/can/can-bcm.ko
+         kernel/drivers/net/can/dev/can-dev.ko
+         kernel/drivers/net/can/vcan.ko
+         kernel/drivers/virtio/virtio_ring.ko kernel/drivers/virtio/virtio.ko
+         kernel/drivers/virtio/virtio_pci_modern_dev.ko kernel/drivers/virtio/virtio_pci_legacy_dev.ko
+         kernel/drivers/virtio/virtio_pci.ko kernel/fs/netfs/netfs.ko kernel/fs/fscache/fscache.ko
+         kernel/net/9p/9pnet.ko kernel/net/9p/9pnet_virtio.ko kernel/fs/9p/9p.ko)
 
-# Whatever kernel is already there is good enough: the VM only needs CAN + vcan modules.
-if compgen -G "$kdir/*/boot/vmlinuz-*" >/dev/null; then
-  exit 0
-fi
+# A kernel already there is good enough when it has every module above.
+for have in "$kdir"/*/boot/vmlinuz-*; do
+  [ -e "$have" ] || continue
+  root=$(dirname "$(dirname "$have")")
+  release=${have##*/vmlinuz-}
+  complete=1
+  for m in "${modules[@]}"; do
+    compgen -G "$root/lib/modules/$release/$m*" >/dev/null || complete=0
+  done
+  if [ "$complete" = 1 ]; then exit 0; fi
+  echo "fetch-kernel: $root lacks modules the VM now needs; fetching again" >&2
+  rm -rf "$root"
+done
 # The versioned package linux-image-amd64 currently points at (e.g. linux-image-6.1.0-56-amd64).
 pkg=$(apt-cache depends linux-image-amd64 2>/dev/null |
       sed -n 's/^ *Depends: \(linux-image-[0-9][^ ]*-amd64\)$/\1/p' | head -n1)

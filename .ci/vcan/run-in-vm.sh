@@ -1,7 +1,14 @@
 #!/usr/bin/env bash
 # Runs test binaries inside a small qemu VM whose kernel has CAN, with vcan0 up (CAN FD capable).
 #
-#   .ci/vcan/run-in-vm.sh [--env NAME=VALUE]... [--timeout SECONDS] BINARY [ARGS...]
+#   .ci/vcan/run-in-vm.sh [--env NAME=VALUE]... [--timeout SECONDS] [--host-root] BINARY [ARGS...]
+#
+# --host-root shares this host's root file system read-only with the VM (virtio 9p, mounted at
+# /host with /proc, /sys, /dev and a fresh /tmp bound in) and puts a `python3` first on PATH that
+# runs this host's python3 (with its installed packages) chrooted into /host: programs written by
+# others (python-canopen, python-can) then talk over the VM's vcan0. Absolute host paths of files
+# the binary passes to python are the same inside the chroot; the binary itself reads them under
+# $IDENT_HOST_ROOT (= /host).
 #
 # BINARY runs as root inside the VM (working directory /payload, PATH has busybox (whose `ip`
 # handles `type vcan`), candump, cansend and cangen). Its output appears on the console, which
@@ -19,9 +26,11 @@ kdir=${IDENT_VCAN_KERNEL_DIR:-/var/cache/ident-vcan}
 cache=${IDENT_VCAN_CACHE:-${TMPDIR:-/tmp}/ident-vcan-$(id -u)}
 timeout_s=${IDENT_VCAN_TIMEOUT:-150}
 envs=()
+host_root=0
 while [ $# -gt 0 ]; do
   case "$1" in
     --env) envs+=("$2"); shift 2 ;;
+    --host-root) host_root=1; shift ;;
     --timeout) timeout_s=$2; shift 2 ;;
     --) shift; break ;;
     -*) echo "run-in-vm: unknown option $1" >&2; exit 2 ;;
@@ -62,6 +71,9 @@ copy_with_libs() {
   done
 }
 
+# Loaded in this order when the host's root is shared (virtio-pci, then 9p over virtio).
+share_modules="virtio_ring virtio virtio_pci_modern_dev virtio_pci_legacy_dev virtio_pci netfs fscache 9pnet 9pnet_virtio 9p"
+
 # ---- base initramfs: cached, keyed by its inputs ------------------------------------------------
 mkdir -p "$cache"
 key=$( { sha256sum "$here/run-in-vm.sh" /bin/busybox "$(command -v candump)" \
@@ -72,7 +84,7 @@ if [ ! -s "$base" ]; then
   stage=$(mktemp -d "$cache/stage.XXXXXX")
   mkdir -p "$stage"/{bin,sbin,dev,proc,sys,tmp,run,lib/modules,payload}
   cp /bin/busybox "$stage/bin/busybox"
-  for m in can can-raw can-dev vcan; do
+  for m in can can-raw can-bcm can-dev vcan $share_modules; do
     src=$(find "$kroot/lib/modules" -name "$m.ko" -o -name "$m.ko.xz" | head -n1)
     [ -n "$src" ] || { echo "run-in-vm: module $m not found under $kroot (re-run .ci/setup)" >&2; rm -rf "$stage"; exit 3; }
     case "$src" in
@@ -89,13 +101,23 @@ mount -t proc proc /proc; mount -t sysfs sys /sys; mount -t devtmpfs dev /dev
 mkdir -p /dev/pts && mount -t devpts -o ptmxmode=0666 devpts /dev/pts  # pseudo-terminals (simulated shaker)
 mount -t tmpfs tmp /tmp
 fail() { echo "VCAN-RESULT: fail ($*)"; sync; poweroff -f; sleep 5; }
-for m in can can-raw can-dev vcan; do
+for m in can can-raw can-bcm can-dev vcan; do
   insmod /lib/modules/$m.ko || fail "insmod $m"
 done
 ip link set lo up
 ip link add dev vcan0 type vcan || fail "ip link add vcan0"
 ip link set vcan0 mtu 72 || fail "vcan0 mtu 72 (CAN FD)"
 ip link set vcan0 up || fail "vcan0 up"
+if [ -e /payload/host-root ]; then
+  for m in virtio_ring virtio virtio_pci_modern_dev virtio_pci_legacy_dev virtio_pci netfs fscache 9pnet 9pnet_virtio 9p; do
+    insmod /lib/modules/$m.ko || fail "insmod $m"
+  done
+  mkdir -p /host
+  mount -t 9p -o trans=virtio,version=9p2000.L,ro,msize=262144 hostroot /host || fail "mount the host's root (9p)"
+  for d in proc sys dev; do mount --bind /$d /host/$d || fail "bind /$d into /host"; done
+  mount -t tmpfs tmp /host/tmp || fail "tmpfs on /host/tmp"
+  export PATH=/payload/bin:$PATH IDENT_HOST_ROOT=/host
+fi
 echo "VCAN-READY: $(cut -d' ' -f1 /proc/uptime) s after boot"
 . /payload/run.sh
 rc=$?
@@ -119,6 +141,17 @@ mkdir -p "$pstage/payload"
 copy_with_libs "$pstage" "$bin" "/payload/$(basename "$bin")"
 # Debug info is most of a test binary's size and slows the VM's initramfs unpacking; symbols stay.
 if command -v strip >/dev/null; then strip --strip-debug "$pstage/payload/$(basename "$bin")" 2>/dev/null || true; fi
+qemu_share=()
+if [ "$host_root" = 1 ]; then
+  # The interpreter itself, not a shim (pyenv's needs its environment).
+  py=$(python3 -c 'import sys; print(sys.executable)' 2>/dev/null || true)
+  [ -n "$py" ] || { echo "run-in-vm: --host-root needs python3 on this host" >&2; exit 3; }
+  mkdir -p "$pstage/payload/bin"
+  printf '#!/bin/sh\nexec chroot /host %q "$@"\n' "$py" > "$pstage/payload/bin/python3"
+  chmod +x "$pstage/payload/bin/python3"
+  touch "$pstage/payload/host-root"
+  qemu_share=(-virtfs "local,path=/,mount_tag=hostroot,security_model=none,readonly=on")
+fi
 {
   echo "cd /payload"
   for e in "${envs[@]}"; do printf 'export %q\n' "$e"; done
@@ -131,7 +164,7 @@ log="$run/console.log"
 start=$(date +%s.%N)
 set +e
 timeout --kill-after=5 "$timeout_s" qemu-system-x86_64 -accel tcg -cpu max -smp 2 -m 1024 \
-  -nographic -no-reboot -nic none \
+  -nographic -no-reboot -nic none "${qemu_share[@]}" \
   -kernel "$vmlinuz" -initrd "$run/initrd.cpio" \
   -append "console=ttyS0 quiet panic=-1 loglevel=3" </dev/null 2>&1 | tee "$log"
 qrc=${PIPESTATUS[0]}

@@ -7,6 +7,7 @@
 //! qemu VM through `.ci/vcan/run-in-vm.sh`, and fails if any of them fails — or if neither vcan0
 //! nor the VM prerequisites are present (install them with `.ci/setup`).
 
+mod python_node;
 mod util;
 
 use std::path::Path;
@@ -65,6 +66,8 @@ fn vcan_suite() {
                 "RUST_BACKTRACE=1",
                 "--timeout",
                 "300",
+                // python-canopen, from this host's python3, plays a DAQ node on vcan0.
+                "--host-root",
             ])
             .arg(&exe)
             .args(test_args)
@@ -1309,4 +1312,56 @@ fn assert_replay_equals_live(
         );
     }
     a
+}
+
+/// python-canopen's `LocalNode` (a stack nobody on this project wrote) as the DAQ node on vcan0,
+/// through python-can's socketcan interface: ident identifies it, configures it over SDO, starts
+/// it by NMT and receives its TPDO stream loss-free (the scenario of `canopen_python.rs`, over CAN).
+#[test]
+#[ignore = "needs vcan0 and python3 with canopen: run by vcan_suite (in the qemu VM, the host's python shared)"]
+fn python_canopen_node_on_vcan_is_configured_and_streams_loss_free() {
+    require_vcan();
+    runtime().block_on(async {
+        let mut child = python_node::spawn(&["--bus", IFACE]);
+        let daq = open_python_node(&mut child);
+        python_node::identified_configured_over_sdo_and_streams_loss_free(child, daq).await;
+    });
+}
+
+/// The python-canopen node on vcan0 sends an EMCY and then falls silent: both are device faults.
+#[test]
+#[ignore = "needs vcan0 and python3 with canopen: run by vcan_suite (in the qemu VM, the host's python shared)"]
+fn python_canopen_node_on_vcan_emcy_and_heartbeat_loss_are_detected() {
+    require_vcan();
+    runtime().block_on(async {
+        let mut child = python_node::spawn(&[
+            "--bus",
+            IFACE,
+            "--emcy-at",
+            "60",
+            "8130",
+            "--silent-after",
+            "300",
+        ]);
+        let daq = open_python_node(&mut child);
+        python_node::emcy_and_heartbeat_loss_are_detected(child, daq).await;
+    });
+}
+
+/// ident's master on vcan0 for the python node, once the node listens (it says `ready` on stdout
+/// after its boot-up message; python takes seconds to start in the VM, and frames sent before it
+/// listens are lost).
+fn open_python_node(child: &mut std::process::Child) -> acquire::canopen::CanOpenDaq {
+    use std::io::BufRead;
+    let stdout = child.stdout.take().expect("piped stdout");
+    let mut line = String::new();
+    std::io::BufReader::new(stdout)
+        .read_line(&mut line)
+        .expect("read the python node's stdout");
+    assert_eq!(
+        line.trim(),
+        "ready",
+        "the python node did not start (see its stderr above)"
+    );
+    acquire::canopen::CanOpenDaq::open(IFACE, python_node::settings()).expect("open vcan0")
 }

@@ -7,7 +7,10 @@ The CAN bus is a pipe: one frame per line in `cansend` notation (`585#4F18100001
 stdin and written to stdout, through a python-can bus class below. Run by
 acquire/tests/canopen_python.rs.
 
-    python_node.py EDS NODE_ID [--silent-after N] [--emcy-at N CODE]
+    python_node.py EDS NODE_ID [--bus IFACE] [--silent-after N] [--emcy-at N CODE]
+
+--bus IFACE: the bus is the SocketCAN interface IFACE (vcan0 in the test VM) through python-can's
+  socketcan interface instead of the pipe; stdin still tells the node when the test is over (EOF).
 
 --silent-after N: after N SYNCs the node stops its heartbeat and sends nothing more.
 --emcy-at N CODE: at the N-th SYNC the node sends an EMCY with error code CODE (hex), register 1.
@@ -69,17 +72,31 @@ def main():
     p = argparse.ArgumentParser()
     p.add_argument("eds")
     p.add_argument("node_id", type=int)
+    p.add_argument("--bus")
     p.add_argument("--silent-after", type=int)
     p.add_argument("--emcy-at", nargs=2)
     a = p.parse_args()
 
     network = canopen.Network()
     closed = threading.Event()
-    network.bus = PipeBus(closed)
+    if a.bus:
+        network.bus = can.Bus(interface="socketcan", channel=a.bus)
+
+        def watch_stdin():
+            for _ in sys.stdin:
+                pass
+            closed.set()
+
+        threading.Thread(target=watch_stdin, daemon=True).start()
+    else:
+        network.bus = PipeBus(closed)
     node = canopen.LocalNode(a.node_id, a.eds)
     network.add_node(node)
     network.connect()
     network.send_message(0x700 + a.node_id, [0])  # boot-up
+    if a.bus:
+        # On a real bus, frames sent before this process listens are lost: say when it does.
+        print("ready", flush=True)
 
     syncs = 0
     sample = 0
