@@ -512,12 +512,29 @@ fn rank(
     let free = free_columns(pc, &cur.u);
     let jfree = DMatrix::from_fn(cur.jac.nrows(), free.len(), |r, c| cur.jac[(r, free[c])]);
     let sigma2 = residual_scale(cur, free.len(), crit.noise.scale_unknown());
-    let candidates =
-        generate::candidates(&crit.model_at(&x), &realized.vars, &x, labels, f_lo, f_hi);
+    // A characteristic whose gain is already a variable gets no gain candidate.
+    let candidates: Vec<_> = generate::candidates(
+        &crit.model_at(&x),
+        &realized.vars,
+        &x,
+        labels,
+        f_lo,
+        f_hi,
+    )
+    .into_iter()
+    .filter(|e| !matches!(e, Effect::Gain { output, .. } if crit.gain_variable(*output).is_some()))
+    .collect();
+    // The effects' gains times the gain variables' (the model output the criterion fits).
+    let gains: Vec<f64> = realized
+        .gains
+        .iter()
+        .enumerate()
+        .map(|(o, g)| g * crit.gain(o, &x))
+        .collect();
     let fit = score::FitPoint {
         crit: &crit,
         x: &x,
-        gains: &realized.gains,
+        gains: &gains,
         e: &cur.e,
         jac: &jfree,
         sigma2,
