@@ -174,8 +174,8 @@ impl Variables {
         ps
     }
 
-    /// The gain of the characteristics of `body`, DOF `dof` at values `x`, with the variable that
-    /// sets it and its ratio (`gain = ratio · x[variable]`); `None` when no variable does.
+    /// The variable that sets the gain of the characteristics of `body`, DOF `dof`, and its
+    /// ratio (`gain = ratio · x[variable]`); `None` when no variable does (the gain is 1).
     pub fn gain(&self, body: usize, dof: u8) -> Option<(usize, f64)> {
         self.vars.iter().enumerate().find_map(|(i, v)| {
             v.targets
