@@ -332,8 +332,9 @@ fn write_back_sdes(
     Ok(())
 }
 
-/// Rewrites the mass, inertia, axes and position of bodies the diagnosis changed (a split).
-fn write_back_bodies(
+/// Rewrites the mass, inertia, axes and position of bodies the diagnosis changed (a split) or
+/// whose mass or inertias are variables (`by_vars`).
+pub(crate) fn write_back_bodies(
     doc: &mut DocumentMut,
     origin: &str,
     (base, fin): (&Model, &Model),
