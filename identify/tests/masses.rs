@@ -415,3 +415,74 @@ fn bad_mass_inertia_and_gain_variables_name_file_line_field_and_fix() {
     assert!(err.contains("second u3"), "{err}");
     assert!(err.contains("remove the variable"), "{err}");
 }
+
+#[test]
+fn diagnose_works_with_mass_and_gain_variables_and_offers_no_gain_already_free() {
+    // The truth's first body is 15 % heavier and its output 8 % hot; the model's mass and that
+    // gain are variables, so the diagnosis has nothing to add and must not offer that gain again.
+    let model = two_mass();
+    let mut truth = two_mass();
+    truth.bodies[0].mass *= 1.15;
+    let d = data_of(
+        &truth,
+        &synthetic::log_lines(8.0, 120.0, 50),
+        0.01,
+        17,
+        (0, 1.08),
+    );
+    let obs = data::validate(&d, &model, "synthetic").unwrap();
+    let text = "[[variable]]\nsdes = \"k1\"\nparameter = \"k\"\n\
+                [[variable]]\nsdes = \"k2\"\nparameter = \"k\"\n\
+                [[variable]]\nbodies = \"first\"\nparameter = \"m\"\n\
+                [[variable]]\ncharacteristics = \"first u3\"\nparameter = \"gain\"\n";
+    let vars = variables::parse(text, "vars.toml", &model).unwrap();
+    let opts = Options::default();
+    let id = idn::identify(&model, &obs, &vars, &opts, &mut |_, _| {}).unwrap();
+    let d = identify::diagnose::diagnose(
+        &model,
+        &obs,
+        &vars,
+        &id,
+        &identify::diagnose::Options::default(),
+        &mut |_| {},
+    )
+    .unwrap();
+    assert!(d.accepted.is_empty(), "{}", identify::diagnose::text(&d));
+    assert_eq!(d.estimate.len(), vars.len());
+    // Nothing accepted: the identification's errors stand.
+    assert!(d.std_error.is_empty());
+    for (i, want) in [(2, 460.0), (3, 1.08)] {
+        let (x, se) = (d.estimate[i], id.uncertainty.std_error[i]);
+        assert!(
+            (x - want).abs() < 3.0 * se,
+            "{}: {x} ± {se} vs {want}",
+            vars.vars[i].name
+        );
+    }
+    let offered: Vec<&str> = d
+        .rounds
+        .iter()
+        .flat_map(|r| r.ranked.iter().map(|c| c.effect.as_str()))
+        .collect();
+    assert!(!offered.is_empty());
+    assert!(
+        offered
+            .iter()
+            .all(|e| !e.contains("gain error of first u3")),
+        "{offered:?}"
+    );
+    // The other characteristic's gain is still a candidate.
+    assert!(
+        offered
+            .iter()
+            .any(|e| e.contains("gain error of second u3")),
+        "{offered:?}"
+    );
+    // The next variables file keeps the mass and the gain and loads again.
+    let next = identify::final_model::variables_toml("model.toml", &id, Some(&d)).unwrap();
+    assert!(next.contains("bodies = [\"first\"]"), "{next}");
+    assert!(next.contains("characteristics = [\"first u3\"]"), "{next}");
+    let back = variables::parse(&next, "next.toml", &model).unwrap();
+    assert_eq!(back.len(), vars.len());
+    assert!((back.vars[3].initial - d.estimate[3]).abs() < 1e-9);
+}
