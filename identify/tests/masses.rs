@@ -302,6 +302,7 @@ fn mass_stiffness_and_gain_together_are_reported_as_not_separable() {
     let obs = data::validate(&d, &truth, "noisy").unwrap();
     let vars = variables::parse(&single_vars(true), "vars.toml", &truth).unwrap();
     let id = idn::identify(&truth, &obs, &vars, &Options::default(), &mut |_, _| {}).unwrap();
+    println!("{}", idn::report::text(&id));
     let weak = id
         .uncertainty
         .weak
@@ -485,4 +486,46 @@ fn diagnose_works_with_mass_and_gain_variables_and_offers_no_gain_already_free()
     let back = variables::parse(&next, "next.toml", &model).unwrap();
     assert_eq!(back.len(), vars.len());
     assert!((back.vars[3].initial - d.estimate[3]).abs() < 1e-9);
+}
+
+#[test]
+fn a_calibrated_level_separates_mass_and_stiffness_even_around_one_resonance() {
+    // Force and sensor calibrated (no gain variable): the absolute level of the response fixes
+    // k and m even from a band of ±10 % around the resonance, only more correlated than over a
+    // band with the stiffness and mass lines. (Started near the truth: from far away a band
+    // without the resonance in it has other minima.)
+    let (m, k, psi) = (80.0, 2.0e6, 0.4);
+    let truth = textbook::single_body(m, k, psi);
+    let f0 = (k / m).sqrt() / (2.0 * std::f64::consts::PI);
+    let near = single_vars(false)
+        .replace("100 kg", "81 kg")
+        .replace("1.3 N/um", "2.01 N/um")
+        .replace("0.3\n", "0.41\n");
+    let vars = variables::parse(&near, "vars.toml", &truth).unwrap();
+    let mut rho = Vec::new();
+    for (lo, hi) in [(0.9, 1.1), (0.1, 10.0)] {
+        let d = data_of(
+            &truth,
+            &synthetic::log_lines(lo * f0, hi * f0, 60),
+            0.01,
+            5,
+            (0, 1.0),
+        );
+        let obs = data::validate(&d, &truth, "noisy").unwrap();
+        let id = idn::identify(&truth, &obs, &vars, &Options::default(), &mut |_, _| {}).unwrap();
+        let u = &id.uncertainty;
+        println!(
+            "band {lo}-{hi} f0: m {:.3} ± {:.3} kg, k {:.5e} ± {:.3e} N/m, correlation {:.4}",
+            id.estimate[0],
+            u.std_error[0],
+            id.estimate[1],
+            u.std_error[1],
+            u.correlation[(0, 1)]
+        );
+        assert!(u.weak.is_empty(), "{:?}", u.weak);
+        assert!(u.std_error[0] < 0.01 * m && u.std_error[1] < 0.01 * k);
+        assert!((id.estimate[0] - m).abs() < 3.0 * u.std_error[0]);
+        rho.push(u.correlation[(0, 1)].abs());
+    }
+    assert!(rho[0] > 0.99 && rho[0] > rho[1], "{rho:?}");
 }

@@ -395,31 +395,35 @@ pub fn sensitivity_map(
     obs: &Observations,
 ) -> Result<SensitivityMap, ReportError> {
     let freqs = obs.lines_hz();
-    let params = id.variables.params();
-    let s = sensitivity::band_sensitivity(model, &freqs, &params, frf::Method::Auto).map_err(
-        |source| ReportError::Model {
-            stage: "identified".into(),
-            source,
-        },
-    )?;
-    let label =
-        |p: &identify::ParamRef| format!("SDE {} {}", model.sdes[p.sde].name, p.name.as_str());
+    let params = id.variables.model_params();
+    let (_, relative) =
+        sensitivity::band_mi(model, &freqs, &params, frf::Method::Auto).map_err(|source| {
+            ReportError::Model {
+                stage: "identified".into(),
+                source,
+            }
+        })?;
+    let outputs = model.outputs.len();
+    let label = |p: &identify::Param| match p {
+        identify::Param::Sde(r) => format!("SDE {} {}", model.sdes[r.sde].name, r.name.as_str()),
+        other => model.label(*other),
+    };
     Ok(SensitivityMap {
         band_hz: [
             freqs.first().copied().unwrap_or(0.0),
             freqs.last().copied().unwrap_or(0.0),
         ],
-        parameters: s.params.iter().map(label).collect(),
+        parameters: params.iter().map(label).collect(),
         characteristics: obs
             .characteristics
             .iter()
             .map(|c| c.label.clone())
             .collect(),
-        relative: (0..s.params.len())
+        relative: (0..params.len())
             .map(|p| {
                 obs.characteristics
                     .iter()
-                    .map(|c| finite(s.relative[p * s.outputs + c.output]))
+                    .map(|c| finite(relative[p * outputs + c.output]))
                     .collect()
             })
             .collect(),
