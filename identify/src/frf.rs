@@ -435,8 +435,7 @@ pub fn states(model: &Model, freqs_hz: &[f64], method: Method) -> Result<States,
 /// Accumulates `∂q_o/∂p` for every parameter given the SDE deformations under the load (`dq`)
 /// and under each output's unit load (`dw[o]`).
 fn jacobian_line(
-    blocks: &[ParamBlock],
-    sde_cols: &[usize],
+    columns: &Columns,
     dq: &[[C64; 6]],
     dw: &[Vec<[C64; 6]>],
     factor: &[C64],
@@ -445,7 +444,7 @@ fn jacobian_line(
     jac: &mut [C64],
 ) {
     let outputs = factor.len();
-    for (pb, &p) in blocks.iter().zip(sde_cols) {
+    for (pb, &p) in columns.blocks.iter().zip(columns.sde_cols) {
         let q6 = &dq[pb.block];
         for o in 0..outputs {
             let w6 = &dw[o][pb.block];
@@ -772,16 +771,7 @@ impl ModalSolver {
                     dwo[blk] = std::array::from_fn(|r| deform[(6 * u + r, o + 1)]);
                 }
             }
-            jacobian_line(
-                blocks,
-                columns.sde_cols,
-                &dq,
-                &dw,
-                &fac,
-                lines,
-                k,
-                &mut out.jacobian,
-            );
+            jacobian_line(columns, &dq, &dw, &fac, lines, k, &mut out.jacobian);
             for ic in columns.inertia {
                 let u = bodies.iter().position(|&b| b == ic.body).unwrap_or(0);
                 // The body's DOF 6·body + r sits at row body_row0 + 6u + r of `deform`.
