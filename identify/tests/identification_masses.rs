@@ -30,19 +30,19 @@ fn perturbed(rng: &mut StdRng) -> (Model, Vec<f64>) {
     (m, factors)
 }
 
-/// `configs/identification/fwd32j.toml` and, if `masses`, one `mJ` scale variable per body.
+/// `configs/identification/fwd32j.toml`, or with `masses` `fwd32j-masses.toml` (the same and one
+/// `mJ` factor per body).
 fn vars_for(model: &Model, masses: bool) -> variables::Variables {
-    let mut text =
-        std::fs::read_to_string(common::repo().join("configs/identification/fwd32j.toml")).unwrap();
-    if masses {
-        for b in &model.bodies {
-            text.push_str(&format!(
-                "\n[[variable]]\nbodies = \"{}\"\nparameter = \"mJ\"\n",
-                b.name
-            ));
-        }
-    }
-    variables::parse(&text, "fwd32j-masses.toml", model).unwrap()
+    let file = if masses {
+        "fwd32j-masses.toml"
+    } else {
+        "fwd32j.toml"
+    };
+    variables::load(
+        &common::repo().join("configs/identification").join(file),
+        model,
+    )
+    .unwrap()
 }
 
 fn fit(model: &Model, obs: &data::Observations, vars: &variables::Variables) -> Identification {
