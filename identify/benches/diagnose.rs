@@ -22,7 +22,7 @@ fn setup() -> (identify::Model, idn::Observations, idn::Variables, Vec<f64>) {
     let x: Vec<f64> = vars
         .vars
         .iter()
-        .map(|v| truth.param(v.targets[0].param).unwrap_or(v.initial) / v.targets[0].ratio)
+        .map(|v| truth.value(v.targets[0].param).unwrap_or(v.initial) / v.targets[0].ratio)
         .collect();
     (truth, obs, vars, x)
 }

@@ -31,10 +31,10 @@ use toml_edit::{DocumentMut, Item, Value};
 use crate::diagnose::{Diagnosis, Effect, Refit};
 use crate::display::{p_value, sig};
 use crate::identification::report::{sde_table, write_params};
-use crate::identification::variables::{self, Tie, Variable};
+use crate::identification::variables::{self, On, Tie, Variable};
 use crate::identification::Identification;
 use crate::model::{
-    Body, Characteristic, Model, ParamName, PointForce, Sde, SdeLaw, Tangential, DOF_NAMES,
+    Body, Characteristic, Model, Param, ParamName, PointForce, Sde, SdeLaw, Tangential, DOF_NAMES,
 };
 
 /// Significant digits of every number written: loads back within 5e-12 relative.
@@ -187,7 +187,8 @@ fn edited(
             })?;
     let notes = diagnosis.map(modified_notes).unwrap_or_default();
     write_back_sdes(&mut doc, origin, id, fin, &notes)?;
-    write_back_bodies(&mut doc, origin, base, fin, &notes)?;
+    let by_vars = id.variables.model_params();
+    write_back_bodies(&mut doc, origin, (base, fin), &by_vars, &notes)?;
     let forces_moved = base.forces != fin.forces;
     if forces_moved {
         doc.remove("excitation");
@@ -331,16 +332,20 @@ fn write_back_sdes(
     Ok(())
 }
 
-/// Rewrites the mass, inertia, axes and position of bodies the diagnosis changed (a split).
-fn write_back_bodies(
+/// Rewrites the mass, inertia, axes and position of bodies the diagnosis changed (a split) or
+/// whose mass or inertias are variables (`by_vars`).
+pub(crate) fn write_back_bodies(
     doc: &mut DocumentMut,
     origin: &str,
-    base: &Model,
-    fin: &Model,
+    (base, fin): (&Model, &Model),
+    by_vars: &[Param],
     notes: &[(&'static str, String, String)],
 ) -> Result<(), FinalModelError> {
-    for (b, f) in base.bodies.iter().zip(&fin.bodies) {
-        if b == f {
+    for (i, (b, f)) in base.bodies.iter().zip(&fin.bodies).enumerate() {
+        let fitted = by_vars
+            .iter()
+            .any(|p| matches!(p, Param::Mass { body } | Param::Inertia { body, .. } if *body == i));
+        if b == f && !fitted {
             continue;
         }
         let table = doc
@@ -949,7 +954,11 @@ fn variable_toml(
     let targets: Vec<_> = v
         .targets
         .iter()
-        .filter(|t| !split.contains(&&fin.sdes[t.param.sde].name))
+        .filter(|t| {
+            t.param
+                .sde()
+                .is_none_or(|p| !split.contains(&&fin.sdes[p.sde].name))
+        })
         .collect();
     if targets.is_empty() {
         return Err(FinalModelError::Inconsistent(format!(
@@ -957,10 +966,21 @@ fn variable_toml(
             v.name
         )));
     }
-    let names: Vec<String> = targets
-        .iter()
-        .map(|t| fin.sdes[t.param.sde].name.clone())
-        .collect();
+    let mut names: Vec<String> = Vec::new();
+    for t in &targets {
+        let name = match t.param {
+            Param::Sde(p) => fin.sdes[p.sde].name.clone(),
+            Param::Mass { body } | Param::Inertia { body, .. } => fin.bodies[body].name.clone(),
+            Param::Gain { body, dof } => format!(
+                "{} {}",
+                fin.bodies[body].name,
+                DOF_NAMES.get(dof as usize).copied().unwrap_or("?")
+            ),
+        };
+        if !names.contains(&name) {
+            names.push(name);
+        }
+    }
     let f = v.unit.factor;
     let u = &v.unit.symbol;
     let value = |si: f64| {
@@ -973,12 +993,15 @@ fn variable_toml(
     let mut s = String::from("[[variable]]\n");
     let _ = writeln!(s, "name = {}", quoted(&v.name));
     let list: Vec<String> = names.iter().map(|n| quoted(n)).collect();
-    let _ = writeln!(s, "sdes = [{}]", list.join(", "));
+    let _ = writeln!(s, "{} = [{}]", v.on.key(), list.join(", "));
     let _ = writeln!(s, "parameter = {}", quoted(&v.parameter));
     let _ = writeln!(s, "unit = {}", quoted(u));
     // A scale tie's factor is now in the model's values: start again from 1.
+    // (A gain is not in the model: its estimate stays the start.)
     let (initial, lower, upper, scale) = match v.tie {
-        Tie::Scale if x > 0.0 => (1.0, v.lower / x, v.upper / x, v.scale / x),
+        Tie::Scale if x > 0.0 && v.on != On::Characteristics => {
+            (1.0, v.lower / x, v.upper / x, v.scale / x)
+        }
         _ => (x, v.lower, v.upper, v.scale),
     };
     let initial = initial.max(lower).min(upper);

@@ -11,13 +11,16 @@
 //!
 //! The Jacobian uses the adjoint form: with `w_o = A⁻¹ e_o` (A is complex symmetric),
 //! `∂q_o/∂p = −w_oᵀ (∂A/∂p) q = −Σ_i c_i (T w_o)_i (T q)_i`, touching only the SDE that owns `p`.
+//! A body's mass or principal inertia enters as `∂A/∂p = −ω² ∂M/∂p`, M diagonal in the body's
+//! principal axes, so `∂q_o/∂p = ω² Σ_i ∂M_ii/∂p (w_o)_i q_i` over the body's six DOFs
+//! ([`response_params`]).
 
 use faer::dyn_stack::{MemBuffer, MemStack, StackReq};
 use faer::linalg::lu::partial_pivoting::{factor, solve};
 use faer::{Mat, Par};
 
 use crate::lines::{Batch, Derivatives, LANES};
-use crate::model::{Model, ParamRef, Quantity};
+use crate::model::{Model, Param, ParamRef, Quantity};
 use crate::system::{ParamBlock, System};
 use crate::C64;
 
@@ -119,7 +122,7 @@ pub struct Response {
     /// Number of output characteristics.
     pub outputs: usize,
     /// Parameters of the Jacobian (empty if none was requested).
-    pub params: Vec<ParamRef>,
+    pub params: Vec<Param>,
     /// `values[o * lines + k]`: output `o` at line `k` (SI units of its quantity).
     pub values: Vec<C64>,
     /// `jacobian[(p * outputs + o) * lines + k]`: ∂ values / ∂ parameter `p` (per SI unit of `p`).
@@ -156,13 +159,79 @@ pub fn response(
     params: &[ParamRef],
     method: Method,
 ) -> Result<Response, SolveError> {
+    let params: Vec<Param> = params.iter().map(|&p| p.into()).collect();
+    response_params(model, freqs_hz, &params, method)
+}
+
+/// A Jacobian column that is a body's mass or principal inertia: `∂A/∂p = −ω² diag(dm)` over the
+/// body's six DOFs.
+#[derive(Debug, Clone, Copy)]
+struct InertiaColumn {
+    /// Column of the Jacobian.
+    col: usize,
+    /// Body index.
+    body: usize,
+    /// `∂[m, m, m, J1, J2, J3]/∂p`.
+    dm: [f64; 6],
+}
+
+impl InertiaColumn {
+    /// `∂q_o/∂p` from the body's DOFs under the load (`q`) and under output `o`'s unit load (`w`).
+    fn derivative(
+        &self,
+        omega: f64,
+        fac: C64,
+        q: impl Fn(usize) -> C64,
+        w: impl Fn(usize) -> C64,
+    ) -> C64 {
+        let mut acc = C64::new(0.0, 0.0);
+        for (i, dm) in self.dm.iter().enumerate() {
+            if *dm != 0.0 {
+                acc += w(6 * self.body + i) * q(6 * self.body + i) * *dm;
+            }
+        }
+        acc * (omega * omega) * fac
+    }
+}
+
+/// [`response`] with the Jacobian with respect to any physical parameters: SDE parameters, body
+/// masses and principal inertias ([`Param`]; a gain is not part of the model and is an
+/// [`SolveError::UnknownParam`]). Column `p` of the Jacobian is per SI unit of `params[p]`.
+pub fn response_params(
+    model: &Model,
+    freqs_hz: &[f64],
+    params: &[Param],
+    method: Method,
+) -> Result<Response, SolveError> {
     let system = System::assemble(model);
-    let blocks = system.param_blocks(model, params);
+    let mut sde_params = Vec::new();
+    let mut sde_cols = Vec::new();
+    let mut inertia = Vec::new();
+    for (col, p) in params.iter().enumerate() {
+        match p {
+            Param::Sde(r) => {
+                sde_params.push(*r);
+                sde_cols.push(col);
+            }
+            _ => match p.inertia_derivative() {
+                Some((body, dm)) if body < model.bodies.len() => {
+                    inertia.push(InertiaColumn { col, body, dm })
+                }
+                _ => return Err(SolveError::UnknownParam(model.label(*p))),
+            },
+        }
+    }
+    let blocks = system.param_blocks(model, &sde_params);
     let blocks: Vec<ParamBlock> = blocks
         .into_iter()
-        .zip(params)
+        .zip(&sde_params)
         .map(|(b, p)| b.ok_or_else(|| SolveError::UnknownParam(model.param_label(*p))))
         .collect::<Result<_, _>>()?;
+    let columns = Columns {
+        blocks: &blocks,
+        sde_cols: &sde_cols,
+        inertia: &inertia,
+    };
     for &f in freqs_hz {
         if !f.is_finite() || f < 0.0 {
             return Err(SolveError::BadFrequency { freq_hz: f });
@@ -180,15 +249,29 @@ pub fn response(
         system.n,
         freqs_hz.len(),
         Work::Outputs {
-            params: blocks.len(),
+            params: params.len(),
         },
     ) {
         Method::Modal => {
-            ModalSolver::new(&system)?.fill(&system, &blocks, &quantities, &mut out)?
+            ModalSolver::new(&system)?.fill(&system, &columns, &quantities, &mut out)?
         }
-        _ => DirectSolver::new(&system).fill(&system, &blocks, &quantities, &mut out)?,
+        _ => DirectSolver::new(&system).fill(&system, &columns, &quantities, &mut out)?,
     }
     Ok(out)
+}
+
+/// The Jacobian's columns by kind: SDE parameters (`blocks[i]` is column `sde_cols[i]`) and
+/// inertia parameters.
+struct Columns<'a> {
+    blocks: &'a [ParamBlock],
+    sde_cols: &'a [usize],
+    inertia: &'a [InertiaColumn],
+}
+
+impl Columns<'_> {
+    fn is_empty(&self) -> bool {
+        self.blocks.is_empty() && self.inertia.is_empty()
+    }
 }
 
 /// The full DOF vector (6 per body, body principal axes, displacement in m and rad) in response
@@ -352,7 +435,7 @@ pub fn states(model: &Model, freqs_hz: &[f64], method: Method) -> Result<States,
 /// Accumulates `∂q_o/∂p` for every parameter given the SDE deformations under the load (`dq`)
 /// and under each output's unit load (`dw[o]`).
 fn jacobian_line(
-    blocks: &[ParamBlock],
+    columns: &Columns,
     dq: &[[C64; 6]],
     dw: &[Vec<[C64; 6]>],
     factor: &[C64],
@@ -361,7 +444,7 @@ fn jacobian_line(
     jac: &mut [C64],
 ) {
     let outputs = factor.len();
-    for (p, pb) in blocks.iter().enumerate() {
+    for (pb, &p) in columns.blocks.iter().zip(columns.sde_cols) {
         let q6 = &dq[pb.block];
         for o in 0..outputs {
             let w6 = &dw[o][pb.block];
@@ -509,10 +592,11 @@ impl DirectSolver {
     fn fill(
         mut self,
         s: &System,
-        blocks: &[ParamBlock],
+        columns: &Columns,
         quantities: &[Quantity],
         out: &mut Response,
     ) -> Result<(), SolveError> {
+        let blocks = columns.blocks;
         let lines = out.freqs_hz.len();
         let outputs = quantities.len();
         let used = distinct_blocks(blocks);
@@ -537,8 +621,16 @@ impl DirectSolver {
                         return Err(SolveError::Singular { freq_hz: f });
                     }
                     values[o * lines + k] = v;
-                    for p in 0..blocks.len() {
-                        jacobian[(p * outputs + o) * lines + k] = -derivatives.at(p, o, l) * fac;
+                    for (p, &col) in columns.sde_cols.iter().enumerate() {
+                        jacobian[(col * outputs + o) * lines + k] = -derivatives.at(p, o, l) * fac;
+                    }
+                    for ic in columns.inertia {
+                        jacobian[(ic.col * outputs + o) * lines + k] = ic.derivative(
+                            omega,
+                            fac,
+                            |i| batch.x(l, 0, i),
+                            |i| batch.x(l, o + 1, i),
+                        );
                     }
                 }
             }
@@ -584,10 +676,11 @@ impl ModalSolver {
     fn fill(
         &self,
         s: &System,
-        blocks: &[ParamBlock],
+        columns: &Columns,
         quantities: &[Quantity],
         out: &mut Response,
     ) -> Result<(), SolveError> {
+        let blocks = columns.blocks;
         let n = s.n;
         let lines = out.freqs_hz.len();
         let outputs = quantities.len();
@@ -607,9 +700,14 @@ impl ModalSolver {
             .collect();
         // E = [T_κ X] stacked for every distinct SDE that carries a parameter (6·B × n), so that
         // one matrix product per line gives every such SDE's deformation under the load and
-        // under each output's unit load: [δq, δw_1, …] = E · [η, ζ_1, …].
+        // under each output's unit load: [δq, δw_1, …] = E · [η, ζ_1, …]. Below them, the rows
+        // of X of every body whose mass or inertia is a parameter give its DOFs alike.
         let used = distinct_blocks(blocks);
-        let mut e = Mat::<C64>::zeros(6 * used.len(), n);
+        let mut bodies: Vec<usize> = columns.inertia.iter().map(|c| c.body).collect();
+        bodies.sort_unstable();
+        bodies.dedup();
+        let body_row0 = 6 * used.len();
+        let mut e = Mat::<C64>::zeros(body_row0 + 6 * bodies.len(), n);
         for (u, &blk) in used.iter().enumerate() {
             let b = &s.sdes[blk];
             for m in 0..n {
@@ -619,8 +717,15 @@ impl ModalSolver {
                 }
             }
         }
+        for (u, &b) in bodies.iter().enumerate() {
+            for r in 0..6 {
+                for m in 0..n {
+                    e[(body_row0 + 6 * u + r, m)] = self.x[(6 * b + r, m)];
+                }
+            }
+        }
         let mut rhs = Mat::<C64>::zeros(n, 1 + outputs);
-        let mut deform = Mat::<C64>::zeros(6 * used.len(), 1 + outputs);
+        let mut deform = Mat::<C64>::zeros(e.nrows(), 1 + outputs);
         let mut dq = vec![[C64::new(0.0, 0.0); 6]; s.sdes.len()];
         let mut dw = vec![vec![[C64::new(0.0, 0.0); 6]; s.sdes.len()]; outputs];
         let mut fac = vec![C64::new(0.0, 0.0); outputs];
@@ -649,7 +754,7 @@ impl ModalSolver {
                 let v: C64 = (0..n).map(|m| xo[o][m] * rhs[(m, 0)]).sum();
                 out.values[o * lines + k] = v * fac[o];
             }
-            if blocks.is_empty() {
+            if columns.is_empty() {
                 continue;
             }
             faer::linalg::matmul::matmul(
@@ -666,7 +771,20 @@ impl ModalSolver {
                     dwo[blk] = std::array::from_fn(|r| deform[(6 * u + r, o + 1)]);
                 }
             }
-            jacobian_line(blocks, &dq, &dw, &fac, lines, k, &mut out.jacobian);
+            jacobian_line(columns, &dq, &dw, &fac, lines, k, &mut out.jacobian);
+            for ic in columns.inertia {
+                let u = bodies.iter().position(|&b| b == ic.body).unwrap_or(0);
+                // The body's DOF 6·body + r sits at row body_row0 + 6u + r of `deform`.
+                let row = |i: usize| body_row0 + 6 * u + (i - 6 * ic.body);
+                for o in 0..outputs {
+                    out.jacobian[(ic.col * outputs + o) * lines + k] = ic.derivative(
+                        omega,
+                        fac[o],
+                        |i| deform[(row(i), 0)],
+                        |i| deform[(row(i), o + 1)],
+                    );
+                }
+            }
         }
         Ok(())
     }

@@ -49,8 +49,8 @@ pub mod units;
 
 pub use measured::{MeasuredData, Measurement};
 pub use model::{
-    Body, Characteristic, Model, ParamName, ParamRef, PointForce, Quantity, Sde, SdeKind, SdeLaw,
-    Tangential,
+    Body, Characteristic, Model, Param, ParamName, ParamRef, PointForce, Quantity, Sde, SdeKind,
+    SdeLaw, Tangential,
 };
 
 /// Complex double, the scalar of every frequency response (same type as faer's `c64`).

@@ -489,6 +489,95 @@ pub struct ParamRef {
     pub name: ParamName,
 }
 
+/// One parameter a decision variable can set: an SDE's, a body's mass or principal inertia, or the
+/// gain of a measured characteristic.
+///
+/// The dynamic stiffness `K + jD − ω²M` is linear in each of the physical ones: an SDE parameter
+/// enters through its law ([`SdeLaw::derivative`]), a mass or inertia through `−ω² ∂M/∂p`, M being
+/// diagonal in each body's principal axes ([`Param::inertia_derivative`]). A gain `g` is not in
+/// the model: it multiplies a measured characteristic's model output (the identification applies
+/// it), so `∂(g q)/∂g = q`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum Param {
+    /// A parameter of an SDE's law.
+    Sde(ParamRef),
+    /// The mass of body `body` (kg): the three translational entries of its inertia block.
+    Mass {
+        /// Index into [`Model::bodies`].
+        body: usize,
+    },
+    /// The principal central moment of inertia `J[axis]` (kg·m², axis 0-2) of body `body`.
+    Inertia {
+        /// Index into [`Model::bodies`].
+        body: usize,
+        /// Principal axis, 0-2 (`J1`-`J3` in files).
+        axis: u8,
+    },
+    /// The gain (-, 1 = nominal) of the characteristics of body `body`, DOF `dof` (0-5), whatever
+    /// their quantity: the model output is multiplied by it.
+    Gain {
+        /// Index into [`Model::bodies`].
+        body: usize,
+        /// 0-2 translations u1..u3, 3-5 rotations r1..r3.
+        dof: u8,
+    },
+}
+
+impl From<ParamRef> for Param {
+    fn from(p: ParamRef) -> Param {
+        Param::Sde(p)
+    }
+}
+
+impl Param {
+    /// The SDE parameter, if it is one.
+    pub fn sde(&self) -> Option<ParamRef> {
+        match self {
+            Param::Sde(r) => Some(*r),
+            _ => None,
+        }
+    }
+
+    /// `∂[m, m, m, J1, J2, J3]/∂p` of the parameter's body, with the body: `Some` only for a mass
+    /// or an inertia (the entries are 0 or 1: M is linear in them).
+    pub fn inertia_derivative(&self) -> Option<(usize, [f64; 6])> {
+        match *self {
+            Param::Mass { body } => Some((body, [1.0, 1.0, 1.0, 0.0, 0.0, 0.0])),
+            Param::Inertia { body, axis } if axis < 3 => {
+                let mut d = [0.0; 6];
+                d[3 + axis as usize] = 1.0;
+                Some((body, d))
+            }
+            _ => None,
+        }
+    }
+
+    /// The parameter's name as written in variables files: the SDE law's (`kn`, `psi`, …), `m`,
+    /// `J1`-`J3`, `gain`.
+    pub fn name(&self) -> String {
+        match self {
+            Param::Sde(p) => p.name.as_str(),
+            Param::Mass { .. } => "m".into(),
+            Param::Inertia { axis, .. } => format!("J{}", axis + 1),
+            Param::Gain { .. } => "gain".into(),
+        }
+    }
+
+    /// SI unit, for reports.
+    pub fn unit(&self, model: &Model) -> &'static str {
+        match self {
+            Param::Sde(p) => model
+                .sdes
+                .get(p.sde)
+                .map(|s| s.law.unit(p.name))
+                .unwrap_or("-"),
+            Param::Mass { .. } => "kg",
+            Param::Inertia { .. } => "kg·m²",
+            Param::Gain { .. } => "-",
+        }
+    }
+}
+
 impl Model {
     /// Number of degrees of freedom (6 per body).
     pub fn dof_count(&self) -> usize {
@@ -530,6 +619,69 @@ impl Model {
         match self.sdes.get_mut(p.sde) {
             Some(s) => s.law.set(p.name, value),
             None => false,
+        }
+    }
+
+    /// Value of any parameter (SI); `None` if it does not exist, and for a gain (not part of the
+    /// model).
+    pub fn value(&self, p: Param) -> Option<f64> {
+        match p {
+            Param::Sde(r) => self.param(r),
+            Param::Mass { body } => self.bodies.get(body).map(|b| b.mass),
+            Param::Inertia { body, axis } => {
+                self.bodies.get(body)?.inertia.get(axis as usize).copied()
+            }
+            Param::Gain { .. } => None,
+        }
+    }
+
+    /// Sets any parameter (SI); returns `false` if it does not exist or is a gain.
+    pub fn set_value(&mut self, p: Param, value: f64) -> bool {
+        match p {
+            Param::Sde(r) => self.set_param(r, value),
+            Param::Mass { body } => match self.bodies.get_mut(body) {
+                Some(b) => {
+                    b.mass = value;
+                    true
+                }
+                None => false,
+            },
+            Param::Inertia { body, axis } => {
+                match self
+                    .bodies
+                    .get_mut(body)
+                    .and_then(|b| b.inertia.get_mut(axis as usize))
+                {
+                    Some(j) => {
+                        *j = value;
+                        true
+                    }
+                    None => false,
+                }
+            }
+            Param::Gain { .. } => false,
+        }
+    }
+
+    /// Human label of any parameter: `"sde 17 kn"`, `"body table m"`, `"body table J2"`,
+    /// `"gain table u1"`.
+    pub fn label(&self, p: Param) -> String {
+        let body = |b: usize| {
+            self.bodies
+                .get(b)
+                .map(|b| b.name.clone())
+                .unwrap_or_else(|| format!("#{b}"))
+        };
+        match p {
+            Param::Sde(r) => self.param_label(r),
+            Param::Mass { body: b } | Param::Inertia { body: b, .. } => {
+                format!("body {} {}", body(b), p.name())
+            }
+            Param::Gain { body: b, dof } => format!(
+                "gain {} {}",
+                body(b),
+                DOF_NAMES.get(dof as usize).copied().unwrap_or("?")
+            ),
         }
     }
 

@@ -8,8 +8,8 @@
 //! and its relative, dimensionless variant `MIr(α, i) = p_α · MI(α, i)`, which ranks parameters of
 //! different units against each other: the table an engineer uses to pick decision variables.
 
-use crate::frf::{response, Method, SolveError};
-use crate::model::{Model, ParamRef};
+use crate::frf::{response_params, Method, SolveError};
+use crate::model::{Model, Param, ParamRef};
 
 /// MI of every parameter for every output characteristic over one band.
 #[derive(Debug, Clone, PartialEq)]
@@ -56,7 +56,25 @@ pub fn band_sensitivity(
     } else {
         params.to_vec()
     };
-    let r = response(model, freqs_hz, &params, method)?;
+    let all: Vec<Param> = params.iter().map(|&p| p.into()).collect();
+    let (mi, relative) = band_mi(model, freqs_hz, &all, method)?;
+    Ok(Sensitivity {
+        params,
+        outputs: model.outputs.len(),
+        mi,
+        relative,
+    })
+}
+
+/// [`band_sensitivity`] of any physical parameters (SDE parameters, masses, inertias):
+/// `(mi, relative)`, each `[p * outputs + o]`.
+pub fn band_mi(
+    model: &Model,
+    freqs_hz: &[f64],
+    params: &[Param],
+    method: Method,
+) -> Result<(Vec<f64>, Vec<f64>), SolveError> {
+    let r = response_params(model, freqs_hz, params, method)?;
     let outputs = model.outputs.len();
     let mut mi = vec![0.0; params.len() * outputs];
     let mut relative = vec![0.0; params.len() * outputs];
@@ -79,13 +97,8 @@ pub fn band_sensitivity(
                 .sum();
             let v = if total > 0.0 { sum / total } else { 0.0 };
             mi[p * outputs + o] = v;
-            relative[p * outputs + o] = v * model.param(*pr).unwrap_or(0.0).abs();
+            relative[p * outputs + o] = v * model.value(*pr).unwrap_or(0.0).abs();
         }
     }
-    Ok(Sensitivity {
-        params,
-        outputs,
-        mi,
-        relative,
-    })
+    Ok((mi, relative))
 }

@@ -145,10 +145,11 @@ fn the_missing_hydraulic_actuator_is_found_added_and_the_fit_reaches_the_noise_f
             .position(|v| v.name == name)
             .expect(name);
         let t = case.vars.vars[i].targets[0];
-        let sde = &case.model.sdes[t.param.sde].name;
+        let p = t.param.sde().expect("an SDE parameter");
+        let sde = &case.model.sdes[p.sde].name;
         let want = truth.sdes[truth.sde_index(sde).expect("in the truth")]
             .law
-            .get(t.param.name)
+            .get(p.name)
             .expect("a parameter of the truth")
             / t.ratio;
         let (x, se) = (d.estimate[i], d.std_error[i]);

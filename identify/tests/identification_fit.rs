@@ -432,8 +432,8 @@ fn the_updated_model_is_written_back_into_the_toml_text() {
         .model;
     for v in &vars.vars {
         for t in &v.targets {
-            let a = back.param(t.param).unwrap();
-            let b = id.model.param(t.param).unwrap();
+            let a = back.value(t.param).unwrap();
+            let b = id.model.value(t.param).unwrap();
             assert!((a / b - 1.0).abs() < 1e-9, "{}: {a} vs {b}", v.name);
         }
     }

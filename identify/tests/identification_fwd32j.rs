@@ -25,7 +25,7 @@ fn vars_for(model: &Model) -> variables::Variables {
 fn truth_values(truth: &Model, vars: &variables::Variables) -> Vec<f64> {
     vars.vars
         .iter()
-        .map(|v| truth.param(v.targets[0].param).unwrap() / v.targets[0].ratio)
+        .map(|v| truth.value(v.targets[0].param).unwrap() / v.targets[0].ratio)
         .collect()
 }
 
@@ -119,7 +119,7 @@ fn fwd32j_synthetic_recovery_from_the_initial_values() {
         .model;
     for (i, v) in vars.vars.iter().enumerate() {
         for t in &v.targets {
-            let a = back.param(t.param).unwrap();
+            let a = back.value(t.param).unwrap();
             let b = t.ratio * id.estimate[i];
             assert!(
                 (a - b).abs() <= 1e-9 * b.abs().max(v.scale),

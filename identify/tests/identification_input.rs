@@ -314,7 +314,7 @@ fn the_fwd32j_variables_file_has_the_papers_twenty_variables() {
     for x in &v.vars {
         for t in &x.targets {
             assert!(
-                (m.param(t.param).unwrap() / (t.ratio * x.initial) - 1.0).abs() < 1e-12,
+                (m.value(t.param).unwrap() / (t.ratio * x.initial) - 1.0).abs() < 1e-12,
                 "{}",
                 x.name
             );

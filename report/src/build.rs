@@ -107,9 +107,21 @@ fn sigmas(c: &Observed) -> (Vec<f64>, &'static str) {
     )
 }
 
+/// The sensor gain of characteristic `c` at values `x` (1 without a gain variable): the model
+/// curve the fit compares with the data is the model's output times it.
+fn gain_of(id: &Identification, c: &Observed, x: &[f64]) -> f64 {
+    match id
+        .variables
+        .gain(c.characteristic.body, c.characteristic.dof)
+    {
+        Some((v, ratio)) => x.get(v).map_or(1.0, |x| ratio * x),
+        None => 1.0,
+    }
+}
+
 fn stage_curve(
     stage: &str,
-    model: &Model,
+    (model, gain): (&Model, f64),
     c: &Observed,
     sigma: &[f64],
 ) -> Result<StageCurve, ReportError> {
@@ -119,7 +131,7 @@ fn stage_curve(
             source,
         }
     })?;
-    let q: Vec<f64> = r.output(c.output).iter().map(|v| v.norm()).collect();
+    let q: Vec<f64> = r.output(c.output).iter().map(|v| v.norm() * gain).collect();
     let mut s2 = 0.0;
     let mut n = 0usize;
     let mut db2 = 0.0;
@@ -265,7 +277,7 @@ fn dense_stage(
 }
 
 /// The part of a stage's dense curve inside characteristic `c`'s own band.
-fn dense_curve(d: &DenseStage, c: &Observed) -> DenseCurve {
+fn dense_curve(d: &DenseStage, c: &Observed, gain: f64) -> DenseCurve {
     let (lo, hi) = (
         c.freqs_hz.first().copied().unwrap_or(0.0),
         c.freqs_hz.last().copied().unwrap_or(0.0),
@@ -276,7 +288,10 @@ fn dense_curve(d: &DenseStage, c: &Observed) -> DenseCurve {
         .collect();
     DenseCurve {
         freqs_hz: inside.iter().map(|&k| d.grid[k]).collect(),
-        amplitude: inside.iter().map(|&k| finite(values[k].norm())).collect(),
+        amplitude: inside
+            .iter()
+            .map(|&k| finite(values[k].norm() * gain))
+            .collect(),
         phase_rad: c
             .phase_rad
             .as_ref()
@@ -380,31 +395,35 @@ pub fn sensitivity_map(
     obs: &Observations,
 ) -> Result<SensitivityMap, ReportError> {
     let freqs = obs.lines_hz();
-    let params = id.variables.params();
-    let s = sensitivity::band_sensitivity(model, &freqs, &params, frf::Method::Auto).map_err(
-        |source| ReportError::Model {
-            stage: "identified".into(),
-            source,
-        },
-    )?;
-    let label =
-        |p: &identify::ParamRef| format!("SDE {} {}", model.sdes[p.sde].name, p.name.as_str());
+    let params = id.variables.model_params();
+    let (_, relative) =
+        sensitivity::band_mi(model, &freqs, &params, frf::Method::Auto).map_err(|source| {
+            ReportError::Model {
+                stage: "identified".into(),
+                source,
+            }
+        })?;
+    let outputs = model.outputs.len();
+    let label = |p: &identify::Param| match p {
+        identify::Param::Sde(r) => format!("SDE {} {}", model.sdes[r.sde].name, r.name.as_str()),
+        other => model.label(*other),
+    };
     Ok(SensitivityMap {
         band_hz: [
             freqs.first().copied().unwrap_or(0.0),
             freqs.last().copied().unwrap_or(0.0),
         ],
-        parameters: s.params.iter().map(label).collect(),
+        parameters: params.iter().map(label).collect(),
         characteristics: obs
             .characteristics
             .iter()
             .map(|c| c.label.clone())
             .collect(),
-        relative: (0..s.params.len())
+        relative: (0..params.len())
             .map(|p| {
                 obs.characteristics
                     .iter()
-                    .map(|c| finite(s.relative[p * s.outputs + c.output]))
+                    .map(|c| finite(relative[p * outputs + c.output]))
                     .collect()
             })
             .collect(),
@@ -518,8 +537,19 @@ pub fn build(inputs: Inputs<'_>) -> Result<Report, ReportError> {
     let mut initial = id.model.clone();
     id.variables.apply(&mut initial, &id.initial);
     let mut stages: Vec<(&str, &Model)> = vec![("initial", &initial), ("identified", &id.model)];
-    if let Some((_, m)) = &inputs.diagnosis {
+    // Each stage's values, for the sensor gains (not part of the model).
+    let mut values: Vec<Vec<f64>> = vec![id.initial.clone(), id.estimate.clone()];
+    if let Some((d, m)) = &inputs.diagnosis {
         stages.push(("diagnosed", m));
+        values.push(if d.final_parameters.len() == id.variables.len() {
+            d.final_parameters
+                .iter()
+                .zip(&id.variables.vars)
+                .map(|(p, v)| p.identified * v.unit.factor)
+                .collect()
+        } else {
+            id.estimate.clone()
+        });
     }
     // The first fit and the final model on dense grids (the initial model only at the lines).
     let band = measured_band(inputs.observations);
@@ -536,9 +566,11 @@ pub fn build(inputs: Inputs<'_>) -> Result<Report, ReportError> {
         let curves = stages
             .iter()
             .zip(&dense)
-            .map(|((s, m), d)| {
-                let mut curve = stage_curve(s, m, c, &sigma)?;
-                curve.dense = d.as_ref().map(|d| dense_curve(d, c));
+            .zip(&values)
+            .map(|(((s, m), d), x)| {
+                let gain = gain_of(id, c, x);
+                let mut curve = stage_curve(s, (m, gain), c, &sigma)?;
+                curve.dense = d.as_ref().map(|d| dense_curve(d, c, gain));
                 Ok(curve)
             })
             .collect::<Result<Vec<_>, ReportError>>()?;

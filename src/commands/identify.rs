@@ -1,5 +1,6 @@
 //! `ident identify MODEL --data DATA --vars VARS`: maximum-likelihood identification of SDE
-//! parameters with Cramér-Rao errors (docs/identification.md).
+//! parameters, body masses and inertias, and sensor gains with Cramér-Rao errors
+//! (docs/identification.md).
 
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;

@@ -281,7 +281,7 @@ pub fn draw(
         .map(|v| {
             v.targets
                 .first()
-                .and_then(|t| model.param(t.param).map(|p| p / t.ratio))
+                .and_then(|t| model.value(t.param).map(|p| p / t.ratio))
                 .unwrap_or(v.initial)
         })
         .collect();

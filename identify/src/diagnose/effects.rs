@@ -542,9 +542,10 @@ fn split_damping(
         .ok_or(EffectError::NoVariable(variable))?;
     let mut moved = Vec::new();
     var.targets.retain(|t| {
-        let hit = sdes.contains(&model.sdes[t.param.sde].name);
+        let Some(p) = t.param.sde() else { return true };
+        let hit = sdes.contains(&model.sdes[p.sde].name);
         if hit {
-            moved.push(t.param);
+            moved.push(p);
         }
         !hit
     });

@@ -16,7 +16,7 @@ use nalgebra::Vector3;
 use super::effects::{box_sides, Effect};
 use crate::identification::variables::Tie;
 use crate::identification::Variables;
-use crate::model::Model;
+use crate::model::{Model, ParamRef};
 
 /// Resonator frequencies per decade of the band.
 const RESONATORS_PER_DECADE: f64 = 6.0;
@@ -222,9 +222,11 @@ fn damping_splits(model: &Model, vars: &Variables, x: &[f64], out: &mut Vec<Effe
         .enumerate()
         .filter(|(_, v)| v.dissipation && v.tie == Tie::Equal && v.targets.len() > 1)
     {
+        let refs: Vec<ParamRef> = v.targets.iter().filter_map(|t| t.param.sde()).collect();
+        let Some(first) = refs.first() else { continue };
         let mut joints: Vec<([Option<usize>; 2], Vec<String>)> = Vec::new();
-        for t in &v.targets {
-            let sde = &model.sdes[t.param.sde];
+        for r in &refs {
+            let sde = &model.sdes[r.sde];
             let mut key = sde.bodies;
             key.sort();
             match joints.iter_mut().find(|(k, _)| *k == key) {
@@ -240,7 +242,7 @@ fn damping_splits(model: &Model, vars: &Variables, x: &[f64], out: &mut Vec<Effe
                 variable: vi,
                 variable_name: v.name.clone(),
                 sdes,
-                parameter: v.targets[0].param.name,
+                parameter: first.name,
                 value: x[vi],
             });
         }

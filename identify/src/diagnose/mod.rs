@@ -779,16 +779,30 @@ fn rank(
     let jfree = DMatrix::from_fn(cur.jac.nrows(), free.len(), |r, c| cur.jac[(r, free[c])]);
     let sigma2 = residual_scale(cur, free.len(), crit.noise.scale_unknown());
     // Candidates live on the structure's bodies, not on the masses and resonators the diagnosis
-    // added itself.
-    let candidates: Vec<Effect> =
-        generate::candidates(&crit.model_at(&x), &realized.vars, &x, labels, f_lo, f_hi)
-            .into_iter()
-            .filter(|c| !c.on_added_body())
-            .collect();
+    // added itself; a characteristic whose gain is already a variable gets no gain candidate.
+    let candidates: Vec<Effect> = generate::candidates(
+        &crit.model_at(&x),
+        &realized.vars,
+        &x,
+        labels,
+        f_lo,
+        f_hi,
+    )
+    .into_iter()
+    .filter(|c| !c.on_added_body())
+    .filter(|e| !matches!(e, Effect::Gain { output, .. } if crit.gain_variable(*output).is_some()))
+    .collect();
+    // The effects' gains times the gain variables' (the model output the criterion fits).
+    let gains: Vec<f64> = realized
+        .gains
+        .iter()
+        .enumerate()
+        .map(|(o, g)| g * crit.gain(o, &x))
+        .collect();
     let fit = score::FitPoint {
         crit: &crit,
         x: &x,
-        gains: &realized.gains,
+        gains: &gains,
         e: &cur.e,
         jac: &jfree,
         sigma2,

@@ -6,6 +6,9 @@
 //! - complex fit: `r = [Re(z − q), Im(z − q)]` per point.
 //!
 //! `R` is diagonal; its per-component variances `σ²` come from one [`NoiseSource`].
+//!
+//! The model's output `q_o` of a characteristic with a sensor-gain variable is `g·q_o`, so its
+//! derivatives are `g ∂q_o/∂p` for the model's parameters and `q_o` (the output / g) for `g`.
 
 use nalgebra::{DMatrix, DVector};
 
@@ -13,7 +16,7 @@ use super::data::Observations;
 use super::variables::Variables;
 use super::IdentifyError;
 use crate::frf::{self, Method};
-use crate::model::{Model, ParamRef};
+use crate::model::{Model, Param, DOF_NAMES};
 use crate::C64;
 
 /// What is fitted.
@@ -138,9 +141,11 @@ pub struct Criterion {
     freqs: Vec<f64>,
     obs: Vec<Obs>,
     fit: FitKind,
-    params: Vec<ParamRef>,
+    params: Vec<Param>,
     /// Per variable: (index into `params`, ratio).
     terms: Vec<Vec<(usize, f64)>>,
+    /// Per characteristic (data order): the gain variable and its ratio, if any.
+    gains: Vec<Option<(usize, f64)>>,
     vars: Variables,
     method: Method,
     /// Model evaluations so far.
@@ -307,18 +312,46 @@ impl Criterion {
             .map(|c| c.characteristic)
             .collect();
         let (obs, groups) = observations(data, &freqs, fit, source)?;
-        let params = vars.params();
+        let params = vars.model_params();
+        let gains: Vec<Option<(usize, f64)>> = data
+            .characteristics
+            .iter()
+            .map(|c| vars.gain(c.characteristic.body, c.characteristic.dof))
+            .collect();
+        for (i, v) in vars.vars.iter().enumerate() {
+            for t in &v.targets {
+                if let Param::Gain { body, dof } = t.param {
+                    let measured = data
+                        .characteristics
+                        .iter()
+                        .any(|c| c.characteristic.body == body && c.characteristic.dof == dof);
+                    if !measured {
+                        return Err(IdentifyError::GainWithoutData {
+                            origin: vars.origin.clone(),
+                            variable: vars.vars[i].name.clone(),
+                            characteristic: format!(
+                                "{} {}",
+                                model
+                                    .bodies
+                                    .get(body)
+                                    .map(|b| b.name.as_str())
+                                    .unwrap_or("?"),
+                                DOF_NAMES.get(dof as usize).copied().unwrap_or("?")
+                            ),
+                        });
+                    }
+                }
+            }
+        }
         let terms = vars
             .vars
             .iter()
             .map(|v| {
                 v.targets
                     .iter()
-                    .map(|t| {
-                        (
-                            params.iter().position(|p| *p == t.param).unwrap_or(0),
-                            t.ratio,
-                        )
+                    .filter_map(|t| {
+                        let p = params.iter().position(|p| *p == t.param)?;
+                        Some((p, t.ratio))
                     })
                     .collect()
             })
@@ -330,6 +363,7 @@ impl Criterion {
             fit,
             params,
             terms,
+            gains,
             vars: vars.clone(),
             method,
             evaluations: Evaluations::default(),
@@ -365,7 +399,21 @@ impl Criterion {
         m
     }
 
-    /// Model responses `q` at every observation for values `x`.
+    /// The sensor gain of characteristic `o` (data order) at values `x`: 1 unless a gain
+    /// variable sets it.
+    pub fn gain(&self, o: usize, x: &[f64]) -> f64 {
+        match self.gains.get(o).copied().flatten() {
+            Some((v, ratio)) => ratio * x[v],
+            None => 1.0,
+        }
+    }
+
+    /// The variable that sets the sensor gain of characteristic `o` (data order), if any.
+    pub fn gain_variable(&self, o: usize) -> Option<usize> {
+        self.gains.get(o).copied().flatten().map(|(v, _)| v)
+    }
+
+    /// Model responses `q` at every observation for values `x` (with the sensor gains).
     pub fn predicted(&mut self, x: &[f64]) -> Result<Vec<C64>, frf::SolveError> {
         self.vars.apply(&mut self.model, x);
         let r = frf::response(&self.model, &self.freqs, &[], self.method)?;
@@ -373,7 +421,7 @@ impl Criterion {
         Ok(self
             .obs
             .iter()
-            .map(|o| r.output(o.output)[o.line])
+            .map(|o| r.output(o.output)[o.line] * self.gain(o.output, x))
             .collect())
     }
 
@@ -420,7 +468,7 @@ impl Criterion {
         let mut e = DVector::zeros(m);
         let np = self.obs.len();
         for (i, o) in self.obs.iter().enumerate() {
-            let q = r.output(o.output)[o.line];
+            let q = r.output(o.output)[o.line] * self.gain(o.output, x);
             match self.fit {
                 FitKind::Amplitude => e[i] = (o.z.re - q.norm()) / o.sigma,
                 FitKind::LogAmplitude => e[i] = log_residual(o, q),
@@ -439,7 +487,7 @@ impl Criterion {
         x: &[f64],
     ) -> Result<(DVector<f64>, DMatrix<f64>), frf::SolveError> {
         self.vars.apply(&mut self.model, x);
-        let r = frf::response(&self.model, &self.freqs, &self.params, self.method)?;
+        let r = frf::response_params(&self.model, &self.freqs, &self.params, self.method)?;
         self.evaluations.model += 1;
         self.evaluations.with_jacobian += 1;
         let m = self.residual_count();
@@ -448,7 +496,9 @@ impl Criterion {
         let mut e = DVector::zeros(m);
         let mut jac = DMatrix::zeros(m, n);
         for (i, o) in self.obs.iter().enumerate() {
-            let q = r.output(o.output)[o.line];
+            let g = self.gain(o.output, x);
+            let q0 = r.output(o.output)[o.line];
+            let q = q0 * g;
             let qa = q.norm();
             match self.fit {
                 FitKind::Amplitude => e[i] = (o.z.re - qa) / o.sigma,
@@ -463,6 +513,12 @@ impl Criterion {
                 let mut dq = C64::new(0.0, 0.0);
                 for &(p, ratio) in terms {
                     dq += r.derivative(p, o.output)[o.line] * ratio;
+                }
+                dq *= g;
+                if let Some((gv, ratio)) = self.gains[o.output] {
+                    if gv == v {
+                        dq += q0 * ratio;
+                    }
                 }
                 match self.fit {
                     FitKind::Amplitude => {

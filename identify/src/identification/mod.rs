@@ -107,6 +107,19 @@ pub enum IdentifyError {
     /// The model cannot be evaluated at the estimate the minimizer returned.
     #[error("the model cannot be evaluated at the estimate: {0}")]
     Estimate(EvalError),
+    /// A gain variable names a characteristic the data do not have.
+    #[error(
+        "{origin}: variable \"{variable}\" sets the gain of {characteristic}, which the data do not \
+         have; measure it or remove the variable"
+    )]
+    GainWithoutData {
+        /// The variables file.
+        origin: String,
+        /// The variable.
+        variable: String,
+        /// The characteristic (`table u1`).
+        characteristic: String,
+    },
     /// No start point was given (`starts` = 0).
     #[error("no start point: give at least one start (--starts 1)")]
     NoStart,

@@ -11,7 +11,7 @@ use super::data::Observations;
 use super::variables::Variables;
 use super::{IdentifyError, Options};
 use crate::contract;
-use crate::model::Model;
+use crate::model::{Model, Param, DOF_NAMES};
 
 /// Format tag of [`to_json`]'s output.
 pub const FORMAT: &str = "ident identification problem 1";
@@ -29,7 +29,10 @@ pub const FORMAT: &str = "ident identification problem 1";
 /// - `variables[v]`: `name`, `initial`, `lower`, `upper` (null when none), `scale` (SI), and
 ///   `terms`: per SDE it moves, `sde` (index into `model.sdes`) and `dk`, `dpsi`, the change of
 ///   the SDE's six stiffnesses (N/m, N·m/rad) and six ψ per unit of the variable. Every law is
-///   linear in its parameters, so `k(x) = k(x0) + Σ_v (x_v − x0_v) dk_v`, likewise ψ.
+///   linear in its parameters, so `k(x) = k(x0) + Σ_v (x_v − x0_v) dk_v`, likewise ψ. A body's
+///   mass or inertia is a term `body` (index into `model.bodies`), `dm` (change of its
+///   `[m, m, m, J1, J2, J3]` per unit of the variable); a sensor gain a term `gain` (`body`,
+///   `dof`) with its `ratio` (the model output of that characteristic is multiplied by it).
 pub fn to_json(
     model: &Model,
     data: &Observations,
@@ -49,10 +52,25 @@ pub fn to_json(
     for v in &vars.vars {
         let mut terms = Vec::with_capacity(v.targets.len());
         for t in &v.targets {
-            let sde = &at_initial.sdes[t.param.sde];
+            let p = match t.param {
+                Param::Sde(p) => p,
+                Param::Gain { body, dof } => {
+                    terms.push(json!({
+                        "gain": {"body": at_initial.bodies[body].name, "dof": DOF_NAMES[dof as usize % 6]},
+                        "ratio": t.ratio,
+                    }));
+                    continue;
+                }
+                other => {
+                    let (body, dm) = other.inertia_derivative().unwrap_or((0, [0.0; 6]));
+                    terms.push(json!({ "body": body, "dm": dm.map(|d| d * t.ratio) }));
+                    continue;
+                }
+            };
+            let sde = &at_initial.sdes[p.sde];
             let (Some((dk, dpsi)), Some(index)) = (
-                sde.law.derivative(t.param.name),
-                enabled.iter().position(|&i| i == t.param.sde),
+                sde.law.derivative(p.name),
+                enabled.iter().position(|&i| i == p.sde),
             ) else {
                 return Err(IdentifyError::Noise {
                     item: format!("{}: variable {}", vars.origin, v.name),

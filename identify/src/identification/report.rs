@@ -364,6 +364,14 @@ pub enum WriteBackError {
         /// SDE name.
         sde: String,
     },
+    /// The fitted masses or inertias could not be written into the `[[body]]` tables.
+    #[error("{origin}: cannot write the fitted masses and inertias: {message}")]
+    Bodies {
+        /// File.
+        origin: String,
+        /// What went wrong.
+        message: String,
+    },
 }
 
 /// Rounds to 12 significant digits so that written values read cleanly (and load back within
@@ -409,7 +417,8 @@ fn set_value(item: &mut Item, si: f64, dim: Dim) {
     *item = Item::Value(new);
 }
 
-/// Writes the identified values into the model's TOML text (`[[sde]]` tables matched by name),
+/// Writes the identified values into the model's TOML text (`[[sde]]` tables matched by name,
+/// and the `mass` and `inertia` of `[[body]]` tables whose mass or inertias were variables),
 /// keeping comments and layout. An isolator given one `psi` whose `psi_n` or `psi_t` was
 /// identified gets both keys; a general element's `k`/`psi` arrays are rewritten in SI.
 pub fn update_toml(
@@ -454,6 +463,18 @@ pub fn update_toml(
             .collect();
         write_params(table, &sde.law, &params);
     }
+    // Bodies whose mass or inertias were identified: their `mass` and `inertia` rewritten.
+    crate::final_model::write_back_bodies(
+        &mut doc,
+        origin,
+        (model, model),
+        &id.variables.model_params(),
+        &[],
+    )
+    .map_err(|e| WriteBackError::Bodies {
+        origin: origin.into(),
+        message: e.to_string(),
+    })?;
     Ok(doc.to_string())
 }
 

@@ -1,5 +1,6 @@
-//! Decision variables: which SDE parameters an identification estimates, read from a variables
-//! TOML file (`configs/identification/*.toml`, documented in `docs/identification.md`).
+//! Decision variables: which SDE parameters, body masses and inertias, and sensor gains an
+//! identification estimates, read from a variables TOML file (`configs/identification/*.toml`,
+//! documented in `docs/identification.md`).
 //!
 //! A variable `x` (SI) sets one or more parameters `p_j = ratio_j · x`: a single parameter, a
 //! group sharing one value (ratio 1), parameters tied by fixed ratios, or (`tie = "scale"`) a
@@ -13,7 +14,7 @@ use std::path::Path;
 use serde::Deserialize;
 use serde_spanned::Spanned;
 
-use crate::model::{Model, ParamName, ParamRef, SdeLaw};
+use crate::model::{Model, Param, ParamName, ParamRef, SdeLaw, DOF_NAMES};
 use crate::source::{Located, Quantity, SourceText};
 use crate::units::{parse_quantity, Dim};
 
@@ -36,8 +37,8 @@ pub enum VarsError {
 /// One parameter a variable sets: `param = ratio · x`.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Target {
-    /// The SDE parameter.
-    pub param: ParamRef,
+    /// The parameter: an SDE's, a body's mass or inertia, or a characteristic's gain.
+    pub param: Param,
     /// Fixed ratio (1 for a shared value).
     pub ratio: f64,
 }
@@ -66,8 +67,11 @@ pub enum Tie {
 pub struct Variable {
     /// Name used in reports and identifiability messages.
     pub name: String,
-    /// The SDE names, compressed (`"2-10, 13-17"`), for the report table.
+    /// What it acts on, for the report table: the SDE names, compressed (`"2-10, 13-17"`), or
+    /// `"body table, carriage"`, or the characteristics (`"table u1"`).
     pub sdes: String,
+    /// Which kind of element the targets belong to (the key the file named them with).
+    pub on: On,
     /// The parameter name (as written in files) of the targets.
     pub parameter: String,
     /// The parameters it sets.
@@ -86,6 +90,28 @@ pub struct Variable {
     pub unit: DisplayUnit,
     /// True for dissipation (ψ) variables.
     pub dissipation: bool,
+}
+
+/// The kind of element a variable's parameters belong to: the key that names them in the file.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum On {
+    /// `sdes = …`: SDE law parameters.
+    Sdes,
+    /// `bodies = …`: masses and principal inertias.
+    Bodies,
+    /// `characteristics = …`: sensor gains.
+    Characteristics,
+}
+
+impl On {
+    /// The key in variables files.
+    pub fn key(&self) -> &'static str {
+        match self {
+            On::Sdes => "sdes",
+            On::Bodies => "bodies",
+            On::Characteristics => "characteristics",
+        }
+    }
 }
 
 /// The decision variables of one identification.
@@ -113,26 +139,50 @@ impl Variables {
         self.vars.iter().map(|v| v.initial).collect()
     }
 
-    /// Writes values `x` (SI) into the model's parameters.
+    /// Writes values `x` (SI) into the model's parameters (SDE parameters, masses, inertias;
+    /// gains are not part of the model: see [`Variables::gain`]).
     pub fn apply(&self, model: &mut Model, x: &[f64]) {
         for (v, &xi) in self.vars.iter().zip(x) {
             for t in &v.targets {
-                model.set_param(t.param, t.ratio * xi);
+                model.set_value(t.param, t.ratio * xi);
             }
         }
     }
 
-    /// Every parameter any variable sets, without repeats, in variable order.
+    /// Every SDE parameter any variable sets, without repeats, in variable order.
     pub fn params(&self) -> Vec<ParamRef> {
         let mut ps: Vec<ParamRef> = Vec::new();
+        for p in self.model_params() {
+            if let Param::Sde(r) = p {
+                ps.push(r);
+            }
+        }
+        ps
+    }
+
+    /// Every parameter of the model any variable sets (SDE parameters, masses, inertias; not
+    /// gains), without repeats, in variable order.
+    pub fn model_params(&self) -> Vec<Param> {
+        let mut ps: Vec<Param> = Vec::new();
         for v in &self.vars {
             for t in &v.targets {
-                if !ps.contains(&t.param) {
+                if !matches!(t.param, Param::Gain { .. }) && !ps.contains(&t.param) {
                     ps.push(t.param);
                 }
             }
         }
         ps
+    }
+
+    /// The variable that sets the gain of the characteristics of `body`, DOF `dof`, and its
+    /// ratio (`gain = ratio · x[variable]`); `None` when no variable does (the gain is 1).
+    pub fn gain(&self, body: usize, dof: u8) -> Option<(usize, f64)> {
+        self.vars.iter().enumerate().find_map(|(i, v)| {
+            v.targets
+                .iter()
+                .find(|t| t.param == Param::Gain { body, dof })
+                .map(|t| (i, t.ratio))
+        })
     }
 }
 
@@ -164,7 +214,11 @@ enum SdeList {
 struct RawVariable {
     name: Option<Spanned<String>>,
     #[serde(alias = "sde")]
-    sdes: Spanned<SdeList>,
+    sdes: Option<Spanned<SdeList>>,
+    #[serde(alias = "body")]
+    bodies: Option<Spanned<SdeList>>,
+    #[serde(alias = "characteristic")]
+    characteristics: Option<Spanned<SdeList>>,
     parameter: Spanned<String>,
     initial: Option<Spanned<Quantity>>,
     lower: Option<Spanned<Quantity>>,
@@ -175,6 +229,32 @@ struct RawVariable {
     ratios: Option<Spanned<Vec<f64>>>,
     #[allow(dead_code)]
     note: Option<String>,
+}
+
+impl RawVariable {
+    /// The one key that names the elements (`sdes`, `bodies` or `characteristics`), if exactly one.
+    fn elements(&self) -> Result<(On, &Spanned<SdeList>), usize> {
+        let given: Vec<(On, &Spanned<SdeList>)> = [
+            (On::Sdes, &self.sdes),
+            (On::Bodies, &self.bodies),
+            (On::Characteristics, &self.characteristics),
+        ]
+        .into_iter()
+        .filter_map(|(on, l)| l.as_ref().map(|l| (on, l)))
+        .collect();
+        match given.as_slice() {
+            [one] => Ok(*one),
+            _ => Err(given.len()),
+        }
+    }
+
+    /// Where the elements are named, for messages.
+    fn names_span(&self) -> Range<usize> {
+        match self.elements() {
+            Ok((_, l)) => l.span(),
+            Err(_) => self.parameter.span(),
+        }
+    }
 }
 
 struct Ctx<'a> {
@@ -207,6 +287,8 @@ fn default_unit(dim: Dim) -> DisplayUnit {
         Dim::CONTACT_STIFFNESS => ("MPa/um", 1e12),
         Dim::STIFFNESS => ("N/um", 1e6),
         Dim::ROTATIONAL_STIFFNESS => ("N*m/rad", 1.0),
+        Dim::MASS => ("kg", 1.0),
+        Dim::INERTIA => ("kg·m²", 1.0),
         _ => ("-", 1.0),
     };
     DisplayUnit {
@@ -318,7 +400,7 @@ pub fn parse(text: &str, origin: &str, model: &Model) -> Result<Variables, VarsE
         ));
     }
     let mut vars: Vec<Variable> = Vec::new();
-    let mut owner: Vec<(ParamRef, String)> = Vec::new();
+    let mut owner: Vec<(Param, String)> = Vec::new();
     for rv in &raw.variables {
         let v = variable(&cx, rv, model, &vars, &owner)?;
         for t in &v.targets {
@@ -347,16 +429,39 @@ fn variable(
     rv: &RawVariable,
     model: &Model,
     earlier: &[Variable],
-    owner: &[(ParamRef, String)],
+    owner: &[(Param, String)],
 ) -> Result<Variable, VarsError> {
-    let names = expand(rv.sdes.get_ref()).map_err(|m| cx.at(rv.sdes.span(), m))?;
+    let (on, list) = rv.elements().map_err(|given| {
+        cx.at(
+            rv.parameter.span(),
+            if given == 0 {
+                "no `sdes`, `bodies` or `characteristics`: name what the variable sets (e.g. sdes = \"2-10\", bodies = \"table\", characteristics = \"table u1\")"
+            } else {
+                "more than one of `sdes`, `bodies`, `characteristics`: a variable sets parameters of one kind; split it into several [[variable]] tables"
+            },
+        )
+    })?;
+    let names = expand(list.get_ref()).map_err(|m| cx.at(list.span(), m))?;
     let pname = rv.parameter.get_ref().trim();
-    let Some(param) = ParamName::parse(pname) else {
-        return Err(cx.at(rv.parameter.span(), format!(
-            "unknown parameter \"{pname}\"; parameters are kn, kt, psi_n, psi_t (slideway, rotary, isolator), k, psi (screw, spring), k1-k6, psi1-psi6 (general)"
-        )));
+    let kind = match on {
+        On::Sdes => match ParamName::parse(pname) {
+            Some(p) => Kind::Sde(p),
+            None => return Err(cx.at(rv.parameter.span(), format!(
+                "unknown parameter \"{pname}\"; parameters are kn, kt, psi_n, psi_t (slideway, rotary, isolator), k, psi (screw, spring), k1-k6, psi1-psi6 (general); masses and inertias go with `bodies`, gains with `characteristics`"
+            ))),
+        },
+        On::Bodies => body_kind(cx, rv, pname)?,
+        On::Characteristics if pname == "gain" => Kind::Gain,
+        On::Characteristics => return Err(cx.at(rv.parameter.span(), format!(
+            "unknown parameter \"{pname}\" of a characteristic; the one there is is parameter = \"gain\""
+        ))),
     };
     let tie = match rv.tie.as_ref().map(|t| t.get_ref().as_str()) {
+        None if kind.several() => Tie::Scale,
+        Some("equal") if kind.several() => {
+            let span = rv.tie.as_ref().map(|t| t.span()).unwrap_or(0..0);
+            return Err(cx.at(span, format!("parameter \"{pname}\" sets several inertias of each body, so it is a factor on the model's values: use tie = \"scale\" (or leave tie out)")));
+        }
         None | Some("equal") => Tie::Equal,
         Some("scale") => Tie::Scale,
         Some(other) => {
@@ -368,14 +473,21 @@ fn variable(
         mut targets,
         dim,
         model_values,
-    } = targets(cx, rv, model, &names, param, owner)?;
+    } = match kind {
+        Kind::Sde(param) => targets(cx, rv, model, &names, param, owner)?,
+        _ => element_targets(cx, rv, model, &names, &kind, owner)?,
+    };
     let name = match &rv.name {
         Some(n) => n.get_ref().trim().to_string(),
         None if names.len() == 1 => format!("{pname} {}", names[0]),
         None => format!("{pname} {}", compress(&names)),
     };
     if earlier.iter().any(|v| v.name == name) {
-        let span = rv.name.as_ref().map(|n| n.span()).unwrap_or(rv.sdes.span());
+        let span = rv
+            .name
+            .as_ref()
+            .map(|n| n.span())
+            .unwrap_or(rv.names_span());
         return Err(cx.at(
             span,
             format!("a variable named \"{name}\" already exists; give it another `name`"),
@@ -405,15 +517,28 @@ fn variable(
         (None, Tie::Equal) => {}
     }
     let unit = display_unit(cx, rv, vdim)?;
+    let positive = !matches!(kind, Kind::Sde(_));
     let Values {
         initial,
         lower,
         upper,
         scale,
-    } = values(cx, rv, tie, vdim, &unit, &targets, &model_values)?;
+    } = values(
+        cx,
+        rv,
+        (tie, positive),
+        vdim,
+        &unit,
+        &targets,
+        &model_values,
+    )?;
     Ok(Variable {
         name,
-        sdes: compress(&names),
+        sdes: match on {
+            On::Sdes | On::Characteristics => compress(&names),
+            On::Bodies => format!("body {}", names.join(", ")),
+        },
+        on,
         parameter: pname.to_string(),
         targets,
         tie,
@@ -422,7 +547,138 @@ fn variable(
         upper,
         scale,
         unit,
-        dissipation: param.is_dissipation(),
+        dissipation: matches!(kind, Kind::Sde(p) if p.is_dissipation()),
+    })
+}
+
+/// What a variable's parameter is, per element it names.
+enum Kind {
+    /// An SDE law parameter.
+    Sde(ParamName),
+    /// Inertia entries of each body: `None` the mass, `Some(a)` the principal inertia `J[a]`.
+    Body(Vec<Option<u8>>),
+    /// The gain of each characteristic.
+    Gain,
+}
+
+impl Kind {
+    /// True when each element gets several parameters (of possibly different values and units):
+    /// only a factor on the model's values makes sense.
+    fn several(&self) -> bool {
+        matches!(self, Kind::Body(ps) if ps.len() > 1)
+    }
+}
+
+/// The parameter of `bodies = …`: `m`, `J1`-`J3`, `J` (J1-J3 together) or `mJ` (m and J1-J3).
+fn body_kind(cx: &Ctx, rv: &RawVariable, pname: &str) -> Result<Kind, VarsError> {
+    Ok(Kind::Body(match pname {
+        "m" => vec![None],
+        "J1" => vec![Some(0)],
+        "J2" => vec![Some(1)],
+        "J3" => vec![Some(2)],
+        "J" => vec![Some(0), Some(1), Some(2)],
+        "mJ" => vec![None, Some(0), Some(1), Some(2)],
+        _ if pname.starts_with('J') => {
+            return Err(cx.at(rv.parameter.span(), format!(
+                "\"{pname}\": a body has three principal inertias, J1, J2, J3 (about its principal axes 1-3); write one of them, or \"J\" for all three scaled together"
+            )))
+        }
+        _ => {
+            return Err(cx.at(rv.parameter.span(), format!(
+                "unknown body parameter \"{pname}\"; a body's are m (mass, kg), J1, J2, J3 (principal inertias, kg·m²), J (J1-J3 scaled together) and mJ (mass and inertias scaled together)"
+            )))
+        }
+    }))
+}
+
+/// The masses/inertias of the bodies, or the gains of the characteristics, in `names`: every one
+/// must exist and not be set by another variable (`owner`); a body's parameters share one
+/// dimension unless the variable is a factor.
+fn element_targets(
+    cx: &Ctx,
+    rv: &RawVariable,
+    model: &Model,
+    names: &[String],
+    kind: &Kind,
+    owner: &[(Param, String)],
+) -> Result<Targets, VarsError> {
+    let pname = rv.parameter.get_ref().trim();
+    let span = rv.names_span();
+    let bodies = || {
+        model
+            .bodies
+            .iter()
+            .map(|b| b.name.as_str())
+            .collect::<Vec<_>>()
+            .join(", ")
+    };
+    let mut params = Vec::new();
+    for n in names {
+        match kind {
+            Kind::Body(entries) => {
+                let Some(b) = model.body_index(n) else {
+                    return Err(cx.at(
+                        span,
+                        format!(
+                            "bodies: unknown body \"{n}\"; the model's bodies: {}",
+                            bodies()
+                        ),
+                    ));
+                };
+                params.extend(entries.iter().map(|e| match e {
+                    None => Param::Mass { body: b },
+                    Some(axis) => Param::Inertia {
+                        body: b,
+                        axis: *axis,
+                    },
+                }));
+            }
+            Kind::Gain => {
+                let (body, dof) = n.rsplit_once(char::is_whitespace).unwrap_or(("", n));
+                let Some(d) = DOF_NAMES.iter().position(|x| *x == dof.trim()) else {
+                    return Err(cx.at(span, format!("characteristics: \"{n}\" is not a characteristic; write the body and the DOF, e.g. \"table u1\" (DOFs u1 u2 u3 r1 r2 r3)")));
+                };
+                let Some(b) = model.body_index(body.trim()) else {
+                    return Err(cx.at(span, format!("characteristics: \"{n}\" names an unknown body \"{}\"; the model's bodies: {}", body.trim(), bodies())));
+                };
+                params.push(Param::Gain {
+                    body: b,
+                    dof: d as u8,
+                });
+            }
+            Kind::Sde(_) => {}
+        }
+    }
+    let mut targets: Vec<Target> = Vec::new();
+    let mut model_values = Vec::new();
+    let mut dim: Option<Dim> = None;
+    for p in params {
+        let d = match p {
+            Param::Mass { .. } => Dim::MASS,
+            Param::Inertia { .. } => Dim::INERTIA,
+            _ => Dim::NONE,
+        };
+        if dim.is_some_and(|d0| d0 != d) && !kind.several() {
+            return Err(cx.at(span, "one variable sets parameters of one dimension"));
+        }
+        dim = Some(d);
+        let label = model.label(p);
+        if let Some((_, other)) = owner.iter().find(|(q, _)| *q == p) {
+            return Err(cx.at(span, format!("{label} is already set by variable \"{other}\"; each parameter belongs to one variable")));
+        }
+        if targets.iter().any(|t| t.param == p) {
+            return Err(cx.at(span, format!("{label} ({pname}) is listed twice")));
+        }
+        targets.push(Target {
+            param: p,
+            ratio: 1.0,
+        });
+        model_values.push(model.value(p).unwrap_or(1.0));
+    }
+    Ok(Targets {
+        targets,
+        dim: dim.unwrap_or(Dim::NONE),
+        model_values,
     })
 }
 
@@ -439,7 +695,7 @@ struct Values {
 fn values(
     cx: &Ctx,
     rv: &RawVariable,
-    tie: Tie,
+    (tie, positive): (Tie, bool),
     vdim: Dim,
     unit: &DisplayUnit,
     targets: &[Target],
@@ -461,7 +717,7 @@ fn values(
                     .iter()
                     .any(|v| (v - first).abs() > 1e-9 * first.abs().max(f64::MIN_POSITIVE))
                 {
-                    return Err(cx.at(rv.sdes.span(), format!(
+                    return Err(cx.at(rv.names_span(), format!(
                         "the model's {pname} values of these SDEs differ ({}); give `initial` for the shared value",
                         implied.iter().map(|v| format!("{:.6}", v / unit.factor)).collect::<Vec<_>>().join(", ")
                     )));
@@ -470,7 +726,33 @@ fn values(
             }
         },
     };
+    if positive && !(initial > 0.0 && initial.is_finite()) {
+        let span = rv
+            .initial
+            .as_ref()
+            .map(|v| v.span())
+            .unwrap_or(rv.names_span());
+        return Err(cx.at(
+            span,
+            format!(
+                "initial value {} {}: a mass, inertia or gain must be > 0",
+                initial / unit.factor,
+                unit.symbol
+            ),
+        ));
+    }
     let lower = match &rv.lower {
+        Some(v) if positive => {
+            let l = cx.value(v, vdim, "lower")?;
+            if l <= 0.0 {
+                return Err(cx.at(v.span(), format!(
+                    "lower bound {} {}: a mass, inertia or gain must stay > 0; give lower > 0 (e.g. a tenth of the initial value, {} {}) or leave it out (default: a hundredth of the initial value)",
+                    l / unit.factor, unit.symbol, initial / 10.0 / unit.factor, unit.symbol
+                )));
+            }
+            l
+        }
+        None if positive => initial / 100.0,
         Some(v) => {
             let l = cx.value(v, vdim, "lower")?;
             if l < 0.0 {
@@ -507,7 +789,7 @@ fn values(
             .initial
             .as_ref()
             .map(|v| v.span())
-            .unwrap_or(rv.sdes.span());
+            .unwrap_or(rv.names_span());
         return Err(cx.at(span, format!(
             "initial value {} {} is outside the bounds [{}, {}] {}; move it inside or widen the bounds",
             initial / unit.factor, unit.symbol, lower / unit.factor, upper / unit.factor, unit.symbol
@@ -545,7 +827,7 @@ fn natural_scale(
                 .initial
                 .as_ref()
                 .map(|v| v.span())
-                .unwrap_or(rv.sdes.span());
+                .unwrap_or(rv.names_span());
             return Err(cx.at(span, format!(
                 "initial value is 0 and there is no upper bound, so the variable has no natural scale; give `scale` (e.g. scale = \"1 {}\") or an `upper` bound",
                 unit.symbol
@@ -562,7 +844,7 @@ fn targets(
     model: &Model,
     names: &[String],
     param: ParamName,
-    owner: &[(ParamRef, String)],
+    owner: &[(Param, String)],
 ) -> Result<Targets, VarsError> {
     let pname = rv.parameter.get_ref().trim();
     let mut targets = Vec::new();
@@ -572,7 +854,7 @@ fn targets(
         let Some(s) = model.sde_index(n) else {
             let known: Vec<&str> = model.sdes.iter().map(|s| s.name.as_str()).collect();
             return Err(cx.at(
-                rv.sdes.span(),
+                rv.names_span(),
                 format!(
                     "unknown SDE \"{n}\"; the model's SDEs: {}",
                     known.join(", ")
@@ -581,12 +863,12 @@ fn targets(
         };
         let sde = &model.sdes[s];
         if !sde.enabled {
-            return Err(cx.at(rv.sdes.span(), format!("SDE \"{n}\" is disabled in the model (enabled = false); enable it or leave it out")));
+            return Err(cx.at(rv.names_span(), format!("SDE \"{n}\" is disabled in the model (enabled = false); enable it or leave it out")));
         }
-        let pr = ParamRef {
+        let pr = Param::Sde(ParamRef {
             sde: s,
             name: param,
-        };
+        });
         let Some(value) = sde.law.get(param) else {
             let has: Vec<String> = sde.law.params().iter().map(|p| p.as_str()).collect();
             return Err(cx.at(
@@ -601,7 +883,7 @@ fn targets(
         let d = param_dim(&sde.law, param);
         if let Some(d0) = dim {
             if d0 != d {
-                return Err(cx.at(rv.sdes.span(), format!(
+                return Err(cx.at(rv.names_span(), format!(
                     "SDE \"{n}\"'s {pname} is {} but the variable's first SDE's is {}; one variable sets parameters of one dimension (use tie = \"scale\" for a factor)",
                     d.describe(), d0.describe()
                 )));
@@ -609,10 +891,10 @@ fn targets(
         }
         dim = Some(d);
         if let Some((_, other)) = owner.iter().find(|(p, _)| *p == pr) {
-            return Err(cx.at(rv.sdes.span(), format!("SDE \"{n}\" {pname} is already set by variable \"{other}\"; each parameter belongs to one variable")));
+            return Err(cx.at(rv.names_span(), format!("SDE \"{n}\" {pname} is already set by variable \"{other}\"; each parameter belongs to one variable")));
         }
         if targets.iter().any(|t: &Target| t.param == pr) {
-            return Err(cx.at(rv.sdes.span(), format!("SDE \"{n}\" is listed twice")));
+            return Err(cx.at(rv.names_span(), format!("SDE \"{n}\" is listed twice")));
         }
         targets.push(Target {
             param: pr,
