@@ -1,0 +1,107 @@
+//! The worked real-data example (`examples/real-three-storey`, data in `data/dtop-three-storey`):
+//! `ident identify` from the documented start against an independent numpy/scipy fit of the same
+//! model form, lines and criterion (`examples/real-three-storey/reference_fit.py`).
+
+// Test helpers unwrap: a panic with its message is the failure report.
+#![allow(clippy::unwrap_used)]
+
+mod common;
+
+use std::process::Command;
+
+use common::{ident, json, p, root, text};
+
+/// The documented command, with `extra` flags appended.
+fn identify_example(extra: &[&str]) -> std::process::Output {
+    let ex = root().join("examples/real-three-storey");
+    let data = root().join("data/dtop-three-storey/three-storey-hammer.uff");
+    let (model, map, vars) = (
+        ex.join("model.toml"),
+        ex.join("map.toml"),
+        ex.join("variables.toml"),
+    );
+    let mut args = vec![
+        "identify",
+        p(&model),
+        "--data",
+        p(&data),
+        "--map",
+        p(&map),
+        "--vars",
+        p(&vars),
+        "--band",
+        "3:40",
+    ];
+    args.extend_from_slice(extra);
+    ident(&args)
+}
+
+/// Runs the reference fit; fails (never skips) without python3, numpy, scipy or pyuff.
+fn reference_fit(out: &std::path::Path) -> serde_json::Value {
+    let probe = Command::new("python3")
+        .args(["-c", "import numpy, scipy, pyuff"])
+        .output();
+    match probe {
+        Ok(o) if o.status.success() => {}
+        Ok(o) => panic!(
+            "python3 lacks numpy, scipy or pyuff ({}): run `.ci/setup` (installs .ci/requirements.txt)",
+            String::from_utf8_lossy(&o.stderr).trim()
+        ),
+        Err(e) => panic!("python3 not found ({e}): run `.ci/setup`"),
+    }
+    let script = root().join("examples/real-three-storey/reference_fit.py");
+    let o = Command::new("python3")
+        .args([p(&script), "--json", p(out)])
+        .output()
+        .unwrap();
+    assert!(
+        o.status.success(),
+        "reference_fit.py failed:\n{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    json(out)
+}
+
+#[test]
+fn identify_reaches_the_independent_scipy_fit() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = identify_example(&["--format", "json"]);
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out));
+    let id: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let reference = reference_fit(&dir.path().join("reference.json"));
+
+    // The same lines: 3 characteristics × the script's lines.
+    let lines = reference["lines"].as_u64().unwrap();
+    assert_eq!(id["observations"].as_u64().unwrap(), 3 * lines);
+    // ident's RMS dB over all observations (every characteristic has the same lines).
+    let per: Vec<f64> = id["rms_db_error"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|r| r[2].as_f64().unwrap())
+        .collect();
+    assert_eq!(per.len(), 3);
+    let ident_db = (per.iter().map(|v| v * v).sum::<f64>() / 3.0).sqrt();
+    let scipy_db = reference["rms_db_overall"].as_f64().unwrap();
+    eprintln!("RMS dB: ident {ident_db:.4}, scipy {scipy_db:.4}");
+    assert!(
+        ident_db <= 1.2 * scipy_db,
+        "ident {ident_db} dB vs the reference fit's {scipy_db} dB"
+    );
+    // And the same optimum: every estimate within 0.1 % of the reference's.
+    for row in id["table"].as_array().unwrap() {
+        let name = row["variable"].as_str().unwrap();
+        let ours = row["identified"].as_f64().unwrap();
+        let theirs = reference["estimates"][name].as_f64().unwrap();
+        // the table is in report units (N/µm for stiffness), the script in SI
+        let theirs = if name.starts_with('k') {
+            theirs * 1e-6
+        } else {
+            theirs
+        };
+        assert!(
+            (ours / theirs - 1.0).abs() < 1e-3,
+            "{name}: ident {ours}, reference {theirs}"
+        );
+    }
+}
