@@ -105,3 +105,42 @@ fn identify_reaches_the_independent_scipy_fit() {
         );
     }
 }
+
+#[test]
+fn many_starts_find_the_same_best_optimum_and_report_the_others() {
+    let one = identify_example(&["--format", "json"]);
+    let many = identify_example(&["--format", "json", "--starts", "12", "--seed", "3"]);
+    assert_eq!(many.status.code(), Some(0), "{}", text(&many));
+    let one: serde_json::Value = serde_json::from_slice(&one.stdout).unwrap();
+    let many: serde_json::Value = serde_json::from_slice(&many.stdout).unwrap();
+    let j1 = one["criterion"].as_f64().unwrap();
+    let jm = many["criterion"].as_f64().unwrap();
+    assert!(
+        jm <= j1 * (1.0 + 1e-9),
+        "12 starts {jm} vs the documented start {j1}"
+    );
+    assert!(
+        (jm / j1 - 1.0).abs() < 1e-6,
+        "the documented start is the best optimum"
+    );
+    let optima = many["start_analysis"]["optima"].as_array().unwrap();
+    let reached: usize = optima
+        .iter()
+        .map(|o| o["starts"].as_array().unwrap().len())
+        .sum();
+    assert_eq!(reached, 12, "every start ends in one optimum");
+    assert!(
+        optima[0]["starts"].as_array().unwrap().contains(&0.into()),
+        "the documented start reaches the best optimum"
+    );
+    // Starts spread over [x0/10, 10 x0] also reach other, much worse optima (degenerate corners):
+    // reported, and since they are significantly worse, no ambiguity warning.
+    assert!(optima.len() >= 2, "{optima:?}");
+    for o in &optima[1..] {
+        assert!(o["criterion"].as_f64().unwrap() > 1.5 * jm);
+    }
+    assert_eq!(
+        many["start_analysis"]["warnings"].as_array().unwrap().len(),
+        0
+    );
+}
