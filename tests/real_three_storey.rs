@@ -144,3 +144,106 @@ fn many_starts_find_the_same_best_optimum_and_report_the_others() {
         0
     );
 }
+
+#[test]
+fn a_modal_start_matches_the_measured_frequencies_and_reaches_the_same_optimum_from_far_off() {
+    // A variables file whose start is far off (storey stiffnesses 10x in opposite directions,
+    // ψ 12x): the pre-fit must bring the three model frequencies onto the measured ones.
+    let dir = tempfile::tempdir().unwrap();
+    let vars = dir.path().join("far.toml");
+    std::fs::write(
+        &vars,
+        r#"
+[[variable]]
+name = "k storey 1"
+sdes = "storey 1"
+parameter = "k1"
+initial = "5 kN/m"
+[[variable]]
+name = "k storey 2"
+sdes = "storey 2"
+parameter = "k1"
+initial = "400 kN/m"
+[[variable]]
+name = "k storey 3"
+sdes = "storey 3"
+parameter = "k1"
+initial = "4 kN/m"
+[[variable]]
+name = "psi sway"
+sdes = ["storey 1", "storey 2", "storey 3"]
+parameter = "psi1"
+initial = 0.3
+"#,
+    )
+    .unwrap();
+    let ex = root().join("examples/real-three-storey");
+    let data = root().join("data/dtop-three-storey/three-storey-hammer.uff");
+    let (model, map) = (ex.join("model.toml"), ex.join("map.toml"));
+    let run = |vars: &std::path::Path| {
+        ident(&[
+            "identify",
+            p(&model),
+            "--data",
+            p(&data),
+            "--map",
+            p(&map),
+            "--vars",
+            p(vars),
+            "--band",
+            "3:40",
+            "--start",
+            "modal",
+            "--format",
+            "json",
+        ])
+    };
+    let out = run(&vars);
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("start: modal pre-fit on 3 measured mode(s) (3 paired)"),
+        "{err}"
+    );
+    // Each pair: "measured F Hz (η E) <- model A Hz -> B Hz, MAC M" with B = F, M near 1.
+    let pairs: Vec<&str> = err
+        .lines()
+        .filter(|l| l.starts_with("start: measured"))
+        .collect();
+    assert_eq!(pairs.len(), 3, "{err}");
+    for l in pairs {
+        let nums: Vec<f64> = l
+            .split(|c: char| !(c.is_ascii_digit() || c == '.'))
+            .filter_map(|t| t.parse().ok())
+            .collect();
+        let (measured, after, mac) = (nums[0], nums[3], nums[4]);
+        assert!((after / measured - 1.0).abs() < 1e-6, "{l}");
+        assert!(mac > 0.9, "{l}");
+    }
+    assert!(
+        (6.4..6.6).contains(
+            &err.lines()
+                .find(|l| l.starts_with("start: measured"))
+                .and_then(|l| l.split_whitespace().nth(2))
+                .and_then(|t| t.parse::<f64>().ok())
+                .unwrap()
+        ),
+        "the first storey mode at 6.5 Hz"
+    );
+    let modal: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let documented = identify_example(&["--format", "json"]);
+    let documented: serde_json::Value = serde_json::from_slice(&documented.stdout).unwrap();
+    let (jm, jd) = (
+        modal["criterion"].as_f64().unwrap(),
+        documented["criterion"].as_f64().unwrap(),
+    );
+    assert!(
+        (jm / jd - 1.0).abs() < 1e-6,
+        "modal start {jm} vs documented start {jd}"
+    );
+    assert!(
+        modal["criterion_initial"].as_f64().unwrap()
+            < documented["criterion_initial"].as_f64().unwrap(),
+        "the pre-fit start is better than the model's values"
+    );
+}

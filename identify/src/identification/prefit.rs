@@ -44,7 +44,7 @@ pub struct Pair {
 pub struct Prefit {
     /// The new start (SI), one value per variable.
     pub start: Vec<f64>,
-    /// The pairs, in measured order.
+    /// The pairs, in measured order (a measured mode the model has no place for is left out).
     pub pairs: Vec<Pair>,
     /// Gauss-Newton iterations done.
     pub iterations: usize,
@@ -141,48 +141,60 @@ fn visibility(sys: &System, phi: &[f64]) -> f64 {
 /// A mode is visible when at least this share of its kinetic energy is at the outputs' DOFs.
 const VISIBLE: f64 = 0.01;
 
-/// Pairs each measured mode with a distinct visible model mode (see [`VISIBLE`]): by MAC at the
-/// characteristics when the measured shape is known (greedy, the measured modes in order), else
-/// by order (the measured modes ascending onto the lowest visible model modes ascending: a first
-/// model may be far off in frequency but rarely in the order of its modes).
+/// Pairs measured modes with distinct visible model modes (see [`VISIBLE`]), as
+/// `(measured, model)` index pairs. With every measured shape known: greedily by the highest MAC
+/// at the characteristics over all pairs (ties to the nearer frequency), as many pairs as there
+/// are visible modes or measured modes (a measured mode the model has no place for stays
+/// unpaired). Without shapes: by order (the measured modes ascending onto the lowest visible model
+/// modes ascending: a first model may be far off in frequency but rarely in the order of its
+/// modes); then every measured mode needs a visible model mode.
 fn pair_initial(
     sys: &System,
     model_modes: &[(f64, Vec<f64>)],
     measured: &[MeasuredMode],
-) -> Result<Vec<usize>, PrefitError> {
+) -> Result<Vec<(usize, usize)>, PrefitError> {
     let visible: Vec<usize> = (0..model_modes.len())
         .filter(|&j| visibility(sys, &model_modes[j].1) >= VISIBLE)
         .collect();
-    if visible.len() < measured.len() {
-        return Err(PrefitError::TooManyModes {
-            measured: measured.len(),
-            model: visible.len(),
-        });
-    }
-    let mut order: Vec<usize> = (0..measured.len()).collect();
-    order.sort_by(|&a, &b| measured[a].freq_hz.total_cmp(&measured[b].freq_hz));
-    let mut out = vec![0; measured.len()];
-    if measured.iter().all(|m| m.shape.is_some()) {
-        let mut taken = vec![false; model_modes.len()];
-        for r in order {
-            let Some(s) = &measured[r].shape else {
-                continue;
-            };
-            let score = |j: usize| mac(s, &shape_at_outputs(sys, &model_modes[j].1));
-            let best = visible
-                .iter()
-                .copied()
-                .filter(|&j| !taken[j])
-                .max_by(|&a, &b| score(a).total_cmp(&score(b)))
-                .unwrap_or(visible[0]);
-            taken[best] = true;
-            out[r] = best;
+    let shapes: Option<Vec<&Vec<C64>>> = measured.iter().map(|m| m.shape.as_ref()).collect();
+    let Some(shapes) = shapes else {
+        if visible.len() < measured.len() {
+            return Err(PrefitError::TooManyModes {
+                measured: measured.len(),
+                model: visible.len(),
+            });
         }
-    } else {
-        for (k, r) in order.into_iter().enumerate() {
-            out[r] = visible[k];
+        let mut order: Vec<usize> = (0..measured.len()).collect();
+        order.sort_by(|&a, &b| measured[a].freq_hz.total_cmp(&measured[b].freq_hz));
+        return Ok(order
+            .into_iter()
+            .enumerate()
+            .map(|(k, r)| (r, visible[k]))
+            .collect());
+    };
+    let mut scored: Vec<(f64, usize, usize)> = Vec::new();
+    for (r, s) in shapes.iter().enumerate() {
+        let lam_m = (2.0 * std::f64::consts::PI * measured[r].freq_hz).powi(2);
+        for &j in &visible {
+            let near = (model_modes[j].0 / lam_m).ln().abs();
+            scored.push((
+                mac(s, &shape_at_outputs(sys, &model_modes[j].1)) - 1e-3 * near,
+                r,
+                j,
+            ));
         }
     }
+    scored.sort_by(|a, b| b.0.total_cmp(&a.0));
+    let (mut used_r, mut used_j) = (vec![false; measured.len()], vec![false; model_modes.len()]);
+    let mut out = Vec::new();
+    for (_, r, j) in scored {
+        if !used_r[r] && !used_j[j] {
+            used_r[r] = true;
+            used_j[j] = true;
+            out.push((r, j));
+        }
+    }
+    out.sort_unstable();
     Ok(out)
 }
 
@@ -207,10 +219,6 @@ pub fn modal_prefit(
     if stiff.is_empty() {
         return Err(PrefitError::NoStiffness);
     }
-    let lam_meas: Vec<f64> = measured
-        .iter()
-        .map(|m| (2.0 * std::f64::consts::PI * m.freq_hz).powi(2))
-        .collect();
     let mut x = vars.initial();
     let at = |x: &[f64]| {
         let mut m = model.clone();
@@ -220,15 +228,13 @@ pub fn modal_prefit(
     let m0 = at(&x);
     let sys0 = System::assemble(&m0);
     let modes0 = elastic_modes(&m0, &sys0)?;
-    if modes0.len() < measured.len() {
-        return Err(PrefitError::TooManyModes {
-            measured: measured.len(),
-            model: modes0.len(),
-        });
-    }
     let paired = pair_initial(&sys0, &modes0, measured)?;
-    let before: Vec<f64> = paired.iter().map(|&j| modes0[j].0).collect();
-    let mut shapes: Vec<Vec<f64>> = paired.iter().map(|&j| modes0[j].1.clone()).collect();
+    let lam_meas: Vec<f64> = paired
+        .iter()
+        .map(|&(r, _)| (2.0 * std::f64::consts::PI * measured[r].freq_hz).powi(2))
+        .collect();
+    let before: Vec<f64> = paired.iter().map(|&(_, j)| modes0[j].0).collect();
+    let mut shapes: Vec<Vec<f64>> = paired.iter().map(|&(_, j)| modes0[j].1.clone()).collect();
     let mut lam: Vec<f64> = before.clone();
     let rms = |lam: &[f64]| -> f64 {
         (lam.iter()
@@ -256,7 +262,7 @@ pub fn modal_prefit(
                 .map(|a| phi[a] * (0..n).map(|b| k[a * n + b] * phi[b]).sum::<f64>())
                 .sum()
         };
-        let mut jac = nalgebra::DMatrix::<f64>::zeros(measured.len(), stiff.len());
+        let mut jac = nalgebra::DMatrix::<f64>::zeros(paired.len(), stiff.len());
         for (c, &i) in stiff.iter().enumerate() {
             let h = x[i].abs().max(vars.vars[i].scale.abs()) * 1e-3;
             let mut xh = x.clone();
@@ -269,7 +275,7 @@ pub fn modal_prefit(
             }
         }
         let res = nalgebra::DVector::from_iterator(
-            measured.len(),
+            paired.len(),
             lam_meas.iter().zip(&lam).map(|(m, l)| (m / l).ln()),
         );
         // Damped Gauss-Newton (Levenberg) in ln x, trying larger damping until the match improves.
@@ -328,8 +334,11 @@ pub fn modal_prefit(
         }
     }
     // ψ from the measured loss factors: a ψ shared by all elements gives every mode η = ψ/2π.
-    let etas: Vec<f64> = measured.iter().filter_map(|m| m.loss_factor).collect();
-    if etas.len() == measured.len() {
+    let etas: Vec<f64> = paired
+        .iter()
+        .filter_map(|&(r, _)| measured[r].loss_factor)
+        .collect();
+    if etas.len() == paired.len() {
         let eta = etas.iter().sum::<f64>() / etas.len() as f64;
         for (i, v) in vars.vars.iter().enumerate() {
             if v.dissipation && eta.is_finite() && eta > 0.0 {
@@ -338,18 +347,18 @@ pub fn modal_prefit(
         }
     }
     let sys = System::assemble(&at(&x));
-    let pairs = measured
+    let pairs = paired
         .iter()
         .enumerate()
-        .map(|(r, m)| Pair {
+        .map(|(k, &(r, _))| Pair {
             measured: r,
-            measured_hz: m.freq_hz,
-            model_hz_before: before[r].sqrt() / (2.0 * std::f64::consts::PI),
-            model_hz_after: lam[r].sqrt() / (2.0 * std::f64::consts::PI),
-            mac: m
+            measured_hz: measured[r].freq_hz,
+            model_hz_before: before[k].sqrt() / (2.0 * std::f64::consts::PI),
+            model_hz_after: lam[k].sqrt() / (2.0 * std::f64::consts::PI),
+            mac: measured[r]
                 .shape
                 .as_ref()
-                .map(|s| mac(s, &shape_at_outputs(&sys, &shapes[r]))),
+                .map(|s| mac(s, &shape_at_outputs(&sys, &shapes[k]))),
         })
         .collect();
     Ok(Prefit {
@@ -360,10 +369,15 @@ pub fn modal_prefit(
     })
 }
 
-/// `vars` with their initial values replaced by `start` (e.g. a pre-fit's); scales unchanged.
+/// `vars` with their initial values replaced by `start` (e.g. a pre-fit's). A scale that was the
+/// default (`|initial|`) follows the new start, so the optimizer sees the variables near 1 as it
+/// would had the file given that start; an explicit scale is kept.
 pub fn with_start(vars: &Variables, start: &[f64]) -> Variables {
     let mut v = vars.clone();
     for (var, &x) in v.vars.iter_mut().zip(start) {
+        if var.scale == var.initial.abs() && x != 0.0 {
+            var.scale = x.abs();
+        }
         var.initial = x;
     }
     v
