@@ -109,6 +109,25 @@ fn main() {
         analysis.optima.first().map_or(0, |o| o.starts.len())
     );
 
+    for (k, o) in analysis.optima.iter().take(6).enumerate() {
+        let far = o
+            .estimate
+            .iter()
+            .zip(&id.estimate)
+            .zip(&id.uncertainty.std_error)
+            .map(|((a, b), s)| (a - b).abs() / s)
+            .fold(0.0, f64::max);
+        println!(
+            "  optimum {}: J {:.6e}, {} start(s), farthest variable {:.1} standard errors from the best",
+            k + 1,
+            o.criterion,
+            o.starts.len(),
+            far
+        );
+    }
+    for w in &analysis.warnings {
+        println!("  warning: {w}");
+    }
     let dir = std::env::temp_dir().join(format!("ident-bench-multistart-{}", std::process::id()));
     std::fs::create_dir_all(&dir).expect("temp dir");
     let problem = dir.join("problem.json");
@@ -125,6 +144,11 @@ fn main() {
     )
     .expect("write");
     let script = root().join("bench/python/multistart_scipy.py");
+    if std::env::var_os("IDENT_BENCH_NO_SCIPY").is_some() {
+        println!("scipy side skipped (IDENT_BENCH_NO_SCIPY is set)");
+        let _ = std::fs::remove_dir_all(&dir);
+        return;
+    }
     match Command::new("python3")
         .arg(&script)
         .arg(&problem)
