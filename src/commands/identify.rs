@@ -26,6 +26,17 @@ pub enum OptimizerArg {
     Bfgs,
 }
 
+/// `--start`.
+#[derive(clap::ValueEnum, Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum StartArg {
+    /// The variables file's initial values (else the model's).
+    #[default]
+    Model,
+    /// Moved from there by a modal pre-fit to the modes extracted from the data (frequencies
+    /// matched, ψ from the loss factors; `identification::prefit`).
+    Modal,
+}
+
 /// `--fit`.
 #[derive(clap::ValueEnum, Clone, Copy, Debug, Default)]
 pub enum FitArg {
@@ -119,9 +130,12 @@ pub struct IdentifyArgs {
     /// Iteration limit (per start).
     #[arg(long, default_value_t = 100)]
     pub max_iterations: usize,
-    /// Number of starts (extra ones spread over the bounds).
+    /// Number of starts (extra ones: a Latin hypercube in log-parameter space over the bounds).
     #[arg(long, default_value_t = 1)]
     pub starts: usize,
+    /// Where the first start comes from.
+    #[arg(long, value_enum, default_value_t = StartArg::Model)]
+    pub start: StartArg,
     /// Seed of the extra starts.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
@@ -243,6 +257,10 @@ pub fn setup(
     let obs = data::validate(&measured, &model, &a.data.display().to_string())?;
     super::measured::check(&model, &obs)?;
     let vars = variables::load(&a.vars, &model)?;
+    let vars = match a.start {
+        StartArg::Model => vars,
+        StartArg::Modal => super::modal_start::modal_start(&model, &obs, &vars)?,
+    };
     anyhow::ensure!(
         a.relative_error.is_finite() && a.relative_error > 0.0,
         "--relative-error {} must be a number > 0 (e.g. 0.02 for 2 %)",

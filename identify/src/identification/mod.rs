@@ -12,6 +12,10 @@
 //! - [`uncertainty`]: Cramér-Rao bound (eq. 4.15), correlations, identifiability;
 //! - [`report`]: the Table-1-like table (text, JSON, CSV) and the updated model (TOML, JSON);
 //! - [`problem`]: the fit problem as JSON for external tools (the Python baseline);
+//! - [`prefit`]: a start from the measured modes (pairing by MAC or frequency, natural
+//!   frequencies matched with analytic eigen-sensitivities);
+//! - [`starts`]: multi-start (Latin hypercube in log-parameter space), distinct optima, warnings
+//!   about ambiguous optima and degenerate corners;
 //! - [`synthetic`]: synthetic measured data from a model (tests, benchmarks).
 //!
 //! ```
@@ -55,14 +59,15 @@ pub mod measurement_map;
 pub mod misfit;
 pub mod optimize;
 pub mod plausibility;
+pub mod prefit;
 pub mod problem;
 pub mod report;
+pub mod starts;
 pub mod synthetic;
 pub mod uncertainty;
 pub mod variables;
 
 use nalgebra::{DMatrix, DVector};
-use rand::{Rng, SeedableRng};
 
 pub use criterion::{Criterion, Evaluations, FitKind, JacobianMode, NoiseChoice, NoiseSource};
 pub use data::{DataError, Observations};
@@ -140,8 +145,9 @@ pub struct Options {
     pub jacobian: JacobianMode,
     /// FRF solution path.
     pub frf_method: frf::Method,
-    /// Number of starts: 1 = from the initial values only; more adds points spread over the
-    /// bounds (log-uniform over [x0/10, 10 x0] ∩ bounds where there is no upper bound).
+    /// Number of starts: 1 = from the initial values only; more adds the points of a Latin
+    /// hypercube over the bounds (in log over [x0/10, 10 x0] ∩ bounds where there is no upper
+    /// bound; [`starts::latin_hypercube`]).
     pub starts: usize,
     /// Seed of the extra starts.
     pub seed: u64,
@@ -171,6 +177,8 @@ impl Default for Options {
 pub struct StartSummary {
     /// Starting values (SI).
     pub x0: Vec<f64>,
+    /// Where it ended (SI; the start itself when it could not be evaluated).
+    pub estimate: Vec<f64>,
     /// Final criterion (`INFINITY` if the start could not be evaluated).
     pub criterion: f64,
     /// Iterations.
@@ -250,30 +258,6 @@ impl optimize::Residuals for Scaled<'_> {
     fn cheap_jacobian(&self) -> bool {
         self.mode == JacobianMode::Analytic
     }
-}
-
-/// Starting points: the initial values, then `starts − 1` points spread over the bounds.
-fn start_points(vars: &Variables, starts: usize, seed: u64) -> Vec<Vec<f64>> {
-    let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
-    let mut pts = vec![vars.initial()];
-    for _ in 1..starts.max(1) {
-        pts.push(
-            vars.vars
-                .iter()
-                .map(|v| {
-                    if v.upper.is_finite() {
-                        rng.random_range(v.lower..=v.upper)
-                    } else {
-                        let c = if v.initial > 0.0 { v.initial } else { v.scale };
-                        let lo = (c / 10.0).max(v.lower).max(f64::MIN_POSITIVE);
-                        let hi = c * 10.0;
-                        (lo.ln() + rng.random::<f64>() * (hi.ln() - lo.ln())).exp()
-                    }
-                })
-                .collect(),
-        );
-    }
-    pts
 }
 
 /// Identifies `vars` from `data` on `model`. `progress(start, line)` is called once per
@@ -363,7 +347,7 @@ fn best_of_starts(
     let hi = DVector::from_iterator(n, vars.vars.iter().map(|v| v.upper / v.scale));
     let mut best: Option<(optimize::Outcome, usize)> = None;
     let mut starts = Vec::new();
-    for (k, xs) in start_points(vars, opts.starts, opts.seed)
+    for (k, xs) in starts::latin_hypercube(vars, opts.starts, opts.seed)
         .into_iter()
         .enumerate()
     {
@@ -385,6 +369,7 @@ fn best_of_starts(
         match res {
             Ok(o) => {
                 starts.push(StartSummary {
+                    estimate: o.u.iter().zip(&scale).map(|(u, s)| u * s).collect(),
                     x0: xs,
                     criterion: o.criterion,
                     iterations: o.iterations,
@@ -399,6 +384,7 @@ fn best_of_starts(
                     return Err(IdentifyError::Initial(m));
                 }
                 starts.push(StartSummary {
+                    estimate: xs.clone(),
                     x0: xs,
                     criterion: f64::INFINITY,
                     iterations: 0,

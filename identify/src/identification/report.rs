@@ -126,6 +126,7 @@ pub fn text(id: &Identification) -> String {
             String::new()
         }
     ));
+    s.push_str(&super::starts::text(id));
     parameter_table(&mut s, id);
     s.push_str(
         "\nRMS amplitude error per characteristic, in dB and relative (initial -> identified):\n",
@@ -261,6 +262,8 @@ pub struct ReportJson {
     pub weak_directions: Vec<(String, Option<f64>)>,
     /// Criterion per start.
     pub starts: Vec<(f64, String)>,
+    /// Distinct optima of the starts and warnings (ambiguous optima, degenerate corners).
+    pub start_analysis: super::starts::StartsAnalysis,
 }
 
 /// The JSON report of an identification.
@@ -313,6 +316,7 @@ pub fn json(id: &Identification) -> ReportJson {
             .iter()
             .map(|s| (s.criterion, s.stop.describe()))
             .collect(),
+        start_analysis: super::starts::analyse(id),
     }
 }
 
