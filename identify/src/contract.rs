@@ -10,7 +10,9 @@ use serde::{Deserialize, Serialize};
 
 use crate::check::Item;
 use crate::frf::Response;
-use crate::model::{Body, Characteristic, Model, PointForce, Quantity, Sde, SdeKind, SdeLaw};
+use crate::model::{
+    Body, Characteristic, Model, PointForce, PointOutput, Quantity, Sde, SdeKind, SdeLaw,
+};
 
 /// The resolved model as serialized.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -96,6 +98,10 @@ pub struct OutputJson {
     pub dof: u8,
     /// `displacement`, `velocity` or `acceleration`.
     pub quantity: String,
+    /// A point output: sensor location (global, m) and axis (global, unit); absent for a
+    /// principal-axis DOF (then `dof` is the output, else the principal axis nearest the axis).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub at: Option<PointOutput>,
 }
 
 fn rows(m: &Matrix3<f64>) -> [[f64; 3]; 3] {
@@ -154,6 +160,7 @@ pub fn to_json(model: &Model) -> ModelJson {
                 body: o.body,
                 dof: o.dof,
                 quantity: o.quantity.as_str().into(),
+                at: o.at,
             })
             .collect(),
     }
@@ -217,6 +224,17 @@ pub fn from_json(j: &ModelJson) -> Result<Model, JsonProblem> {
             body: o.body,
             dof: o.dof,
             quantity,
+            at: match o.at {
+                None => None,
+                Some(p) => Some(
+                    PointOutput::new(p.point.into(), p.direction.into()).ok_or_else(|| {
+                        JsonProblem {
+                            path: format!("$.outputs[{i}].at"),
+                            message: "a point output needs a finite point and a non-zero, finite direction".into(),
+                        }
+                    })?,
+                ),
+            },
         });
     }
     Ok(Model {

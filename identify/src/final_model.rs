@@ -579,6 +579,12 @@ fn length_list(p: &Vector3<f64>) -> String {
     )
 }
 
+/// `[x, y, z]` in the shortest form that reads back to the same bits (a point output's geometry
+/// is its identity: SI metres for a point, a unit vector for a direction).
+fn exact_list(v: &[f64; 3]) -> String {
+    format!("[{:?}, {:?}, {:?}]", v[0], v[1], v[2])
+}
+
 fn inertia_list(j: &[f64; 3]) -> String {
     let j: Vec<String> = j.iter().map(|v| quantity(*v, 1.0, "kg m^2")).collect();
     format!("[{}]", j.join(", "))
@@ -746,12 +752,25 @@ fn force_toml(f: &PointForce, model: &Model) -> String {
 /// The outputs, consecutive characteristics of one body and quantity as one `[[output]]`.
 fn outputs_toml(model: &Model) -> String {
     let mut groups: Vec<(usize, crate::model::Quantity, Vec<u8>)> = Vec::new();
+    let mut points = String::new();
     for &Characteristic {
         body,
         dof,
         quantity,
+        at,
     } in &model.outputs
     {
+        if let Some(at) = at {
+            let _ = write!(
+                points,
+                "\n[[output]]\nbody = {}\npoint = {}\ndirection = {}\nquantity = \"{}\"\n",
+                quoted(&body_name(model, Some(body))),
+                exact_list(&at.point),
+                exact_list(&at.direction),
+                quantity.as_str()
+            );
+            continue;
+        }
         match groups.last_mut() {
             Some((b, q, dofs)) if *b == body && *q == quantity && !dofs.contains(&dof) => {
                 dofs.push(dof)
@@ -773,7 +792,7 @@ fn outputs_toml(model: &Model) -> String {
             q.as_str()
         );
     }
-    s
+    s + &points
 }
 
 // ---------------------------------------------------------------------------------------------

@@ -228,7 +228,8 @@ pub struct States {
     pub freqs_hz: Vec<f64>,
     /// `load[k * n + i]`: DOF `i` under the load at line `k` (m, rad per N).
     pub load: Vec<C64>,
-    /// `unit[(k * outputs + o) * n + i]`: DOF `i` under a unit load on output `o`'s DOF.
+    /// `unit[(k * outputs + o) * n + i]`: DOF `i` under output `o`'s row as a load (a unit load
+    /// on its DOF for a principal-axis output).
     pub unit: Vec<C64>,
     /// `factor[k * outputs + o]`: displacement → output quantity (1, jω or −ω²).
     pub factor: Vec<C64>,
@@ -271,7 +272,7 @@ impl States {
 pub fn states(model: &Model, freqs_hz: &[f64], method: Method) -> Result<States, SolveError> {
     let system = System::assemble(model);
     let n = system.n;
-    let outputs = system.output_dofs.len();
+    let outputs = system.output_rows.len();
     let lines = freqs_hz.len();
     for &f in freqs_hz {
         if !f.is_finite() || f < 0.0 {
@@ -299,6 +300,7 @@ pub fn states(model: &Model, freqs_hz: &[f64], method: Method) -> Result<States,
                 .map(|l| l.norm())
                 .fold(0.0, f64::max)
                 .max(1.0);
+            let yo = modal.output_loads(&system);
             let mut eta = vec![C64::new(0.0, 0.0); n];
             let mut inv = vec![C64::new(0.0, 0.0); n];
             for (k, &f) in freqs_hz.iter().enumerate() {
@@ -312,12 +314,7 @@ pub fn states(model: &Model, freqs_hz: &[f64], method: Method) -> Result<States,
                 }
                 for col in 0..=outputs {
                     for m in 0..n {
-                        eta[m] = inv[m]
-                            * if col == 0 {
-                                b[m]
-                            } else {
-                                modal.y[(m, system.output_dofs[col - 1])]
-                            };
+                        eta[m] = inv[m] * if col == 0 { b[m] } else { yo[col - 1][m] };
                     }
                     let dst = if col == 0 {
                         &mut st.load[k * n..(k + 1) * n]
@@ -398,7 +395,7 @@ struct DirectSolver {
 impl DirectSolver {
     fn new(system: &System) -> DirectSolver {
         let n = system.n;
-        let cols = 1 + system.output_dofs.len();
+        let cols = 1 + system.output_rows.len();
         let req = StackReq::any_of(&[
             factor::lu_in_place_scratch::<usize, C64>(n, n, Par::Seq, Default::default()),
             solve::solve_in_place_scratch::<usize, C64>(n, cols, Par::Seq),
@@ -427,8 +424,10 @@ impl DirectSolver {
         for i in 0..n {
             self.rhs[(i, 0)] = C64::new(s.load[i], 0.0);
         }
-        for (o, &d) in s.output_dofs.iter().enumerate() {
-            self.rhs[(d, o + 1)] = C64::new(1.0, 0.0);
+        for (o, row) in s.output_rows.iter().enumerate() {
+            for &(d, v) in &row.taps {
+                self.rhs[(d, o + 1)] = C64::new(v, 0.0);
+            }
         }
         let (_, perm) = factor::lu_in_place(
             self.a.as_mut(),
@@ -467,7 +466,7 @@ impl DirectSolver {
         mut each: impl FnMut(usize, &Batch) -> Result<(), SolveError>,
     ) -> Result<(), SolveError> {
         let n = s.n;
-        let cols = 1 + s.output_dofs.len();
+        let cols = 1 + s.output_rows.len();
         let mut batch = Batch::new(s);
         let mut sol = vec![C64::new(0.0, 0.0); cols * n];
         for (b, chunk) in freqs_hz.chunks(LANES).enumerate() {
@@ -496,7 +495,7 @@ impl DirectSolver {
         freqs_hz: &[f64],
         mut each: impl FnMut(usize, &[C64]) -> Result<(), SolveError>,
     ) -> Result<(), SolveError> {
-        let mut sol = vec![C64::new(0.0, 0.0); (1 + s.output_dofs.len()) * s.n];
+        let mut sol = vec![C64::new(0.0, 0.0); (1 + s.output_rows.len()) * s.n];
         self.solve_batches(s, freqs_hz, |first, batch| {
             for (l, k) in (first..freqs_hz.len().min(first + LANES)).enumerate() {
                 batch.solution(l, &mut sol);
@@ -532,7 +531,7 @@ impl DirectSolver {
                 let omega = TWO_PI * f;
                 for (o, q) in quantities.iter().enumerate() {
                     let fac = q.factor(omega);
-                    let v = batch.x(l, 0, s.output_dofs[o]) * fac;
+                    let v = s.output_rows[o].apply(|d| batch.x(l, 0, d)) * fac;
                     if !v.is_finite() {
                         return Err(SolveError::Singular { freq_hz: f });
                     }
@@ -581,6 +580,14 @@ impl ModalSolver {
         Ok(ModalSolver { lambda, x, y })
     }
 
+    /// Each output's row as a modal load, `Y t_o`: `[o][mode]`.
+    fn output_loads(&self, s: &System) -> Vec<Vec<C64>> {
+        s.output_rows
+            .iter()
+            .map(|row| (0..s.n).map(|m| row.apply(|d| self.y[(m, d)])).collect())
+            .collect()
+    }
+
     fn fill(
         &self,
         s: &System,
@@ -595,15 +602,11 @@ impl ModalSolver {
         let b: Vec<C64> = (0..n)
             .map(|m| (0..n).map(|i| self.y[(m, i)] * s.load[i]).sum())
             .collect();
-        let yo: Vec<Vec<C64>> = s
-            .output_dofs
-            .iter()
-            .map(|&d| (0..n).map(|m| self.y[(m, d)]).collect())
-            .collect();
+        let yo = self.output_loads(s);
         let xo: Vec<Vec<C64>> = s
-            .output_dofs
+            .output_rows
             .iter()
-            .map(|&d| (0..n).map(|m| self.x[(d, m)]).collect())
+            .map(|row| (0..n).map(|m| row.apply(|d| self.x[(d, m)])).collect())
             .collect();
         // E = [T_κ X] stacked for every distinct SDE that carries a parameter (6·B × n), so that
         // one matrix product per line gives every such SDE's deformation under the load and
@@ -725,7 +728,7 @@ mod tests {
         for (k, f) in [5.0, 10.0].into_iter().enumerate() {
             solver.factor(&s, f).expect("pivoted LU");
             let n = s.n;
-            let cols = 1 + s.output_dofs.len();
+            let cols = 1 + s.output_rows.len();
             let scale = (0..cols)
                 .flat_map(|c| (0..n).map(move |i| (i, c)))
                 .map(|ic| solver.rhs[ic].norm())

@@ -50,7 +50,7 @@ pub struct Derivatives {
 impl Derivatives {
     /// Buffers for `params` parameters of `system`.
     pub fn new(system: &System, params: usize) -> Derivatives {
-        let outputs = system.output_dofs.len();
+        let outputs = system.output_rows.len();
         let blocks = system.sdes.len();
         Derivatives {
             outputs,
@@ -195,7 +195,7 @@ impl Batch {
     /// sides (columns 0 and 1..=outputs, as in the per-line solver).
     pub fn new(system: &System) -> Batch {
         let n = system.n;
-        let cols = 1 + system.output_dofs.len();
+        let cols = 1 + system.output_rows.len();
         Batch {
             n,
             cols,
@@ -366,7 +366,7 @@ impl Batch {
         growth
     }
 
-    /// Right-hand sides (the load, then unit loads on the output DOFs) and
+    /// Right-hand sides (the load, then each output's row as a load) and
     /// `x = L⁻ᵀ Δ⁻¹ L⁻¹ b` for each of them.
     #[inline(always)]
     fn solve(&mut self, s: &System) {
@@ -376,8 +376,10 @@ impl Batch {
         for i in 0..n {
             self.x_re[i] = [s.load[i]; LANES];
         }
-        for (o, &d) in s.output_dofs.iter().enumerate() {
-            self.x_re[(o + 1) * n + d] = [1.0; LANES];
+        for (o, row) in s.output_rows.iter().enumerate() {
+            for &(d, v) in &row.taps {
+                self.x_re[(o + 1) * n + d] = [v; LANES];
+            }
         }
         for c in 0..self.cols {
             let (xr, xi) = (
@@ -472,13 +474,15 @@ mod tests {
                 s.d[i * n + j],
             )
         });
-        let cols = 1 + s.output_dofs.len();
+        let cols = 1 + s.output_rows.len();
         let mut b = Mat::<C64>::zeros(n, cols);
         for i in 0..n {
             b[(i, 0)] = C64::new(s.load[i], 0.0);
         }
-        for (o, &d) in s.output_dofs.iter().enumerate() {
-            b[(d, o + 1)] = C64::new(1.0, 0.0);
+        for (o, row) in s.output_rows.iter().enumerate() {
+            for &(d, v) in &row.taps {
+                b[(d, o + 1)] = C64::new(v, 0.0);
+            }
         }
         let x = faer::linalg::solvers::Solve::solve(&a.partial_piv_lu(), &b);
         (0..cols)
@@ -505,7 +509,7 @@ mod tests {
             .map(|k| 3.0 * (1000.0f64 / 3.0).powf(k as f64 / 37.0))
             .collect();
         let mut batch = Batch::new(&s);
-        let mut sol = vec![C64::new(0.0, 0.0); (1 + s.output_dofs.len()) * s.n];
+        let mut sol = vec![C64::new(0.0, 0.0); (1 + s.output_rows.len()) * s.n];
         let mut worst = 0.0f64;
         for chunk in freqs.chunks(LANES) {
             batch.factor_and_solve(&s, chunk);
@@ -542,7 +546,7 @@ mod tests {
         batch.factor_and_solve(&s, &[5.0, 10.0, 20.0]);
         assert!(batch.accurate(0) && batch.accurate(2));
         assert!(!batch.accurate(1), "a zero pivot must not be trusted");
-        let mut sol = vec![C64::new(0.0, 0.0); (1 + s.output_dofs.len()) * s.n];
+        let mut sol = vec![C64::new(0.0, 0.0); (1 + s.output_rows.len()) * s.n];
         batch.solution(2, &mut sol);
         let r = reference(&s, 20.0);
         let err = sol

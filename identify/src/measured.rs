@@ -8,7 +8,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::model::{Characteristic, Quantity};
+use crate::model::{Characteristic, PointOutput, Quantity};
 
 /// The measured points of one characteristic.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -35,6 +35,10 @@ pub struct Measurement {
     /// Number of averages behind each point's estimate, when known.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub averages: Option<u32>,
+    /// A point output: the sensor's location and axis (global); absent for a principal-axis DOF
+    /// (then `dof` is the output; with `at`, `dof` is the principal translation nearest the axis).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub at: Option<PointOutput>,
 }
 
 /// Serialized name of a [`Quantity`].
@@ -72,6 +76,9 @@ impl From<Quantity> for QuantityName {
 impl Measurement {
     /// Its name in messages: the body and the DOF, e.g. `table u3`.
     pub fn label(&self) -> String {
+        if let Some(at) = &self.at {
+            return format!("{} {}", self.body, at.label());
+        }
         let dof = crate::model::DOF_NAMES
             .get(self.dof as usize)
             .copied()
@@ -87,6 +94,7 @@ impl Measurement {
             body,
             dof: self.dof,
             quantity: self.quantity.into(),
+            at: self.at,
         })
     }
 }

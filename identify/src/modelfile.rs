@@ -209,6 +209,8 @@ struct RawOutput {
     dof: Option<Sp<String>>,
     dofs: Option<Sp<Vec<Sp<String>>>>,
     quantity: Option<Sp<String>>,
+    point: Option<Sp<Value>>,
+    direction: Option<Sp<Value>>,
 }
 
 /// Locates errors in the TOML text.
@@ -719,6 +721,43 @@ fn output(cx: &Ctx, o: &RawOutput, bodies: &[Body]) -> Result<Vec<Characteristic
             )
         })?,
     };
+    match (&o.point, &o.direction) {
+        (None, None) => {}
+        (Some(p), Some(d)) => {
+            if let Some(x) = o
+                .dof
+                .as_ref()
+                .map(|d| d.span())
+                .or(o.dofs.as_ref().map(|d| d.span()))
+            {
+                return Err(cx.at(x, "a point output (`point` + `direction`) names no `dof`/`dofs`; drop one or the other"));
+            }
+            let point = cx.vec3(p, Dim::LENGTH, "point")?;
+            let direction = cx.vec3(d, Dim::NONE, "direction")?;
+            let Some(at) = PointOutput::new(point, direction) else {
+                return Err(cx.at(d.span(), "direction: the zero vector has no direction; give the sensor's axis, e.g. [0, 1, 0] (global)"));
+            };
+            let (dof, _) = at.nearest_axis(&bodies[body]);
+            return Ok(vec![Characteristic {
+                body,
+                dof,
+                quantity,
+                at: Some(at),
+            }]);
+        }
+        (Some(p), None) => {
+            return Err(cx.at(
+                p.span(),
+                "a point output needs `direction = [x, y, z]` (global) beside `point`",
+            ))
+        }
+        (None, Some(d)) => {
+            return Err(cx.at(
+                d.span(),
+                "a point output needs `point` (global, e.g. \"100 0 450 mm\") beside `direction`",
+            ))
+        }
+    }
     let names: Vec<&Sp<String>> = match (&o.dof, &o.dofs) {
         (Some(d), None) => vec![d],
         (None, Some(ds)) => ds.get_ref().iter().collect(),
@@ -732,6 +771,7 @@ fn output(cx: &Ctx, o: &RawOutput, bodies: &[Body]) -> Result<Vec<Characteristic
                 body,
                 dof: dof as u8,
                 quantity,
+                at: None,
             })
         })
         .collect()

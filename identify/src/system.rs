@@ -14,7 +14,7 @@
 
 use nalgebra::{Matrix3, Matrix6, Vector3, Vector6};
 
-use crate::model::{Model, ParamRef};
+use crate::model::{Characteristic, Model, ParamRef};
 use crate::C64;
 
 /// The SDE deformation map of one body: `G_b` above (sde_from_body coordinates).
@@ -48,6 +48,48 @@ pub fn generalized_force(
     let f = rt * force;
     let m = a.cross(&f) + rt * moment;
     Vector6::new(f.x, f.y, f.z, m.x, m.y, m.z)
+}
+
+/// An output as a row over the global DOFs: `y = Σ v q[dof]` over its taps. A principal-axis
+/// characteristic is one tap of 1; a point output on body `b` is `[R_bᵀ d, a × R_bᵀ d]` over the
+/// body's six DOFs, with `a = R_bᵀ (p − c_b)` — the generalized force of a unit force `d` at `p`
+/// ([`generalized_force`]), so the output's adjoint load is that force (reciprocity).
+#[derive(Debug, Clone, PartialEq)]
+pub struct OutputRow {
+    /// `(global DOF, coefficient)`, at most six, zeros left out.
+    pub taps: Vec<(usize, f64)>,
+}
+
+impl OutputRow {
+    /// The row of characteristic `c` of `model`.
+    pub fn of(model: &Model, c: &Characteristic) -> OutputRow {
+        let base = 6 * c.body;
+        let taps = match (&c.at, model.bodies.get(c.body)) {
+            (Some(at), Some(body)) => {
+                let t = generalized_force(
+                    &body.position,
+                    &body.rotation,
+                    &Vector3::from(at.point),
+                    &Vector3::from(at.direction),
+                    &Vector3::zeros(),
+                );
+                (0..6)
+                    .filter(|&i| t[i] != 0.0)
+                    .map(|i| (base + i, t[i]))
+                    .collect()
+            }
+            _ => vec![(base + c.dof as usize, 1.0)],
+        };
+        OutputRow { taps }
+    }
+
+    /// `Σ v x(dof)` over the taps.
+    #[inline]
+    pub fn apply(&self, x: impl Fn(usize) -> C64) -> C64 {
+        self.taps
+            .iter()
+            .fold(C64::new(0.0, 0.0), |acc, &(i, v)| acc + x(i) * v)
+    }
 }
 
 /// One enabled SDE as the solver sees it.
@@ -123,8 +165,8 @@ pub struct System {
     pub load: Vec<f64>,
     /// Enabled SDEs.
     pub sdes: Vec<SdeBlock>,
-    /// Global DOF index of each output characteristic.
-    pub output_dofs: Vec<usize>,
+    /// Each output characteristic as a row over the DOFs.
+    pub output_rows: Vec<OutputRow>,
 }
 
 impl System {
@@ -202,10 +244,10 @@ impl System {
                 load[6 * f.body + i] += p[i];
             }
         }
-        let output_dofs = model
+        let output_rows = model
             .outputs
             .iter()
-            .map(|c| 6 * c.body + c.dof as usize)
+            .map(|c| OutputRow::of(model, c))
             .collect();
         System {
             n,
@@ -214,7 +256,7 @@ impl System {
             d,
             load,
             sdes,
-            output_dofs,
+            output_rows,
         }
     }
 

@@ -49,6 +49,7 @@ pub fn single_body(mass: f64, k: f64, psi: f64) -> Model {
             body: 0,
             dof: 2,
             quantity: Quantity::Displacement,
+            at: None,
         }],
     }
 }
@@ -101,11 +102,13 @@ pub fn two_in_series(m1: f64, m2: f64, k1: f64, k2: f64, psi: f64) -> Model {
                 body: 0,
                 dof: 2,
                 quantity: Quantity::Displacement,
+                at: None,
             },
             Characteristic {
                 body: 1,
                 dof: 2,
                 quantity: Quantity::Displacement,
+                at: None,
             },
         ],
     }
@@ -180,6 +183,7 @@ pub fn chain(n: usize) -> Model {
                 body: last,
                 dof,
                 quantity: Quantity::Displacement,
+                at: None,
             })
             .collect(),
         bodies,

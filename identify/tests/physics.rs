@@ -205,12 +205,14 @@ fn random_model(seed: u64, bodies: usize) -> Model {
             body: bodies - 1,
             dof,
             quantity: Quantity::Displacement,
+            at: None,
         });
     }
     m.outputs.push(Characteristic {
         body: 0,
         dof: 1,
         quantity: Quantity::Acceleration,
+        at: None,
     });
     m
 }

@@ -475,6 +475,7 @@ fn csv_characteristic(
         variance: has_var.then(|| pts.iter().map(|r| r.var.unwrap_or(f64::NAN)).collect()),
         coherence: has_coh.then(|| pts.iter().map(|r| r.coh.unwrap_or(f64::NAN)).collect()),
         averages,
+        at: None,
     })
 }
 
@@ -618,6 +619,21 @@ pub fn validate(
         origin: origin.into(),
         characteristics: out,
     })
+}
+
+/// `model` with the point outputs of `data` (sensors anywhere on a body, named by a measurement
+/// map) added to its outputs where it does not declare them already; principal-axis outputs must
+/// be declared by the model (see [`validate`]).
+pub fn with_point_outputs(model: &Model, data: &MeasuredData) -> Model {
+    let mut out = model.clone();
+    for c in data.characteristics.iter().filter(|m| m.at.is_some()) {
+        if let Some(c) = c.resolve(model) {
+            if !out.outputs.contains(&c) {
+                out.outputs.push(c);
+            }
+        }
+    }
+    out
 }
 
 /// A characteristic of a data file, for errors: the file and a JSON-path-like item.

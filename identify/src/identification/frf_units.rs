@@ -198,6 +198,7 @@ pub fn convert_quantity(
             body,
             dof: m.dof,
             quantity: q,
+            at: m.at,
         })
     };
     if is_output(have) {

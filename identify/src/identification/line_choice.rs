@@ -322,6 +322,7 @@ mod tests {
                         .collect(),
                 ),
                 averages: Some(8),
+                at: None,
                 freqs_hz: f,
             }],
         }

@@ -1,7 +1,7 @@
 //! The measurement map (`--map FILE`, TOML): which measured channel — a UFF response node and
-//! direction, or a named sensor — is which body of the model and which of its principal-axis
-//! DOFs; the reference to use when a file holds several; the unit when a file gives none.
-//! [`MeasurementMap::apply`] turns the channels of a vendor file into [`MeasuredData`] in the
+//! direction, or a named sensor — is which body of the model and which output of it (a
+//! principal-axis DOF, or a point and a direction on the body); the reference to use when a file
+//! holds several; the unit when a file gives none. [`MeasurementMap::apply`] turns the channels of a vendor file into [`MeasuredData`] in the
 //! model's convention (SI, the response to the model's excitation, the output's quantity).
 //!
 //! ```toml
@@ -13,19 +13,24 @@
 //! node = 3                     # UFF response node ...
 //! dir = "+Z"                   # ... and direction (±X/Y/Z or ±1..3, global axes)
 //! body = "table"
-//! point = "0 0 450 mm"         # optional: where the sensor is (global), checked below
+//! point = "120 0 450 mm"       # optional: where the sensor is (global); see below
 //! [[channel]]
 //! sensor = "acc2"              # a named sensor (CSV `body` column or a UFF response entity)
 //! body = "column"
 //! direction = [0, 1, 0]        # global direction of its axis, or `dof = "u2"` / `"-u2"`
 //! ```
 //!
-//! A channel maps onto one principal-axis DOF u1-u3 of its body: its direction must lie within
-//! 1° of a principal axis (a negative axis flips the sign), and a sensor `point` must lie on the
-//! line through the body's centre of mass along that direction (within 1 mm), where the reading
-//! is that DOF alone; anywhere else it reads u + θ×(p − c), which mixes in the body's rotations
-//! and is an error (ident's outputs are principal-axis DOFs). Errors name the map's file, line
-//! and field.
+//! A channel is an output of its body (`docs/identification.md`, measurement map):
+//! - `dof = "u2"` (or `"-u2"`): that principal-axis DOF at the centre of mass. A UFF `dir` beside
+//!   it must lie within 1° of that axis; a `point` is not allowed with it.
+//! - a direction (`direction = [x, y, z]`, or the UFF `dir`) and an optional `point` (global; the
+//!   centre of mass when omitted): where the point lies within 1 mm of the line through the centre
+//!   of mass along a principal axis and the direction within 1° of that axis, the channel is that
+//!   principal-axis DOF (a negative axis flips the sign), as before; anywhere else it is a **point
+//!   output**, `dᵀ(u + θ × (p − c))` ([`crate::model::PointOutput`]), which the model need not
+//!   declare ([`super::data::with_point_outputs`]).
+//!
+//! Errors name the map's file, line and field.
 
 use std::collections::BTreeSet;
 use std::f64::consts::PI;
@@ -38,14 +43,15 @@ use serde_spanned::Spanned;
 use super::data::DataError;
 use super::frf_units::{self, FrfUnit};
 use crate::measured::{MeasuredData, Measurement};
-use crate::model::{Model, DOF_NAMES};
+use crate::model::{Model, PointOutput, DOF_NAMES};
 use crate::source::{Located, SourceText};
 use crate::units::{parse_quantities, Dim};
 
-/// Largest angle (degrees) between a channel's direction and the principal axis it maps to.
+/// Largest angle (degrees) between a channel's direction and the principal axis it maps to (as
+/// that DOF; farther off it is a point output, except where the map declares `dof`).
 pub const MAX_AXIS_ANGLE_DEG: f64 = 1.0;
 /// Largest distance (m) of a sensor's point from the line through the centre of mass along its
-/// direction.
+/// direction for it to read a principal-axis DOF (farther off it is a point output).
 pub const MAX_LEVER_ARM_M: f64 = 1e-3;
 
 /// Why a map could not be read or applied.
@@ -130,7 +136,19 @@ struct Entry {
     body: usize,
     dof: u8,
     negative: bool,
+    /// A point output (sensor off the principal-axis lines); `None`: the DOF `dof`.
+    at: Option<PointOutput>,
     unit: Option<FrfUnit>,
+}
+
+impl Entry {
+    /// `u2`, or `at (100, 0, 450) mm along (0, 1, 0)`.
+    fn output_name(&self) -> String {
+        match &self.at {
+            Some(at) => at.label(),
+            None => DOF_NAMES[self.dof as usize].to_string(),
+        }
+    }
 }
 
 /// A measurement map resolved against a model.
@@ -259,12 +277,18 @@ pub fn parse(text: &str, origin: &str, model: &Model) -> Result<MeasurementMap, 
                 format!("{} is mapped twice (line {} too)", e.name, o.line),
             ));
         }
-        if let Some(o) = entries.iter().find(|o| (o.body, o.dof) == (e.body, e.dof)) {
+        if let Some(o) = entries
+            .iter()
+            .find(|o| (o.body, o.dof, o.at) == (e.body, e.dof, e.at))
+        {
             return Err(src.at(
                 c.body.span(),
                 format!(
                     "{} {} is already measured by {} (line {}); one channel per body and DOF",
-                    model.bodies[e.body].name, DOF_NAMES[e.dof as usize], o.name, o.line
+                    model.bodies[e.body].name,
+                    e.output_name(),
+                    o.name,
+                    o.line
                 ),
             ));
         }
@@ -317,7 +341,7 @@ fn entry(src: &SourceText, c: &RawChannel, model: &Model) -> Result<Entry, Locat
         ));
     };
     let b = &model.bodies[body];
-    let (dof, negative) = match (&c.dof, &c.direction) {
+    let (dof, negative, at) = match (&c.dof, &c.direction) {
         (Some(_), Some(d)) => {
             return Err(src.at(d.span(), "give `dof` or `direction`, not both"));
         }
@@ -333,7 +357,31 @@ fn entry(src: &SourceText, c: &RawChannel, model: &Model) -> Result<Entry, Locat
                     format!("dof: \"{t}\" is not u1, u2 or u3 (optionally with a sign: \"-u2\"); rotations are not mapped from sensors"),
                 )
             })?;
-            (k as u8, neg)
+            if let Some(p) = &c.point {
+                return Err(src.at(
+                    p.span(),
+                    "`point` goes with a direction (`direction = [x, y, z]` or the UFF `dir`), not with `dof`: a channel declared as a principal-axis DOF reads it at the centre of mass",
+                ));
+            }
+            // A UFF direction beside `dof` must agree with it: within 1° of that principal axis.
+            if let (Some(dspan), ChannelName::Node { dir, .. }) = (&c.dir, &name) {
+                if (1..=3).contains(&dir.abs()) {
+                    let mut g = Vector3::zeros();
+                    g[(dir.unsigned_abs() - 1) as usize] = dir.signum() as f64;
+                    let cos = g.dot(&b.rotation.column(k));
+                    let angle = cos.abs().min(1.0).acos() * 180.0 / PI;
+                    if angle > MAX_AXIS_ANGLE_DEG {
+                        return Err(src.at(
+                            dspan.span(),
+                            format!(
+                                "dir: {} is {angle:.2}° from {} of body \"{}\" (dof = \"{}\"); a channel declared as a principal-axis DOF must lie within {MAX_AXIS_ANGLE_DEG}° of it — drop `dof` to map it as a point output along its direction",
+                                dir_text(*dir), DOF_NAMES[k], b.name, d.get_ref()
+                            ),
+                        ));
+                    }
+                }
+            }
+            (k as u8, neg, None)
         }
         (None, given) => {
             let (d, span) = match (given, &name) {
@@ -373,47 +421,42 @@ fn entry(src: &SourceText, c: &RawChannel, model: &Model) -> Result<Entry, Locat
                 return Err(src.at(span, "direction: the zero vector has no direction"));
             }
             let d = d / n;
+            let point = match &c.point {
+                None => None,
+                Some(p) => {
+                    let xs = match p.get_ref() {
+                        Point::Numbers(v) => v.clone(),
+                        Point::Text(t) => parse_quantities(t, Dim::LENGTH)
+                            .map_err(|e| src.at(p.span(), format!("point: {e}")))?,
+                    };
+                    if xs.len() != 3 || !xs.iter().all(|x| x.is_finite()) {
+                        return Err(src.at(
+                            p.span(),
+                            "point: three coordinates, e.g. \"0 0 450 mm\" or [0, 0, 0.45] (m)",
+                        ));
+                    }
+                    Some(Vector3::new(xs[0], xs[1], xs[2]))
+                }
+            };
+            // The sensor reads dᵀ(u + θ × (p − c)); where p lies on the line through the centre
+            // of mass along a principal axis it reads that DOF alone, and the channel keeps the
+            // principal-axis characteristic; anywhere else it is a point output.
             let (k, cos) = (0..3)
                 .map(|k| (k, d.dot(&b.rotation.column(k))))
                 .max_by(|a, b| a.1.abs().total_cmp(&b.1.abs()))
                 .unwrap_or((0, 0.0));
             let angle = cos.abs().min(1.0).acos() * 180.0 / PI;
-            if angle > MAX_AXIS_ANGLE_DEG {
-                return Err(src.at(
-                    span,
-                    format!(
-                        "direction ({:.4}, {:.4}, {:.4}) is {angle:.2}° from the nearest principal axis ({}) of body \"{}\"; ident's outputs are the principal-axis DOFs u1-u3, so a channel must be within {MAX_AXIS_ANGLE_DEG}° of one (outputs along other directions are not supported yet)",
-                        d.x, d.y, d.z, DOF_NAMES[k], b.name
-                    ),
-                ));
-            }
-            if let Some(p) = &c.point {
-                let xs = match p.get_ref() {
-                    Point::Numbers(v) => v.clone(),
-                    Point::Text(t) => parse_quantities(t, Dim::LENGTH)
-                        .map_err(|e| src.at(p.span(), format!("point: {e}")))?,
+            let on_axis_line =
+                point.is_none_or(|p| (p - b.position).cross(&d).norm() <= MAX_LEVER_ARM_M);
+            if angle <= MAX_AXIS_ANGLE_DEG && on_axis_line {
+                (k as u8, cos < 0.0, None)
+            } else {
+                let p = point.unwrap_or(b.position);
+                let Some(at) = PointOutput::new(p, d) else {
+                    return Err(src.at(span, "direction: not a finite direction"));
                 };
-                if xs.len() != 3 || !xs.iter().all(|x| x.is_finite()) {
-                    return Err(src.at(
-                        p.span(),
-                        "point: three coordinates, e.g. \"0 0 450 mm\" or [0, 0, 0.45] (m)",
-                    ));
-                }
-                let r = Vector3::new(xs[0], xs[1], xs[2]) - b.position;
-                let off = r.cross(&d).norm();
-                if off > MAX_LEVER_ARM_M {
-                    return Err(src.at(
-                        p.span(),
-                        format!(
-                            "point: the sensor is {:.1} mm off the line through the centre of mass of \"{}\" along its direction; there it reads u + θ×(p − c), which mixes in the body's rotations, and ident's outputs are the principal-axis DOFs at the centre of mass (point outputs are not supported yet): place the sensor on that line, or omit `point` if its reading is the body's {} by construction",
-                            off * 1e3,
-                            b.name,
-                            DOF_NAMES[k]
-                        ),
-                    ));
-                }
+                (k as u8, false, Some(at))
             }
-            (k as u8, cos < 0.0)
         }
     };
     let unit = c.unit.as_ref().map(|u| unit_of(src, u)).transpose()?;
@@ -423,6 +466,7 @@ fn entry(src: &SourceText, c: &RawChannel, model: &Model) -> Result<Entry, Locat
         body,
         dof,
         negative,
+        at,
         unit,
     })
 }
@@ -520,13 +564,14 @@ impl MeasurementMap {
                 variance: None,
                 coherence: c.coherence.clone(),
                 averages: None,
+                at: e.at,
             };
             notes.push(format!(
                 "{} ({}) is {body} {}{}, unit from {from}",
                 e.name,
                 c.item,
                 if e.negative { "-" } else { "" },
-                DOF_NAMES[e.dof as usize]
+                e.output_name()
             ));
             frf_units::to_model_convention(&mut m, &unit, model, &mut notes)
                 .map_err(|message| bad(&c.item, message))?;

@@ -62,6 +62,7 @@ pub fn amplitude_data(
                 Measurement {
                     body: truth.bodies[c.body].name.clone(),
                     dof: c.dof,
+                    at: c.at,
                     quantity: QuantityName::from(c.quantity),
                     freqs_hz: freqs_hz.to_vec(),
                     amplitude: q

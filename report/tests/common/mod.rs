@@ -47,6 +47,7 @@ pub fn fixture(seed: u64) -> Fixture {
                 ),
                 coherence: None,
                 averages: None,
+                at: None,
             })
             .collect(),
     };
