@@ -541,6 +541,22 @@ pub fn resolved_toml(model: &Model) -> String {
         s.push('\n');
         s.push_str(&excitation_toml(model));
     }
+    for r in &model.references {
+        let _ = write!(s, "\n[[reference]]\nname = {}\n", quoted(&r.name));
+        match &r.excitation {
+            crate::model::Excitation::BaseMotion { direction } => {
+                let _ = writeln!(s, "base_motion = {}", exact_list(direction));
+            }
+            crate::model::Excitation::Forces(forces) => {
+                for f in forces {
+                    s.push_str(
+                        &force_toml(f, model)
+                            .replace("[[excitation.force]]", "[[reference.force]]"),
+                    );
+                }
+            }
+        }
+    }
     s.push_str(&outputs_toml(model));
     s
 }
@@ -758,8 +774,36 @@ fn outputs_toml(model: &Model) -> String {
         dof,
         quantity,
         at,
+        reference,
+        relative,
     } in &model.outputs
     {
+        if reference != 0 || relative {
+            let _ = write!(
+                points,
+                "\n[[output]]\nbody = {}\n{}quantity = \"{}\"\nreference = {}\n{}",
+                quoted(&body_name(model, Some(body))),
+                match at {
+                    Some(at) => format!(
+                        "point = {}\ndirection = {}\n",
+                        exact_list(&at.point),
+                        exact_list(&at.direction)
+                    ),
+                    None => format!(
+                        "dof = {}\n",
+                        quoted(DOF_NAMES.get(dof as usize).copied().unwrap_or("u1"))
+                    ),
+                },
+                quantity.as_str(),
+                quoted(model.reference_name(reference)),
+                if relative {
+                    "motion = \"relative\"\n"
+                } else {
+                    ""
+                }
+            );
+            continue;
+        }
         if let Some(at) = at {
             let _ = write!(
                 points,

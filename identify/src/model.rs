@@ -466,6 +466,12 @@ pub struct Characteristic {
     /// `None`: the principal-axis DOF `dof`. `Some`: a point output, `dᵀ(u + θ × (p − c))` in
     /// global axes (see [`PointOutput`]).
     pub at: Option<PointOutput>,
+    /// Which excitation the output responds to: 0 the model's `forces`, `i ≥ 1`
+    /// [`Model::references`]`[i − 1]`.
+    pub reference: u8,
+    /// Under base motion: the response relative to the base (`false`: absolute, the
+    /// transmissibility). Always `false` for a force reference.
+    pub relative: bool,
 }
 
 impl Characteristic {
@@ -476,6 +482,8 @@ impl Characteristic {
             dof,
             quantity,
             at: None,
+            reference: 0,
+            relative: false,
         }
     }
 }
@@ -585,10 +593,38 @@ pub struct Model {
     pub bodies: Vec<Body>,
     /// Spring-damping elements.
     pub sdes: Vec<Sde>,
-    /// Excitation: forces at points.
+    /// Excitation: forces at points (reference 0 of an output, see [`Characteristic::reference`]).
     pub forces: Vec<PointForce>,
+    /// Further excitations, each one column of an FRF matrix (several shakers, a roving hammer, a
+    /// shaker table): reference `i ≥ 1` of an output is `references[i − 1]`.
+    pub references: Vec<Reference>,
     /// Output characteristics.
     pub outputs: Vec<Characteristic>,
+}
+
+/// A named excitation beside the model's `forces`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Reference {
+    /// Unique name, as data and measurement maps call it.
+    pub name: String,
+    /// What excites the structure.
+    pub excitation: Excitation,
+}
+
+/// What a [`Reference`] is.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Excitation {
+    /// Forces (and moments) at points of bodies, amplitudes in N (N·m).
+    Forces(Vec<PointForce>),
+    /// Prescribed base motion (shaker table): the ground — every SDE attached to it — moves as a
+    /// rigid whole along `direction` (global, unit length) with a displacement of 1 m, so the
+    /// outputs are transmissibilities (m/m, or any quantity over the same quantity of the base).
+    /// The structure responds through its SDEs: with `q = z + T u_b` (`T u_b` every body
+    /// following the base rigidly), `A(ω) z = ω² M T u_b`.
+    BaseMotion {
+        /// Direction of the base motion, global, unit length.
+        direction: [f64; 3],
+    },
 }
 
 /// A reference to one parameter of one SDE.
@@ -609,6 +645,25 @@ impl Model {
     /// Index of the body with this name.
     pub fn body_index(&self, name: &str) -> Option<usize> {
         self.bodies.iter().position(|b| b.name == name)
+    }
+
+    /// Index of the reference with this name, as [`Characteristic::reference`] counts it (1 for
+    /// `references[0]`).
+    pub fn reference_index(&self, name: &str) -> Option<u8> {
+        let i = self.references.iter().position(|r| r.name == name)?;
+        u8::try_from(i + 1).ok()
+    }
+
+    /// The name of reference `r` (`"excitation"` for 0, the model's forces).
+    pub fn reference_name(&self, r: u8) -> &str {
+        match r {
+            0 => "excitation",
+            r => self
+                .references
+                .get(r as usize - 1)
+                .map(|x| x.name.as_str())
+                .unwrap_or("?"),
+        }
     }
 
     /// Index of the SDE with this name.
@@ -659,12 +714,19 @@ impl Model {
             .get(c.body)
             .map(|b| b.name.as_str())
             .unwrap_or("?");
-        match c.at {
+        let mut s = match c.at {
             None => {
                 let dof = DOF_NAMES.get(c.dof as usize).copied().unwrap_or("?");
                 format!("{body} {dof} {}", c.quantity.as_str())
             }
             Some(p) => format!("{body} {} {}", p.label(), c.quantity.as_str()),
+        };
+        if c.relative {
+            s.push_str(" relative");
         }
+        if c.reference != 0 {
+            s.push_str(&format!(" / {}", self.reference_name(c.reference)));
+        }
+        s
     }
 }

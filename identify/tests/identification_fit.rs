@@ -56,6 +56,8 @@ fn measured(model: &Model, rel: f64, seed: u64) -> MeasuredData {
                     coherence: (rel > 0.0).then(|| vec![g2; f.len()]),
                     averages: (rel > 0.0).then_some(n),
                     at: None,
+                    reference: None,
+                    relative: false,
                 }
             })
             .collect(),

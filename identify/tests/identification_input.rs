@@ -28,6 +28,8 @@ fn sample() -> MeasuredData {
                 coherence: None,
                 averages: Some(8),
                 at: None,
+                reference: None,
+                relative: false,
             },
             Measurement {
                 body: "second".into(),
@@ -40,6 +42,8 @@ fn sample() -> MeasuredData {
                 coherence: Some(vec![0.9, 0.95]),
                 averages: None,
                 at: None,
+                reference: None,
+                relative: false,
             },
         ],
     }
@@ -214,7 +218,7 @@ proptest! {
             source: "p".into(),
             characteristics: vec![Measurement {
                 body: "second".into(), dof: 2, quantity: QuantityName::Velocity,
-                freqs_hz: freqs, amplitude: amps, phase_rad: None, variance: None, coherence: None, averages: None, at: None,
+                freqs_hz: freqs, amplitude: amps, phase_rad: None, variance: None, coherence: None, averages: None, at: None, reference: None, relative: false,
             }],
         };
         let mut back = data::parse_csv(&data::to_csv(&d), "p").unwrap();

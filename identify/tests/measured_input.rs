@@ -38,6 +38,8 @@ fn exact(m: &Model, f: &[f64], o_scaled: usize, scale: f64) -> MeasuredData {
                 coherence: None,
                 averages: None,
                 at: None,
+                reference: None,
+                relative: false,
             })
             .collect(),
     }
@@ -430,7 +432,7 @@ fn a_sensor_off_the_principal_axis_lines_maps_to_a_point_output() {
     // On the axis: the principal-axis DOF, as before.
     assert_eq!((axis.at, axis.dof), (None, 2));
     // The model gains the two point outputs and the data validate against it.
-    let with = data::with_point_outputs(&m, &d);
+    let with = data::with_measured_outputs(&m, &d);
     assert_eq!(with.outputs.len(), m.outputs.len() + 2);
     let obs = data::validate(&d, &with, "run.uff").unwrap();
     assert_eq!(obs.characteristics.len(), 3);

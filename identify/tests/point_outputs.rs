@@ -47,6 +47,8 @@ fn oblique_sensors(model: &Model, body: usize, quantity: Quantity) -> Vec<Charac
             dof: at.nearest_axis(&model.bodies[body]).0,
             quantity,
             at: Some(at),
+            reference: 0,
+            relative: false,
         }
     })
     .collect()
@@ -177,6 +179,8 @@ fn exact(model: &Model) -> MeasuredData {
                 coherence: None,
                 averages: None,
                 at: c.at,
+                reference: None,
+                relative: false,
             })
             .collect(),
     }
@@ -203,12 +207,14 @@ fn principal_axis_and_off_axis_point_outputs_give_the_same_estimates() {
                 dof: at.nearest_axis(&truth.bodies[body]).0,
                 quantity: Quantity::Displacement,
                 at: Some(at),
+                reference: 0,
+                relative: false,
             });
         }
     }
     let fit = |model: &Model| {
         let d = exact(model);
-        let model = data::with_point_outputs(&truth, &d);
+        let model = data::with_measured_outputs(&truth, &d);
         let obs = data::validate(&d, &model, "exact").unwrap();
         let vars = variables::parse(vars_text, "vars.toml", &model).unwrap();
         let opts = Options {

@@ -272,5 +272,7 @@ pub fn to_measurement(
         coherence: coherence.map(|c| points.iter().map(|&k| c[k]).collect()),
         averages,
         at: None,
+        reference: None,
+        relative: false,
     })
 }

@@ -101,8 +101,8 @@ pub fn score_all(
         .map(|c| OutputRow::of(&model, c))
         .collect();
     let q = |o: usize, k: usize| {
-        outputs[o].apply(|i| states.load_at(k)[i])
-            * states.factor[k * states.outputs + o]
+        (outputs[o].apply(|i| states.load_for(k, o)[i]) * states.factor[k * states.outputs + o]
+            + states.offset[k * states.outputs + o])
             * fit.gains[o]
     };
     // Orthonormal basis of the fit Jacobian's columns, for the projection.
@@ -190,8 +190,9 @@ fn fill_derivative(
             for o in 0..gains.len() {
                 for k in 0..nl {
                     dq[o * nl + k] = if o == *output {
-                        outputs[o].apply(|i| states.load_at(k)[i])
+                        (outputs[o].apply(|i| states.load_for(k, o)[i])
                             * states.factor[k * states.outputs + o]
+                            + states.offset[k * states.outputs + o])
                             * gains[o]
                     } else {
                         C64::new(0.0, 0.0)
@@ -290,8 +291,14 @@ fn flexible_first_order(
     let mut rho = [[C64::new(0.0, 0.0); 6]; 2];
     for (k, f) in lines.iter().enumerate() {
         let w2 = (TWO_PI * f).powi(2);
-        end_force(states.load_at(k), &|r| sys.load[r], w2, &mut lambda);
         for (o, g) in gains.iter().enumerate() {
+            let column = sys.output_rows[o].column;
+            end_force(
+                states.load_for(k, o),
+                &|r| sys.load_entry(column, r),
+                w2,
+                &mut lambda,
+            );
             let w = &states.unit[(k * states.outputs + o) * n..(k * states.outputs + o + 1) * n];
             // The unit load sits on an original body's DOF, never on a new end third.
             end_force(w, &|_| 0.0, w2, &mut rho);

@@ -199,6 +199,8 @@ pub fn convert_quantity(
             dof: m.dof,
             quantity: q,
             at: m.at,
+            reference: m.reference_index(model),
+            relative: m.relative,
         })
     };
     if is_output(have) {

@@ -323,6 +323,8 @@ mod tests {
                 ),
                 averages: Some(8),
                 at: None,
+                reference: None,
+                relative: false,
                 freqs_hz: f,
             }],
         }

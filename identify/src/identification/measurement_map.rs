@@ -28,7 +28,7 @@
 //!   of mass along a principal axis and the direction within 1° of that axis, the channel is that
 //!   principal-axis DOF (a negative axis flips the sign), as before; anywhere else it is a **point
 //!   output**, `dᵀ(u + θ × (p − c))` ([`crate::model::PointOutput`]), which the model need not
-//!   declare ([`super::data::with_point_outputs`]).
+//!   declare ([`super::data::with_measured_outputs`]).
 //!
 //! Errors name the map's file, line and field.
 
@@ -565,6 +565,8 @@ impl MeasurementMap {
                 coherence: c.coherence.clone(),
                 averages: None,
                 at: e.at,
+                reference: None,
+                relative: false,
             };
             notes.push(format!(
                 "{} ({}) is {body} {}{}, unit from {from}",

@@ -48,6 +48,8 @@ pub fn fixture(seed: u64) -> Fixture {
                 coherence: None,
                 averages: None,
                 at: None,
+                reference: None,
+                relative: false,
             })
             .collect(),
     };
