@@ -43,7 +43,7 @@ use serde_spanned::Spanned;
 use super::data::DataError;
 use super::frf_units::{self, FrfUnit};
 use crate::measured::{MeasuredData, Measurement};
-use crate::model::{Model, PointOutput, DOF_NAMES};
+use crate::model::{Excitation, Model, PointOutput, DOF_NAMES};
 use crate::source::{Located, SourceText};
 use crate::units::{parse_quantities, Dim};
 
@@ -151,11 +151,24 @@ impl Entry {
     }
 }
 
+/// One `[reference]` / `[[reference]]` of the map: which excitation of the file is which of the
+/// model.
+#[derive(Debug, Clone, PartialEq)]
+struct MapReference {
+    line: usize,
+    /// The file's reference node and direction.
+    node_dir: (i64, i64),
+    /// The model's reference (`None`: its own excitation).
+    name: Option<String>,
+    /// Under base motion: the channels are relative to the base.
+    relative: bool,
+}
+
 /// A measurement map resolved against a model.
 #[derive(Debug, Clone, PartialEq)]
 pub struct MeasurementMap {
     file: String,
-    reference: Option<(i64, i64)>,
+    references: Vec<MapReference>,
     unit: Option<FrfUnit>,
     entries: Vec<Entry>,
 }
@@ -180,7 +193,7 @@ enum Point {
 #[serde(deny_unknown_fields)]
 struct RawMap {
     unit: Option<Sp<String>>,
-    reference: Option<RawReference>,
+    reference: Option<RawReferences>,
     #[serde(default, rename = "channel")]
     channels: Vec<RawChannel>,
 }
@@ -190,6 +203,39 @@ struct RawMap {
 struct RawReference {
     node: Sp<i64>,
     dir: Sp<Dir>,
+    name: Option<Sp<String>>,
+    motion: Option<Sp<String>>,
+}
+
+/// `[reference]` (one table) or `[[reference]]` (several), read without buffering so that every
+/// field keeps its place in the file.
+struct RawReferences(Vec<RawReference>);
+
+impl<'de> Deserialize<'de> for RawReferences {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        struct OneOrMany;
+        impl<'de> serde::de::Visitor<'de> for OneOrMany {
+            type Value = RawReferences;
+            fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+                f.write_str("a [reference] table or [[reference]] tables")
+            }
+            fn visit_map<A: serde::de::MapAccess<'de>>(
+                self,
+                map: A,
+            ) -> Result<RawReferences, A::Error> {
+                RawReference::deserialize(serde::de::value::MapAccessDeserializer::new(map))
+                    .map(|r| RawReferences(vec![r]))
+            }
+            fn visit_seq<A: serde::de::SeqAccess<'de>>(
+                self,
+                seq: A,
+            ) -> Result<RawReferences, A::Error> {
+                Vec::<RawReference>::deserialize(serde::de::value::SeqAccessDeserializer::new(seq))
+                    .map(RawReferences)
+            }
+        }
+        d.deserialize_any(OneOrMany)
+    }
 }
 
 #[derive(Deserialize)]
@@ -253,15 +299,90 @@ pub fn parse(text: &str, origin: &str, model: &Model) -> Result<MeasurementMap, 
         )
     })?;
     let unit = raw.unit.as_ref().map(|u| unit_of(&src, u)).transpose()?;
-    let reference = match &raw.reference {
-        None => None,
-        Some(r) => Some((
+    let mut references: Vec<MapReference> = Vec::new();
+    for r in raw.reference.iter().flat_map(|r| &r.0) {
+        let node_dir = (
             *r.node.get_ref(),
             parse_dir(r.dir.get_ref()).ok_or_else(|| {
                 src.at(r.dir.span(), "reference.dir: use +X, -Y, Z, ... or ±1..6")
             })?,
-        )),
-    };
+        );
+        let line = src.at(r.node.span(), "").line;
+        if let Some(o) = references.iter().find(|o| o.node_dir == node_dir) {
+            return Err(src.at(
+                r.node.span(),
+                format!(
+                    "reference node {} {} is mapped twice (line {} too)",
+                    node_dir.0,
+                    dir_text(node_dir.1),
+                    o.line
+                ),
+            ));
+        }
+        let name = match &r.name {
+            None => None,
+            Some(n) if n.get_ref() == "excitation" => None,
+            Some(n) => {
+                if model.reference_index(n.get_ref()).is_none() {
+                    let known: Vec<&str> =
+                        model.references.iter().map(|x| x.name.as_str()).collect();
+                    return Err(src.at(
+                        n.span(),
+                        format!(
+                            "reference.name: the model has no [[reference]] \"{}\"; its references: excitation{}{}",
+                            n.get_ref(),
+                            if known.is_empty() { "" } else { ", " },
+                            known.join(", ")
+                        ),
+                    ));
+                }
+                Some(n.get_ref().clone())
+            }
+        };
+        if references.iter().any(|o| o.name == name) {
+            return Err(src.at(
+                r.name.as_ref().map(|n| n.span()).unwrap_or(r.node.span()),
+                format!(
+                    "reference.name: two file references map to the model's {}; name a different [[reference]] of the model for each",
+                    name.as_deref().unwrap_or("excitation")
+                ),
+            ));
+        }
+        let relative = match &r.motion {
+            None => false,
+            Some(m) => {
+                let base = name
+                    .as_deref()
+                    .and_then(|n| model.references.iter().find(|x| x.name == n))
+                    .is_some_and(|x| matches!(x.excitation, Excitation::BaseMotion { .. }));
+                if !base {
+                    return Err(src.at(
+                        m.span(),
+                        format!(
+                            "reference.motion: absolute or relative motion is an output under base motion, and the model's {} is not one; name a [[reference]] of the model with base_motion",
+                            name.as_deref().map(|n| format!("reference \"{n}\"")).unwrap_or("excitation".into())
+                        ),
+                    ));
+                }
+                match m.get_ref().as_str() {
+                    "absolute" => false,
+                    "relative" => true,
+                    other => {
+                        return Err(src.at(
+                            m.span(),
+                            format!("reference.motion: \"{other}\" is neither \"absolute\" (transmissibility) nor \"relative\" (response − base)"),
+                        ))
+                    }
+                }
+            }
+        };
+        references.push(MapReference {
+            line,
+            node_dir,
+            name,
+            relative,
+        });
+    }
     if raw.channels.is_empty() {
         return Err(src.at(
             0..0,
@@ -296,7 +417,7 @@ pub fn parse(text: &str, origin: &str, model: &Model) -> Result<MeasurementMap, 
     }
     Ok(MeasurementMap {
         file: origin.to_string(),
-        reference,
+        references,
         unit,
         entries,
     })
@@ -490,15 +611,64 @@ impl MeasurementMap {
             })
         };
         let mut notes = vec![format!("channels mapped by {}", self.file)];
-        let reference = self.reference(channels, origin)?;
-        if let Some((n, d)) = reference {
-            notes.push(format!("reference node {n} {}", dir_text(d)));
+        let targets: Vec<MapReference> = if self.references.is_empty() {
+            match self.reference(channels, origin)? {
+                Some(node_dir) => vec![MapReference {
+                    line: 0,
+                    node_dir,
+                    name: None,
+                    relative: false,
+                }],
+                None => Vec::new(),
+            }
+        } else {
+            self.references.clone()
+        };
+        let held: BTreeSet<(i64, i64)> = channels.iter().filter_map(|c| c.reference).collect();
+        for t in &targets {
+            let (n, d) = t.node_dir;
+            if t.line > 0 && !held.contains(&t.node_dir) && !held.is_empty() {
+                return Err(MapError::Map(Located {
+                    file: self.file.clone(),
+                    line: t.line,
+                    column: 1,
+                    message: format!(
+                        "reference: {origin} holds no FRFs of reference node {n} {}; its references: {}",
+                        dir_text(d),
+                        held.iter()
+                            .map(|(n, d)| format!("node {n} {}", dir_text(*d)))
+                            .collect::<Vec<_>>()
+                            .join(", ")
+                    ),
+                }));
+            }
+            notes.push(format!(
+                "reference node {n} {} is the model's {}{}",
+                dir_text(d),
+                t.name.as_deref().unwrap_or("excitation"),
+                if t.relative { " (relative motion)" } else { "" }
+            ));
         }
-        let of_reference = |c: &&MeasuredChannel| {
-            reference.is_none() || c.reference.is_none() || c.reference == reference
+        let of_any = |c: &MeasuredChannel| {
+            targets.is_empty()
+                || c.reference.is_none()
+                || targets.iter().any(|t| c.reference == Some(t.node_dir))
         };
         let mut characteristics = Vec::new();
-        for e in &self.entries {
+        let no_target = [None];
+        let each: Vec<Option<&MapReference>> = if targets.is_empty() {
+            no_target.to_vec()
+        } else {
+            targets.iter().map(Some).collect()
+        };
+        for (t, e) in each
+            .iter()
+            .flat_map(|t| self.entries.iter().map(move |e| (t, e)))
+        {
+            let reference = t.map(|t| t.node_dir);
+            let of_reference = |c: &&MeasuredChannel| {
+                reference.is_none() || c.reference.is_none() || c.reference == reference
+            };
             let found: Vec<&MeasuredChannel> = channels
                 .iter()
                 .filter(of_reference)
@@ -565,8 +735,8 @@ impl MeasurementMap {
                 coherence: c.coherence.clone(),
                 averages: None,
                 at: e.at,
-                reference: None,
-                relative: false,
+                reference: t.and_then(|t| t.name.clone()),
+                relative: t.is_some_and(|t| t.relative),
             };
             notes.push(format!(
                 "{} ({}) is {body} {}{}, unit from {from}",
@@ -581,7 +751,7 @@ impl MeasurementMap {
         }
         let unused: Vec<String> = channels
             .iter()
-            .filter(|c| !self.entries.iter().any(|e| e.name == c.name) || !of_reference(c))
+            .filter(|c| !self.entries.iter().any(|e| e.name == c.name) || !of_any(c))
             .map(|c| format!("{} ({})", c.name, c.item))
             .collect();
         if !unused.is_empty() {
@@ -612,9 +782,6 @@ impl MeasurementMap {
         channels: &[MeasuredChannel],
         origin: &str,
     ) -> Result<Option<(i64, i64)>, MapError> {
-        if self.reference.is_some() {
-            return Ok(self.reference);
-        }
         let refs: BTreeSet<(i64, i64)> = channels
             .iter()
             .filter(|c| self.entries.iter().any(|e| e.name == c.name))
@@ -629,7 +796,7 @@ impl MeasurementMap {
                 origin: origin.to_string(),
                 item: "references".into(),
                 message: format!(
-                    "the file holds FRFs of {} references ({}); choose one in the map: [reference] node = ..., dir = \"...\" (several references in one fit are not supported yet)",
+                    "the file holds FRFs of {} references ({}); say in the map which is which of the model: [[reference]] node = ..., dir = \"...\", name = \"...\" (a [[reference]] of the model; without name, the model's excitation), one per reference to use",
                     refs.len(),
                     list.join(", ")
                 ),
