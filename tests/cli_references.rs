@@ -124,9 +124,24 @@ fn identify_fits_two_references_of_point_outputs_from_a_uff_file() {
         let v = row["identified"].as_f64().unwrap();
         assert!((v / truth - 1.0).abs() < 1e-6, "{row}");
     }
-    // The plain run prints the result table with both stiffnesses.
-    let o = ident(&args);
+    // The plain run prints the result table with both stiffnesses, and writes the identified
+    // model with the measured point outputs under both references.
+    let written = dir.path().join("identified.toml");
+    let o = ident(&[&args[..], &["--write-model", p(&written)]].concat());
     assert_eq!(o.status.code(), Some(0), "{}", utf8(&o.stderr));
+    let back = identify::modelfile::load(&written).unwrap().model;
+    let points: Vec<(u8, bool)> = back
+        .outputs
+        .iter()
+        .filter(|c| c.at.is_some())
+        .map(|c| {
+            (
+                c.reference,
+                c.at == truth.outputs[usize::from(c.reference) * 2 + c.body].at,
+            )
+        })
+        .collect();
+    assert_eq!(points, [(0, true), (0, true), (1, true), (1, true)]);
     let out = utf8(&o.stdout);
     assert!(
         out.contains("k1") && out.contains("k2") && out.contains("20"),

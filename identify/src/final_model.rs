@@ -200,6 +200,19 @@ fn edited(
         out.push_str("\n# The excitation, rewritten by `ident diagnose`: the bodies it acts on were split (see below).\n");
         out.push_str(&excitation_toml(fin));
     }
+    // Outputs the measured data added to the model (point outputs, other references:
+    // `identification::data::with_measured_outputs`) follow the file's own.
+    let declared = crate::modelfile::parse_toml(text, origin)
+        .map(|l| l.model.outputs.len())
+        .unwrap_or(fin.outputs.len());
+    if fin.outputs.len() > declared {
+        let mut measured = fin.clone();
+        measured.outputs = fin.outputs[declared..].to_vec();
+        out.push_str(
+            "\n# Outputs the measured data added (point outputs, responses to other references).\n",
+        );
+        out.push_str(&outputs_toml(&measured));
+    }
     if let Some(d) = diagnosis {
         out.push_str(&added_toml(base, d)?);
     }
@@ -767,8 +780,9 @@ fn force_toml(f: &PointForce, model: &Model) -> String {
 
 /// The outputs, consecutive characteristics of one body and quantity as one `[[output]]`.
 fn outputs_toml(model: &Model) -> String {
-    let mut groups: Vec<(usize, crate::model::Quantity, Vec<u8>)> = Vec::new();
-    let mut points = String::new();
+    // In model order: consecutive principal-axis outputs of one body and quantity share a table;
+    // a point output, or one under another reference, has its own.
+    let mut groups: Vec<(usize, crate::model::Quantity, Vec<u8>, Option<String>)> = Vec::new();
     for &Characteristic {
         body,
         dof,
@@ -778,10 +792,10 @@ fn outputs_toml(model: &Model) -> String {
         relative,
     } in &model.outputs
     {
-        if reference != 0 || relative {
-            let _ = write!(
-                points,
-                "\n[[output]]\nbody = {}\n{}quantity = \"{}\"\nreference = {}\n{}",
+        let simple = at.is_none() && reference == 0 && !relative;
+        if !simple {
+            let table = format!(
+                "\n[[output]]\nbody = {}\n{}quantity = \"{}\"\n{}{}",
                 quoted(&body_name(model, Some(body))),
                 match at {
                     Some(at) => format!(
@@ -795,35 +809,33 @@ fn outputs_toml(model: &Model) -> String {
                     ),
                 },
                 quantity.as_str(),
-                quoted(model.reference_name(reference)),
+                if reference != 0 {
+                    format!("reference = {}\n", quoted(model.reference_name(reference)))
+                } else {
+                    String::new()
+                },
                 if relative {
                     "motion = \"relative\"\n"
                 } else {
                     ""
                 }
             );
-            continue;
-        }
-        if let Some(at) = at {
-            let _ = write!(
-                points,
-                "\n[[output]]\nbody = {}\npoint = {}\ndirection = {}\nquantity = \"{}\"\n",
-                quoted(&body_name(model, Some(body))),
-                exact_list(&at.point),
-                exact_list(&at.direction),
-                quantity.as_str()
-            );
+            groups.push((body, quantity, Vec::new(), Some(table)));
             continue;
         }
         match groups.last_mut() {
-            Some((b, q, dofs)) if *b == body && *q == quantity && !dofs.contains(&dof) => {
+            Some((b, q, dofs, None)) if *b == body && *q == quantity && !dofs.contains(&dof) => {
                 dofs.push(dof)
             }
-            _ => groups.push((body, quantity, vec![dof])),
+            _ => groups.push((body, quantity, vec![dof], None)),
         }
     }
     let mut s = String::new();
-    for (body, q, dofs) in groups {
+    for (body, q, dofs, table) in groups {
+        if let Some(t) = table {
+            s.push_str(&t);
+            continue;
+        }
         let names: Vec<String> = dofs
             .iter()
             .map(|d| quoted(DOF_NAMES.get(*d as usize).copied().unwrap_or("u1")))
@@ -836,7 +848,7 @@ fn outputs_toml(model: &Model) -> String {
             q.as_str()
         );
     }
-    s + &points
+    s
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -933,7 +945,20 @@ pub fn differences(a: &Model, b: &Model, tol: f64) -> Vec<String> {
         out.push("the excitation differs".into());
     }
     if a.outputs != b.outputs {
-        out.push("the output characteristics differ".into());
+        let first = a
+            .outputs
+            .iter()
+            .zip(&b.outputs)
+            .find(|(x, y)| x != y)
+            .map(|(x, y)| {
+                format!(
+                    " (first: {} against {})",
+                    a.characteristic_label(*x),
+                    b.characteristic_label(*y)
+                )
+            })
+            .unwrap_or_else(|| format!(" ({} against {})", a.outputs.len(), b.outputs.len()));
+        out.push(format!("the output characteristics differ{first}"));
     }
     out
 }

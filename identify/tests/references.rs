@@ -396,6 +396,25 @@ reference = "side"
         (back.references, back.outputs),
         (m.references.clone(), m.outputs.clone())
     );
+    // The model file ident writes (final model) reads back to the same references and outputs,
+    // a point output under a reference included.
+    let mut with_point = m.clone();
+    let at = identify::model::PointOutput::new(
+        Vector3::new(0.1, -0.2, 0.05),
+        Vector3::new(0.3, 0.1, 1.0),
+    )
+    .unwrap();
+    with_point.outputs.push(Characteristic {
+        at: Some(at),
+        reference: 2,
+        ..m.outputs[0]
+    });
+    let written = identify::final_model::resolved_toml(&with_point);
+    let read = identify::modelfile::parse_toml(&written, "written.toml")
+        .unwrap()
+        .model;
+    assert_eq!(read.references, with_point.references, "{written}");
+    assert_eq!(read.outputs, with_point.outputs, "{written}");
 
     for (bad, says) in [
         (
