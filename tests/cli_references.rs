@@ -148,3 +148,30 @@ fn identify_fits_two_references_of_point_outputs_from_a_uff_file() {
         "{out}"
     );
 }
+
+#[test]
+fn frf_prints_point_outputs_and_references_as_csv_columns_and_json() {
+    let dir = tempfile::tempdir().unwrap();
+    let text = std::fs::read_to_string(root().join(TWO_MASS)).unwrap()
+        + HAMMER
+        + "\n[[output]]\nbody = \"first\"\npoint = \"150 -50 20 mm\"\ndirection = [0.1, 0.3, 1]\nreference = \"hammer\"\n";
+    let model = dir.path().join("points.toml");
+    std::fs::write(&model, &text).unwrap();
+    let o = ident(&["frf", p(&model), "--hz", "10,20"]);
+    assert_eq!(o.status.code(), Some(0), "{}", utf8(&o.stderr));
+    let out = utf8(&o.stdout);
+    let rows: Vec<Vec<&str>> = out.lines().map(|l| l.split(',').collect()).collect();
+    assert_eq!(rows.len(), 3, "{out}");
+    assert!(rows.iter().all(|r| r.len() == 1 + 4 * 3), "{out}");
+    assert!(
+        rows[0][9].starts_with("first_at_(150;-50;20)_mm_along_")
+            && rows[0][9].ends_with("/_hammer_re"),
+        "{out}"
+    );
+    let o = ident(&["frf", p(&model), "--hz", "10", "--json"]);
+    assert_eq!(o.status.code(), Some(0), "{}", utf8(&o.stderr));
+    let j: serde_json::Value = serde_json::from_str(&utf8(&o.stdout)).unwrap();
+    let third = &j["outputs"][2];
+    assert_eq!(third["reference"], 1, "{j}");
+    assert_eq!(third["at"]["point"][0], 0.15, "{j}");
+}

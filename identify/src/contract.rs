@@ -386,6 +386,15 @@ pub struct FrfOutputJson {
     pub dof: u8,
     /// Quantity name.
     pub quantity: String,
+    /// A point output's location and axis, as in [`OutputJson::at`].
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub at: Option<PointOutput>,
+    /// The excitation, as in [`OutputJson::reference`].
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub reference: u8,
+    /// Relative to the base, as in [`OutputJson::relative`].
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub relative: bool,
     /// Real parts, SI.
     pub re: Vec<f64>,
     /// Imaginary parts, SI.
@@ -404,6 +413,9 @@ pub fn frf_json(model: &Model, r: &Response) -> FrfJson {
                 body: c.body,
                 dof: c.dof,
                 quantity: c.quantity.as_str().into(),
+                at: c.at,
+                reference: c.reference,
+                relative: c.relative,
                 re: r.output(o).iter().map(|v| v.re).collect(),
                 im: r.output(o).iter().map(|v| v.im).collect(),
             })

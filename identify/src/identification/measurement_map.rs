@@ -1,14 +1,19 @@
 //! The measurement map (`--map FILE`, TOML): which measured channel — a UFF response node and
 //! direction, or a named sensor — is which body of the model and which output of it (a
-//! principal-axis DOF, or a point and a direction on the body); the reference to use when a file
-//! holds several; the unit when a file gives none. [`MeasurementMap::apply`] turns the channels of a vendor file into [`MeasuredData`] in the
-//! model's convention (SI, the response to the model's excitation, the output's quantity).
+//! principal-axis DOF, or a point and a direction on the body); which file reference is which
+//! of the model's excitations; the unit when a file gives none. [`MeasurementMap::apply`] turns
+//! the channels of a vendor file into [`MeasuredData`] in the model's convention (SI, the
+//! response to the model's excitation or reference, the output's quantity).
 //!
 //! ```toml
 //! unit = "g/N"                 # optional: when the file's records give no units
-//! [reference]                  # optional: which excitation, when the file holds several
+//! [[reference]]                # optional: one per file reference to use ([reference]: one)
 //! node = 1
-//! dir = "+Z"
+//! dir = "+Z"                   # no name: the model's own excitation
+//! [[reference]]
+//! node = 2
+//! dir = "+Y"
+//! name = "hammer"              # a [[reference]] of the model (motion = "relative": base motion)
 //! [[channel]]
 //! node = 3                     # UFF response node ...
 //! dir = "+Z"                   # ... and direction (±X/Y/Z or ±1..3, global axes)
@@ -30,7 +35,8 @@
 //!   output**, `dᵀ(u + θ × (p − c))` ([`crate::model::PointOutput`]), which the model need not
 //!   declare ([`super::data::with_measured_outputs`]).
 //!
-//! Errors name the map's file, line and field.
+//! With several `[[reference]]`s every channel is mapped once per reference. Errors name the
+//! map's file, line and field.
 
 use std::collections::BTreeSet;
 use std::f64::consts::PI;
