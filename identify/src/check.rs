@@ -239,6 +239,31 @@ fn check_output(model: &Model, i: usize, o: &Characteristic, errors: &mut Vec<Pr
             ),
         );
     }
+    let references = model.references.len();
+    if usize::from(o.reference) > references {
+        err(
+            Item::Output(i, "reference"),
+            format!(
+                "output {}: reference {} does not exist; the model has {references} besides its excitation",
+                i + 1,
+                o.reference
+            ),
+        );
+    } else if o.relative
+        && (o.reference == 0
+            || !matches!(
+                model.references[usize::from(o.reference) - 1].excitation,
+                crate::model::Excitation::BaseMotion { .. }
+            ))
+    {
+        err(
+            Item::Output(i, "relative"),
+            format!(
+                "output {}: a motion relative to the base needs a base-motion reference",
+                i + 1
+            ),
+        );
+    }
 }
 
 /// Warnings of a model without errors: bodies connected to nothing or held only by SDEs of zero

@@ -10,7 +10,10 @@ use serde::{Deserialize, Serialize};
 
 use crate::check::Item;
 use crate::frf::Response;
-use crate::model::{Body, Characteristic, Model, PointForce, Quantity, Sde, SdeKind, SdeLaw};
+use crate::model::{
+    Body, Characteristic, Excitation, Model, PointForce, PointOutput, Quantity, Reference, Sde,
+    SdeKind, SdeLaw,
+};
 
 /// The resolved model as serialized.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -24,6 +27,9 @@ pub struct ModelJson {
     pub sdes: Vec<SdeJson>,
     /// Forces at points.
     pub excitation: ExcitationJson,
+    /// Further excitations (reference `i + 1` of an output), absent when there are none.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub references: Vec<ReferenceJson>,
     /// Output characteristics.
     pub outputs: Vec<OutputJson>,
 }
@@ -70,6 +76,20 @@ pub struct ExcitationJson {
     pub forces: Vec<ForceJson>,
 }
 
+/// `references[i]`: a named excitation, forces or base motion.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ReferenceJson {
+    /// Unique name.
+    pub name: String,
+    /// Forces at points (when not base motion).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub forces: Vec<ForceJson>,
+    /// Base motion: the ground's direction of motion (global, unit), 1 m amplitude.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub base_motion: Option<[f64; 3]>,
+}
+
 /// `excitation.forces[i]`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -96,6 +116,29 @@ pub struct OutputJson {
     pub dof: u8,
     /// `displacement`, `velocity` or `acceleration`.
     pub quantity: String,
+    /// A point output: sensor location (global, m) and axis (global, unit); absent for a
+    /// principal-axis DOF (then `dof` is the output, else the principal axis nearest the axis).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub at: Option<PointOutput>,
+    /// The excitation: 0 (absent) `excitation`, `i ≥ 1` `references[i − 1]`.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub reference: u8,
+    /// Under base motion: relative to the base (absent: absolute).
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub relative: bool,
+}
+
+fn is_zero(r: &u8) -> bool {
+    *r == 0
+}
+
+fn force_json(f: &PointForce) -> ForceJson {
+    ForceJson {
+        body: f.body,
+        point: Some(f.point.into()),
+        force: f.force.into(),
+        moment: (f.moment != Vector3::zeros()).then(|| f.moment.into()),
+    }
 }
 
 fn rows(m: &Matrix3<f64>) -> [[f64; 3]; 3] {
@@ -154,6 +197,25 @@ pub fn to_json(model: &Model) -> ModelJson {
                 body: o.body,
                 dof: o.dof,
                 quantity: o.quantity.as_str().into(),
+                at: o.at,
+                reference: o.reference,
+                relative: o.relative,
+            })
+            .collect(),
+        references: model
+            .references
+            .iter()
+            .map(|r| match &r.excitation {
+                Excitation::Forces(f) => ReferenceJson {
+                    name: r.name.clone(),
+                    forces: f.iter().map(force_json).collect(),
+                    base_motion: None,
+                },
+                Excitation::BaseMotion { direction } => ReferenceJson {
+                    name: r.name.clone(),
+                    forces: Vec::new(),
+                    base_motion: Some(*direction),
+                },
             })
             .collect(),
     }
@@ -182,26 +244,37 @@ pub fn json_path(item: Item) -> String {
 /// Converts the serialized form to a model (structural conversion only; [`crate::check::check`]
 /// validates the physics). Errors: an unknown quantity, or a body index out of range.
 pub fn from_json(j: &ModelJson) -> Result<Model, JsonProblem> {
-    let nb = j.bodies.len();
-    let mut forces = Vec::new();
-    for (i, f) in j.excitation.forces.iter().enumerate() {
-        let Some(body) = j.bodies.get(f.body) else {
-            return Err(JsonProblem {
-                path: format!("$.excitation.forces[{i}].body"),
-                message: format!(
-                    "body index {} does not exist; there are {nb} bodies (0-based)",
-                    f.body
-                ),
-            });
+    let forces = forces_from_json(j, &j.excitation.forces, "$.excitation.forces")?;
+    let mut references = Vec::new();
+    for (i, r) in j.references.iter().enumerate() {
+        let excitation = match (&r.base_motion, r.forces.is_empty()) {
+            (Some(d), true) => {
+                let n = Vector3::from(*d).norm();
+                if !(n.is_finite() && n > 0.0) {
+                    return Err(JsonProblem {
+                        path: format!("$.references[{i}].base_motion"),
+                        message: "the base motion needs a finite, non-zero direction".into(),
+                    });
+                }
+                Excitation::BaseMotion {
+                    direction: (Vector3::from(*d) / n).into(),
+                }
+            }
+            (None, _) => Excitation::Forces(forces_from_json(
+                j,
+                &r.forces,
+                &format!("$.references[{i}].forces"),
+            )?),
+            (Some(_), false) => {
+                return Err(JsonProblem {
+                    path: format!("$.references[{i}]"),
+                    message: "a reference is either forces or a base motion, not both".into(),
+                })
+            }
         };
-        forces.push(PointForce {
-            body: f.body,
-            point: f
-                .point
-                .map(Vector3::from)
-                .unwrap_or_else(|| Vector3::from(body.position)),
-            force: f.force.into(),
-            moment: f.moment.map(Vector3::from).unwrap_or_else(Vector3::zeros),
+        references.push(Reference {
+            name: r.name.clone(),
+            excitation,
         });
     }
     let mut outputs = Vec::new();
@@ -217,6 +290,19 @@ pub fn from_json(j: &ModelJson) -> Result<Model, JsonProblem> {
             body: o.body,
             dof: o.dof,
             quantity,
+            at: match o.at {
+                None => None,
+                Some(p) => Some(
+                    PointOutput::new(p.point.into(), p.direction.into()).ok_or_else(|| {
+                        JsonProblem {
+                            path: format!("$.outputs[{i}].at"),
+                            message: "a point output needs a finite point and a non-zero, finite direction".into(),
+                        }
+                    })?,
+                ),
+            },
+            reference: o.reference,
+            relative: o.relative,
         });
     }
     Ok(Model {
@@ -246,8 +332,40 @@ pub fn from_json(j: &ModelJson) -> Result<Model, JsonProblem> {
             })
             .collect(),
         forces,
+        references,
         outputs,
     })
+}
+
+/// The forces of a JSON list at `path`, body indices checked.
+fn forces_from_json(
+    j: &ModelJson,
+    list: &[ForceJson],
+    path: &str,
+) -> Result<Vec<PointForce>, JsonProblem> {
+    let nb = j.bodies.len();
+    let mut forces = Vec::new();
+    for (i, f) in list.iter().enumerate() {
+        let Some(body) = j.bodies.get(f.body) else {
+            return Err(JsonProblem {
+                path: format!("{path}[{i}].body"),
+                message: format!(
+                    "body index {} does not exist; there are {nb} bodies (0-based)",
+                    f.body
+                ),
+            });
+        };
+        forces.push(PointForce {
+            body: f.body,
+            point: f
+                .point
+                .map(Vector3::from)
+                .unwrap_or_else(|| Vector3::from(body.position)),
+            force: f.force.into(),
+            moment: f.moment.map(Vector3::from).unwrap_or_else(Vector3::zeros),
+        });
+    }
+    Ok(forces)
 }
 
 /// `ident frf --json` output: `{ "freqs_hz": [...], "outputs": [ {body, dof, quantity, re, im} ] }`.
@@ -268,6 +386,15 @@ pub struct FrfOutputJson {
     pub dof: u8,
     /// Quantity name.
     pub quantity: String,
+    /// A point output's location and axis, as in [`OutputJson::at`].
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub at: Option<PointOutput>,
+    /// The excitation, as in [`OutputJson::reference`].
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub reference: u8,
+    /// Relative to the base, as in [`OutputJson::relative`].
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub relative: bool,
     /// Real parts, SI.
     pub re: Vec<f64>,
     /// Imaginary parts, SI.
@@ -286,6 +413,9 @@ pub fn frf_json(model: &Model, r: &Response) -> FrfJson {
                 body: c.body,
                 dof: c.dof,
                 quantity: c.quantity.as_str().into(),
+                at: c.at,
+                reference: c.reference,
+                relative: c.relative,
                 re: r.output(o).iter().map(|v| v.re).collect(),
                 im: r.output(o).iter().map(|v| v.im).collect(),
             })

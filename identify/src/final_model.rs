@@ -201,6 +201,19 @@ fn edited(
         out.push_str("\n# The excitation, rewritten by `ident diagnose`: the bodies it acts on were split (see below).\n");
         out.push_str(&excitation_toml(fin));
     }
+    // Outputs the measured data added to the model (point outputs, other references:
+    // `identification::data::with_measured_outputs`) follow the file's own.
+    let declared = crate::modelfile::parse_toml(text, origin)
+        .map(|l| l.model.outputs.len())
+        .unwrap_or(fin.outputs.len());
+    if fin.outputs.len() > declared {
+        let mut measured = fin.clone();
+        measured.outputs = fin.outputs[declared..].to_vec();
+        out.push_str(
+            "\n# Outputs the measured data added (point outputs, responses to other references).\n",
+        );
+        out.push_str(&outputs_toml(&measured));
+    }
     if let Some(d) = diagnosis {
         out.push_str(&added_toml(base, d)?);
     }
@@ -546,6 +559,22 @@ pub fn resolved_toml(model: &Model) -> String {
         s.push('\n');
         s.push_str(&excitation_toml(model));
     }
+    for r in &model.references {
+        let _ = write!(s, "\n[[reference]]\nname = {}\n", quoted(&r.name));
+        match &r.excitation {
+            crate::model::Excitation::BaseMotion { direction } => {
+                let _ = writeln!(s, "base_motion = {}", exact_list(direction));
+            }
+            crate::model::Excitation::Forces(forces) => {
+                for f in forces {
+                    s.push_str(
+                        &force_toml(f, model)
+                            .replace("[[excitation.force]]", "[[reference.force]]"),
+                    );
+                }
+            }
+        }
+    }
     s.push_str(&outputs_toml(model));
     s
 }
@@ -582,6 +611,12 @@ fn length_list(p: &Vector3<f64>) -> String {
         quantity(p.y, 1e-3, "mm"),
         quantity(p.z, 1e-3, "mm")
     )
+}
+
+/// `[x, y, z]` in the shortest form that reads back to the same bits (a point output's geometry
+/// is its identity: SI metres for a point, a unit vector for a direction).
+fn exact_list(v: &[f64; 3]) -> String {
+    format!("[{:?}, {:?}, {:?}]", v[0], v[1], v[2])
 }
 
 fn inertia_list(j: &[f64; 3]) -> String {
@@ -750,22 +785,62 @@ fn force_toml(f: &PointForce, model: &Model) -> String {
 
 /// The outputs, consecutive characteristics of one body and quantity as one `[[output]]`.
 fn outputs_toml(model: &Model) -> String {
-    let mut groups: Vec<(usize, crate::model::Quantity, Vec<u8>)> = Vec::new();
+    // In model order: consecutive principal-axis outputs of one body and quantity share a table;
+    // a point output, or one under another reference, has its own.
+    let mut groups: Vec<(usize, crate::model::Quantity, Vec<u8>, Option<String>)> = Vec::new();
     for &Characteristic {
         body,
         dof,
         quantity,
+        at,
+        reference,
+        relative,
     } in &model.outputs
     {
+        let simple = at.is_none() && reference == 0 && !relative;
+        if !simple {
+            let table = format!(
+                "\n[[output]]\nbody = {}\n{}quantity = \"{}\"\n{}{}",
+                quoted(&body_name(model, Some(body))),
+                match at {
+                    Some(at) => format!(
+                        "point = {}\ndirection = {}\n",
+                        exact_list(&at.point),
+                        exact_list(&at.direction)
+                    ),
+                    None => format!(
+                        "dof = {}\n",
+                        quoted(DOF_NAMES.get(dof as usize).copied().unwrap_or("u1"))
+                    ),
+                },
+                quantity.as_str(),
+                if reference != 0 {
+                    format!("reference = {}\n", quoted(model.reference_name(reference)))
+                } else {
+                    String::new()
+                },
+                if relative {
+                    "motion = \"relative\"\n"
+                } else {
+                    ""
+                }
+            );
+            groups.push((body, quantity, Vec::new(), Some(table)));
+            continue;
+        }
         match groups.last_mut() {
-            Some((b, q, dofs)) if *b == body && *q == quantity && !dofs.contains(&dof) => {
+            Some((b, q, dofs, None)) if *b == body && *q == quantity && !dofs.contains(&dof) => {
                 dofs.push(dof)
             }
-            _ => groups.push((body, quantity, vec![dof])),
+            _ => groups.push((body, quantity, vec![dof], None)),
         }
     }
     let mut s = String::new();
-    for (body, q, dofs) in groups {
+    for (body, q, dofs, table) in groups {
+        if let Some(t) = table {
+            s.push_str(&t);
+            continue;
+        }
         let names: Vec<String> = dofs
             .iter()
             .map(|d| quoted(DOF_NAMES.get(*d as usize).copied().unwrap_or("u1")))
@@ -875,7 +950,20 @@ pub fn differences(a: &Model, b: &Model, tol: f64) -> Vec<String> {
         out.push("the excitation differs".into());
     }
     if a.outputs != b.outputs {
-        out.push("the output characteristics differ".into());
+        let first = a
+            .outputs
+            .iter()
+            .zip(&b.outputs)
+            .find(|(x, y)| x != y)
+            .map(|(x, y)| {
+                format!(
+                    " (first: {} against {})",
+                    a.characteristic_label(*x),
+                    b.characteristic_label(*y)
+                )
+            })
+            .unwrap_or_else(|| format!(" ({} against {})", a.outputs.len(), b.outputs.len()));
+        out.push(format!("the output characteristics differ{first}"));
     }
     out
 }

@@ -177,20 +177,26 @@ struct InertiaColumn {
 
 impl InertiaColumn {
     /// `∂q_o/∂p` from the body's DOFs under the load (`q`) and under output `o`'s unit load (`w`).
+    /// Under a base motion `t = T u_b` the load `ω² M t` depends on the masses too: the solve
+    /// gives `z` with `A z = M t`, and `∂z/∂p = A⁻¹ ∂M (t + ω² z)`, so `q + t/ω²` stands for `q`.
     fn derivative(
         &self,
         omega: f64,
         fac: C64,
+        base: Option<&[f64]>,
         q: impl Fn(usize) -> C64,
         w: impl Fn(usize) -> C64,
     ) -> C64 {
+        let w2 = omega * omega;
         let mut acc = C64::new(0.0, 0.0);
         for (i, dm) in self.dm.iter().enumerate() {
             if *dm != 0.0 {
-                acc += w(6 * self.body + i) * q(6 * self.body + i) * *dm;
+                let d = 6 * self.body + i;
+                let moved = base.map_or(0.0, |t| t[d] / w2);
+                acc += w(d) * (q(d) + moved) * *dm;
             }
         }
-        acc * (omega * omega) * fac
+        acc * w2 * fac
     }
 }
 
@@ -309,12 +315,22 @@ pub struct States {
     pub outputs: usize,
     /// Frequencies (Hz).
     pub freqs_hz: Vec<f64>,
-    /// `load[k * n + i]`: DOF `i` under the load at line `k` (m, rad per N).
+    /// References: the model's excitation and each of [`Model::references`].
+    pub references: usize,
+    /// `load[(k * references + r) * n + i]`: DOF `i` under reference `r`'s load at line `k` (m,
+    /// rad per N; per m of base motion and per ω² for a base motion).
     pub load: Vec<C64>,
-    /// `unit[(k * outputs + o) * n + i]`: DOF `i` under a unit load on output `o`'s DOF.
+    /// `unit[(k * outputs + o) * n + i]`: DOF `i` under output `o`'s row as a load (a unit load
+    /// on its DOF for a principal-axis output).
     pub unit: Vec<C64>,
-    /// `factor[k * outputs + o]`: displacement → output quantity (1, jω or −ω²).
+    /// `factor[k * outputs + o]`: displacement → output quantity (1, jω or −ω²; times ω² under
+    /// base motion).
     pub factor: Vec<C64>,
+    /// `offset[k * outputs + o]`: added to the output (an absolute output under base motion:
+    /// the base's own motion, as the output's quantity); 0 otherwise.
+    pub offset: Vec<C64>,
+    /// The reference each output responds to.
+    pub reference_of: Vec<usize>,
 }
 
 /// One term of a perturbation `ΔA(ω) = Σ c(ω) t tᵀ`: a row `t` over a few DOFs and its
@@ -330,7 +346,7 @@ impl States {
         o: usize,
         terms: impl IntoIterator<Item = (&'a Row, C64)>,
     ) -> C64 {
-        let q = &self.load[k * self.n..(k + 1) * self.n];
+        let q = self.load_for(k, o);
         let w = &self.unit[(k * self.outputs + o) * self.n..(k * self.outputs + o + 1) * self.n];
         let mut acc = C64::new(0.0, 0.0);
         for (row, c) in terms {
@@ -344,9 +360,15 @@ impl States {
         -acc * self.factor[k * self.outputs + o]
     }
 
-    /// The DOF vector under the load at line `k`.
+    /// The DOF vector under the model's excitation (reference 0) at line `k`.
     pub fn load_at(&self, k: usize) -> &[C64] {
-        &self.load[k * self.n..(k + 1) * self.n]
+        &self.load[k * self.references * self.n..(k * self.references + 1) * self.n]
+    }
+
+    /// The DOF vector under output `o`'s reference at line `k`.
+    pub fn load_for(&self, k: usize, o: usize) -> &[C64] {
+        let at = (k * self.references + self.reference_of[o]) * self.n;
+        &self.load[at..at + self.n]
     }
 }
 
@@ -354,27 +376,51 @@ impl States {
 pub fn states(model: &Model, freqs_hz: &[f64], method: Method) -> Result<States, SolveError> {
     let system = System::assemble(model);
     let n = system.n;
-    let outputs = system.output_dofs.len();
+    let outputs = system.output_rows.len();
     let lines = freqs_hz.len();
     for &f in freqs_hz {
         if !f.is_finite() || f < 0.0 {
             return Err(SolveError::BadFrequency { freq_hz: f });
         }
     }
+    let refs = 1 + system.reference_loads.len();
+    // Load column c of the solve ↔ reference r: c = 0 ↔ 0, c = outputs + r ↔ r ≥ 1.
+    let column = |r: usize| if r == 0 { 0 } else { outputs + r };
     let mut st = States {
         n,
         outputs,
+        references: refs,
         freqs_hz: freqs_hz.to_vec(),
-        load: vec![C64::new(0.0, 0.0); lines * n],
+        load: vec![C64::new(0.0, 0.0); lines * refs * n],
         unit: vec![C64::new(0.0, 0.0); lines * outputs * n],
         factor: vec![C64::new(0.0, 0.0); lines * outputs],
+        offset: vec![C64::new(0.0, 0.0); lines * outputs],
+        reference_of: system
+            .output_rows
+            .iter()
+            .map(|r| if r.column == 0 { 0 } else { r.column - outputs })
+            .collect(),
     };
     let quantities: Vec<Quantity> = model.outputs.iter().map(|c| c.quantity).collect();
-    match method.resolve(n, lines, Work::States { rhs: 1 + outputs }) {
+    match method.resolve(
+        n,
+        lines,
+        Work::States {
+            rhs: refs + outputs,
+        },
+    ) {
         Method::Modal => {
             let modal = ModalSolver::new(&system)?;
-            let b: Vec<C64> = (0..n)
-                .map(|m| (0..n).map(|i| modal.y[(m, i)] * system.load[i]).sum())
+            let b: Vec<Vec<C64>> = (0..refs)
+                .map(|r| {
+                    (0..n)
+                        .map(|m| {
+                            (0..n)
+                                .map(|i| modal.y[(m, i)] * system.load_entry(column(r), i))
+                                .sum()
+                        })
+                        .collect()
+                })
                 .collect();
             let lambda_scale = modal
                 .lambda
@@ -382,6 +428,7 @@ pub fn states(model: &Model, freqs_hz: &[f64], method: Method) -> Result<States,
                 .map(|l| l.norm())
                 .fold(0.0, f64::max)
                 .max(1.0);
+            let yo = modal.output_loads(&system);
             let mut eta = vec![C64::new(0.0, 0.0); n];
             let mut inv = vec![C64::new(0.0, 0.0); n];
             for (k, &f) in freqs_hz.iter().enumerate() {
@@ -393,19 +440,20 @@ pub fn states(model: &Model, freqs_hz: &[f64], method: Method) -> Result<States,
                     }
                     *v = den.inv();
                 }
-                for col in 0..=outputs {
+                for col in 0..refs + outputs {
                     for m in 0..n {
                         eta[m] = inv[m]
-                            * if col == 0 {
-                                b[m]
+                            * if col < refs {
+                                b[col][m]
                             } else {
-                                modal.y[(m, system.output_dofs[col - 1])]
+                                yo[col - refs][m]
                             };
                     }
-                    let dst = if col == 0 {
-                        &mut st.load[k * n..(k + 1) * n]
+                    let dst = if col < refs {
+                        &mut st.load[(k * refs + col) * n..(k * refs + col + 1) * n]
                     } else {
-                        &mut st.unit[(k * outputs + col - 1) * n..(k * outputs + col) * n]
+                        let o = col - refs;
+                        &mut st.unit[(k * outputs + o) * n..(k * outputs + o + 1) * n]
                     };
                     for (i, d) in dst.iter_mut().enumerate() {
                         *d = (0..n).map(|m| modal.x[(i, m)] * eta[m]).sum();
@@ -415,15 +463,24 @@ pub fn states(model: &Model, freqs_hz: &[f64], method: Method) -> Result<States,
         }
         _ => {
             DirectSolver::new(&system).solve_lines(&system, freqs_hz, |k, sol| {
-                st.load[k * n..(k + 1) * n].copy_from_slice(&sol[..n]);
-                st.unit[k * outputs * n..(k + 1) * outputs * n].copy_from_slice(&sol[n..]);
+                for r in 0..refs {
+                    let c = column(r);
+                    st.load[(k * refs + r) * n..(k * refs + r + 1) * n]
+                        .copy_from_slice(&sol[c * n..(c + 1) * n]);
+                }
+                st.unit[k * outputs * n..(k + 1) * outputs * n]
+                    .copy_from_slice(&sol[n..(1 + outputs) * n]);
                 Ok(())
             })?;
         }
     }
     for (k, &f) in freqs_hz.iter().enumerate() {
         for (o, q) in quantities.iter().enumerate() {
-            st.factor[k * outputs + o] = q.factor(TWO_PI * f);
+            let omega = TWO_PI * f;
+            let (offset, factor) =
+                system.output_rows[o].scale(q.factor(omega), omega, C64::new(0.0, 0.0));
+            st.factor[k * outputs + o] = factor;
+            st.offset[k * outputs + o] = offset;
         }
     }
     if st.load.iter().chain(&st.unit).any(|v| !v.is_finite()) {
@@ -432,11 +489,13 @@ pub fn states(model: &Model, freqs_hz: &[f64], method: Method) -> Result<States,
     Ok(st)
 }
 
-/// Accumulates `∂q_o/∂p` for every parameter given the SDE deformations under the load (`dq`)
-/// and under each output's unit load (`dw[o]`).
+/// Accumulates `∂q_o/∂p` for every parameter given the SDE deformations under each load column
+/// (`dq[column]`, the output's own) and under each output's unit load (`dw[o]`).
+#[allow(clippy::too_many_arguments)]
 fn jacobian_line(
+    s: &System,
     columns: &Columns,
-    dq: &[[C64; 6]],
+    dq: &[Vec<[C64; 6]>],
     dw: &[Vec<[C64; 6]>],
     factor: &[C64],
     lines: usize,
@@ -445,8 +504,8 @@ fn jacobian_line(
 ) {
     let outputs = factor.len();
     for (pb, &p) in columns.blocks.iter().zip(columns.sde_cols) {
-        let q6 = &dq[pb.block];
         for o in 0..outputs {
+            let q6 = &dq[s.output_rows[o].column][pb.block];
             let w6 = &dw[o][pb.block];
             let mut acc = C64::new(0.0, 0.0);
             for i in 0..6 {
@@ -481,7 +540,7 @@ struct DirectSolver {
 impl DirectSolver {
     fn new(system: &System) -> DirectSolver {
         let n = system.n;
-        let cols = 1 + system.output_dofs.len();
+        let cols = system.columns();
         let req = StackReq::any_of(&[
             factor::lu_in_place_scratch::<usize, C64>(n, n, Par::Seq, Default::default()),
             solve::solve_in_place_scratch::<usize, C64>(n, cols, Par::Seq),
@@ -507,11 +566,15 @@ impl DirectSolver {
             self.a[(i, i)].re -= w2 * s.mass[i];
         }
         self.rhs.fill(C64::new(0.0, 0.0));
-        for i in 0..n {
-            self.rhs[(i, 0)] = C64::new(s.load[i], 0.0);
+        for c in (0..s.columns()).filter(|&c| c == 0 || c > s.output_rows.len()) {
+            for i in 0..n {
+                self.rhs[(i, c)] = C64::new(s.load_entry(c, i), 0.0);
+            }
         }
-        for (o, &d) in s.output_dofs.iter().enumerate() {
-            self.rhs[(d, o + 1)] = C64::new(1.0, 0.0);
+        for (o, row) in s.output_rows.iter().enumerate() {
+            for &(d, v) in &row.taps {
+                self.rhs[(d, o + 1)] = C64::new(v, 0.0);
+            }
         }
         let (_, perm) = factor::lu_in_place(
             self.a.as_mut(),
@@ -550,7 +613,7 @@ impl DirectSolver {
         mut each: impl FnMut(usize, &Batch) -> Result<(), SolveError>,
     ) -> Result<(), SolveError> {
         let n = s.n;
-        let cols = 1 + s.output_dofs.len();
+        let cols = s.columns();
         let mut batch = Batch::new(s);
         let mut sol = vec![C64::new(0.0, 0.0); cols * n];
         for (b, chunk) in freqs_hz.chunks(LANES).enumerate() {
@@ -579,7 +642,7 @@ impl DirectSolver {
         freqs_hz: &[f64],
         mut each: impl FnMut(usize, &[C64]) -> Result<(), SolveError>,
     ) -> Result<(), SolveError> {
-        let mut sol = vec![C64::new(0.0, 0.0); (1 + s.output_dofs.len()) * s.n];
+        let mut sol = vec![C64::new(0.0, 0.0); s.columns() * s.n];
         self.solve_batches(s, freqs_hz, |first, batch| {
             for (l, k) in (first..freqs_hz.len().min(first + LANES)).enumerate() {
                 batch.solution(l, &mut sol);
@@ -615,8 +678,12 @@ impl DirectSolver {
                 let f = freqs[k];
                 let omega = TWO_PI * f;
                 for (o, q) in quantities.iter().enumerate() {
-                    let fac = q.factor(omega);
-                    let v = batch.x(l, 0, s.output_dofs[o]) * fac;
+                    let row = &s.output_rows[o];
+                    let (v, fac) = row.scale(
+                        q.factor(omega),
+                        omega,
+                        row.apply(|d| batch.x(l, row.column, d)),
+                    );
                     if !v.is_finite() {
                         return Err(SolveError::Singular { freq_hz: f });
                     }
@@ -628,7 +695,8 @@ impl DirectSolver {
                         jacobian[(ic.col * outputs + o) * lines + k] = ic.derivative(
                             omega,
                             fac,
-                            |i| batch.x(l, 0, i),
+                            s.base_motion_of_column(row.column),
+                            |i| batch.x(l, row.column, i),
                             |i| batch.x(l, o + 1, i),
                         );
                     }
@@ -673,6 +741,14 @@ impl ModalSolver {
         Ok(ModalSolver { lambda, x, y })
     }
 
+    /// Each output's row as a modal load, `Y t_o`: `[o][mode]`.
+    fn output_loads(&self, s: &System) -> Vec<Vec<C64>> {
+        s.output_rows
+            .iter()
+            .map(|row| (0..s.n).map(|m| row.apply(|d| self.y[(m, d)])).collect())
+            .collect()
+    }
+
     fn fill(
         &self,
         s: &System,
@@ -684,19 +760,23 @@ impl ModalSolver {
         let n = s.n;
         let lines = out.freqs_hz.len();
         let outputs = quantities.len();
-        // Modal load b = Y P, output rows of X, unit-load modal vectors Y e_o.
-        let b: Vec<C64> = (0..n)
-            .map(|m| (0..n).map(|i| self.y[(m, i)] * s.load[i]).sum())
-            .collect();
-        let yo: Vec<Vec<C64>> = s
-            .output_dofs
+        // Modal loads b_c = Y P_c (the load columns), output rows of X, unit-load modal vectors
+        // Y t_o.
+        let cols = s.columns();
+        let load_cols: Vec<usize> = (0..cols).filter(|&c| c == 0 || c > outputs).collect();
+        let b: Vec<Vec<C64>> = load_cols
             .iter()
-            .map(|&d| (0..n).map(|m| self.y[(m, d)]).collect())
+            .map(|&c| {
+                (0..n)
+                    .map(|m| (0..n).map(|i| self.y[(m, i)] * s.load_entry(c, i)).sum())
+                    .collect()
+            })
             .collect();
+        let yo = self.output_loads(s);
         let xo: Vec<Vec<C64>> = s
-            .output_dofs
+            .output_rows
             .iter()
-            .map(|&d| (0..n).map(|m| self.x[(d, m)]).collect())
+            .map(|row| (0..n).map(|m| row.apply(|d| self.x[(d, m)])).collect())
             .collect();
         // E = [T_κ X] stacked for every distinct SDE that carries a parameter (6·B × n), so that
         // one matrix product per line gives every such SDE's deformation under the load and
@@ -724,9 +804,9 @@ impl ModalSolver {
                 }
             }
         }
-        let mut rhs = Mat::<C64>::zeros(n, 1 + outputs);
-        let mut deform = Mat::<C64>::zeros(e.nrows(), 1 + outputs);
-        let mut dq = vec![[C64::new(0.0, 0.0); 6]; s.sdes.len()];
+        let mut rhs = Mat::<C64>::zeros(n, cols);
+        let mut deform = Mat::<C64>::zeros(e.nrows(), cols);
+        let mut dq = vec![vec![[C64::new(0.0, 0.0); 6]; s.sdes.len()]; cols];
         let mut dw = vec![vec![[C64::new(0.0, 0.0); 6]; s.sdes.len()]; outputs];
         let mut fac = vec![C64::new(0.0, 0.0); outputs];
         let lambda_scale = self
@@ -744,15 +824,19 @@ impl ModalSolver {
                     return Err(SolveError::Singular { freq_hz: f });
                 }
                 let inv = den.inv();
-                rhs[(m, 0)] = b[m] * inv;
+                for (bc, &c) in b.iter().zip(&load_cols) {
+                    rhs[(m, c)] = bc[m] * inv;
+                }
                 for o in 0..outputs {
                     rhs[(m, o + 1)] = yo[o][m] * inv;
                 }
             }
             for (o, q) in quantities.iter().enumerate() {
-                fac[o] = q.factor(omega);
-                let v: C64 = (0..n).map(|m| xo[o][m] * rhs[(m, 0)]).sum();
-                out.values[o * lines + k] = v * fac[o];
+                let row = &s.output_rows[o];
+                let x: C64 = (0..n).map(|m| xo[o][m] * rhs[(m, row.column)]).sum();
+                let (v, factor) = row.scale(q.factor(omega), omega, x);
+                fac[o] = factor;
+                out.values[o * lines + k] = v;
             }
             if columns.is_empty() {
                 continue;
@@ -766,21 +850,26 @@ impl ModalSolver {
                 Par::Seq,
             );
             for (u, &blk) in used.iter().enumerate() {
-                dq[blk] = std::array::from_fn(|r| deform[(6 * u + r, 0)]);
+                for &c in &load_cols {
+                    dq[c][blk] = std::array::from_fn(|r| deform[(6 * u + r, c)]);
+                }
                 for (o, dwo) in dw.iter_mut().enumerate() {
                     dwo[blk] = std::array::from_fn(|r| deform[(6 * u + r, o + 1)]);
                 }
             }
-            jacobian_line(columns, &dq, &dw, &fac, lines, k, &mut out.jacobian);
+            jacobian_line(s, columns, &dq, &dw, &fac, lines, k, &mut out.jacobian);
             for ic in columns.inertia {
                 let u = bodies.iter().position(|&b| b == ic.body).unwrap_or(0);
                 // The body's DOF 6·body + r sits at row body_row0 + 6u + r of `deform`.
                 let row = |i: usize| body_row0 + 6 * u + (i - 6 * ic.body);
                 for o in 0..outputs {
+                    // Under the output's own reference load, and under its unit load.
+                    let load = s.output_rows[o].column;
                     out.jacobian[(ic.col * outputs + o) * lines + k] = ic.derivative(
                         omega,
                         fac[o],
-                        |i| deform[(row(i), 0)],
+                        s.base_motion_of_column(load),
+                        |i| deform[(row(i), load)],
                         |i| deform[(row(i), o + 1)],
                     );
                 }
@@ -843,7 +932,7 @@ mod tests {
         for (k, f) in [5.0, 10.0].into_iter().enumerate() {
             solver.factor(&s, f).expect("pivoted LU");
             let n = s.n;
-            let cols = 1 + s.output_dofs.len();
+            let cols = s.columns();
             let scale = (0..cols)
                 .flat_map(|c| (0..n).map(move |i| (i, c)))
                 .map(|ic| solver.rhs[ic].norm())

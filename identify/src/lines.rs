@@ -50,14 +50,14 @@ pub struct Derivatives {
 impl Derivatives {
     /// Buffers for `params` parameters of `system`.
     pub fn new(system: &System, params: usize) -> Derivatives {
-        let outputs = system.output_dofs.len();
+        let outputs = system.output_rows.len();
         let blocks = system.sdes.len();
         Derivatives {
             outputs,
             re: vec![ZERO; params * outputs],
             im: vec![ZERO; params * outputs],
-            def_re: vec![[ZERO; 6]; 1 + outputs],
-            def_im: vec![[ZERO; 6]; 1 + outputs],
+            def_re: vec![[ZERO; 6]; system.columns()],
+            def_im: vec![[ZERO; 6]; system.columns()],
             prod_re: vec![[ZERO; 6]; blocks * outputs],
             prod_im: vec![[ZERO; 6]; blocks * outputs],
         }
@@ -87,7 +87,7 @@ impl pulp::WithSimd for DerivativeWork<'_> {
         let (b, d) = (self.batch, self.out);
         let (n, outputs) = (b.n, d.outputs);
         for &blk in self.used {
-            for c in 0..=outputs {
+            for c in 0..b.cols {
                 // Local sums: the compiler then knows they alias nothing and vectorises the taps.
                 let (mut ar, mut ai) = ([ZERO; 6], [ZERO; 6]);
                 let (xr, xi) = (&b.x_re[c * n..(c + 1) * n], &b.x_im[c * n..(c + 1) * n]);
@@ -108,7 +108,8 @@ impl pulp::WithSimd for DerivativeWork<'_> {
                 d.def_im[c] = ai;
             }
             for o in 0..outputs {
-                let (qr, qi) = (&d.def_re[0], &d.def_im[0]);
+                let col = self.s.output_rows[o].column;
+                let (qr, qi) = (&d.def_re[col], &d.def_im[col]);
                 let (wr, wi) = (&d.def_re[o + 1], &d.def_im[o + 1]);
                 let (pr, pi) = (
                     &mut d.prod_re[blk * outputs + o],
@@ -195,7 +196,7 @@ impl Batch {
     /// sides (columns 0 and 1..=outputs, as in the per-line solver).
     pub fn new(system: &System) -> Batch {
         let n = system.n;
-        let cols = 1 + system.output_dofs.len();
+        let cols = system.columns();
         Batch {
             n,
             cols,
@@ -366,7 +367,7 @@ impl Batch {
         growth
     }
 
-    /// Right-hand sides (the load, then unit loads on the output DOFs) and
+    /// Right-hand sides (the load, then each output's row as a load) and
     /// `x = L⁻ᵀ Δ⁻¹ L⁻¹ b` for each of them.
     #[inline(always)]
     fn solve(&mut self, s: &System) {
@@ -376,8 +377,19 @@ impl Batch {
         for i in 0..n {
             self.x_re[i] = [s.load[i]; LANES];
         }
-        for (o, &d) in s.output_dofs.iter().enumerate() {
-            self.x_re[(o + 1) * n + d] = [1.0; LANES];
+        let past = 1 + s.output_rows.len();
+        for (r, load) in s.reference_loads.iter().enumerate() {
+            for (x, &p) in self.x_re[(past + r) * n..(past + r + 1) * n]
+                .iter_mut()
+                .zip(load)
+            {
+                *x = [p; LANES];
+            }
+        }
+        for (o, row) in s.output_rows.iter().enumerate() {
+            for &(d, v) in &row.taps {
+                self.x_re[(o + 1) * n + d] = [v; LANES];
+            }
         }
         for c in 0..self.cols {
             let (xr, xi) = (
@@ -472,13 +484,17 @@ mod tests {
                 s.d[i * n + j],
             )
         });
-        let cols = 1 + s.output_dofs.len();
+        let cols = s.columns();
         let mut b = Mat::<C64>::zeros(n, cols);
-        for i in 0..n {
-            b[(i, 0)] = C64::new(s.load[i], 0.0);
+        for c in 0..cols {
+            for i in 0..n {
+                b[(i, c)] = C64::new(s.load_entry(c, i), 0.0);
+            }
         }
-        for (o, &d) in s.output_dofs.iter().enumerate() {
-            b[(d, o + 1)] = C64::new(1.0, 0.0);
+        for (o, row) in s.output_rows.iter().enumerate() {
+            for &(d, v) in &row.taps {
+                b[(d, o + 1)] = C64::new(v, 0.0);
+            }
         }
         let x = faer::linalg::solvers::Solve::solve(&a.partial_piv_lu(), &b);
         (0..cols)
@@ -505,7 +521,7 @@ mod tests {
             .map(|k| 3.0 * (1000.0f64 / 3.0).powf(k as f64 / 37.0))
             .collect();
         let mut batch = Batch::new(&s);
-        let mut sol = vec![C64::new(0.0, 0.0); (1 + s.output_dofs.len()) * s.n];
+        let mut sol = vec![C64::new(0.0, 0.0); s.columns() * s.n];
         let mut worst = 0.0f64;
         for chunk in freqs.chunks(LANES) {
             batch.factor_and_solve(&s, chunk);
@@ -542,7 +558,7 @@ mod tests {
         batch.factor_and_solve(&s, &[5.0, 10.0, 20.0]);
         assert!(batch.accurate(0) && batch.accurate(2));
         assert!(!batch.accurate(1), "a zero pivot must not be trusted");
-        let mut sol = vec![C64::new(0.0, 0.0); (1 + s.output_dofs.len()) * s.n];
+        let mut sol = vec![C64::new(0.0, 0.0); s.columns() * s.n];
         batch.solution(2, &mut sol);
         let r = reference(&s, 20.0);
         let err = sol

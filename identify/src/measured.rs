@@ -8,7 +8,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::model::{Characteristic, Quantity};
+use crate::model::{Characteristic, PointOutput, Quantity};
 
 /// The measured points of one characteristic.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -35,6 +35,18 @@ pub struct Measurement {
     /// Number of averages behind each point's estimate, when known.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub averages: Option<u32>,
+    /// A point output: the sensor's location and axis (global); absent for a principal-axis DOF
+    /// (then `dof` is the output; with `at`, `dof` is the principal translation nearest the axis).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub at: Option<PointOutput>,
+    /// The excitation this FRF responds to: a name among the model's `[[reference]]`s; absent
+    /// for the model's own excitation (`forces`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub reference: Option<String>,
+    /// Under base motion: the response relative to the base; `false` (absent): absolute, the
+    /// transmissibility.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub relative: bool,
 }
 
 /// Serialized name of a [`Quantity`].
@@ -72,11 +84,33 @@ impl From<Quantity> for QuantityName {
 impl Measurement {
     /// Its name in messages: the body and the DOF, e.g. `table u3`.
     pub fn label(&self) -> String {
-        let dof = crate::model::DOF_NAMES
-            .get(self.dof as usize)
-            .copied()
-            .unwrap_or("?");
-        format!("{} {dof}", self.body)
+        let mut s = match &self.at {
+            Some(at) => format!("{} {}", self.body, at.label()),
+            None => {
+                let dof = crate::model::DOF_NAMES
+                    .get(self.dof as usize)
+                    .copied()
+                    .unwrap_or("?");
+                format!("{} {dof}", self.body)
+            }
+        };
+        if self.relative {
+            s.push_str(" relative");
+        }
+        if let Some(r) = &self.reference {
+            s.push_str(&format!(" / {r}"));
+        }
+        s
+    }
+
+    /// [`Characteristic::reference`] of this measurement in `model`: 0 for none, `u8::MAX` for a
+    /// name the model does not have (which no output carries; [`crate::identification::data::validate`]
+    /// says so).
+    pub fn reference_index(&self, model: &crate::Model) -> u8 {
+        match &self.reference {
+            None => 0,
+            Some(name) => model.reference_index(name).unwrap_or(u8::MAX),
+        }
     }
 
     /// The characteristic this measurement is of, with the body resolved in `model`;
@@ -87,6 +121,9 @@ impl Measurement {
             body,
             dof: self.dof,
             quantity: self.quantity.into(),
+            at: self.at,
+            reference: self.reference_index(model),
+            relative: self.relative,
         })
     }
 }

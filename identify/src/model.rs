@@ -448,7 +448,9 @@ impl Quantity {
     }
 }
 
-/// One output characteristic: `q_body[dof]` in the body's principal central axes, as a quantity.
+/// One output characteristic: `q_body[dof]` in the body's principal central axes, as a quantity —
+/// or, with [`Characteristic::at`], the reading of a sensor at a point of the body along a
+/// direction.
 ///
 /// This is the one meaning of "characteristic" across the project: model outputs, processed
 /// measurements, identification data and reports all use it.
@@ -456,10 +458,127 @@ impl Quantity {
 pub struct Characteristic {
     /// Index into [`Model::bodies`].
     pub body: usize,
-    /// 0-2 translations u1..u3, 3-5 rotations r1..r3, along/about the principal axes.
+    /// 0-2 translations u1..u3, 3-5 rotations r1..r3, along/about the principal axes. For a
+    /// point output, the principal translation nearest to its direction (labels, unit notes).
     pub dof: u8,
     /// Displacement, velocity or acceleration.
     pub quantity: Quantity,
+    /// `None`: the principal-axis DOF `dof`. `Some`: a point output, `dᵀ(u + θ × (p − c))` in
+    /// global axes (see [`PointOutput`]).
+    pub at: Option<PointOutput>,
+    /// Which excitation the output responds to: 0 the model's `forces`, `i ≥ 1`
+    /// [`Model::references`]`[i − 1]`.
+    pub reference: u8,
+    /// Under base motion: the response relative to the base (`false`: absolute, the
+    /// transmissibility). Always `false` for a force reference.
+    pub relative: bool,
+}
+
+impl Characteristic {
+    /// The principal-axis DOF `dof` of `body` as `quantity`.
+    pub fn dof(body: usize, dof: u8, quantity: Quantity) -> Characteristic {
+        Characteristic {
+            body,
+            dof,
+            quantity,
+            at: None,
+            reference: 0,
+            relative: false,
+        }
+    }
+}
+
+/// Where a point output reads and along what: a sensor at `point` (global, m) whose axis is
+/// `direction` (global, unit length). On a rigid body it reads `dᵀ (u + θ × (p − c))`, with `u`
+/// and `θ` the body's translation and rotation and `c` its centre of mass.
+///
+/// Two point outputs are the same output when their coordinates are bit for bit equal (equality,
+/// order and hash compare the bits), so it can identify a characteristic.
+#[derive(Debug, Clone, Copy, serde::Serialize, serde::Deserialize)]
+pub struct PointOutput {
+    /// Sensor location, global frame (m).
+    pub point: [f64; 3],
+    /// Sensor axis, global frame, unit length.
+    pub direction: [f64; 3],
+}
+
+impl PointOutput {
+    /// A point output along `direction` (any non-zero length, normalized here) at `point` (m);
+    /// `None` if the direction is zero or either vector is not finite.
+    pub fn new(point: Vector3<f64>, direction: Vector3<f64>) -> Option<PointOutput> {
+        let n = direction.norm();
+        let finite = point.iter().chain(direction.iter()).all(|x| x.is_finite());
+        // A direction already of unit length (within rounding) is kept bit for bit, so that a
+        // point output written out and read back is the same output.
+        let unit = if (n - 1.0).abs() <= 4.0 * f64::EPSILON {
+            direction
+        } else {
+            direction / n
+        };
+        (finite && n > 0.0).then(|| PointOutput {
+            point: point.into(),
+            direction: unit.into(),
+        })
+    }
+
+    /// The principal translation u1-u3 of `body` nearest to the direction, and the cosine of the
+    /// angle between them (negative when the direction points along the negative axis).
+    pub fn nearest_axis(&self, body: &Body) -> (u8, f64) {
+        let d = Vector3::from(self.direction);
+        (0..3u8)
+            .map(|k| (k, d.dot(&body.rotation.column(k as usize))))
+            .max_by(|a, b| a.1.abs().total_cmp(&b.1.abs()))
+            .unwrap_or((0, 0.0))
+    }
+
+    /// `"at (100, 0, 450) mm along (0, 0.6, 0.8)"`.
+    pub fn label(&self) -> String {
+        let mm = self.point.map(|x| crate::display::sig(x * 1e3, 6));
+        let d = self.direction.map(|x| crate::display::sig(x, 6));
+        format!(
+            "at ({}, {}, {}) mm along ({}, {}, {})",
+            mm[0], mm[1], mm[2], d[0], d[1], d[2]
+        )
+    }
+
+    fn bits(&self) -> [u64; 6] {
+        let [a, b, c] = self.point;
+        let [d, e, f] = self.direction;
+        [a, b, c, d, e, f].map(f64::to_bits)
+    }
+}
+
+impl PartialEq for PointOutput {
+    fn eq(&self, other: &Self) -> bool {
+        self.bits() == other.bits()
+    }
+}
+
+impl Eq for PointOutput {}
+
+impl std::hash::Hash for PointOutput {
+    fn hash<H: std::hash::Hasher>(&self, state: &mut H) {
+        self.bits().hash(state);
+    }
+}
+
+impl PartialOrd for PointOutput {
+    fn partial_cmp(&self, other: &Self) -> Option<std::cmp::Ordering> {
+        Some(self.cmp(other))
+    }
+}
+
+impl Ord for PointOutput {
+    fn cmp(&self, other: &Self) -> std::cmp::Ordering {
+        let (a, b) = (
+            self.point.iter().chain(&self.direction),
+            other.point.iter().chain(&other.direction),
+        );
+        a.zip(b)
+            .map(|(x, y)| x.total_cmp(y))
+            .find(|o| o.is_ne())
+            .unwrap_or(std::cmp::Ordering::Equal)
+    }
 }
 
 /// Names of the six DOFs as written in files and reports.
@@ -474,10 +593,38 @@ pub struct Model {
     pub bodies: Vec<Body>,
     /// Spring-damping elements.
     pub sdes: Vec<Sde>,
-    /// Excitation: forces at points.
+    /// Excitation: forces at points (reference 0 of an output, see [`Characteristic::reference`]).
     pub forces: Vec<PointForce>,
+    /// Further excitations, each one column of an FRF matrix (several shakers, a roving hammer, a
+    /// shaker table): reference `i ≥ 1` of an output is `references[i − 1]`.
+    pub references: Vec<Reference>,
     /// Output characteristics.
     pub outputs: Vec<Characteristic>,
+}
+
+/// A named excitation beside the model's `forces`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Reference {
+    /// Unique name, as data and measurement maps call it.
+    pub name: String,
+    /// What excites the structure.
+    pub excitation: Excitation,
+}
+
+/// What a [`Reference`] is.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Excitation {
+    /// Forces (and moments) at points of bodies, amplitudes in N (N·m).
+    Forces(Vec<PointForce>),
+    /// Prescribed base motion (shaker table): the ground — every SDE attached to it — moves as a
+    /// rigid whole along `direction` (global, unit length) with a displacement of 1 m, so the
+    /// outputs are transmissibilities (m/m, or any quantity over the same quantity of the base).
+    /// The structure responds through its SDEs: with `q = z + T u_b` (`T u_b` every body
+    /// following the base rigidly), `A(ω) z = ω² M T u_b`.
+    BaseMotion {
+        /// Direction of the base motion, global, unit length.
+        direction: [f64; 3],
+    },
 }
 
 /// A reference to one parameter of one SDE.
@@ -587,6 +734,25 @@ impl Model {
     /// Index of the body with this name.
     pub fn body_index(&self, name: &str) -> Option<usize> {
         self.bodies.iter().position(|b| b.name == name)
+    }
+
+    /// Index of the reference with this name, as [`Characteristic::reference`] counts it (1 for
+    /// `references[0]`).
+    pub fn reference_index(&self, name: &str) -> Option<u8> {
+        let i = self.references.iter().position(|r| r.name == name)?;
+        u8::try_from(i + 1).ok()
+    }
+
+    /// The name of reference `r` (`"excitation"` for 0, the model's forces).
+    pub fn reference_name(&self, r: u8) -> &str {
+        match r {
+            0 => "excitation",
+            r => self
+                .references
+                .get(r as usize - 1)
+                .map(|x| x.name.as_str())
+                .unwrap_or("?"),
+        }
     }
 
     /// Index of the SDE with this name.
@@ -700,7 +866,19 @@ impl Model {
             .get(c.body)
             .map(|b| b.name.as_str())
             .unwrap_or("?");
-        let dof = DOF_NAMES.get(c.dof as usize).copied().unwrap_or("?");
-        format!("{body} {dof} {}", c.quantity.as_str())
+        let mut s = match c.at {
+            None => {
+                let dof = DOF_NAMES.get(c.dof as usize).copied().unwrap_or("?");
+                format!("{body} {dof} {}", c.quantity.as_str())
+            }
+            Some(p) => format!("{body} {} {}", p.label(), c.quantity.as_str()),
+        };
+        if c.relative {
+            s.push_str(" relative");
+        }
+        if c.reference != 0 {
+            s.push_str(&format!(" / {}", self.reference_name(c.reference)));
+        }
+        s
     }
 }

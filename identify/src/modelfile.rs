@@ -111,8 +111,22 @@ struct RawModel {
     #[serde(default, rename = "sde")]
     sdes: Vec<RawSde>,
     excitation: Option<RawExcitation>,
+    #[serde(default, rename = "reference")]
+    references: Vec<RawReference>,
     #[serde(default, rename = "output")]
     outputs: Vec<RawOutput>,
+}
+
+/// `[[reference]]`: a further, named excitation (forces, pairs, or base motion).
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawReference {
+    name: Sp<String>,
+    #[serde(default)]
+    force: Vec<RawForce>,
+    #[serde(default)]
+    pair: Vec<RawPair>,
+    base_motion: Option<Sp<Value>>,
 }
 
 #[derive(Deserialize)]
@@ -209,6 +223,10 @@ struct RawOutput {
     dof: Option<Sp<String>>,
     dofs: Option<Sp<Vec<Sp<String>>>>,
     quantity: Option<Sp<String>>,
+    point: Option<Sp<Value>>,
+    direction: Option<Sp<Value>>,
+    reference: Option<Sp<String>>,
+    motion: Option<Sp<String>>,
 }
 
 /// Locates errors in the TOML text.
@@ -415,15 +433,96 @@ pub fn parse_toml(text: &str, origin: &str) -> Result<Loaded, LoadError> {
             forces.extend(force_pair(&cx, p, &bodies)?);
         }
     }
+    let mut references: Vec<Reference> = Vec::new();
+    for r in &raw.references {
+        let name = r.name.get_ref().trim();
+        if name.is_empty() || name == "excitation" || references.iter().any(|x| x.name == name) {
+            return Err(cx.at(r.name.span(), format!("reference name \"{name}\": give each [[reference]] a unique, non-empty name other than \"excitation\" (the model's own [excitation])")));
+        }
+        let excitation = match &r.base_motion {
+            Some(b) => {
+                if let Some(f) = r.force.first() {
+                    return Err(cx.at(
+                        f.body.span(),
+                        "a reference is either forces or a base motion, not both",
+                    ));
+                }
+                if !r.pair.is_empty() {
+                    return Err(cx.at(
+                        b.span(),
+                        "a reference is either forces or a base motion, not both",
+                    ));
+                }
+                let d = cx.direction(b, "base_motion")?;
+                Excitation::BaseMotion {
+                    direction: d.into(),
+                }
+            }
+            None => {
+                let mut f = Vec::new();
+                for x in &r.force {
+                    f.push(point_force(&cx, x, &bodies)?);
+                }
+                for p in &r.pair {
+                    f.extend(force_pair(&cx, p, &bodies)?);
+                }
+                if f.is_empty() {
+                    return Err(cx.at(r.name.span(), "the reference has no excitation: give [[reference.force]], [[reference.pair]] or base_motion = [x, y, z]"));
+                }
+                Excitation::Forces(f)
+            }
+        };
+        references.push(Reference {
+            name: name.to_string(),
+            excitation,
+        });
+    }
     let mut outputs = Vec::new();
     for o in &raw.outputs {
-        outputs.extend(output(&cx, o, &bodies)?);
+        let mut cs = output(&cx, o, &bodies)?;
+        let reference = match &o.reference {
+            None => 0,
+            Some(r) => {
+                let name = r.get_ref().trim();
+                match references.iter().position(|x| x.name == name) {
+                    Some(i) => u8::try_from(i + 1)
+                        .map_err(|_| cx.at(r.span(), "at most 255 references"))?,
+                    None if name == "excitation" => 0,
+                    None => {
+                        let known: Vec<&str> = references.iter().map(|x| x.name.as_str()).collect();
+                        return Err(cx.at(r.span(), format!("reference: the model has no [[reference]] \"{name}\"; its references: excitation{}{}", if known.is_empty() { "" } else { ", " }, known.join(", "))));
+                    }
+                }
+            }
+        };
+        let relative = match &o.motion {
+            None => false,
+            Some(m) => {
+                let base = reference > 0
+                    && matches!(
+                        references[reference as usize - 1].excitation,
+                        Excitation::BaseMotion { .. }
+                    );
+                match m.get_ref().as_str() {
+                    _ if !base => return Err(cx.at(m.span(), "motion: absolute or relative motion is an output under base motion; name a [[reference]] with base_motion in `reference`")),
+                    "absolute" => false,
+                    "relative" => true,
+                    other => return Err(cx.at(m.span(), format!("motion: \"{other}\" is neither \"absolute\" (transmissibility) nor \"relative\" (response − base)"))),
+                }
+            }
+        };
+        for c in &mut cs {
+            c.reference = reference;
+            c.relative = relative;
+        }
+        outputs.extend(cs);
     }
     let model = Model {
         name: raw.name.unwrap_or_else(|| origin.to_string()),
         bodies,
         sdes,
         forces,
+        references,
         outputs,
     };
     checked(&cx, model, &spans)
@@ -719,6 +818,45 @@ fn output(cx: &Ctx, o: &RawOutput, bodies: &[Body]) -> Result<Vec<Characteristic
             )
         })?,
     };
+    match (&o.point, &o.direction) {
+        (None, None) => {}
+        (Some(p), Some(d)) => {
+            if let Some(x) = o
+                .dof
+                .as_ref()
+                .map(|d| d.span())
+                .or(o.dofs.as_ref().map(|d| d.span()))
+            {
+                return Err(cx.at(x, "a point output (`point` + `direction`) names no `dof`/`dofs`; drop one or the other"));
+            }
+            let point = cx.vec3(p, Dim::LENGTH, "point")?;
+            let direction = cx.vec3(d, Dim::NONE, "direction")?;
+            let Some(at) = PointOutput::new(point, direction) else {
+                return Err(cx.at(d.span(), "direction: the zero vector has no direction; give the sensor's axis, e.g. [0, 1, 0] (global)"));
+            };
+            let (dof, _) = at.nearest_axis(&bodies[body]);
+            return Ok(vec![Characteristic {
+                body,
+                dof,
+                quantity,
+                at: Some(at),
+                reference: 0,
+                relative: false,
+            }]);
+        }
+        (Some(p), None) => {
+            return Err(cx.at(
+                p.span(),
+                "a point output needs `direction = [x, y, z]` (global) beside `point`",
+            ))
+        }
+        (None, Some(d)) => {
+            return Err(cx.at(
+                d.span(),
+                "a point output needs `point` (global, e.g. \"100 0 450 mm\") beside `direction`",
+            ))
+        }
+    }
     let names: Vec<&Sp<String>> = match (&o.dof, &o.dofs) {
         (Some(d), None) => vec![d],
         (None, Some(ds)) => ds.get_ref().iter().collect(),
@@ -732,6 +870,9 @@ fn output(cx: &Ctx, o: &RawOutput, bodies: &[Body]) -> Result<Vec<Characteristic
                 body,
                 dof: dof as u8,
                 quantity,
+                at: None,
+                reference: 0,
+                relative: false,
             })
         })
         .collect()

@@ -14,7 +14,7 @@
 
 use nalgebra::{Matrix3, Matrix6, Vector3, Vector6};
 
-use crate::model::{Model, ParamRef};
+use crate::model::{Characteristic, Excitation, Model, ParamRef};
 use crate::C64;
 
 /// The SDE deformation map of one body: `G_b` above (sde_from_body coordinates).
@@ -48,6 +48,95 @@ pub fn generalized_force(
     let f = rt * force;
     let m = a.cross(&f) + rt * moment;
     Vector6::new(f.x, f.y, f.z, m.x, m.y, m.z)
+}
+
+/// An output as a row over the global DOFs: `y = Σ v q[dof]` over its taps. A principal-axis
+/// characteristic is one tap of 1; a point output on body `b` is `[R_bᵀ d, a × R_bᵀ d]` over the
+/// body's six DOFs, with `a = R_bᵀ (p − c_b)` — the generalized force of a unit force `d` at `p`
+/// ([`generalized_force`]), so the output's adjoint load is that force (reciprocity).
+///
+/// An output responds to one excitation, the solve's right-hand side `column`
+/// ([`System::load_column`]). Under base motion the load is `ω² M T u_b` ([`System::assemble`]), so
+/// the solution is scaled by `ω²` (`base`), and an absolute output adds the base's own rigid
+/// motion, `offset = row · T u_b` (parameter-free: the Jacobian is the relative one's).
+#[derive(Debug, Clone, PartialEq)]
+pub struct OutputRow {
+    /// `(global DOF, coefficient)`, at most six, zeros left out.
+    pub taps: Vec<(usize, f64)>,
+    /// The right-hand side whose solution the output reads.
+    pub column: usize,
+    /// The reference is a base motion: the solution is scaled by `ω²`.
+    pub base: bool,
+    /// Added to the row's reading (before the quantity's `(jω)^k`): the base's rigid motion
+    /// for an absolute output under base motion, else 0.
+    pub offset: f64,
+}
+
+impl OutputRow {
+    /// The row of characteristic `c` of `model`.
+    pub fn of(model: &Model, c: &Characteristic) -> OutputRow {
+        let base = 6 * c.body;
+        let taps = match (&c.at, model.bodies.get(c.body)) {
+            (Some(at), Some(body)) => {
+                let t = generalized_force(
+                    &body.position,
+                    &body.rotation,
+                    &Vector3::from(at.point),
+                    &Vector3::from(at.direction),
+                    &Vector3::zeros(),
+                );
+                (0..6)
+                    .filter(|&i| t[i] != 0.0)
+                    .map(|i| (base + i, t[i]))
+                    .collect()
+            }
+            _ => vec![(base + c.dof as usize, 1.0)],
+        };
+        OutputRow {
+            taps,
+            column: 0,
+            base: false,
+            offset: 0.0,
+        }
+    }
+
+    /// The output's value and its factor at `omega` (rad/s) from the row's reading `x` of its
+    /// column: `value = factor · x + quantity_factor · offset`, and `factor` also scales the
+    /// reading's derivatives.
+    #[inline]
+    pub fn scale(&self, quantity_factor: C64, omega: f64, x: C64) -> (C64, C64) {
+        let factor = if self.base {
+            quantity_factor * (omega * omega)
+        } else {
+            quantity_factor
+        };
+        (factor * x + quantity_factor * self.offset, factor)
+    }
+
+    /// `Σ v x(dof)` over the taps.
+    #[inline]
+    pub fn apply(&self, x: impl Fn(usize) -> C64) -> C64 {
+        self.taps
+            .iter()
+            .fold(C64::new(0.0, 0.0), |acc, &(i, v)| acc + x(i) * v)
+    }
+}
+
+/// Adds the generalized forces of `forces` to `load`.
+fn add_forces(model: &Model, forces: &[crate::model::PointForce], load: &mut [f64]) {
+    for f in forces {
+        let body = &model.bodies[f.body];
+        let p = generalized_force(
+            &body.position,
+            &body.rotation,
+            &f.point,
+            &f.force,
+            &f.moment,
+        );
+        for i in 0..6 {
+            load[6 * f.body + i] += p[i];
+        }
+    }
 }
 
 /// One enabled SDE as the solver sees it.
@@ -119,12 +208,18 @@ pub struct System {
     pub k: Vec<f64>,
     /// Hysteretic damping matrix D (n×n, row-major), symmetric.
     pub d: Vec<f64>,
-    /// Generalized force vector P (n).
+    /// Generalized force vector P (n) of the model's excitation (reference 0).
     pub load: Vec<f64>,
+    /// The load of each further reference ([`Model::references`]), solved as right-hand side
+    /// `1 + outputs + i` ([`System::load_column`]); `M T u_b` for a base motion.
+    pub reference_loads: Vec<Vec<f64>>,
+    /// Per reference (0 = the model's excitation): the base's rigid motion `T u_b` per DOF when
+    /// that reference is a base motion (its load `M T u_b` then depends on the masses too).
+    pub base_motion: Vec<Option<Vec<f64>>>,
     /// Enabled SDEs.
     pub sdes: Vec<SdeBlock>,
-    /// Global DOF index of each output characteristic.
-    pub output_dofs: Vec<usize>,
+    /// Each output characteristic as a row over the DOFs.
+    pub output_rows: Vec<OutputRow>,
 }
 
 impl System {
@@ -189,23 +284,49 @@ impl System {
             sdes.push(block);
         }
         let mut load = vec![0.0; n];
-        for f in &model.forces {
-            let body = &model.bodies[f.body];
-            let p = generalized_force(
-                &body.position,
-                &body.rotation,
-                &f.point,
-                &f.force,
-                &f.moment,
-            );
-            for i in 0..6 {
-                load[6 * f.body + i] += p[i];
+        add_forces(model, &model.forces, &mut load);
+        let outputs = model.outputs.len();
+        let mut reference_loads = Vec::new();
+        // Per reference: the base's rigid motion `T u_b` (body axes, translations) if it moves.
+        let mut base_motion: Vec<Option<Vec<f64>>> = vec![None];
+        for r in &model.references {
+            let mut p = vec![0.0; n];
+            match &r.excitation {
+                Excitation::Forces(forces) => {
+                    add_forces(model, forces, &mut p);
+                    base_motion.push(None);
+                }
+                Excitation::BaseMotion { direction } => {
+                    let mut t = vec![0.0; n];
+                    for (b, body) in model.bodies.iter().enumerate() {
+                        let u = body.rotation.transpose() * Vector3::from(*direction);
+                        for i in 0..3 {
+                            t[6 * b + i] = u[i];
+                            p[6 * b + i] = body.mass * u[i];
+                        }
+                    }
+                    base_motion.push(Some(t));
+                }
             }
+            reference_loads.push(p);
         }
-        let output_dofs = model
+        let output_rows = model
             .outputs
             .iter()
-            .map(|c| 6 * c.body + c.dof as usize)
+            .map(|c| {
+                let mut row = OutputRow::of(model, c);
+                let r = c.reference as usize;
+                if r > 0 && r <= model.references.len() {
+                    row.column = outputs + r;
+                    if let Some(Some(t)) = base_motion.get(r) {
+                        row.base = true;
+                        if !c.relative {
+                            row.offset = row.taps.iter().map(|&(i, v)| v * t[i]).sum();
+                        }
+                    }
+                }
+                row
+            })
             .collect();
         System {
             n,
@@ -213,8 +334,36 @@ impl System {
             k,
             d,
             load,
+            reference_loads,
+            base_motion,
             sdes,
-            output_dofs,
+            output_rows,
+        }
+    }
+
+    /// The base's rigid motion `T u_b` of load column `c`, when its reference is a base motion.
+    pub fn base_motion_of_column(&self, c: usize) -> Option<&[f64]> {
+        let outputs = self.output_rows.len();
+        let r = if c == 0 { 0 } else { c.checked_sub(outputs)? };
+        self.base_motion.get(r)?.as_deref()
+    }
+
+    /// Right-hand sides of a solve: the load, one per output (its row as a load), one per further
+    /// reference.
+    pub fn columns(&self) -> usize {
+        1 + self.output_rows.len() + self.reference_loads.len()
+    }
+
+    /// Column `c`'s load entry `i` (`c` a load column: 0 or past the outputs), else 0.
+    #[inline]
+    pub fn load_entry(&self, c: usize, i: usize) -> f64 {
+        let outputs = self.output_rows.len();
+        if c == 0 {
+            self.load[i]
+        } else if c > outputs {
+            self.reference_loads[c - outputs - 1][i]
+        } else {
+            0.0
         }
     }
 

@@ -45,10 +45,14 @@ pub fn single_body(mass: f64, k: f64, psi: f64) -> Model {
             force: Vector3::new(0.0, 0.0, 1.0),
             moment: Vector3::zeros(),
         }],
+        references: Vec::new(),
         outputs: vec![Characteristic {
             body: 0,
             dof: 2,
             quantity: Quantity::Displacement,
+            at: None,
+            reference: 0,
+            relative: false,
         }],
     }
 }
@@ -96,16 +100,23 @@ pub fn two_in_series(m1: f64, m2: f64, k1: f64, k2: f64, psi: f64) -> Model {
             force: Vector3::new(0.0, 0.0, 1.0),
             moment: Vector3::zeros(),
         }],
+        references: Vec::new(),
         outputs: vec![
             Characteristic {
                 body: 0,
                 dof: 2,
                 quantity: Quantity::Displacement,
+                at: None,
+                reference: 0,
+                relative: false,
             },
             Characteristic {
                 body: 1,
                 dof: 2,
                 quantity: Quantity::Displacement,
+                at: None,
+                reference: 0,
+                relative: false,
             },
         ],
     }
@@ -175,11 +186,15 @@ pub fn chain(n: usize) -> Model {
             force: Vector3::new(400.0, 300.0, 866.0),
             moment: Vector3::zeros(),
         }],
+        references: Vec::new(),
         outputs: (0..3)
             .map(|dof| Characteristic {
                 body: last,
                 dof,
                 quantity: Quantity::Displacement,
+                at: None,
+                reference: 0,
+                relative: false,
             })
             .collect(),
         bodies,

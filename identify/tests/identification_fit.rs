@@ -55,6 +55,9 @@ fn measured(model: &Model, rel: f64, seed: u64) -> MeasuredData {
                         .then(|| q.iter().map(|v| (rel * v.norm()).powi(2)).collect()),
                     coherence: (rel > 0.0).then(|| vec![g2; f.len()]),
                     averages: (rel > 0.0).then_some(n),
+                    at: None,
+                    reference: None,
+                    relative: false,
                 }
             })
             .collect(),

@@ -27,6 +27,9 @@ fn sample() -> MeasuredData {
                 variance: Some(vec![1e-17, 2e-17, 3e-17]),
                 coherence: None,
                 averages: Some(8),
+                at: None,
+                reference: None,
+                relative: false,
             },
             Measurement {
                 body: "second".into(),
@@ -38,6 +41,9 @@ fn sample() -> MeasuredData {
                 variance: None,
                 coherence: Some(vec![0.9, 0.95]),
                 averages: None,
+                at: None,
+                reference: None,
+                relative: false,
             },
         ],
     }
@@ -212,7 +218,7 @@ proptest! {
             source: "p".into(),
             characteristics: vec![Measurement {
                 body: "second".into(), dof: 2, quantity: QuantityName::Velocity,
-                freqs_hz: freqs, amplitude: amps, phase_rad: None, variance: None, coherence: None, averages: None,
+                freqs_hz: freqs, amplitude: amps, phase_rad: None, variance: None, coherence: None, averages: None, at: None, reference: None, relative: false,
             }],
         };
         let mut back = data::parse_csv(&data::to_csv(&d), "p").unwrap();

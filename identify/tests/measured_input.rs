@@ -37,6 +37,9 @@ fn exact(m: &Model, f: &[f64], o_scaled: usize, scale: f64) -> MeasuredData {
                 variance: None,
                 coherence: None,
                 averages: None,
+                at: None,
+                reference: None,
+                relative: false,
             })
             .collect(),
     }
@@ -193,26 +196,32 @@ fn map_errors_name_the_file_line_and_field() {
     );
     let e = parse("[[channel]]\nnode = 1\ndir = \"+Q\"\nbody = \"first\"\n");
     assert!(e.starts_with("map.toml:3:7: dir:"), "{e}");
-    // 5° off the principal axis.
+    // A channel declared as a principal-axis DOF keeps the 1° rule against its UFF direction.
+    let e = parse("[[channel]]\nnode = 1\ndir = \"+X\"\nbody = \"first\"\ndof = \"u3\"\n");
+    assert!(
+        e.starts_with("map.toml:3:7: dir: +X is 90.00° from u3 of body \"first\""),
+        "{e}"
+    );
+    // ... and takes no point; a zero direction has none.
     let e =
-        parse("[[channel]]\nsensor = \"a\"\nbody = \"first\"\ndirection = [0.0872, 0, 0.9962]\n");
+        parse("[[channel]]\nsensor = \"a\"\nbody = \"first\"\ndof = \"u3\"\npoint = [0.1, 0, 0]\n");
     assert!(
-        e.starts_with("map.toml:4:13:") && e.contains("5.00° from the nearest principal axis (u3)"),
+        e.starts_with("map.toml:5:9:") && e.contains("`point` goes with a direction"),
         "{e}"
     );
-    // 0.5° off is accepted, as u3.
-    assert!(measurement_map::parse(
+    let e = parse("[[channel]]\nsensor = \"a\"\nbody = \"first\"\ndirection = [0, 0, 0]\n");
+    assert!(
+        e.starts_with("map.toml:4:13: direction: the zero vector"),
+        "{e}"
+    );
+    // 5° off a principal axis, or 100 mm off the centre line: point outputs, accepted.
+    for ok in [
+        "[[channel]]\nsensor = \"a\"\nbody = \"first\"\ndirection = [0.0872, 0, 0.9962]\n",
+        "[[channel]]\nnode = 1\ndir = 3\nbody = \"first\"\npoint = \"100 0 0 mm\"\n",
         "[[channel]]\nsensor = \"a\"\nbody = \"first\"\ndirection = [0.0087, 0, 1]\n",
-        "map.toml",
-        &m
-    )
-    .is_ok());
-    // A sensor 100 mm off the centre line: it would read the rotations too.
-    let e = parse("[[channel]]\nnode = 1\ndir = 3\nbody = \"first\"\npoint = \"100 0 0 mm\"\n");
-    assert!(
-        e.starts_with("map.toml:5:9: point:") && e.contains("100.0 mm off the line"),
-        "{e}"
-    );
+    ] {
+        assert!(measurement_map::parse(ok, "map.toml", &m).is_ok(), "{ok}");
+    }
     // Two channels on one DOF, unknown keys.
     let e = parse("[[channel]]\nnode = 1\ndir = 3\nbody = \"first\"\n[[channel]]\nnode = 2\ndir = 3\nbody = \"first\"\n");
     assert!(
@@ -390,4 +399,47 @@ fn the_mass_line_names_a_unit_error_that_misplaced_resonances_hide_from_the_band
     // The unscaled output: no unit warning.
     let w0 = levels[0].warning.clone().unwrap_or_default();
     assert!(!w0.contains("looks like"), "{w0}");
+}
+
+#[test]
+fn a_sensor_off_the_principal_axis_lines_maps_to_a_point_output() {
+    let m = model();
+    let map = measurement_map::parse(
+        "[[channel]]\nnode = 1\ndir = \"-Z\"\nbody = \"first\"\npoint = \"100 0 0 mm\"\n\
+         [[channel]]\nsensor = \"tilted\"\nbody = \"second\"\ndirection = [0, 3, 4]\n\
+         [[channel]]\nnode = 2\ndir = \"+Z\"\nbody = \"second\"\n",
+        "map.toml",
+        &m,
+    )
+    .unwrap();
+    let mut tilted = channel(7, 3, "m/N");
+    tilted.name = ChannelName::Sensor("tilted".into());
+    let chans = vec![channel(1, -3, "m/N"), tilted, channel(2, 3, "m/N")];
+    let d = map.apply(&chans, "run.uff", &m).unwrap();
+    let [first, second, axis] = &d.characteristics[..] else {
+        panic!("{:?}", d.characteristics)
+    };
+    // Off the centre line: a point output whose direction carries the sign, phase untouched.
+    let at = first.at.unwrap();
+    assert_eq!(at.point, [0.1, 0.0, 0.0]);
+    assert_eq!(at.direction, [0.0, 0.0, -1.0]);
+    assert_eq!(first.phase_rad.as_ref().unwrap()[0], 0.1);
+    // Oblique at the centre of mass: a point output there.
+    let at = second.at.unwrap();
+    assert_eq!(at.point, <[f64; 3]>::from(m.bodies[1].position));
+    assert!((at.direction[1] - 0.6).abs() < 1e-15 && (at.direction[2] - 0.8).abs() < 1e-15);
+    assert_eq!(second.dof, 2, "nearest principal axis u3");
+    // On the axis: the principal-axis DOF, as before.
+    assert_eq!((axis.at, axis.dof), (None, 2));
+    // The model gains the two point outputs and the data validate against it.
+    let with = data::with_measured_outputs(&m, &d);
+    assert_eq!(with.outputs.len(), m.outputs.len() + 2);
+    let obs = data::validate(&d, &with, "run.uff").unwrap();
+    assert_eq!(obs.characteristics.len(), 3);
+    assert!(obs.characteristics[0]
+        .label
+        .contains("at (100, 0, 0) mm along (0, 0, -1)"));
+    // Without them, the data do not validate: the outputs are not the model's.
+    let e = data::validate(&d, &m, "run.uff").unwrap_err().to_string();
+    assert!(e.contains("not among the model's outputs"), "{e}");
 }

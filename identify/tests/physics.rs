@@ -105,6 +105,7 @@ fn random_model(seed: u64, bodies: usize) -> Model {
         bodies: Vec::new(),
         sdes: Vec::new(),
         forces: Vec::new(),
+        references: Vec::new(),
         outputs: Vec::new(),
     };
     for b in 0..bodies {
@@ -205,12 +206,18 @@ fn random_model(seed: u64, bodies: usize) -> Model {
             body: bodies - 1,
             dof,
             quantity: Quantity::Displacement,
+            at: None,
+            reference: 0,
+            relative: false,
         });
     }
     m.outputs.push(Characteristic {
         body: 0,
         dof: 1,
         quantity: Quantity::Acceleration,
+        at: None,
+        reference: 0,
+        relative: false,
     });
     m
 }

@@ -271,5 +271,8 @@ pub fn to_measurement(
         variance: variance.map(|v| points.iter().map(|&k| v[k] * s * s).collect()),
         coherence: coherence.map(|c| points.iter().map(|&k| c[k]).collect()),
         averages,
+        at: None,
+        reference: None,
+        relative: false,
     })
 }

@@ -36,7 +36,11 @@ pub fn run(a: FrfArgs) -> anyhow::Result<ExitCode> {
     } else {
         let mut s = String::from("freq_hz");
         for c in &model.outputs {
-            let l = model.characteristic_label(*c).replace(' ', "_");
+            // A point output's label holds "(x, y, z)": no commas in a CSV header.
+            let l = model
+                .characteristic_label(*c)
+                .replace(", ", ";")
+                .replace(' ', "_");
             write!(s, ",{l}_re,{l}_im,{l}_amp,{l}_phase_deg")?;
         }
         s.push('\n');

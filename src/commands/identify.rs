@@ -254,6 +254,7 @@ pub fn setup(
     let model = load_model(&a.model)?;
     let measured = super::measured::load(&a.data, a.map.as_deref(), &model)?;
     let measured = super::measured::choose_lines(&measured, &line_choice(a), a.points, &a.data)?;
+    let model = data::with_measured_outputs(&model, &measured);
     let obs = data::validate(&measured, &model, &a.data.display().to_string())?;
     super::measured::check(&model, &obs)?;
     let vars = variables::load(&a.vars, &model)?;

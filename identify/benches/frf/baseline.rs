@@ -18,7 +18,7 @@ pub fn dense_response(model: &Model, freqs: &[f64], params: &[ParamRef]) -> (Vec
         .map(|b| b.expect("param"))
         .collect();
     let n = s.n;
-    let outs = s.output_dofs.len();
+    let outs = s.output_rows.len();
     let lines = freqs.len();
     let mut values = vec![C64::new(0.0, 0.0); outs * lines];
     let mut jac = vec![C64::new(0.0, 0.0); params.len() * outs * lines];
@@ -33,8 +33,9 @@ pub fn dense_response(model: &Model, freqs: &[f64], params: &[ParamRef]) -> (Vec
         let lu = a.partial_piv_lu();
         let p = Mat::<C64>::from_fn(n, 1, |i, _| C64::new(s.load[i], 0.0));
         let q = lu.solve(&p);
-        for (o, &d) in s.output_dofs.iter().enumerate() {
-            values[o * lines + k] = q[(d, 0)] * model.outputs[o].quantity.factor(w2.sqrt());
+        for (o, row) in s.output_rows.iter().enumerate() {
+            values[o * lines + k] =
+                row.apply(|d| q[(d, 0)]) * model.outputs[o].quantity.factor(w2.sqrt());
         }
         for (pi, pb) in blocks.iter().enumerate() {
             let b = &s.sdes[pb.block];
@@ -53,9 +54,9 @@ pub fn dense_response(model: &Model, freqs: &[f64], params: &[ParamRef]) -> (Vec
             let da = t.transpose() * &dt;
             let rhs = -(&da * &q);
             let dq = lu.solve(&rhs);
-            for (o, &d) in s.output_dofs.iter().enumerate() {
+            for (o, row) in s.output_rows.iter().enumerate() {
                 jac[(pi * outs + o) * lines + k] =
-                    dq[(d, 0)] * model.outputs[o].quantity.factor(w2.sqrt());
+                    row.apply(|d| dq[(d, 0)]) * model.outputs[o].quantity.factor(w2.sqrt());
             }
         }
     }

@@ -750,6 +750,13 @@ pub fn split_body(model: &mut Model, name: &str, axis: usize, c: f64) -> Result<
     for f in model.forces.iter_mut().filter(|f| f.body == b) {
         f.body = third(&f.point);
     }
+    for r in model.references.iter_mut() {
+        if let crate::model::Excitation::Forces(forces) = &mut r.excitation {
+            for f in forces.iter_mut().filter(|f| f.body == b) {
+                f.body = third(&f.point);
+            }
+        }
+    }
     // The joints: cross-section of the other two sides.
     let (a1, a2) = (sides[(axis + 1) % 3], sides[(axis + 2) % 3]);
     let kt = 1.0 / c;

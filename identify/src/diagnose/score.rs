@@ -21,6 +21,7 @@ use super::residuals::chi2_tail;
 use crate::frf::{self, States};
 use crate::identification::Criterion;
 use crate::model::{Model, ParamRef};
+use crate::system::OutputRow;
 use crate::C64;
 use nalgebra::{DMatrix, DVector};
 use serde::Serialize;
@@ -94,13 +95,15 @@ pub fn score_all(
     let model = crit.model_at(fit.x);
     let lines = crit.lines().to_vec();
     let states = frf::states(&model, &lines, frf::Method::Auto)?;
-    let outputs: Vec<usize> = model
+    let outputs: Vec<OutputRow> = model
         .outputs
         .iter()
-        .map(|c| 6 * c.body + c.dof as usize)
+        .map(|c| OutputRow::of(&model, c))
         .collect();
     let q = |o: usize, k: usize| {
-        states.load_at(k)[outputs[o]] * states.factor[k * states.outputs + o] * fit.gains[o]
+        (outputs[o].apply(|i| states.load_for(k, o)[i]) * states.factor[k * states.outputs + o]
+            + states.offset[k * states.outputs + o])
+            * fit.gains[o]
     };
     // Orthonormal basis of the fit Jacobian's columns, for the projection.
     let basis = orthonormal_columns(fit.jac);
@@ -165,7 +168,7 @@ fn fill_derivative(
     cand: &Effect,
     model: &Model,
     states: &States,
-    outputs: &[usize],
+    outputs: &[OutputRow],
     gains: &[f64],
     lines: &[f64],
     damping: &Option<(Vec<ParamRef>, frf::Response)>,
@@ -187,8 +190,9 @@ fn fill_derivative(
             for o in 0..gains.len() {
                 for k in 0..nl {
                     dq[o * nl + k] = if o == *output {
-                        states.load_at(k)[outputs[o]]
+                        (outputs[o].apply(|i| states.load_for(k, o)[i])
                             * states.factor[k * states.outputs + o]
+                            + states.offset[k * states.outputs + o])
                             * gains[o]
                     } else {
                         C64::new(0.0, 0.0)
@@ -287,8 +291,14 @@ fn flexible_first_order(
     let mut rho = [[C64::new(0.0, 0.0); 6]; 2];
     for (k, f) in lines.iter().enumerate() {
         let w2 = (TWO_PI * f).powi(2);
-        end_force(states.load_at(k), &|r| sys.load[r], w2, &mut lambda);
         for (o, g) in gains.iter().enumerate() {
+            let column = sys.output_rows[o].column;
+            end_force(
+                states.load_for(k, o),
+                &|r| sys.load_entry(column, r),
+                w2,
+                &mut lambda,
+            );
             let w = &states.unit[(k * states.outputs + o) * n..(k * states.outputs + o + 1) * n];
             // The unit load sits on an original body's DOF, never on a new end third.
             end_force(w, &|_| 0.0, w2, &mut rho);
@@ -425,10 +435,10 @@ mod tests {
         let model = crate::modelfile::load(&path).unwrap().model;
         let lines = [20.0, 57.0, 131.0, 250.0, 400.0];
         let states = frf::states(&model, &lines, frf::Method::Direct).unwrap();
-        let outputs: Vec<usize> = model
+        let outputs: Vec<OutputRow> = model
             .outputs
             .iter()
-            .map(|c| 6 * c.body + c.dof as usize)
+            .map(|c| OutputRow::of(&model, c))
             .collect();
         let gains = vec![1.0; outputs.len()];
         let nl = lines.len();
@@ -454,7 +464,7 @@ mod tests {
                 for o in 0..outputs.len() {
                     let fd: Vec<C64> = (0..nl)
                         .map(|k| {
-                            let y0 = states.load_at(k)[outputs[o]]
+                            let y0 = outputs[o].apply(|i| states.load_at(k)[i])
                                 * states.factor[k * states.outputs + o];
                             let (d1, d2) =
                                 ((r1.output(o)[k] - y0) / h1, (r2.output(o)[k] - y0) / h2);

@@ -475,6 +475,9 @@ fn csv_characteristic(
         variance: has_var.then(|| pts.iter().map(|r| r.var.unwrap_or(f64::NAN)).collect()),
         coherence: has_coh.then(|| pts.iter().map(|r| r.coh.unwrap_or(f64::NAN)).collect()),
         averages,
+        at: None,
+        reference: None,
+        relative: false,
     })
 }
 
@@ -620,6 +623,29 @@ pub fn validate(
     })
 }
 
+/// `model` with the outputs `data` measure added where it does not declare them already: point
+/// outputs (sensors anywhere on a body, named by a measurement map), and a declared output's
+/// response to another of the model's references (an FRF matrix's other columns) or relative to
+/// a moving base. A principal-axis output must be declared by the model under some reference
+/// (see [`validate`]); references the model does not have are left to [`validate`] to report.
+pub fn with_measured_outputs(model: &Model, data: &MeasuredData) -> Model {
+    let mut out = model.clone();
+    for m in &data.characteristics {
+        let Some(c) = m.resolve(model) else { continue };
+        if usize::from(c.reference) > model.references.len() || out.outputs.contains(&c) {
+            continue;
+        }
+        let declared = model
+            .outputs
+            .iter()
+            .any(|o| (o.body, o.dof, o.quantity, o.at) == (c.body, c.dof, c.quantity, c.at));
+        if c.at.is_some() || declared {
+            out.outputs.push(c);
+        }
+    }
+    out
+}
+
 /// A characteristic of a data file, for errors: the file and a JSON-path-like item.
 struct DataItem<'a> {
     origin: &'a str,
@@ -669,6 +695,28 @@ fn resolve_output(
             m.dof
         )));
     };
+    if let Some(name) = &m.reference {
+        if model.reference_index(name).is_none() {
+            let known: Vec<&str> = model.references.iter().map(|r| r.name.as_str()).collect();
+            return Err(bad(format!(
+                "reference \"{name}\" is not one of the model's (excitation{}{}); declare it as a [[reference]] of the model or fix the name",
+                if known.is_empty() { "" } else { ", " },
+                known.join(", ")
+            )));
+        }
+    }
+    let base = c.reference > 0
+        && matches!(
+            model.references[usize::from(c.reference) - 1].excitation,
+            crate::model::Excitation::BaseMotion { .. }
+        );
+    if c.relative && !base {
+        return Err(bad(format!(
+            "relative: a motion relative to the base is an output under base motion, and the reference \"{}\" is {}; declare a [[reference]] with base_motion in the model and name it, or drop `relative`",
+            model.reference_name(c.reference),
+            if c.reference == 0 { "the model's force excitation" } else { "a force" }
+        )));
+    }
     let Some(output) = model.outputs.iter().position(|o| *o == c) else {
         let outs: Vec<String> = model
             .outputs

@@ -152,7 +152,26 @@ pub fn to_model_convention(
         )
     };
     if unit.per_force {
-        let Some(f) = excitation_amplitude(model) else {
+        let of_reference = match m.reference.as_deref() {
+            None => excitation_amplitude(model),
+            Some(name) => match model.references.iter().find(|r| r.name == name) {
+                Some(crate::model::Reference {
+                    excitation: crate::model::Excitation::Forces(f),
+                    ..
+                }) => f
+                    .first()
+                    .map(|f| f.force.norm())
+                    .filter(|f| f.is_finite() && *f > 0.0),
+                Some(_) => {
+                    return Err(format!(
+                        "{label}: the data are per unit force ({}), but reference \"{name}\" is a base motion: give transmissibilities as the response per metre of base motion (unit = \"m\"; a ratio of accelerations is the same number)",
+                        unit.text
+                    ))
+                }
+                None => None,
+            },
+        };
+        let Some(f) = of_reference else {
             return Err(format!(
                 "{label}: the data are per unit force ({}), but the model declares no excitation \
                  force to scale them to; add an [[excitation]] to the model",
@@ -161,7 +180,11 @@ pub fn to_model_convention(
         };
         factor *= f;
         how.push_str(&format!(
-            ", scaled to the model's excitation ({f} N, the first force's amplitude)"
+            ", scaled to the model's {} ({f} N, the first force's amplitude)",
+            m.reference
+                .as_deref()
+                .map(|r| format!("reference \"{r}\""))
+                .unwrap_or_else(|| "excitation".into())
         ));
     }
     scale(m, factor);
@@ -198,6 +221,9 @@ pub fn convert_quantity(
             body,
             dof: m.dof,
             quantity: q,
+            at: m.at,
+            reference: m.reference_index(model),
+            relative: m.relative,
         })
     };
     if is_output(have) {

@@ -322,6 +322,9 @@ mod tests {
                         .collect(),
                 ),
                 averages: Some(8),
+                at: None,
+                reference: None,
+                relative: false,
                 freqs_hz: f,
             }],
         }

@@ -1,31 +1,42 @@
 //! The measurement map (`--map FILE`, TOML): which measured channel — a UFF response node and
-//! direction, or a named sensor — is which body of the model and which of its principal-axis
-//! DOFs; the reference to use when a file holds several; the unit when a file gives none.
-//! [`MeasurementMap::apply`] turns the channels of a vendor file into [`MeasuredData`] in the
-//! model's convention (SI, the response to the model's excitation, the output's quantity).
+//! direction, or a named sensor — is which body of the model and which output of it (a
+//! principal-axis DOF, or a point and a direction on the body); which file reference is which
+//! of the model's excitations; the unit when a file gives none. [`MeasurementMap::apply`] turns
+//! the channels of a vendor file into [`MeasuredData`] in the model's convention (SI, the
+//! response to the model's excitation or reference, the output's quantity).
 //!
 //! ```toml
 //! unit = "g/N"                 # optional: when the file's records give no units
-//! [reference]                  # optional: which excitation, when the file holds several
+//! [[reference]]                # optional: one per file reference to use ([reference]: one)
 //! node = 1
-//! dir = "+Z"
+//! dir = "+Z"                   # no name: the model's own excitation
+//! [[reference]]
+//! node = 2
+//! dir = "+Y"
+//! name = "hammer"              # a [[reference]] of the model (motion = "relative": base motion)
 //! [[channel]]
 //! node = 3                     # UFF response node ...
 //! dir = "+Z"                   # ... and direction (±X/Y/Z or ±1..3, global axes)
 //! body = "table"
-//! point = "0 0 450 mm"         # optional: where the sensor is (global), checked below
+//! point = "120 0 450 mm"       # optional: where the sensor is (global); see below
 //! [[channel]]
 //! sensor = "acc2"              # a named sensor (CSV `body` column or a UFF response entity)
 //! body = "column"
 //! direction = [0, 1, 0]        # global direction of its axis, or `dof = "u2"` / `"-u2"`
 //! ```
 //!
-//! A channel maps onto one principal-axis DOF u1-u3 of its body: its direction must lie within
-//! 1° of a principal axis (a negative axis flips the sign), and a sensor `point` must lie on the
-//! line through the body's centre of mass along that direction (within 1 mm), where the reading
-//! is that DOF alone; anywhere else it reads u + θ×(p − c), which mixes in the body's rotations
-//! and is an error (ident's outputs are principal-axis DOFs). Errors name the map's file, line
-//! and field.
+//! A channel is an output of its body (`docs/identification.md`, measurement map):
+//! - `dof = "u2"` (or `"-u2"`): that principal-axis DOF at the centre of mass. A UFF `dir` beside
+//!   it must lie within 1° of that axis; a `point` is not allowed with it.
+//! - a direction (`direction = [x, y, z]`, or the UFF `dir`) and an optional `point` (global; the
+//!   centre of mass when omitted): where the point lies within 1 mm of the line through the centre
+//!   of mass along a principal axis and the direction within 1° of that axis, the channel is that
+//!   principal-axis DOF (a negative axis flips the sign), as before; anywhere else it is a **point
+//!   output**, `dᵀ(u + θ × (p − c))` ([`crate::model::PointOutput`]), which the model need not
+//!   declare ([`super::data::with_measured_outputs`]).
+//!
+//! With several `[[reference]]`s every channel is mapped once per reference. Errors name the
+//! map's file, line and field.
 
 use std::collections::BTreeSet;
 use std::f64::consts::PI;
@@ -38,14 +49,15 @@ use serde_spanned::Spanned;
 use super::data::DataError;
 use super::frf_units::{self, FrfUnit};
 use crate::measured::{MeasuredData, Measurement};
-use crate::model::{Model, DOF_NAMES};
+use crate::model::{Excitation, Model, PointOutput, DOF_NAMES};
 use crate::source::{Located, SourceText};
 use crate::units::{parse_quantities, Dim};
 
-/// Largest angle (degrees) between a channel's direction and the principal axis it maps to.
+/// Largest angle (degrees) between a channel's direction and the principal axis it maps to (as
+/// that DOF; farther off it is a point output, except where the map declares `dof`).
 pub const MAX_AXIS_ANGLE_DEG: f64 = 1.0;
 /// Largest distance (m) of a sensor's point from the line through the centre of mass along its
-/// direction.
+/// direction for it to read a principal-axis DOF (farther off it is a point output).
 pub const MAX_LEVER_ARM_M: f64 = 1e-3;
 
 /// Why a map could not be read or applied.
@@ -130,14 +142,39 @@ struct Entry {
     body: usize,
     dof: u8,
     negative: bool,
+    /// A point output (sensor off the principal-axis lines); `None`: the DOF `dof`.
+    at: Option<PointOutput>,
     unit: Option<FrfUnit>,
+}
+
+impl Entry {
+    /// `u2`, or `at (100, 0, 450) mm along (0, 1, 0)`.
+    fn output_name(&self) -> String {
+        match &self.at {
+            Some(at) => at.label(),
+            None => DOF_NAMES[self.dof as usize].to_string(),
+        }
+    }
+}
+
+/// One `[reference]` / `[[reference]]` of the map: which excitation of the file is which of the
+/// model.
+#[derive(Debug, Clone, PartialEq)]
+struct MapReference {
+    line: usize,
+    /// The file's reference node and direction.
+    node_dir: (i64, i64),
+    /// The model's reference (`None`: its own excitation).
+    name: Option<String>,
+    /// Under base motion: the channels are relative to the base.
+    relative: bool,
 }
 
 /// A measurement map resolved against a model.
 #[derive(Debug, Clone, PartialEq)]
 pub struct MeasurementMap {
     file: String,
-    reference: Option<(i64, i64)>,
+    references: Vec<MapReference>,
     unit: Option<FrfUnit>,
     entries: Vec<Entry>,
 }
@@ -162,7 +199,7 @@ enum Point {
 #[serde(deny_unknown_fields)]
 struct RawMap {
     unit: Option<Sp<String>>,
-    reference: Option<RawReference>,
+    reference: Option<RawReferences>,
     #[serde(default, rename = "channel")]
     channels: Vec<RawChannel>,
 }
@@ -172,6 +209,39 @@ struct RawMap {
 struct RawReference {
     node: Sp<i64>,
     dir: Sp<Dir>,
+    name: Option<Sp<String>>,
+    motion: Option<Sp<String>>,
+}
+
+/// `[reference]` (one table) or `[[reference]]` (several), read without buffering so that every
+/// field keeps its place in the file.
+struct RawReferences(Vec<RawReference>);
+
+impl<'de> Deserialize<'de> for RawReferences {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        struct OneOrMany;
+        impl<'de> serde::de::Visitor<'de> for OneOrMany {
+            type Value = RawReferences;
+            fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+                f.write_str("a [reference] table or [[reference]] tables")
+            }
+            fn visit_map<A: serde::de::MapAccess<'de>>(
+                self,
+                map: A,
+            ) -> Result<RawReferences, A::Error> {
+                RawReference::deserialize(serde::de::value::MapAccessDeserializer::new(map))
+                    .map(|r| RawReferences(vec![r]))
+            }
+            fn visit_seq<A: serde::de::SeqAccess<'de>>(
+                self,
+                seq: A,
+            ) -> Result<RawReferences, A::Error> {
+                Vec::<RawReference>::deserialize(serde::de::value::SeqAccessDeserializer::new(seq))
+                    .map(RawReferences)
+            }
+        }
+        d.deserialize_any(OneOrMany)
+    }
 }
 
 #[derive(Deserialize)]
@@ -235,15 +305,90 @@ pub fn parse(text: &str, origin: &str, model: &Model) -> Result<MeasurementMap, 
         )
     })?;
     let unit = raw.unit.as_ref().map(|u| unit_of(&src, u)).transpose()?;
-    let reference = match &raw.reference {
-        None => None,
-        Some(r) => Some((
+    let mut references: Vec<MapReference> = Vec::new();
+    for r in raw.reference.iter().flat_map(|r| &r.0) {
+        let node_dir = (
             *r.node.get_ref(),
             parse_dir(r.dir.get_ref()).ok_or_else(|| {
                 src.at(r.dir.span(), "reference.dir: use +X, -Y, Z, ... or ±1..6")
             })?,
-        )),
-    };
+        );
+        let line = src.at(r.node.span(), "").line;
+        if let Some(o) = references.iter().find(|o| o.node_dir == node_dir) {
+            return Err(src.at(
+                r.node.span(),
+                format!(
+                    "reference node {} {} is mapped twice (line {} too)",
+                    node_dir.0,
+                    dir_text(node_dir.1),
+                    o.line
+                ),
+            ));
+        }
+        let name = match &r.name {
+            None => None,
+            Some(n) if n.get_ref() == "excitation" => None,
+            Some(n) => {
+                if model.reference_index(n.get_ref()).is_none() {
+                    let known: Vec<&str> =
+                        model.references.iter().map(|x| x.name.as_str()).collect();
+                    return Err(src.at(
+                        n.span(),
+                        format!(
+                            "reference.name: the model has no [[reference]] \"{}\"; its references: excitation{}{}",
+                            n.get_ref(),
+                            if known.is_empty() { "" } else { ", " },
+                            known.join(", ")
+                        ),
+                    ));
+                }
+                Some(n.get_ref().clone())
+            }
+        };
+        if references.iter().any(|o| o.name == name) {
+            return Err(src.at(
+                r.name.as_ref().map(|n| n.span()).unwrap_or(r.node.span()),
+                format!(
+                    "reference.name: two file references map to the model's {}; name a different [[reference]] of the model for each",
+                    name.as_deref().unwrap_or("excitation")
+                ),
+            ));
+        }
+        let relative = match &r.motion {
+            None => false,
+            Some(m) => {
+                let base = name
+                    .as_deref()
+                    .and_then(|n| model.references.iter().find(|x| x.name == n))
+                    .is_some_and(|x| matches!(x.excitation, Excitation::BaseMotion { .. }));
+                if !base {
+                    return Err(src.at(
+                        m.span(),
+                        format!(
+                            "reference.motion: absolute or relative motion is an output under base motion, and the model's {} is not one; name a [[reference]] of the model with base_motion",
+                            name.as_deref().map(|n| format!("reference \"{n}\"")).unwrap_or("excitation".into())
+                        ),
+                    ));
+                }
+                match m.get_ref().as_str() {
+                    "absolute" => false,
+                    "relative" => true,
+                    other => {
+                        return Err(src.at(
+                            m.span(),
+                            format!("reference.motion: \"{other}\" is neither \"absolute\" (transmissibility) nor \"relative\" (response − base)"),
+                        ))
+                    }
+                }
+            }
+        };
+        references.push(MapReference {
+            line,
+            node_dir,
+            name,
+            relative,
+        });
+    }
     if raw.channels.is_empty() {
         return Err(src.at(
             0..0,
@@ -259,12 +404,18 @@ pub fn parse(text: &str, origin: &str, model: &Model) -> Result<MeasurementMap, 
                 format!("{} is mapped twice (line {} too)", e.name, o.line),
             ));
         }
-        if let Some(o) = entries.iter().find(|o| (o.body, o.dof) == (e.body, e.dof)) {
+        if let Some(o) = entries
+            .iter()
+            .find(|o| (o.body, o.dof, o.at) == (e.body, e.dof, e.at))
+        {
             return Err(src.at(
                 c.body.span(),
                 format!(
                     "{} {} is already measured by {} (line {}); one channel per body and DOF",
-                    model.bodies[e.body].name, DOF_NAMES[e.dof as usize], o.name, o.line
+                    model.bodies[e.body].name,
+                    e.output_name(),
+                    o.name,
+                    o.line
                 ),
             ));
         }
@@ -272,7 +423,7 @@ pub fn parse(text: &str, origin: &str, model: &Model) -> Result<MeasurementMap, 
     }
     Ok(MeasurementMap {
         file: origin.to_string(),
-        reference,
+        references,
         unit,
         entries,
     })
@@ -317,7 +468,7 @@ fn entry(src: &SourceText, c: &RawChannel, model: &Model) -> Result<Entry, Locat
         ));
     };
     let b = &model.bodies[body];
-    let (dof, negative) = match (&c.dof, &c.direction) {
+    let (dof, negative, at) = match (&c.dof, &c.direction) {
         (Some(_), Some(d)) => {
             return Err(src.at(d.span(), "give `dof` or `direction`, not both"));
         }
@@ -333,7 +484,31 @@ fn entry(src: &SourceText, c: &RawChannel, model: &Model) -> Result<Entry, Locat
                     format!("dof: \"{t}\" is not u1, u2 or u3 (optionally with a sign: \"-u2\"); rotations are not mapped from sensors"),
                 )
             })?;
-            (k as u8, neg)
+            if let Some(p) = &c.point {
+                return Err(src.at(
+                    p.span(),
+                    "`point` goes with a direction (`direction = [x, y, z]` or the UFF `dir`), not with `dof`: a channel declared as a principal-axis DOF reads it at the centre of mass",
+                ));
+            }
+            // A UFF direction beside `dof` must agree with it: within 1° of that principal axis.
+            if let (Some(dspan), ChannelName::Node { dir, .. }) = (&c.dir, &name) {
+                if (1..=3).contains(&dir.abs()) {
+                    let mut g = Vector3::zeros();
+                    g[(dir.unsigned_abs() - 1) as usize] = dir.signum() as f64;
+                    let cos = g.dot(&b.rotation.column(k));
+                    let angle = cos.abs().min(1.0).acos() * 180.0 / PI;
+                    if angle > MAX_AXIS_ANGLE_DEG {
+                        return Err(src.at(
+                            dspan.span(),
+                            format!(
+                                "dir: {} is {angle:.2}° from {} of body \"{}\" (dof = \"{}\"); a channel declared as a principal-axis DOF must lie within {MAX_AXIS_ANGLE_DEG}° of it — drop `dof` to map it as a point output along its direction",
+                                dir_text(*dir), DOF_NAMES[k], b.name, d.get_ref()
+                            ),
+                        ));
+                    }
+                }
+            }
+            (k as u8, neg, None)
         }
         (None, given) => {
             let (d, span) = match (given, &name) {
@@ -373,47 +548,42 @@ fn entry(src: &SourceText, c: &RawChannel, model: &Model) -> Result<Entry, Locat
                 return Err(src.at(span, "direction: the zero vector has no direction"));
             }
             let d = d / n;
+            let point = match &c.point {
+                None => None,
+                Some(p) => {
+                    let xs = match p.get_ref() {
+                        Point::Numbers(v) => v.clone(),
+                        Point::Text(t) => parse_quantities(t, Dim::LENGTH)
+                            .map_err(|e| src.at(p.span(), format!("point: {e}")))?,
+                    };
+                    if xs.len() != 3 || !xs.iter().all(|x| x.is_finite()) {
+                        return Err(src.at(
+                            p.span(),
+                            "point: three coordinates, e.g. \"0 0 450 mm\" or [0, 0, 0.45] (m)",
+                        ));
+                    }
+                    Some(Vector3::new(xs[0], xs[1], xs[2]))
+                }
+            };
+            // The sensor reads dᵀ(u + θ × (p − c)); where p lies on the line through the centre
+            // of mass along a principal axis it reads that DOF alone, and the channel keeps the
+            // principal-axis characteristic; anywhere else it is a point output.
             let (k, cos) = (0..3)
                 .map(|k| (k, d.dot(&b.rotation.column(k))))
                 .max_by(|a, b| a.1.abs().total_cmp(&b.1.abs()))
                 .unwrap_or((0, 0.0));
             let angle = cos.abs().min(1.0).acos() * 180.0 / PI;
-            if angle > MAX_AXIS_ANGLE_DEG {
-                return Err(src.at(
-                    span,
-                    format!(
-                        "direction ({:.4}, {:.4}, {:.4}) is {angle:.2}° from the nearest principal axis ({}) of body \"{}\"; ident's outputs are the principal-axis DOFs u1-u3, so a channel must be within {MAX_AXIS_ANGLE_DEG}° of one (outputs along other directions are not supported yet)",
-                        d.x, d.y, d.z, DOF_NAMES[k], b.name
-                    ),
-                ));
-            }
-            if let Some(p) = &c.point {
-                let xs = match p.get_ref() {
-                    Point::Numbers(v) => v.clone(),
-                    Point::Text(t) => parse_quantities(t, Dim::LENGTH)
-                        .map_err(|e| src.at(p.span(), format!("point: {e}")))?,
+            let on_axis_line =
+                point.is_none_or(|p| (p - b.position).cross(&d).norm() <= MAX_LEVER_ARM_M);
+            if angle <= MAX_AXIS_ANGLE_DEG && on_axis_line {
+                (k as u8, cos < 0.0, None)
+            } else {
+                let p = point.unwrap_or(b.position);
+                let Some(at) = PointOutput::new(p, d) else {
+                    return Err(src.at(span, "direction: not a finite direction"));
                 };
-                if xs.len() != 3 || !xs.iter().all(|x| x.is_finite()) {
-                    return Err(src.at(
-                        p.span(),
-                        "point: three coordinates, e.g. \"0 0 450 mm\" or [0, 0, 0.45] (m)",
-                    ));
-                }
-                let r = Vector3::new(xs[0], xs[1], xs[2]) - b.position;
-                let off = r.cross(&d).norm();
-                if off > MAX_LEVER_ARM_M {
-                    return Err(src.at(
-                        p.span(),
-                        format!(
-                            "point: the sensor is {:.1} mm off the line through the centre of mass of \"{}\" along its direction; there it reads u + θ×(p − c), which mixes in the body's rotations, and ident's outputs are the principal-axis DOFs at the centre of mass (point outputs are not supported yet): place the sensor on that line, or omit `point` if its reading is the body's {} by construction",
-                            off * 1e3,
-                            b.name,
-                            DOF_NAMES[k]
-                        ),
-                    ));
-                }
+                (k as u8, false, Some(at))
             }
-            (k as u8, cos < 0.0)
         }
     };
     let unit = c.unit.as_ref().map(|u| unit_of(src, u)).transpose()?;
@@ -423,6 +593,7 @@ fn entry(src: &SourceText, c: &RawChannel, model: &Model) -> Result<Entry, Locat
         body,
         dof,
         negative,
+        at,
         unit,
     })
 }
@@ -446,15 +617,64 @@ impl MeasurementMap {
             })
         };
         let mut notes = vec![format!("channels mapped by {}", self.file)];
-        let reference = self.reference(channels, origin)?;
-        if let Some((n, d)) = reference {
-            notes.push(format!("reference node {n} {}", dir_text(d)));
+        let targets: Vec<MapReference> = if self.references.is_empty() {
+            match self.reference(channels, origin)? {
+                Some(node_dir) => vec![MapReference {
+                    line: 0,
+                    node_dir,
+                    name: None,
+                    relative: false,
+                }],
+                None => Vec::new(),
+            }
+        } else {
+            self.references.clone()
+        };
+        let held: BTreeSet<(i64, i64)> = channels.iter().filter_map(|c| c.reference).collect();
+        for t in &targets {
+            let (n, d) = t.node_dir;
+            if t.line > 0 && !held.contains(&t.node_dir) && !held.is_empty() {
+                return Err(MapError::Map(Located {
+                    file: self.file.clone(),
+                    line: t.line,
+                    column: 1,
+                    message: format!(
+                        "reference: {origin} holds no FRFs of reference node {n} {}; its references: {}",
+                        dir_text(d),
+                        held.iter()
+                            .map(|(n, d)| format!("node {n} {}", dir_text(*d)))
+                            .collect::<Vec<_>>()
+                            .join(", ")
+                    ),
+                }));
+            }
+            notes.push(format!(
+                "reference node {n} {} is the model's {}{}",
+                dir_text(d),
+                t.name.as_deref().unwrap_or("excitation"),
+                if t.relative { " (relative motion)" } else { "" }
+            ));
         }
-        let of_reference = |c: &&MeasuredChannel| {
-            reference.is_none() || c.reference.is_none() || c.reference == reference
+        let of_any = |c: &MeasuredChannel| {
+            targets.is_empty()
+                || c.reference.is_none()
+                || targets.iter().any(|t| c.reference == Some(t.node_dir))
         };
         let mut characteristics = Vec::new();
-        for e in &self.entries {
+        let no_target = [None];
+        let each: Vec<Option<&MapReference>> = if targets.is_empty() {
+            no_target.to_vec()
+        } else {
+            targets.iter().map(Some).collect()
+        };
+        for (t, e) in each
+            .iter()
+            .flat_map(|t| self.entries.iter().map(move |e| (t, e)))
+        {
+            let reference = t.map(|t| t.node_dir);
+            let of_reference = |c: &&MeasuredChannel| {
+                reference.is_none() || c.reference.is_none() || c.reference == reference
+            };
             let found: Vec<&MeasuredChannel> = channels
                 .iter()
                 .filter(of_reference)
@@ -520,13 +740,16 @@ impl MeasurementMap {
                 variance: None,
                 coherence: c.coherence.clone(),
                 averages: None,
+                at: e.at,
+                reference: t.and_then(|t| t.name.clone()),
+                relative: t.is_some_and(|t| t.relative),
             };
             notes.push(format!(
                 "{} ({}) is {body} {}{}, unit from {from}",
                 e.name,
                 c.item,
                 if e.negative { "-" } else { "" },
-                DOF_NAMES[e.dof as usize]
+                e.output_name()
             ));
             frf_units::to_model_convention(&mut m, &unit, model, &mut notes)
                 .map_err(|message| bad(&c.item, message))?;
@@ -534,7 +757,7 @@ impl MeasurementMap {
         }
         let unused: Vec<String> = channels
             .iter()
-            .filter(|c| !self.entries.iter().any(|e| e.name == c.name) || !of_reference(c))
+            .filter(|c| !self.entries.iter().any(|e| e.name == c.name) || !of_any(c))
             .map(|c| format!("{} ({})", c.name, c.item))
             .collect();
         if !unused.is_empty() {
@@ -565,9 +788,6 @@ impl MeasurementMap {
         channels: &[MeasuredChannel],
         origin: &str,
     ) -> Result<Option<(i64, i64)>, MapError> {
-        if self.reference.is_some() {
-            return Ok(self.reference);
-        }
         let refs: BTreeSet<(i64, i64)> = channels
             .iter()
             .filter(|c| self.entries.iter().any(|e| e.name == c.name))
@@ -582,7 +802,7 @@ impl MeasurementMap {
                 origin: origin.to_string(),
                 item: "references".into(),
                 message: format!(
-                    "the file holds FRFs of {} references ({}); choose one in the map: [reference] node = ..., dir = \"...\" (several references in one fit are not supported yet)",
+                    "the file holds FRFs of {} references ({}); say in the map which is which of the model: [[reference]] node = ..., dir = \"...\", name = \"...\" (a [[reference]] of the model; without name, the model's excitation), one per reference to use",
                     refs.len(),
                     list.join(", ")
                 ),

@@ -31,7 +31,7 @@
 //!     characteristics: (0..2).map(|o| identify::Measurement {
 //!         body: truth.bodies[o].name.clone(), dof: 2, quantity: identify::measured::QuantityName::Displacement,
 //!         freqs_hz: freqs.clone(), amplitude: r.output(o).iter().map(|v| v.norm()).collect(),
-//!         phase_rad: None, variance: None, coherence: None, averages: None,
+//!         phase_rad: None, variance: None, coherence: None, averages: None, at: None, reference: None, relative: false,
 //!     }).collect(),
 //! };
 //! let obs = identify::identification::data::validate(&data, &truth, "synthetic").unwrap();

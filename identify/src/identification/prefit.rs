@@ -123,19 +123,23 @@ fn mac_mass(a: &[f64], b: &[f64], mass: &[f64]) -> f64 {
 }
 
 fn shape_at_outputs(sys: &System, phi: &[f64]) -> Vec<C64> {
-    sys.output_dofs
+    sys.output_rows
         .iter()
-        .map(|&d| C64::new(phi[d], 0.0))
+        .map(|row| C64::new(row.taps.iter().map(|&(d, c)| c * phi[d]).sum(), 0.0))
         .collect()
 }
 
 /// Share of a mass-normalized mode's kinetic energy at the output characteristics' DOFs: the
 /// modes the measurement can see.
 fn visibility(sys: &System, phi: &[f64]) -> f64 {
-    sys.output_dofs
+    let mut dofs: Vec<usize> = sys
+        .output_rows
         .iter()
-        .map(|&d| sys.mass[d] * phi[d] * phi[d])
-        .sum()
+        .flat_map(|row| row.taps.iter().map(|&(d, _)| d))
+        .collect();
+    dofs.sort_unstable();
+    dofs.dedup();
+    dofs.iter().map(|&d| sys.mass[d] * phi[d] * phi[d]).sum()
 }
 
 /// A mode is visible when at least this share of its kinetic energy is at the outputs' DOFs.

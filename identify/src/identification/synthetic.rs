@@ -62,6 +62,10 @@ pub fn amplitude_data(
                 Measurement {
                     body: truth.bodies[c.body].name.clone(),
                     dof: c.dof,
+                    at: c.at,
+                    reference: (c.reference > 0)
+                        .then(|| truth.reference_name(c.reference).to_string()),
+                    relative: c.relative,
                     quantity: QuantityName::from(c.quantity),
                     freqs_hz: freqs_hz.to_vec(),
                     amplitude: q

@@ -47,6 +47,9 @@ pub fn fixture(seed: u64) -> Fixture {
                 ),
                 coherence: None,
                 averages: None,
+                at: None,
+                reference: None,
+                relative: false,
             })
             .collect(),
     };
