@@ -88,7 +88,7 @@ fn the_judge_matches_effects_by_kind_and_place() {
     let truth: Vec<f64> = vars
         .vars
         .iter()
-        .map(|v| model.param(v.targets[0].param).unwrap() / v.targets[0].ratio)
+        .map(|v| model.value(v.targets[0].param).unwrap() / v.targets[0].ratio)
         .collect();
     // (A variable whose truth is 0 starts from its file's initial value, perturbed.)
     for ((v, x), v0) in clean.vars.vars.iter().zip(&truth).zip(&vars.vars) {

@@ -22,12 +22,18 @@ fn coupled() -> Model {
             body: 2,
             dof,
             quantity: Quantity::Displacement,
+            at: None,
+            reference: 0,
+            relative: false,
         })
         .collect();
     m.outputs.push(Characteristic {
         body: 0,
         dof: 1,
         quantity: Quantity::Acceleration,
+        at: None,
+        reference: 0,
+        relative: false,
     });
     m
 }
