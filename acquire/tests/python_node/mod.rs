@@ -12,6 +12,10 @@ use acquire::canopen::sdo::Address;
 use acquire::canopen::{CanOpenDaq, CanOpenSettings};
 use acquire::daq::{Daq, DaqConfig, DaqError, DaqEvent, FaultKind, SampleBlock, StreamFault};
 
+/// One python node at a time: under a loaded machine (CI runs the tests of a binary in parallel
+/// on 2 cores) two nodes streaming at once starve each other's PDO loop.
+static ONE_AT_A_TIME: tokio::sync::Mutex<()> = tokio::sync::Mutex::const_new(());
+
 /// The node id python_node.py is started with.
 pub const NODE: u8 = 5;
 
@@ -123,6 +127,7 @@ pub async fn identified_configured_over_sdo_and_streams_loss_free(
     child: Child,
     mut daq: CanOpenDaq,
 ) {
+    let _one = ONE_AT_A_TIME.lock().await;
     // Identity: python-canopen's SDO server answers 0x1018 expedited and 0x1008/0x100A segmented.
     let id = daq.identify().await.expect("identify the python node");
     assert_eq!(id.manufacturer, "IDENT-SIM");
@@ -198,6 +203,7 @@ pub async fn identified_configured_over_sdo_and_streams_loss_free(
 /// heartbeat are device faults, the stream ends in a timeout, and the 15 blocks before the
 /// silence all arrive.
 pub async fn emcy_and_heartbeat_loss_are_detected(child: Child, mut daq: CanOpenDaq) {
+    let _one = ONE_AT_A_TIME.lock().await;
     daq.identify().await.expect("identify");
     daq.configure(&DaqConfig {
         sample_rate_hz: 500.0,
