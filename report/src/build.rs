@@ -443,7 +443,11 @@ pub fn diagnosis(d: &diagnose::Diagnosis, base: &str, id: &Identification) -> Di
     for (i, round) in d.rounds.iter().enumerate() {
         let accepted = round.accepted.and_then(|k| round.refits.get(k));
         for c in &round.ranked {
-            let refit = accepted.filter(|a| a.effect == c.effect);
+            // The accepted refit stands for its family: the leader, or a member refitted in its
+            // place (see `diagnose`'s family refits).
+            let refit =
+                accepted.filter(|a| a.effect == c.effect || a.equivalent.contains(&c.effect));
+            let effect = refit.map_or(&c.effect, |a| &a.effect);
             // Values at the final fit; none for an effect a later round removed.
             // An accepted mass whose position was then fitted is in the final model as placed.
             let final_effect = refit.map(|a| {
@@ -459,13 +463,12 @@ pub fn diagnosis(d: &diagnose::Diagnosis, base: &str, id: &Identification) -> Di
             candidates.push(Candidate {
                 round: i + 1,
                 name: c.kind.clone(),
-                location: match removed_in(&c.effect).filter(|_| refit.is_some()) {
+                location: match removed_in(effect).filter(|_| refit.is_some()) {
                     Some(k) => format!(
-                        "{} (removed in round {}: not needed once later effects were added)",
-                        c.effect,
+                        "{effect} (removed in round {}: not needed once later effects were added)",
                         k + 1
                     ),
-                    None => c.effect.clone(),
+                    None => effect.clone(),
                 },
                 statistic: finite(c.statistic),
                 p_value: c.p_value.clamp(0.0, 1.0),
