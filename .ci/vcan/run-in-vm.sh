@@ -4,7 +4,7 @@
 #   .ci/vcan/run-in-vm.sh [--env NAME=VALUE]... [--timeout SECONDS] [--host-root] BINARY [ARGS...]
 #
 # --host-root shares this host's root file system read-only with the VM (virtio 9p, mounted at
-# /host with /proc, /sys, /dev and a fresh /tmp bound in) and puts a `python3` first on PATH that
+# /host with /proc, /sys and /dev bound in) and puts a `python3` first on PATH that
 # runs this host's python3 (with its installed packages) chrooted into /host: programs written by
 # others (python-canopen, python-can) then talk over the VM's vcan0. Absolute host paths of files
 # the binary passes to python are the same inside the chroot; the binary itself reads them under
@@ -114,8 +114,8 @@ if [ -e /payload/host-root ]; then
   done
   mkdir -p /host
   mount -t 9p -o trans=virtio,version=9p2000.L,ro,msize=262144 hostroot /host || fail "mount the host's root (9p)"
+  # /host/tmp stays the host's: a CI clone of the repository lives there.
   for d in proc sys dev; do mount --bind /$d /host/$d || fail "bind /$d into /host"; done
-  mount -t tmpfs tmp /host/tmp || fail "tmpfs on /host/tmp"
   export PATH=/payload/bin:$PATH IDENT_HOST_ROOT=/host
 fi
 echo "VCAN-READY: $(cut -d' ' -f1 /proc/uptime) s after boot"
