@@ -105,6 +105,23 @@ pub fn runtime() -> anyhow::Result<tokio::runtime::Runtime> {
         .context("cannot start the async runtime")
 }
 
+/// What stops a sweep: Ctrl-C when the options ask for it, else only the sweep's own end.
+fn stop_signal(opts: &SweepOptions<'_>) -> StopSignal {
+    if opts.ctrl_c {
+        StopSignal::on_ctrl_c()
+    } else {
+        StopSignal::new()
+    }
+}
+
+/// Creates the session file every signal of the sweep goes into, and says where.
+fn record(session: &Path) -> anyhow::Result<Session> {
+    let file = Session::create(session, SessionOptions::default())
+        .with_context(|| format!("cannot create the session file {}", session.display()))?;
+    eprintln!("recording {}", session.display());
+    Ok(file)
+}
+
 /// Runs a stepped-sine sweep of `stand` into a new session file at `session`. Ports given as
 /// `"sim"` are served by the simulated stand (announced on stderr). The session file is kept
 /// whatever happens; only failures before it exists are `Err`.
@@ -119,15 +136,9 @@ pub fn sweep(
     let rt = runtime()?;
     rt.block_on(async {
         // The Ctrl-C handler needs the runtime.
-        let stop = if opts.ctrl_c {
-            StopSignal::on_ctrl_c()
-        } else {
-            StopSignal::new()
-        };
+        let stop = stop_signal(opts);
         let (sim, bound) = start_sim(stand, opts.can)?;
-        let file = Session::create(session, SessionOptions::default())
-            .with_context(|| format!("cannot create the session file {}", session.display()))?;
-        eprintln!("recording {}", session.display());
+        let file = record(session)?;
         let h = file.handle();
         let outcome = async {
             sweep::log_session_start(&h, &stand.file, plan, opts.resume, &opts.done)?;
@@ -209,15 +220,10 @@ pub fn broadband_sweep(
 ) -> anyhow::Result<BroadbandSwept> {
     let rt = runtime()?;
     rt.block_on(async {
-        let stop = if opts.ctrl_c {
-            StopSignal::on_ctrl_c()
-        } else {
-            StopSignal::new()
-        };
+        // The Ctrl-C handler needs the runtime.
+        let stop = stop_signal(opts);
         let (sim, bound) = start_sim(stand, opts.can)?;
-        let file = Session::create(session, SessionOptions::default())
-            .with_context(|| format!("cannot create the session file {}", session.display()))?;
-        eprintln!("recording {}", session.display());
+        let file = record(session)?;
         let h = file.handle();
         let outcome = async {
             sweep::log_session_start(&h, &stand.file, plan, None, &BTreeSet::new())?;

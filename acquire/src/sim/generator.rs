@@ -539,9 +539,8 @@ impl SimGenerator {
     }
 }
 
-/// Waits up to 20 ms for bytes from the host and returns the complete commands they finish
-/// (binary blocks whole); `None` when the device stops serving this connection, as
-/// [`super::read_lines`] does.
+/// The complete commands the host's next bytes finish (binary blocks whole); `None` when the
+/// device stops serving this connection ([`super::read_host`]).
 async fn read_commands<T: Transport>(
     io: &mut T,
     framer: &mut CommandFramer,
@@ -549,19 +548,7 @@ async fn read_commands<T: Transport>(
     shared: &SharedRef,
     pty: bool,
 ) -> Option<Vec<FramedCommand>> {
-    use tokio::io::AsyncReadExt;
-    if lock(shared).cable_pulled {
-        return None;
-    }
-    let n = match tokio::time::timeout(Duration::from_millis(20), io.read(buf)).await {
-        Err(_) => return Some(Vec::new()),
-        Ok(Ok(0)) | Ok(Err(_)) if !pty => return None,
-        Ok(Ok(0)) | Ok(Err(_)) => {
-            tokio::time::sleep(Duration::from_millis(10)).await;
-            return Some(Vec::new());
-        }
-        Ok(Ok(n)) => n,
-    };
+    let n = super::read_host(io, buf, shared, pty).await?;
     let mut got = Vec::new();
     framer.feed(&buf[..n], |c| got.push(c));
     Some(got)

@@ -547,10 +547,31 @@ async fn serve_shaker<T: Transport>(
     }
 }
 
-/// Waits up to 20 ms for bytes from the host and returns the complete lines they finish. `None`
+/// Waits up to 20 ms for bytes from the host into `buf`: how many arrived (0: none yet). `None`
 /// when the device stops serving this connection: its cable is pulled, or the host left a
 /// connection that is not a pty (`pty == false`: a TCP client). On a pty, a port no host has open
 /// (reads fail with EIO) is waited out.
+async fn read_host<T: Transport>(
+    io: &mut T,
+    buf: &mut [u8],
+    shared: &SharedRef,
+    pty: bool,
+) -> Option<usize> {
+    if lock(shared).cable_pulled {
+        return None;
+    }
+    match tokio::time::timeout(Duration::from_millis(20), io.read(buf)).await {
+        Err(_) => Some(0),
+        Ok(Ok(0)) | Ok(Err(_)) if !pty => None,
+        Ok(Ok(0)) | Ok(Err(_)) => {
+            tokio::time::sleep(Duration::from_millis(10)).await;
+            Some(0)
+        }
+        Ok(Ok(n)) => Some(n),
+    }
+}
+
+/// The complete lines the host's next bytes finish ([`read_host`]; `None` as there).
 async fn read_lines<T: Transport>(
     io: &mut T,
     lines: &mut LineBuffer,
@@ -558,18 +579,7 @@ async fn read_lines<T: Transport>(
     shared: &SharedRef,
     pty: bool,
 ) -> Option<Vec<Line>> {
-    if lock(shared).cable_pulled {
-        return None;
-    }
-    let n = match tokio::time::timeout(Duration::from_millis(20), io.read(buf)).await {
-        Err(_) => return Some(Vec::new()),
-        Ok(Ok(0)) | Ok(Err(_)) if !pty => return None,
-        Ok(Ok(0)) | Ok(Err(_)) => {
-            tokio::time::sleep(Duration::from_millis(10)).await;
-            return Some(Vec::new());
-        }
-        Ok(Ok(n)) => n,
-    };
+    let n = read_host(io, buf, shared, pty).await?;
     let mut got = Vec::new();
     lines.feed(&buf[..n], |l| got.push(l));
     Some(got)
