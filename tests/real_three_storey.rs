@@ -149,35 +149,8 @@ fn many_starts_find_the_same_best_optimum_and_report_the_others() {
 fn a_modal_start_matches_the_measured_frequencies_and_reaches_the_same_optimum_from_far_off() {
     // A variables file whose start is far off (storey stiffnesses 10x in opposite directions,
     // ψ 12x): the pre-fit must bring the three model frequencies onto the measured ones.
-    let dir = tempfile::tempdir().unwrap();
-    let vars = dir.path().join("far.toml");
-    std::fs::write(
-        &vars,
-        r#"
-[[variable]]
-name = "k storey 1"
-sdes = "storey 1"
-parameter = "k1"
-initial = "5 kN/m"
-[[variable]]
-name = "k storey 2"
-sdes = "storey 2"
-parameter = "k1"
-initial = "400 kN/m"
-[[variable]]
-name = "k storey 3"
-sdes = "storey 3"
-parameter = "k1"
-initial = "4 kN/m"
-[[variable]]
-name = "psi sway"
-sdes = ["storey 1", "storey 2", "storey 3"]
-parameter = "psi1"
-initial = 0.3
-"#,
-    )
-    .unwrap();
     let ex = root().join("examples/real-three-storey");
+    let vars = ex.join("far-start.toml");
     let data = root().join("data/dtop-three-storey/three-storey-hammer.uff");
     let (model, map) = (ex.join("model.toml"), ex.join("map.toml"));
     let run = |vars: &std::path::Path| {

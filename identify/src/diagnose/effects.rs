@@ -20,8 +20,8 @@ use crate::identification::variables::Variables;
 use crate::model::{Body, Model, ParamName, ParamRef, Sde, SdeKind, SdeLaw};
 use crate::modelfile::frame_from_axis;
 
-/// Two-sided 95 % normal quantile.
-const Z95: f64 = 1.96;
+/// Two-sided 95 % normal quantile: a confidence interval is `estimate ± Z95 σ`.
+pub(crate) const Z95: f64 = 1.96;
 use crate::system::generalized_force;
 use crate::C64;
 

@@ -35,7 +35,7 @@ use serde::Serialize;
 use statrs::distribution::{ChiSquared, ContinuousCDF};
 
 pub use effects::Effect;
-use effects::EffectParam;
+use effects::{EffectParam, Z95};
 pub use residuals::ResidualAnalysis;
 
 use crate::identification::optimize::{self, Residuals as _};
@@ -883,10 +883,9 @@ fn refit_leading(
     // effects and the score understates large ones, so a loose gate (1000× the LR's
     // threshold) loses nothing and saves the refits when there is nothing to find. The families
     // are refitted in parallel.
-    let count = opts.refit;
     let jobs: Vec<Vec<(&Effect, f64)>> = families
         .iter()
-        .take(count)
+        .take(opts.refit)
         .filter(|f| scored[f[0]].p_value < (1000.0 * threshold).min(1.0))
         .map(|family| {
             family
@@ -1078,9 +1077,6 @@ fn partial_fix(r: &Refit, cur: &Current, sigma2: f64) -> Option<String> {
         )
     })
 }
-
-/// Two-sided 95 % normal quantile: an effect's confidence interval is `estimate ± Z95 σ`.
-const Z95: f64 = 1.96;
 
 /// Why an effect's refitted estimates `est` (of parameters `params`) do not make it a physical,
 /// identified effect, or `None` when they do: every parameter away from its bounds (but the
