@@ -277,6 +277,7 @@ fn the_final_model_file_is_the_diagnosed_model_for_every_effect_kind() {
         body: "first".into(),
         point: Vector3::new(0.1, 0.0, 0.2),
         freq_hz: 35.0,
+        tuning: [30.0, 40.0],
         scale: 10.0,
     };
     round_trip(&c, &accepting(&c, resonator, &[4.0, 33.3]));

@@ -133,6 +133,10 @@ pub enum Effect {
         point: Vector3<f64>,
         /// Natural frequency of the mass on its spring (Hz), the start of the refit.
         freq_hz: f64,
+        /// The tuning frequencies (Hz) this candidate stands for: its score is the best over
+        /// them, and `freq_hz` is set there (a resonator is sharply tuned, a fixed grid of
+        /// frequencies misses it).
+        tuning: [f64; 2],
         /// Typical size of the mass (kg).
         scale: f64,
     },
@@ -439,11 +443,7 @@ impl Effect {
         match self {
             Effect::Spring { psi, .. } => C64::new(1.0, psi / TWO_PI),
             Effect::Mass { .. } => C64::new(-omega * omega, 0.0),
-            Effect::Resonator { freq_hz, .. } => {
-                // Dynamic stiffness of a mass m on a spring tuned to ωr, per unit m, at m → 0.
-                let wr2 = C64::new(1.0, STRUCTURAL_PSI / TWO_PI) * (TWO_PI * freq_hz).powi(2);
-                -omega * omega * wr2 / (wr2 - omega * omega)
-            }
+            Effect::Resonator { freq_hz, .. } => resonator_coefficient(omega, *freq_hz),
             _ => C64::new(0.0, 0.0),
         }
     }
@@ -524,6 +524,16 @@ impl Effect {
         Ok(())
     }
 }
+
+/// Dynamic stiffness of a mass on a spring tuned to `freq_hz` (loss ψ of the structure), per
+/// unit mass, at `omega` (rad/s): the coefficient of a resonator's first-order action.
+pub fn resonator_coefficient(omega: f64, freq_hz: f64) -> C64 {
+    let wr2 = C64::new(1.0, STRUCTURAL_PSI / TWO_PI) * (TWO_PI * freq_hz).powi(2);
+    -omega * omega * wr2 / (wr2 - omega * omega)
+}
+
+/// Relative half-power width of a resonator's peak: its loss factor `ψ / 2π`.
+pub const RESONATOR_WIDTH: f64 = STRUCTURAL_PSI / TWO_PI;
 
 /// Gives the SDEs `sdes` of ψ group `variable` their own value `psi` of `parameter`, taking
 /// them out of the group.

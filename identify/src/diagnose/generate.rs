@@ -49,9 +49,10 @@ pub fn candidates(
     let n_res = ((f_hi / f_lo).log10() * RESONATORS_PER_DECADE)
         .ceil()
         .max(1.0) as usize;
-    let res_freqs: Vec<f64> = (0..n_res)
-        .map(|i| f_lo * (f_hi / f_lo).powf((i as f64 + 0.5) / n_res as f64))
-        .collect();
+    // Each resonator candidate stands for a cell of tuning frequencies (its score is the best
+    // within it): the cells tile the band.
+    let edge = |i: usize| f_lo * (f_hi / f_lo).powf(i as f64 / n_res as f64);
+    let res_freqs: Vec<[f64; 2]> = (0..n_res).map(|i| [edge(i), edge(i + 1)]).collect();
     for b in 0..model.bodies.len() {
         masses_and_flexibility(model, b, &res_freqs, &mut out);
     }
@@ -169,7 +170,7 @@ fn springs_to_ground(
 
 /// Point masses and resonators (tuned across the band) at body `b`'s centre, box corners and
 /// force points, and the body split along each principal axis.
-fn masses_and_flexibility(model: &Model, b: usize, res_freqs: &[f64], out: &mut Vec<Effect>) {
+fn masses_and_flexibility(model: &Model, b: usize, res_freqs: &[[f64; 2]], out: &mut Vec<Effect>) {
     let body = &model.bodies[b];
     let mut points = vec![body.position];
     let sides = box_sides(body);
@@ -186,11 +187,12 @@ fn masses_and_flexibility(model: &Model, b: usize, res_freqs: &[f64], out: &mut 
             point: *p,
             scale,
         });
-        for f in res_freqs {
+        for &[lo, hi] in res_freqs {
             out.push(Effect::Resonator {
                 body: body.name.clone(),
                 point: *p,
-                freq_hz: *f,
+                freq_hz: (lo * hi).sqrt(),
+                tuning: [lo, hi],
                 scale,
             });
         }

@@ -29,6 +29,7 @@ pub mod generate;
 pub mod problem;
 pub mod residuals;
 pub mod score;
+mod screen;
 
 use nalgebra::{DMatrix, DVector};
 use serde::Serialize;
@@ -780,7 +781,7 @@ fn rank(
     let sigma2 = residual_scale(cur, free.len(), crit.noise.scale_unknown());
     // Candidates live on the structure's bodies, not on the masses and resonators the diagnosis
     // added itself; a characteristic whose gain is already a variable gets no gain candidate.
-    let candidates: Vec<Effect> = generate::candidates(
+    let mut candidates: Vec<Effect> = generate::candidates(
         &crit.model_at(&x),
         &realized.vars,
         &x,
@@ -809,9 +810,15 @@ fn rank(
     };
     let scores = score::score_all(&fit, &candidates).map_err(EvalError::from)?;
     let mut scored: Vec<score::Scored> = Vec::new();
-    for (c, s) in candidates.iter().zip(scores) {
+    for (c, s) in candidates.iter_mut().zip(scores) {
         match s {
-            Ok(s) => scored.push(s),
+            Ok(s) => {
+                // A resonator stands at the tuning frequency its score found.
+                if let (Effect::Resonator { freq_hz, .. }, Some(f)) = (&mut *c, s.tuned_hz) {
+                    *freq_hz = f;
+                }
+                scored.push(s);
+            }
             Err(reason) => not_tried.push(NotTried {
                 effect: c.describe(),
                 reason: reason.to_string(),
@@ -871,7 +878,7 @@ fn refit_leading(
     let Ranking {
         candidates,
         scored,
-        families,
+        families: _,
         ranked: _,
         threshold,
         sigma2,
@@ -881,19 +888,30 @@ fn refit_leading(
     let mut not_identifiable = Vec::new();
     // Refit only what the score makes plausible: the score and LR statistics agree for small
     // effects and the score understates large ones, so a loose gate (1000× the LR's
-    // threshold) loses nothing and saves the refits when there is nothing to find. The families
-    // are refitted in parallel.
-    let jobs: Vec<Vec<(&Effect, f64)>> = families
-        .iter()
-        .take(opts.refit)
-        .filter(|f| scored[f[0]].p_value < (1000.0 * threshold).min(1.0))
-        .map(|family| {
-            family
-                .iter()
-                .map(|&j| (&candidates[scored[j].candidate], scored[j].step))
-                .collect()
-        })
+    // threshold) loses nothing and saves the refits when there is nothing to find. The leading
+    // candidates are screened by a finite step (the score is a small-effect statistic), and the
+    // families of the best screened are refitted, in parallel.
+    let gate = (1000.0 * threshold).min(1.0);
+    let leading: Vec<usize> = (0..scored.len())
+        .filter(|&j| scored[j].p_value < gate)
+        .take(SCREENED)
         .collect();
+    let screened = screen_leading((model, vars, obs), opts, cur, ranking, &leading, f_hi);
+    let jobs = refit_jobs(ranking, &screened, opts.refit, f_hi);
+    if let Some(((j, js, _), (k, _))) = screened
+        .first()
+        .zip(jobs.first().and_then(|job| job.first()))
+    {
+        progress(&format!(
+            "screened {} candidates by a finite step; best: {} (J {:.1} → {:.1}); refitting {} families, first {}",
+            screened.len(),
+            candidates[scored[*j].candidate].describe(),
+            0.5 * cur.e.norm_squared(),
+            js,
+            jobs.len(),
+            k.describe()
+        ));
+    }
     let results = in_parallel(&jobs, |members| {
         refit_family((model, vars, obs), opts, cur, members, f_hi, *sigma2)
     });
@@ -952,6 +970,88 @@ fn refit_leading(
     (refits, best, not_identifiable)
 }
 
+/// Candidates passing the score's gate that are screened by a finite step, best score first.
+const SCREENED: usize = 30;
+
+/// The finite-step screen (see [`screen`]) of the candidates `leading` (indices into
+/// `ranking.scored`): `(index, screened criterion J, the effect's parameters there (SI))`, best
+/// (lowest J) first; candidates that cannot be evaluated are left out.
+fn screen_leading(
+    (model, vars, obs): (&Model, &Variables, &Observations),
+    opts: &Options,
+    cur: &Current,
+    ranking: &Ranking,
+    leading: &[usize],
+    f_hi: f64,
+) -> Vec<(usize, f64, Vec<f64>)> {
+    if leading.is_empty() {
+        return Vec::new();
+    }
+    let pc = Problem::new(
+        model,
+        vars,
+        obs,
+        &opts.identification,
+        cur.effects.clone(),
+        f_hi,
+    );
+    let free = free_columns(&pc, &cur.u);
+    let jfree = DMatrix::from_fn(cur.jac.nrows(), free.len(), |r, c| cur.jac[(r, free[c])]);
+    let basis = score::orthonormal_columns(&jfree);
+    let results = in_parallel(leading, |&j| {
+        let s = &ranking.scored[j];
+        let cand = &ranking.candidates[s.candidate];
+        let mut effects = cur.effects.clone();
+        effects.push(cand.clone());
+        let mut p = Problem::new(model, vars, obs, &opts.identification, effects, f_hi);
+        let params = cand.params(f_hi);
+        let starts = screen::effect_starts(&params, &score_start(cand, s.step, f_hi), true);
+        let resonator = matches!(cand, Effect::Resonator { .. });
+        screen::screen(&mut p, &cur.u, &basis, &starts, resonator).map(|(js, g)| (j, js, g))
+    });
+    let mut out: Vec<(usize, f64, Vec<f64>)> = results.into_iter().flatten().collect();
+    out.sort_by(|a, b| a.1.total_cmp(&b.1));
+    out
+}
+
+/// The refits of a round: up to `n` families, in the order of their best screened member, each
+/// that member first (started where the screen left it) and then the family's other members
+/// (from their score steps).
+fn refit_jobs<'r>(
+    ranking: &'r Ranking,
+    screened: &[(usize, f64, Vec<f64>)],
+    n: usize,
+    f_hi: f64,
+) -> Vec<Vec<(&'r Effect, Vec<f64>)>> {
+    let Ranking {
+        candidates,
+        scored,
+        families,
+        ..
+    } = ranking;
+    let mut taken: Vec<Option<usize>> = Vec::new();
+    let mut jobs = Vec::new();
+    for (j, _, start) in screened {
+        if jobs.len() == n {
+            break;
+        }
+        let family = families.iter().position(|f| f.contains(j));
+        if family.is_some() && taken.contains(&family) {
+            continue;
+        }
+        taken.push(family);
+        let mut job = vec![(&candidates[scored[*j].candidate], start.clone())];
+        for &k in family.map(|f| families[f].as_slice()).unwrap_or(&[]) {
+            if k != *j {
+                let c = &candidates[scored[k].candidate];
+                job.push((c, score_start(c, scored[k].step, f_hi)));
+            }
+        }
+        jobs.push(job);
+    }
+    jobs
+}
+
 /// `f` over `jobs` on the machine's cores (scoped threads taking the next job in turn); the
 /// results in the jobs' order.
 fn in_parallel<J: Sync, R: Send>(jobs: &[J], f: impl Fn(&J) -> R + Sync) -> Vec<R> {
@@ -998,17 +1098,16 @@ fn refit_family<'a>(
     (model, vars, obs): (&Model, &Variables, &Observations),
     opts: &Options,
     cur: &Current,
-    members: &[(&'a Effect, f64)],
+    members: &[(&'a Effect, Vec<f64>)],
     f_hi: f64,
     sigma2: f64,
 ) -> Result<(Refit, Current, &'a Effect), RefitError> {
-    let Some(((leader, step), others)) = members.split_first() else {
+    let Some(((leader, start), others)) = members.split_first() else {
         return Err(RefitError::TooFewObservations {
             observations: cur.e.len(),
             parameters: 0,
         });
     };
-    let start = score_start(leader, *step, f_hi);
     let (r, next) = refit(
         model,
         vars,
@@ -1016,7 +1115,7 @@ fn refit_family<'a>(
         opts,
         cur,
         leader,
-        (&start, true),
+        (start, true),
         f_hi,
         sigma2,
     )?;
@@ -1028,8 +1127,7 @@ fn refit_family<'a>(
         return Ok(best);
     }
     let same_kind = others.iter().filter(|(c, _)| c.kind() == leader.kind());
-    for (cand, step) in same_kind.take(FAMILY_REFITS) {
-        let start = score_start(cand, *step, f_hi);
+    for (cand, start) in same_kind.take(FAMILY_REFITS) {
         if let Ok((r, next)) = refit(
             model,
             vars,
@@ -1037,7 +1135,7 @@ fn refit_family<'a>(
             opts,
             cur,
             cand,
-            (&start, false),
+            (start, false),
             f_hi,
             sigma2,
         ) {
@@ -1459,56 +1557,9 @@ fn analysis(p: &Problem, cur: &Current, opts: &Options) -> Result<ResidualAnalys
     ))
 }
 
-/// Tuning frequencies of a resonator's starting grid across its range.
-const RESONATOR_GRID: usize = 24;
-
-/// A resonator's starting point (its mass and tuning frequency, the last two of `u0`): the tuning
-/// frequency on a log grid across its range at the current mass, then the mass over decades of
-/// its scale at the best frequency, then the frequency refined around the best by halving steps.
-fn tune_resonator(p: &mut Problem, u0: &mut DVector<f64>, mut j_best: f64) {
-    let n = u0.len();
-    if n < 2 {
-        return;
-    }
-    let (lo, hi) = p.bounds();
-    let (im, i_f) = (n - 2, n - 1);
-    let try_at = |p: &mut Problem, u0: &mut DVector<f64>, i: usize, v: f64, j_best: &mut f64| {
-        let mut u = u0.clone();
-        u[i] = v.clamp(lo[i], hi[i]);
-        if let Ok((e, _)) = p.eval(&u, false) {
-            let j = e.norm_squared();
-            if j < *j_best {
-                *j_best = j;
-                *u0 = u;
-            }
-        }
-    };
-    let (f_lo, f_hi) = (lo[i_f].max(1e-9), hi[i_f]);
-    let ratio = (f_hi / f_lo).powf(1.0 / (RESONATOR_GRID - 1) as f64);
-    for k in 0..RESONATOR_GRID {
-        try_at(p, u0, i_f, f_lo * ratio.powi(k as i32), &mut j_best);
-    }
-    for d in REFIT_SIZE_DECADES {
-        try_at(p, u0, im, 10f64.powi(d), &mut j_best);
-    }
-    let mut step = ratio.sqrt();
-    for _ in 0..4 {
-        let f = u0[i_f];
-        try_at(p, u0, i_f, f * step, &mut j_best);
-        try_at(p, u0, i_f, f / step, &mut j_best);
-        step = step.sqrt();
-    }
-}
-
-/// A refit starts where the new parameters are this fraction of the way from their nested values
-/// to the given start, whichever fits best.
-const REFIT_START_FRACTIONS: [f64; 4] = [1.0, 0.3, 0.1, 0.03];
-/// And where the effect's size is its nested value ± its scale times ten to these powers.
-const REFIT_SIZE_DECADES: [i32; 6] = [-2, -1, 0, 1, 2, 3];
-
 /// Refits the current effects plus `cand` with every parameter free, from `start` (the new
 /// parameters' values) or, with `explore`, from the best of the starts around it (see
-/// [`REFIT_START_FRACTIONS`], [`REFIT_SIZE_DECADES`]; a resonator's tuning frequency also on a
+/// [`screen::REFIT_START_FRACTIONS`], [`screen::REFIT_SIZE_DECADES`]; a resonator's tuning frequency also on a
 /// grid across its range, refined around the best).
 #[allow(clippy::too_many_arguments)]
 fn refit(
@@ -1547,44 +1598,11 @@ fn refit(
     let (lo, hi) = p.bounds();
     let mut u0: Option<DVector<f64>> = None;
     let mut j_start = f64::INFINITY;
-    // The first parameter (the effect's size) also from a grid of decades of its scale on
-    // either side of the nested value: for a large effect the score step is no guide.
-    let size_grid = new_params
-        .first()
-        .filter(|_| explore)
-        .map_or(Vec::new(), |np| {
-            REFIT_SIZE_DECADES
-                .iter()
-                .flat_map(|d| [1.0, -1.0].map(|sign| np.nested + sign * np.scale * 10f64.powi(*d)))
-                .filter(|x| *x > np.lower && *x < np.upper)
-                .collect()
-        });
-    let fractions: &[f64] = if explore {
-        &REFIT_START_FRACTIONS
-    } else {
-        &REFIT_START_FRACTIONS[..1]
-    };
-    let starts = fractions
-        .iter()
-        .map(|t| {
-            new_params
-                .iter()
-                .zip(start)
-                .map(|(np, v)| np.nested + t * (v - np.nested))
-                .collect::<Vec<f64>>()
-        })
-        .chain(size_grid.iter().map(|x0| {
-            let mut v = start.to_vec();
-            if let Some(first) = v.first_mut() {
-                *first = *x0;
-            }
-            v
-        }));
-    // The score step itself (the first start) is always refitted: the best-fitting start is a
+    // The given start itself (the first) is always refitted: the best-fitting start is a
     // better valley for a large effect but can be a worse one for a small effect (a start that
     // fits best before the refit is not the one that fits best after it). The better end wins.
     let mut score_step: Option<DVector<f64>> = None;
-    for st in starts {
+    for st in screen::effect_starts(&new_params, start, explore) {
         let mut u: Vec<f64> = cur.u.iter().copied().collect();
         for (np, x) in new_params.iter().zip(&st) {
             u.push(x.clamp(np.lower, np.upper) / np.scale);
@@ -1610,7 +1628,11 @@ fn refit(
         });
     };
     if explore && matches!(cand, Effect::Resonator { .. }) {
-        tune_resonator(&mut p, &mut u0, j_start);
+        let mut objective = |u: &DVector<f64>| {
+            p.eval(u, false)
+                .map_or(f64::INFINITY, |(e, _)| e.norm_squared())
+        };
+        screen::tune_resonator(&mut objective, &mut u0, j_start, (&lo, &hi));
     }
     let settings = opts.identification.settings;
     let scale = p.scale.clone();

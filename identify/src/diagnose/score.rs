@@ -16,7 +16,9 @@
 //! rigid is scored in its rigid limit from the forces its joints would carry
 //! ([`flexible_first_order`]); the damping splits share one Jacobian.
 
-use super::effects::{body_index, point_row, split_body, Effect, EffectError};
+use super::effects::{
+    body_index, point_row, resonator_coefficient, split_body, Effect, EffectError, RESONATOR_WIDTH,
+};
 use super::residuals::chi2_tail;
 use crate::frf::{self, States};
 use crate::identification::Criterion;
@@ -43,6 +45,8 @@ pub struct Scored {
     /// candidates whose directions nearly coincide cannot be told apart by the data.
     #[serde(skip)]
     pub direction: DVector<f64>,
+    /// A resonator's tuning frequency (Hz) where its score is largest within its cell.
+    pub tuned_hz: Option<f64>,
 }
 
 /// The fit the scores are taken at.
@@ -111,6 +115,16 @@ pub fn score_all(
     let mut out = Vec::with_capacity(candidates.len());
     let mut dq = vec![C64::new(0.0, 0.0); outputs.len() * lines.len()];
     for (ci, cand) in candidates.iter().enumerate() {
+        if let Effect::Resonator { tuning, .. } = cand {
+            let action = Action {
+                model: &model,
+                states: &states,
+                gains: fit.gains,
+                lines: &lines,
+            };
+            out.push(tuned_resonator(ci, cand, *tuning, &action, &q, fit, &basis));
+            continue;
+        }
         let filled = fill_derivative(
             cand, &model, &states, &outputs, fit.gains, &lines, &damping, &mut dq,
         );
@@ -159,7 +173,136 @@ fn statistic(
         p_value,
         step,
         direction,
+        tuned_hz: None,
     })
+}
+
+/// What a candidate's first-order action is computed from: the model at the fit, its states
+/// (load and adjoint unit responses per line), the gains per characteristic and the lines (Hz).
+struct Action<'a> {
+    model: &'a Model,
+    states: &'a States,
+    gains: &'a [f64],
+    lines: &'a [f64],
+}
+
+/// Tuning frequencies tried per resonance width (`ψ/2π` in log-frequency) in a resonator's cell.
+const TUNING_STEPS_PER_WIDTH: f64 = 2.0;
+
+/// A resonator's score test maximised over its tuning frequency within `[lo, hi]` (Hz).
+///
+/// Its action is `c(ω; f) Σ tᵀt` over its point's three rows, with `c` the tuned mass's dynamic
+/// stiffness per unit mass ([`resonator_coefficient`]): the output changes are `c(ω_k; f) b_ok`
+/// with `b` from one pass over the states, and the whitened column is
+/// `Re c · W(b) + Im c · W(i b)` (the whitening `W` is real-linear). So every frequency costs one
+/// projection, and the search can step at a fraction of the resonance's width — a sharply tuned
+/// resonator between two grid frequencies scores where it is. Coarse steps of
+/// [`TUNING_STEPS_PER_WIDTH`] per width, then a golden-section refinement around the best.
+fn tuned_resonator(
+    ci: usize,
+    cand: &Effect,
+    [lo, hi]: [f64; 2],
+    action: &Action,
+    q: &dyn Fn(usize, usize) -> C64,
+    fit: &FitPoint,
+    basis: &DMatrix<f64>,
+) -> Result<Scored, NotScored> {
+    let rows = cand.rows(action.model).ok_or(NotScored::NoFirstOrderForm)?;
+    let nl = action.lines.len();
+    let unit = C64::new(1.0, 0.0);
+    let mut b = vec![C64::new(0.0, 0.0); action.gains.len() * nl];
+    for k in 0..nl {
+        for (o, g) in action.gains.iter().enumerate() {
+            b[o * nl + k] =
+                action
+                    .states
+                    .first_order(k, o, rows.iter().map(|r| (r.as_slice(), unit)))
+                    * g;
+        }
+    }
+    let crit = fit.crit;
+    let w_re = crit.whitened_derivative(q, |o, k| b[o * nl + k]);
+    let w_im = crit.whitened_derivative(q, |o, k| b[o * nl + k] * C64::new(0.0, 1.0));
+    let points = crit.points();
+    let line_of = |i: usize| points[i % points.len()].1;
+    let column = |f: f64| {
+        let c: Vec<C64> = action
+            .lines
+            .iter()
+            .map(|l| resonator_coefficient(TWO_PI * l, f))
+            .collect();
+        DVector::from_fn(w_re.len(), |i, _| {
+            let ck = c[line_of(i)];
+            ck.re * w_re[i] + ck.im * w_im[i]
+        })
+    };
+    // The one-sided statistic (a mass is not negative): 0 where the score lowers the mass.
+    let lm = |f: f64| {
+        let g = column(f);
+        let s = g.dot(fit.e);
+        let info = g.norm_squared() - (basis.transpose() * &g).norm_squared();
+        if s < 0.0 && info > 0.0 {
+            s * s / info
+        } else {
+            0.0
+        }
+    };
+    let (ln_lo, ln_hi) = (lo.ln(), hi.ln().max(lo.ln()));
+    let step = RESONATOR_WIDTH / TUNING_STEPS_PER_WIDTH;
+    let n = ((ln_hi - ln_lo) / step).ceil().max(1.0) as usize;
+    let (mut best, mut best_lm) = (ln_lo, f64::NEG_INFINITY);
+    for i in 0..=n {
+        let x = ln_lo + (ln_hi - ln_lo) * i as f64 / n as f64;
+        let v = lm(x.exp());
+        if v > best_lm {
+            (best, best_lm) = (x, v);
+        }
+    }
+    let h = (ln_hi - ln_lo) / n as f64;
+    let tuned = golden_max(
+        |x| lm(x.exp()),
+        (best - h).max(ln_lo),
+        (best + h).min(ln_hi),
+    )
+    .exp();
+    let tuned_cand = match cand {
+        Effect::Resonator {
+            body,
+            point,
+            tuning,
+            scale,
+            ..
+        } => Effect::Resonator {
+            body: body.clone(),
+            point: *point,
+            freq_hz: tuned,
+            tuning: *tuning,
+            scale: *scale,
+        },
+        other => other.clone(),
+    };
+    let mut s = statistic(ci, &tuned_cand, &column(tuned), fit, basis)?;
+    s.tuned_hz = Some(tuned);
+    Ok(s)
+}
+
+/// The maximum of `f` on `[a, b]` by golden-section search (a unimodal stretch; 30 steps).
+fn golden_max(f: impl Fn(f64) -> f64, mut a: f64, mut b: f64) -> f64 {
+    let r = 0.5 * (5f64.sqrt() - 1.0);
+    let (mut c, mut d) = (b - r * (b - a), a + r * (b - a));
+    let (mut fc, mut fd) = (f(c), f(d));
+    for _ in 0..30 {
+        if fc > fd {
+            (b, d, fd) = (d, c, fc);
+            c = b - r * (b - a);
+            fc = f(c);
+        } else {
+            (a, c, fc) = (c, d, fd);
+            d = a + r * (b - a);
+            fd = f(d);
+        }
+    }
+    0.5 * (a + b)
 }
 
 /// `∂ output / ∂γ` of one candidate at every (characteristic, line), into `dq[o * lines + k]`.
@@ -407,7 +550,7 @@ fn damping_jacobian(
 }
 
 /// An orthonormal basis of the column space of `j` (thin QR; near-dependent columns dropped).
-fn orthonormal_columns(j: &DMatrix<f64>) -> DMatrix<f64> {
+pub(super) fn orthonormal_columns(j: &DMatrix<f64>) -> DMatrix<f64> {
     if j.ncols() == 0 {
         return DMatrix::zeros(j.nrows(), 0);
     }
