@@ -70,6 +70,7 @@ fn main() {
                     o.exact,
                     o.seconds
                 );
+                println!("  {}", diagnose::timing_text(&d));
                 outcomes.push(o);
             }
             Err(e) => println!("seed {seed}: failed: {e}"),

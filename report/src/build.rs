@@ -456,8 +456,8 @@ pub fn diagnosis(d: &diagnose::Diagnosis, base: &str, id: &Identification) -> Di
                     .as_ref()
                     .map_or(a.effect.as_str(), |p| p.effect.as_str())
             });
-            let principal = final_effect
-                .and_then(|e| d.accepted.iter().find(|f| f.effect == e))
+            let final_refit = final_effect.and_then(|e| d.accepted.iter().find(|f| f.effect == e));
+            let principal = final_refit
                 .and_then(|a| a.params.first())
                 .map(|p| p.display());
             candidates.push(Candidate {
@@ -476,6 +476,8 @@ pub fn diagnosis(d: &diagnose::Diagnosis, base: &str, id: &Identification) -> Di
                 estimate: principal.map(|(v, _, _)| finite(v)),
                 std_error: principal.map(|(_, s, _)| finite(s)),
                 unit: principal.map(|(_, _, u)| u.to_string()).unwrap_or_default(),
+                rms_db_before: refit.map(|a| finite(a.rms_db_before)),
+                rms_db_after: refit.map(|a| finite(a.rms_db_after)),
             });
         }
     }
@@ -489,6 +491,14 @@ pub fn diagnosis(d: &diagnose::Diagnosis, base: &str, id: &Identification) -> Di
             .map(|c| LabelledValue {
                 label: c.label.clone(),
                 value: finite(c.rms_relative),
+            })
+            .collect(),
+        rms_db_error: r
+            .characteristics
+            .iter()
+            .map(|c| LabelledValue {
+                label: c.label.clone(),
+                value: finite(c.rms_db),
             })
             .collect(),
     };

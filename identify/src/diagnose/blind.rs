@@ -142,6 +142,15 @@ pub fn same_site(a: &Effect, b: &Effect) -> bool {
         ) => x == y && i == j,
         (Gain { output: x, .. }, Gain { output: y, .. }) => x == y,
         (
+            Direction {
+                sde: x, axis: i, ..
+            },
+            Direction {
+                sde: y, axis: j, ..
+            },
+        ) => x == y && i == j,
+        (BodyMass { body: x, .. }, BodyMass { body: y, .. }) => x == y,
+        (
             Damping {
                 variable: x,
                 sdes: s,
@@ -155,6 +164,26 @@ pub fn same_site(a: &Effect, b: &Effect) -> bool {
         ) => x == y && s == t,
         _ => false,
     }
+}
+
+/// A found resonator's tuning frequency must be within this fraction of the injected one.
+pub const RESONATOR_TOLERANCE: f64 = 0.1;
+
+/// Whether the added effect `e` with fitted parameter `values` (empty: not fitted, its own
+/// starting values stand) is the injected `i`: the same site ([`same_site`]) and, for a
+/// resonator, the same tuning frequency within [`RESONATOR_TOLERANCE`] (a resonator on the right
+/// body at another frequency is another effect).
+pub fn found(i: &Injected, e: &Effect, values: &[f64]) -> bool {
+    if !same_site(&i.effect, e) {
+        return false;
+    }
+    let Effect::Resonator { freq_hz, .. } = e else {
+        return true;
+    };
+    let f = values.get(1).copied().unwrap_or(*freq_hz);
+    i.values
+        .get(1)
+        .is_some_and(|f0| (f / f0 - 1.0).abs() <= RESONATOR_TOLERANCE)
 }
 
 /// The amplitude of every characteristic of `r` at `lines` (gains applied), flattened.
@@ -178,6 +207,7 @@ fn values_at(effect: &Effect, nested: &[f64], t: f64, sign: f64, extra: f64) -> 
     match effect {
         Effect::Gain { .. } => v[0] = sign * t.min(0.45),
         Effect::Damping { value, .. } => v[0] = value * (sign * t).exp(),
+        Effect::BodyMass { mass, .. } => v[0] = mass * (sign * t).exp(),
         Effect::Spring { .. } => {
             v[0] = t;
             v[1] = extra;
@@ -232,6 +262,8 @@ fn sized(
     let (mut lo, mut hi) = match effect {
         Effect::Gain { .. } => (1e-6, 0.45),
         Effect::Damping { .. } => (1e-6, 3.0),
+        // Within the fitted range (a tenth to ten times the model's mass).
+        Effect::BodyMass { .. } => (1e-6, 2.0),
         _ => (params[0].scale * 1e-8, params[0].scale * 1e8),
     };
     match chi2(hi)? {
@@ -275,16 +307,7 @@ pub fn draw(
     } else {
         1
     };
-    let x: Vec<f64> = vars
-        .vars
-        .iter()
-        .map(|v| {
-            v.targets
-                .first()
-                .and_then(|t| model.value(t.param).map(|p| p / t.ratio))
-                .unwrap_or(v.initial)
-        })
-        .collect();
+    let x = truth_values(model, vars);
     let labels: Vec<String> = (0..model.outputs.len()).map(|o| format!("#{o}")).collect();
     let library = super::generate::candidates(model, vars, &x, &labels, f_min, f_max);
     let mut kinds: Vec<&'static str> = library.iter().map(Effect::kind).collect();
@@ -330,8 +353,78 @@ pub fn draw(
             signal: got,
         });
     }
+    finish(
+        (&truth, injected),
+        (vars, &x),
+        (lines, noise),
+        (&mut rng, seed),
+    )
+}
+
+/// The case of one given `effect` on `model` (the truth's values) sized so that its noise-free
+/// change of the data is `signal` (χ² units at relative noise `noise`), measured at `lines`
+/// (Hz), the identification started from `vars` perturbed ±[`PERTURBATION`] as [`draw`] does.
+/// `None` when no size of the effect reaches `signal`.
+pub fn with_effect(
+    model: &Model,
+    vars: &Variables,
+    lines: &[f64],
+    effect: &Effect,
+    (signal, noise): (f64, f64),
+    seed: u64,
+) -> Result<Option<BlindCase>, BlindError> {
+    let mut rng = StdRng::seed_from_u64(seed);
+    let f_max = lines.iter().copied().fold(0.0, f64::max);
+    let x = truth_values(model, vars);
+    let mut truth = Realized {
+        model: model.clone(),
+        vars: vars.clone(),
+        gains: vec![1.0; model.outputs.len()],
+    };
+    let q0 = amplitudes(&truth, lines)?;
+    let Some((values, got)) = sized(&truth, effect, &q0, lines, (noise, f_max), signal, &mut rng)?
+    else {
+        return Ok(None);
+    };
+    effect.apply(&mut truth, &values, f_max)?;
+    let injected = vec![Injected {
+        effect: effect.clone(),
+        values,
+        signal: got,
+    }];
+    finish(
+        (&truth, injected),
+        (vars, &x),
+        (lines, noise),
+        (&mut rng, seed),
+    )
+    .map(Some)
+}
+
+/// The variables' values in `model` (a variable whose parameter is not found keeps its initial
+/// value).
+fn truth_values(model: &Model, vars: &Variables) -> Vec<f64> {
+    vars.vars
+        .iter()
+        .map(|v| {
+            v.targets
+                .first()
+                .and_then(|t| model.value(t.param).map(|p| p / t.ratio))
+                .unwrap_or(v.initial)
+        })
+        .collect()
+}
+
+/// A case from its `truth` (the effects `injected` applied): the noisy data at `lines` and the
+/// variables `vars` started from their truth's values `x` perturbed ±[`PERTURBATION`].
+fn finish(
+    (truth, injected): (&Realized, Vec<Injected>),
+    (vars, x): (&Variables, &[f64]),
+    (lines, noise): (&[f64], f64),
+    (rng, seed): (&mut StdRng, u64),
+) -> Result<BlindCase, BlindError> {
     let mut data = synthetic::amplitude_data(&truth.model, lines, noise, || {
-        StandardNormal.sample(&mut rng)
+        StandardNormal.sample(&mut *rng)
     })?;
     for (c, g) in data.characteristics.iter_mut().zip(&truth.gains) {
         c.amplitude.iter_mut().for_each(|a| *a *= g);
@@ -340,7 +433,7 @@ pub fn draw(
         }
     }
     let mut vars = vars.clone();
-    for (v, xi) in vars.vars.iter_mut().zip(&x) {
+    for (v, xi) in vars.vars.iter_mut().zip(x) {
         let f = 1.0 + rng.random_range(-PERTURBATION..PERTURBATION);
         let x0 = if *xi != 0.0 { xi * f } else { v.initial * f };
         v.initial = x0.clamp(v.lower, v.upper);
@@ -379,13 +472,20 @@ pub fn run(
 
 /// Judges diagnosis `d` of `case`.
 pub fn judge(case: &BlindCase, d: &Diagnosis, seconds: f64, diagnosis_seconds: f64) -> Outcome {
-    let hit = |e: &Effect| case.injected.iter().any(|i| same_site(&i.effect, e));
-    let right_first = d.effects.first().is_some_and(hit);
+    // The fitted values of each added effect (a resonator's tuning frequency is compared).
+    let fitted = |k: usize| -> Vec<f64> {
+        d.accepted
+            .get(k)
+            .map(|a| a.params.iter().map(|p| p.value).collect())
+            .unwrap_or_default()
+    };
+    let hit = |e: &Effect, values: &[f64]| case.injected.iter().any(|i| found(i, e, values));
+    let right_first = d.effects.first().is_some_and(|e| hit(e, &fitted(0)));
     let ranked_first = d
         .rounds
         .first()
         .and_then(|r| r.ranked.first())
-        .is_some_and(|r| r.family.iter().any(hit));
+        .is_some_and(|r| r.family.iter().any(|e| hit(e, &[])));
     // One to one: every injected effect matched by a distinct added one and nothing else added.
     let mut used = vec![false; d.effects.len()];
     let all_found = case.injected.iter().all(|i| {
@@ -393,7 +493,7 @@ pub fn judge(case: &BlindCase, d: &Diagnosis, seconds: f64, diagnosis_seconds: f
             .effects
             .iter()
             .enumerate()
-            .find(|(k, e)| !used[*k] && same_site(&i.effect, e))
+            .find(|(k, e)| !used[*k] && found(i, e, &fitted(*k)))
         {
             Some((k, _)) => {
                 used[k] = true;

@@ -131,6 +131,11 @@ pub struct Refit {
     pub aic_change: f64,
     /// Change of the Bayesian information criterion.
     pub bic_change: f64,
+    /// RMS amplitude error (dB) over every fitted point before the refit: the gain in the
+    /// curves' terms, beside the criterion's.
+    pub rms_db_before: f64,
+    /// After it.
+    pub rms_db_after: f64,
     /// The effect's parameters.
     pub params: Vec<ParamEstimate>,
     /// Why the refit stopped.
@@ -304,7 +309,7 @@ fn outside_library(after: &ResidualAnalysis, added: usize) -> Option<String> {
 
 /// What the numbers of a diagnosis's JSON form are in (the text report uses the paper's units:
 /// N/µm, µm/N, mm).
-pub const JSON_UNITS: &str = "SI throughout: each effect parameter's unit is its params[].unit (N/m, m/N, m, kg, Hz, - ); estimate[] and std_error[] in each variable's SI unit, in variables-file order; frequencies in Hz (freqs_hz, mode_hz, from_hz, to_hz); criteria, statistics, p-values, shares and residuals dimensionless; timing in s";
+pub const JSON_UNITS: &str = "SI throughout: each effect parameter's unit is its params[].unit (N/m, N·m/rad, m/N, rad/(N·m), m, kg, Hz, - ); estimate[] and std_error[] in each variable's SI unit, in variables-file order; frequencies in Hz (freqs_hz, mode_hz, from_hz, to_hz); RMS amplitude errors in dB (rms_db, rms_db_before, rms_db_after); criteria, statistics, p-values, shares and residuals dimensionless; timing in s";
 
 /// Wall time of a diagnosis's parts (seconds).
 #[derive(Debug, Clone, Copy, Default, PartialEq, Serialize)]
@@ -412,13 +417,14 @@ pub fn diagnose(
                 .map(|s| ranking.candidates[s.candidate].describe())
                 .unwrap_or_default()
         ));
+        let screened = screen_leading((model, vars, obs), opts, &cur, &ranking, f_hi);
         timing.ranking += t.elapsed().as_secs_f64();
         let t = std::time::Instant::now();
         let (refits, best, not_identifiable) = refit_leading(
             (model, vars, obs),
             opts,
             &cur,
-            &ranking,
+            (&ranking, &screened),
             f_hi,
             &mut not_tried,
             progress,
@@ -870,7 +876,7 @@ fn refit_leading(
     (model, vars, obs): (&Model, &Variables, &Observations),
     opts: &Options,
     cur: &Current,
-    ranking: &Ranking,
+    (ranking, screened): (&Ranking, &[(usize, f64, Vec<f64>)]),
     f_hi: f64,
     not_tried: &mut Vec<NotTried>,
     progress: &mut dyn FnMut(&str),
@@ -886,18 +892,8 @@ fn refit_leading(
     let mut refits: Vec<Refit> = Vec::new();
     let mut best: Option<(usize, Current)> = None;
     let mut not_identifiable = Vec::new();
-    // Refit only what the score makes plausible: the score and LR statistics agree for small
-    // effects and the score understates large ones, so a loose gate (1000× the LR's
-    // threshold) loses nothing and saves the refits when there is nothing to find. The leading
-    // candidates are screened by a finite step (the score is a small-effect statistic), and the
-    // families of the best screened are refitted, in parallel.
-    let gate = (1000.0 * threshold).min(1.0);
-    let leading: Vec<usize> = (0..scored.len())
-        .filter(|&j| scored[j].p_value < gate)
-        .take(SCREENED)
-        .collect();
-    let screened = screen_leading((model, vars, obs), opts, cur, ranking, &leading, f_hi);
-    let jobs = refit_jobs(ranking, &screened, opts.refit, f_hi);
+    // The families of the best screened candidates are refitted, in parallel.
+    let jobs = refit_jobs(ranking, screened, opts.refit, f_hi);
     if let Some(((j, js, _), (k, _))) = screened
         .first()
         .zip(jobs.first().and_then(|job| job.first()))
@@ -973,17 +969,24 @@ fn refit_leading(
 /// Candidates passing the score's gate that are screened by a finite step, best score first.
 const SCREENED: usize = 30;
 
-/// The finite-step screen (see [`screen`]) of the candidates `leading` (indices into
-/// `ranking.scored`): `(index, screened criterion J, the effect's parameters there (SI))`, best
-/// (lowest J) first; candidates that cannot be evaluated are left out.
+/// The finite-step screen (see [`screen`]) of the leading candidates: up to [`SCREENED`] of
+/// those whose score makes them plausible — the score and LR statistics agree for small effects
+/// and the score understates large ones, so a loose gate (1000× the LR's threshold) loses nothing
+/// and saves the work when there is nothing to find. `(index into ranking.scored, screened
+/// criterion J, the effect's parameters there (SI))`, best (lowest J) first; candidates that
+/// cannot be evaluated are left out.
 fn screen_leading(
     (model, vars, obs): (&Model, &Variables, &Observations),
     opts: &Options,
     cur: &Current,
     ranking: &Ranking,
-    leading: &[usize],
     f_hi: f64,
 ) -> Vec<(usize, f64, Vec<f64>)> {
+    let gate = (1000.0 * ranking.threshold).min(1.0);
+    let leading: Vec<usize> = (0..ranking.scored.len())
+        .filter(|&j| ranking.scored[j].p_value < gate)
+        .take(SCREENED)
+        .collect();
     if leading.is_empty() {
         return Vec::new();
     }
@@ -998,14 +1001,14 @@ fn screen_leading(
     let free = free_columns(&pc, &cur.u);
     let jfree = DMatrix::from_fn(cur.jac.nrows(), free.len(), |r, c| cur.jac[(r, free[c])]);
     let basis = score::orthonormal_columns(&jfree);
-    let results = in_parallel(leading, |&j| {
+    let results = in_parallel(&leading, |&j| {
         let s = &ranking.scored[j];
         let cand = &ranking.candidates[s.candidate];
         let mut effects = cur.effects.clone();
         effects.push(cand.clone());
         let mut p = Problem::new(model, vars, obs, &opts.identification, effects, f_hi);
         let params = cand.params(f_hi);
-        let starts = screen::effect_starts(&params, &score_start(cand, s.step, f_hi), true);
+        let starts = screen::size_starts(&params, &score_start(cand, s.step, f_hi));
         let resonator = matches!(cand, Effect::Resonator { .. });
         screen::screen(&mut p, &cur.u, &basis, &starts, resonator).map(|(js, g)| (j, js, g))
     });
@@ -1085,15 +1088,10 @@ fn in_parallel<J: Sync, R: Send>(jobs: &[J], f: impl Fn(&J) -> R + Sync) -> Vec<
         .collect()
 }
 
-/// Members of a ranking family refitted besides its leader when the leader's refit leaves the
-/// data unexplained.
-const FAMILY_REFITS: usize = 4;
-
-/// Refits a family's leader (exploring starts) and, when that is more than a partial fix but leaves
-/// the misfit well above the noise, up to [`FAMILY_REFITS`] members of its kind that the score test
-/// could not tell from it: the score
-/// is a small-effect statistic, and for a large effect the place matters (a spring at the body's
-/// centre and one at its corner differ by the moment arm). The best refit, and its effect.
+/// Refits a family's best screened member from where the screen left its parameters. When the
+/// misfit is large (reduced χ² above [`LARGE_MISFIT`]) the refit also explores (see [`refit`]): a
+/// large missing effect bends the fit's own variables, and the screen adjusts them to first
+/// order only. The refit, its fit and its effect.
 fn refit_family<'a>(
     (model, vars, obs): (&Model, &Variables, &Observations),
     opts: &Options,
@@ -1102,12 +1100,14 @@ fn refit_family<'a>(
     f_hi: f64,
     sigma2: f64,
 ) -> Result<(Refit, Current, &'a Effect), RefitError> {
-    let Some(((leader, start), others)) = members.split_first() else {
+    let Some((leader, start)) = members.first() else {
         return Err(RefitError::TooFewObservations {
             observations: cur.e.len(),
             parameters: 0,
         });
     };
+    let m = cur.e.len() as f64;
+    let large = cur.e.norm_squared() / sigma2 > LARGE_MISFIT * m;
     let (r, next) = refit(
         model,
         vars,
@@ -1115,37 +1115,15 @@ fn refit_family<'a>(
         opts,
         cur,
         leader,
-        (start, true),
+        (start, large),
         f_hi,
         sigma2,
     )?;
-    let mut best = (r, next, *leader);
-    // Only a leader that is a real part of the answer (not a partial fix) but leaves the data
-    // unexplained makes its place worth refining; members of the leader's kind only.
-    let explained = |r: &Refit| 2.0 * r.criterion_after / sigma2 < 1.5 * cur.e.len() as f64;
-    if explained(&best.0) || partial_fix(&best.0, cur, sigma2).is_some() {
-        return Ok(best);
-    }
-    let same_kind = others.iter().filter(|(c, _)| c.kind() == leader.kind());
-    for (cand, start) in same_kind.take(FAMILY_REFITS) {
-        if let Ok((r, next)) = refit(
-            model,
-            vars,
-            obs,
-            opts,
-            cur,
-            cand,
-            (start, false),
-            f_hi,
-            sigma2,
-        ) {
-            if r.criterion_after < best.0.criterion_after {
-                best = (r, next, *cand);
-            }
-        }
-    }
-    Ok(best)
+    Ok((r, next, *leader))
 }
+
+/// A misfit above this reduced χ² is large: refits then explore their starts.
+const LARGE_MISFIT: f64 = 2.0;
 
 /// A refit's start for `cand`'s parameters: the first (its size) at the score's Gauss-Newton
 /// `step` from its nested value, the others at their initial values.
@@ -1686,11 +1664,14 @@ fn refit(
     // Standard errors from the Fisher information at the refit (σ̂² scaled when R is unknown):
     // the new effect's are the last.
     let params = estimates(&p, &next, f_hi, sigma2).pop().unwrap_or_default();
+    let crit = p.criterion(&p.realize(&p.split(&next.u).1)?)?;
     let r = Refit {
         effect: cand.describe(),
         kind: cand.kind().into(),
         criterion_before: j0,
         criterion_after: j1,
+        rms_db_before: residuals::rms_db(&crit, &cur.e),
+        rms_db_after: residuals::rms_db(&crit, &next.e),
         lr,
         dof: q,
         p_value,
@@ -1730,6 +1711,7 @@ pub fn text(d: &Diagnosis) -> String {
     for a in &d.accepted {
         let ps: Vec<String> = a.params.iter().map(ParamEstimate::describe).collect();
         let _ = writeln!(s, "  added: {} ({})", a.effect, ps.join(", "));
+        let _ = writeln!(s, "         {}", gain_text(a));
         if let Some(place) = &a.place {
             let _ = writeln!(s, "         {place}");
         }
@@ -1827,11 +1809,21 @@ pub fn final_text(id: &Identification, d: &Diagnosis) -> String {
     for a in &d.accepted {
         let ps: Vec<String> = a.params.iter().map(ParamEstimate::describe).collect();
         let _ = writeln!(s, "  + {} ({})", a.effect, ps.join(", "));
+        let _ = writeln!(s, "    {}", gain_text(a));
         if let Some(place) = &a.place {
             let _ = writeln!(s, "    {place}");
         }
     }
     s
+}
+
+/// What an accepted effect gained when it was added: the RMS amplitude error in dB over every
+/// fitted point, and the criterion.
+pub fn gain_text(a: &Refit) -> String {
+    format!(
+        "gain when added: RMS error {:.2} → {:.2} dB, criterion J {:.1} → {:.1}",
+        a.rms_db_before, a.rms_db_after, a.criterion_before, a.criterion_after
+    )
 }
 
 /// Round `i` of a diagnosis: the ranking, the refits, the placement and the removals.
@@ -1868,8 +1860,16 @@ fn round_text(s: &mut String, i: usize, r: &Round) {
         };
         let _ = writeln!(
             s,
-            "    refit: {}: J {:.1} → {:.1}, LR {:.1} ({} dof), p {:.1e}, ΔBIC {:.1} {mark}",
-            f.effect, f.criterion_before, f.criterion_after, f.lr, f.dof, f.p_value, f.bic_change
+            "    refit: {}: J {:.1} → {:.1}, RMS {:.2} → {:.2} dB, LR {:.1} ({} dof), p {:.1e}, ΔBIC {:.1} {mark}",
+            f.effect,
+            f.criterion_before,
+            f.criterion_after,
+            f.rms_db_before,
+            f.rms_db_after,
+            f.lr,
+            f.dof,
+            f.p_value,
+            f.bic_change
         );
     }
     if let Some(p) = &r.placed {
@@ -1912,6 +1912,11 @@ fn before_after_text(s: &mut String, d: &Diagnosis) {
         "    reduced χ²      {:.2} → {:.2}",
         d.before.reduced_chi2, d.after.reduced_chi2
     );
+    let _ = writeln!(
+        s,
+        "    RMS error       {:.2} dB → {:.2} dB",
+        d.before.rms_db, d.after.rms_db
+    );
     if let (Some(a), Some(b)) = (d.before.chi2_p, d.after.chi2_p) {
         let _ = writeln!(
             s,
@@ -1928,8 +1933,10 @@ fn before_after_text(s: &mut String, d: &Diagnosis) {
     {
         let _ = writeln!(
             s,
-            "    RMS rel. error  {:<28} {} → {}",
+            "    RMS error       {:<28} {:.2} dB → {:.2} dB ({} → {})",
             a.label,
+            a.rms_db,
+            b.rms_db,
             crate::display::relative(a.rms_relative),
             crate::display::relative(b.rms_relative)
         );

@@ -568,6 +568,125 @@ pub(super) fn orthonormal_columns(j: &DMatrix<f64>) -> DMatrix<f64> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::diagnose::effects::Realized;
+
+    /// The first-order action of every candidate that acts through `A(ω)` — springs, masses,
+    /// resonators, freed SDE directions (left out, and held stiff by a general element), body
+    /// masses — against a central difference of the model with the effect applied.
+    #[test]
+    fn first_order_actions_match_a_central_difference_of_the_applied_effect() {
+        let path =
+            std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../configs/models/fwd32j.toml");
+        let fwd = crate::modelfile::load(&path).unwrap().model;
+        let chain = crate::textbook::two_in_series(100.0, 50.0, 1e6, 2e6, 0.2);
+        let vars_of = |_: &Model| crate::identification::Variables {
+            vars: Vec::new(),
+            origin: String::new(),
+        };
+        let mut checked = std::collections::BTreeMap::<&str, usize>::new();
+        for model in [&fwd, &chain] {
+            let lines = [20.0, 57.0, 131.0, 250.0, 400.0];
+            let labels: Vec<String> = (0..model.outputs.len()).map(|o| o.to_string()).collect();
+            let vars = vars_of(model);
+            let candidates =
+                crate::diagnose::generate::candidates(model, &vars, &[], &labels, 20.0, 400.0);
+            let states = frf::states(model, &lines, frf::Method::Direct).unwrap();
+            let outputs: Vec<OutputRow> = model
+                .outputs
+                .iter()
+                .map(|c| OutputRow::of(model, c))
+                .collect();
+            let gains = vec![1.0; outputs.len()];
+            let nl = lines.len();
+            let base = frf::response(model, &lines, &[], frf::Method::Direct).unwrap();
+            // A few of each kind (the first, the middle and the last).
+            let mut kinds: Vec<&str> = candidates.iter().map(Effect::kind).collect();
+            kinds.dedup();
+            for kind in kinds {
+                let of: Vec<&Effect> = candidates.iter().filter(|c| c.kind() == kind).collect();
+                for cand in [of[0], of[of.len() / 2], of[of.len() - 1]] {
+                    if cand.rows(model).is_none() {
+                        continue;
+                    }
+                    let mut dq = vec![C64::new(0.0, 0.0); outputs.len() * nl];
+                    fill_derivative(
+                        cand, model, &states, &outputs, &gains, &lines, &None, &mut dq,
+                    )
+                    .unwrap();
+                    let np = &cand.params(400.0)[0];
+                    // Large enough that the change stands above the solves' rounding (the
+                    // structure's stiffnesses span six decades), small enough to be linear.
+                    // (A resonator near a line acts strongly and nonlinearly: a smaller step.)
+                    let h = np.scale
+                        * if matches!(cand, Effect::Resonator { .. }) {
+                            1e-4
+                        } else {
+                            1e-2
+                        };
+                    let at = |g: f64| {
+                        let mut r = Realized {
+                            model: model.clone(),
+                            vars: vars.clone(),
+                            gains: gains.clone(),
+                        };
+                        let mut v: Vec<f64> = cand.params(400.0).iter().map(|p| p.nested).collect();
+                        v[0] = g;
+                        cand.apply(&mut r, &v, 400.0).unwrap();
+                        frf::response(&r.model, &lines, &[], frf::Method::Direct).unwrap()
+                    };
+                    // One-sided parameters (bounded at their nested value) by a forward
+                    // difference with Richardson extrapolation, the others centrally.
+                    let one_sided = np.lower >= np.nested;
+                    let (rp, rm, rp2) = if one_sided {
+                        (at(np.nested + h), None, Some(at(np.nested + 2.0 * h)))
+                    } else {
+                        (at(np.nested + h), Some(at(np.nested - h)), None)
+                    };
+                    for o in 0..outputs.len() {
+                        let fd: Vec<C64> = (0..nl)
+                            .map(|k| match (&rm, &rp2) {
+                                (Some(rm), _) => (rp.output(o)[k] - rm.output(o)[k]) / (2.0 * h),
+                                (None, Some(rp2)) => {
+                                    let y0 = base.output(o)[k];
+                                    let d1 = (rp.output(o)[k] - y0) / h;
+                                    let d2 = (rp2.output(o)[k] - y0) / (2.0 * h);
+                                    2.0 * d1 - d2
+                                }
+                                _ => unreachable!(),
+                            })
+                            .collect();
+                        let scale = fd.iter().map(|v| v.norm()).fold(0.0, f64::max);
+                        // An added point mass is a small body on a stiff mount (30× above the
+                        // band), a rigid mass in its first-order form.
+                        let tol = match cand {
+                            Effect::Mass { .. } => 1e-3,
+                            _ => 1e-4,
+                        };
+                        for (k, fd) in fd.into_iter().enumerate() {
+                            let a = dq[o * nl + k];
+                            assert!(
+                                (a - fd).norm() <= tol * scale + 1e-30,
+                                "{}: output {o}, {} Hz: first order {a}, difference {fd}",
+                                cand.describe(),
+                                lines[k]
+                            );
+                        }
+                    }
+                    *checked.entry(cand.kind()).or_default() += 1;
+                }
+            }
+        }
+        for kind in ["spring", "mass", "resonator", "SDE direction", "body mass"] {
+            assert!(checked.get(kind).is_some_and(|n| *n >= 3), "{checked:?}");
+        }
+        // The chain's guides hold their directions at a stiffness: those are freed as compliances.
+        let vars = vars_of(&chain);
+        let held = crate::diagnose::generate::candidates(&chain, &vars, &[], &[], 20.0, 400.0)
+            .into_iter()
+            .filter(|c| matches!(c, Effect::Direction { held, .. } if *held > 0.0))
+            .count();
+        assert!(held >= 8, "{held}");
+    }
 
     /// The rigid-limit derivative of every split body of FWD-32J against a finite difference of
     /// the split model (O(h) accurate).

@@ -24,7 +24,7 @@ pub(super) const REFIT_SIZE_DECADES: [i32; 6] = [-2, -1, 0, 1, 2, 3];
 /// Tuning frequencies of a resonator's starting grid across its range.
 const RESONATOR_GRID: usize = 24;
 /// Iterations of the screen's minimization over a candidate's own parameters.
-const SCREEN_ITERATIONS: usize = 8;
+const SCREEN_ITERATIONS: usize = 5;
 
 /// Starting values (SI) of a new effect's parameters: `start`, and with `explore` also the way
 /// there from the nested values ([`REFIT_START_FRACTIONS`]) and the size over decades of its
@@ -58,6 +58,14 @@ pub(super) fn effect_starts(params: &[EffectParam], start: &[f64], explore: bool
             }
         }
     }
+    out
+}
+
+/// The screen's starting values (SI) of a new effect's parameters: `start` (the score step) and
+/// the size over decades of its scale on either side of the nested value.
+pub(super) fn size_starts(params: &[EffectParam], start: &[f64]) -> Vec<Vec<f64>> {
+    let mut out = effect_starts(params, start, true);
+    out.drain(1..REFIT_START_FRACTIONS.len());
     out
 }
 
