@@ -9,7 +9,8 @@
 //!
 //! Sizes are set by what the effect does to the data, not by its parameter: each effect's
 //! parameter is chosen (bisection on a log scale) so that its noise-free change of the data is
-//! `signal` in χ² units (Σ((|q₁| − |q₀|)/(ε|q₀|))² over every point), with `signal` drawn
+//! `signal` in χ² units (Σ((|q₁| − |q₀|)/(ε|q₀|))² over every point, less the part the
+//! identification's variables can absorb to first order: what a fit cannot explain away), with `signal` drawn
 //! log-uniform over [`SIGNAL`]: from about twice the Bonferroni critical value of one candidate
 //! among a thousand (barely detectable once the fitted variables absorb part of it) to
 //! dominant (a misfit of reduced χ² in the hundreds).
@@ -18,6 +19,7 @@ use std::time::Instant;
 
 use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
+use nalgebra::{DMatrix, DVector};
 use rand_distr::{Distribution, StandardNormal};
 
 use super::effects::{Effect, EffectError, Realized};
@@ -27,7 +29,8 @@ use crate::identification::{self, data, synthetic, IdentifyError, Variables};
 use crate::measured::MeasuredData;
 use crate::model::Model;
 
-/// Range of an injected effect's signal: its noise-free change of the data in χ² units.
+/// Range of an injected effect's signal: its noise-free change of the data in χ² units, less
+/// what the variables absorb.
 pub const SIGNAL: (f64, f64) = (100.0, 1.0e5);
 /// Range of the relative noise σ/|q| of the data (0.5-3 %).
 pub const NOISE: (f64, f64) = (0.005, 0.03);
@@ -221,8 +224,35 @@ fn values_at(effect: &Effect, nested: &[f64], t: f64, sign: f64, extra: f64) -> 
     v
 }
 
+/// Orthonormal columns spanning how the identification's variables move the data `q0` of `r`
+/// at `lines` (whitened by the relative noise `noise`; forward differences at the truth's
+/// values): what a fit can absorb of an effect, to first order.
+fn absorbed(
+    r: &Realized,
+    q0: &[f64],
+    lines: &[f64],
+    noise: f64,
+) -> Result<DMatrix<f64>, BlindError> {
+    let x = truth_values(&r.model, &r.vars);
+    let mut jac = DMatrix::zeros(q0.len(), x.len());
+    for (i, v) in r.vars.vars.iter().enumerate() {
+        let h = 1e-6 * x[i].abs().max(v.scale.abs()).max(f64::MIN_POSITIVE);
+        let mut xh = x.clone();
+        xh[i] += h;
+        let mut m = r.clone();
+        r.vars.apply(&mut m.model, &xh);
+        let q = amplitudes(&m, lines)?;
+        for (k, (a, b)) in q.iter().zip(q0).enumerate() {
+            jac[(k, i)] = (a - b) / (h * noise * b);
+        }
+    }
+    Ok(super::score::orthonormal_columns(&jac))
+}
+
 /// Injects `effect` into `r` with a size such that its noise-free change of the data `q0` is
-/// `signal` (χ² units at relative noise `noise`); returns the values used.
+/// `signal` in χ² units at relative noise `noise` — the part of the change the identification's
+/// variables cannot absorb (projected off [`absorbed`]): an effect the variables can mimic is
+/// not detectable, whatever it does to the data. Returns the values used.
 #[allow(clippy::too_many_arguments)]
 fn sized(
     r: &Realized,
@@ -244,6 +274,7 @@ fn sized(
         }
         _ => 0.0,
     };
+    let absorbed = absorbed(r, q0, lines, noise)?;
     let chi2 = |t: f64| -> Result<Option<f64>, BlindError> {
         let mut x = r.clone();
         let v = values_at(effect, &nested, t, sign, extra);
@@ -251,11 +282,12 @@ fn sized(
         let Ok(q) = amplitudes(&x, lines) else {
             return Ok(None);
         };
+        let d = DVector::from_iterator(
+            q.len(),
+            q.iter().zip(q0).map(|(a, b)| (a - b) / (noise * b)),
+        );
         Ok(Some(
-            q.iter()
-                .zip(q0)
-                .map(|(a, b)| ((a - b) / (noise * b)).powi(2))
-                .sum(),
+            (d.norm_squared() - (absorbed.transpose() * &d).norm_squared()).max(0.0),
         ))
     };
     // Bracket on a log scale from the parameter's own scale, then bisect.

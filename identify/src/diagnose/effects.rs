@@ -267,6 +267,17 @@ impl Effect {
         }
     }
 
+    /// Whether the element the effect changes is one of `base`'s (the structure's own): a freed
+    /// direction of an SDE, a body's mass. The SDEs and bodies the diagnosis added (springs,
+    /// mounts, a split body's thirds and joints) are not candidates themselves.
+    pub fn on_structure(&self, base: &Model) -> bool {
+        match self {
+            Effect::Direction { sde, .. } => base.sde_index(sde).is_some(),
+            Effect::BodyMass { body, .. } => base.body_index(body).is_some(),
+            _ => !self.on_added_body(),
+        }
+    }
+
     /// Where a placed effect was fitted, with its 95 % confidence region, from its parameter
     /// `values` and their standard `errors` (SI): a point mass's point ± per global axis, a
     /// spring's line of action ± across it along the two directions the offsets move it. `None`

@@ -785,8 +785,8 @@ fn rank(
     let free = free_columns(pc, &cur.u);
     let jfree = DMatrix::from_fn(cur.jac.nrows(), free.len(), |r, c| cur.jac[(r, free[c])]);
     let sigma2 = residual_scale(cur, free.len(), crit.noise.scale_unknown());
-    // Candidates live on the structure's bodies, not on the masses and resonators the diagnosis
-    // added itself; a characteristic whose gain is already a variable gets no gain candidate.
+    // Candidates live on the structure's bodies and SDEs, not on the masses, resonators,
+    // springs and split joints the diagnosis added itself; a characteristic whose gain is already a variable gets no gain candidate.
     let mut candidates: Vec<Effect> = generate::candidates(
         &crit.model_at(&x),
         &realized.vars,
@@ -796,7 +796,7 @@ fn rank(
         f_hi,
     )
     .into_iter()
-    .filter(|c| !c.on_added_body())
+    .filter(|c| c.on_structure(pc.base()))
     .filter(|e| !matches!(e, Effect::Gain { output, .. } if crit.gain_variable(*output).is_some()))
     .collect();
     // The effects' gains times the gain variables' (the model output the criterion fits).

@@ -189,7 +189,8 @@ struct Action<'a> {
 /// Tuning frequencies tried per resonance width (`ψ/2π` in log-frequency) in a resonator's cell.
 const TUNING_STEPS_PER_WIDTH: f64 = 2.0;
 
-/// A resonator's score test maximised over its tuning frequency within `[lo, hi]` (Hz).
+/// A resonator's score test maximised over its tuning frequency within `[lo, hi]` (Hz), its
+/// p-value multiplied by the number of independent frequencies searched (Bonferroni).
 ///
 /// Its action is `c(ω; f) Σ tᵀt` over its point's three rows, with `c` the tuned mass's dynamic
 /// stiffness per unit mass ([`resonator_coefficient`]): the output changes are `c(ω_k; f) b_ok`
@@ -283,6 +284,10 @@ fn tuned_resonator(
     };
     let mut s = statistic(ci, &tuned_cand, &column(tuned), fit, basis)?;
     s.tuned_hz = Some(tuned);
+    // The best of many tuning frequencies: its p-value counts the independent ones searched —
+    // one per line in the cell (a sharp resonance acts where a line sits) and one between.
+    let searched = 1 + action.lines.iter().filter(|f| (lo..=hi).contains(*f)).count();
+    s.p_value = (s.p_value * searched as f64).min(1.0);
     Ok(s)
 }
 
