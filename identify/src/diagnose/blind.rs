@@ -246,6 +246,14 @@ fn absorbed(
             jac[(k, i)] = (a - b) / (h * noise * b);
         }
     }
+    // The variables' units differ by ten decades (Pa/m against ψ): columns of unit length, so
+    // that the basis drops only columns that truly depend on the others.
+    for mut c in jac.column_iter_mut() {
+        let n = c.norm();
+        if n > 0.0 {
+            c /= n;
+        }
+    }
     Ok(super::score::orthonormal_columns(&jac))
 }
 
@@ -596,3 +604,5 @@ pub fn rates(outcomes: &[Outcome]) -> Rates {
         median_diagnosis_seconds: median(&|o| o.diagnosis_seconds),
     }
 }
+
+
