@@ -17,9 +17,9 @@
 
 use std::time::Instant;
 
+use nalgebra::{DMatrix, DVector};
 use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
-use nalgebra::{DMatrix, DVector};
 use rand_distr::{Distribution, StandardNormal};
 
 use super::effects::{Effect, EffectError, Realized};
@@ -604,5 +604,3 @@ pub fn rates(outcomes: &[Outcome]) -> Rates {
         median_diagnosis_seconds: median(&|o| o.diagnosis_seconds),
     }
 }
-
-

@@ -876,7 +876,7 @@ fn refit_leading(
     (model, vars, obs): (&Model, &Variables, &Observations),
     opts: &Options,
     cur: &Current,
-    (ranking, screened): (&Ranking, &[(usize, f64, Vec<f64>)]),
+    (ranking, screened): (&Ranking, &[Screened]),
     f_hi: f64,
     not_tried: &mut Vec<NotTried>,
     progress: &mut dyn FnMut(&str),
@@ -894,16 +894,16 @@ fn refit_leading(
     let mut not_identifiable = Vec::new();
     // The families of the best screened candidates are refitted, in parallel.
     let jobs = refit_jobs(ranking, screened, opts.refit, f_hi);
-    if let Some(((j, js, _), (k, _))) = screened
+    if let Some((best, (k, _))) = screened
         .first()
         .zip(jobs.first().and_then(|job| job.first()))
     {
         progress(&format!(
             "screened {} candidates by a finite step; best: {} (J {:.1} → {:.1}); refitting {} families, first {}",
             screened.len(),
-            candidates[scored[*j].candidate].describe(),
+            candidates[scored[best.index].candidate].describe(),
             0.5 * cur.e.norm_squared(),
-            js,
+            best.criterion,
             jobs.len(),
             k.describe()
         ));
@@ -966,6 +966,16 @@ fn refit_leading(
     (refits, best, not_identifiable)
 }
 
+/// One candidate's finite-step screen.
+struct Screened {
+    /// Index into the ranking's scored candidates.
+    index: usize,
+    /// The screened criterion J.
+    criterion: f64,
+    /// The effect's parameters (SI) where it is least: the refit's start.
+    start: Vec<f64>,
+}
+
 /// Candidates passing the score's gate that are screened by a finite step, best score first.
 const SCREENED: usize = 30;
 
@@ -981,7 +991,7 @@ fn screen_leading(
     cur: &Current,
     ranking: &Ranking,
     f_hi: f64,
-) -> Vec<(usize, f64, Vec<f64>)> {
+) -> Vec<Screened> {
     let gate = (1000.0 * ranking.threshold).min(1.0);
     let leading: Vec<usize> = (0..ranking.scored.len())
         .filter(|&j| ranking.scored[j].p_value < gate)
@@ -1010,10 +1020,16 @@ fn screen_leading(
         let params = cand.params(f_hi);
         let starts = screen::size_starts(&params, &score_start(cand, s.step, f_hi));
         let resonator = matches!(cand, Effect::Resonator { .. });
-        screen::screen(&mut p, &cur.u, &basis, &starts, resonator).map(|(js, g)| (j, js, g))
+        screen::screen(&mut p, &cur.u, &basis, &starts, resonator).map(|(criterion, start)| {
+            Screened {
+                index: j,
+                criterion,
+                start,
+            }
+        })
     });
-    let mut out: Vec<(usize, f64, Vec<f64>)> = results.into_iter().flatten().collect();
-    out.sort_by(|a, b| a.1.total_cmp(&b.1));
+    let mut out: Vec<Screened> = results.into_iter().flatten().collect();
+    out.sort_by(|a, b| a.criterion.total_cmp(&b.criterion));
     out
 }
 
@@ -1022,7 +1038,7 @@ fn screen_leading(
 /// (from their score steps).
 fn refit_jobs<'r>(
     ranking: &'r Ranking,
-    screened: &[(usize, f64, Vec<f64>)],
+    screened: &[Screened],
     n: usize,
     f_hi: f64,
 ) -> Vec<Vec<(&'r Effect, Vec<f64>)>> {
@@ -1034,7 +1050,10 @@ fn refit_jobs<'r>(
     } = ranking;
     let mut taken: Vec<Option<usize>> = Vec::new();
     let mut jobs = Vec::new();
-    for (j, _, start) in screened {
+    for Screened {
+        index: j, start, ..
+    } in screened
+    {
         if jobs.len() == n {
             break;
         }

@@ -286,7 +286,11 @@ fn tuned_resonator(
     s.tuned_hz = Some(tuned);
     // The best of many tuning frequencies: its p-value counts the independent ones searched —
     // one per line in the cell (a sharp resonance acts where a line sits) and one between.
-    let searched = 1 + action.lines.iter().filter(|f| (lo..=hi).contains(*f)).count();
+    let searched = 1 + action
+        .lines
+        .iter()
+        .filter(|f| (lo..=hi).contains(*f))
+        .count();
     s.p_value = (s.p_value * searched as f64).min(1.0);
     Ok(s)
 }

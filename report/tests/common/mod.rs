@@ -99,6 +99,13 @@ pub fn diagnosis_section(f: &Fixture) -> Diagnosis {
                 value: *v,
             })
             .collect();
+    let db: Vec<LabelledValue> = rms
+        .iter()
+        .map(|l| LabelledValue {
+            label: l.label.clone(),
+            value: 20.0 * (1.0 + l.value).log10(),
+        })
+        .collect();
     Diagnosis {
         candidates: vec![
             Candidate {
@@ -133,14 +140,14 @@ pub fn diagnosis_section(f: &Fixture) -> Diagnosis {
             chi2_p_value: Some(1e-6),
             reduced_chi2: 3.0,
             rms_relative_error: rms.clone(),
-            rms_db_error: Vec::new(),
+            rms_db_error: db.clone(),
         },
         after: FitQuality {
             criterion: f.id.criterion,
             chi2_p_value: None,
             reduced_chi2: 1.0,
             rms_relative_error: rms,
-            rms_db_error: Vec::new(),
+            rms_db_error: db,
         },
         final_model: "two masses + spring k1-body–ground".into(),
         final_parameters: vec![Parameter {
