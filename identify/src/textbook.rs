@@ -46,6 +46,7 @@ pub fn single_body(mass: f64, k: f64, psi: f64) -> Model {
             moment: Vector3::zeros(),
         }],
         references: Vec::new(),
+        point_masses: Vec::new(),
         outputs: vec![Characteristic {
             body: 0,
             dof: 2,
@@ -101,6 +102,7 @@ pub fn two_in_series(m1: f64, m2: f64, k1: f64, k2: f64, psi: f64) -> Model {
             moment: Vector3::zeros(),
         }],
         references: Vec::new(),
+        point_masses: Vec::new(),
         outputs: vec![
             Characteristic {
                 body: 0,
@@ -187,6 +189,7 @@ pub fn chain(n: usize) -> Model {
             moment: Vector3::zeros(),
         }],
         references: Vec::new(),
+        point_masses: Vec::new(),
         outputs: (0..3)
             .map(|dof| Characteristic {
                 body: last,
