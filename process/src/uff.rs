@@ -1174,7 +1174,7 @@ fn ordinate_unit(f: &Function) -> std::result::Result<FrfUnit, String> {
         Ok(u) if u.per_force || u.per_base_motion => u,
         // A transmissibility whose denominator is not written: the ratio of like quantities.
         _ if transmissibility && empty(den) => FrfUnit::parse(&format!("({num})/({num})"))
-            .map_err(|e| format!("record 9 units "{num}" of a transmissibility: {e}"))?,
+            .map_err(|e| format!("record 9 units \"{num}\" of a transmissibility: {e}"))?,
         _ if empty(den) => {
             return Err(format!(
                 "record 10 (ordinate denominator) has no units label, so the force unit of \"{num}\" is unknown"
