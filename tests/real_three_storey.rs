@@ -108,8 +108,11 @@ fn identify_reaches_the_independent_scipy_fit() {
 
 #[test]
 fn many_starts_find_the_same_best_optimum_and_report_the_others() {
-    let one = identify_example(&["--format", "json"]);
-    let many = identify_example(&["--format", "json", "--starts", "12", "--seed", "3"]);
+    // The variables file's start and the hypercube only (no modal start: `--start model`).
+    let one = identify_example(&["--format", "json", "--start", "model"]);
+    let many = identify_example(&[
+        "--format", "json", "--starts", "12", "--seed", "3", "--start", "model",
+    ]);
     assert_eq!(many.status.code(), Some(0), "{}", text(&many));
     let one: serde_json::Value = serde_json::from_slice(&one.stdout).unwrap();
     let many: serde_json::Value = serde_json::from_slice(&many.stdout).unwrap();
@@ -218,5 +221,70 @@ fn a_modal_start_matches_the_measured_frequencies_and_reaches_the_same_optimum_f
         modal["criterion_initial"].as_f64().unwrap()
             < documented["criterion_initial"].as_f64().unwrap(),
         "the pre-fit start is better than the model's values"
+    );
+}
+
+#[test]
+fn by_default_a_far_start_also_starts_from_the_measured_modes_and_keeps_the_better_fit() {
+    // Vendor data (no variances): `--start auto`, the default, fits from the variables file's
+    // values and from the modal pre-fit's. From the far start the first ends at a degenerate
+    // corner (storey 1 at 3 kN/m, ψ 0.2, 7.5 dB); the second reaches the documented optimum.
+    let ex = root().join("examples/real-three-storey");
+    let far = ex.join("far-start.toml");
+    let data = root().join("data/dtop-three-storey/three-storey-hammer.uff");
+    let (model, map) = (ex.join("model.toml"), ex.join("map.toml"));
+    let run = |start: &str| {
+        let o = ident(&[
+            "identify",
+            p(&model),
+            "--data",
+            p(&data),
+            "--map",
+            p(&map),
+            "--vars",
+            p(&far),
+            "--band",
+            "3:40",
+            "--start",
+            start,
+            "--format",
+            "json",
+        ]);
+        assert_eq!(o.status.code(), Some(0), "{}", text(&o));
+        let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+        (j, String::from_utf8_lossy(&o.stderr).into_owned())
+    };
+    let (auto, err) = run("auto");
+    let (plain, _) = run("model");
+    let documented = identify_example(&["--format", "json", "--start", "model"]);
+    let documented: serde_json::Value = serde_json::from_slice(&documented.stdout).unwrap();
+    let j = |v: &serde_json::Value| v["criterion"].as_f64().unwrap();
+    assert!(
+        err.contains("start: auto: from the variables file's values and from the modal pre-fit's"),
+        "{err}"
+    );
+    assert_eq!(
+        auto["starts"].as_array().unwrap().len(),
+        2,
+        "{}",
+        auto["starts"]
+    );
+    assert!(
+        (j(&auto) / j(&documented) - 1.0).abs() < 1e-6,
+        "auto {} vs documented {}",
+        j(&auto),
+        j(&documented)
+    );
+    assert!(
+        j(&plain) > 3.0 * j(&auto),
+        "the far start alone {} vs auto {}",
+        j(&plain),
+        j(&auto)
+    );
+    // The report lists both starts: the best is the modal one (start 1).
+    let optima = auto["start_analysis"]["optima"].as_array().unwrap();
+    assert!(
+        optima[0]["starts"].as_array().unwrap().contains(&1.into()),
+        "{optima:?}"
     );
 }

@@ -124,6 +124,10 @@ pub struct Variables {
     pub origin: String,
     /// The variables, in file order.
     pub vars: Vec<Variable>,
+    /// Further starting points (SI, one value per variable) tried after the initial values
+    /// and before any Latin-hypercube starts: e.g. a modal pre-fit's (`ident identify --start
+    /// auto`). The best fit of all is kept.
+    pub extra_starts: Vec<Vec<f64>>,
 }
 
 impl Variables {
@@ -417,6 +421,7 @@ pub fn parse(text: &str, origin: &str, model: &Model) -> Result<Variables, VarsE
     Ok(Variables {
         origin: origin.into(),
         vars,
+        extra_starts: Vec::new(),
     })
 }
 
