@@ -234,3 +234,86 @@ fn the_python_baseline_reads_mass_point_mass_and_gain_terms_and_reaches_the_same
         );
     }
 }
+
+#[test]
+fn sensitivity_ranks_the_variables_files_masses_point_masses_and_gains() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let model_text = std::fs::read_to_string(root().join(TWO_MASS)).expect("model") + SENSOR;
+    let model_file = dir.path().join("model.toml");
+    std::fs::write(&model_file, &model_text).expect("write");
+    let vars_file = dir.path().join("vars.toml");
+    std::fs::write(
+        &vars_file,
+        "[[variable]]\nbodies = \"first\"\nparameter = \"m\"\n\n[[variable]]\npoint_masses = \"sensor\"\nparameter = \"m\"\n\n[[variable]]\ncharacteristics = \"second u3\"\nparameter = \"gain\"\n",
+    )
+    .expect("write");
+    let run = |extra: &[&str]| {
+        let o = common::ident(
+            &[
+                &[
+                    "sensitivity",
+                    p(&model_file),
+                    "--from",
+                    "10",
+                    "--to",
+                    "120",
+                    "--json",
+                ][..],
+                extra,
+            ]
+            .concat(),
+        );
+        assert_eq!(o.status.code(), Some(0), "{}", utf8(&o.stderr));
+        serde_json::from_slice::<serde_json::Value>(&o.stdout).expect("json")
+    };
+    let plain = run(&[]);
+    let with = run(&["--vars", p(&vars_file)]);
+    let rows = |j: &serde_json::Value| j["params"].as_array().expect("params").clone();
+    // The SDE rows stay; three more follow.
+    assert_eq!(rows(&with).len(), rows(&plain).len() + 3);
+    let find = |key: &str, name: &str| {
+        rows(&with)
+            .into_iter()
+            .find(|r| r[key] == name)
+            .unwrap_or_else(|| panic!("no {key} {name} in {with}"))
+    };
+    let mass = find("body", "first");
+    let sensor = find("point_mass", "sensor");
+    let gain = find("characteristic", "second u3");
+    assert_eq!(
+        (mass["unit"].as_str(), mass["value"].as_f64()),
+        (Some("kg"), Some(400.0))
+    );
+    assert_eq!(sensor["value"].as_f64(), Some(5.0));
+    // The body mass moves both outputs; a gain moves only its own characteristic, by exactly its
+    // level (relative MI 1).
+    let rel = |r: &serde_json::Value| -> Vec<f64> {
+        r["relative_mi"]
+            .as_array()
+            .expect("relative_mi")
+            .iter()
+            .map(|v| v.as_f64().expect("number"))
+            .collect()
+    };
+    assert!(rel(&mass).iter().all(|v| *v > 0.1), "{mass}");
+    assert!(rel(&sensor).iter().all(|v| *v > 0.0), "{sensor}");
+    assert_eq!(rel(&gain), vec![0.0, 1.0], "{gain}");
+    // The text table ranks them with the SDE parameters.
+    let o = common::ident(&[
+        "sensitivity",
+        p(&model_file),
+        "--from",
+        "10",
+        "--to",
+        "120",
+        "--vars",
+        p(&vars_file),
+    ]);
+    let out = utf8(&o.stdout);
+    assert!(
+        out.contains("body first m")
+            && out.contains("point mass sensor m")
+            && out.contains("gain second u3"),
+        "{out}"
+    );
+}
