@@ -240,14 +240,13 @@ fn a_point_mass_jacobian_matches_finite_differences_on_both_paths_and_under_base
     for method in [Method::Direct, Method::Modal] {
         let r = response_params(&model, &f, &[p], method).unwrap();
         for o in 0..model.outputs.len() {
-            for k in 0..f.len() {
+            for (k, fk) in f.iter().enumerate() {
                 // A is affine in the mass: the central difference is exact up to rounding.
                 let fd = (up.output(o)[k] - down.output(o)[k]) / (2.0 * h);
                 let an = r.derivative(0, o)[k];
                 assert!(
                     (fd - an).norm() <= 1e-6 * an.norm() + 1e-9 * up.output(o)[k].norm(),
-                    "{method:?} output {o} at {} Hz: {an} vs {fd}",
-                    f[k]
+                    "{method:?} output {o} at {fk} Hz: {an} vs {fd}"
                 );
             }
         }
