@@ -126,15 +126,21 @@ fn a_bad_mass_variable_exits_2_naming_the_file_line_and_fix() {
 /// The two-mass chain with a 5 kg sensor block off the second body's centre, as a model file.
 const SENSOR: &str = "\n[[point_mass]]\nname = \"sensor\"\nbody = \"second\"\npoint = \"80 -40 1030 mm\"\nmass = \"5 kg\"\ninertia = \"2e-3 kg m^2\"\n";
 
+/// The two-mass model file with [`SENSOR`], written into `dir`: its path and text.
+fn model_with_sensor(dir: &std::path::Path) -> (std::path::PathBuf, String) {
+    let text = std::fs::read_to_string(root().join(TWO_MASS)).expect("model") + SENSOR;
+    let path = dir.join("model.toml");
+    std::fs::write(&path, &text).expect("write");
+    (path, text)
+}
+
 #[test]
 fn the_python_baseline_reads_mass_point_mass_and_gain_terms_and_reaches_the_same_fit() {
     // ident and bench/python/ident_baseline.py (numpy FRF, scipy least_squares, its own
     // assembly of M with the point mass's parallel-axis block) fit the exported problem: the
     // two springs, the first body's mass, the sensor's mass and the second output's gain.
     let dir = tempfile::tempdir().expect("temp dir");
-    let model_text = std::fs::read_to_string(root().join(TWO_MASS)).expect("model") + SENSOR;
-    let model_file = dir.path().join("model.toml");
-    std::fs::write(&model_file, &model_text).expect("write");
+    let (model_file, model_text) = model_with_sensor(dir.path());
     let truth = identify::modelfile::parse_toml(&model_text, "model.toml")
         .expect("model with a sensor")
         .model;
@@ -238,31 +244,19 @@ fn the_python_baseline_reads_mass_point_mass_and_gain_terms_and_reaches_the_same
 #[test]
 fn sensitivity_ranks_the_variables_files_masses_point_masses_and_gains() {
     let dir = tempfile::tempdir().expect("temp dir");
-    let model_text = std::fs::read_to_string(root().join(TWO_MASS)).expect("model") + SENSOR;
-    let model_file = dir.path().join("model.toml");
-    std::fs::write(&model_file, &model_text).expect("write");
+    let (model_file, _) = model_with_sensor(dir.path());
     let vars_file = dir.path().join("vars.toml");
     std::fs::write(
         &vars_file,
         "[[variable]]\nbodies = \"first\"\nparameter = \"m\"\n\n[[variable]]\npoint_masses = \"sensor\"\nparameter = \"m\"\n\n[[variable]]\ncharacteristics = \"second u3\"\nparameter = \"gain\"\n",
     )
     .expect("write");
+    let sensitivity = |extra: &[&str]| {
+        let args = ["sensitivity", p(&model_file), "--from", "10", "--to", "120"];
+        common::ident(&[&args[..], extra].concat())
+    };
     let run = |extra: &[&str]| {
-        let o = common::ident(
-            &[
-                &[
-                    "sensitivity",
-                    p(&model_file),
-                    "--from",
-                    "10",
-                    "--to",
-                    "120",
-                    "--json",
-                ][..],
-                extra,
-            ]
-            .concat(),
-        );
+        let o = sensitivity(&[&["--json"][..], extra].concat());
         assert_eq!(o.status.code(), Some(0), "{}", utf8(&o.stderr));
         serde_json::from_slice::<serde_json::Value>(&o.stdout).expect("json")
     };
@@ -299,17 +293,7 @@ fn sensitivity_ranks_the_variables_files_masses_point_masses_and_gains() {
     assert!(rel(&sensor).iter().all(|v| *v > 0.0), "{sensor}");
     assert_eq!(rel(&gain), vec![0.0, 1.0], "{gain}");
     // The text table ranks them with the SDE parameters.
-    let o = common::ident(&[
-        "sensitivity",
-        p(&model_file),
-        "--from",
-        "10",
-        "--to",
-        "120",
-        "--vars",
-        p(&vars_file),
-    ]);
-    let out = utf8(&o.stdout);
+    let out = utf8(&sensitivity(&["--vars", p(&vars_file)]).stdout);
     assert!(
         out.contains("body first m")
             && out.contains("point mass sensor m")

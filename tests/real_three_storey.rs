@@ -13,13 +13,20 @@ use common::{ident, json, p, root, text};
 
 /// The documented command, with `extra` flags appended.
 fn identify_example(extra: &[&str]) -> std::process::Output {
+    identify_from("variables.toml", extra)
+}
+
+/// The documented command from the far start (`far-start.toml`: storey stiffnesses 10x off in
+/// opposite directions, ψ 12x) with `--start start`, JSON on stdout.
+fn identify_far(start: &str) -> std::process::Output {
+    identify_from("far-start.toml", &["--start", start, "--format", "json"])
+}
+
+/// The documented command with the example's variables file `vars` and `extra` flags.
+fn identify_from(vars: &str, extra: &[&str]) -> std::process::Output {
     let ex = root().join("examples/real-three-storey");
     let data = root().join("data/dtop-three-storey/three-storey-hammer.uff");
-    let (model, map, vars) = (
-        ex.join("model.toml"),
-        ex.join("map.toml"),
-        ex.join("variables.toml"),
-    );
+    let (model, map, vars) = (ex.join("model.toml"), ex.join("map.toml"), ex.join(vars));
     let mut args = vec![
         "identify",
         p(&model),
@@ -34,6 +41,19 @@ fn identify_example(extra: &[&str]) -> std::process::Output {
     ];
     args.extend_from_slice(extra);
     ident(&args)
+}
+
+/// The numbers of each pre-fit pair line on stderr, `start: measured F Hz (η E) <- model A Hz
+/// -> B Hz, MAC M`: `[F, E, A, B, M]`.
+fn measured_pairs(err: &str) -> Vec<Vec<f64>> {
+    err.lines()
+        .filter(|l| l.starts_with("start: measured"))
+        .map(|l| {
+            l.split(|c: char| !(c.is_ascii_digit() || c == '.'))
+                .filter_map(|t| t.parse().ok())
+                .collect()
+        })
+        .collect()
 }
 
 /// Runs the reference fit; fails (never skips) without python3, numpy, scipy or pyuff.
@@ -152,29 +172,7 @@ fn many_starts_find_the_same_best_optimum_and_report_the_others() {
 fn a_modal_start_matches_the_measured_frequencies_and_reaches_the_same_optimum_from_far_off() {
     // A variables file whose start is far off (storey stiffnesses 10x in opposite directions,
     // ψ 12x): the pre-fit must bring the three model frequencies onto the measured ones.
-    let ex = root().join("examples/real-three-storey");
-    let vars = ex.join("far-start.toml");
-    let data = root().join("data/dtop-three-storey/three-storey-hammer.uff");
-    let (model, map) = (ex.join("model.toml"), ex.join("map.toml"));
-    let run = |vars: &std::path::Path| {
-        ident(&[
-            "identify",
-            p(&model),
-            "--data",
-            p(&data),
-            "--map",
-            p(&map),
-            "--vars",
-            p(vars),
-            "--band",
-            "3:40",
-            "--start",
-            "modal",
-            "--format",
-            "json",
-        ])
-    };
-    let out = run(&vars);
+    let out = identify_far("modal");
     assert_eq!(out.status.code(), Some(0), "{}", text(&out));
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(
@@ -182,28 +180,15 @@ fn a_modal_start_matches_the_measured_frequencies_and_reaches_the_same_optimum_f
         "{err}"
     );
     // Each pair: "measured F Hz (η E) <- model A Hz -> B Hz, MAC M" with B = F, M near 1.
-    let pairs: Vec<&str> = err
-        .lines()
-        .filter(|l| l.starts_with("start: measured"))
-        .collect();
+    let pairs = measured_pairs(&err);
     assert_eq!(pairs.len(), 3, "{err}");
-    for l in pairs {
-        let nums: Vec<f64> = l
-            .split(|c: char| !(c.is_ascii_digit() || c == '.'))
-            .filter_map(|t| t.parse().ok())
-            .collect();
+    for nums in &pairs {
         let (measured, after, mac) = (nums[0], nums[3], nums[4]);
-        assert!((after / measured - 1.0).abs() < 1e-6, "{l}");
-        assert!(mac > 0.9, "{l}");
+        assert!((after / measured - 1.0).abs() < 1e-6, "{nums:?}");
+        assert!(mac > 0.9, "{nums:?}");
     }
     assert!(
-        (6.4..6.6).contains(
-            &err.lines()
-                .find(|l| l.starts_with("start: measured"))
-                .and_then(|l| l.split_whitespace().nth(2))
-                .and_then(|t| t.parse::<f64>().ok())
-                .unwrap()
-        ),
+        (6.4..6.6).contains(&pairs[0][0]),
         "the first storey mode at 6.5 Hz"
     );
     let modal: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
@@ -229,27 +214,8 @@ fn by_default_a_far_start_also_starts_from_the_measured_modes_and_keeps_the_bett
     // Vendor data (no variances): `--start auto`, the default, fits from the variables file's
     // values and from the modal pre-fit's. From the far start the first ends at a degenerate
     // corner (storey 1 at 3 kN/m, ψ 0.2, 7.5 dB); the second reaches the documented optimum.
-    let ex = root().join("examples/real-three-storey");
-    let far = ex.join("far-start.toml");
-    let data = root().join("data/dtop-three-storey/three-storey-hammer.uff");
-    let (model, map) = (ex.join("model.toml"), ex.join("map.toml"));
     let run = |start: &str| {
-        let o = ident(&[
-            "identify",
-            p(&model),
-            "--data",
-            p(&data),
-            "--map",
-            p(&map),
-            "--vars",
-            p(&far),
-            "--band",
-            "3:40",
-            "--start",
-            start,
-            "--format",
-            "json",
-        ]);
+        let o = identify_far(start);
         assert_eq!(o.status.code(), Some(0), "{}", text(&o));
         let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
         (j, String::from_utf8_lossy(&o.stderr).into_owned())
@@ -335,17 +301,7 @@ fn all_three_hammer_positions_are_fitted_together_and_the_modal_start_uses_one_r
     ]);
     assert_eq!(o.status.code(), Some(0), "{}", text(&o));
     let err = String::from_utf8_lossy(&o.stderr);
-    let pairs: Vec<(f64, f64)> = err
-        .lines()
-        .filter(|l| l.starts_with("start: measured"))
-        .map(|l| {
-            let nums: Vec<f64> = l
-                .split(|c: char| !(c.is_ascii_digit() || c == '.'))
-                .filter_map(|t| t.parse().ok())
-                .collect();
-            (nums[0], nums[4])
-        })
-        .collect();
+    let pairs: Vec<(f64, f64)> = measured_pairs(&err).iter().map(|n| (n[0], n[4])).collect();
     assert_eq!(pairs.len(), 3, "{err}");
     for ((f, mac), want) in pairs.iter().zip([6.51, 17.46, 26.50]) {
         assert!(
