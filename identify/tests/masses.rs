@@ -18,23 +18,10 @@ use identify::textbook;
 fn coupled() -> Model {
     let mut m = textbook::chain(3);
     m.outputs = (0..6)
-        .map(|dof| Characteristic {
-            body: 2,
-            dof,
-            quantity: Quantity::Displacement,
-            at: None,
-            reference: 0,
-            relative: false,
-        })
+        .map(|dof| Characteristic::dof(2, dof, Quantity::Displacement))
         .collect();
-    m.outputs.push(Characteristic {
-        body: 0,
-        dof: 1,
-        quantity: Quantity::Acceleration,
-        at: None,
-        reference: 0,
-        relative: false,
-    });
+    m.outputs
+        .push(Characteristic::dof(0, 1, Quantity::Acceleration));
     m
 }
 
@@ -330,65 +317,45 @@ fn error_of(text: &str, model: &Model) -> String {
 #[test]
 fn bad_mass_inertia_and_gain_variables_name_file_line_field_and_fix() {
     let model = two_mass();
-    let unknown = error_of(
-        "[[variable]]\nbodies = \"third\"\nparameter = \"m\"\n",
-        &model,
-    );
-    assert!(unknown.contains("masses.toml:2"), "{unknown}");
-    assert!(unknown.contains("unknown body \"third\""), "{unknown}");
-    assert!(unknown.contains("first, second"), "{unknown}");
-
-    let axis = error_of(
-        "[[variable]]\nbodies = \"first\"\nparameter = \"J4\"\n",
-        &model,
-    );
-    assert!(axis.contains("masses.toml:3"), "{axis}");
-    assert!(axis.contains("J1, J2, J3"), "{axis}");
-
-    let zero = error_of(
-        "[[variable]]\nbodies = \"first\"\nparameter = \"m\"\nlower = \"0 kg\"\n",
-        &model,
-    );
-    assert!(zero.contains("masses.toml:4"), "{zero}");
-    assert!(zero.contains("lower bound 0 kg"), "{zero}");
-    assert!(zero.contains("give lower > 0"), "{zero}");
-
-    let negative = error_of(
-        "[[variable]]\nbodies = \"first\"\nparameter = \"J2\"\ninitial = \"-3 kg m^2\"\n",
-        &model,
-    );
-    assert!(negative.contains("masses.toml:4"), "{negative}");
-    assert!(negative.contains("must be > 0"), "{negative}");
-
-    let no_dof = error_of(
-        "[[variable]]\ncharacteristics = \"second u7\"\nparameter = \"gain\"\n",
-        &model,
-    );
-    assert!(no_dof.contains("masses.toml:2"), "{no_dof}");
-    assert!(no_dof.contains("characteristics"), "{no_dof}");
-    assert!(no_dof.contains("u1 u2 u3 r1 r2 r3"), "{no_dof}");
-
-    let no_body = error_of(
-        "[[variable]]\ncharacteristics = \"saddle u1\"\nparameter = \"gain\"\n",
-        &model,
-    );
-    assert!(no_body.contains("unknown body \"saddle\""), "{no_body}");
-
-    let mixed = error_of(
-        "[[variable]]\nsdes = \"k1\"\nbodies = \"first\"\nparameter = \"m\"\n",
-        &model,
-    );
-    assert!(mixed.contains("more than one of"), "{mixed}");
-
-    let twice = error_of(
-        "[[variable]]\nbodies = \"first\"\nparameter = \"m\"\n[[variable]]\nbodies = [\"second\", \"first\"]\nparameter = \"mJ\"\n",
-        &model,
-    );
-    assert!(twice.contains("masses.toml:5"), "{twice}");
-    assert!(
-        twice.contains("already set by variable \"m first\""),
-        "{twice}"
-    );
+    for (text, says) in [
+        (
+            "[[variable]]\nbodies = \"third\"\nparameter = \"m\"\n",
+            &["masses.toml:2", "unknown body \"third\"", "first, second"][..],
+        ),
+        (
+            "[[variable]]\nbodies = \"first\"\nparameter = \"J4\"\n",
+            &["masses.toml:3", "J1, J2, J3"],
+        ),
+        (
+            "[[variable]]\nbodies = \"first\"\nparameter = \"m\"\nlower = \"0 kg\"\n",
+            &["masses.toml:4", "lower bound 0 kg", "give lower > 0"],
+        ),
+        (
+            "[[variable]]\nbodies = \"first\"\nparameter = \"J2\"\ninitial = \"-3 kg m^2\"\n",
+            &["masses.toml:4", "must be > 0"],
+        ),
+        (
+            "[[variable]]\ncharacteristics = \"second u7\"\nparameter = \"gain\"\n",
+            &["masses.toml:2", "characteristics", "u1 u2 u3 r1 r2 r3"],
+        ),
+        (
+            "[[variable]]\ncharacteristics = \"saddle u1\"\nparameter = \"gain\"\n",
+            &["unknown body \"saddle\""],
+        ),
+        (
+            "[[variable]]\nsdes = \"k1\"\nbodies = \"first\"\nparameter = \"m\"\n",
+            &["more than one of"],
+        ),
+        (
+            "[[variable]]\nbodies = \"first\"\nparameter = \"m\"\n[[variable]]\nbodies = [\"second\", \"first\"]\nparameter = \"mJ\"\n",
+            &["masses.toml:5", "already set by variable \"m first\""],
+        ),
+    ] {
+        let e = error_of(text, &model);
+        for want in says {
+            assert!(e.contains(want), "{e}");
+        }
+    }
 
     // A gain on a characteristic the model has but the data do not.
     let d = data_of(
