@@ -234,19 +234,24 @@ initial = 0.3
     s
 }
 
-#[test]
-fn mass_and_stiffness_of_one_body_are_both_identified_from_exact_receptance() {
-    let (m, k, psi) = (80.0, 2.0e6, 0.4);
+/// The single body's mass (kg), stiffness (N/m) and ψ.
+const SINGLE_BODY: (f64, f64, f64) = (80.0, 2.0e6, 0.4);
+
+/// The single body and its amplitude data (relative noise `rel`, seeded) at 60 log-spaced lines
+/// from a tenth of its resonance (the spring line) to ten times it (the mass line).
+fn single_body_data(rel: f64, seed: u64) -> (Model, identify::MeasuredData) {
+    let (m, k, psi) = SINGLE_BODY;
     let truth = textbook::single_body(m, k, psi);
     let f0 = (k / m).sqrt() / (2.0 * std::f64::consts::PI);
-    // From a tenth of the resonance (the spring line) to ten times it (the mass line).
-    let d = data_of(
-        &truth,
-        &synthetic::log_lines(f0 / 10.0, 10.0 * f0, 60),
-        0.0,
-        1,
-        (0, 1.0),
-    );
+    let lines = synthetic::log_lines(f0 / 10.0, 10.0 * f0, 60);
+    let d = data_of(&truth, &lines, rel, seed, (0, 1.0));
+    (truth, d)
+}
+
+#[test]
+fn mass_and_stiffness_of_one_body_are_both_identified_from_exact_receptance() {
+    let (m, k, psi) = SINGLE_BODY;
+    let (truth, d) = single_body_data(0.0, 1);
     // The identification model starts 25 % heavy and 35 % stiff.
     let obs = data::validate(&d, &truth, "exact").unwrap();
     let vars = variables::parse(&single_vars(false), "vars.toml", &truth).unwrap();
@@ -282,16 +287,7 @@ fn mass_and_stiffness_of_one_body_are_both_identified_from_exact_receptance() {
 fn mass_stiffness_and_gain_together_are_reported_as_not_separable() {
     // Scaling m, k and the gain together leaves g/(k(1 + jψ/2π) − ω²m) unchanged: the data can
     // never separate them, whatever the band. The identifiability warning must say so.
-    let (m, k, psi) = (80.0, 2.0e6, 0.4);
-    let truth = textbook::single_body(m, k, psi);
-    let f0 = (k / m).sqrt() / (2.0 * std::f64::consts::PI);
-    let d = data_of(
-        &truth,
-        &synthetic::log_lines(f0 / 10.0, 10.0 * f0, 60),
-        0.01,
-        5,
-        (0, 1.0),
-    );
+    let (truth, d) = single_body_data(0.01, 5);
     let obs = data::validate(&d, &truth, "noisy").unwrap();
     let vars = variables::parse(&single_vars(true), "vars.toml", &truth).unwrap();
     let id = idn::identify(&truth, &obs, &vars, &Options::default(), &mut |_, _| {}).unwrap();
