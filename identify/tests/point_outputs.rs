@@ -177,13 +177,8 @@ fn principal_axis_and_off_axis_point_outputs_give_the_same_estimates() {
 
 #[test]
 fn a_model_file_declares_a_point_output_and_writes_it_back() {
-    let text = common::one_body_on_a_spring(
-        "one body",
-        "100 kg",
-        "10 20 30 kg m^2",
-        ("1e6 N/m", "1e4 N*m/rad"),
-        0.2,
-    ) + r#"[[output]]
+    let text = String::from(common::ONE_BODY_ON_A_SPRING)
+        + r#"[[output]]
 body = "mass"
 point = "100 50 0 mm"
 direction = [0, 3, 4]

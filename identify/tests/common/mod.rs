@@ -41,42 +41,32 @@ pub fn fwd32j_data(truth: &Model, rel: f64, rng: &mut StdRng) -> MeasuredData {
 pub const TWO_MASS_PSI_VARS: &str =
     include_str!("../../../configs/identification/textbook-two-mass-psi.toml");
 
-/// A model file of one body `mass` (principal inertias `inertia`) on a six-spring element to the
-/// ground at its centre of mass (translational stiffness `k`, rotational `k_rot`, loss factor
-/// `psi`), loaded by 1 N along z, its first output the body's u3: the part the model-file tests
-/// append their `[[reference]]`s and further `[[output]]`s to.
-pub fn one_body_on_a_spring(
-    name: &str,
-    mass: &str,
-    inertia: &str,
-    (k, k_rot): (&str, &str),
-    psi: f64,
-) -> String {
-    format!(
-        r#"
-name = "{name}"
+/// A model file of one 250 kg body on a six-spring element to the ground at its centre of mass
+/// (3·10⁶ N/m along each axis, 3·10⁴ N·m/rad about each, ψ = 0.3), loaded by 1 N along z, its
+/// first output the body's u3: the part the model-file tests append their `[[reference]]`s and
+/// further `[[output]]`s to.
+pub const ONE_BODY_ON_A_SPRING: &str = r#"
+name = "one body on a spring"
 [[body]]
 name = "mass"
-mass = "{mass}"
+mass = "250 kg"
 position = [0.0, 0.0, 0.0]
-inertia = "{inertia}"
+inertia = "25 50 75 kg m^2"
 [[sde]]
 name = "spring"
 kind = "general"
 bodies = ["ground", "mass"]
 point = [0.0, 0.0, 0.0]
 axes = [[1, 0, 0], [0, 1, 0], [0, 0, 1]]
-k = ["{k}", "{k}", "{k}", "{k_rot}", "{k_rot}", "{k_rot}"]
-psi = {psi}
+k = ["3e6 N/m", "3e6 N/m", "3e6 N/m", "3e4 N*m/rad", "3e4 N*m/rad", "3e4 N*m/rad"]
+psi = 0.3
 [[excitation.force]]
 body = "mass"
 force = [0.0, 0.0, 1.0]
 [[output]]
 body = "mass"
 dof = "u3"
-"#
-    )
-}
+"#;
 
 /// `model`'s outputs as exact complex data at 40 lines over 10-60 Hz; with `relative_sigma` ε,
 /// each point's variance is `(ε |q|)²` (none without).
