@@ -12,7 +12,7 @@ use super::arbitrary::{ArbitraryDialect, RateSetting};
 use super::dialect::{self, Dialect, DialectOverrides};
 use super::{Generator, GeneratorError};
 use crate::device::DeviceIdentity;
-use crate::shaker::scpi::{parse_bool_answer, parse_error_entry};
+use crate::shaker::scpi::{also_queued, parse_bool_answer, parse_error_entry};
 use crate::transport::{Answer, LineLink, Transport, TransportError};
 
 /// Opens the instrument's connection again after it dropped (a socket reset, a USB serial
@@ -230,11 +230,7 @@ impl ScpiGenerator {
             command: command.to_string(),
             code: first.code,
             message: first.message,
-            more: if more.is_empty() {
-                String::new()
-            } else {
-                format!(" (also queued: {})", more.join("; "))
-            },
+            more: also_queued(&more),
         })
     }
 

@@ -123,11 +123,7 @@ impl<T: Transport> ScpiShaker<T> {
             command: line,
             code: first.code,
             message: first.message,
-            more: if more.is_empty() {
-                String::new()
-            } else {
-                format!(" (also queued: {})", more.join("; "))
-            },
+            more: scpi::also_queued(&more),
         })
     }
 
