@@ -305,11 +305,11 @@ fn at_limit(run: &Run, s: &State) -> Outcome {
     outcome(s, n, StopReason::IterationLimit)
 }
 
+/// A trial point: its criterion, its full state when evaluated with the Jacobian, and the point.
+type Trial = (f64, Option<State>, DVector<f64>);
+
 /// Evaluates a trial point: the full state if the Jacobian is cheap, residuals only otherwise.
-fn trial(
-    obj: &mut dyn Residuals,
-    u: DVector<f64>,
-) -> Result<(f64, Option<State>, DVector<f64>), EvalError> {
+fn trial(obj: &mut dyn Residuals, u: DVector<f64>) -> Result<Trial, EvalError> {
     if obj.cheap_jacobian() {
         let s = state(obj, u.clone())?;
         Ok((s.cost, Some(s), u))
@@ -323,25 +323,25 @@ fn trial(
     }
 }
 
-fn complete(
-    obj: &mut dyn Residuals,
-    t: (f64, Option<State>, DVector<f64>),
-) -> Result<State, EvalError> {
+fn complete(obj: &mut dyn Residuals, t: Trial) -> Result<State, EvalError> {
     match t.1 {
         Some(s) => Ok(s),
         None => state(obj, t.2),
     }
 }
 
-/// The state at the trial point `t` accepted in iteration `it` (step norm `sn`) after `s`; the
-/// outcome instead when it cannot be evaluated in full, or when a tolerance stops the run.
+/// The state at the trial point `accepted` in iteration `it` after `s` (with the step's norm);
+/// the outcome instead when none was, when it cannot be evaluated in full, or when a tolerance
+/// stops the run.
 fn advance(
     run: &mut Run,
     s: &State,
-    t: (f64, Option<State>, DVector<f64>),
-    sn: f64,
+    accepted: Option<(Trial, f64)>,
     it: usize,
 ) -> Result<State, Outcome> {
+    let Some((t, sn)) = accepted else {
+        return Err(outcome(s, it - 1, StopReason::NoFurtherDecrease));
+    };
     let new =
         complete(run.obj, t).map_err(|m| outcome(s, it, StopReason::Diverged(m.to_string())))?;
     match after_step(run, &new, (s.cost, sn, it), true) {
@@ -422,13 +422,10 @@ fn levenberg_marquardt(run: &mut Run, mut s: State) -> Outcome {
             }
         };
         lambda = Some(lam);
-        let Some((t, sn)) = accepted else {
-            return outcome(&s, it - 1, StopReason::NoFurtherDecrease);
-        };
-        s = match advance(run, &s, t, sn, it) {
-            Ok(next) => next,
+        match advance(run, &s, accepted, it) {
+            Ok(next) => s = next,
             Err(o) => return o,
-        };
+        }
     }
     at_limit(run, &s)
 }
@@ -489,13 +486,10 @@ fn gauss_newton(run: &mut Run, mut s: State) -> Outcome {
                 Err(_) => alpha *= 0.25,
             }
         }
-        let Some((t, sn)) = accepted else {
-            return outcome(&s, it - 1, StopReason::NoFurtherDecrease);
-        };
-        s = match advance(run, &s, t, sn, it) {
-            Ok(next) => next,
+        match advance(run, &s, accepted, it) {
+            Ok(next) => s = next,
             Err(o) => return o,
-        };
+        }
     }
     at_limit(run, &s)
 }
