@@ -1072,11 +1072,7 @@ fn canopen_node_over_vcan_streams_loss_free_and_reports_emcy_and_lost_heartbeat(
         daq.configure(&cfg).await.expect("configure");
         daq.start().await.expect("start");
         let (events, err) = acquire::daq::events_until_error(&mut daq).await;
-        let device: Vec<String> = events
-            .iter()
-            .filter_map(DaqEvent::device_fault)
-            .map(str::to_owned)
-            .collect();
+        let device: Vec<&str> = events.iter().filter_map(DaqEvent::device_fault).collect();
         assert_eq!(device.len(), 2, "{device:?}");
         assert!(device[0].contains("0x4210 (temperature)"), "{device:?}");
         assert!(

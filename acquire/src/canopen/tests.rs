@@ -494,11 +494,7 @@ async fn a_lost_heartbeat_is_a_device_fault_then_the_stream_times_out() {
     daq.configure(&config(vec![0, 1])).await.expect("configure");
     daq.start().await.expect("start");
     let (events, err) = events_until_error(&mut daq).await;
-    let lost: Vec<_> = events
-        .iter()
-        .filter_map(DaqEvent::device_fault)
-        .map(str::to_owned)
-        .collect();
+    let lost: Vec<&str> = events.iter().filter_map(DaqEvent::device_fault).collect();
     assert_eq!(lost.len(), 1, "{lost:?}");
     assert!(lost[0].contains("node 5 lost: no heartbeat"), "{lost:?}");
     assert!(matches!(err, DaqError::Timeout { .. }), "{err:?}");
