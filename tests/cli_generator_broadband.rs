@@ -9,24 +9,24 @@
 
 mod common;
 
+use std::path::Path;
+
 use acquire::sim::SimSetup;
 use acquire::stand::Stand;
 use common::{ident, p, root, text};
 
 const STAND: &str = "configs/stands/fwd32j-generator-sim.toml";
 
+/// `ident sweep --broadband` of the stand file `stand` into `out`.
+fn broadband_sweep(stand: &Path, out: &Path) -> std::process::Output {
+    ident(&["sweep", "--stand", p(stand), "--broadband", "--out", p(out)])
+}
+
 #[test]
 fn broadband_sweep_through_the_generator_and_process_give_the_truth_frf() {
     let dir = tempfile::tempdir().unwrap();
     let stand_path = root().join(STAND);
-    let o = ident(&[
-        "sweep",
-        "--stand",
-        p(&stand_path),
-        "--broadband",
-        "--out",
-        p(dir.path()),
-    ]);
+    let o = broadband_sweep(&stand_path, dir.path());
     let out = text(&o);
     assert!(o.status.success(), "{out}");
     assert!(
@@ -145,14 +145,7 @@ fn a_broadband_section_the_generator_cannot_play_names_the_field_and_the_fix() {
     ];
     for (name, stand, says) in cases {
         let stand = write(name, &stand);
-        let o = ident(&[
-            "sweep",
-            "--stand",
-            p(&stand),
-            "--broadband",
-            "--out",
-            p(dir.path()),
-        ]);
+        let o = broadband_sweep(&stand, dir.path());
         let out = text(&o);
         assert!(!o.status.success(), "{out}");
         for want in says {
