@@ -9,31 +9,21 @@ mod common;
 
 use std::process::Command;
 
-use common::{ident, json, p, root, text};
+use common::{identify_mapped, json, p, root, text};
 
 /// The documented command, with `extra` flags appended.
 fn identify_example(extra: &[&str]) -> std::process::Output {
+    let vars = root().join("examples/real-three-storey/variables.toml");
+    identify_example_from(&vars, extra)
+}
+
+/// The documented command with the variables file `vars`, and `extra` flags appended.
+fn identify_example_from(vars: &std::path::Path, extra: &[&str]) -> std::process::Output {
     let ex = root().join("examples/real-three-storey");
     let data = root().join("data/dtop-three-storey/three-storey-hammer.uff");
-    let (model, map, vars) = (
-        ex.join("model.toml"),
-        ex.join("map.toml"),
-        ex.join("variables.toml"),
-    );
-    let mut args = vec![
-        "identify",
-        p(&model),
-        "--data",
-        p(&data),
-        "--map",
-        p(&map),
-        "--vars",
-        p(&vars),
-        "--band",
-        "3:40",
-    ];
-    args.extend_from_slice(extra);
-    ident(&args)
+    let (model, map) = (ex.join("model.toml"), ex.join("map.toml"));
+    let flags = [&["--band", "3:40"][..], extra].concat();
+    identify_mapped(&model, &data, &map, vars, &flags)
 }
 
 /// Runs the reference fit; fails (never skips) without python3, numpy, scipy or pyuff.
@@ -149,29 +139,8 @@ fn many_starts_find_the_same_best_optimum_and_report_the_others() {
 fn a_modal_start_matches_the_measured_frequencies_and_reaches_the_same_optimum_from_far_off() {
     // A variables file whose start is far off (storey stiffnesses 10x in opposite directions,
     // ψ 12x): the pre-fit must bring the three model frequencies onto the measured ones.
-    let ex = root().join("examples/real-three-storey");
-    let vars = ex.join("far-start.toml");
-    let data = root().join("data/dtop-three-storey/three-storey-hammer.uff");
-    let (model, map) = (ex.join("model.toml"), ex.join("map.toml"));
-    let run = |vars: &std::path::Path| {
-        ident(&[
-            "identify",
-            p(&model),
-            "--data",
-            p(&data),
-            "--map",
-            p(&map),
-            "--vars",
-            p(vars),
-            "--band",
-            "3:40",
-            "--start",
-            "modal",
-            "--format",
-            "json",
-        ])
-    };
-    let out = run(&vars);
+    let vars = root().join("examples/real-three-storey/far-start.toml");
+    let out = identify_example_from(&vars, &["--start", "modal", "--format", "json"]);
     assert_eq!(out.status.code(), Some(0), "{}", text(&out));
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(
