@@ -54,13 +54,8 @@ fn a_uff_file_in_g_per_newton_with_a_map_is_identified() {
             .zip(&f)
             .map(|(z, fk)| -z * (2.0 * std::f64::consts::PI * fk).powi(2) / 9.80665)
             .collect();
-        let mut s = uff::Function::frf("Prüfstand", 0.0, 0.0, a);
-        s.abscissa = uff::Abscissa::Uneven(f.clone());
+        let mut s = uff::Function::frf_between("Prüfstand", f.clone(), a, (*node, 3), (1, 3));
         s.response_entity = "Prüfstand".into();
-        s.response_node = *node;
-        s.response_dir = 3;
-        s.reference_node = 1;
-        s.reference_dir = 3;
         s.axes[1].spec_data_type = 12;
         s.axes[1].units = "g".into();
         s.axes[2].spec_data_type = 13;

@@ -9,38 +9,28 @@ mod common;
 
 use std::process::Command;
 
-use common::{ident, json, p, root, text};
+use common::{identify_mapped, json, p, root, text};
 
 /// The documented command, with `extra` flags appended.
 fn identify_example(extra: &[&str]) -> std::process::Output {
-    identify_from("variables.toml", extra)
+    let vars = root().join("examples/real-three-storey/variables.toml");
+    identify_example_from(&vars, extra)
+}
+
+/// The documented command with the variables file `vars`, and `extra` flags appended.
+fn identify_example_from(vars: &std::path::Path, extra: &[&str]) -> std::process::Output {
+    let ex = root().join("examples/real-three-storey");
+    let data = root().join("data/dtop-three-storey/three-storey-hammer.uff");
+    let (model, map) = (ex.join("model.toml"), ex.join("map.toml"));
+    let flags = [&["--band", "3:40"][..], extra].concat();
+    identify_mapped(&model, &data, &map, vars, &flags)
 }
 
 /// The documented command from the far start (`far-start.toml`: storey stiffnesses 10x off in
 /// opposite directions, ψ 12x) with `--start start`, JSON on stdout.
 fn identify_far(start: &str) -> std::process::Output {
-    identify_from("far-start.toml", &["--start", start, "--format", "json"])
-}
-
-/// The documented command with the example's variables file `vars` and `extra` flags.
-fn identify_from(vars: &str, extra: &[&str]) -> std::process::Output {
-    let ex = root().join("examples/real-three-storey");
-    let data = root().join("data/dtop-three-storey/three-storey-hammer.uff");
-    let (model, map, vars) = (ex.join("model.toml"), ex.join("map.toml"), ex.join(vars));
-    let mut args = vec![
-        "identify",
-        p(&model),
-        "--data",
-        p(&data),
-        "--map",
-        p(&map),
-        "--vars",
-        p(&vars),
-        "--band",
-        "3:40",
-    ];
-    args.extend_from_slice(extra);
-    ident(&args)
+    let vars = root().join("examples/real-three-storey/far-start.toml");
+    identify_example_from(&vars, &["--start", start, "--format", "json"])
 }
 
 /// The numbers of each pre-fit pair line on stderr, `start: measured F Hz (η E) <- model A Hz
@@ -285,20 +275,13 @@ fn all_three_hammer_positions_are_fitted_together_and_the_modal_start_uses_one_r
     std::fs::write(&map_file, map).unwrap();
     let data = root().join("data/dtop-three-storey/three-storey-hammer.uff");
     let vars = ex.join("variables.toml");
-    let o = ident(&[
-        "identify",
-        p(&model_file),
-        "--data",
-        p(&data),
-        "--map",
-        p(&map_file),
-        "--vars",
-        p(&vars),
-        "--band",
-        "3:40",
-        "--format",
-        "json",
-    ]);
+    let o = identify_mapped(
+        &model_file,
+        &data,
+        &map_file,
+        &vars,
+        &["--band", "3:40", "--format", "json"],
+    );
     assert_eq!(o.status.code(), Some(0), "{}", text(&o));
     let err = String::from_utf8_lossy(&o.stderr);
     let pairs: Vec<(f64, f64)> = measured_pairs(&err).iter().map(|n| (n[0], n[4])).collect();

@@ -165,6 +165,17 @@ fn force_json(f: &PointForce) -> ForceJson {
     }
 }
 
+fn output_json(c: &Characteristic) -> OutputJson {
+    OutputJson {
+        body: c.body,
+        dof: c.dof,
+        quantity: c.quantity.as_str().into(),
+        at: c.at,
+        reference: c.reference,
+        relative: c.relative,
+    }
+}
+
 fn rows(m: &Matrix3<f64>) -> [[f64; 3]; 3] {
     std::array::from_fn(|i| std::array::from_fn(|j| m[(i, j)]))
 }
@@ -203,29 +214,9 @@ pub fn to_json(model: &Model) -> ModelJson {
             })
             .collect(),
         excitation: ExcitationJson {
-            forces: model
-                .forces
-                .iter()
-                .map(|f| ForceJson {
-                    body: f.body,
-                    point: Some(f.point.into()),
-                    force: f.force.into(),
-                    moment: (f.moment != Vector3::zeros()).then(|| f.moment.into()),
-                })
-                .collect(),
+            forces: model.forces.iter().map(force_json).collect(),
         },
-        outputs: model
-            .outputs
-            .iter()
-            .map(|o| OutputJson {
-                body: o.body,
-                dof: o.dof,
-                quantity: o.quantity.as_str().into(),
-                at: o.at,
-                reference: o.reference,
-                relative: o.relative,
-            })
-            .collect(),
+        outputs: model.outputs.iter().map(output_json).collect(),
         references: model
             .references
             .iter()
@@ -424,24 +415,12 @@ pub struct FrfJson {
     pub outputs: Vec<FrfOutputJson>,
 }
 
-/// One characteristic of [`FrfJson`].
+/// One characteristic of [`FrfJson`]: the output as in the model's `outputs` and its values.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct FrfOutputJson {
-    /// Body index.
-    pub body: usize,
-    /// 0-5.
-    pub dof: u8,
-    /// Quantity name.
-    pub quantity: String,
-    /// A point output's location and axis, as in [`OutputJson::at`].
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub at: Option<PointOutput>,
-    /// The excitation, as in [`OutputJson::reference`].
-    #[serde(default, skip_serializing_if = "is_zero")]
-    pub reference: u8,
-    /// Relative to the base, as in [`OutputJson::relative`].
-    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
-    pub relative: bool,
+    /// Which output: body, DOF, quantity, point, reference and motion, as in [`OutputJson`].
+    #[serde(flatten)]
+    pub output: OutputJson,
     /// Real parts, SI.
     pub re: Vec<f64>,
     /// Imaginary parts, SI.
@@ -457,12 +436,7 @@ pub fn frf_json(model: &Model, r: &Response) -> FrfJson {
             .iter()
             .enumerate()
             .map(|(o, c)| FrfOutputJson {
-                body: c.body,
-                dof: c.dof,
-                quantity: c.quantity.as_str().into(),
-                at: c.at,
-                reference: c.reference,
-                relative: c.relative,
+                output: output_json(c),
                 re: r.output(o).iter().map(|v| v.re).collect(),
                 im: r.output(o).iter().map(|v| v.im).collect(),
             })

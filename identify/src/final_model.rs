@@ -98,6 +98,18 @@ fn final_of<'a>(id: &'a Identification, diagnosis: Option<&'a Diagnosis>) -> &'a
     diagnosis.map(|d| &d.model).unwrap_or(&id.model)
 }
 
+/// The final model, once the diagnosis's accepted effects (if one ran) are known to be
+/// expressible in the model file.
+fn writable_final<'a>(
+    id: &'a Identification,
+    diagnosis: Option<&'a Diagnosis>,
+) -> Result<&'a Model, FinalModelError> {
+    if let Some(d) = diagnosis {
+        expressible(d)?;
+    }
+    Ok(final_of(id, diagnosis))
+}
+
 /// The final model as TOML text in the project's model format (`docs/model-format.md`): for a
 /// TOML source its text with the final values written back in each key's own unit and the
 /// accepted effects appended; for a JSON source the resolved final model written whole. A header
@@ -107,10 +119,7 @@ pub fn model_toml(
     id: &Identification,
     diagnosis: Option<&Diagnosis>,
 ) -> Result<String, FinalModelError> {
-    if let Some(d) = diagnosis {
-        expressible(d)?;
-    }
-    let fin = final_of(id, diagnosis);
+    let fin = writable_final(id, diagnosis)?;
     let mut out = header(source, id, diagnosis);
     match source.text {
         Some(text) => out.push_str(&edited(text, source.origin, id, diagnosis)?),
@@ -1046,10 +1055,7 @@ pub fn variables_toml(
     id: &Identification,
     diagnosis: Option<&Diagnosis>,
 ) -> Result<String, FinalModelError> {
-    if let Some(d) = diagnosis {
-        expressible(d)?;
-    }
-    let fin = final_of(id, diagnosis);
+    let fin = writable_final(id, diagnosis)?;
     let estimate = diagnosis.map(|d| &d.estimate).unwrap_or(&id.estimate);
     let stage = match diagnosis {
         Some(d) if !d.accepted.is_empty() => "final fit (after the diagnosis)",

@@ -428,12 +428,7 @@ pub fn states(model: &Model, freqs_hz: &[f64], method: Method) -> Result<States,
                         .collect()
                 })
                 .collect();
-            let lambda_scale = modal
-                .lambda
-                .iter()
-                .map(|l| l.norm())
-                .fold(0.0, f64::max)
-                .max(1.0);
+            let lambda_scale = modal.lambda_scale();
             let yo = modal.output_loads(&system);
             let mut eta = vec![C64::new(0.0, 0.0); n];
             let mut inv = vec![C64::new(0.0, 0.0); n];
@@ -751,6 +746,16 @@ impl ModalSolver {
         Ok(ModalSolver { lambda, x, y })
     }
 
+    /// The largest |λ| (rad²/s²), at least 1: a line is singular where `|λ − ω²|` is below 10⁻¹³
+    /// of it.
+    fn lambda_scale(&self) -> f64 {
+        self.lambda
+            .iter()
+            .map(|l| l.norm())
+            .fold(0.0, f64::max)
+            .max(1.0)
+    }
+
     /// Each output's row as a modal load, `Y t_o`: `[o][mode]`.
     fn output_loads(&self, s: &System) -> Vec<Vec<C64>> {
         s.output_rows
@@ -819,12 +824,7 @@ impl ModalSolver {
         let mut dq = vec![vec![[C64::new(0.0, 0.0); 6]; s.sdes.len()]; cols];
         let mut dw = vec![vec![[C64::new(0.0, 0.0); 6]; s.sdes.len()]; outputs];
         let mut fac = vec![C64::new(0.0, 0.0); outputs];
-        let lambda_scale = self
-            .lambda
-            .iter()
-            .map(|l| l.norm())
-            .fold(0.0, f64::max)
-            .max(1.0);
+        let lambda_scale = self.lambda_scale();
         for (k, &f) in out.freqs_hz.iter().enumerate() {
             let omega = TWO_PI * f;
             let w2 = omega * omega;

@@ -950,14 +950,7 @@ fn output(cx: &Ctx, o: &RawOutput, bodies: &[Body]) -> Result<Vec<Characteristic
         .into_iter()
         .map(|d| {
             let dof = DOF_NAMES.iter().position(|n| n == d.get_ref()).ok_or_else(|| cx.at(d.span(), format!("unknown dof \"{}\"; use u1, u2, u3 (translations) or r1, r2, r3 (rotations) along the body's principal axes", d.get_ref())))?;
-            Ok(Characteristic {
-                body,
-                dof: dof as u8,
-                quantity,
-                at: None,
-                reference: 0,
-                relative: false,
-            })
+            Ok(Characteristic::dof(body, dof as u8, quantity))
         })
         .collect()
 }

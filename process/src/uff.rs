@@ -149,6 +149,23 @@ impl Function {
         f
     }
 
+    /// A complex FRF at the frequencies `freqs_hz` (Hz, any spacing) between the response at
+    /// `response` and the excitation at `reference`, each a node and a direction (±1..±6 =
+    /// ±X,Y,Z,RX,RY,RZ).
+    pub fn frf_between(
+        name: &str,
+        freqs_hz: Vec<f64>,
+        h: Vec<C64>,
+        response: (i64, i64),
+        reference: (i64, i64),
+    ) -> Function {
+        let mut f = Function::frf(name, 0.0, 0.0, h);
+        f.abscissa = Abscissa::Uneven(freqs_hz);
+        (f.response_node, f.response_dir) = response;
+        (f.reference_node, f.reference_dir) = reference;
+        f
+    }
+
     /// A real time history sampled at `sample_rate_hz` from t = 0.
     pub fn time_history(name: &str, sample_rate_hz: f64, samples: Vec<f64>) -> Function {
         let mut f = Function::blank(

@@ -262,13 +262,13 @@ fn a_file_without_units_needs_them_in_the_map() {
     let (model, f, h) = case();
     let mut fs: Vec<uff::Function> = Vec::new();
     for (k, node) in [1i64, 2].iter().enumerate() {
-        let mut g = uff::Function::frf("no units", 0.0, 0.0, h[k].clone());
-        g.abscissa = uff::Abscissa::Uneven(f.clone());
-        g.response_node = *node;
-        g.response_dir = 3;
-        g.reference_node = 9;
-        g.reference_dir = 3;
-        fs.push(g);
+        fs.push(uff::Function::frf_between(
+            "no units",
+            f.clone(),
+            h[k].clone(),
+            (*node, 3),
+            (9, 3),
+        ));
     }
     let mut coh = uff::Function::frf("coherence", 0.0, 0.0, vec![]);
     coh.func_type = uff::function_type::COHERENCE;

@@ -265,6 +265,13 @@ impl RawVariable {
             Err(_) => self.parameter.span(),
         }
     }
+
+    /// Where `key` is written, or the element names when it is not.
+    fn span_or_names<T>(&self, key: &Option<Spanned<T>>) -> Range<usize> {
+        key.as_ref()
+            .map(|k| k.span())
+            .unwrap_or_else(|| self.names_span())
+    }
 }
 
 struct Ctx<'a> {
@@ -498,11 +505,7 @@ fn variable(
         None => format!("{pname} {}", compress(&names)),
     };
     if earlier.iter().any(|v| v.name == name) {
-        let span = rv
-            .name
-            .as_ref()
-            .map(|n| n.span())
-            .unwrap_or(rv.names_span());
+        let span = rv.span_or_names(&rv.name);
         return Err(cx.at(
             span,
             format!("a variable named \"{name}\" already exists; give it another `name`"),
@@ -759,11 +762,7 @@ fn values(
         },
     };
     if positive && !(initial > 0.0 && initial.is_finite()) {
-        let span = rv
-            .initial
-            .as_ref()
-            .map(|v| v.span())
-            .unwrap_or(rv.names_span());
+        let span = rv.span_or_names(&rv.initial);
         return Err(cx.at(
             span,
             format!(
@@ -817,11 +816,7 @@ fn values(
         None => f64::INFINITY,
     };
     if initial < lower || initial > upper {
-        let span = rv
-            .initial
-            .as_ref()
-            .map(|v| v.span())
-            .unwrap_or(rv.names_span());
+        let span = rv.span_or_names(&rv.initial);
         return Err(cx.at(span, format!(
             "initial value {} {} is outside the bounds [{}, {}] {}; move it inside or widen the bounds",
             initial / unit.factor, unit.symbol, lower / unit.factor, upper / unit.factor, unit.symbol
@@ -855,11 +850,7 @@ fn natural_scale(
         None if initial.abs() > 0.0 => initial.abs(),
         None if upper.is_finite() => upper - lower,
         None => {
-            let span = rv
-                .initial
-                .as_ref()
-                .map(|v| v.span())
-                .unwrap_or(rv.names_span());
+            let span = rv.span_or_names(&rv.initial);
             return Err(cx.at(span, format!(
                 "initial value is 0 and there is no upper bound, so the variable has no natural scale; give `scale` (e.g. scale = \"1 {}\") or an `upper` bound",
                 unit.symbol
