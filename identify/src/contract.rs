@@ -11,8 +11,8 @@ use serde::{Deserialize, Serialize};
 use crate::check::Item;
 use crate::frf::Response;
 use crate::model::{
-    Body, Characteristic, Excitation, Model, PointForce, PointOutput, Quantity, Reference, Sde,
-    SdeKind, SdeLaw,
+    Body, Characteristic, Excitation, Model, PointForce, PointMass, PointOutput, Quantity,
+    Reference, Sde, SdeKind, SdeLaw,
 };
 
 /// The resolved model as serialized.
@@ -32,6 +32,30 @@ pub struct ModelJson {
     pub references: Vec<ReferenceJson>,
     /// Output characteristics.
     pub outputs: Vec<OutputJson>,
+    /// Masses added rigidly to bodies at points, absent when there are none.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub point_masses: Vec<PointMassJson>,
+}
+
+/// `point_masses[i]`: a mass added rigidly to a body (sensor, force gauge, fixture).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PointMassJson {
+    /// Unique name.
+    pub name: String,
+    /// Body index.
+    pub body: usize,
+    /// Global, m.
+    pub point: [f64; 3],
+    /// kg.
+    pub mass: f64,
+    /// Its own moments of inertia about its centre along global x, y, z, kg·m² (absent: 0).
+    #[serde(default, skip_serializing_if = "is_zero3")]
+    pub inertia: [f64; 3],
+}
+
+fn is_zero3(j: &[f64; 3]) -> bool {
+    *j == [0.0; 3]
 }
 
 /// `bodies[i]`.
@@ -209,6 +233,17 @@ pub fn to_json(model: &Model) -> ModelJson {
                 },
             })
             .collect(),
+        point_masses: model
+            .point_masses
+            .iter()
+            .map(|p| PointMassJson {
+                name: p.name.clone(),
+                body: p.body,
+                point: p.point.into(),
+                mass: p.mass,
+                inertia: p.inertia,
+            })
+            .collect(),
     }
 }
 
@@ -228,6 +263,7 @@ pub fn json_path(item: Item) -> String {
         Item::Sde(i, f) => format!("$.sdes[{i}].{f}"),
         Item::Force(i, f) => format!("$.excitation.forces[{i}].{f}"),
         Item::Output(i, f) => format!("$.outputs[{i}].{f}"),
+        Item::PointMass(i, f) => format!("$.point_masses[{i}].{f}"),
         Item::Model => "$".into(),
     }
 }
@@ -325,6 +361,17 @@ pub fn from_json(j: &ModelJson) -> Result<Model, JsonProblem> {
         forces,
         references,
         outputs,
+        point_masses: j
+            .point_masses
+            .iter()
+            .map(|p| PointMass {
+                name: p.name.clone(),
+                body: p.body,
+                point: p.point.into(),
+                mass: p.mass,
+                inertia: p.inertia,
+            })
+            .collect(),
     })
 }
 

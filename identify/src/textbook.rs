@@ -46,6 +46,7 @@ pub fn single_body(mass: f64, k: f64, psi: f64) -> Model {
             moment: Vector3::zeros(),
         }],
         references: Vec::new(),
+        point_masses: Vec::new(),
         outputs: vec![Characteristic::dof(0, 2, Quantity::Displacement)],
     }
 }
@@ -94,6 +95,7 @@ pub fn two_in_series(m1: f64, m2: f64, k1: f64, k2: f64, psi: f64) -> Model {
             moment: Vector3::zeros(),
         }],
         references: Vec::new(),
+        point_masses: Vec::new(),
         outputs: vec![
             Characteristic::dof(0, 2, Quantity::Displacement),
             Characteristic::dof(1, 2, Quantity::Displacement),
@@ -166,6 +168,7 @@ pub fn chain(n: usize) -> Model {
             moment: Vector3::zeros(),
         }],
         references: Vec::new(),
+        point_masses: Vec::new(),
         outputs: (0..3)
             .map(|dof| Characteristic::dof(last, dof, Quantity::Displacement))
             .collect(),

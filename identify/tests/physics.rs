@@ -107,6 +107,7 @@ fn random_model(seed: u64, bodies: usize) -> Model {
         forces: Vec::new(),
         references: Vec::new(),
         outputs: Vec::new(),
+        point_masses: Vec::new(),
     };
     for b in 0..bodies {
         let mass = rng.random_range(50.0..800.0);

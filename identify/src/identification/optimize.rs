@@ -330,6 +330,18 @@ fn complete(obj: &mut dyn Residuals, t: Trial) -> Result<State, EvalError> {
     }
 }
 
+/// Levenberg-Marquardt's first damping, relative to the diagonal of JᵀJ (Marquardt's scaling): the
+/// first step is about 1/100 of the Gauss-Newton step in each variable's own metric, and grows up
+/// to 3× per accepted step. Being relative, the steps are the same whatever the size of the
+/// residuals or the scale of a variable. (An absolute start, `1e-3 · max_i (JᵀJ)_ii` as for an
+/// unscaled `λI`, multiplied by the diagonal made the first steps `max (JᵀJ)_ii` times shorter
+/// than intended: with large whitened residuals, or a start far from the variables' scale, the
+/// first step fell under the step tolerance and the fit "converged" after 0 iterations where it
+/// began. A cautious first step is kept: a near Gauss-Newton first step (1e-3) lands in other
+/// basins of these multimodal fits — on FWD-32J without the actuator, seed 11, J 9028 instead of
+/// 126.7.)
+const INITIAL_DAMPING: f64 = 1e2;
+
 /// The state at the trial point `accepted` in iteration `it` after `s` (with the step's norm);
 /// the outcome instead when none was, when it cannot be evaluated in full, or when a tolerance
 /// stops the run.
@@ -370,11 +382,13 @@ fn levenberg_marquardt(run: &mut Run, mut s: State) -> Outcome {
             .map(|&i| diag[i])
             .fold(0.0, f64::max)
             .max(f64::MIN_POSITIVE);
-        let mut lam = lambda.unwrap_or(1e-3 * dmax);
+        // The damping multiplies D = diag(JᵀJ) (Marquardt's scaling), so λ is a pure number:
+        // the step is the same whatever the size of the residuals or the scale of a variable.
+        let mut lam = lambda.unwrap_or(INITIAL_DAMPING);
         let mut tries = 0;
         let accepted = loop {
             tries += 1;
-            if tries > 60 || lam > 1e30 * dmax {
+            if tries > 60 || lam > 1e30 {
                 break None;
             }
             let k = idx.len();
@@ -755,6 +769,73 @@ mod tests {
             let o = rosenbrock(m, [-10.0; 2], [0.5, 10.0], 500);
             assert_eq!(o.u[0], 0.5, "{m:?}");
             assert!((o.u[1] - 0.25).abs() < 1e-5, "{m:?}: {:?}", o.u);
+        }
+    }
+
+    /// Rosenbrock with its residuals multiplied by `c` and its variables by `s`
+    /// (`x = s ∘ u`): the same problem in other units.
+    struct ScaledRosen {
+        c: f64,
+        s: [f64; 2],
+    }
+    impl Residuals for ScaledRosen {
+        fn eval(
+            &mut self,
+            u: &DVector<f64>,
+            jacobian: bool,
+        ) -> Result<(DVector<f64>, Option<DMatrix<f64>>), EvalError> {
+            let (c, [s0, s1]) = (self.c, self.s);
+            let x = [s0 * u[0], s1 * u[1]];
+            let e = DVector::from_vec(vec![10.0 * c * (x[1] - x[0] * x[0]), c * (1.0 - x[0])]);
+            let j = jacobian.then(|| {
+                DMatrix::from_row_slice(2, 2, &[-20.0 * c * x[0] * s0, 10.0 * c * s1, -c * s0, 0.0])
+            });
+            Ok((e, j))
+        }
+        fn cheap_jacobian(&self) -> bool {
+            true
+        }
+    }
+
+    #[test]
+    fn levenberg_marquardt_takes_the_same_steps_in_any_units() {
+        // Large whitened residuals (small σ, many lines) and a start far from the variables'
+        // scale: the damping used to start at 1e-3 max (JᵀJ)_ii on top of Marquardt's diagonal,
+        // so with c = 1e8 the first step was 1e13 times too short, fell under the step
+        // tolerance, and the fit "converged" after 0 iterations at its start.
+        let run = |c: f64, s: [f64; 2]| {
+            let u0 = DVector::from_vec(vec![-1.2 / s[0], 1.0 / s[1]]);
+            minimize(
+                Optimizer::LevenbergMarquardt,
+                &mut ScaledRosen { c, s },
+                &u0,
+                &DVector::from_element(2, -1e9),
+                &DVector::from_element(2, 1e9),
+                &Settings {
+                    max_iterations: 500,
+                    ..Settings::default()
+                },
+                &mut |_| {},
+            )
+            .unwrap()
+        };
+        let plain = run(1.0, [1.0, 1.0]);
+        assert!(plain.stop.converged() && plain.iterations > 5, "{plain:?}");
+        for c in [1e8, 1e3, 1e-4] {
+            for s in [[1.0, 1.0], [10.0, 0.1], [1e-3, 1e2]] {
+                let o = run(c, s);
+                let x = [o.u[0] * s[0], o.u[1] * s[1]];
+                assert!(
+                    o.stop.converged() && (x[0] - 1.0).abs() < 1e-5 && (x[1] - 1.0).abs() < 1e-5,
+                    "c {c}, s {s:?}: {o:?}"
+                );
+                assert!(
+                    o.iterations.abs_diff(plain.iterations) <= 2,
+                    "c {c}, s {s:?}: {} iterations against {}",
+                    o.iterations,
+                    plain.iterations
+                );
+            }
         }
     }
 
