@@ -12,11 +12,12 @@ use std::path::{Path, PathBuf};
 
 use acquire::analysis::{characteristics, AnalysisOptions, SessionAnalysis};
 use acquire::rig::Rig;
-use acquire::session::{Session, SessionOptions};
+use acquire::session::{Session, SessionHandle, SessionOptions};
 use acquire::sim::SimStand;
 use acquire::stand::{PortSpec, Stand};
 use acquire::sweep::{
-    self, Broadband, BroadbandResult, SteppedSine, StopSignal, SweepOutcome, SweepProgress,
+    self, Broadband, BroadbandResult, SteppedSine, StopSignal, SweepError, SweepOutcome,
+    SweepProgress,
 };
 use anyhow::Context;
 use identify::diagnose;
@@ -133,6 +134,35 @@ pub fn sweep(
     progress: &dyn SweepProgress,
 ) -> anyhow::Result<Swept> {
     let planned = plan.frequencies.frequencies()?.len();
+    let r = recorded(stand, plan, session, opts, async |rig, h, stop| {
+        sweep::stepped_sine(rig, plan, h, progress, stop, &opts.done).await
+    })?;
+    Ok(Swept {
+        session: session.to_path_buf(),
+        planned,
+        outcome: r.outcome,
+        messages: r.messages,
+        finish_error: r.finish_error,
+    })
+}
+
+/// A measurement that ended, completely or not, with its session file.
+struct Recorded<T> {
+    outcome: Result<T, String>,
+    messages: u64,
+    finish_error: Option<String>,
+}
+
+/// Runs `measure` (of `plan`, recorded in the session start) on `stand`'s rig, its `"sim"` ports
+/// served by the simulated stand, into a new session file at `session`, completed whatever
+/// happens; only failures before it exists are `Err`.
+fn recorded<T>(
+    stand: &Stand,
+    plan: &impl serde::Serialize,
+    session: &Path,
+    opts: &SweepOptions<'_>,
+    measure: impl AsyncFnOnce(&mut Rig, &SessionHandle, &StopSignal) -> Result<T, SweepError>,
+) -> anyhow::Result<Recorded<T>> {
     let rt = runtime()?;
     rt.block_on(async {
         // The Ctrl-C handler needs the runtime.
@@ -143,9 +173,7 @@ pub fn sweep(
         let outcome = async {
             sweep::log_session_start(&h, &stand.file, plan, opts.resume, &opts.done)?;
             let mut rig = Rig::connect(&bound, Some(&h)).await?;
-            Ok::<_, anyhow::Error>(
-                sweep::stepped_sine(&mut rig, plan, &h, progress, &stop, &opts.done).await?,
-            )
+            Ok::<_, anyhow::Error>(measure(&mut rig, &h, &stop).await?)
         }
         .await
         .map_err(|e| format!("{e:#}"));
@@ -156,9 +184,7 @@ pub fn sweep(
         if let Some(s) = sim {
             s.shutdown();
         }
-        Ok(Swept {
-            session: session.to_path_buf(),
-            planned,
+        Ok(Recorded {
             outcome,
             messages,
             finish_error,
@@ -210,7 +236,8 @@ pub struct BroadbandSwept {
 }
 
 /// Runs a broadband measurement (`stand`'s `[broadband]` plan) into a new session file, like
-/// [`sweep`] does a stepped sine.
+/// [`sweep`] does a stepped sine (`opts.resume` and `opts.done` are for stepped sines: leave them
+/// empty).
 pub fn broadband_sweep(
     stand: &Stand,
     plan: &Broadband,
@@ -218,32 +245,13 @@ pub fn broadband_sweep(
     opts: &SweepOptions<'_>,
     progress: &dyn SweepProgress,
 ) -> anyhow::Result<BroadbandSwept> {
-    let rt = runtime()?;
-    rt.block_on(async {
-        // The Ctrl-C handler needs the runtime.
-        let stop = stop_signal(opts);
-        let (sim, bound) = start_sim(stand, opts.can)?;
-        let file = record(session)?;
-        let h = file.handle();
-        let outcome = async {
-            sweep::log_session_start(&h, &stand.file, plan, None, &BTreeSet::new())?;
-            let mut rig = Rig::connect(&bound, Some(&h)).await?;
-            Ok::<_, anyhow::Error>(sweep::broadband(&mut rig, plan, &h, progress, &stop).await?)
-        }
-        .await
-        .map_err(|e| format!("{e:#}"));
-        let (messages, finish_error) = match file.finish() {
-            Ok(summary) => (summary.total(), None),
-            Err(e) => (0, Some(e.to_string())),
-        };
-        if let Some(s) = sim {
-            s.shutdown();
-        }
-        Ok(BroadbandSwept {
-            outcome,
-            messages,
-            finish_error,
-        })
+    let r = recorded(stand, plan, session, opts, async |rig, h, stop| {
+        sweep::broadband(rig, plan, h, progress, stop).await
+    })?;
+    Ok(BroadbandSwept {
+        outcome: r.outcome,
+        messages: r.messages,
+        finish_error: r.finish_error,
     })
 }
 

@@ -42,23 +42,41 @@ fn sigint(pid: u32) {
     assert!(st.success());
 }
 
+/// `ident sweep` of `stand` into `out` with the plan's `flags`.
+fn ident_sweep(stand: &str, out: &Path, flags: &[&str]) -> std::process::Output {
+    let mut args = vec!["sweep", "--stand", stand, "--out", out.to_str().unwrap()];
+    args.extend_from_slice(flags);
+    ident(&args)
+}
+
+/// `ident process` of `session` into `out` succeeds and recomputes all its `steps` live estimates
+/// bit for bit.
+fn assert_process_equals_live(session: &Path, out: &Path, steps: usize) {
+    let o = ident(&[
+        "process",
+        session.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert_eq!(o.status.code(), Some(0), "{}", text(&o));
+    assert!(
+        text(&o).contains(&format!(
+            "{steps} of {steps} steps equal the live estimate bit for bit"
+        )),
+        "{}",
+        text(&o)
+    );
+}
+
 #[test]
 fn sweep_then_process_gives_data_for_identify() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("s");
-    let o = ident(&[
-        "sweep",
-        "--stand",
+    let o = ident_sweep(
         &stand(),
-        "--out",
-        out.to_str().unwrap(),
-        "--points",
-        "8",
-        "--from",
-        "30",
-        "--to",
-        "300",
-    ]);
+        &out,
+        &["--points", "8", "--from", "30", "--to", "300"],
+    );
     assert_eq!(o.status.code(), Some(0), "{}", text(&o));
     assert!(text(&o).contains("8 of 8 steps measured"), "{}", text(&o));
     let s = sessions(&out);
@@ -69,18 +87,7 @@ fn sweep_then_process_gives_data_for_identify() {
         "session named by stand and UTC time: {name}"
     );
 
-    let o = ident(&[
-        "process",
-        s[0].to_str().unwrap(),
-        "--out",
-        dir.path().join("p").to_str().unwrap(),
-    ]);
-    assert_eq!(o.status.code(), Some(0), "{}", text(&o));
-    assert!(
-        text(&o).contains("8 of 8 steps equal the live estimate bit for bit"),
-        "{}",
-        text(&o)
-    );
+    assert_process_equals_live(&s[0], &dir.path().join("p"), 8);
     let stem = name.trim_end_matches(".mcap");
     let measured = dir.path().join("p").join(format!("{stem}.measured.json"));
     let m: identify::MeasuredData =
@@ -229,17 +236,7 @@ fn stand_with(dir: &Path, edit: impl Fn(String) -> String) -> String {
 fn bad_input_gets_messages_naming_what_to_fix() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("s");
-    let sweep = |stand: &str| {
-        ident(&[
-            "sweep",
-            "--stand",
-            stand,
-            "--out",
-            out.to_str().unwrap(),
-            "--points",
-            "3",
-        ])
-    };
+    let sweep = |stand: &str| ident_sweep(stand, &out, &["--points", "3"]);
 
     // A sensor that is not on the body it names (the table is 740..1060 mm in y).
     let s = stand_with(dir.path(), |t| {
@@ -466,19 +463,11 @@ fn generator_stand_with(dir: &Path, edit: impl Fn(String) -> String) -> String {
 fn a_generator_stand_is_swept_and_served_over_a_local_tcp_port() {
     let dir = tempfile::tempdir().unwrap();
     let sweep = |stand: &str, out: &Path| {
-        ident(&[
-            "sweep",
-            "--stand",
+        ident_sweep(
             stand,
-            "--out",
-            out.to_str().unwrap(),
-            "--points",
-            "5",
-            "--from",
-            "30",
-            "--to",
-            "300",
-        ])
+            out,
+            &["--points", "5", "--from", "30", "--to", "300"],
+        )
     };
     // `ident sweep` starts the simulated generator itself (port = "sim").
     let root = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
@@ -493,18 +482,7 @@ fn a_generator_stand_is_swept_and_served_over_a_local_tcp_port() {
     );
     // Processing the generator session recomputes every live estimate bit for bit.
     let session = sessions(&dir.path().join("a")).remove(0);
-    let o = ident(&[
-        "process",
-        session.to_str().unwrap(),
-        "--out",
-        dir.path().join("p").to_str().unwrap(),
-    ]);
-    assert_eq!(o.status.code(), Some(0), "{}", text(&o));
-    assert!(
-        text(&o).contains("5 of 5 steps equal the live estimate bit for bit"),
-        "{}",
-        text(&o)
-    );
+    assert_process_equals_live(&session, &dir.path().join("p"), 5);
 
     // `ident sim` serves it on 127.0.0.1; a stand file pointing there is swept like a real one.
     let sim_stand = generator_stand_with(dir.path(), |t| {

@@ -54,13 +54,8 @@ fn a_uff_file_in_g_per_newton_with_a_map_is_identified() {
             .zip(&f)
             .map(|(z, fk)| -z * (2.0 * std::f64::consts::PI * fk).powi(2) / 9.80665)
             .collect();
-        let mut s = uff::Function::frf("Prüfstand", 0.0, 0.0, a);
-        s.abscissa = uff::Abscissa::Uneven(f.clone());
+        let mut s = uff::Function::frf_between("Prüfstand", f.clone(), a, (*node, 3), (1, 3));
         s.response_entity = "Prüfstand".into();
-        s.response_node = *node;
-        s.response_dir = 3;
-        s.reference_node = 1;
-        s.reference_dir = 3;
         s.axes[1].spec_data_type = 12;
         s.axes[1].units = "g".into();
         s.axes[2].spec_data_type = 13;
@@ -159,6 +154,43 @@ fn frequencies_in_khz_under_freq_hz_stop_before_a_confident_wrong_fit() {
     );
     let html = std::fs::read_to_string(report.join("report.html")).unwrap();
     assert!(html.contains("<li>THE MODEL DOES NOT EXPLAIN THE DATA"));
+}
+
+#[test]
+fn frequencies_in_khz_that_still_overlap_the_band_end_in_the_misfit_headline() {
+    // Measured from 10 Hz to 4 kHz and written in kHz under freq_hz: 0.01-4 "Hz", which reaches
+    // within a decade of the model's first resonance (25 Hz), so the band check lets it through.
+    // The fit must not pass for a result: its headline says the model does not explain the data,
+    // that the standard errors are not to be trusted, and names kHz among the likely causes.
+    let dir = tempfile::tempdir().unwrap();
+    let f: Vec<f64> = (0..60)
+        .map(|i| 10.0 * 400f64.powf(i as f64 / 59.0))
+        .collect();
+    let h = receptances(&f);
+    let mut csv = String::from("# unit = m/N\nbody,dof,freq_hz,amplitude\n");
+    for (k, body) in ["first", "second"].iter().enumerate() {
+        for (i, fk) in f.iter().enumerate() {
+            csv.push_str(&format!(
+                "{body},u3,{:?},{:?}\n",
+                fk / 1000.0,
+                h[k][i].norm()
+            ));
+        }
+    }
+    let data = dir.path().join("khz.csv");
+    std::fs::write(&data, &csv).unwrap();
+    let vars = dir.path().join("vars.toml");
+    std::fs::write(&vars, VARS).unwrap();
+    let o = identify_two_mass(&data, &vars, &[], &[]);
+    let out = utf8(&o.stdout);
+    let first = out.lines().next().unwrap_or_default();
+    assert!(
+        first.starts_with("THE MODEL DOES NOT EXPLAIN THE DATA")
+            && first.contains("NOT to be trusted")
+            && first.contains("kHz vs Hz"),
+        "{out}\n{}",
+        utf8(&o.stderr)
+    );
 }
 
 /// A dense CSV of the two-mass chain (mm/N, 0.05 Hz lines over 2-80 Hz) with what real spectra

@@ -9,24 +9,24 @@
 
 mod common;
 
+use std::path::Path;
+
 use acquire::sim::SimSetup;
 use acquire::stand::Stand;
 use common::{ident, p, root, text};
 
 const STAND: &str = "configs/stands/fwd32j-generator-sim.toml";
 
+/// `ident sweep --broadband` of the stand file `stand` into `out`.
+fn broadband_sweep(stand: &Path, out: &Path) -> std::process::Output {
+    ident(&["sweep", "--stand", p(stand), "--broadband", "--out", p(out)])
+}
+
 #[test]
 fn broadband_sweep_through_the_generator_and_process_give_the_truth_frf() {
     let dir = tempfile::tempdir().unwrap();
     let stand_path = root().join(STAND);
-    let o = ident(&[
-        "sweep",
-        "--stand",
-        p(&stand_path),
-        "--broadband",
-        "--out",
-        p(dir.path()),
-    ]);
+    let o = broadband_sweep(&stand_path, dir.path());
     let out = text(&o);
     assert!(o.status.success(), "{out}");
     assert!(
@@ -112,67 +112,44 @@ fn a_broadband_section_the_generator_cannot_play_names_the_field_and_the_fix() {
         .unwrap();
         path
     };
-    // A 100 s chirp at 5120 Hz is 512 000 points; the simulated model takes 65 536.
-    let long = write(
-        "long.toml",
-        &good.replace(
-            "waveform = \"random\"",
-            "waveform = \"chirp\"\nperiod = \"100 s\"",
+    let cases = [
+        // A 100 s chirp at 5120 Hz is 512 000 points; the simulated model takes 65 536.
+        (
+            "long.toml",
+            good.replace(
+                "waveform = \"random\"",
+                "waveform = \"chirp\"\nperiod = \"100 s\"",
+            ),
+            &[
+                "512000 points",
+                "IDENT-SIM SIGGEN",
+                "65536",
+                "shorten broadband.period",
+            ][..],
         ),
-    );
-    let o = ident(&[
-        "sweep",
-        "--stand",
-        p(&long),
-        "--broadband",
-        "--out",
-        p(dir.path()),
-    ]);
-    let out = text(&o);
-    assert!(!o.status.success(), "{out}");
-    assert!(
-        out.contains("512000 points")
-            && out.contains("IDENT-SIM SIGGEN")
-            && out.contains("65536")
-            && out.contains("shorten broadband.period"),
-        "{out}"
-    );
-    // A model without uploads.
-    let generic = write(
-        "generic.toml",
-        &good.replace("retries = 2\n", "retries = 2\ndialect = \"generic\"\n"),
-    );
-    let o = ident(&[
-        "sweep",
-        "--stand",
-        p(&generic),
-        "--broadband",
-        "--out",
-        p(dir.path()),
-    ]);
-    let out = text(&o);
-    assert!(!o.status.success(), "{out}");
-    assert!(
-        out.contains("`generic` (generator.dialect) has no arbitrary-waveform upload")
-            && out.contains("stepped sine"),
-        "{out}"
-    );
-    // No [broadband] at all.
-    let none = write(
-        "none.toml",
-        &good[..good.find("\n# `ident sweep --broadband`").unwrap()],
-    );
-    let o = ident(&[
-        "sweep",
-        "--stand",
-        p(&none),
-        "--broadband",
-        "--out",
-        p(dir.path()),
-    ]);
-    let out = text(&o);
-    assert!(
-        !o.status.success() && out.contains("has no [broadband] section"),
-        "{out}"
-    );
+        // A model without uploads.
+        (
+            "generic.toml",
+            good.replace("retries = 2\n", "retries = 2\ndialect = \"generic\"\n"),
+            &[
+                "`generic` (generator.dialect) has no arbitrary-waveform upload",
+                "stepped sine",
+            ],
+        ),
+        // No [broadband] at all.
+        (
+            "none.toml",
+            good[..good.find("\n# `ident sweep --broadband`").unwrap()].to_string(),
+            &["has no [broadband] section"],
+        ),
+    ];
+    for (name, stand, says) in cases {
+        let stand = write(name, &stand);
+        let o = broadband_sweep(&stand, dir.path());
+        let out = text(&o);
+        assert!(!o.status.success(), "{out}");
+        for want in says {
+            assert!(out.contains(want), "{out}");
+        }
+    }
 }

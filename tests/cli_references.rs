@@ -5,7 +5,7 @@
 
 mod common;
 
-use common::{ident, p, root, utf8, TWO_MASS};
+use common::{ident, identify_mapped, p, root, utf8, TWO_MASS};
 
 use identify::frf::{self, Method};
 use identify::model::{Characteristic, PointOutput, Quantity};
@@ -85,13 +85,13 @@ fn identify_fits_two_references_of_point_outputs_from_a_uff_file() {
         .iter()
         .enumerate()
         .map(|(o, c)| {
-            let mut s = uff::Function::frf("mimo", 0.0, 0.0, r.output(o).to_vec());
-            s.abscissa = uff::Abscissa::Uneven(f.clone());
-            s.response_node = 11 + c.body as i64;
-            s.response_dir = 3;
-            s.reference_node = 1 + i64::from(c.reference);
-            s.reference_dir = 3;
-            s
+            uff::Function::frf_between(
+                "mimo",
+                f.clone(),
+                r.output(o).to_vec(),
+                (11 + c.body as i64, 3),
+                (1 + i64::from(c.reference), 3),
+            )
         })
         .collect();
     let data = dir.path().join("mimo.uff");
@@ -100,17 +100,8 @@ fn identify_fits_two_references_of_point_outputs_from_a_uff_file() {
     std::fs::write(&map, MAP).unwrap();
     let vars = dir.path().join("vars.toml");
     std::fs::write(&vars, VARS).unwrap();
-    let args = [
-        "identify",
-        p(&model_path),
-        "--data",
-        p(&data),
-        "--map",
-        p(&map),
-        "--vars",
-        p(&vars),
-    ];
-    let o = ident(&[&args[..], &["--format", "json"]].concat());
+    let identify = |extra: &[&str]| identify_mapped(&model_path, &data, &map, &vars, extra);
+    let o = identify(&["--format", "json"]);
     assert_eq!(o.status.code(), Some(0), "{}", utf8(&o.stderr));
     let err = utf8(&o.stderr);
     assert!(
@@ -127,7 +118,7 @@ fn identify_fits_two_references_of_point_outputs_from_a_uff_file() {
     // The plain run prints the result table with both stiffnesses, and writes the identified
     // model with the measured point outputs under both references.
     let written = dir.path().join("identified.toml");
-    let o = ident(&[&args[..], &["--write-model", p(&written)]].concat());
+    let o = identify(&["--write-model", p(&written)]);
     assert_eq!(o.status.code(), Some(0), "{}", utf8(&o.stderr));
     let back = identify::modelfile::load(&written).unwrap().model;
     let points: Vec<(u8, bool)> = back

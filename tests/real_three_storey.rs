@@ -9,31 +9,41 @@ mod common;
 
 use std::process::Command;
 
-use common::{ident, json, p, root, text};
+use common::{identify_mapped, json, p, root, text};
 
 /// The documented command, with `extra` flags appended.
 fn identify_example(extra: &[&str]) -> std::process::Output {
+    let vars = root().join("examples/real-three-storey/variables.toml");
+    identify_example_from(&vars, extra)
+}
+
+/// The documented command with the variables file `vars`, and `extra` flags appended.
+fn identify_example_from(vars: &std::path::Path, extra: &[&str]) -> std::process::Output {
     let ex = root().join("examples/real-three-storey");
     let data = root().join("data/dtop-three-storey/three-storey-hammer.uff");
-    let (model, map, vars) = (
-        ex.join("model.toml"),
-        ex.join("map.toml"),
-        ex.join("variables.toml"),
-    );
-    let mut args = vec![
-        "identify",
-        p(&model),
-        "--data",
-        p(&data),
-        "--map",
-        p(&map),
-        "--vars",
-        p(&vars),
-        "--band",
-        "3:40",
-    ];
-    args.extend_from_slice(extra);
-    ident(&args)
+    let (model, map) = (ex.join("model.toml"), ex.join("map.toml"));
+    let flags = [&["--band", "3:40"][..], extra].concat();
+    identify_mapped(&model, &data, &map, vars, &flags)
+}
+
+/// The documented command from the far start (`far-start.toml`: storey stiffnesses 10x off in
+/// opposite directions, ψ 12x) with `--start start`, JSON on stdout.
+fn identify_far(start: &str) -> std::process::Output {
+    let vars = root().join("examples/real-three-storey/far-start.toml");
+    identify_example_from(&vars, &["--start", start, "--format", "json"])
+}
+
+/// The numbers of each pre-fit pair line on stderr, `start: measured F Hz (η E) <- model A Hz
+/// -> B Hz, MAC M`: `[F, E, A, B, M]`.
+fn measured_pairs(err: &str) -> Vec<Vec<f64>> {
+    err.lines()
+        .filter(|l| l.starts_with("start: measured"))
+        .map(|l| {
+            l.split(|c: char| !(c.is_ascii_digit() || c == '.'))
+                .filter_map(|t| t.parse().ok())
+                .collect()
+        })
+        .collect()
 }
 
 /// Runs the reference fit; fails (never skips) without python3, numpy, scipy or pyuff.
@@ -108,8 +118,11 @@ fn identify_reaches_the_independent_scipy_fit() {
 
 #[test]
 fn many_starts_find_the_same_best_optimum_and_report_the_others() {
-    let one = identify_example(&["--format", "json"]);
-    let many = identify_example(&["--format", "json", "--starts", "12", "--seed", "3"]);
+    // The variables file's start and the hypercube only (no modal start: `--start model`).
+    let one = identify_example(&["--format", "json", "--start", "model"]);
+    let many = identify_example(&[
+        "--format", "json", "--starts", "12", "--seed", "3", "--start", "model",
+    ]);
     assert_eq!(many.status.code(), Some(0), "{}", text(&many));
     let one: serde_json::Value = serde_json::from_slice(&one.stdout).unwrap();
     let many: serde_json::Value = serde_json::from_slice(&many.stdout).unwrap();
@@ -149,29 +162,7 @@ fn many_starts_find_the_same_best_optimum_and_report_the_others() {
 fn a_modal_start_matches_the_measured_frequencies_and_reaches_the_same_optimum_from_far_off() {
     // A variables file whose start is far off (storey stiffnesses 10x in opposite directions,
     // ψ 12x): the pre-fit must bring the three model frequencies onto the measured ones.
-    let ex = root().join("examples/real-three-storey");
-    let vars = ex.join("far-start.toml");
-    let data = root().join("data/dtop-three-storey/three-storey-hammer.uff");
-    let (model, map) = (ex.join("model.toml"), ex.join("map.toml"));
-    let run = |vars: &std::path::Path| {
-        ident(&[
-            "identify",
-            p(&model),
-            "--data",
-            p(&data),
-            "--map",
-            p(&map),
-            "--vars",
-            p(vars),
-            "--band",
-            "3:40",
-            "--start",
-            "modal",
-            "--format",
-            "json",
-        ])
-    };
-    let out = run(&vars);
+    let out = identify_far("modal");
     assert_eq!(out.status.code(), Some(0), "{}", text(&out));
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(
@@ -179,28 +170,15 @@ fn a_modal_start_matches_the_measured_frequencies_and_reaches_the_same_optimum_f
         "{err}"
     );
     // Each pair: "measured F Hz (η E) <- model A Hz -> B Hz, MAC M" with B = F, M near 1.
-    let pairs: Vec<&str> = err
-        .lines()
-        .filter(|l| l.starts_with("start: measured"))
-        .collect();
+    let pairs = measured_pairs(&err);
     assert_eq!(pairs.len(), 3, "{err}");
-    for l in pairs {
-        let nums: Vec<f64> = l
-            .split(|c: char| !(c.is_ascii_digit() || c == '.'))
-            .filter_map(|t| t.parse().ok())
-            .collect();
+    for nums in &pairs {
         let (measured, after, mac) = (nums[0], nums[3], nums[4]);
-        assert!((after / measured - 1.0).abs() < 1e-6, "{l}");
-        assert!(mac > 0.9, "{l}");
+        assert!((after / measured - 1.0).abs() < 1e-6, "{nums:?}");
+        assert!(mac > 0.9, "{nums:?}");
     }
     assert!(
-        (6.4..6.6).contains(
-            &err.lines()
-                .find(|l| l.starts_with("start: measured"))
-                .and_then(|l| l.split_whitespace().nth(2))
-                .and_then(|t| t.parse::<f64>().ok())
-                .unwrap()
-        ),
+        (6.4..6.6).contains(&pairs[0][0]),
         "the first storey mode at 6.5 Hz"
     );
     let modal: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
@@ -219,4 +197,107 @@ fn a_modal_start_matches_the_measured_frequencies_and_reaches_the_same_optimum_f
             < documented["criterion_initial"].as_f64().unwrap(),
         "the pre-fit start is better than the model's values"
     );
+}
+
+#[test]
+fn by_default_a_far_start_also_starts_from_the_measured_modes_and_keeps_the_better_fit() {
+    // Vendor data (no variances): `--start auto`, the default, fits from the variables file's
+    // values and from the modal pre-fit's. From the far start the first ends at a degenerate
+    // corner (storey 1 at 3 kN/m, ψ 0.2, 7.5 dB); the second reaches the documented optimum.
+    let run = |start: &str| {
+        let o = identify_far(start);
+        assert_eq!(o.status.code(), Some(0), "{}", text(&o));
+        let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+        (j, String::from_utf8_lossy(&o.stderr).into_owned())
+    };
+    let (auto, err) = run("auto");
+    let (plain, _) = run("model");
+    let documented = identify_example(&["--format", "json", "--start", "model"]);
+    let documented: serde_json::Value = serde_json::from_slice(&documented.stdout).unwrap();
+    let j = |v: &serde_json::Value| v["criterion"].as_f64().unwrap();
+    assert!(
+        err.contains("start: auto: from the variables file's values and from the modal pre-fit's"),
+        "{err}"
+    );
+    assert_eq!(
+        auto["starts"].as_array().unwrap().len(),
+        2,
+        "{}",
+        auto["starts"]
+    );
+    assert!(
+        (j(&auto) / j(&documented) - 1.0).abs() < 1e-6,
+        "auto {} vs documented {}",
+        j(&auto),
+        j(&documented)
+    );
+    assert!(
+        j(&plain) > 3.0 * j(&auto),
+        "the far start alone {} vs auto {}",
+        j(&plain),
+        j(&auto)
+    );
+    // The report lists both starts: the best is the modal one (start 1).
+    let optima = auto["start_analysis"]["optima"].as_array().unwrap();
+    assert!(
+        optima[0]["starts"].as_array().unwrap().contains(&1.into()),
+        "{optima:?}"
+    );
+}
+
+#[test]
+fn all_three_hammer_positions_are_fitted_together_and_the_modal_start_uses_one_reference() {
+    // The file holds the hammer on floors 1, 2 and 3: a model with two more references and a
+    // map naming all three fits the nine FRFs. The modal start takes its shapes from one
+    // reference (mixing them multiplied each row by that reference's participation: the
+    // 17.5 Hz mode paired at MAC 0.06, the 28.9 Hz mode taken for the third storey mode).
+    let dir = tempfile::tempdir().unwrap();
+    let ex = root().join("examples/real-three-storey");
+    let mut model = std::fs::read_to_string(ex.join("model.toml")).unwrap();
+    for floor in [2, 3] {
+        model.push_str(&format!(
+            "\n[[reference]]\nname = \"hammer {floor}\"\n[[reference.force]]\nbody = \"floor {floor}\"\nforce = [1.0, 0.0, 0.0]\n"
+        ));
+    }
+    let mut map = String::from("[[reference]]\nnode = 1\ndir = \"+X\"\n");
+    for floor in [2, 3] {
+        map.push_str(&format!(
+            "[[reference]]\nnode = {floor}\ndir = \"+X\"\nname = \"hammer {floor}\"\n"
+        ));
+    }
+    for floor in 1..=3 {
+        map.push_str(&format!(
+            "[[channel]]\nnode = {floor}\ndir = \"+X\"\nbody = \"floor {floor}\"\n"
+        ));
+    }
+    let (model_file, map_file) = (dir.path().join("model.toml"), dir.path().join("map.toml"));
+    std::fs::write(&model_file, model).unwrap();
+    std::fs::write(&map_file, map).unwrap();
+    let data = root().join("data/dtop-three-storey/three-storey-hammer.uff");
+    let vars = ex.join("variables.toml");
+    let o = identify_mapped(
+        &model_file,
+        &data,
+        &map_file,
+        &vars,
+        &["--band", "3:40", "--format", "json"],
+    );
+    assert_eq!(o.status.code(), Some(0), "{}", text(&o));
+    let err = String::from_utf8_lossy(&o.stderr);
+    let pairs: Vec<(f64, f64)> = measured_pairs(&err).iter().map(|n| (n[0], n[4])).collect();
+    assert_eq!(pairs.len(), 3, "{err}");
+    for ((f, mac), want) in pairs.iter().zip([6.51, 17.46, 26.50]) {
+        assert!(
+            (f - want).abs() < 0.02 && *mac > 0.9,
+            "{f} Hz, MAC {mac}\n{err}"
+        );
+    }
+    let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let db = j["rms_db_error"].as_array().unwrap();
+    assert_eq!(db.len(), 9, "{db:?}");
+    // Every FRF of the matrix within 4 dB of the data, the same model form's level.
+    for row in db {
+        let after = row[2].as_f64().unwrap();
+        assert!(after < 4.0, "{row}");
+    }
 }

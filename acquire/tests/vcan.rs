@@ -991,24 +991,19 @@ fn canopen_settings(node: u8) -> acquire::canopen::CanOpenSettings {
     }
 }
 
-/// The simulated CANopen node's count of `ch` at sample `k`.
-fn canopen_count(ch: u16, k: u64) -> i32 {
-    ((k as i32 * 37 + ch as i32 * 4001) % 30_000) - 15_000
-}
-
 type NodeTask = (
     tokio::sync::oneshot::Sender<()>,
     tokio::task::JoinHandle<Result<acquire::canopen::sim::SimNodeStats, CanError>>,
 );
 
 fn spawn_canopen_node(node: u8, faults: acquire::canopen::sim::SimNodeFaults) -> NodeTask {
-    use acquire::canopen::sim::SimCanOpenNode;
+    use acquire::canopen::sim::{count_pattern, SimCanOpenNode};
     let sim = SimCanOpenNode::new(node).expect("EDS").with_faults(faults);
     let bus = CanBus::open(IFACE).expect("open vcan0 for the node");
     let (tx, rx) = tokio::sync::oneshot::channel();
     (
         tx,
-        tokio::spawn(sim.serve(Box::new(bus), Box::new(canopen_count), rx)),
+        tokio::spawn(sim.serve(Box::new(bus), Box::new(count_pattern), rx)),
     )
 }
 
@@ -1050,14 +1045,7 @@ fn canopen_node_over_vcan_streams_loss_free_and_reports_emcy_and_lost_heartbeat(
         );
         for (i, b) in blocks.iter().enumerate() {
             assert_eq!(b.seq, i as u64);
-            for (c, &ch) in channels.iter().enumerate() {
-                for (j, v) in b.channel(c).enumerate() {
-                    let k = b.first_sample + j as u64;
-                    let want =
-                        (canopen_count(ch, k) as f64 * info.channels[c].volts_per_count) as f32;
-                    assert_eq!(v, want, "block {i} channel {ch} sample {k}");
-                }
-            }
+            python_node::assert_exact(b, &channels, &info);
         }
         let _ = node.0.send(());
         node.1.await.expect("node task").expect("node");
@@ -1083,18 +1071,8 @@ fn canopen_node_over_vcan_streams_loss_free_and_reports_emcy_and_lost_heartbeat(
         let mut daq = CanOpenDaq::open(IFACE, canopen_settings(5)).expect("open vcan0");
         daq.configure(&cfg).await.expect("configure");
         daq.start().await.expect("start");
-        let mut events = Vec::new();
-        let err = loop {
-            match daq.next_event().await {
-                Ok(ev) => events.push(ev),
-                Err(e) => break e,
-            }
-        };
-        let device: Vec<String> = events
-            .iter()
-            .filter_map(DaqEvent::device_fault)
-            .map(str::to_owned)
-            .collect();
+        let (events, err) = acquire::daq::events_until_error(&mut daq).await;
+        let device: Vec<&str> = events.iter().filter_map(DaqEvent::device_fault).collect();
         assert_eq!(device.len(), 2, "{device:?}");
         assert!(device[0].contains("0x4210 (temperature)"), "{device:?}");
         assert!(

@@ -5,15 +5,19 @@ Reads the fit problem that `ident identify MODEL --data DATA --vars VARS --expor
 writes (docs/identification.md, "Problem export"): the resolved model at the initial values
 (docs/model-json.md), the observations (characteristic, line, measured amplitude, sigma), and the
 decision variables (initial value, bounds, internal scale, and per SDE the change of its six k and
-six psi per unit of the variable). Then it solves the same problem as ident, like for like:
+six psi per unit of the variable; per body the change of its [m, m, m, J1, J2, J3]; per point mass
+the change of its mass; per sensor gain the ratio). Then it solves the same problem as ident, like
+for like:
 
 - the same criterion J = 1/2 sum((|z| - |q(x)|) / sigma)^2 on the same observations;
 - the same scaled variables u = x / scale, the same start, the same bounds;
 - the FRF by numpy: M, K, D assembled as identify/src/system.rs does (independently written from
-  docs/model-json.md), one batched dense complex solve over all lines;
+  docs/model-json.md; a point mass adds its 6x6 block with the parallel-axis terms to its body's),
+  one batched dense complex solve over all lines; a gain multiplies its characteristics' outputs;
 - `--jac analytic` (default): the adjoint Jacobian that ident uses, dq_o/dp = -(T w_o)^T dK_c (T q)
   with w_o = A^-1 e_o (A is complex symmetric), obtained from the same batched solve with the output
-  unit vectors as extra right-hand sides; `--jac 2-point`: scipy's forward differences.
+  unit vectors as extra right-hand sides (a mass: dq_o/dp = omega^2 w_o^T dM q; a gain g:
+  d|g q|/dg = |q|); `--jac 2-point`: scipy's forward differences.
 
 Prints one JSON line: the fit's wall time (median over --repeat runs; reading the file and
 assembling the fixed matrices excluded), function/Jacobian evaluations, final cost, status, the
@@ -59,6 +63,21 @@ def sde_from_body(pos, rot_b, point, rot_s):
 
 
 QUANTITY_POWER = {"displacement": 0, "velocity": 1, "acceleration": 2}
+DOF_NAMES = ["u1", "u2", "u3", "r1", "r2", "r3"]
+
+
+def point_mass_block(body, point, mass, inertia):
+    """6x6 mass block of a point mass on a body, in the body's coordinates: m at the arm
+    a = R^T (p - c), its own inertia (about global x, y, z) rotated into the body's axes."""
+    rot = np.array(body["rotation"])
+    a = rot.T @ (np.array(point) - np.array(body["position"]))
+    s = skew(a)
+    block = np.zeros((6, 6))
+    block[:3, :3] = mass * np.eye(3)
+    block[:3, 3:] = -mass * s
+    block[3:, :3] = mass * s
+    block[3:, 3:] = mass * s.T @ s + rot.T @ np.diag(inertia) @ rot
+    return block
 
 
 class Problem:
@@ -71,7 +90,17 @@ class Problem:
         bodies = m["bodies"]
         self.n = 6 * len(bodies)
         n = self.n
-        self.mass = np.concatenate([[b["mass"]] * 3 + list(b["inertia"]) for b in bodies])
+        for o in m["outputs"]:
+            if o.get("at") or o.get("reference") or o.get("relative"):
+                raise SystemExit("ident_baseline.py takes principal-axis outputs of the model's excitation only (an output has at/reference/relative)")
+        if m.get("references"):
+            raise SystemExit("ident_baseline.py takes the model's own excitation only (the model has references)")
+        # M as a dense matrix: the bodies' diagonals plus their point masses' blocks.
+        self.mass0 = np.diag(np.concatenate([[b["mass"]] * 3 + list(b["inertia"]) for b in bodies]))
+        for pm in m.get("point_masses", []):
+            b = pm["body"]
+            self.mass0[6 * b:6 * b + 6, 6 * b:6 * b + 6] += point_mass_block(
+                bodies[b], pm["point"], pm["mass"], pm.get("inertia", [0.0, 0.0, 0.0]))
         sdes = m["sdes"]
         # T: stacked deformation maps, 6 rows per SDE: delta = G_r q_r - G_p q_p.
         self.T = np.zeros((6 * len(sdes), n))
@@ -108,10 +137,30 @@ class Problem:
         nv = len(self.vars)
         self.dk = np.zeros((nv, len(self.k0)))
         self.dpsi = np.zeros((nv, len(self.k0)))
+        # dM per unit of each variable (bodies' masses and inertias, point masses), and the
+        # gain of each output: (variable, ratio) or None.
+        self.dmass = np.zeros((nv, n, n))
+        body_index = {b["name"]: i for i, b in enumerate(bodies)}
+        gains = {}
         for i, v in enumerate(self.vars):
             for t in v["terms"]:
-                self.dk[i, 6 * t["sde"]:6 * t["sde"] + 6] += t["dk"]
-                self.dpsi[i, 6 * t["sde"]:6 * t["sde"] + 6] += t["dpsi"]
+                if "sde" in t:
+                    self.dk[i, 6 * t["sde"]:6 * t["sde"] + 6] += t["dk"]
+                    self.dpsi[i, 6 * t["sde"]:6 * t["sde"] + 6] += t["dpsi"]
+                elif "point_mass" in t:
+                    pm = m["point_masses"][t["point_mass"]]
+                    b = pm["body"]
+                    self.dmass[i, 6 * b:6 * b + 6, 6 * b:6 * b + 6] += t["dmass"] * point_mass_block(
+                        bodies[b], pm["point"], 1.0, [0.0, 0.0, 0.0])
+                elif "gain" in t:
+                    key = (body_index[t["gain"]["body"]], DOF_NAMES.index(t["gain"]["dof"]))
+                    gains[key] = (i, t["ratio"])
+                elif "body" in t:
+                    b = t["body"]
+                    self.dmass[i, 6 * b:6 * b + 6, 6 * b:6 * b + 6] += np.diag(t["dm"])
+                else:
+                    raise SystemExit("unknown term %r of variable %r" % (sorted(t), v["name"]))
+        self.mass_vars = [i for i in range(nv) if np.any(self.dmass[i])]
         self.freqs = np.array(p["lines_hz"])
         omega = TWO_PI * self.freqs
         self.omega2 = omega ** 2
@@ -119,6 +168,7 @@ class Problem:
         self.out_dof = np.array([6 * o["body"] + o["dof"] for o in outs])
         # (j omega)^k per output and line: displacement, velocity, acceleration.
         self.out_factor = np.array([(1j * omega) ** QUANTITY_POWER[o["quantity"]] for o in outs])
+        self.out_gain = [gains.get((o["body"], o["dof"])) for o in outs]
         obs = p["observations"]
         self.obs_out = np.array([o["characteristic"] for o in obs])
         self.obs_line = np.array([o["line"] for o in obs])
@@ -133,7 +183,6 @@ class Problem:
             rhs[d, 1 + o] = 1.0
         self.rhs_all = np.broadcast_to(rhs, (len(self.freqs), n, 1 + no))
         self.rhs_load = np.broadcast_to(rhs[:, :1], (len(self.freqs), n, 1))
-        self.mass_lines = self.omega2[:, None] * self.mass[None, :]
         self.nfev = 0
         self.njev = 0
         self._cache_u = None
@@ -145,22 +194,27 @@ class Problem:
         psi = self.psi0 + dx @ self.dpsi
         return k, psi, k * (1.0 + 1j * psi / TWO_PI)
 
-    def system(self, kc):
+    def mass(self, x):
+        dx = x - self.x0
+        return self.mass0 + np.tensordot(dx, self.dmass, axes=1)
+
+    def gains(self, x):
+        """Each output's gain at x (1 where no variable sets it), shape (outputs, 1)."""
+        return np.array([[1.0 if g is None else g[1] * x[g[0]]] for g in self.out_gain])
+
+    def system(self, kc, mass):
         """A(f) = T^T diag(kc) T - omega^2 M for every line, shape (lines, n, n)."""
         a0 = self.T.T @ (kc[:, None] * self.T)
-        a = np.repeat(a0[None, :, :], len(self.freqs), axis=0)
-        idx = np.arange(self.n)
-        a[:, idx, idx] -= self.mass_lines
-        return a
+        return a0[None, :, :] - self.omega2[:, None, None] * mass[None, :, :]
 
     def solve(self, x, adjoint):
         k, psi, kc = self.complex_stiffness(x)
-        sol = np.linalg.solve(self.system(kc), self.rhs_all if adjoint else self.rhs_load)
+        sol = np.linalg.solve(self.system(kc, self.mass(x)), self.rhs_all if adjoint else self.rhs_load)
         return k, psi, sol
 
     def amplitudes(self, x):
         _, _, sol = self.solve(x, False)
-        q = sol[:, :, 0][:, self.out_dof].T * self.out_factor  # (outputs, lines)
+        q = sol[:, :, 0][:, self.out_dof].T * self.out_factor * self.gains(x)  # (outputs, lines)
         return np.abs(q[self.obs_out, self.obs_line])
 
     # --- least_squares callbacks (u = x / scale) ---
@@ -173,7 +227,7 @@ class Problem:
             k, psi, sol = self.solve(x, True)
             self._cache_u = u.copy()
             self._cache = (k, psi, sol)
-            q = sol[:, :, 0][:, self.out_dof].T * self.out_factor
+            q = sol[:, :, 0][:, self.out_dof].T * self.out_factor * self.gains(x)
             qa = np.abs(q[self.obs_out, self.obs_line])
         else:
             qa = self.amplitudes(x)
@@ -193,11 +247,22 @@ class Problem:
         dkc = self.dk * (1.0 + 1j * psi / TWO_PI)[None, :] + 1j * (k / TWO_PI)[None, :] * self.dpsi
         # dq_o/dx_v = -(T w_o)^T diag(dkc_v) (T q), times (j omega)^k
         dq = -np.matmul(tw * tq[:, None, :], dkc.T).transpose(1, 0, 2) * self.out_factor[:, :, None]
-        q = q_full[:, self.out_dof].T * self.out_factor  # (outputs, lines)
-        qo = q[self.obs_out, self.obs_line]
-        dqo = dq[self.obs_out, self.obs_line, :]  # (points, vars)
+        # A mass: dA/dp = -omega^2 dM, so dq_o/dp = omega^2 w_o^T dM q.
+        for v in self.mass_vars:
+            dmq = q_full @ self.dmass[v].T  # (lines, n): dM q per line
+            dq[:, :, v] += (self.omega2[:, None] * np.einsum("lno,ln->lo", w, dmq)).T * self.out_factor
+        x = u * self.scale
+        g = self.gains(x)
+        q = q_full[:, self.out_dof].T * self.out_factor  # (outputs, lines), before the gains
+        qo = (q * g)[self.obs_out, self.obs_line]
+        dqo = (dq * g[:, :, None])[self.obs_out, self.obs_line, :]  # (points, vars)
         qa = np.abs(qo)
         da = np.where(qa[:, None] > 0.0, (np.conj(qo)[:, None] * dqo).real / np.where(qa > 0, qa, 1.0)[:, None], 0.0)
+        # A gain g = ratio x_v of an output: d|g q|/dx_v = ratio |q|.
+        for o, gv in enumerate(self.out_gain):
+            if gv is not None:
+                at = self.obs_out == o
+                da[at, gv[0]] += gv[1] * np.abs(q[o, self.obs_line[at]])
         return -da / self.sigma[:, None] * self.scale[None, :]
 
 

@@ -4,7 +4,7 @@
 
 use nalgebra::Matrix3;
 
-use crate::model::{Body, Characteristic, Model, PointForce, Sde};
+use crate::model::{Body, Characteristic, Model, PointForce, PointMass, Sde};
 
 /// A field of an element of the model.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -17,6 +17,8 @@ pub enum Item {
     Force(usize, &'static str),
     /// `outputs[i].field`.
     Output(usize, &'static str),
+    /// `point_masses[i].field`.
+    PointMass(usize, &'static str),
     /// The model as a whole.
     Model,
 }
@@ -73,10 +75,67 @@ pub fn check(model: &Model) -> (Vec<Problem>, Vec<Problem>) {
     for (i, o) in model.outputs.iter().enumerate() {
         check_output(model, i, o, &mut errors);
     }
+    for (i, p) in model.point_masses.iter().enumerate() {
+        check_point_mass(model, i, p, &mut errors);
+    }
     if !errors.is_empty() {
         return (errors, Vec::new());
     }
     (errors, connectivity(model))
+}
+
+/// Point mass `i`: an existing body, a finite point, a positive mass, inertias ≥ 0, a unique
+/// non-empty name.
+fn check_point_mass(model: &Model, i: usize, p: &PointMass, errors: &mut Vec<Problem>) {
+    let mut err = |field, message: String| {
+        errors.push(Problem {
+            item: Item::PointMass(i, field),
+            message,
+        })
+    };
+    let name = &p.name;
+    if name.trim().is_empty() {
+        err("name", "a point mass needs a non-empty name".into());
+    } else if model.point_masses[..i].iter().any(|o| &o.name == name) {
+        err(
+            "name",
+            format!("point mass name \"{name}\" is used twice; names must be unique"),
+        );
+    }
+    if p.body >= model.bodies.len() {
+        err(
+            "body",
+            format!(
+                "point mass \"{name}\": body index {} does not exist; there are {} bodies",
+                p.body,
+                model.bodies.len()
+            ),
+        );
+    }
+    if p.point.iter().any(|v| !v.is_finite()) {
+        err(
+            "point",
+            format!("point mass \"{name}\": point is not finite"),
+        );
+    }
+    if !(p.mass.is_finite() && p.mass > 0.0) {
+        err(
+            "mass",
+            format!(
+                "point mass \"{name}\": mass must be a positive number of kg, got {}",
+                p.mass
+            ),
+        );
+    }
+    if p.inertia.iter().any(|j| !(j.is_finite() && *j >= 0.0)) {
+        err(
+            "inertia",
+            format!(
+                "point mass \"{name}\": its own moments of inertia must be ≥ 0 (kg·m²), got {:?}",
+                p.inertia
+            ),
+        );
+    }
 }
 
 /// Body `i`: positive mass and inertias, finite position, proper axes, a unique name.

@@ -11,8 +11,8 @@ use serde::{Deserialize, Serialize};
 use crate::check::Item;
 use crate::frf::Response;
 use crate::model::{
-    Body, Characteristic, Excitation, Model, PointForce, PointOutput, Quantity, Reference, Sde,
-    SdeKind, SdeLaw,
+    Body, Characteristic, Excitation, Model, PointForce, PointMass, PointOutput, Quantity,
+    Reference, Sde, SdeKind, SdeLaw,
 };
 
 /// The resolved model as serialized.
@@ -32,6 +32,30 @@ pub struct ModelJson {
     pub references: Vec<ReferenceJson>,
     /// Output characteristics.
     pub outputs: Vec<OutputJson>,
+    /// Masses added rigidly to bodies at points, absent when there are none.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub point_masses: Vec<PointMassJson>,
+}
+
+/// `point_masses[i]`: a mass added rigidly to a body (sensor, force gauge, fixture).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PointMassJson {
+    /// Unique name.
+    pub name: String,
+    /// Body index.
+    pub body: usize,
+    /// Global, m.
+    pub point: [f64; 3],
+    /// kg.
+    pub mass: f64,
+    /// Its own moments of inertia about its centre along global x, y, z, kg·m² (absent: 0).
+    #[serde(default, skip_serializing_if = "is_zero3")]
+    pub inertia: [f64; 3],
+}
+
+fn is_zero3(j: &[f64; 3]) -> bool {
+    *j == [0.0; 3]
 }
 
 /// `bodies[i]`.
@@ -141,6 +165,17 @@ fn force_json(f: &PointForce) -> ForceJson {
     }
 }
 
+fn output_json(c: &Characteristic) -> OutputJson {
+    OutputJson {
+        body: c.body,
+        dof: c.dof,
+        quantity: c.quantity.as_str().into(),
+        at: c.at,
+        reference: c.reference,
+        relative: c.relative,
+    }
+}
+
 fn rows(m: &Matrix3<f64>) -> [[f64; 3]; 3] {
     std::array::from_fn(|i| std::array::from_fn(|j| m[(i, j)]))
 }
@@ -179,29 +214,9 @@ pub fn to_json(model: &Model) -> ModelJson {
             })
             .collect(),
         excitation: ExcitationJson {
-            forces: model
-                .forces
-                .iter()
-                .map(|f| ForceJson {
-                    body: f.body,
-                    point: Some(f.point.into()),
-                    force: f.force.into(),
-                    moment: (f.moment != Vector3::zeros()).then(|| f.moment.into()),
-                })
-                .collect(),
+            forces: model.forces.iter().map(force_json).collect(),
         },
-        outputs: model
-            .outputs
-            .iter()
-            .map(|o| OutputJson {
-                body: o.body,
-                dof: o.dof,
-                quantity: o.quantity.as_str().into(),
-                at: o.at,
-                reference: o.reference,
-                relative: o.relative,
-            })
-            .collect(),
+        outputs: model.outputs.iter().map(output_json).collect(),
         references: model
             .references
             .iter()
@@ -216,6 +231,17 @@ pub fn to_json(model: &Model) -> ModelJson {
                     forces: Vec::new(),
                     base_motion: Some(*direction),
                 },
+            })
+            .collect(),
+        point_masses: model
+            .point_masses
+            .iter()
+            .map(|p| PointMassJson {
+                name: p.name.clone(),
+                body: p.body,
+                point: p.point.into(),
+                mass: p.mass,
+                inertia: p.inertia,
             })
             .collect(),
     }
@@ -237,6 +263,7 @@ pub fn json_path(item: Item) -> String {
         Item::Sde(i, f) => format!("$.sdes[{i}].{f}"),
         Item::Force(i, f) => format!("$.excitation.forces[{i}].{f}"),
         Item::Output(i, f) => format!("$.outputs[{i}].{f}"),
+        Item::PointMass(i, f) => format!("$.point_masses[{i}].{f}"),
         Item::Model => "$".into(),
     }
 }
@@ -334,6 +361,17 @@ pub fn from_json(j: &ModelJson) -> Result<Model, JsonProblem> {
         forces,
         references,
         outputs,
+        point_masses: j
+            .point_masses
+            .iter()
+            .map(|p| PointMass {
+                name: p.name.clone(),
+                body: p.body,
+                point: p.point.into(),
+                mass: p.mass,
+                inertia: p.inertia,
+            })
+            .collect(),
     })
 }
 
@@ -377,24 +415,12 @@ pub struct FrfJson {
     pub outputs: Vec<FrfOutputJson>,
 }
 
-/// One characteristic of [`FrfJson`].
+/// One characteristic of [`FrfJson`]: the output as in the model's `outputs` and its values.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct FrfOutputJson {
-    /// Body index.
-    pub body: usize,
-    /// 0-5.
-    pub dof: u8,
-    /// Quantity name.
-    pub quantity: String,
-    /// A point output's location and axis, as in [`OutputJson::at`].
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub at: Option<PointOutput>,
-    /// The excitation, as in [`OutputJson::reference`].
-    #[serde(default, skip_serializing_if = "is_zero")]
-    pub reference: u8,
-    /// Relative to the base, as in [`OutputJson::relative`].
-    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
-    pub relative: bool,
+    /// Which output: body, DOF, quantity, point, reference and motion, as in [`OutputJson`].
+    #[serde(flatten)]
+    pub output: OutputJson,
     /// Real parts, SI.
     pub re: Vec<f64>,
     /// Imaginary parts, SI.
@@ -410,12 +436,7 @@ pub fn frf_json(model: &Model, r: &Response) -> FrfJson {
             .iter()
             .enumerate()
             .map(|(o, c)| FrfOutputJson {
-                body: c.body,
-                dof: c.dof,
-                quantity: c.quantity.as_str().into(),
-                at: c.at,
-                reference: c.reference,
-                relative: c.relative,
+                output: output_json(c),
                 re: r.output(o).iter().map(|v| v.re).collect(),
                 im: r.output(o).iter().map(|v| v.im).collect(),
             })

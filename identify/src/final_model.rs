@@ -34,7 +34,8 @@ use crate::identification::report::{sde_table, write_params};
 use crate::identification::variables::{self, On, Tie, Variable};
 use crate::identification::Identification;
 use crate::model::{
-    Body, Characteristic, Model, Param, ParamName, PointForce, Sde, SdeLaw, Tangential, DOF_NAMES,
+    Body, Characteristic, Model, Param, ParamName, PointForce, PointMass, Sde, SdeLaw, Tangential,
+    DOF_NAMES,
 };
 
 /// Significant digits of every number written: loads back within 5e-12 relative.
@@ -97,6 +98,18 @@ fn final_of<'a>(id: &'a Identification, diagnosis: Option<&'a Diagnosis>) -> &'a
     diagnosis.map(|d| &d.model).unwrap_or(&id.model)
 }
 
+/// The final model, once the diagnosis's accepted effects (if one ran) are known to be
+/// expressible in the model file.
+fn writable_final<'a>(
+    id: &'a Identification,
+    diagnosis: Option<&'a Diagnosis>,
+) -> Result<&'a Model, FinalModelError> {
+    if let Some(d) = diagnosis {
+        expressible(d)?;
+    }
+    Ok(final_of(id, diagnosis))
+}
+
 /// The final model as TOML text in the project's model format (`docs/model-format.md`): for a
 /// TOML source its text with the final values written back in each key's own unit and the
 /// accepted effects appended; for a JSON source the resolved final model written whole. A header
@@ -106,10 +119,7 @@ pub fn model_toml(
     id: &Identification,
     diagnosis: Option<&Diagnosis>,
 ) -> Result<String, FinalModelError> {
-    if let Some(d) = diagnosis {
-        expressible(d)?;
-    }
-    let fin = final_of(id, diagnosis);
+    let fin = writable_final(id, diagnosis)?;
     let mut out = header(source, id, diagnosis);
     match source.text {
         Some(text) => out.push_str(&edited(text, source.origin, id, diagnosis)?),
@@ -385,6 +395,40 @@ pub(crate) fn write_back_bodies(
             prepend_comment(table, &n.2);
         }
     }
+    write_back_point_masses(doc, origin, fin, by_vars)
+}
+
+/// Rewrites the `mass` of the `[[point_mass]]` tables whose mass is a variable.
+fn write_back_point_masses(
+    doc: &mut DocumentMut,
+    origin: &str,
+    fin: &Model,
+    by_vars: &[Param],
+) -> Result<(), FinalModelError> {
+    for p in by_vars {
+        let Param::PointMass { index } = *p else {
+            continue;
+        };
+        let Some(pm) = fin.point_masses.get(index) else {
+            continue;
+        };
+        let table = doc
+            .get_mut("point_mass")
+            .and_then(Item::as_array_of_tables_mut)
+            .and_then(|ts| {
+                ts.iter_mut().find(|t| {
+                    t.get("name")
+                        .and_then(Item::as_str)
+                        .is_some_and(|n| n.trim() == pm.name)
+                })
+            })
+            .ok_or_else(|| FinalModelError::Missing {
+                origin: origin.into(),
+                table: "point_mass",
+                name: pm.name.clone(),
+            })?;
+        table.insert("mass", raw_item(&quantity(pm.mass, 1.0, "kg"))?);
+    }
     Ok(())
 }
 
@@ -588,6 +632,23 @@ pub fn resolved_toml(model: &Model) -> String {
         }
     }
     s.push_str(&outputs_toml(model));
+    for p in &model.point_masses {
+        s.push('\n');
+        s.push_str(&point_mass_toml(p, model));
+    }
+    s
+}
+
+/// One `[[point_mass]]`.
+fn point_mass_toml(p: &PointMass, model: &Model) -> String {
+    let mut s = String::from("[[point_mass]]\n");
+    let _ = writeln!(s, "name = {}", quoted(&p.name));
+    let _ = writeln!(s, "body = {}", quoted(&body_name(model, Some(p.body))));
+    let _ = writeln!(s, "point = {}", length_list(&p.point));
+    let _ = writeln!(s, "mass = {}", quantity(p.mass, 1.0, "kg"));
+    if p.inertia != [0.0; 3] {
+        let _ = writeln!(s, "inertia = {}", inertia_list(&p.inertia));
+    }
     s
 }
 
@@ -939,6 +1000,17 @@ pub fn differences(a: &Model, b: &Model, tol: f64) -> Vec<String> {
             out.push(format!("SDE \"{}\" differs from \"{}\"", x.name, y.name));
         }
     }
+    let points_same = a.point_masses.len() == b.point_masses.len()
+        && a.point_masses.iter().zip(&b.point_masses).all(|(x, y)| {
+            x.name == y.name
+                && x.body == y.body
+                && abs(x.point.as_slice(), y.point.as_slice())
+                && close(&[x.mass], &[y.mass], tol)
+                && close(&x.inertia, &y.inertia, tol)
+        });
+    if !points_same {
+        out.push("the point masses differ".into());
+    }
     let load = |m: &Model| -> Vec<(usize, Vec<f64>)> {
         let mut v: Vec<(usize, Vec<f64>)> = m
             .forces
@@ -995,10 +1067,7 @@ pub fn variables_toml(
     id: &Identification,
     diagnosis: Option<&Diagnosis>,
 ) -> Result<String, FinalModelError> {
-    if let Some(d) = diagnosis {
-        expressible(d)?;
-    }
-    let fin = final_of(id, diagnosis);
+    let fin = writable_final(id, diagnosis)?;
     let estimate = diagnosis.map(|d| &d.estimate).unwrap_or(&id.estimate);
     let stage = match diagnosis {
         Some(d) if !d.accepted.is_empty() => "final fit (after the diagnosis)",
@@ -1071,6 +1140,7 @@ fn variable_toml(
         let name = match t.param {
             Param::Sde(p) => fin.sdes[p.sde].name.clone(),
             Param::Mass { body } | Param::Inertia { body, .. } => fin.bodies[body].name.clone(),
+            Param::PointMass { index } => fin.point_masses[index].name.clone(),
             Param::Gain { body, dof } => format!(
                 "{} {}",
                 fin.bodies[body].name,

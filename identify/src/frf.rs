@@ -11,9 +11,11 @@
 //!
 //! The Jacobian uses the adjoint form: with `w_o = A⁻¹ e_o` (A is complex symmetric),
 //! `∂q_o/∂p = −w_oᵀ (∂A/∂p) q = −Σ_i c_i (T w_o)_i (T q)_i`, touching only the SDE that owns `p`.
-//! A body's mass or principal inertia enters as `∂A/∂p = −ω² ∂M/∂p`, M diagonal in the body's
-//! principal axes, so `∂q_o/∂p = ω² Σ_i ∂M_ii/∂p (w_o)_i q_i` over the body's six DOFs
-//! ([`response_params`]).
+//! A body's mass or principal inertia, or a point mass, enters as `∂A/∂p = −ω² ∂M/∂p`, so
+//! `∂q_o/∂p = ω² Σ_ij ∂M_ij/∂p (w_o)_i q_j` over its body's six DOFs (diagonal for the body's
+//! own mass and inertias, a full block for a point mass off the centre of mass;
+//! [`response_params`]). With point masses M is block-diagonal rather than diagonal, and the
+//! modal path's `M^-½` is each body's inverse Cholesky factor ([`MassScaling`]).
 
 use faer::dyn_stack::{MemBuffer, MemStack, StackReq};
 use faer::linalg::lu::partial_pivoting::{factor, solve};
@@ -21,7 +23,7 @@ use faer::{Mat, Par};
 
 use crate::lines::{Batch, Derivatives, LANES};
 use crate::model::{Model, Param, ParamRef, Quantity};
-use crate::system::{ParamBlock, System};
+use crate::system::{MassScaling, ParamBlock, System};
 use crate::C64;
 
 const TWO_PI: f64 = 2.0 * std::f64::consts::PI;
@@ -163,16 +165,16 @@ pub fn response(
     response_params(model, freqs_hz, &params, method)
 }
 
-/// A Jacobian column that is a body's mass or principal inertia: `∂A/∂p = −ω² diag(dm)` over the
-/// body's six DOFs.
-#[derive(Debug, Clone, Copy)]
+/// A Jacobian column that is a body's mass or principal inertia, or a point mass:
+/// `∂A/∂p = −ω² ∂M/∂p` over the body's six DOFs.
+#[derive(Debug, Clone)]
 struct InertiaColumn {
     /// Column of the Jacobian.
     col: usize,
     /// Body index.
     body: usize,
-    /// `∂[m, m, m, J1, J2, J3]/∂p`.
-    dm: [f64; 6],
+    /// The nonzero entries `(i, j, ∂M_ij/∂p)` of the body's 6×6 block (`i, j` in 0..6).
+    dm: Vec<(usize, usize, f64)>,
 }
 
 impl InertiaColumn {
@@ -189,12 +191,10 @@ impl InertiaColumn {
     ) -> C64 {
         let w2 = omega * omega;
         let mut acc = C64::new(0.0, 0.0);
-        for (i, dm) in self.dm.iter().enumerate() {
-            if *dm != 0.0 {
-                let d = 6 * self.body + i;
-                let moved = base.map_or(0.0, |t| t[d] / w2);
-                acc += w(d) * (q(d) + moved) * *dm;
-            }
+        for &(i, j, dm) in &self.dm {
+            let (di, dj) = (6 * self.body + i, 6 * self.body + j);
+            let moved = base.map_or(0.0, |t| t[dj] / w2);
+            acc += w(di) * (q(dj) + moved) * dm;
         }
         acc * w2 * fac
     }
@@ -219,10 +219,16 @@ pub fn response_params(
                 sde_params.push(*r);
                 sde_cols.push(col);
             }
-            _ => match p.inertia_derivative() {
-                Some((body, dm)) if body < model.bodies.len() => {
-                    inertia.push(InertiaColumn { col, body, dm })
-                }
+            _ => match model.mass_derivative(*p) {
+                Some((body, dm)) if body < model.bodies.len() => inertia.push(InertiaColumn {
+                    col,
+                    body,
+                    dm: (0..6)
+                        .flat_map(|i| (0..6).map(move |j| (i, j)))
+                        .filter(|&(i, j)| dm[(i, j)] != 0.0)
+                        .map(|(i, j)| (i, j, dm[(i, j)]))
+                        .collect(),
+                }),
                 _ => return Err(SolveError::UnknownParam(model.label(*p))),
             },
         }
@@ -422,12 +428,7 @@ pub fn states(model: &Model, freqs_hz: &[f64], method: Method) -> Result<States,
                         .collect()
                 })
                 .collect();
-            let lambda_scale = modal
-                .lambda
-                .iter()
-                .map(|l| l.norm())
-                .fold(0.0, f64::max)
-                .max(1.0);
+            let lambda_scale = modal.lambda_scale();
             let yo = modal.output_loads(&system);
             let mut eta = vec![C64::new(0.0, 0.0); n];
             let mut inv = vec![C64::new(0.0, 0.0); n];
@@ -564,6 +565,9 @@ impl DirectSolver {
                 self.a[(i, j)] = C64::new(s.k[i * n + j], s.d[i * n + j]);
             }
             self.a[(i, i)].re -= w2 * s.mass[i];
+        }
+        for &(i, j, v) in &s.mass_coupling {
+            self.a[(i, j)].re -= w2 * v;
         }
         self.rhs.fill(C64::new(0.0, 0.0));
         for c in (0..s.columns()).filter(|&c| c == 0 || c > s.output_rows.len()) {
@@ -721,9 +725,10 @@ impl ModalSolver {
     /// Decomposes the system (one O(n³) eigen-decomposition and one inverse).
     pub fn new(s: &System) -> Result<ModalSolver, SolveError> {
         let n = s.n;
-        let scale: Vec<f64> = s.mass.iter().map(|m| 1.0 / m.sqrt()).collect();
+        let scale = MassScaling::new(s)
+            .ok_or_else(|| SolveError::Eigen("the mass matrix is not positive definite".into()))?;
         let a = Mat::<C64>::from_fn(n, n, |i, j| {
-            C64::new(s.k[i * n + j], s.d[i * n + j]) * (scale[i] * scale[j])
+            scale.congruence(i, j, |k, l| C64::new(s.k[k * n + l], s.d[k * n + l]))
         });
         let eig = a.eigen().map_err(|e| SolveError::Eigen(format!("{e:?}")))?;
         let v = eig.U();
@@ -736,9 +741,19 @@ impl ModalSolver {
                 "the mode shapes are linearly dependent (defective eigenproblem)".into(),
             ));
         }
-        let x = Mat::<C64>::from_fn(n, n, |i, j| v[(i, j)] * scale[i]);
-        let y = Mat::<C64>::from_fn(n, n, |i, j| v_inv[(i, j)] * scale[j]);
+        let x = Mat::<C64>::from_fn(n, n, |i, j| scale.left(i, j, |k, m| v[(k, m)]));
+        let y = Mat::<C64>::from_fn(n, n, |i, j| scale.right(i, j, |m, k| v_inv[(m, k)]));
         Ok(ModalSolver { lambda, x, y })
+    }
+
+    /// The largest |λ| (rad²/s²), at least 1: a line is singular where `|λ − ω²|` is below 10⁻¹³
+    /// of it.
+    fn lambda_scale(&self) -> f64 {
+        self.lambda
+            .iter()
+            .map(|l| l.norm())
+            .fold(0.0, f64::max)
+            .max(1.0)
     }
 
     /// Each output's row as a modal load, `Y t_o`: `[o][mode]`.
@@ -809,12 +824,7 @@ impl ModalSolver {
         let mut dq = vec![vec![[C64::new(0.0, 0.0); 6]; s.sdes.len()]; cols];
         let mut dw = vec![vec![[C64::new(0.0, 0.0); 6]; s.sdes.len()]; outputs];
         let mut fac = vec![C64::new(0.0, 0.0); outputs];
-        let lambda_scale = self
-            .lambda
-            .iter()
-            .map(|l| l.norm())
-            .fold(0.0, f64::max)
-            .max(1.0);
+        let lambda_scale = self.lambda_scale();
         for (k, &f) in out.freqs_hz.iter().enumerate() {
             let omega = TWO_PI * f;
             let w2 = omega * omega;

@@ -287,6 +287,14 @@ impl Batch {
                 }
             }
         }
+        // Point masses couple DOFs of one body through M.
+        for &(i, j, v) in s.mass_coupling.iter().filter(|c| c.1 < c.0) {
+            let re = &mut self.re[i * n + j];
+            for l in 0..LANES {
+                re[l] -= w2[l] * v;
+                amax[l] = amax[l].max(re[l].abs());
+            }
+        }
         amax
     }
 

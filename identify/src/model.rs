@@ -2,7 +2,7 @@
 //! characteristics, all in SI units and the global frame. Everything that computes (FRF, modes,
 //! sensitivities, identification) takes a [`Model`]; model files (TOML, resolved JSON) load into it.
 
-use nalgebra::{Matrix3, Vector3};
+use nalgebra::{Matrix3, Matrix6, Vector3, Vector6};
 
 /// A rigid finite element (RFE): a rigid body with six degrees of freedom.
 ///
@@ -393,6 +393,58 @@ pub struct Sde {
     pub enabled: bool,
 }
 
+/// A mass added rigidly to a body at a point: a sensor, the force gauge, a fixture, bolts. It
+/// adds its exact 6×6 block to the body's mass matrix (in the body's coordinates, principal axes
+/// at the body's centre of mass): with the arm `a = R_bᵀ(p − c_b)` and `S = [a]×`,
+///
+/// ```text
+/// ΔM = | m I      −m S              |
+///      | m S      m SᵀS + R_bᵀ J R_b |
+/// ```
+///
+/// (`m SᵀS` is the parallel-axis term; `J` its own inertia about its centre, global axes), so
+/// the body's centre of mass and principal axes stay where the drawing puts them.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PointMass {
+    /// Unique name, as variables files and reports call it.
+    pub name: String,
+    /// Index into [`Model::bodies`].
+    pub body: usize,
+    /// Where it sits, global frame (m).
+    pub point: Vector3<f64>,
+    /// Mass (kg), > 0.
+    pub mass: f64,
+    /// Its own moments of inertia about its centre along the global x, y, z axes (kg·m², ≥ 0;
+    /// zero for a point).
+    pub inertia: [f64; 3],
+}
+
+impl PointMass {
+    /// Its 6×6 mass block on `body` (see [`PointMass`]).
+    pub fn block(&self, body: &Body) -> Matrix6<f64> {
+        let mut b = Self::unit_block(body, &self.point) * self.mass;
+        let rt = body.rotation.transpose();
+        let own = rt * Matrix3::from_diagonal(&Vector3::from(self.inertia)) * body.rotation;
+        let mut jj = b.fixed_view_mut::<3, 3>(3, 3);
+        jj += own;
+        b
+    }
+
+    /// The block of 1 kg at `point` on `body`, no inertia of its own: `∂ΔM/∂m`.
+    pub fn unit_block(body: &Body, point: &Vector3<f64>) -> Matrix6<f64> {
+        let a = body.rotation.transpose() * (point - body.position);
+        let s = a.cross_matrix();
+        let mut b = Matrix6::zeros();
+        b.fixed_view_mut::<3, 3>(0, 0)
+            .copy_from(&Matrix3::identity());
+        b.fixed_view_mut::<3, 3>(0, 3).copy_from(&(-s));
+        b.fixed_view_mut::<3, 3>(3, 0).copy_from(&s);
+        b.fixed_view_mut::<3, 3>(3, 3)
+            .copy_from(&(s.transpose() * s));
+        b
+    }
+}
+
 /// A harmonic force (and optional moment) applied at a point of a body.
 #[derive(Debug, Clone, PartialEq)]
 pub struct PointForce {
@@ -600,6 +652,8 @@ pub struct Model {
     pub references: Vec<Reference>,
     /// Output characteristics.
     pub outputs: Vec<Characteristic>,
+    /// Masses added rigidly to bodies at points (sensors, the force gauge, fixtures).
+    pub point_masses: Vec<PointMass>,
 }
 
 /// A named excitation beside the model's `forces`.
@@ -660,6 +714,11 @@ pub enum Param {
         /// Principal axis, 0-2 (`J1`-`J3` in files).
         axis: u8,
     },
+    /// The mass (kg) of point mass `index` ([`Model::point_masses`]); its own inertia is held.
+    PointMass {
+        /// Index into [`Model::point_masses`].
+        index: usize,
+    },
     /// The gain (-, 1 = nominal) of the characteristics of body `body`, DOF `dof` (0-5), whatever
     /// their quantity: the model output is multiplied by it.
     Gain {
@@ -704,7 +763,7 @@ impl Param {
     pub fn name(&self) -> String {
         match self {
             Param::Sde(p) => p.name.as_str(),
-            Param::Mass { .. } => "m".into(),
+            Param::Mass { .. } | Param::PointMass { .. } => "m".into(),
             Param::Inertia { axis, .. } => format!("J{}", axis + 1),
             Param::Gain { .. } => "gain".into(),
         }
@@ -718,7 +777,7 @@ impl Param {
                 .get(p.sde)
                 .map(|s| s.law.unit(p.name))
                 .unwrap_or("-"),
-            Param::Mass { .. } => "kg",
+            Param::Mass { .. } | Param::PointMass { .. } => "kg",
             Param::Inertia { .. } => "kg·m²",
             Param::Gain { .. } => "-",
         }
@@ -734,6 +793,22 @@ impl Model {
     /// Index of the body with this name.
     pub fn body_index(&self, name: &str) -> Option<usize> {
         self.bodies.iter().position(|b| b.name == name)
+    }
+
+    /// Index of the point mass with this name.
+    pub fn point_mass_index(&self, name: &str) -> Option<usize> {
+        self.point_masses.iter().position(|p| p.name == name)
+    }
+
+    /// Mass (kg) a body carries: its own and its point masses'.
+    pub fn carried_mass(&self, body: usize) -> f64 {
+        let own = self.bodies.get(body).map_or(0.0, |b| b.mass);
+        own + self
+            .point_masses
+            .iter()
+            .filter(|p| p.body == body)
+            .map(|p| p.mass)
+            .sum::<f64>()
     }
 
     /// Index of the reference with this name, as [`Characteristic::reference`] counts it (1 for
@@ -797,7 +872,25 @@ impl Model {
             Param::Inertia { body, axis } => {
                 self.bodies.get(body)?.inertia.get(axis as usize).copied()
             }
+            Param::PointMass { index } => self.point_masses.get(index).map(|p| p.mass),
             Param::Gain { .. } => None,
+        }
+    }
+
+    /// `∂M/∂p` of a physical mass parameter: the body whose 6×6 block it changes and that
+    /// block's derivative (a body's mass or inertia: 0/1 on the diagonal; a point mass: its
+    /// [`PointMass::unit_block`]). `None` for SDE parameters and gains.
+    pub fn mass_derivative(&self, p: Param) -> Option<(usize, Matrix6<f64>)> {
+        match p {
+            Param::PointMass { index } => {
+                let pm = self.point_masses.get(index)?;
+                let body = self.bodies.get(pm.body)?;
+                Some((pm.body, PointMass::unit_block(body, &pm.point)))
+            }
+            _ => {
+                let (body, dm) = p.inertia_derivative()?;
+                Some((body, Matrix6::from_diagonal(&Vector6::from(dm))))
+            }
         }
     }
 
@@ -825,6 +918,13 @@ impl Model {
                     None => false,
                 }
             }
+            Param::PointMass { index } => match self.point_masses.get_mut(index) {
+                Some(p) => {
+                    p.mass = value;
+                    true
+                }
+                None => false,
+            },
             Param::Gain { .. } => false,
         }
     }
@@ -843,6 +943,13 @@ impl Model {
             Param::Mass { body: b } | Param::Inertia { body: b, .. } => {
                 format!("body {} {}", body(b), p.name())
             }
+            Param::PointMass { index } => format!(
+                "point mass {} m",
+                self.point_masses
+                    .get(index)
+                    .map(|p| p.name.clone())
+                    .unwrap_or_else(|| format!("#{index}"))
+            ),
             Param::Gain { body: b, dof } => format!(
                 "gain {} {}",
                 body(b),

@@ -115,6 +115,21 @@ struct RawModel {
     references: Vec<RawReference>,
     #[serde(default, rename = "output")]
     outputs: Vec<RawOutput>,
+    #[serde(default, rename = "point_mass")]
+    point_masses: Vec<RawPointMass>,
+}
+
+/// `[[point_mass]]`: a mass added rigidly to a body at a point (sensor, force gauge, fixture).
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawPointMass {
+    name: Sp<String>,
+    body: Sp<String>,
+    point: Sp<Value>,
+    mass: Sp<Value>,
+    inertia: Option<Sp<Value>>,
+    #[allow(dead_code)]
+    note: Option<String>,
 }
 
 /// `[[reference]]`: a further, named excitation (forces, pairs, or base motion).
@@ -517,6 +532,10 @@ pub fn parse_toml(text: &str, origin: &str) -> Result<Loaded, LoadError> {
         }
         outputs.extend(cs);
     }
+    let mut point_masses = Vec::new();
+    for (i, p) in raw.point_masses.iter().enumerate() {
+        point_masses.push(point_mass(&cx, i, p, &bodies, &point_masses, &mut spans)?);
+    }
     let model = Model {
         name: raw.name.unwrap_or_else(|| origin.to_string()),
         bodies,
@@ -524,6 +543,7 @@ pub fn parse_toml(text: &str, origin: &str) -> Result<Loaded, LoadError> {
         forces,
         references,
         outputs,
+        point_masses,
     };
     checked(&cx, model, &spans)
 }
@@ -603,6 +623,70 @@ fn body(
         inertia,
         position,
         rotation,
+    })
+}
+
+/// Point mass `i` of the file; `earlier` are the ones before it (names must be unique).
+fn point_mass(
+    cx: &Ctx,
+    i: usize,
+    p: &RawPointMass,
+    bodies: &[Body],
+    earlier: &[PointMass],
+    spans: &mut Spans,
+) -> Result<PointMass, LoadError> {
+    let name = p.name.get_ref().trim().to_string();
+    if name.is_empty() {
+        return Err(cx.at(p.name.span(), "point mass name must be non-empty"));
+    }
+    if earlier.iter().any(|o| o.name == name) {
+        return Err(cx.at(
+            p.name.span(),
+            format!("point mass name \"{name}\" is used twice; names must be unique"),
+        ));
+    }
+    let Some(body) = body_ref(cx, bodies, &p.body)? else {
+        return Err(cx.at(
+            p.body.span(),
+            "a point mass on the ground does not move; name the body it sits on",
+        ));
+    };
+    for (field, span) in [
+        ("name", p.name.span()),
+        ("body", p.body.span()),
+        ("point", p.point.span()),
+        ("mass", p.mass.span()),
+    ] {
+        spans.push((Item::PointMass(i, field), span));
+    }
+    let point = cx.vec3(&p.point, Dim::LENGTH, "point")?;
+    let mass = cx.scalar(&p.mass, Dim::MASS, "mass")?;
+    if mass <= 0.0 {
+        return Err(cx.at(
+            p.mass.span(),
+            format!("point mass \"{name}\": mass must be positive, got {mass} kg"),
+        ));
+    }
+    let inertia = match &p.inertia {
+        None => [0.0; 3],
+        Some(j) => {
+            spans.push((Item::PointMass(i, "inertia"), j.span()));
+            let j3 = match j.get_ref() {
+                Value::List(_) => cx.vector(j, &[Dim::INERTIA; 3], "inertia")?,
+                _ => vec![cx.scalar(j, Dim::INERTIA, "inertia")?; 3],
+            };
+            if j3.iter().any(|x| *x < 0.0) {
+                return Err(cx.at(j.span(), format!("point mass \"{name}\": its own moments of inertia must be ≥ 0, got {j3:?} kg m^2")));
+            }
+            [j3[0], j3[1], j3[2]]
+        }
+    };
+    Ok(PointMass {
+        name,
+        body,
+        point,
+        mass,
+        inertia,
     })
 }
 
@@ -866,14 +950,7 @@ fn output(cx: &Ctx, o: &RawOutput, bodies: &[Body]) -> Result<Vec<Characteristic
         .into_iter()
         .map(|d| {
             let dof = DOF_NAMES.iter().position(|n| n == d.get_ref()).ok_or_else(|| cx.at(d.span(), format!("unknown dof \"{}\"; use u1, u2, u3 (translations) or r1, r2, r3 (rotations) along the body's principal axes", d.get_ref())))?;
-            Ok(Characteristic {
-                body,
-                dof: dof as u8,
-                quantity,
-                at: None,
-                reference: 0,
-                relative: false,
-            })
+            Ok(Characteristic::dof(body, dof as u8, quantity))
         })
         .collect()
 }

@@ -1,14 +1,15 @@
 //! Natural frequencies and mode shapes: undamped (`K φ = ω² M φ`, real) and complex
 //! (`(K + jD) φ = λ M φ`, hysteretic damping: `λ = ω_n² (1 + jη)` with loss factor η).
 //!
-//! Both are solved through `M^-½ · M^-½` scaling (M is diagonal) with faer's symmetric and
-//! standard eigen solvers, never the generalized one.
+//! Both are solved through `M^-½ · M^-½` scaling (M is diagonal; with point masses, each body's
+//! inverse Cholesky factor, [`MassScaling`]) with faer's symmetric and standard eigen solvers,
+//! never the generalized one.
 
 use faer::{Mat, Side};
 
 use crate::frf::{ModalSolver, SolveError};
 use crate::model::Model;
-use crate::system::System;
+use crate::system::{MassScaling, System};
 use crate::C64;
 
 const TWO_PI: f64 = 2.0 * std::f64::consts::PI;
@@ -28,7 +29,7 @@ pub struct Mode {
     pub energy: Vec<f64>,
 }
 
-fn finish(model: &Model, mass: &[f64], lambda: C64, shape: Vec<C64>) -> Mode {
+fn finish(s: &System, lambda: C64, shape: Vec<C64>) -> Mode {
     let freq_hz = lambda.re.max(0.0).sqrt() / TWO_PI;
     let loss_factor = if lambda.re > 0.0 {
         lambda.im / lambda.re
@@ -45,13 +46,17 @@ fn finish(model: &Model, mass: &[f64], lambda: C64, shape: Vec<C64>) -> Mode {
     } else {
         shape
     };
-    let mut energy: Vec<f64> = (0..model.bodies.len())
+    // Kinetic energy per body, φᴴ M_b φ (M_b with its point masses' couplings).
+    let mut energy: Vec<f64> = (0..s.n / 6)
         .map(|b| {
             (0..6)
-                .map(|i| mass[6 * b + i] * shape[6 * b + i].norm_sqr())
+                .map(|i| s.mass[6 * b + i] * shape[6 * b + i].norm_sqr())
                 .sum()
         })
         .collect();
+    for &(i, j, v) in &s.mass_coupling {
+        energy[i / 6] += v * (shape[i].conj() * shape[j]).re;
+    }
     let total: f64 = energy.iter().sum();
     if total > 0.0 {
         energy.iter_mut().for_each(|e| *e /= total);
@@ -68,8 +73,9 @@ fn finish(model: &Model, mass: &[f64], lambda: C64, shape: Vec<C64>) -> Mode {
 pub fn undamped(model: &Model) -> Result<Vec<Mode>, SolveError> {
     let s = System::assemble(model);
     let n = s.n;
-    let scale: Vec<f64> = s.mass.iter().map(|m| 1.0 / m.sqrt()).collect();
-    let a = Mat::<f64>::from_fn(n, n, |i, j| s.k[i * n + j] * scale[i] * scale[j]);
+    let scale = MassScaling::new(&s)
+        .ok_or_else(|| SolveError::Eigen("the mass matrix is not positive definite".into()))?;
+    let a = Mat::<f64>::from_fn(n, n, |i, j| scale.congruence(i, j, |k, l| s.k[k * n + l]));
     let eig = a
         .self_adjoint_eigen(Side::Lower)
         .map_err(|e| SolveError::Eigen(format!("{e:?}")))?;
@@ -77,9 +83,9 @@ pub fn undamped(model: &Model) -> Result<Vec<Mode>, SolveError> {
         .map(|m| {
             let lambda = eig.S()[m];
             let shape = (0..n)
-                .map(|i| C64::new(eig.U()[(i, m)] * scale[i], 0.0))
+                .map(|i| C64::new(scale.left(i, m, |k, mm| eig.U()[(k, mm)]), 0.0))
                 .collect();
-            finish(model, &s.mass, C64::new(lambda, 0.0), shape)
+            finish(&s, C64::new(lambda, 0.0), shape)
         })
         .collect())
 }
@@ -91,7 +97,7 @@ pub fn complex(model: &Model) -> Result<Vec<Mode>, SolveError> {
     let mut modes: Vec<Mode> = (0..s.n)
         .map(|m| {
             let shape = (0..s.n).map(|i| solver.x[(i, m)]).collect();
-            finish(model, &s.mass, solver.lambda[m], shape)
+            finish(&s, solver.lambda[m], shape)
         })
         .collect();
     modes.sort_by(|a, b| a.freq_hz.total_cmp(&b.freq_hz));

@@ -139,6 +139,132 @@ fn add_forces(model: &Model, forces: &[crate::model::PointForce], load: &mut [f6
     }
 }
 
+/// Each body's 6×6 block of M in its coordinates: `diag(m, m, m, J1, J2, J3)` plus the blocks of
+/// the point masses it carries.
+pub fn mass_blocks(model: &Model) -> Vec<Matrix6<f64>> {
+    let mut blocks: Vec<Matrix6<f64>> = model
+        .bodies
+        .iter()
+        .map(|b| Matrix6::from_diagonal(&Vector6::from(b.inertia_diagonal())))
+        .collect();
+    for pm in &model.point_masses {
+        if let (Some(block), Some(body)) = (blocks.get_mut(pm.body), model.bodies.get(pm.body)) {
+            *block += pm.block(body);
+        }
+    }
+    blocks
+}
+
+/// The off-diagonal entries of the blocks as global `(i, j, value)`, zeros left out.
+fn off_diagonal(blocks: &[Matrix6<f64>]) -> Vec<(usize, usize, f64)> {
+    let mut out = Vec::new();
+    for (b, m) in blocks.iter().enumerate() {
+        for i in 0..6 {
+            for j in (0..6).filter(|&j| j != i && m[(i, j)] != 0.0) {
+                out.push((6 * b + i, 6 * b + j, m[(i, j)]));
+            }
+        }
+    }
+    out
+}
+
+/// `S` with `Sᵀ M S = I`, block-diagonal like M: `M^-½` when M is diagonal, else per body
+/// `L⁻ᵀ` of the Cholesky factor `M_b = L Lᵀ` (point masses couple a body's DOFs). The modal
+/// paths solve the standard eigenproblem of `Sᵀ (K + jD) S = V Λ V⁻¹`; then
+/// `A(ω)⁻¹ = S V (Λ − ω²)⁻¹ V⁻¹ Sᵀ`.
+#[derive(Debug, Clone)]
+pub enum MassScaling {
+    /// `S = diag(1/√m_i)`.
+    Diagonal(Vec<f64>),
+    /// S by rows and by columns: `rows[i]` holds `(column, S_ij)`, `cols[j]` holds
+    /// `(row, S_ij)`, all within one body's block.
+    Blocks {
+        /// Nonzero entries of each row.
+        rows: Vec<Vec<(usize, f64)>>,
+        /// Nonzero entries of each column.
+        cols: Vec<Vec<(usize, f64)>>,
+    },
+}
+
+impl MassScaling {
+    /// The scaling of `s`'s M; `None` when a body's block is not positive definite.
+    pub fn new(s: &System) -> Option<MassScaling> {
+        if s.mass_coupling.is_empty() {
+            return s
+                .mass
+                .iter()
+                .all(|m| *m > 0.0)
+                .then(|| MassScaling::Diagonal(s.mass.iter().map(|m| 1.0 / m.sqrt()).collect()));
+        }
+        let mut rows = vec![Vec::new(); s.n];
+        let mut cols = vec![Vec::new(); s.n];
+        for b in 0..s.n / 6 {
+            let mut m = Matrix6::from_diagonal(&Vector6::from_fn(|i, _| s.mass[6 * b + i]));
+            for &(i, j, v) in s.mass_coupling.iter().filter(|c| c.0 / 6 == b) {
+                m[(i - 6 * b, j - 6 * b)] = v;
+            }
+            let l_inv = m.cholesky()?.l().try_inverse()?;
+            let st = l_inv.transpose();
+            for i in 0..6 {
+                for j in (0..6).filter(|&j| st[(i, j)] != 0.0) {
+                    rows[6 * b + i].push((6 * b + j, st[(i, j)]));
+                    cols[6 * b + j].push((6 * b + i, st[(i, j)]));
+                }
+            }
+        }
+        Some(MassScaling::Blocks { rows, cols })
+    }
+
+    /// Entry `(i, j)` of `Sᵀ A S` for the n×n matrix `a`.
+    #[inline]
+    pub fn congruence<T>(&self, i: usize, j: usize, a: impl Fn(usize, usize) -> T) -> T
+    where
+        T: Copy + Default + std::ops::Add<Output = T> + std::ops::Mul<f64, Output = T>,
+    {
+        match self {
+            MassScaling::Diagonal(d) => a(i, j) * (d[i] * d[j]),
+            MassScaling::Blocks { cols, .. } => {
+                // (Sᵀ A S)_ij = Σ_k Σ_l S_ki A_kl S_lj, over the blocks of i and j.
+                let mut acc = T::default();
+                for &(k, ski) in &cols[i] {
+                    for &(l, slj) in &cols[j] {
+                        acc = acc + a(k, l) * (ski * slj);
+                    }
+                }
+                acc
+            }
+        }
+    }
+
+    /// Entry `(i, m)` of `S V` for the n×n matrix `v` (physical shapes from scaled ones).
+    #[inline]
+    pub fn left<T>(&self, i: usize, m: usize, v: impl Fn(usize, usize) -> T) -> T
+    where
+        T: Copy + Default + std::ops::Add<Output = T> + std::ops::Mul<f64, Output = T>,
+    {
+        match self {
+            MassScaling::Diagonal(d) => v(i, m) * d[i],
+            MassScaling::Blocks { rows, .. } => rows[i]
+                .iter()
+                .fold(T::default(), |acc, &(k, x)| acc + v(k, m) * x),
+        }
+    }
+
+    /// Entry `(m, j)` of `W Sᵀ` for the n×n matrix `w`.
+    #[inline]
+    pub fn right<T>(&self, m: usize, j: usize, w: impl Fn(usize, usize) -> T) -> T
+    where
+        T: Copy + Default + std::ops::Add<Output = T> + std::ops::Mul<f64, Output = T>,
+    {
+        match self {
+            MassScaling::Diagonal(d) => w(m, j) * d[j],
+            MassScaling::Blocks { rows, .. } => rows[j]
+                .iter()
+                .fold(T::default(), |acc, &(k, x)| acc + w(m, k) * x),
+        }
+    }
+}
+
 /// One enabled SDE as the solver sees it.
 #[derive(Debug, Clone)]
 pub struct SdeBlock {
@@ -202,8 +328,12 @@ pub struct ParamBlock {
 pub struct System {
     /// Number of DOFs (6 per body).
     pub n: usize,
-    /// Diagonal of M: `[m, m, m, J1, J2, J3]` per body.
+    /// Diagonal of M: `[m, m, m, J1, J2, J3]` per body, plus what point masses add there.
     pub mass: Vec<f64>,
+    /// The off-diagonal entries of M, `(i, j, value)` with both `(i, j)` and `(j, i)`, all within
+    /// one body's 6×6 block: what point masses off a body's centre of mass add
+    /// ([`crate::model::PointMass`]). Empty without point masses, when M is diagonal.
+    pub mass_coupling: Vec<(usize, usize, f64)>,
     /// Stiffness matrix K (n×n, row-major), symmetric positive semi-definite.
     pub k: Vec<f64>,
     /// Hysteretic damping matrix D (n×n, row-major), symmetric.
@@ -226,11 +356,12 @@ impl System {
     /// Assembles M, K, D and P from a model. The model must be valid (see the loader).
     pub fn assemble(model: &Model) -> System {
         let n = model.dof_count();
-        let mass: Vec<f64> = model
-            .bodies
+        let blocks = mass_blocks(model);
+        let mass: Vec<f64> = blocks
             .iter()
-            .flat_map(|b| b.inertia_diagonal())
+            .flat_map(|m| (0..6).map(move |i| m[(i, i)]))
             .collect();
+        let mass_coupling = off_diagonal(&blocks);
         let mut k = vec![0.0; n * n];
         let mut d = vec![0.0; n * n];
         let mut sdes = Vec::new();
@@ -300,9 +431,11 @@ impl System {
                     let mut t = vec![0.0; n];
                     for (b, body) in model.bodies.iter().enumerate() {
                         let u = body.rotation.transpose() * Vector3::from(*direction);
-                        for i in 0..3 {
-                            t[6 * b + i] = u[i];
-                            p[6 * b + i] = body.mass * u[i];
+                        let tb = Vector6::new(u.x, u.y, u.z, 0.0, 0.0, 0.0);
+                        let pb = blocks[b] * tb;
+                        for i in 0..6 {
+                            t[6 * b + i] = tb[i];
+                            p[6 * b + i] = pb[i];
                         }
                     }
                     base_motion.push(Some(t));
@@ -331,6 +464,7 @@ impl System {
         System {
             n,
             mass,
+            mass_coupling,
             k,
             d,
             load,
@@ -339,6 +473,30 @@ impl System {
             sdes,
             output_rows,
         }
+    }
+
+    /// `aᵀ M b` (M with its couplings).
+    pub fn mass_inner(&self, a: &[f64], b: &[f64]) -> f64 {
+        let diag: f64 = a
+            .iter()
+            .zip(b)
+            .zip(&self.mass)
+            .map(|((x, y), m)| m * x * y)
+            .sum();
+        diag + self
+            .mass_coupling
+            .iter()
+            .map(|&(i, j, v)| a[i] * v * b[j])
+            .sum::<f64>()
+    }
+
+    /// `M x` (M with its couplings).
+    pub fn mass_times(&self, x: &[f64]) -> Vec<f64> {
+        let mut y: Vec<f64> = self.mass.iter().zip(x).map(|(m, v)| m * v).collect();
+        for &(i, j, v) in &self.mass_coupling {
+            y[i] += v * x[j];
+        }
+        y
     }
 
     /// The base's rigid motion `T u_b` of load column `c`, when its reference is a base motion.

@@ -46,14 +46,8 @@ pub fn single_body(mass: f64, k: f64, psi: f64) -> Model {
             moment: Vector3::zeros(),
         }],
         references: Vec::new(),
-        outputs: vec![Characteristic {
-            body: 0,
-            dof: 2,
-            quantity: Quantity::Displacement,
-            at: None,
-            reference: 0,
-            relative: false,
-        }],
+        point_masses: Vec::new(),
+        outputs: vec![Characteristic::dof(0, 2, Quantity::Displacement)],
     }
 }
 
@@ -101,23 +95,10 @@ pub fn two_in_series(m1: f64, m2: f64, k1: f64, k2: f64, psi: f64) -> Model {
             moment: Vector3::zeros(),
         }],
         references: Vec::new(),
+        point_masses: Vec::new(),
         outputs: vec![
-            Characteristic {
-                body: 0,
-                dof: 2,
-                quantity: Quantity::Displacement,
-                at: None,
-                reference: 0,
-                relative: false,
-            },
-            Characteristic {
-                body: 1,
-                dof: 2,
-                quantity: Quantity::Displacement,
-                at: None,
-                reference: 0,
-                relative: false,
-            },
+            Characteristic::dof(0, 2, Quantity::Displacement),
+            Characteristic::dof(1, 2, Quantity::Displacement),
         ],
     }
 }
@@ -187,15 +168,9 @@ pub fn chain(n: usize) -> Model {
             moment: Vector3::zeros(),
         }],
         references: Vec::new(),
+        point_masses: Vec::new(),
         outputs: (0..3)
-            .map(|dof| Characteristic {
-                body: last,
-                dof,
-                quantity: Quantity::Displacement,
-                at: None,
-                reference: 0,
-                relative: false,
-            })
+            .map(|dof| Characteristic::dof(last, dof, Quantity::Displacement))
             .collect(),
         bodies,
         sdes,

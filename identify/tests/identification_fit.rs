@@ -366,24 +366,21 @@ fn tied_and_scaled_variables_move_their_parameters_together() {
     let d = measured(&m, 0.0, 1);
     let obs = data::validate(&d, &m, "textbook").unwrap();
     // k2 = 0.25 k1 (the truth's ratio), and one factor on both ψ.
-    let vars = variables::parse(
-        "[[variable]]\nname = \"k chain\"\nsdes = [\"k1\", \"k2\"]\nparameter = \"k\"\nratios = [1.0, 0.25]\ninitial = \"12 N/um\"\n\
-         [[variable]]\nname = \"psi factor\"\nsdes = \"k1, k2\"\nparameter = \"psi\"\ntie = \"scale\"\n",
-        "tied.toml",
-        &m,
-    )
-    .unwrap();
+    let tied = |model: &Model| {
+        variables::parse(
+            "[[variable]]\nname = \"k chain\"\nsdes = [\"k1\", \"k2\"]\nparameter = \"k\"\nratios = [1.0, 0.25]\ninitial = \"12 N/um\"\n\
+             [[variable]]\nname = \"psi factor\"\nsdes = \"k1, k2\"\nparameter = \"psi\"\ntie = \"scale\"\n",
+            "tied.toml",
+            model,
+        )
+        .unwrap()
+    };
+    let vars = tied(&m);
     assert_eq!(vars.vars[1].initial, 1.0);
     let mut start = m.clone();
     vars.apply(&mut start, &[1.2e7, 0.6]);
     let obs2 = data::validate(&d, &start, "textbook").unwrap();
-    let vars2 = variables::parse(
-        "[[variable]]\nname = \"k chain\"\nsdes = [\"k1\", \"k2\"]\nparameter = \"k\"\nratios = [1.0, 0.25]\ninitial = \"12 N/um\"\n\
-         [[variable]]\nname = \"psi factor\"\nsdes = \"k1, k2\"\nparameter = \"psi\"\ntie = \"scale\"\n",
-        "tied.toml",
-        &start,
-    )
-    .unwrap();
+    let vars2 = tied(&start);
     let id = idn::identify(&start, &obs2, &vars2, &Options::default(), &mut |_, _| {}).unwrap();
     assert!(id.stop.converged());
     assert!(

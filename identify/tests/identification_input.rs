@@ -240,61 +240,76 @@ fn vars_err(text: &str) -> String {
 
 #[test]
 fn variables_file_errors_are_located_and_explained() {
-    let e = vars_err("[[variable]]\nsdes = \"k3\"\nparameter = \"k\"\n");
-    assert!(
-        e.starts_with("vars.toml:2:") && e.contains("unknown SDE \"k3\"") && e.contains("k1, k2"),
-        "{e}"
-    );
-    let e = vars_err("[[variable]]\nsdes = \"k1\"\nparameter = \"kk\"\n");
-    assert!(
-        e.starts_with("vars.toml:3:") && e.contains("unknown parameter \"kk\""),
-        "{e}"
-    );
-    let e = vars_err("[[variable]]\nsdes = \"k1\"\nparameter = \"kn\"\n");
-    assert!(
-        e.contains("SDE \"k1\" (spring) has no parameter \"kn\"; its parameters: k, psi"),
-        "{e}"
-    );
-    let e = vars_err("[[variable]]\nsdes = \"k1\"\nparameter = \"k\"\nlower = \"-1 N/um\"\n");
-    assert!(
-        e.starts_with("vars.toml:4:") && e.contains("outside the physical range"),
-        "{e}"
-    );
-    let e = vars_err("[[variable]]\nsdes = \"k1\"\nparameter = \"k\"\ninitial = \"30 N/um\"\nupper = \"25 N/um\"\n");
-    assert!(
-        e.starts_with("vars.toml:4:") && e.contains("outside the bounds"),
-        "{e}"
-    );
-    let e = vars_err("[[variable]]\nsdes = \"k1\"\nparameter = \"k\"\ninitial = \"3 m\"\n");
-    assert!(e.contains("initial") && e.contains("stiffness"), "{e}");
-    let e = vars_err("[[variable]]\nsdes = \"k1\"\nparameter = \"k\"\n[[variable]]\nsdes = [\"k2\", \"k1\"]\nparameter = \"k\"\n");
-    assert!(
-        e.starts_with("vars.toml:5:") && e.contains("already set by variable \"k k1\""),
-        "{e}"
-    );
-    let e = vars_err("[[variable]]\nsdes = \"k1\"\nparameter = \"k\"\nbogus = 1\n");
-    assert!(
-        e.starts_with("vars.toml:4:") && e.contains("unknown field"),
-        "{e}"
-    );
-    let e = vars_err("[[variable]]\nsdes = [\"k1\", \"guide 1\"]\nparameter = \"psi\"\n");
-    assert!(
-        e.contains("\"guide 1\" (general) has no parameter \"psi\""),
-        "{e}"
-    );
-    let e = vars_err("[[variable]]\nsdes = \"k1\"\nparameter = \"k\"\ninitial = 0\n");
-    assert!(e.contains("no natural scale"), "{e}");
-    let e = vars_err("[[variable]]\nsdes = \"k1, k2\"\nparameter = \"k\"\n");
-    assert!(
-        e.contains("values of these SDEs differ") && e.contains("give `initial`"),
-        "{e}"
-    );
-    let e = vars_err(
-        "[[variable]]\nsdes = \"k1, k2\"\nparameter = \"k\"\nratios = [1.0]\ninitial = 1e6\n",
-    );
-    assert!(e.contains("1 ratios for 2 SDEs"), "{e}");
-    let e = vars_err("");
-    assert!(e.contains("no [[variable]]"), "{e}");
+    // Each file, the location its error starts with ("" where not asserted) and what it says.
+    for (text, at, says) in [
+        (
+            "[[variable]]\nsdes = \"k3\"\nparameter = \"k\"\n",
+            "vars.toml:2:",
+            &["unknown SDE \"k3\"", "k1, k2"][..],
+        ),
+        (
+            "[[variable]]\nsdes = \"k1\"\nparameter = \"kk\"\n",
+            "vars.toml:3:",
+            &["unknown parameter \"kk\""],
+        ),
+        (
+            "[[variable]]\nsdes = \"k1\"\nparameter = \"kn\"\n",
+            "",
+            &["SDE \"k1\" (spring) has no parameter \"kn\"; its parameters: k, psi"],
+        ),
+        (
+            "[[variable]]\nsdes = \"k1\"\nparameter = \"k\"\nlower = \"-1 N/um\"\n",
+            "vars.toml:4:",
+            &["outside the physical range"],
+        ),
+        (
+            "[[variable]]\nsdes = \"k1\"\nparameter = \"k\"\ninitial = \"30 N/um\"\nupper = \"25 N/um\"\n",
+            "vars.toml:4:",
+            &["outside the bounds"],
+        ),
+        (
+            "[[variable]]\nsdes = \"k1\"\nparameter = \"k\"\ninitial = \"3 m\"\n",
+            "",
+            &["initial", "stiffness"],
+        ),
+        (
+            "[[variable]]\nsdes = \"k1\"\nparameter = \"k\"\n[[variable]]\nsdes = [\"k2\", \"k1\"]\nparameter = \"k\"\n",
+            "vars.toml:5:",
+            &["already set by variable \"k k1\""],
+        ),
+        (
+            "[[variable]]\nsdes = \"k1\"\nparameter = \"k\"\nbogus = 1\n",
+            "vars.toml:4:",
+            &["unknown field"],
+        ),
+        (
+            "[[variable]]\nsdes = [\"k1\", \"guide 1\"]\nparameter = \"psi\"\n",
+            "",
+            &["\"guide 1\" (general) has no parameter \"psi\""],
+        ),
+        (
+            "[[variable]]\nsdes = \"k1\"\nparameter = \"k\"\ninitial = 0\n",
+            "",
+            &["no natural scale"],
+        ),
+        (
+            "[[variable]]\nsdes = \"k1, k2\"\nparameter = \"k\"\n",
+            "",
+            &["values of these SDEs differ", "give `initial`"],
+        ),
+        (
+            "[[variable]]\nsdes = \"k1, k2\"\nparameter = \"k\"\nratios = [1.0]\ninitial = 1e6\n",
+            "",
+            &["1 ratios for 2 SDEs"],
+        ),
+        ("", "", &["no [[variable]]"]),
+    ] {
+        let e = vars_err(text);
+        assert!(e.starts_with(at), "{e}");
+        for want in says {
+            assert!(e.contains(want), "{e}");
+        }
+    }
 }
 
 #[test]

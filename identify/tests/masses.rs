@@ -18,23 +18,10 @@ use identify::textbook;
 fn coupled() -> Model {
     let mut m = textbook::chain(3);
     m.outputs = (0..6)
-        .map(|dof| Characteristic {
-            body: 2,
-            dof,
-            quantity: Quantity::Displacement,
-            at: None,
-            reference: 0,
-            relative: false,
-        })
+        .map(|dof| Characteristic::dof(2, dof, Quantity::Displacement))
         .collect();
-    m.outputs.push(Characteristic {
-        body: 0,
-        dof: 1,
-        quantity: Quantity::Acceleration,
-        at: None,
-        reference: 0,
-        relative: false,
-    });
+    m.outputs
+        .push(Characteristic::dof(0, 1, Quantity::Acceleration));
     m
 }
 
@@ -247,19 +234,24 @@ initial = 0.3
     s
 }
 
-#[test]
-fn mass_and_stiffness_of_one_body_are_both_identified_from_exact_receptance() {
-    let (m, k, psi) = (80.0, 2.0e6, 0.4);
+/// The single body's mass (kg), stiffness (N/m) and ψ.
+const SINGLE_BODY: (f64, f64, f64) = (80.0, 2.0e6, 0.4);
+
+/// The single body and its amplitude data (relative noise `rel`, seeded) at 60 log-spaced lines
+/// from a tenth of its resonance (the spring line) to ten times it (the mass line).
+fn single_body_data(rel: f64, seed: u64) -> (Model, identify::MeasuredData) {
+    let (m, k, psi) = SINGLE_BODY;
     let truth = textbook::single_body(m, k, psi);
     let f0 = (k / m).sqrt() / (2.0 * std::f64::consts::PI);
-    // From a tenth of the resonance (the spring line) to ten times it (the mass line).
-    let d = data_of(
-        &truth,
-        &synthetic::log_lines(f0 / 10.0, 10.0 * f0, 60),
-        0.0,
-        1,
-        (0, 1.0),
-    );
+    let lines = synthetic::log_lines(f0 / 10.0, 10.0 * f0, 60);
+    let d = data_of(&truth, &lines, rel, seed, (0, 1.0));
+    (truth, d)
+}
+
+#[test]
+fn mass_and_stiffness_of_one_body_are_both_identified_from_exact_receptance() {
+    let (m, k, psi) = SINGLE_BODY;
+    let (truth, d) = single_body_data(0.0, 1);
     // The identification model starts 25 % heavy and 35 % stiff.
     let obs = data::validate(&d, &truth, "exact").unwrap();
     let vars = variables::parse(&single_vars(false), "vars.toml", &truth).unwrap();
@@ -295,16 +287,7 @@ fn mass_and_stiffness_of_one_body_are_both_identified_from_exact_receptance() {
 fn mass_stiffness_and_gain_together_are_reported_as_not_separable() {
     // Scaling m, k and the gain together leaves g/(k(1 + jψ/2π) − ω²m) unchanged: the data can
     // never separate them, whatever the band. The identifiability warning must say so.
-    let (m, k, psi) = (80.0, 2.0e6, 0.4);
-    let truth = textbook::single_body(m, k, psi);
-    let f0 = (k / m).sqrt() / (2.0 * std::f64::consts::PI);
-    let d = data_of(
-        &truth,
-        &synthetic::log_lines(f0 / 10.0, 10.0 * f0, 60),
-        0.01,
-        5,
-        (0, 1.0),
-    );
+    let (truth, d) = single_body_data(0.01, 5);
     let obs = data::validate(&d, &truth, "noisy").unwrap();
     let vars = variables::parse(&single_vars(true), "vars.toml", &truth).unwrap();
     let id = idn::identify(&truth, &obs, &vars, &Options::default(), &mut |_, _| {}).unwrap();
@@ -330,65 +313,45 @@ fn error_of(text: &str, model: &Model) -> String {
 #[test]
 fn bad_mass_inertia_and_gain_variables_name_file_line_field_and_fix() {
     let model = two_mass();
-    let unknown = error_of(
-        "[[variable]]\nbodies = \"third\"\nparameter = \"m\"\n",
-        &model,
-    );
-    assert!(unknown.contains("masses.toml:2"), "{unknown}");
-    assert!(unknown.contains("unknown body \"third\""), "{unknown}");
-    assert!(unknown.contains("first, second"), "{unknown}");
-
-    let axis = error_of(
-        "[[variable]]\nbodies = \"first\"\nparameter = \"J4\"\n",
-        &model,
-    );
-    assert!(axis.contains("masses.toml:3"), "{axis}");
-    assert!(axis.contains("J1, J2, J3"), "{axis}");
-
-    let zero = error_of(
-        "[[variable]]\nbodies = \"first\"\nparameter = \"m\"\nlower = \"0 kg\"\n",
-        &model,
-    );
-    assert!(zero.contains("masses.toml:4"), "{zero}");
-    assert!(zero.contains("lower bound 0 kg"), "{zero}");
-    assert!(zero.contains("give lower > 0"), "{zero}");
-
-    let negative = error_of(
-        "[[variable]]\nbodies = \"first\"\nparameter = \"J2\"\ninitial = \"-3 kg m^2\"\n",
-        &model,
-    );
-    assert!(negative.contains("masses.toml:4"), "{negative}");
-    assert!(negative.contains("must be > 0"), "{negative}");
-
-    let no_dof = error_of(
-        "[[variable]]\ncharacteristics = \"second u7\"\nparameter = \"gain\"\n",
-        &model,
-    );
-    assert!(no_dof.contains("masses.toml:2"), "{no_dof}");
-    assert!(no_dof.contains("characteristics"), "{no_dof}");
-    assert!(no_dof.contains("u1 u2 u3 r1 r2 r3"), "{no_dof}");
-
-    let no_body = error_of(
-        "[[variable]]\ncharacteristics = \"saddle u1\"\nparameter = \"gain\"\n",
-        &model,
-    );
-    assert!(no_body.contains("unknown body \"saddle\""), "{no_body}");
-
-    let mixed = error_of(
-        "[[variable]]\nsdes = \"k1\"\nbodies = \"first\"\nparameter = \"m\"\n",
-        &model,
-    );
-    assert!(mixed.contains("more than one of"), "{mixed}");
-
-    let twice = error_of(
-        "[[variable]]\nbodies = \"first\"\nparameter = \"m\"\n[[variable]]\nbodies = [\"second\", \"first\"]\nparameter = \"mJ\"\n",
-        &model,
-    );
-    assert!(twice.contains("masses.toml:5"), "{twice}");
-    assert!(
-        twice.contains("already set by variable \"m first\""),
-        "{twice}"
-    );
+    for (text, says) in [
+        (
+            "[[variable]]\nbodies = \"third\"\nparameter = \"m\"\n",
+            &["masses.toml:2", "unknown body \"third\"", "first, second"][..],
+        ),
+        (
+            "[[variable]]\nbodies = \"first\"\nparameter = \"J4\"\n",
+            &["masses.toml:3", "J1, J2, J3"],
+        ),
+        (
+            "[[variable]]\nbodies = \"first\"\nparameter = \"m\"\nlower = \"0 kg\"\n",
+            &["masses.toml:4", "lower bound 0 kg", "give lower > 0"],
+        ),
+        (
+            "[[variable]]\nbodies = \"first\"\nparameter = \"J2\"\ninitial = \"-3 kg m^2\"\n",
+            &["masses.toml:4", "must be > 0"],
+        ),
+        (
+            "[[variable]]\ncharacteristics = \"second u7\"\nparameter = \"gain\"\n",
+            &["masses.toml:2", "characteristics", "u1 u2 u3 r1 r2 r3"],
+        ),
+        (
+            "[[variable]]\ncharacteristics = \"saddle u1\"\nparameter = \"gain\"\n",
+            &["unknown body \"saddle\""],
+        ),
+        (
+            "[[variable]]\nsdes = \"k1\"\nbodies = \"first\"\nparameter = \"m\"\n",
+            &["more than one of"],
+        ),
+        (
+            "[[variable]]\nbodies = \"first\"\nparameter = \"m\"\n[[variable]]\nbodies = [\"second\", \"first\"]\nparameter = \"mJ\"\n",
+            &["masses.toml:5", "already set by variable \"m first\""],
+        ),
+    ] {
+        let e = error_of(text, &model);
+        for want in says {
+            assert!(e.contains(want), "{e}");
+        }
+    }
 
     // A gain on a characteristic the model has but the data do not.
     let d = data_of(

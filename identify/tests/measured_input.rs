@@ -289,6 +289,14 @@ fn a_map_applies_signs_units_and_references() {
         "{e}"
     );
     let mut bad = channel(1, -3, "m/N");
+    bad.freqs_hz = vec![10.0, 20.0, 20.0];
+    let e = chosen.apply(&[bad], "run.uff", &m).unwrap_err().to_string();
+    assert!(
+        e.contains("run.uff: dataset 1 (line 10), line 2 of the function (20 Hz)")
+            && e.contains("repeats the previous"),
+        "{e}"
+    );
+    let mut bad = channel(1, -3, "m/N");
     bad.amplitude[1] = f64::NAN;
     let e = chosen.apply(&[bad], "run.uff", &m).unwrap_err().to_string();
     assert!(

@@ -107,6 +107,7 @@ fn random_model(seed: u64, bodies: usize) -> Model {
         forces: Vec::new(),
         references: Vec::new(),
         outputs: Vec::new(),
+        point_masses: Vec::new(),
     };
     for b in 0..bodies {
         let mass = rng.random_range(50.0..800.0);
@@ -202,23 +203,11 @@ fn random_model(seed: u64, bodies: usize) -> Model {
         moment: Vector3::zeros(),
     });
     for dof in 0..6 {
-        m.outputs.push(Characteristic {
-            body: bodies - 1,
-            dof,
-            quantity: Quantity::Displacement,
-            at: None,
-            reference: 0,
-            relative: false,
-        });
+        m.outputs
+            .push(Characteristic::dof(bodies - 1, dof, Quantity::Displacement));
     }
-    m.outputs.push(Characteristic {
-        body: 0,
-        dof: 1,
-        quantity: Quantity::Acceleration,
-        at: None,
-        reference: 0,
-        relative: false,
-    });
+    m.outputs
+        .push(Characteristic::dof(0, 1, Quantity::Acceleration));
     m
 }
 

@@ -6,20 +6,16 @@
 // Test helpers unwrap: a panic with its message is the failure report.
 #![allow(clippy::unwrap_used)]
 
+mod common;
+
+use common::load_model;
 use identify::frf::{self, Method};
-use identify::identification::{self as idn, data, variables, FitKind, Options, Settings};
-use identify::measured::{MeasuredData, Measurement, QuantityName};
-use identify::model::{Characteristic, Model, PointOutput, Quantity};
+use identify::identification::NoiseChoice;
+use identify::model::{Characteristic, Model, Param, PointOutput, Quantity};
 use identify::{textbook, C64};
 use nalgebra::Vector3;
 
 const TWO_PI: f64 = 2.0 * std::f64::consts::PI;
-
-fn fwd32j() -> Model {
-    let path =
-        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../configs/models/fwd32j.toml");
-    identify::modelfile::load(&path).unwrap().model
-}
 
 /// Three sensors on `body` of `model`, off every principal-axis line and along oblique
 /// directions, as `quantity`.
@@ -56,7 +52,7 @@ fn oblique_sensors(model: &Model, body: usize, quantity: Quantity) -> Vec<Charac
 
 #[test]
 fn a_point_output_reads_the_rigid_body_motion_at_its_point() {
-    let mut model = fwd32j();
+    let mut model = load_model("fwd32j.toml");
     let freqs = [23.0, 61.0, 140.0, 333.0];
     let q = frf::dof_response(&model, &freqs).unwrap();
     let mut checked = 0;
@@ -102,7 +98,7 @@ fn a_point_output_reads_the_rigid_body_motion_at_its_point() {
 
 #[test]
 fn a_principal_axis_output_is_a_point_output_at_the_centre_of_mass_along_its_axis() {
-    let mut model = fwd32j();
+    let mut model = load_model("fwd32j.toml");
     let freqs = [40.0, 180.0];
     let axis = model.outputs.clone();
     let r_axis = frf::response(&model, &freqs, &[], Method::Direct).unwrap();
@@ -124,71 +120,26 @@ fn a_principal_axis_output_is_a_point_output_at_the_centre_of_mass_along_its_axi
 
 #[test]
 fn the_jacobian_of_a_point_output_matches_finite_differences() {
-    let mut model = fwd32j();
+    let mut model = load_model("fwd32j.toml");
     let table = model.body_index("table").unwrap();
     model.outputs = oblique_sensors(&model, table, Quantity::Acceleration);
-    let params: Vec<_> = model.all_params().into_iter().step_by(7).collect();
+    let params: Vec<Param> = model
+        .all_params()
+        .into_iter()
+        .step_by(7)
+        .map(Into::into)
+        .collect();
     assert!(params.len() >= 8, "{} parameters", params.len());
-    let freqs = [37.0, 97.0, 211.0];
-    for method in [Method::Direct, Method::Modal] {
-        let r = frf::response(&model, &freqs, &params, method).unwrap();
-        for (pi, &p) in params.iter().enumerate() {
-            let v = model.param(p).unwrap();
-            let h = 1e-6 * v.abs().max(1e-3);
-            let at = |x: f64| {
-                let mut m = model.clone();
-                m.set_param(p, x);
-                frf::response(&m, &freqs, &[], Method::Direct).unwrap()
-            };
-            let (plus, minus) = (at(v + h), at(v - h));
-            for o in 0..model.outputs.len() {
-                let scale = r.output(o).iter().map(|z| z.norm()).fold(0.0, f64::max);
-                for k in 0..freqs.len() {
-                    let fd = (plus.output(o)[k] - minus.output(o)[k]) / (2.0 * h);
-                    let an = r.derivative(pi, o)[k];
-                    let err = (fd - an).norm();
-                    assert!(
-                        err <= 1e-5 * (an.norm() + scale / v.abs().max(1e-3) * 1e-3),
-                        "{method:?} {} output {o} line {k}: analytic {an}, finite difference {fd}",
-                        model.param_label(p)
-                    );
-                }
-            }
-        }
-    }
-}
-
-/// Exact complex data of `model`'s outputs at 40 lines over 10-60 Hz.
-fn exact(model: &Model) -> MeasuredData {
-    let f: Vec<f64> = (0..40).map(|i| 10.0 + 50.0 * i as f64 / 39.0).collect();
-    let r = frf::response(model, &f, &[], Method::Direct).unwrap();
-    MeasuredData {
-        source: "exact".into(),
-        characteristics: model
-            .outputs
-            .iter()
-            .enumerate()
-            .map(|(o, c)| Measurement {
-                body: model.bodies[c.body].name.clone(),
-                dof: c.dof,
-                quantity: QuantityName::from(c.quantity),
-                freqs_hz: f.clone(),
-                amplitude: r.output(o).iter().map(|v| v.norm()).collect(),
-                phase_rad: Some(r.output(o).iter().map(|v| v.arg()).collect()),
-                variance: None,
-                coherence: None,
-                averages: None,
-                at: c.at,
-                reference: None,
-                relative: false,
-            })
-            .collect(),
-    }
+    common::assert_jacobian_matches_central_differences(
+        &model,
+        &params,
+        &[37.0, 97.0, 211.0],
+        1e-8,
+    );
 }
 
 #[test]
 fn principal_axis_and_off_axis_point_outputs_give_the_same_estimates() {
-    let vars_text = include_str!("../../configs/identification/textbook-two-mass-psi.toml");
     let truth = textbook::two_in_series(400.0, 120.0, 2.0e7, 5.0e6, 0.5);
     let mut sensors = truth.clone();
     sensors.outputs = vec![];
@@ -213,21 +164,7 @@ fn principal_axis_and_off_axis_point_outputs_give_the_same_estimates() {
         }
     }
     let fit = |model: &Model| {
-        let d = exact(model);
-        let model = data::with_measured_outputs(&truth, &d);
-        let obs = data::validate(&d, &model, "exact").unwrap();
-        let vars = variables::parse(vars_text, "vars.toml", &model).unwrap();
-        let opts = Options {
-            fit: FitKind::Complex,
-            settings: Settings {
-                max_iterations: 300,
-                ..Settings::default()
-            },
-            ..Options::default()
-        };
-        let id = idn::identify(&model, &obs, &vars, &opts, &mut |_, _| {}).unwrap();
-        assert!(id.stop.converged(), "{}", id.stop.describe());
-        id.estimate
+        common::fit_two_mass(&truth, &common::exact(model, None), NoiseChoice::default()).estimate
     };
     let on_axis = fit(&truth);
     let off_axis = fit(&sensors);
@@ -240,34 +177,14 @@ fn principal_axis_and_off_axis_point_outputs_give_the_same_estimates() {
 
 #[test]
 fn a_model_file_declares_a_point_output_and_writes_it_back() {
-    let text = r#"
-name = "one body"
-[[body]]
-name = "mass"
-mass = "100 kg"
-position = [0.0, 0.0, 0.0]
-inertia = "10 20 30 kg m^2"
-[[sde]]
-name = "spring"
-kind = "general"
-bodies = ["ground", "mass"]
-point = [0.0, 0.0, 0.0]
-axes = [[1, 0, 0], [0, 1, 0], [0, 0, 1]]
-k = ["1e6 N/m", "1e6 N/m", "1e6 N/m", "1e4 N*m/rad", "1e4 N*m/rad", "1e4 N*m/rad"]
-psi = 0.2
-[[excitation.force]]
-body = "mass"
-force = [0.0, 0.0, 1.0]
-[[output]]
-body = "mass"
-dof = "u3"
-[[output]]
+    let text = String::from(common::ONE_BODY_ON_A_SPRING)
+        + r#"[[output]]
 body = "mass"
 point = "100 50 0 mm"
 direction = [0, 3, 4]
 quantity = "acceleration"
 "#;
-    let loaded = identify::modelfile::parse_toml(text, "point.toml").unwrap();
+    let loaded = identify::modelfile::parse_toml(&text, "point.toml").unwrap();
     let m = &loaded.model;
     assert_eq!(m.outputs.len(), 2);
     assert_eq!(m.outputs[0].at, None);

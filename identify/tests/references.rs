@@ -6,17 +6,16 @@
 // Test helpers unwrap: a panic with its message is the failure report.
 #![allow(clippy::unwrap_used)]
 
+mod common;
+
 use identify::frf::{self, Method};
-use identify::identification::{
-    self as idn, data, variables, FitKind, NoiseChoice, Options, Settings,
-};
-use identify::measured::{MeasuredData, Measurement, QuantityName};
+use identify::identification::{self as idn, data, NoiseChoice};
+use identify::measured::MeasuredData;
 use identify::model::{Characteristic, Excitation, Model, PointForce, Quantity, Reference};
 use identify::{textbook, C64};
 use nalgebra::Vector3;
 
 const TWO_PI: f64 = 2.0 * std::f64::consts::PI;
-const VARS: &str = include_str!("../../configs/identification/textbook-two-mass-psi.toml");
 
 /// The two-mass chain with a second reference: 1 N along z on the first body ("hammer").
 fn two_references() -> Model {
@@ -35,53 +34,11 @@ fn two_references() -> Model {
 
 /// `model`'s outputs as exact data with relative standard deviation 1 % as their variance.
 fn exact(model: &Model) -> MeasuredData {
-    let f: Vec<f64> = (0..40).map(|i| 10.0 + 50.0 * i as f64 / 39.0).collect();
-    let r = frf::response(model, &f, &[], Method::Direct).unwrap();
-    MeasuredData {
-        source: "exact".into(),
-        characteristics: model
-            .outputs
-            .iter()
-            .enumerate()
-            .map(|(o, c)| Measurement {
-                body: model.bodies[c.body].name.clone(),
-                dof: c.dof,
-                quantity: QuantityName::from(c.quantity),
-                freqs_hz: f.clone(),
-                amplitude: r.output(o).iter().map(|v| v.norm()).collect(),
-                phase_rad: Some(r.output(o).iter().map(|v| v.arg()).collect()),
-                variance: Some(
-                    r.output(o)
-                        .iter()
-                        .map(|v| (0.01 * v.norm()).powi(2))
-                        .collect(),
-                ),
-                coherence: None,
-                averages: None,
-                at: c.at,
-                reference: (c.reference > 0).then(|| model.reference_name(c.reference).to_string()),
-                relative: c.relative,
-            })
-            .collect(),
-    }
+    common::exact(model, Some(0.01))
 }
 
 fn fit(model: &Model, measured: &MeasuredData) -> idn::Identification {
-    let model = data::with_measured_outputs(model, measured);
-    let obs = data::validate(measured, &model, "exact").unwrap();
-    let vars = variables::parse(VARS, "vars.toml", &model).unwrap();
-    let opts = Options {
-        fit: FitKind::Complex,
-        noise: NoiseChoice::Variance,
-        settings: Settings {
-            max_iterations: 300,
-            ..Settings::default()
-        },
-        ..Options::default()
-    };
-    let id = idn::identify(&model, &obs, &vars, &opts, &mut |_, _| {}).unwrap();
-    assert!(id.stop.converged(), "{}", id.stop.describe());
-    id
+    common::fit_two_mass(model, measured, NoiseChoice::Variance)
 }
 
 #[test]
@@ -273,32 +230,7 @@ fn the_jacobian_under_base_motion_matches_finite_differences() {
 /// Every column of the Jacobian for `params`, on both solve paths, against central differences
 /// of the direct response at 14, 33 and 47 Hz.
 fn assert_columns_match_central_differences(model: &Model, params: &[identify::model::Param]) {
-    let freqs = [14.0, 33.0, 47.0];
-    for method in [Method::Direct, Method::Modal] {
-        let r = frf::response_params(model, &freqs, params, method).unwrap();
-        for (pi, &p) in params.iter().enumerate() {
-            let v = model.value(p).unwrap();
-            let h = 1e-6 * v.abs().max(1e-3);
-            let at = |x: f64| {
-                let mut m = model.clone();
-                assert!(m.set_value(p, x));
-                frf::response(&m, &freqs, &[], Method::Direct).unwrap()
-            };
-            let (plus, minus) = (at(v + h), at(v - h));
-            for o in 0..model.outputs.len() {
-                let scale = r.output(o).iter().map(|z| z.norm()).fold(0.0, f64::max);
-                for k in 0..freqs.len() {
-                    let fd = (plus.output(o)[k] - minus.output(o)[k]) / (2.0 * h);
-                    let an = r.derivative(pi, o)[k];
-                    assert!(
-                        (fd - an).norm() <= 1e-5 * an.norm() + 1e-9 * scale / v.abs().max(1e-3),
-                        "{method:?} {} output {o} line {k}: analytic {an}, finite difference {fd}",
-                        model.label(p)
-                    );
-                }
-            }
-        }
-    }
+    common::assert_jacobian_matches_central_differences(model, params, &[14.0, 33.0, 47.0], 1e-9);
 }
 
 #[test]
@@ -315,25 +247,9 @@ fn mass_and_inertia_columns_under_base_motion_match_finite_differences() {
 
 #[test]
 fn k_and_psi_are_identified_from_transmissibility_data() {
-    let mut truth = textbook::two_in_series(400.0, 120.0, 2.0e7, 5.0e6, 0.5);
-    truth.references.push(Reference {
-        name: "table".into(),
-        excitation: Excitation::BaseMotion {
-            direction: [0.0, 0.0, 1.0],
-        },
-    });
-    let declared = truth.outputs.clone();
-    truth.outputs = vec![
-        Characteristic {
-            reference: 1,
-            ..declared[0]
-        },
-        Characteristic {
-            reference: 1,
-            relative: true,
-            ..declared[1]
-        },
-    ];
+    let mut truth = two_masses_on_a_table();
+    truth.outputs.truncate(2);
+    let declared = textbook::two_in_series(400.0, 120.0, 2.0e7, 5.0e6, 0.5).outputs;
     let d = exact(&truth);
     assert_eq!(d.characteristics[0].reference.as_deref(), Some("table"));
     assert!(d.characteristics[1].relative);
@@ -352,25 +268,8 @@ fn k_and_psi_are_identified_from_transmissibility_data() {
 
 #[test]
 fn a_model_file_declares_references_and_base_motion() {
-    let text = r#"
-name = "table"
-[[body]]
-name = "mass"
-mass = "250 kg"
-position = [0.0, 0.0, 0.0]
-inertia = "25 50 75 kg m^2"
-[[sde]]
-name = "spring"
-kind = "general"
-bodies = ["ground", "mass"]
-point = [0.0, 0.0, 0.0]
-axes = [[1, 0, 0], [0, 1, 0], [0, 0, 1]]
-k = ["3e6 N/m", "3e6 N/m", "3e6 N/m", "3e4 N*m/rad", "3e4 N*m/rad", "3e4 N*m/rad"]
-psi = 0.3
-[[excitation.force]]
-body = "mass"
-force = [0.0, 0.0, 1.0]
-[[reference]]
+    let text = String::from(common::ONE_BODY_ON_A_SPRING)
+        + r#"[[reference]]
 name = "side"
 [[reference.force]]
 body = "mass"
@@ -382,9 +281,6 @@ base_motion = [0, 0, 2]
 [[output]]
 body = "mass"
 dof = "u3"
-[[output]]
-body = "mass"
-dof = "u3"
 reference = "table"
 motion = "relative"
 [[output]]
@@ -392,7 +288,7 @@ body = "mass"
 dofs = ["u1", "r2"]
 reference = "side"
 "#;
-    let m = identify::modelfile::parse_toml(text, "table.toml")
+    let m = identify::modelfile::parse_toml(&text, "table.toml")
         .unwrap()
         .model;
     assert_eq!(m.references.len(), 2);

@@ -33,6 +33,8 @@ pub mod function_type {
     pub const CROSS_SPECTRUM: u32 = 3;
     /// Frequency response function.
     pub const FRF: u32 = 4;
+    /// Transmissibility (a response per the same quantity of a base motion).
+    pub const TRANSMISSIBILITY: u32 = 5;
     /// Coherence.
     pub const COHERENCE: u32 = 6;
 }
@@ -144,6 +146,23 @@ impl Function {
         f.axes[0].spec_data_type = 18;
         f.axes[0].label = "Frequency".into();
         f.axes[0].units = "Hz".into();
+        f
+    }
+
+    /// A complex FRF at the frequencies `freqs_hz` (Hz, any spacing) between the response at
+    /// `response` and the excitation at `reference`, each a node and a direction (±1..±6 =
+    /// ±X,Y,Z,RX,RY,RZ).
+    pub fn frf_between(
+        name: &str,
+        freqs_hz: Vec<f64>,
+        h: Vec<C64>,
+        response: (i64, i64),
+        reference: (i64, i64),
+    ) -> Function {
+        let mut f = Function::frf(name, 0.0, 0.0, h);
+        f.abscissa = Abscissa::Uneven(freqs_hz);
+        (f.response_node, f.response_dir) = response;
+        (f.reference_node, f.reference_dir) = reference;
         f
     }
 
@@ -1049,14 +1068,14 @@ pub fn measured_channels(
             message,
         };
         match f.func_type {
-            function_type::FRF => {}
+            function_type::FRF | function_type::TRANSMISSIBILITY => {}
             function_type::COHERENCE => {
                 coherences.push((f, item));
                 continue;
             }
             t => {
                 notes.push(format!(
-                    "{item}: function type {t} is not an FRF (4): not used"
+                    "{item}: function type {t} is not an FRF (4) or a transmissibility (5): not used"
                 ));
                 continue;
             }
@@ -1120,6 +1139,16 @@ pub fn measured_channels(
             _ => notes.push(format!("{item}: coherence without a matching FRF (same nodes, directions and lines): not used")),
         }
     }
+    if channels.is_empty() {
+        return Err(ProcessError::Format {
+            file: origin.to_string(),
+            location: "every dataset".into(),
+            message: format!(
+                "no frequency response function (dataset 58/58b of function type 4, or 5 for a transmissibility) in the file; it holds: {}. Export the FRFs (H1, accelerance/mobility/receptance) as UFF58",
+                if notes.is_empty() { "nothing".to_string() } else { notes.join("; ") }
+            ),
+        });
+    }
     Ok((channels, notes))
 }
 
@@ -1157,8 +1186,12 @@ fn ordinate_unit(f: &Function) -> std::result::Result<FrfUnit, String> {
             f.axes[1].spec_data_type
         ));
     }
+    let transmissibility = f.func_type == function_type::TRANSMISSIBILITY;
     let unit = match FrfUnit::parse(num) {
-        Ok(u) if u.per_force => u,
+        Ok(u) if u.per_force || u.per_base_motion => u,
+        // A transmissibility whose denominator is not written: the ratio of like quantities.
+        _ if transmissibility && empty(den) => FrfUnit::parse(&format!("({num})/({num})"))
+            .map_err(|e| format!("record 9 units \"{num}\" of a transmissibility: {e}"))?,
         _ if empty(den) => {
             return Err(format!(
                 "record 10 (ordinate denominator) has no units label, so the force unit of \"{num}\" is unknown"
@@ -1167,6 +1200,15 @@ fn ordinate_unit(f: &Function) -> std::result::Result<FrfUnit, String> {
         _ => FrfUnit::parse(&format!("({num})/({den})"))
             .map_err(|e| format!("records 9-10 units \"{num}\" per \"{den}\": {e}"))?,
     };
+    if transmissibility && !unit.per_base_motion {
+        return Err(format!(
+            "function type 5 (transmissibility), but records 9-10 units \"{num}\" per \"{den}\" are a {}; a transmissibility is a response per the same quantity (g/g, m/m)",
+            unit.kind()
+        ));
+    }
+    if unit.per_base_motion {
+        return Ok(unit);
+    }
     if !unit.per_force {
         return Err(format!(
             "records 9-10 units \"{num}\" per \"{den}\" are not a response per force"

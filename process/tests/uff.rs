@@ -254,6 +254,15 @@ fn non_ascii_headers_are_read_by_character_in_utf8_and_latin1() {
         assert_eq!(g.axes[2].units, "N", "{what}");
         assert_eq!(g.ids[0], "Prüfstand FRF", "{what}");
         assert_close(g, &f, 1e-12, what);
+        // The channel keeps its node and direction, and "m/s²" per "N" reads as accelerance.
+        let file = uff::parse_file(bytes, what).unwrap();
+        let (channels, _) = uff::measured_channels(&file, what).unwrap();
+        let unit = channels[0].unit.as_ref().unwrap();
+        assert_eq!(
+            (unit.kind(), unit.to_si, channels[0].name.to_string()),
+            ("accelerance", 1.0, "node 1234 -Z".to_string()),
+            "{what}"
+        );
     }
 }
 

@@ -177,19 +177,98 @@ fn the_same_frfs_in_any_unit_and_file_give_the_same_estimates() {
         }
     }
 }
+/// The case's FRFs as UFF58b (ident's writer) in `num`/`den` (record 9/10 labels) with the
+/// values in that unit: `h` (m/N) times (jω)^power / scale.
+fn uff_in(f: &[f64], h: &[Vec<C64>], num: &str, den: &str, scale: f64, power: i32) -> Vec<u8> {
+    let sets: Vec<uff::Function> = [1i64, 2]
+        .iter()
+        .zip(h)
+        .map(|(node, ho)| {
+            let v = ho
+                .iter()
+                .zip(f)
+                .map(|(z, fk)| z * C64::new(0.0, 2.0 * PI * fk).powi(power) / scale)
+                .collect();
+            let mut g = uff::Function::frf("units", 0.0, 0.0, v);
+            g.abscissa = uff::Abscissa::Uneven(f.to_vec());
+            g.response_node = *node;
+            g.response_dir = 3;
+            g.reference_node = 9;
+            g.reference_dir = 3;
+            g.axes[1].units = num.into();
+            g.axes[2].units = den.into();
+            g
+        })
+        .collect();
+    uff::to_bytes(&sets, uff::Encoding::Binary).unwrap()
+}
+
+#[test]
+fn pounds_kilonewtons_micrometres_and_millimetres_give_the_same_estimates() {
+    let (model, f, h) = case();
+    let dir = tempfile::tempdir().unwrap();
+    let lbf = 4.448_221_615_260_5;
+    let g = 9.80665;
+    let reference = {
+        let path = dir.path().join("si.csv");
+        std::fs::write(&path, csv(&f, &h, "m/N", 1.0, 0)).unwrap();
+        estimate(&model, &data::load_for_model(&path, &model).unwrap())
+    };
+    // CSV: the value in each unit is the SI value / (unit in SI); a plain response (mm, no
+    // "per force") is the response to the model's 4 kN excitation.
+    for (unit, scale, power) in [
+        ("um/kN", 1e-9, 0),
+        ("µm/N", 1e-6, 0),
+        ("mm/lbf", 1e-3 / lbf, 0),
+        ("(mm/s)/kN", 1e-6, 1),
+        ("g/lbf", g / lbf, 2),
+        ("mm", 1e-3 / 4000.0, 0),
+    ] {
+        let path = dir.path().join("units.csv");
+        std::fs::write(&path, csv(&f, &h, unit, scale, power)).unwrap();
+        let d = data::load_for_model(&path, &model).unwrap();
+        let e = estimate(&model, &d);
+        for (a, b) in e.iter().zip(&reference) {
+            assert!(
+                (a / b - 1.0).abs() < 1e-9,
+                "CSV {unit}: {e:?} vs {reference:?}"
+            );
+        }
+    }
+    // UFF: the units from records 9 and 10.
+    for (num, den, scale, power) in [
+        ("µm", "kN", 1e-9, 0),
+        ("mm/s", "lbf", 1e-3 / lbf, 1),
+        ("g", "lbf", g / lbf, 2),
+        ("m/s^2", "kN", 1e-3, 2),
+    ] {
+        let bytes = uff_in(&f, &h, num, den, scale, power);
+        let file = uff::parse_file(&bytes, "units.uff").unwrap();
+        let (channels, _) = uff::measured_channels(&file, "units.uff").unwrap();
+        let map = measurement_map::parse(MAP, "map.toml", &model).unwrap();
+        let d = map.apply(&channels, "units.uff", &model).unwrap();
+        let e = estimate(&model, &d);
+        for (a, b) in e.iter().zip(&reference) {
+            assert!(
+                (a / b - 1.0).abs() < 1e-9,
+                "UFF {num}/{den}: {e:?} vs {reference:?}"
+            );
+        }
+    }
+}
 
 #[test]
 fn a_file_without_units_needs_them_in_the_map() {
     let (model, f, h) = case();
     let mut fs: Vec<uff::Function> = Vec::new();
     for (k, node) in [1i64, 2].iter().enumerate() {
-        let mut g = uff::Function::frf("no units", 0.0, 0.0, h[k].clone());
-        g.abscissa = uff::Abscissa::Uneven(f.clone());
-        g.response_node = *node;
-        g.response_dir = 3;
-        g.reference_node = 9;
-        g.reference_dir = 3;
-        fs.push(g);
+        fs.push(uff::Function::frf_between(
+            "no units",
+            f.clone(),
+            h[k].clone(),
+            (*node, 3),
+            (9, 3),
+        ));
     }
     let mut coh = uff::Function::frf("coherence", 0.0, 0.0, vec![]);
     coh.func_type = uff::function_type::COHERENCE;
@@ -274,6 +353,167 @@ fn a_kilohertz_abscissa_is_converted_and_a_time_abscissa_refused() {
             && e.contains("dataset 1")
             && e.contains("record 8")
             && e.contains("time"),
+        "{e}"
+    );
+}
+
+#[test]
+fn a_file_without_frfs_says_what_it_holds() {
+    // A geometry dataset (15) and an auto-spectrum (58, function type 2): nothing to identify.
+    let mut psd = uff::Function::frf("psd", 0.0, 1.0, vec![]);
+    psd.func_type = uff::function_type::AUTO_SPECTRUM;
+    psd.data = uff::Ordinate::Real(vec![1.0, 2.0, 3.0]);
+    psd.response_node = 1;
+    psd.response_dir = 3;
+    let body = String::from_utf8(uff::to_bytes(&[psd], uff::Encoding::Ascii).unwrap()).unwrap();
+    let text = format!("    -1\n    15\n         1         0         0         0 0.0000000E+00 0.0000000E+00 0.0000000E+00\n    -1\n{body}");
+    let file = uff::parse_file(text.as_bytes(), "spectra.uff").unwrap();
+    let e = uff::measured_channels(&file, "spectra.uff")
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.starts_with("spectra.uff")
+            && e.contains("no frequency response function")
+            && e.contains("dataset 1 (line 2) is of type 15")
+            && e.contains("function type 2 is not an FRF"),
+        "{e}"
+    );
+}
+
+/// The two-mass chain on a shaker table moving along z (`[[reference]] "table"`), declared
+/// outputs: both bodies' u3 displacement. Its absolute transmissibilities x/x_b at `f`.
+fn on_a_table(f: &[f64]) -> (Model, Vec<Vec<C64>>) {
+    use identify::model::{Characteristic, Excitation, Reference};
+    let mut m = textbook::two_in_series(400.0, 120.0, 2.0e7, 5.0e6, 0.5);
+    m.references.push(Reference {
+        name: "table".into(),
+        excitation: Excitation::BaseMotion {
+            direction: [0.0, 0.0, 1.0],
+        },
+    });
+    let mut t = m.clone();
+    t.outputs = m
+        .outputs
+        .iter()
+        .map(|c| Characteristic { reference: 1, ..*c })
+        .collect();
+    let r = frf::response(&t, f, &[], Method::Direct).unwrap();
+    let h = (0..2).map(|o| r.output(o).to_vec()).collect();
+    (m, h)
+}
+
+const TABLE_MAP: &str = r#"
+[[reference]]
+node = 100
+dir = "+Z"
+name = "table"
+
+[[channel]]
+node = 1
+dir = "+Z"
+body = "first"
+
+[[channel]]
+node = 2
+dir = "+Z"
+body = "second"
+"#;
+
+#[test]
+fn transmissibilities_in_g_per_g_or_any_like_ratio_are_read_exactly() {
+    let f: Vec<f64> = (0..50).map(|i| 5.0 + 1.3 * i as f64).collect();
+    let (model, t) = on_a_table(&f);
+    // UFF type 5 in g/g; type 4 in (mm/s^2)/g (× 1000 / 9.80665 of the ratio); type 5 with
+    // record 10 empty.
+    let forms: [(u32, &str, &str, f64); 3] = [
+        (uff::function_type::TRANSMISSIBILITY, "g", "g", 1.0),
+        (uff::function_type::FRF, "mm/s^2", "g", 1e3 * 9.80665),
+        (uff::function_type::TRANSMISSIBILITY, "m/s^2", "", 1.0),
+    ];
+    for (kind, num, den, factor) in forms {
+        let sets: Vec<uff::Function> = [1i64, 2]
+            .iter()
+            .zip(&t)
+            .map(|(node, to)| {
+                let mut g =
+                    uff::Function::frf("table", 0.0, 0.0, to.iter().map(|z| z * factor).collect());
+                g.func_type = kind;
+                g.abscissa = uff::Abscissa::Uneven(f.clone());
+                g.response_node = *node;
+                g.response_dir = 3;
+                g.reference_node = 100;
+                g.reference_dir = 3;
+                g.axes[1].units = num.into();
+                g.axes[2].units = den.into();
+                g
+            })
+            .collect();
+        let bytes = uff::to_bytes(&sets, uff::Encoding::Binary).unwrap();
+        let file = uff::parse_file(&bytes, "table.uff").unwrap();
+        let (channels, _) = uff::measured_channels(&file, "table.uff").unwrap();
+        let map = measurement_map::parse(TABLE_MAP, "map.toml", &model).unwrap();
+        let d = map.apply(&channels, "table.uff", &model).unwrap();
+        assert!(d.source.contains("transmissibility in"), "{}", d.source);
+        for (o, c) in d.characteristics.iter().enumerate() {
+            assert_eq!(c.reference.as_deref(), Some("table"));
+            for (k, want) in t[o].iter().enumerate() {
+                let got = C64::from_polar(c.amplitude[k], c.phase_rad.as_ref().unwrap()[k]);
+                assert!(
+                    (got - want).norm() <= 1e-12 * want.norm(),
+                    "{num}/{den} output {o} line {k}: {got} vs {want}"
+                );
+            }
+        }
+        // k1, k2 and ψ from the transmissibilities (the model gains its outputs under the
+        // table, as `ident identify` adds them).
+        let e = estimate(&data::with_measured_outputs(&model, &d), &d);
+        for (x, truth) in e.iter().zip([2.0e7, 5.0e6, 0.5]) {
+            assert!((x / truth - 1.0).abs() < 1e-6, "{num}/{den}: {e:?}");
+        }
+    }
+    // CSV: `# unit = g/g` with a reference column.
+    let mut csv = String::from("# unit = g/g\nbody,dof,reference,freq_hz,amplitude,phase_rad\n");
+    for (o, body) in ["first", "second"].iter().enumerate() {
+        for (k, fk) in f.iter().enumerate() {
+            let z = t[o][k];
+            csv.push_str(&format!(
+                "{body},u3,table,{fk:?},{:?},{:?}\n",
+                z.norm(),
+                z.arg()
+            ));
+        }
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("table.csv");
+    std::fs::write(&path, &csv).unwrap();
+    let d = data::load_for_model(&path, &model).unwrap();
+    let got = C64::from_polar(
+        d.characteristics[1].amplitude[7],
+        d.characteristics[1].phase_rad.as_ref().unwrap()[7],
+    );
+    assert!((got - t[1][7]).norm() <= 1e-12 * t[1][7].norm());
+    // A transmissibility without a base-motion reference: what to name.
+    std::fs::write(&path, csv.replace(",table,", ",excitation,")).unwrap();
+    let e = data::load_for_model(&path, &model).unwrap_err().to_string();
+    assert!(
+        e.contains("table.csv:1:")
+            && e.contains("a transmissibility (g/g)")
+            && e.contains("reference = \"table\""),
+        "{e}"
+    );
+    // A force-type unit on a type-5 function is refused.
+    let mut g = uff::Function::frf("bad", 0.0, 1.0, vec![C64::new(1.0, 0.0); 3]);
+    g.func_type = uff::function_type::TRANSMISSIBILITY;
+    g.response_node = 1;
+    g.response_dir = 3;
+    g.axes[1].units = "g".into();
+    g.axes[2].units = "N".into();
+    let bytes = uff::to_bytes(&[g], uff::Encoding::Binary).unwrap();
+    let file = uff::parse_file(&bytes, "bad.uff").unwrap();
+    let (channels, _) = uff::measured_channels(&file, "bad.uff").unwrap();
+    let e = channels[0].unit.as_ref().unwrap_err();
+    assert!(
+        e.contains("function type 5") && e.contains("accelerance"),
         "{e}"
     );
 }

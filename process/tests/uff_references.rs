@@ -93,13 +93,14 @@ fn uff_bytes(m: &Model) -> Vec<u8> {
     for (o, c) in truth.outputs.iter().enumerate() {
         let per_newton = if c.reference == 0 { 4000.0 } else { 250.0 };
         let h: Vec<C64> = r.output(o).iter().map(|z| z / per_newton).collect();
-        let mut s = uff::Function::frf("two references", 0.0, 0.0, h);
-        s.abscissa = uff::Abscissa::Uneven(f.clone());
-        s.response_node = 11 + c.body as i64;
-        s.response_dir = 3;
-        s.reference_node = if c.reference == 0 { 9 } else { 8 };
-        s.reference_dir = 3;
-        sets.push(s);
+        let reference_node = if c.reference == 0 { 9 } else { 8 };
+        sets.push(uff::Function::frf_between(
+            "two references",
+            f.clone(),
+            h,
+            (11 + c.body as i64, 3),
+            (reference_node, 3),
+        ));
     }
     uff::to_bytes(&sets, uff::Encoding::Binary).unwrap()
 }

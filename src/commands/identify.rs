@@ -29,8 +29,12 @@ pub enum OptimizerArg {
 /// `--start`.
 #[derive(clap::ValueEnum, Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum StartArg {
-    /// The variables file's initial values (else the model's).
+    /// For data without variances or coherence (vendor files: the log-amplitude fit), the
+    /// variables file's start and the modal pre-fit's both, the better fit kept; otherwise the
+    /// variables file's start.
     #[default]
+    Auto,
+    /// The variables file's initial values (else the model's).
     Model,
     /// Moved from there by a modal pre-fit to the modes extracted from the data (frequencies
     /// matched, ψ from the loss factors; `identification::prefit`).
@@ -133,8 +137,10 @@ pub struct IdentifyArgs {
     /// Number of starts (extra ones: a Latin hypercube in log-parameter space over the bounds).
     #[arg(long, default_value_t = 1)]
     pub starts: usize,
-    /// Where the first start comes from.
-    #[arg(long, value_enum, default_value_t = StartArg::Model)]
+    /// Where the fit starts: `auto` (default) also starts from the modal pre-fit for data
+    /// without variances (vendor files), keeping the better fit; `model` the variables file's
+    /// values only; `modal` the modal pre-fit's only.
+    #[arg(long, value_enum, default_value_t = StartArg::Auto)]
     pub start: StartArg,
     /// Seed of the extra starts.
     #[arg(long, default_value_t = 1)]
@@ -258,10 +264,6 @@ pub fn setup(
     let obs = data::validate(&measured, &model, &a.data.display().to_string())?;
     super::measured::check(&model, &obs)?;
     let vars = variables::load(&a.vars, &model)?;
-    let vars = match a.start {
-        StartArg::Model => vars,
-        StartArg::Modal => super::modal_start::modal_start(&model, &obs, &vars)?,
-    };
     anyhow::ensure!(
         a.relative_error.is_finite() && a.relative_error > 0.0,
         "--relative-error {} must be a number > 0 (e.g. 0.02 for 2 %)",
@@ -307,7 +309,40 @@ pub fn setup(
         seed: a.seed,
         weak_threshold: a.weak_threshold,
     };
+    let vars = start(a.start, &model, &obs, vars, opts.fit)?;
     Ok((model, obs, vars, opts))
+}
+
+/// The variables with the start `--start` asks for. `auto`, for data without variances or
+/// coherence (`fit` log-amplitude: vendor files, a first model): the modal pre-fit's start is
+/// added as a second start (the better fit is kept), or, when the data allow no modal
+/// extraction, the variables file's start alone, saying why.
+fn start(
+    how: StartArg,
+    model: &identify::Model,
+    obs: &idn::Observations,
+    vars: idn::Variables,
+    fit: FitKind,
+) -> anyhow::Result<idn::Variables> {
+    match how {
+        StartArg::Model => Ok(vars),
+        StartArg::Modal => super::modal_start::modal_start(model, obs, &vars),
+        StartArg::Auto if fit != FitKind::LogAmplitude => Ok(vars),
+        StartArg::Auto => match super::modal_start::modal_start(model, obs, &vars) {
+            Ok(modal) => {
+                eprintln!("start: auto: from the variables file's values and from the modal pre-fit's; the better fit is kept (--start model or modal for one)");
+                let mut vars = vars;
+                vars.extra_starts.push(modal.initial());
+                Ok(vars)
+            }
+            Err(e) => {
+                eprintln!(
+                    "start: auto: no modal pre-fit ({e:#}); from the variables file's values"
+                );
+                Ok(vars)
+            }
+        },
+    }
 }
 
 /// The report of an identification, and of its diagnosis when given, built as the workflows

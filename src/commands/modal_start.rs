@@ -12,19 +12,33 @@ use process::C64;
 /// Highest LSCF order (as `ident modes-from-data`'s default).
 const MAX_ORDER: usize = 40;
 
-/// The measured modes of `obs`: one reference (the model's excitation), the characteristics as
-/// outputs. They must share their lines and carry phases.
+/// The measured modes of `obs` from the characteristics of one reference (the model's
+/// excitation if measured, else the first reference the data hold), as outputs: a mode's shape
+/// over the outputs is the same under every reference up to a factor, while a mix of references
+/// would multiply each row by that reference's own participation. They must share their lines
+/// and carry phases.
 pub fn measured_modes(
     model: &identify::Model,
     obs: &idn::Observations,
 ) -> anyhow::Result<Vec<prefit::MeasuredMode>> {
-    let Some(first) = obs.characteristics.first() else {
+    let reference = obs
+        .characteristics
+        .iter()
+        .map(|c| c.characteristic.reference)
+        .min()
+        .unwrap_or(0);
+    let chosen: Vec<&idn::data::Observed> = obs
+        .characteristics
+        .iter()
+        .filter(|c| c.characteristic.reference == reference)
+        .collect();
+    let Some(first) = chosen.first() else {
         bail!("{}: no characteristic", obs.origin);
     };
     let freqs = first.freqs_hz.clone();
     let quantity = first.characteristic.quantity;
-    let mut h = Vec::with_capacity(obs.characteristics.len() * freqs.len());
-    for c in &obs.characteristics {
+    let mut h = Vec::with_capacity(chosen.len() * freqs.len());
+    for c in &chosen {
         if c.freqs_hz != freqs {
             bail!(
                 "--start modal: {} and {} have different lines; a modal extraction needs the characteristics on common lines",
@@ -60,8 +74,8 @@ pub fn measured_modes(
         Quantity::Acceleration => FrfKind::Accelerance,
     };
     let band = (freqs[0], freqs[freqs.len() - 1]);
-    let data = ModalData::new(freqs, obs.characteristics.len(), 1, h, kind)
-        .with_context(|| obs.origin.clone())?;
+    let data =
+        ModalData::new(freqs, chosen.len(), 1, h, kind).with_context(|| obs.origin.clone())?;
     let orders = modal::lscf(
         &data,
         &LscfSettings {
@@ -86,25 +100,29 @@ pub fn measured_modes(
         );
     }
     let fitted = modal::lsfd(&data, &poles, Some(band))?;
-    // Shapes in the model's output order; None unless every output is measured.
-    let covers = {
-        let mut outs: Vec<usize> = obs.characteristics.iter().map(|c| c.output).collect();
-        outs.sort_unstable();
-        outs == (0..model.outputs.len()).collect::<Vec<_>>()
-    };
+    // Shapes in the model's output order: each model output reads the chosen characteristic at
+    // the same place (body, DOF or point, quantity) whatever its reference; None unless every
+    // output has one.
+    let rows: Option<Vec<usize>> = model
+        .outputs
+        .iter()
+        .map(|o| {
+            chosen.iter().position(|c| {
+                let k = &c.characteristic;
+                (k.body, k.dof, k.quantity, k.at, k.relative)
+                    == (o.body, o.dof, o.quantity, o.at, o.relative)
+            })
+        })
+        .collect();
     Ok(fitted
         .modes
         .iter()
         .map(|m| prefit::MeasuredMode {
             freq_hz: m.pole.freq_hz,
             loss_factor: Some(2.0 * m.pole.damping_ratio),
-            shape: covers.then(|| {
-                let mut s = vec![C64::new(0.0, 0.0); model.outputs.len()];
-                for (c, v) in obs.characteristics.iter().zip(&m.shape) {
-                    s[c.output] = *v;
-                }
-                s
-            }),
+            shape: rows
+                .as_ref()
+                .map(|rows| rows.iter().map(|&r| m.shape[r]).collect()),
         })
         .collect())
 }

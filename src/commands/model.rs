@@ -37,7 +37,7 @@ pub fn run(args: ModelArgs) -> anyhow::Result<ExitCode> {
     match args.action {
         Action::Check { model } => {
             let m = load_model(&model)?;
-            let mass: f64 = m.bodies.iter().map(|b| b.mass).sum();
+            let mass: f64 = (0..m.bodies.len()).map(|b| m.carried_mass(b)).sum();
             println!("{}: \"{}\"", model.display(), m.name);
             println!(
                 "  {} bodies, total mass {:.1} kg, {} DOFs",
@@ -45,6 +45,14 @@ pub fn run(args: ModelArgs) -> anyhow::Result<ExitCode> {
                 mass,
                 m.dof_count()
             );
+            if !m.point_masses.is_empty() {
+                let added: f64 = m.point_masses.iter().map(|p| p.mass).sum();
+                println!(
+                    "  {} point masses, {} kg in all (in the total)",
+                    m.point_masses.len(),
+                    identify::display::sig(added, 4)
+                );
+            }
             let enabled = m.sdes.iter().filter(|s| s.enabled).count();
             println!(
                 "  {} SDEs ({} enabled), {} parameters",

@@ -114,59 +114,65 @@ pub fn run(a: SweepArgs) -> anyhow::Result<ExitCode> {
     let started = Instant::now();
     let swept = pipeline::sweep(&stand, &plan, &path, &opts, &IndicatifProgress::new())?;
     let elapsed = started.elapsed().as_secs_f64();
-    if let Some(e) = &swept.finish_error {
+    let o = completed(&path, swept.finish_error, swept.outcome)?;
+    let measured = o.steps.len() + o.skipped.len();
+    println!("session: {}", path.display());
+    println!(
+        "{} of {} steps measured in {elapsed:.1} s ({} in this run, {} from {}), {} stream faults recorded, {} messages",
+        measured,
+        freqs.len(),
+        o.steps.len(),
+        o.skipped.len(),
+        a.resume.as_ref().map(|p| p.display().to_string()).unwrap_or_else(|| "earlier sessions".into()),
+        o.faults,
+        swept.messages
+    );
+    let settings: Vec<u32> = o
+        .steps
+        .iter()
+        .filter_map(|s| s.generator_settings)
+        .collect();
+    if let (Some(lo), Some(hi)) = (settings.iter().min(), settings.iter().max()) {
+        let first = settings.first().copied().unwrap_or(0);
+        let later: Vec<u32> = settings.iter().skip(1).copied().collect();
+        let mean = later.iter().map(|&n| f64::from(n)).sum::<f64>() / later.len().max(1) as f64;
+        println!(
+            "generator settings per line (frequency, ramp, corrections): {lo} to {hi}; first line {first}, later lines {mean:.1} on average"
+        );
+    }
+    if o.stopped || measured < freqs.len() {
+        println!(
+            "the sweep is incomplete; continue it with: ident sweep --stand {} --resume {}",
+            a.stand.display(),
+            path.display()
+        );
+        Ok(ExitCode::from(1))
+    } else {
+        Ok(ExitCode::SUCCESS)
+    }
+}
+
+/// A measurement's result once its session file at `path` is complete: `Err` when the file could
+/// not be completed, or when the measurement failed (the file records the failure, and stderr
+/// says where it is).
+fn completed<T>(
+    path: &Path,
+    finish_error: Option<String>,
+    outcome: Result<T, String>,
+) -> anyhow::Result<T> {
+    if let Some(e) = finish_error {
         anyhow::bail!(
             "the session file {} could not be completed: {e}",
             path.display()
         );
     }
-    match swept.outcome {
-        Ok(o) => {
-            let measured = o.steps.len() + o.skipped.len();
-            println!("session: {}", path.display());
-            println!(
-                "{} of {} steps measured in {elapsed:.1} s ({} in this run, {} from {}), {} stream faults recorded, {} messages",
-                measured,
-                freqs.len(),
-                o.steps.len(),
-                o.skipped.len(),
-                a.resume.as_ref().map(|p| p.display().to_string()).unwrap_or_else(|| "earlier sessions".into()),
-                o.faults,
-                swept.messages
-            );
-            let settings: Vec<u32> = o
-                .steps
-                .iter()
-                .filter_map(|s| s.generator_settings)
-                .collect();
-            if let (Some(lo), Some(hi)) = (settings.iter().min(), settings.iter().max()) {
-                let first = settings.first().copied().unwrap_or(0);
-                let later: Vec<u32> = settings.iter().skip(1).copied().collect();
-                let mean =
-                    later.iter().map(|&n| f64::from(n)).sum::<f64>() / later.len().max(1) as f64;
-                println!(
-                    "generator settings per line (frequency, ramp, corrections): {lo} to {hi}; first line {first}, later lines {mean:.1} on average"
-                );
-            }
-            if o.stopped || measured < freqs.len() {
-                println!(
-                    "the sweep is incomplete; continue it with: ident sweep --stand {} --resume {}",
-                    a.stand.display(),
-                    path.display()
-                );
-                Ok(ExitCode::from(1))
-            } else {
-                Ok(ExitCode::SUCCESS)
-            }
-        }
-        Err(e) => {
-            eprintln!(
-                "session (complete, records the failure): {}",
-                path.display()
-            );
-            Err(anyhow::anyhow!(e))
-        }
-    }
+    outcome.map_err(|e| {
+        eprintln!(
+            "session (complete, records the failure): {}",
+            path.display()
+        );
+        anyhow::anyhow!(e)
+    })
 }
 
 /// `ident sweep --broadband`: the stand's `[broadband]` plan into a new session.
@@ -188,49 +194,33 @@ fn broadband(a: &SweepArgs, stand: &Stand) -> anyhow::Result<ExitCode> {
     let started = Instant::now();
     let swept = pipeline::broadband_sweep(stand, &plan, &path, &opts, &IndicatifProgress::new())?;
     let elapsed = started.elapsed().as_secs_f64();
-    if let Some(e) = &swept.finish_error {
-        anyhow::bail!(
-            "the session file {} could not be completed: {e}",
-            path.display()
-        );
-    }
-    match swept.outcome {
-        Ok(r) => {
-            let force = stand
-                .channels
-                .iter()
-                .position(|c| c.kind == acquire::stand::ChannelKind::Force);
-            let coherence: Vec<f64> = r
-                .coherence
-                .iter()
-                .enumerate()
-                .filter(|(c, _)| Some(*c) != force)
-                .flat_map(|(_, v)| v.iter().copied())
-                .collect();
-            let mean = coherence.iter().sum::<f64>() / coherence.len().max(1) as f64;
-            println!("session: {}", path.display());
-            println!(
-                "broadband {:?}: {} averages of {} lines ({:.1} to {:.1} Hz) in {elapsed:.1} s, mean coherence {mean:.3}, {} messages",
-                plan.waveform,
-                r.averages,
-                r.freqs_hz.len(),
-                r.freqs_hz.first().copied().unwrap_or(0.0),
-                r.freqs_hz.last().copied().unwrap_or(0.0),
-                swept.messages
-            );
-            if r.stopped {
-                println!("stopped before all {} averages", plan.averages);
-                Ok(ExitCode::from(1))
-            } else {
-                Ok(ExitCode::SUCCESS)
-            }
-        }
-        Err(e) => {
-            eprintln!(
-                "session (complete, records the failure): {}",
-                path.display()
-            );
-            Err(anyhow::anyhow!(e))
-        }
+    let r = completed(&path, swept.finish_error, swept.outcome)?;
+    let force = stand
+        .channels
+        .iter()
+        .position(|c| c.kind == acquire::stand::ChannelKind::Force);
+    let coherence: Vec<f64> = r
+        .coherence
+        .iter()
+        .enumerate()
+        .filter(|(c, _)| Some(*c) != force)
+        .flat_map(|(_, v)| v.iter().copied())
+        .collect();
+    let mean = coherence.iter().sum::<f64>() / coherence.len().max(1) as f64;
+    println!("session: {}", path.display());
+    println!(
+        "broadband {:?}: {} averages of {} lines ({:.1} to {:.1} Hz) in {elapsed:.1} s, mean coherence {mean:.3}, {} messages",
+        plan.waveform,
+        r.averages,
+        r.freqs_hz.len(),
+        r.freqs_hz.first().copied().unwrap_or(0.0),
+        r.freqs_hz.last().copied().unwrap_or(0.0),
+        swept.messages
+    );
+    if r.stopped {
+        println!("stopped before all {} averages", plan.averages);
+        Ok(ExitCode::from(1))
+    } else {
+        Ok(ExitCode::SUCCESS)
     }
 }

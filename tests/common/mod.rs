@@ -35,6 +35,29 @@ pub fn identify_two_mass(data: &Path, vars: &Path, extra: &[&str], env: &[(&str,
     ident_with(&args, env)
 }
 
+/// Runs `ident identify` on `model` with the measured file `data` read through the measurement
+/// map `map` and the variables file `vars`, then the flags `extra`.
+pub fn identify_mapped(
+    model: &Path,
+    data: &Path,
+    map: &Path,
+    vars: &Path,
+    extra: &[&str],
+) -> Output {
+    let mut args = vec![
+        "identify",
+        p(model),
+        "--data",
+        p(data),
+        "--map",
+        p(map),
+        "--vars",
+        p(vars),
+    ];
+    args.extend_from_slice(extra);
+    ident(&args)
+}
+
 /// Bytes a run printed, as text.
 pub fn utf8(b: &[u8]) -> String {
     String::from_utf8_lossy(b).into_owned()

@@ -343,6 +343,18 @@ impl Transfer<'_> {
         )
     }
 
+    /// Aborts the transfer (toggle bit not alternated) and returns the error for segment
+    /// `segment`, whose toggle bit is wrong.
+    async fn toggle_error(&mut self, segment: usize) -> SdoError {
+        self.abort(AbortCode::ToggleNotAlternated).await;
+        SdoError::Toggle {
+            node: self.node,
+            op: self.op,
+            address: self.address,
+            segment,
+        }
+    }
+
     fn malformed(&self, f: &[u8; 8], detail: impl Into<String>) -> SdoError {
         SdoError::Malformed {
             node: self.node,
@@ -465,13 +477,7 @@ impl Transfer<'_> {
                 return Err(self.unexpected(&s, "an upload segment (0x0_/0x1_)").await);
             }
             if s[0] & cs::TOGGLE != toggle {
-                self.abort(AbortCode::ToggleNotAlternated).await;
-                return Err(SdoError::Toggle {
-                    node: self.node,
-                    op: self.op,
-                    address: self.address,
-                    segment,
-                });
+                return Err(self.toggle_error(segment).await);
             }
             let n = 7 - ((s[0] >> 1) & 7) as usize;
             data.extend_from_slice(&s[1..1 + n]);
@@ -563,13 +569,7 @@ impl Transfer<'_> {
                     .await);
             }
             if s[0] & cs::TOGGLE != toggle {
-                self.abort(AbortCode::ToggleNotAlternated).await;
-                return Err(SdoError::Toggle {
-                    node: self.node,
-                    op: self.op,
-                    address: self.address,
-                    segment,
-                });
+                return Err(self.toggle_error(segment).await);
             }
             toggle ^= cs::TOGGLE;
         }

@@ -20,6 +20,13 @@ use crate::canopen::{
 /// The EDS of the simulated node, as shipped in `configs/canopen/`.
 pub const SIM_EDS: &str = include_str!("../../../configs/canopen/ident-sim-daq.eds");
 
+/// A deterministic ADC count of input `ch` at sample `k`, distinct per channel and sample, so
+/// that a stream can be checked sample by sample: the [`Signal`] the tests serve from the
+/// simulated node (and `tests/canopen/python_node.py` from python-canopen's).
+pub fn count_pattern(ch: u16, k: u64) -> i32 {
+    ((k as i32 * 37 + ch as i32 * 4001) % 30_000) - 15_000
+}
+
 /// Faults the simulated node injects.
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct SimNodeFaults {

@@ -9,23 +9,18 @@ use crate::can::{BusEvent, CanId, FrameKind, WireFrame};
 use crate::canopen::eds::{Access, DataType, ObjectDictionary};
 use crate::canopen::sdo::{AbortCode, Address, SdoClient, SdoError};
 use crate::canopen::sim::{
-    serve_fixed_sdo_answer, SimCanOpenNode, SimNodeFaults, SimNodeStats, SIM_EDS,
+    count_pattern, serve_fixed_sdo_answer, SimCanOpenNode, SimNodeFaults, SimNodeStats, SIM_EDS,
 };
 use crate::canopen::{CanLink, CanOpenDaq, CanOpenSettings, MemoryBus, NmtCommand, NmtState};
-use crate::daq::{Daq, DaqConfig, DaqError, DaqEvent, FaultKind};
+use crate::daq::{events_until_error, Daq, DaqConfig, DaqError, DaqEvent, FaultKind};
 
 type Node = (
     tokio::sync::oneshot::Sender<()>,
     tokio::task::JoinHandle<Result<SimNodeStats, crate::can::CanError>>,
 );
 
-/// The ADC count the simulated node reads on `ch` at sample `k`: distinct per channel and sample.
-fn count(ch: u16, k: u64) -> i32 {
-    ((k as i32 * 37 + ch as i32 * 4001) % 30_000) - 15_000
-}
-
 fn signal() -> Signal {
-    Box::new(count)
+    Box::new(count_pattern)
 }
 
 fn start_node(bus: &MemoryBus, node: u8, faults: SimNodeFaults) -> Node {
@@ -380,7 +375,7 @@ fn assert_block_matches_signal(b: &crate::daq::SampleBlock, channels: &[u16], vp
     for (c, &ch) in channels.iter().enumerate() {
         for (i, v) in b.channel(c).enumerate() {
             let k = b.first_sample + i as u64;
-            let want = (count(ch, k) as f64 * vpc) as f32;
+            let want = (count_pattern(ch, k) as f64 * vpc) as f32;
             assert_eq!(v, want, "block {} channel {ch} sample {k}", b.seq);
         }
     }
@@ -498,18 +493,8 @@ async fn a_lost_heartbeat_is_a_device_fault_then_the_stream_times_out() {
     let mut daq = master(&bus, settings(5));
     daq.configure(&config(vec![0, 1])).await.expect("configure");
     daq.start().await.expect("start");
-    let mut events = Vec::new();
-    let err = loop {
-        match daq.next_event().await {
-            Ok(ev) => events.push(ev),
-            Err(e) => break e,
-        }
-    };
-    let lost: Vec<_> = events
-        .iter()
-        .filter_map(DaqEvent::device_fault)
-        .map(str::to_owned)
-        .collect();
+    let (events, err) = events_until_error(&mut daq).await;
+    let lost: Vec<&str> = events.iter().filter_map(DaqEvent::device_fault).collect();
     assert_eq!(lost.len(), 1, "{lost:?}");
     assert!(lost[0].contains("node 5 lost: no heartbeat"), "{lost:?}");
     assert!(matches!(err, DaqError::Timeout { .. }), "{err:?}");

@@ -48,6 +48,18 @@ pub trait Daq: Send {
     async fn stop(&mut self) -> Result<(), DaqError>;
 }
 
+/// Reads a started stream to its end: every block and fault in stream order, then the error
+/// that ended it (a lost device, a timeout).
+pub async fn events_until_error(daq: &mut dyn Daq) -> (Vec<DaqEvent>, DaqError) {
+    let mut events = Vec::new();
+    loop {
+        match daq.next_event().await {
+            Ok(ev) => events.push(ev),
+            Err(e) => return (events, e),
+        }
+    }
+}
+
 /// What the host asks the DAQ to stream.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct DaqConfig {

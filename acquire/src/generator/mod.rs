@@ -205,3 +205,34 @@ pub enum GeneratorError {
     #[error(transparent)]
     Table(#[from] dialect::TableError),
 }
+
+impl GeneratorError {
+    /// Maps an I/O error on `instrument`: end-of-stream, hang-up and EIO become
+    /// [`GeneratorError::Disconnected`].
+    pub fn from_io(instrument: &str, e: std::io::Error) -> GeneratorError {
+        use std::io::ErrorKind as K;
+        let lost = matches!(
+            e.kind(),
+            K::UnexpectedEof | K::BrokenPipe | K::ConnectionReset | K::NotConnected
+        ) || e.raw_os_error() == Some(5);
+        let (instrument, detail) = (instrument.to_string(), e.to_string());
+        if lost {
+            GeneratorError::Disconnected { instrument, detail }
+        } else {
+            GeneratorError::Io { instrument, detail }
+        }
+    }
+}
+
+impl crate::transport::LinkFailure for GeneratorError {
+    fn io(instrument: &str, e: std::io::Error) -> GeneratorError {
+        GeneratorError::from_io(instrument, e)
+    }
+
+    fn closed(instrument: &str) -> GeneratorError {
+        GeneratorError::Disconnected {
+            instrument: instrument.to_string(),
+            detail: "end of stream".into(),
+        }
+    }
+}

@@ -7,14 +7,13 @@ use std::pin::Pin;
 use std::time::Duration;
 
 use async_trait::async_trait;
-use tokio::time::Instant;
 
 use super::arbitrary::{ArbitraryDialect, RateSetting};
 use super::dialect::{self, Dialect, DialectOverrides};
 use super::{Generator, GeneratorError};
 use crate::device::DeviceIdentity;
-use crate::shaker::scpi::{parse_bool_answer, parse_error_entry, Line};
-use crate::transport::{LineLink, LinkError, Transport, TransportError};
+use crate::shaker::scpi::{also_queued, parse_bool_answer, parse_error_entry};
+use crate::transport::{Answer, LineLink, Transport, TransportError};
 
 /// Opens the instrument's connection again after it dropped (a socket reset, a USB serial
 /// adapter re-enumerated).
@@ -97,50 +96,9 @@ impl ScpiGenerator {
         self.dialect.as_ref()
     }
 
-    fn io_error(&self, e: std::io::Error) -> GeneratorError {
-        use std::io::ErrorKind as K;
-        let lost = matches!(
-            e.kind(),
-            K::UnexpectedEof | K::BrokenPipe | K::ConnectionReset | K::NotConnected
-        ) || e.raw_os_error() == Some(5);
-        if lost {
-            GeneratorError::Disconnected {
-                instrument: self.instrument.clone(),
-                detail: e.to_string(),
-            }
-        } else {
-            GeneratorError::Io {
-                instrument: self.instrument.clone(),
-                detail: e.to_string(),
-            }
-        }
-    }
-
     async fn send(&mut self, line: &str) -> Result<(), GeneratorError> {
         let r = self.link.send(line, &self.opts.terminator).await;
-        r.map_err(|e| self.io_error(e))
-    }
-
-    fn link_error(&self, e: LinkError) -> GeneratorError {
-        match e {
-            LinkError::Io(e) => self.io_error(e),
-            LinkError::Closed => GeneratorError::Disconnected {
-                instrument: self.instrument.clone(),
-                detail: "end of stream".into(),
-            },
-        }
-    }
-
-    /// One answer line before `deadline`; `Ok(None)` on timeout.
-    async fn read_line(&mut self, deadline: Instant) -> Result<Option<Line>, GeneratorError> {
-        let r = self.link.read_line(deadline).await;
-        r.map_err(|e| self.link_error(e))
-    }
-
-    /// Discards late answers of an attempt that timed out.
-    async fn drain(&mut self) -> Result<(), GeneratorError> {
-        let r = self.link.drain().await;
-        r.map_err(|e| self.link_error(e))
+        r.map_err(|e| GeneratorError::from_io(&self.instrument, e))
     }
 
     /// Opens the connection again, if a way to do so was given; `false` if not.
@@ -181,30 +139,21 @@ impl ScpiGenerator {
     }
 
     async fn query_once(&mut self, line: &str) -> Result<String, GeneratorError> {
-        for attempt in 0..=self.opts.retries {
-            if attempt > 0 {
-                self.drain().await?;
-            }
-            self.send(line).await?;
-            let deadline = Instant::now() + self.opts.timeout;
-            match self.read_line(deadline).await? {
-                Some(Line::Text(t)) => return Ok(t),
-                Some(Line::Garbage(g)) => {
-                    return Err(GeneratorError::Garbled {
-                        instrument: self.instrument.clone(),
-                        command: line.to_string(),
-                        got: g,
-                    })
-                }
-                None => continue,
-            }
+        let (timeout, retries) = (self.opts.timeout, self.opts.retries);
+        let answer = self
+            .link
+            .query(line, &self.opts.terminator, timeout, retries)
+            .await;
+        match answer.map_err(|e| e.on::<GeneratorError>(&self.instrument))? {
+            Answer::Text(t) => Ok(t),
+            Answer::Garbage(g) => Err(self.garbled(line, g)),
+            Answer::Silent { .. } => Err(GeneratorError::Timeout {
+                instrument: self.instrument.clone(),
+                command: line.to_string(),
+                waited: timeout,
+                attempts: retries + 1,
+            }),
         }
-        Err(GeneratorError::Timeout {
-            instrument: self.instrument.clone(),
-            command: line.to_string(),
-            waited: self.opts.timeout,
-            attempts: self.opts.retries + 1,
-        })
     }
 
     fn garbled(&self, command: &str, got: String) -> GeneratorError {
@@ -228,7 +177,7 @@ impl ScpiGenerator {
 
     async fn send_bytes(&mut self, bytes: &[u8]) -> Result<(), GeneratorError> {
         let r = self.link.send_bytes(bytes, &self.opts.terminator).await;
-        r.map_err(|e| self.io_error(e))
+        r.map_err(|e| GeneratorError::from_io(&self.instrument, e))
     }
 
     /// Like [`ScpiGenerator::set`] for a command carrying data: `text` (for messages) and its
@@ -281,11 +230,7 @@ impl ScpiGenerator {
             command: command.to_string(),
             code: first.code,
             message: first.message,
-            more: if more.is_empty() {
-                String::new()
-            } else {
-                format!(" (also queued: {})", more.join("; "))
-            },
+            more: also_queued(&more),
         })
     }
 

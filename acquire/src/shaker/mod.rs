@@ -231,6 +231,19 @@ pub enum ShakerError {
     },
 }
 
+impl crate::transport::LinkFailure for ShakerError {
+    fn io(port: &str, e: std::io::Error) -> ShakerError {
+        ShakerError::from_io(port, e)
+    }
+
+    fn closed(port: &str) -> ShakerError {
+        ShakerError::Disconnected {
+            port: port.to_string(),
+            detail: "end of stream".into(),
+        }
+    }
+}
+
 impl ShakerError {
     /// Maps an I/O error on `port`: end-of-stream and hang-up become [`ShakerError::Disconnected`].
     pub fn from_io(port: &str, e: std::io::Error) -> ShakerError {

@@ -431,6 +431,16 @@ pub fn parse_command(line: &str) -> Result<Command, ScpiError> {
     }
 }
 
+/// The rest of an error queue after its first entry, as the end of a message:
+/// ` (also queued: A; B)`, or nothing when the first was alone.
+pub fn also_queued(more: &[String]) -> String {
+    if more.is_empty() {
+        String::new()
+    } else {
+        format!(" (also queued: {})", more.join("; "))
+    }
+}
+
 /// Parses an error-queue entry `<code>,"<message>"`.
 pub fn parse_error_entry(line: &str) -> Option<ScpiError> {
     let (code, msg) = line.trim().split_once(',')?;

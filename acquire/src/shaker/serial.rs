@@ -5,12 +5,11 @@
 use std::time::Duration;
 
 use async_trait::async_trait;
-use tokio::time::Instant;
 
-use super::scpi::{self, Command, Function, Line};
+use super::scpi::{self, Command, Function};
 use super::{Shaker, ShakerError, ShakerStatus, Waveform};
 use crate::device::DeviceIdentity;
-use crate::transport::{LineLink, LinkError, Transport};
+use crate::transport::{Answer, LineLink, Transport};
 
 /// Timeouts and retries of the SCPI driver.
 #[derive(Debug, Clone, PartialEq)]
@@ -55,68 +54,34 @@ impl<T: Transport> ScpiShaker<T> {
             .map_err(|e| ShakerError::from_io(&self.port, e))
     }
 
-    fn link_error(&self, e: LinkError) -> ShakerError {
-        match e {
-            LinkError::Io(e) => ShakerError::from_io(&self.port, e),
-            LinkError::Closed => ShakerError::Disconnected {
-                port: self.port.clone(),
-                detail: "end of stream".into(),
-            },
-        }
-    }
-
-    /// Reads one answer line before `deadline`; `Ok(None)` on timeout.
-    async fn read_line(&mut self, deadline: Instant) -> Result<Option<Line>, ShakerError> {
-        let r = self.link.read_line(deadline).await;
-        r.map_err(|e| self.link_error(e))
-    }
-
-    /// Discards anything already received (late answers to an attempt that timed out).
-    async fn drain(&mut self) -> Result<(), ShakerError> {
-        let r = self.link.drain().await;
-        r.map_err(|e| self.link_error(e))
-    }
-
     /// Sends a query and returns its answer line, re-sending after a timeout.
     pub async fn query(&mut self, command: &Command) -> Result<String, ShakerError> {
         let line = command.to_string();
-        let mut garbage: Option<String> = None;
-        for attempt in 0..=self.opts.retries {
-            if attempt > 0 {
-                self.drain().await?;
-            }
-            self.send(&line).await?;
-            let deadline = Instant::now() + self.opts.timeout;
-            match self.read_line(deadline).await? {
-                Some(Line::Text(t)) => return Ok(t),
-                Some(Line::Garbage(g)) => {
-                    return Err(ShakerError::Garbled {
-                        port: self.port.clone(),
-                        command: line,
-                        got: g,
-                    })
-                }
-                None => {
-                    let p = self.link.pending();
-                    if !p.is_empty() {
-                        garbage = Some(p);
-                    }
-                }
+        let (timeout, retries) = (self.opts.timeout, self.opts.retries);
+        let answer = self.link.query(&line, "\n", timeout, retries).await;
+        match answer.map_err(|e| e.on::<ShakerError>(&self.port))? {
+            Answer::Text(t) => Ok(t),
+            Answer::Garbage(g) => Err(ShakerError::Garbled {
+                port: self.port.clone(),
+                command: line,
+                got: g,
+            }),
+            Answer::Silent { pending } => {
+                let hint = match pending {
+                    Some(g) => format!(
+                        " (received {g:?} without a line end: wrong device, baud rate or terminator?)"
+                    ),
+                    None => "; check that the controller is on, the cable, and the baud rate".into(),
+                };
+                Err(ShakerError::Timeout {
+                    port: self.port.clone(),
+                    command: line,
+                    waited: timeout,
+                    attempts: retries + 1,
+                    hint,
+                })
             }
         }
-        let hint = match garbage {
-            Some(g) => format!(
-                " (received {g:?} without a line end: wrong device, baud rate or terminator?)"
-            ),
-            None => "; check that the controller is on, the cable, and the baud rate".into(),
-        };
-        Err(ShakerError::Timeout {
-            port: self.port.clone(),
-            command: line,
-            waited: self.opts.timeout,
-            attempts: self.opts.retries + 1,
-            hint,
-        })
     }
 
     async fn query_parsed<V>(
@@ -158,11 +123,7 @@ impl<T: Transport> ScpiShaker<T> {
             command: line,
             code: first.code,
             message: first.message,
-            more: if more.is_empty() {
-                String::new()
-            } else {
-                format!(" (also queued: {})", more.join("; "))
-            },
+            more: scpi::also_queued(&more),
         })
     }
 

@@ -24,6 +24,39 @@ pub enum LinkError {
     Closed,
 }
 
+impl LinkError {
+    /// This failure as the driver's error, naming its device `device`.
+    pub fn on<E: LinkFailure>(self, device: &str) -> E {
+        match self {
+            LinkError::Io(e) => E::io(device, e),
+            LinkError::Closed => E::closed(device),
+        }
+    }
+}
+
+/// A driver's error type, as it names the failures of its device's link.
+pub trait LinkFailure {
+    /// The operating system's error `e` on the link to `device`.
+    fn io(device: &str, e: std::io::Error) -> Self;
+    /// `device` closed the stream (end of file).
+    fn closed(device: &str) -> Self;
+}
+
+/// What a query got back.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Answer {
+    /// An answer line.
+    Text(String),
+    /// A line that is not text (the bytes lossily decoded).
+    Garbage(String),
+    /// No line after every attempt; `pending`: what the last attempt to receive any bytes
+    /// received without a line end (a wrong baud rate or terminator shows here).
+    Silent {
+        /// Bytes without a line end, lossily decoded.
+        pending: Option<String>,
+    },
+}
+
 /// A transport with its receive buffer and the lines framed but not yet read.
 pub struct LineLink<T> {
     io: T,
@@ -97,6 +130,35 @@ impl<T: Transport> LineLink<T> {
             let ready = &mut self.ready;
             self.lines.feed(&self.rx[..n], |l| ready.push_back(l));
         }
+    }
+
+    /// Sends `line` with `terminator` and waits `timeout` for the answer line; after a timeout,
+    /// drains late bytes and sends it again, `retries` times.
+    pub async fn query(
+        &mut self,
+        line: &str,
+        terminator: &str,
+        timeout: Duration,
+        retries: u32,
+    ) -> Result<Answer, LinkError> {
+        let mut pending = None;
+        for attempt in 0..=retries {
+            if attempt > 0 {
+                self.drain().await?;
+            }
+            self.send(line, terminator).await.map_err(LinkError::Io)?;
+            match self.read_line(Instant::now() + timeout).await? {
+                Some(Line::Text(t)) => return Ok(Answer::Text(t)),
+                Some(Line::Garbage(g)) => return Ok(Answer::Garbage(g)),
+                None => {
+                    let p = self.pending();
+                    if !p.is_empty() {
+                        pending = Some(p);
+                    }
+                }
+            }
+        }
+        Ok(Answer::Silent { pending })
     }
 
     /// Discards everything received so far and whatever still arrives until the line is quiet

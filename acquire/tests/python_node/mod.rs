@@ -9,8 +9,12 @@ use std::time::{Duration, Instant};
 
 use acquire::canopen::eds::ObjectDictionary;
 use acquire::canopen::sdo::Address;
+use acquire::canopen::sim::count_pattern;
 use acquire::canopen::{CanOpenDaq, CanOpenSettings};
-use acquire::daq::{Daq, DaqConfig, DaqError, DaqEvent, FaultKind, SampleBlock, StreamFault};
+use acquire::daq::{
+    events_until_error, Daq, DaqConfig, DaqError, DaqEvent, FaultKind, SampleBlock, StreamFault,
+    StreamInfo,
+};
 
 /// One python node at a time: under a loaded machine (CI runs the tests of a binary in parallel
 /// on 2 cores) two nodes streaming at once starve each other's PDO loop.
@@ -18,11 +22,6 @@ static ONE_AT_A_TIME: tokio::sync::Mutex<()> = tokio::sync::Mutex::const_new(())
 
 /// The node id python_node.py is started with.
 pub const NODE: u8 = 5;
-
-/// The python node's signal (same formula in python_node.py).
-pub fn count(ch: u16, k: u64) -> i32 {
-    ((k as i32 * 37 + ch as i32 * 4001) % 30_000) - 15_000
-}
 
 fn manifest() -> &'static Path {
     Path::new(env!("CARGO_MANIFEST_DIR"))
@@ -106,13 +105,16 @@ pub fn finish(mut child: Child, daq: CanOpenDaq) {
     }
 }
 
-pub fn assert_exact(b: &SampleBlock, channels: &[u16], vpc: f64) {
+/// Every sample of `b` (streaming `channels`, scaled as `info` says) is the node's count
+/// ([`count_pattern`], the formula python_node.py uses too) in volts.
+pub fn assert_exact(b: &SampleBlock, channels: &[u16], info: &StreamInfo) {
     for (c, &ch) in channels.iter().enumerate() {
+        let vpc = info.channels[c].volts_per_count;
         for (i, v) in b.channel(c).enumerate() {
             let k = b.first_sample + i as u64;
             assert_eq!(
                 v,
-                (count(ch, k) as f64 * vpc) as f32,
+                (count_pattern(ch, k) as f64 * vpc) as f32,
                 "block {} channel {ch} sample {k}",
                 b.seq
             );
@@ -194,7 +196,7 @@ pub async fn identified_configured_over_sdo_and_streams_loss_free(
     assert!(faults.is_empty(), "loss-free: {faults:?}");
     for (i, b) in blocks.iter().enumerate() {
         assert_eq!(b.seq, i as u64);
-        assert_exact(b, &channels, info.channels[0].volts_per_count);
+        assert_exact(b, &channels, &info);
     }
     finish(child, daq);
 }
@@ -213,13 +215,7 @@ pub async fn emcy_and_heartbeat_loss_are_detected(child: Child, mut daq: CanOpen
     .await
     .expect("configure");
     daq.start().await.expect("start");
-    let mut events = Vec::new();
-    let err = loop {
-        match daq.next_event().await {
-            Ok(ev) => events.push(ev),
-            Err(e) => break e,
-        }
-    };
+    let (events, err) = events_until_error(&mut daq).await;
     let device: Vec<&str> = events.iter().filter_map(DaqEvent::device_fault).collect();
     assert_eq!(device.len(), 2, "{device:?}");
     assert!(

@@ -591,6 +591,7 @@ mod tests {
         let vars_of = |_: &Model| crate::identification::Variables {
             vars: Vec::new(),
             origin: String::new(),
+            extra_starts: Vec::new(),
         };
         let mut checked = std::collections::BTreeMap::<&str, usize>::new();
         for model in [&fwd, &chain] {

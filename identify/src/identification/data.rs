@@ -182,7 +182,8 @@ pub fn parse_csv_declared(
     if let Some(d) = &declared {
         for m in &mut data.characteristics {
             let q: QuantityName = d.unit.quantity.into();
-            if has_quantity && m.quantity != q {
+            // A transmissibility is the same ratio in any like quantity.
+            if has_quantity && m.quantity != q && !d.unit.per_base_motion {
                 return Err(err.at(d.line, format!(
                     "{} {}: the quantity column says {}, but the declared unit {} is a {}; fix one of them",
                     m.body,
@@ -218,7 +219,7 @@ pub fn parse_json(text: &str, origin: &str) -> Result<MeasuredData, DataError> {
 }
 
 /// Columns of the CSV form, in the order [`to_csv`] writes them.
-pub const CSV_COLUMNS: [&str; 9] = [
+pub const CSV_COLUMNS: [&str; 11] = [
     "body",
     "dof",
     "quantity",
@@ -228,7 +229,13 @@ pub const CSV_COLUMNS: [&str; 9] = [
     "variance",
     "coherence",
     "averages",
+    "reference",
+    "motion",
 ];
+
+/// What one CSV row's characteristic is: body, DOF, quantity, reference (`None`: the model's
+/// excitation) and whether it is relative to a moving base.
+type CsvKey = (String, u8, QuantityName, Option<String>, bool);
 
 /// Parses the CSV form: a header naming the columns (any order; `body`, `dof`, `freq_hz`,
 /// `amplitude` required; `quantity` defaults to displacement; `phase_rad`, `variance`,
@@ -263,7 +270,7 @@ fn parse_csv_rows(text: &str, origin: &str) -> Result<(MeasuredData, bool), Data
     };
     let (col, ncols) = csv_columns(header, hline, &err)?;
     // Characteristics in order of first appearance.
-    let mut order: Vec<(String, u8, QuantityName)> = Vec::new();
+    let mut order: Vec<CsvKey> = Vec::new();
     let mut rows: Vec<Vec<CsvRow>> = Vec::new();
     for (ln, l) in lines {
         let cells: Vec<&str> = l.split(',').map(str::trim).collect();
@@ -365,7 +372,7 @@ fn csv_row(
     col: &BTreeMap<&'static str, usize>,
     ln: usize,
     err: &CsvErr,
-) -> Result<((String, u8, QuantityName), CsvRow), DataError> {
+) -> Result<(CsvKey, CsvRow), DataError> {
     let cell = |name: &str| col.get(name).map(|&i| cells[i]).filter(|c| !c.is_empty());
     let number = |name: &str| -> Result<Option<f64>, DataError> {
         match cell(name) {
@@ -394,6 +401,19 @@ fn csv_row(
             )
         })?,
     };
+    let reference = cell("reference")
+        .filter(|r| *r != "excitation")
+        .map(str::to_string);
+    let relative = match cell("motion") {
+        None | Some("absolute") => false,
+        Some("relative") => true,
+        Some(other) => {
+            return Err(err.at(
+                ln,
+                format!("column motion: \"{other}\" is neither absolute (transmissibility) nor relative (response − base); leave it empty under a force"),
+            ))
+        }
+    };
     let freq = number("freq_hz")?.ok_or_else(|| err.at(ln, "empty freq_hz".into()))?;
     let amp = number("amplitude")?.ok_or_else(|| err.at(ln, "empty amplitude".into()))?;
     let avg = match cell("averages") {
@@ -414,13 +434,13 @@ fn csv_row(
         coh: number("coherence")?,
         avg,
     };
-    Ok(((body, dof, quantity), row))
+    Ok(((body, dof, quantity, reference, relative), row))
 }
 
 /// The characteristic of one key from its rows: sorted by frequency, distinct frequencies, the
 /// optional columns given for every point or none, one number of averages.
 fn csv_characteristic(
-    (body, dof, quantity): (String, u8, QuantityName),
+    (body, dof, quantity, reference, relative): CsvKey,
     mut pts: Vec<CsvRow>,
     hline: usize,
     err: &CsvErr,
@@ -476,8 +496,8 @@ fn csv_characteristic(
         coherence: has_coh.then(|| pts.iter().map(|r| r.coh.unwrap_or(f64::NAN)).collect()),
         averages,
         at: None,
-        reference: None,
-        relative: false,
+        reference,
+        relative,
     })
 }
 
@@ -503,7 +523,7 @@ pub fn to_csv(data: &MeasuredData) -> String {
         for k in 0..m.freqs_hz.len() {
             let dof = DOF_NAMES.get(m.dof as usize).copied().unwrap_or("?");
             s.push_str(&format!(
-                "{},{},{},{:?},{:?},{},{},{},{}\n",
+                "{},{},{},{:?},{:?},{},{},{},{},{},{}\n",
                 m.body,
                 dof,
                 Quantity::from(m.quantity).as_str(),
@@ -512,7 +532,9 @@ pub fn to_csv(data: &MeasuredData) -> String {
                 opt(&m.phase_rad, k),
                 opt(&m.variance, k),
                 opt(&m.coherence, k),
-                m.averages.map(|a| a.to_string()).unwrap_or_default()
+                m.averages.map(|a| a.to_string()).unwrap_or_default(),
+                m.reference.as_deref().unwrap_or_default(),
+                if m.relative { "relative" } else { "" }
             ));
         }
     }

@@ -1,6 +1,8 @@
 //! Units of measured frequency responses: receptance (m/N), mobility ((m/s)/N) and accelerance
-//! ((m/s²)/N) as files write them (`mm/N`, `(mm/s)/kN`, `g/lbf`, `m/s^2/N`), or a response to the
-//! model's own excitation (`mm`, `mm/s`, `g`); read through the one unit parser
+//! ((m/s²)/N) as files write them (`mm/N`, `(mm/s)/kN`, `g/lbf`, `m/s^2/N`), a response to the
+//! model's own excitation (`mm`, `mm/s`, `g`), or a transmissibility — the response per the same
+//! quantity of a base motion (`m/m`, `g/g`, `(m/s²)/(m/s²)`, `(mm/s)/(m/s)`, `dimensionless`);
+//! read through the one unit parser
 //! [`crate::units`], converted exactly (g = 9.80665 m/s², lbf = 4.4482216152605 N), and brought
 //! to the model's convention: SI, the response to the model's declared excitation, in the
 //! quantity of the model's output for that body and DOF (by (jω)^k). Every conversion is noted so
@@ -13,6 +15,8 @@
 //! assert_eq!((u.quantity, u.per_force, u.to_si), (Quantity::Acceleration, true, 9.80665));
 //! let u = FrfUnit::parse("(mm/s)/kN").unwrap();
 //! assert_eq!((u.quantity, u.to_si), (Quantity::Velocity, 1e-6));
+//! let u = FrfUnit::parse("(mm/s^2)/g").unwrap();
+//! assert!(u.per_base_motion && (u.to_si - 1e-3 / 9.80665).abs() < 1e-18);
 //! assert!(FrfUnit::parse("N/mm").is_err());
 //! ```
 
@@ -33,7 +37,11 @@ pub struct FrfUnit {
     /// True for a response per unit force (an FRF); false for a response to the model's
     /// declared excitation.
     pub per_force: bool,
-    /// Factor from the written unit to SI (m/N, (m/s)/N, (m/s²)/N, or m, m/s, m/s²).
+    /// True for a transmissibility: the response per the same quantity of the base's motion
+    /// (dimensionless; a ratio of accelerations is the ratio of displacements), read as the
+    /// displacement per metre of base displacement (`quantity` is then displacement).
+    pub per_base_motion: bool,
+    /// Factor from the written unit to SI (m/N, (m/s)/N, (m/s²)/N, or m, m/s, m/s², or m/m).
     pub to_si: f64,
 }
 
@@ -61,11 +69,21 @@ impl FrfUnit {
                         text: t.to_string(),
                         quantity,
                         per_force,
+                        per_base_motion: false,
                         to_si,
                     })
                 }
                 Err(e) => last = Some(e),
             }
+        }
+        if let Some(to_si) = transmissibility(t) {
+            return Ok(FrfUnit {
+                text: t.to_string(),
+                quantity: Quantity::Displacement,
+                per_force: false,
+                per_base_motion: true,
+                to_si,
+            });
         }
         let why = match last {
             Some(crate::units::UnitError::Unknown { unit, .. }) => {
@@ -75,13 +93,16 @@ impl FrfUnit {
         };
         Err(format!(
             "\"{t}\" is not a receptance (m/N, mm/N, um/N), mobility (m/s/N, (mm/s)/N), \
-             accelerance ((m/s^2)/N, g/N) per N, kN or lbf, nor a displacement, velocity or \
-             acceleration{why}"
+             accelerance ((m/s^2)/N, g/N) per N, kN or lbf, a displacement, velocity or \
+             acceleration, nor a transmissibility (m/m, g/g, (m/s^2)/(m/s^2), dimensionless){why}"
         ))
     }
 
     /// The SI unit of this kind of value, for notes: `(m/s²)/N`.
     pub fn si_text(&self) -> &'static str {
+        if self.per_base_motion {
+            return "m/m";
+        }
         match (self.quantity, self.per_force) {
             (Quantity::Displacement, true) => "m/N",
             (Quantity::Velocity, true) => "(m/s)/N",
@@ -92,8 +113,12 @@ impl FrfUnit {
         }
     }
 
-    /// `receptance`, `mobility`, `accelerance` (per force) or the quantity's name.
+    /// `receptance`, `mobility`, `accelerance` (per force), `transmissibility`, or the
+    /// quantity's name.
     pub fn kind(&self) -> &'static str {
+        if self.per_base_motion {
+            return "transmissibility";
+        }
         match (self.quantity, self.per_force) {
             (Quantity::Displacement, true) => "receptance",
             (Quantity::Velocity, true) => "mobility",
@@ -101,6 +126,31 @@ impl FrfUnit {
             (q, false) => q.as_str(),
         }
     }
+}
+
+/// The factor to SI of a transmissibility unit: a quantity over a quantity of the same kind
+/// (length, velocity or acceleration: `m/m`, `g/g`, `(mm/s^2)/(m/s^2)`, `m/s²/g`), or a plain
+/// ratio (`1`, `-`, `dimensionless`, `ratio`). `None` for anything else (an angle, a percentage,
+/// a force ratio).
+fn transmissibility(t: &str) -> Option<f64> {
+    if ["1", "-", "dimensionless", "ratio"]
+        .iter()
+        .any(|w| t.eq_ignore_ascii_case(w))
+    {
+        return Some(1.0);
+    }
+    let like = [Dim::LENGTH, Dim::VELOCITY, Dim::ACCELERATION];
+    // Every '/' is a candidate split between numerator and denominator.
+    t.char_indices()
+        .filter(|&(_, c)| c == '/')
+        .find_map(|(i, _)| {
+            let (num, den) = (t[..i].trim(), t[i + 1..].trim());
+            like.iter().find_map(|&dim| {
+                let n = parse_quantity(&format!("1 {num}"), dim).ok()?;
+                let d = parse_quantity(&format!("1 {den}"), dim).ok()?;
+                (n.is_finite() && d.is_finite() && d != 0.0).then(|| n / d)
+            })
+        })
 }
 
 /// Amplitude of the model's declared excitation (N): the first force's magnitude, the
@@ -139,6 +189,9 @@ pub fn to_model_convention(
             unit.text
         ));
     }
+    if unit.per_base_motion {
+        return transmissibility_to_model(m, unit, model, notes);
+    }
     let mut factor = unit.to_si;
     let mut how = if unit.to_si == 1.0 {
         format!("{} in {}", unit.kind(), unit.text)
@@ -164,7 +217,7 @@ pub fn to_model_convention(
                     .filter(|f| f.is_finite() && *f > 0.0),
                 Some(_) => {
                     return Err(format!(
-                        "{label}: the data are per unit force ({}), but reference \"{name}\" is a base motion: give transmissibilities as the response per metre of base motion (unit = \"m\"; a ratio of accelerations is the same number)",
+                        "{label}: the data are per unit force ({}), but reference \"{name}\" is a base motion: give transmissibilities with a transmissibility unit (unit = \"g/g\", \"m/m\", \"(m/s^2)/(m/s^2)\")",
                         unit.text
                     ))
                 }
@@ -190,6 +243,61 @@ pub fn to_model_convention(
     scale(m, factor);
     m.quantity = unit.quantity.into();
     notes.push(format!("{label}: {how}"));
+    convert_quantity(m, model, notes)
+}
+
+/// A transmissibility to the model's convention: the response per metre of the base's
+/// displacement (a ratio of like quantities is that ratio), in the quantity of the model's output
+/// by (jω)^k. Its reference must be a base motion.
+fn transmissibility_to_model(
+    m: &mut Measurement,
+    unit: &FrfUnit,
+    model: &Model,
+    notes: &mut Vec<String>,
+) -> Result<(), String> {
+    let label = m.label();
+    let is_base = |r: &&crate::model::Reference| {
+        matches!(r.excitation, crate::model::Excitation::BaseMotion { .. })
+    };
+    let base = m.reference.as_deref().and_then(|name| {
+        model
+            .references
+            .iter()
+            .filter(is_base)
+            .find(|r| r.name == name)
+    });
+    let Some(base) = base else {
+        let bases: Vec<&str> = model
+            .references
+            .iter()
+            .filter(is_base)
+            .map(|r| r.name.as_str())
+            .collect();
+        let now = match m.reference.as_deref() {
+            Some(r) => format!("\"{r}\""),
+            None => "the model's force excitation".into(),
+        };
+        let fix = if bases.is_empty() {
+            "the model has none: add a [[reference]] with base_motion = [x, y, z]".to_string()
+        } else {
+            format!("reference = \"{}\"", bases.join("\" or \""))
+        };
+        return Err(format!(
+            "{label}: a transmissibility ({}) is the response per the base's motion, but its reference is {now}: name the model's base-motion [[reference]] for it ({fix})",
+            unit.text
+        ));
+    };
+    scale(m, unit.to_si);
+    m.quantity = Quantity::Displacement.into();
+    let how = if unit.to_si == 1.0 {
+        String::new()
+    } else {
+        format!(" (× {})", unit.to_si)
+    };
+    notes.push(format!(
+        "{label}: transmissibility in {}{how}, read as the response per metre of the base motion \"{}\" (a ratio of accelerations or velocities is the ratio of displacements)",
+        unit.text, base.name
+    ));
     convert_quantity(m, model, notes)
 }
 
@@ -304,8 +412,45 @@ mod tests {
             );
         }
         assert_eq!(FrfUnit::parse("g/N").unwrap().to_si, 9.80665);
-        for bad in ["", "N/mm", "Pa", "furlong/N", "V/N"] {
+        for bad in [
+            "",
+            "N/mm",
+            "Pa",
+            "furlong/N",
+            "V/N",
+            "deg",
+            "N/N",
+            "%",
+            "rad",
+        ] {
             assert!(FrfUnit::parse(bad).is_err(), "{bad}");
+        }
+        let ratios: &[(&str, f64)] = &[
+            ("m/m", 1.0),
+            ("mm/m", 1e-3),
+            ("g/g", 1.0),
+            ("(m/s^2)/(m/s^2)", 1.0),
+            ("m/s²/(m/s²)", 1.0),
+            ("(mm/s^2)/g", 1e-3 / g),
+            ("(m/s^2)/g", 1.0 / g),
+            ("g/(m/s^2)", g),
+            ("(mm/s)/(m/s)", 1e-3),
+            ("um/mm", 1e-3),
+            ("dimensionless", 1.0),
+            ("-", 1.0),
+        ];
+        for (text, si) in ratios {
+            let u = FrfUnit::parse(text).unwrap_or_else(|e| panic!("{text}: {e}"));
+            assert!(
+                u.per_base_motion && !u.per_force && u.quantity == Quantity::Displacement,
+                "{text}: {u:?}"
+            );
+            assert!(
+                (u.to_si - si).abs() <= 1e-15 * si,
+                "{text}: {} vs {si}",
+                u.to_si
+            );
+            assert_eq!(u.kind(), "transmissibility");
         }
         assert!(FrfUnit::parse("furlong/N").unwrap_err().contains("furlong"));
     }

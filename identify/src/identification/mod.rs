@@ -347,10 +347,11 @@ fn best_of_starts(
     let hi = DVector::from_iterator(n, vars.vars.iter().map(|v| v.upper / v.scale));
     let mut best: Option<(optimize::Outcome, usize)> = None;
     let mut starts = Vec::new();
-    for (k, xs) in starts::latin_hypercube(vars, opts.starts, opts.seed)
-        .into_iter()
-        .enumerate()
-    {
+    // The initial values, the variables' extra starts (a pre-fit's), then the hypercube.
+    let mut points = starts::latin_hypercube(vars, opts.starts, opts.seed);
+    let extra = vars.extra_starts.iter().filter(|x| x.len() == n).cloned();
+    points.splice(1..1, extra);
+    for (k, xs) in points.into_iter().enumerate() {
         let u0 = DVector::from_iterator(xs.len(), xs.iter().zip(&scale).map(|(x, s)| x / s));
         let mut obj = Scaled {
             crit: &mut *crit,

@@ -236,11 +236,27 @@ pub fn minimize(
     progress: &mut dyn FnMut(&Progress),
 ) -> Result<Outcome, EvalError> {
     let s0 = state(obj, clamp(u0, lo, hi))?;
+    let mut run = Run {
+        obj,
+        lo,
+        hi,
+        set: settings,
+        progress,
+    };
     Ok(match method {
-        Optimizer::LevenbergMarquardt => levenberg_marquardt(obj, s0, lo, hi, settings, progress),
-        Optimizer::GaussNewton => gauss_newton(obj, s0, lo, hi, settings, progress),
-        Optimizer::Bfgs => bfgs(obj, s0, lo, hi, settings, progress),
+        Optimizer::LevenbergMarquardt => levenberg_marquardt(&mut run, s0),
+        Optimizer::GaussNewton => gauss_newton(&mut run, s0),
+        Optimizer::Bfgs => bfgs(&mut run, s0),
     })
+}
+
+/// One minimization's residuals, box, tolerances and progress report.
+struct Run<'a> {
+    obj: &'a mut dyn Residuals,
+    lo: &'a DVector<f64>,
+    hi: &'a DVector<f64>,
+    set: &'a Settings,
+    progress: &'a mut dyn FnMut(&Progress),
 }
 
 fn outcome(s: &State, iterations: usize, stop: StopReason) -> Outcome {
@@ -254,20 +270,14 @@ fn outcome(s: &State, iterations: usize, stop: StopReason) -> Outcome {
 
 /// After an accepted step of iteration `it` (criterion `old` before it, step norm `sn`): reports
 /// progress, then stops on the criterion or step tolerance when `test_tolerances`.
-#[allow(clippy::too_many_arguments)]
 fn after_step(
+    run: &mut Run,
     s: &State,
-    old: f64,
-    sn: f64,
-    it: usize,
-    lo: &DVector<f64>,
-    hi: &DVector<f64>,
-    set: &Settings,
+    (old, sn, it): (f64, f64, usize),
     test_tolerances: bool,
-    progress: &mut dyn FnMut(&Progress),
 ) -> Option<Outcome> {
-    let free = free_set(&s.u, &s.g, lo, hi);
-    progress(&Progress {
+    let free = free_set(&s.u, &s.g, run.lo, run.hi);
+    (run.progress)(&Progress {
         iteration: it,
         criterion: s.cost,
         step_norm: sn,
@@ -276,29 +286,30 @@ fn after_step(
     if !test_tolerances {
         return None;
     }
-    if old - s.cost <= set.criterion_tol * old {
+    if old - s.cost <= run.set.criterion_tol * old {
         return Some(outcome(s, it, StopReason::CriterionTolerance));
     }
-    if step_small(sn, &s.u, set.step_tol) {
+    if step_small(sn, &s.u, run.set.step_tol) {
         return Some(outcome(s, it, StopReason::StepTolerance));
     }
     None
 }
 
 /// The outcome at the iteration limit: converged after all if the projected gradient is small.
-fn at_limit(s: &State, lo: &DVector<f64>, hi: &DVector<f64>, set: &Settings) -> Outcome {
-    let free = free_set(&s.u, &s.g, lo, hi);
-    if gradient_converged(s, &free, set.gradient_tol) {
-        return outcome(s, set.max_iterations, StopReason::GradientTolerance);
+fn at_limit(run: &Run, s: &State) -> Outcome {
+    let free = free_set(&s.u, &s.g, run.lo, run.hi);
+    let n = run.set.max_iterations;
+    if gradient_converged(s, &free, run.set.gradient_tol) {
+        return outcome(s, n, StopReason::GradientTolerance);
     }
-    outcome(s, set.max_iterations, StopReason::IterationLimit)
+    outcome(s, n, StopReason::IterationLimit)
 }
 
+/// A trial point: its criterion, its full state when evaluated with the Jacobian, and the point.
+type Trial = (f64, Option<State>, DVector<f64>);
+
 /// Evaluates a trial point: the full state if the Jacobian is cheap, residuals only otherwise.
-fn trial(
-    obj: &mut dyn Residuals,
-    u: DVector<f64>,
-) -> Result<(f64, Option<State>, DVector<f64>), EvalError> {
+fn trial(obj: &mut dyn Residuals, u: DVector<f64>) -> Result<Trial, EvalError> {
     if obj.cheap_jacobian() {
         let s = state(obj, u.clone())?;
         Ok((s.cost, Some(s), u))
@@ -312,32 +323,54 @@ fn trial(
     }
 }
 
-fn complete(
-    obj: &mut dyn Residuals,
-    t: (f64, Option<State>, DVector<f64>),
-) -> Result<State, EvalError> {
+fn complete(obj: &mut dyn Residuals, t: Trial) -> Result<State, EvalError> {
     match t.1 {
         Some(s) => Ok(s),
         None => state(obj, t.2),
     }
 }
 
-fn levenberg_marquardt(
-    obj: &mut dyn Residuals,
-    mut s: State,
-    lo: &DVector<f64>,
-    hi: &DVector<f64>,
-    set: &Settings,
-    progress: &mut dyn FnMut(&Progress),
-) -> Outcome {
+/// Levenberg-Marquardt's first damping, relative to the diagonal of JᵀJ (Marquardt's scaling): the
+/// first step is about 1/100 of the Gauss-Newton step in each variable's own metric, and grows up
+/// to 3× per accepted step. Being relative, the steps are the same whatever the size of the
+/// residuals or the scale of a variable. (An absolute start, `1e-3 · max_i (JᵀJ)_ii` as for an
+/// unscaled `λI`, multiplied by the diagonal made the first steps `max (JᵀJ)_ii` times shorter
+/// than intended: with large whitened residuals, or a start far from the variables' scale, the
+/// first step fell under the step tolerance and the fit "converged" after 0 iterations where it
+/// began. A cautious first step is kept: a near Gauss-Newton first step (1e-3) lands in other
+/// basins of these multimodal fits — on FWD-32J without the actuator, seed 11, J 9028 instead of
+/// 126.7.)
+const INITIAL_DAMPING: f64 = 1e2;
+
+/// The state at the trial point `accepted` in iteration `it` after `s` (with the step's norm);
+/// the outcome instead when none was, when it cannot be evaluated in full, or when a tolerance
+/// stops the run.
+fn advance(
+    run: &mut Run,
+    s: &State,
+    accepted: Option<(Trial, f64)>,
+    it: usize,
+) -> Result<State, Outcome> {
+    let Some((t, sn)) = accepted else {
+        return Err(outcome(s, it - 1, StopReason::NoFurtherDecrease));
+    };
+    let new =
+        complete(run.obj, t).map_err(|m| outcome(s, it, StopReason::Diverged(m.to_string())))?;
+    match after_step(run, &new, (s.cost, sn, it), true) {
+        Some(o) => Err(o),
+        None => Ok(new),
+    }
+}
+
+fn levenberg_marquardt(run: &mut Run, mut s: State) -> Outcome {
     let n = s.u.len();
     let mut diag = vec![0.0f64; n];
     let mut lambda: Option<f64> = None;
     let mut nu = 2.0;
-    for it in 1..=set.max_iterations {
+    for it in 1..=run.set.max_iterations {
         let a = s.jac.tr_mul(&s.jac);
-        let free = free_set(&s.u, &s.g, lo, hi);
-        if gradient_converged(&s, &free, set.gradient_tol) {
+        let free = free_set(&s.u, &s.g, run.lo, run.hi);
+        if gradient_converged(&s, &free, run.set.gradient_tol) {
             return outcome(&s, it - 1, StopReason::GradientTolerance);
         }
         let idx: Vec<usize> = (0..n).filter(|&i| free[i]).collect();
@@ -349,11 +382,13 @@ fn levenberg_marquardt(
             .map(|&i| diag[i])
             .fold(0.0, f64::max)
             .max(f64::MIN_POSITIVE);
-        let mut lam = lambda.unwrap_or(1e-3 * dmax);
+        // The damping multiplies D = diag(JᵀJ) (Marquardt's scaling), so λ is a pure number:
+        // the step is the same whatever the size of the residuals or the scale of a variable.
+        let mut lam = lambda.unwrap_or(INITIAL_DAMPING);
         let mut tries = 0;
         let accepted = loop {
             tries += 1;
-            if tries > 60 || lam > 1e30 * dmax {
+            if tries > 60 || lam > 1e30 {
                 break None;
             }
             let k = idx.len();
@@ -376,14 +411,14 @@ fn levenberg_marquardt(
             for (p, &i) in idx.iter().enumerate() {
                 un[i] += d[p];
             }
-            let un = clamp(&un, lo, hi);
+            let un = clamp(&un, run.lo, run.hi);
             let step = &un - &s.u;
             let sn = step.norm();
-            if step_small(sn, &s.u, set.step_tol) {
+            if step_small(sn, &s.u, run.set.step_tol) {
                 return outcome(&s, it - 1, StopReason::StepTolerance);
             }
             let pred = -(s.g.dot(&step) + 0.5 * step.dot(&(&a * &step)));
-            match trial(obj, un) {
+            match trial(run.obj, un) {
                 Ok(t) if t.0 < s.cost && pred > 0.0 => {
                     let rho = (s.cost - t.0) / pred;
                     if rho > 1e-4 {
@@ -401,20 +436,12 @@ fn levenberg_marquardt(
             }
         };
         lambda = Some(lam);
-        let Some((t, sn)) = accepted else {
-            return outcome(&s, it - 1, StopReason::NoFurtherDecrease);
-        };
-        let old = s.cost;
-        let new = match complete(obj, t) {
-            Ok(ns) => ns,
-            Err(m) => return outcome(&s, it, StopReason::Diverged(m.to_string())),
-        };
-        s = new;
-        if let Some(o) = after_step(&s, old, sn, it, lo, hi, set, true, progress) {
-            return o;
+        match advance(run, &s, accepted, it) {
+            Ok(next) => s = next,
+            Err(o) => return o,
         }
     }
-    at_limit(&s, lo, hi, set)
+    at_limit(run, &s)
 }
 
 /// Gauss-Newton direction on the free variables by SVD (singular values below 1e-12 of the
@@ -438,17 +465,10 @@ fn gauss_newton_direction(s: &State, free: &[bool]) -> DVector<f64> {
     d
 }
 
-fn gauss_newton(
-    obj: &mut dyn Residuals,
-    mut s: State,
-    lo: &DVector<f64>,
-    hi: &DVector<f64>,
-    set: &Settings,
-    progress: &mut dyn FnMut(&Progress),
-) -> Outcome {
-    for it in 1..=set.max_iterations {
-        let free = free_set(&s.u, &s.g, lo, hi);
-        if gradient_converged(&s, &free, set.gradient_tol) {
+fn gauss_newton(run: &mut Run, mut s: State) -> Outcome {
+    for it in 1..=run.set.max_iterations {
+        let free = free_set(&s.u, &s.g, run.lo, run.hi);
+        if gradient_converged(&s, &free, run.set.gradient_tol) {
             return outcome(&s, it - 1, StopReason::GradientTolerance);
         }
         let mut d = gauss_newton_direction(&s, &free);
@@ -459,14 +479,14 @@ fn gauss_newton(
         let mut alpha = 1.0;
         let mut accepted = None;
         for _ in 0..40 {
-            let un = clamp(&(&s.u + &d * alpha), lo, hi);
+            let un = clamp(&(&s.u + &d * alpha), run.lo, run.hi);
             let step = &un - &s.u;
             let sn = step.norm();
-            if step_small(sn, &s.u, set.step_tol) {
+            if step_small(sn, &s.u, run.set.step_tol) {
                 return outcome(&s, it - 1, StopReason::StepTolerance);
             }
             let slope = s.g.dot(&step);
-            match trial(obj, un) {
+            match trial(run.obj, un) {
                 Ok(t) if t.0 <= s.cost + 1e-4 * slope && t.0 < s.cost => {
                     accepted = Some((t, sn));
                     break;
@@ -480,19 +500,12 @@ fn gauss_newton(
                 Err(_) => alpha *= 0.25,
             }
         }
-        let Some((t, sn)) = accepted else {
-            return outcome(&s, it - 1, StopReason::NoFurtherDecrease);
-        };
-        let old = s.cost;
-        s = match complete(obj, t) {
-            Ok(ns) => ns,
-            Err(m) => return outcome(&s, it, StopReason::Diverged(m.to_string())),
-        };
-        if let Some(o) = after_step(&s, old, sn, it, lo, hi, set, true, progress) {
-            return o;
+        match advance(run, &s, accepted, it) {
+            Ok(next) => s = next,
+            Err(o) => return o,
         }
     }
-    at_limit(&s, lo, hi, set)
+    at_limit(run, &s)
 }
 
 /// A point on the search line: the state and φ'(α) = ∇J·d there.
@@ -606,21 +619,14 @@ fn wolfe_search(
     prev
 }
 
-fn bfgs(
-    obj: &mut dyn Residuals,
-    mut s: State,
-    lo: &DVector<f64>,
-    hi: &DVector<f64>,
-    set: &Settings,
-    progress: &mut dyn FnMut(&Progress),
-) -> Outcome {
+fn bfgs(run: &mut Run, mut s: State) -> Outcome {
     let n = s.u.len();
     let mut hinv = DMatrix::<f64>::identity(n, n);
     let mut fresh = true;
     let mut prev_free: Option<Vec<bool>> = None;
-    for it in 1..=set.max_iterations {
-        let free = free_set(&s.u, &s.g, lo, hi);
-        if gradient_converged(&s, &free, set.gradient_tol) {
+    for it in 1..=run.set.max_iterations {
+        let free = free_set(&s.u, &s.g, run.lo, run.hi);
+        if gradient_converged(&s, &free, run.set.gradient_tol) {
             return outcome(&s, it - 1, StopReason::GradientTolerance);
         }
         if prev_free.as_ref() != Some(&free) {
@@ -632,7 +638,7 @@ fn bfgs(
         // Components that would leave the box at once are dropped (the quasi-Newton direction
         // can point outward where the gradient points inward).
         let blocked = |i: usize, di: f64| {
-            !free[i] || (s.u[i] >= hi[i] && di > 0.0) || (s.u[i] <= lo[i] && di < 0.0)
+            !free[i] || (s.u[i] >= run.hi[i] && di > 0.0) || (s.u[i] <= run.lo[i] && di < 0.0)
         };
         let mut d = -(&hinv * &gf);
         for i in 0..n {
@@ -652,10 +658,10 @@ fn bfgs(
         }
         let mut alpha_max = f64::INFINITY;
         for i in 0..n {
-            if d[i] < 0.0 && lo[i].is_finite() {
-                alpha_max = alpha_max.min((lo[i] - s.u[i]) / d[i]);
-            } else if d[i] > 0.0 && hi[i].is_finite() {
-                alpha_max = alpha_max.min((hi[i] - s.u[i]) / d[i]);
+            if d[i] < 0.0 && run.lo[i].is_finite() {
+                alpha_max = alpha_max.min((run.lo[i] - s.u[i]) / d[i]);
+            } else if d[i] > 0.0 && run.hi[i].is_finite() {
+                alpha_max = alpha_max.min((run.hi[i] - s.u[i]) / d[i]);
             }
         }
         let alpha_max = alpha_max.max(0.0);
@@ -665,7 +671,7 @@ fn bfgs(
         } else {
             1.0
         };
-        let Some(p) = wolfe_search(obj, &s, &d, alpha0, alpha_max, lo, hi) else {
+        let Some(p) = wolfe_search(run.obj, &s, &d, alpha0, alpha_max, run.lo, run.hi) else {
             return outcome(&s, it - 1, StopReason::NoFurtherDecrease);
         };
         if p.s.cost >= s.cost {
@@ -690,11 +696,11 @@ fn bfgs(
         let sn = step.norm();
         s = p.s;
         // A (short) steepest-descent step after a restart says little about convergence.
-        if let Some(o) = after_step(&s, old, sn, it, lo, hi, set, !was_fresh, progress) {
+        if let Some(o) = after_step(run, &s, (old, sn, it), !was_fresh) {
             return o;
         }
     }
-    at_limit(&s, lo, hi, set)
+    at_limit(run, &s)
 }
 
 #[cfg(test)]
@@ -763,6 +769,73 @@ mod tests {
             let o = rosenbrock(m, [-10.0; 2], [0.5, 10.0], 500);
             assert_eq!(o.u[0], 0.5, "{m:?}");
             assert!((o.u[1] - 0.25).abs() < 1e-5, "{m:?}: {:?}", o.u);
+        }
+    }
+
+    /// Rosenbrock with its residuals multiplied by `c` and its variables by `s`
+    /// (`x = s ∘ u`): the same problem in other units.
+    struct ScaledRosen {
+        c: f64,
+        s: [f64; 2],
+    }
+    impl Residuals for ScaledRosen {
+        fn eval(
+            &mut self,
+            u: &DVector<f64>,
+            jacobian: bool,
+        ) -> Result<(DVector<f64>, Option<DMatrix<f64>>), EvalError> {
+            let (c, [s0, s1]) = (self.c, self.s);
+            let x = [s0 * u[0], s1 * u[1]];
+            let e = DVector::from_vec(vec![10.0 * c * (x[1] - x[0] * x[0]), c * (1.0 - x[0])]);
+            let j = jacobian.then(|| {
+                DMatrix::from_row_slice(2, 2, &[-20.0 * c * x[0] * s0, 10.0 * c * s1, -c * s0, 0.0])
+            });
+            Ok((e, j))
+        }
+        fn cheap_jacobian(&self) -> bool {
+            true
+        }
+    }
+
+    #[test]
+    fn levenberg_marquardt_takes_the_same_steps_in_any_units() {
+        // Large whitened residuals (small σ, many lines) and a start far from the variables'
+        // scale: the damping used to start at 1e-3 max (JᵀJ)_ii on top of Marquardt's diagonal,
+        // so with c = 1e8 the first step was 1e13 times too short, fell under the step
+        // tolerance, and the fit "converged" after 0 iterations at its start.
+        let run = |c: f64, s: [f64; 2]| {
+            let u0 = DVector::from_vec(vec![-1.2 / s[0], 1.0 / s[1]]);
+            minimize(
+                Optimizer::LevenbergMarquardt,
+                &mut ScaledRosen { c, s },
+                &u0,
+                &DVector::from_element(2, -1e9),
+                &DVector::from_element(2, 1e9),
+                &Settings {
+                    max_iterations: 500,
+                    ..Settings::default()
+                },
+                &mut |_| {},
+            )
+            .unwrap()
+        };
+        let plain = run(1.0, [1.0, 1.0]);
+        assert!(plain.stop.converged() && plain.iterations > 5, "{plain:?}");
+        for c in [1e8, 1e3, 1e-4] {
+            for s in [[1.0, 1.0], [10.0, 0.1], [1e-3, 1e2]] {
+                let o = run(c, s);
+                let x = [o.u[0] * s[0], o.u[1] * s[1]];
+                assert!(
+                    o.stop.converged() && (x[0] - 1.0).abs() < 1e-5 && (x[1] - 1.0).abs() < 1e-5,
+                    "c {c}, s {s:?}: {o:?}"
+                );
+                assert!(
+                    o.iterations.abs_diff(plain.iterations) <= 2,
+                    "c {c}, s {s:?}: {} iterations against {}",
+                    o.iterations,
+                    plain.iterations
+                );
+            }
         }
     }
 

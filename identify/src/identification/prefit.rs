@@ -90,12 +90,7 @@ fn elastic_modes(model: &Model, sys: &System) -> Result<Vec<(f64, Vec<f64>)>, Pr
         .filter(|m| m.freq_hz > 1e-6 * top)
         .map(|m| {
             let phi: Vec<f64> = m.shape.iter().map(|v| v.re).collect();
-            let norm: f64 = phi
-                .iter()
-                .zip(&sys.mass)
-                .map(|(p, m)| m * p * p)
-                .sum::<f64>()
-                .sqrt();
+            let norm = sys.mass_inner(&phi, &phi).sqrt();
             let w = 2.0 * std::f64::consts::PI * m.freq_hz;
             (w * w, phi.iter().map(|p| p / norm).collect())
         })
@@ -115,11 +110,9 @@ fn mac(a: &[C64], b: &[C64]) -> f64 {
 }
 
 /// Mass-weighted MAC of two model shapes (mode tracking).
-fn mac_mass(a: &[f64], b: &[f64], mass: &[f64]) -> f64 {
-    let ab: f64 = a.iter().zip(b).zip(mass).map(|((x, y), m)| m * x * y).sum();
-    let aa: f64 = a.iter().zip(mass).map(|(x, m)| m * x * x).sum();
-    let bb: f64 = b.iter().zip(mass).map(|(x, m)| m * x * x).sum();
-    ab * ab / (aa * bb)
+fn mac_mass(a: &[f64], b: &[f64], sys: &System) -> f64 {
+    let ab = sys.mass_inner(a, b);
+    ab * ab / (sys.mass_inner(a, a) * sys.mass_inner(b, b))
 }
 
 fn shape_at_outputs(sys: &System, phi: &[f64]) -> Vec<C64> {
@@ -312,11 +305,7 @@ pub fn modal_prefit(
                 let j = (0..modes.len())
                     .filter(|&j| !taken[j])
                     .max_by(|&a, &b| {
-                        mac_mass(s, &modes[a].1, &sn.mass).total_cmp(&mac_mass(
-                            s,
-                            &modes[b].1,
-                            &sn.mass,
-                        ))
+                        mac_mass(s, &modes[a].1, &sn).total_cmp(&mac_mass(s, &modes[b].1, &sn))
                     })
                     .unwrap_or(0);
                 taken[j] = true;

@@ -31,8 +31,10 @@ pub const FORMAT: &str = "ident identification problem 1";
 ///   the SDE's six stiffnesses (N/m, N·m/rad) and six ψ per unit of the variable. Every law is
 ///   linear in its parameters, so `k(x) = k(x0) + Σ_v (x_v − x0_v) dk_v`, likewise ψ. A body's
 ///   mass or inertia is a term `body` (index into `model.bodies`), `dm` (change of its
-///   `[m, m, m, J1, J2, J3]` per unit of the variable); a sensor gain a term `gain` (`body`,
-///   `dof`) with its `ratio` (the model output of that characteristic is multiplied by it).
+///   `[m, m, m, J1, J2, J3]` per unit of the variable); a point mass a term `point_mass` (index
+///   into `model.point_masses`), `dmass` (change of its mass per unit of the variable); a sensor
+///   gain a term `gain` (`body`, `dof`) with its `ratio` (the model output of that
+///   characteristic is multiplied by it).
 pub fn to_json(
     model: &Model,
     data: &Observations,
@@ -59,6 +61,10 @@ pub fn to_json(
                         "gain": {"body": at_initial.bodies[body].name, "dof": DOF_NAMES[dof as usize % 6]},
                         "ratio": t.ratio,
                     }));
+                    continue;
+                }
+                Param::PointMass { index } => {
+                    terms.push(json!({ "point_mass": index, "dmass": t.ratio }));
                     continue;
                 }
                 other => {

@@ -101,6 +101,8 @@ pub enum On {
     Bodies,
     /// `characteristics = …`: sensor gains.
     Characteristics,
+    /// `point_masses = …`: masses added to bodies at points (`[[point_mass]]`).
+    PointMasses,
 }
 
 impl On {
@@ -110,6 +112,7 @@ impl On {
             On::Sdes => "sdes",
             On::Bodies => "bodies",
             On::Characteristics => "characteristics",
+            On::PointMasses => "point_masses",
         }
     }
 }
@@ -121,6 +124,10 @@ pub struct Variables {
     pub origin: String,
     /// The variables, in file order.
     pub vars: Vec<Variable>,
+    /// Further starting points (SI, one value per variable) tried after the initial values
+    /// and before any Latin-hypercube starts: e.g. a modal pre-fit's (`ident identify --start
+    /// auto`). The best fit of all is kept.
+    pub extra_starts: Vec<Vec<f64>>,
 }
 
 impl Variables {
@@ -219,6 +226,8 @@ struct RawVariable {
     bodies: Option<Spanned<SdeList>>,
     #[serde(alias = "characteristic")]
     characteristics: Option<Spanned<SdeList>>,
+    #[serde(alias = "point_mass")]
+    point_masses: Option<Spanned<SdeList>>,
     parameter: Spanned<String>,
     initial: Option<Spanned<Quantity>>,
     lower: Option<Spanned<Quantity>>,
@@ -238,6 +247,7 @@ impl RawVariable {
             (On::Sdes, &self.sdes),
             (On::Bodies, &self.bodies),
             (On::Characteristics, &self.characteristics),
+            (On::PointMasses, &self.point_masses),
         ]
         .into_iter()
         .filter_map(|(on, l)| l.as_ref().map(|l| (on, l)))
@@ -254,6 +264,13 @@ impl RawVariable {
             Ok((_, l)) => l.span(),
             Err(_) => self.parameter.span(),
         }
+    }
+
+    /// Where `key` is written, or the element names when it is not.
+    fn span_or_names<T>(&self, key: &Option<Spanned<T>>) -> Range<usize> {
+        key.as_ref()
+            .map(|k| k.span())
+            .unwrap_or_else(|| self.names_span())
     }
 }
 
@@ -411,6 +428,7 @@ pub fn parse(text: &str, origin: &str, model: &Model) -> Result<Variables, VarsE
     Ok(Variables {
         origin: origin.into(),
         vars,
+        extra_starts: Vec::new(),
     })
 }
 
@@ -435,9 +453,9 @@ fn variable(
         cx.at(
             rv.parameter.span(),
             if given == 0 {
-                "no `sdes`, `bodies` or `characteristics`: name what the variable sets (e.g. sdes = \"2-10\", bodies = \"table\", characteristics = \"table u1\")"
+                "no `sdes`, `bodies`, `characteristics` or `point_masses`: name what the variable sets (e.g. sdes = \"2-10\", bodies = \"table\", characteristics = \"table u1\", point_masses = \"force gauge\")"
             } else {
-                "more than one of `sdes`, `bodies`, `characteristics`: a variable sets parameters of one kind; split it into several [[variable]] tables"
+                "more than one of `sdes`, `bodies`, `characteristics`, `point_masses`: a variable sets parameters of one kind; split it into several [[variable]] tables"
             },
         )
     })?;
@@ -454,6 +472,10 @@ fn variable(
         On::Characteristics if pname == "gain" => Kind::Gain,
         On::Characteristics => return Err(cx.at(rv.parameter.span(), format!(
             "unknown parameter \"{pname}\" of a characteristic; the one there is is parameter = \"gain\""
+        ))),
+        On::PointMasses if pname == "m" => Kind::PointMass,
+        On::PointMasses => return Err(cx.at(rv.parameter.span(), format!(
+            "unknown parameter \"{pname}\" of a point mass; the one there is is parameter = \"m\" (its mass, kg)"
         ))),
     };
     let tie = match rv.tie.as_ref().map(|t| t.get_ref().as_str()) {
@@ -483,11 +505,7 @@ fn variable(
         None => format!("{pname} {}", compress(&names)),
     };
     if earlier.iter().any(|v| v.name == name) {
-        let span = rv
-            .name
-            .as_ref()
-            .map(|n| n.span())
-            .unwrap_or(rv.names_span());
+        let span = rv.span_or_names(&rv.name);
         return Err(cx.at(
             span,
             format!("a variable named \"{name}\" already exists; give it another `name`"),
@@ -537,6 +555,7 @@ fn variable(
         sdes: match on {
             On::Sdes | On::Characteristics => compress(&names),
             On::Bodies => format!("body {}", names.join(", ")),
+            On::PointMasses => format!("point mass {}", names.join(", ")),
         },
         on,
         parameter: pname.to_string(),
@@ -559,6 +578,8 @@ enum Kind {
     Body(Vec<Option<u8>>),
     /// The gain of each characteristic.
     Gain,
+    /// The mass of each point mass.
+    PointMass,
 }
 
 impl Kind {
@@ -646,6 +667,20 @@ fn element_targets(
                     dof: d as u8,
                 });
             }
+            Kind::PointMass => {
+                let Some(index) = model.point_mass_index(n) else {
+                    let known: Vec<&str> =
+                        model.point_masses.iter().map(|p| p.name.as_str()).collect();
+                    return Err(cx.at(
+                        span,
+                        format!(
+                            "point_masses: unknown point mass \"{n}\"; the model's [[point_mass]] names: {}",
+                            if known.is_empty() { "none (declare it in the model file)".to_string() } else { known.join(", ") }
+                        ),
+                    ));
+                };
+                params.push(Param::PointMass { index });
+            }
             Kind::Sde(_) => {}
         }
     }
@@ -654,7 +689,7 @@ fn element_targets(
     let mut dim: Option<Dim> = None;
     for p in params {
         let d = match p {
-            Param::Mass { .. } => Dim::MASS,
+            Param::Mass { .. } | Param::PointMass { .. } => Dim::MASS,
             Param::Inertia { .. } => Dim::INERTIA,
             _ => Dim::NONE,
         };
@@ -727,11 +762,7 @@ fn values(
         },
     };
     if positive && !(initial > 0.0 && initial.is_finite()) {
-        let span = rv
-            .initial
-            .as_ref()
-            .map(|v| v.span())
-            .unwrap_or(rv.names_span());
+        let span = rv.span_or_names(&rv.initial);
         return Err(cx.at(
             span,
             format!(
@@ -785,11 +816,7 @@ fn values(
         None => f64::INFINITY,
     };
     if initial < lower || initial > upper {
-        let span = rv
-            .initial
-            .as_ref()
-            .map(|v| v.span())
-            .unwrap_or(rv.names_span());
+        let span = rv.span_or_names(&rv.initial);
         return Err(cx.at(span, format!(
             "initial value {} {} is outside the bounds [{}, {}] {}; move it inside or widen the bounds",
             initial / unit.factor, unit.symbol, lower / unit.factor, upper / unit.factor, unit.symbol
@@ -823,11 +850,7 @@ fn natural_scale(
         None if initial.abs() > 0.0 => initial.abs(),
         None if upper.is_finite() => upper - lower,
         None => {
-            let span = rv
-                .initial
-                .as_ref()
-                .map(|v| v.span())
-                .unwrap_or(rv.names_span());
+            let span = rv.span_or_names(&rv.initial);
             return Err(cx.at(span, format!(
                 "initial value is 0 and there is no upper bound, so the variable has no natural scale; give `scale` (e.g. scale = \"1 {}\") or an `upper` bound",
                 unit.symbol

@@ -2,7 +2,7 @@
 //! instruments give, as their programming manuals show them.
 
 use super::*;
-use crate::shaker::scpi::LineBuffer;
+use crate::shaker::scpi::{Line, LineBuffer};
 use crate::transport::MemoryTransport;
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use tokio::task::JoinHandle;
