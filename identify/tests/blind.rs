@@ -68,9 +68,11 @@ fn the_blind_subset_is_diagnosed_at_the_asserted_rates() {
     assert!(r.exact >= EXACT, "{r:?}");
 }
 
-/// Share of the subset's cases with effects whose first added effect is an injected one.
-const RIGHT_FIRST: f64 = 0.6;
-/// Share of the subset's cases that end with exactly the injected set.
+/// Share of the subset's cases with effects whose first added effect is an injected one. The
+/// subset gets 4 of its 6 (seeds 1-10); one case of margin.
+const RIGHT_FIRST: f64 = 0.5;
+/// Share of the subset's cases that end with exactly the injected set. The subset gets 8 of 10;
+/// one case of margin.
 const EXACT: f64 = 0.7;
 
 #[test]

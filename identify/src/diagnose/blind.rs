@@ -142,9 +142,8 @@ pub fn same_site(a: &Effect, b: &Effect) -> bool {
             Flexible {
                 body: y, axis: j, ..
             },
-        ) => x == y && i == j,
-        (Gain { output: x, .. }, Gain { output: y, .. }) => x == y,
-        (
+        )
+        | (
             Direction {
                 sde: x, axis: i, ..
             },
@@ -152,6 +151,7 @@ pub fn same_site(a: &Effect, b: &Effect) -> bool {
                 sde: y, axis: j, ..
             },
         ) => x == y && i == j,
+        (Gain { output: x, .. }, Gain { output: y, .. }) => x == y,
         (BodyMass { body: x, .. }, BodyMass { body: y, .. }) => x == y,
         (
             Damping {
