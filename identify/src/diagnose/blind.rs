@@ -357,11 +357,7 @@ pub fn draw(
     if kinds.is_empty() {
         return Err(BlindError::NoCandidates);
     }
-    let mut truth = Realized {
-        model: model.clone(),
-        vars: vars.clone(),
-        gains: vec![1.0; model.outputs.len()],
-    };
+    let mut truth = pristine(model, vars);
     let mut injected: Vec<Injected> = Vec::new();
     let mut attempts = 0;
     while injected.len() < n_effects && attempts < 200 {
@@ -372,26 +368,10 @@ pub fn draw(
         if injected.iter().any(|i| same_site(&i.effect, &effect)) {
             continue;
         }
-        let q0 = amplitudes(&truth, lines)?;
         let signal = SIGNAL.0 * (SIGNAL.1 / SIGNAL.0).powf(rng.random::<f64>());
-        let Some((values, got)) = sized(
-            &truth,
-            &effect,
-            &q0,
-            lines,
-            (noise, f_max),
-            signal,
-            &mut rng,
-        )?
-        else {
-            continue;
-        };
-        effect.apply(&mut truth, &values, f_max)?;
-        injected.push(Injected {
-            effect,
-            values,
-            signal: got,
-        });
+        if let Some(i) = inject(&mut truth, &effect, lines, (signal, noise), &mut rng)? {
+            injected.push(i);
+        }
     }
     finish(
         (&truth, injected),
@@ -414,31 +394,50 @@ pub fn with_effect(
     seed: u64,
 ) -> Result<Option<BlindCase>, BlindError> {
     let mut rng = StdRng::seed_from_u64(seed);
-    let f_max = lines.iter().copied().fold(0.0, f64::max);
     let x = truth_values(model, vars);
-    let mut truth = Realized {
-        model: model.clone(),
-        vars: vars.clone(),
-        gains: vec![1.0; model.outputs.len()],
-    };
-    let q0 = amplitudes(&truth, lines)?;
-    let Some((values, got)) = sized(&truth, effect, &q0, lines, (noise, f_max), signal, &mut rng)?
-    else {
+    let mut truth = pristine(model, vars);
+    let Some(injected) = inject(&mut truth, effect, lines, (signal, noise), &mut rng)? else {
         return Ok(None);
     };
-    effect.apply(&mut truth, &values, f_max)?;
-    let injected = vec![Injected {
-        effect: effect.clone(),
-        values,
-        signal: got,
-    }];
     finish(
-        (&truth, injected),
+        (&truth, vec![injected]),
         (vars, &x),
         (lines, noise),
         (&mut rng, seed),
     )
     .map(Some)
+}
+
+/// The truth before any effect: `model` with `vars`, every gain 1.
+fn pristine(model: &Model, vars: &Variables) -> Realized {
+    Realized {
+        model: model.clone(),
+        vars: vars.clone(),
+        gains: vec![1.0; model.outputs.len()],
+    }
+}
+
+/// Injects `effect` into `truth` sized so that the part of its noise-free change of the data at
+/// `lines` the variables cannot absorb is `signal` (χ² units at relative noise `noise`);
+/// `None` (and `truth` unchanged) when no size of the effect reaches it.
+fn inject(
+    truth: &mut Realized,
+    effect: &Effect,
+    lines: &[f64],
+    (signal, noise): (f64, f64),
+    rng: &mut StdRng,
+) -> Result<Option<Injected>, BlindError> {
+    let f_max = lines.iter().copied().fold(0.0, f64::max);
+    let q0 = amplitudes(truth, lines)?;
+    let Some((values, got)) = sized(truth, effect, &q0, lines, (noise, f_max), signal, rng)? else {
+        return Ok(None);
+    };
+    effect.apply(truth, &values, f_max)?;
+    Ok(Some(Injected {
+        effect: effect.clone(),
+        values,
+        signal: got,
+    }))
 }
 
 /// The variables' values in `model` (a variable whose parameter is not found keeps its initial
