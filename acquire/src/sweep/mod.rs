@@ -400,27 +400,21 @@ impl<'a> Pump<'a> {
         }
     }
 
-    /// Reads (and records) the blocks the port or socket already holds, so that the next block
-    /// read was produced after the last command: settling is counted from there. Blocks queued
-    /// while the host was busy (a slow host, an emulated machine) must not count as settled
-    /// data. Caught up = a read has to wait, or the host has read as many samples as the DAQ can
-    /// have produced since START (wall-clock time × sample rate × the simulated stand's speed).
-    async fn catch_up(&mut self, fault: &mut bool) -> Result<(), SweepError> {
-        let block_s = f64::from(self.rig.stream.samples_per_block) / self.samples_per_wall_s;
-        let wait = std::time::Duration::from_secs_f64((0.5 * block_s).max(5e-4));
-        let cap = self.next_sample + (2.0 * self.samples_per_wall_s) as u64;
-        loop {
-            let produced = (self.started.elapsed().as_secs_f64() * self.samples_per_wall_s) as u64;
-            if self.next_sample >= produced || self.next_sample >= cap {
-                return Ok(());
-            }
-            match tokio::time::timeout(wait, self.next(fault)).await {
-                Err(_) => return Ok(()),
-                Ok(r) => {
-                    r?;
-                }
-            }
-        }
+    /// The first sample the DAQ takes after now: the samples before it were taken before the
+    /// last command reached the exciter, so settling counts from there. It comes from the DAQ's
+    /// sample clock — the host's own where it paces the sampling
+    /// ([`crate::daq::Daq::sample_clock`]), else wall-clock time since START × sample rate × the
+    /// simulated stand's speed — and not from what the host has read so far: blocks that arrive
+    /// late (a busy or emulated host, a buffering link) are stale however long the host took to
+    /// read them. At most two seconds of stream ahead of what was read (a simulated DAQ slowed
+    /// down by its host runs behind the wall clock, and its stream must not be waited for in
+    /// vain).
+    fn fresh_from(&self) -> u64 {
+        let clock = self.rig.daq.sample_clock().unwrap_or_else(|| {
+            (self.started.elapsed().as_secs_f64() * self.samples_per_wall_s) as u64
+        });
+        let ahead = (2.0 * self.samples_per_wall_s) as u64;
+        clock.clamp(self.next_sample, self.next_sample + ahead)
     }
 }
 
@@ -853,8 +847,9 @@ enum Window {
     Stopped,
 }
 
-/// Catches up with the stream, lets `settle` samples pass, then collects `window` samples into
-/// `estimator`. Faults while settling do not touch the window: it starts after them.
+/// Lets `settle` samples pass from the first sample taken after now ([`Pump::fresh_from`]; the
+/// blocks before it are read and recorded), then collects `window` samples into `estimator`.
+/// Faults while settling do not touch the window: it starts after them.
 async fn measure_window(
     pump: &mut Pump<'_>,
     estimator: &mut StepEstimator,
@@ -866,8 +861,7 @@ async fn measure_window(
         return Ok(Window::Stopped);
     }
     let mut fault = false;
-    pump.catch_up(&mut fault).await?;
-    let start = pump.next_sample + settle;
+    let start = pump.fresh_from() + settle;
     estimator.clear();
     let mut window_first = None;
     while (estimator.len() as u64) < window {
