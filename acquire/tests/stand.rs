@@ -944,3 +944,77 @@ async fn blocks_arriving_late_never_feed_the_force_loop_stale_data() {
     })
     .await
 }
+
+/// The loop's first drive assumes a path gain of 1; this shaker delivers 1.15 times its command,
+/// so the first reading clips the force channel (4.6 kN on a 4.44 kN full scale). The target
+/// lies within the range, so the loop drives less (the force estimated from the share of clipped
+/// samples) and measures every line unclipped; no clipped window is kept. A clipped force beyond
+/// the exciter's limit (a shaker delivering twice its command: 8 kN on a 6 kN exciter) still
+/// stops the sweep, with the output off and no line kept.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_clipped_settling_reading_drives_less_and_an_over_force_still_stops() {
+    bounded(120, async {
+        let mut stand = sim_stand(10.0);
+        stand.truth.as_mut().unwrap().shaker_gain = 1.15;
+        let plan = quick_plan(3);
+        let (_d, path) = temp_file("clipped.mcap");
+        let (r, _sim) = sweep_to_the_end(&stand, &plan, &path).await;
+        let o = r.unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(o.steps.len(), 3);
+        let rs = records(&path);
+        let controls: Vec<&str> = topic(&rs, "/sweep/event")
+            .iter()
+            .filter(|r| r.value["kind"] == "force_control")
+            .filter_map(|r| r.value["detail"].as_str())
+            .collect();
+        // The clipped force, estimated from the share of samples at the rails, is what the
+        // shaker delivered: 4000 N × 1.15 × |1 / (1 + j 40/350)| = 4570 N.
+        let estimated: f64 = controls[0]
+            .strip_prefix("force clipped at the input range (≈ ")
+            .and_then(|d| d.split(' ').next())
+            .and_then(|n| n.parse().ok())
+            .unwrap_or_else(|| panic!("{controls:?}"));
+        let t = stand.truth.as_ref().unwrap();
+        let delivered = 4000.0 * 1.15 / (1.0 + (40.0 / t.shaker_cutoff_hz).powi(2)).sqrt();
+        assert!(
+            (estimated - delivered).abs() < 0.02 * delivered,
+            "{estimated} vs {delivered}"
+        );
+        assert_lines_at_their_drive(&stand, &plan, &path);
+        for s in &o.steps {
+            let peak = window_force_peak_volts(&rs, s);
+            assert!(
+                peak < 0.999 * stand.daq.input_range_v,
+                "{} Hz: {peak} V",
+                s.frequency_hz
+            );
+        }
+
+        stand.truth.as_mut().unwrap().shaker_gain = 2.0;
+        let (_d, path) = temp_file("over.mcap");
+        let (r, sim) = sweep_to_the_end(&stand, &plan, &path).await;
+        let e = r.unwrap_err();
+        assert!(matches!(e, SweepError::ForceClipped { step: 0, .. }), "{e}");
+        assert!(!sim.excitation().output_on, "output left on");
+        assert!(
+            topic(&records(&path), "/sweep/step").is_empty(),
+            "a clipped line was kept"
+        );
+    })
+    .await
+}
+
+/// The largest force-channel sample (V) of a step's measurement window in the recorded blocks.
+fn window_force_peak_volts(rs: &[acquire::session::Record], s: &sweep::StepResult) -> f64 {
+    let window = s.first_sample..s.first_sample + s.samples;
+    let mut peak = 0.0f64;
+    for b in topic(rs, "/daq/block") {
+        let first = b.value["first_sample"].as_u64().unwrap();
+        for (i, v) in b.value["volts"][0].as_array().unwrap().iter().enumerate() {
+            if window.contains(&(first + i as u64)) {
+                peak = peak.max(v.as_f64().unwrap().abs());
+            }
+        }
+    }
+    peak
+}
