@@ -12,9 +12,8 @@ use std::collections::BTreeSet;
 use std::path::Path;
 
 use acquire::generator::exciter::IDLE_V;
-use acquire::rig::Rig;
+use acquire::session;
 use acquire::session::records::{DriveKind, DriveRecord, SweepEvent};
-use acquire::session::{self, Session, SessionOptions};
 use acquire::sim::generator::GeneratorState;
 use acquire::sim::SimStand;
 use acquire::stand::{GeneratorAddress, Stand};
@@ -85,26 +84,11 @@ async fn run_over(
         };
         g.port = GeneratorAddress::Usbtmc(pty.clone());
     }
-    let session = Session::create(path, SessionOptions::default()).unwrap();
-    let h = session.handle();
-    sweep::log_session_start(&h, &stand.file, plan, None, &BTreeSet::new()).unwrap();
-    let r = async {
-        let mut rig = Rig::connect(&bound, Some(&h))
-            .await
-            .map_err(|e| e.to_string())?;
-        sweep::stepped_sine(
-            &mut rig,
-            plan,
-            &h,
-            &NoProgress,
-            &StopSignal::new(),
-            &BTreeSet::new(),
-        )
-        .await
-        .map_err(|e| e.to_string())
-    }
+    let r = recorded(stand, &bound, plan, path, async |rig, h| {
+        let none = BTreeSet::new();
+        sweep::stepped_sine(rig, plan, h, &NoProgress, &StopSignal::new(), &none).await
+    })
     .await;
-    session.finish().unwrap();
     let state = sim.generator_state().unwrap();
     let injected = sim.injected().iter().map(|f| f.kind).collect();
     (r, state, injected)

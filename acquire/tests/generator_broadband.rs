@@ -10,13 +10,11 @@
 
 mod util;
 
-use std::collections::BTreeSet;
 use std::path::Path;
 
 use acquire::generator::waveform;
-use acquire::rig::Rig;
+use acquire::session;
 use acquire::session::records::{DriveKind, DriveRecord};
-use acquire::session::{self, Session, SessionOptions};
 use acquire::shaker::Waveform;
 use acquire::sim::generator::GeneratorState;
 use acquire::sim::{SimSetup, SimStand};
@@ -55,19 +53,10 @@ async fn run(
 ) -> (Result<BroadbandResult, String>, GeneratorState) {
     let sim = SimStand::start(stand).unwrap();
     let bound = sim.bind(stand);
-    let session = Session::create(path, SessionOptions::default()).unwrap();
-    let h = session.handle();
-    sweep::log_session_start(&h, &stand.file, plan, None, &BTreeSet::new()).unwrap();
-    let r = async {
-        let mut rig = Rig::connect(&bound, Some(&h))
-            .await
-            .map_err(|e| e.to_string())?;
-        sweep::broadband(&mut rig, plan, &h, &NoProgress, &StopSignal::new())
-            .await
-            .map_err(|e| e.to_string())
-    }
+    let r = recorded(stand, &bound, plan, path, async |rig, h| {
+        sweep::broadband(rig, plan, h, &NoProgress, &StopSignal::new()).await
+    })
     .await;
-    session.finish().unwrap();
     (r, sim.generator_state().unwrap())
 }
 

@@ -1262,15 +1262,26 @@ fn sweep_over_vcan(
                 &StopSignal::new(),
                 &Default::default(),
             )
-            .await
-            .expect("sweep");
+            .await;
+            drop(rig);
             session.finish().expect("finish");
             sim.shutdown();
-            o
+            o.unwrap_or_else(|e| panic!("sweep: {e}\n{}", sweep_events(path)))
         })
         .await
         .unwrap_or_else(|_| panic!("sweep over vcan0 finishes within {limit_s} s"))
     })
+}
+
+/// The sweep's events recorded in the session at `path`, one a line: the force loop's trail
+/// (drives, corrections, retries) for a failure message.
+fn sweep_events(path: &Path) -> String {
+    util::records(path)
+        .iter()
+        .filter(|r| r.topic == "/sweep/event")
+        .map(|r| r.value.to_string())
+        .collect::<Vec<_>>()
+        .join("\n")
 }
 
 /// The session's steps recomputed from its raw blocks equal the live estimates, bit for bit;

@@ -253,6 +253,8 @@ pub struct CanOpenDaq {
     info: Option<StreamInfo>,
     sync_period: Duration,
     next_sync: Instant,
+    /// SYNCs sent since START: the node takes sample `syncs_sent` at the next one.
+    syncs_sent: u64,
     last_data: Instant,
     last_raw: Option<u32>,
     last_index: u64,
@@ -301,6 +303,7 @@ impl CanOpenDaq {
             info: None,
             sync_period: Duration::from_millis(1),
             next_sync: now,
+            syncs_sent: 0,
             last_data: now,
             last_raw: None,
             last_index: 0,
@@ -450,6 +453,7 @@ impl CanOpenDaq {
             if now >= self.next_sync {
                 let f = WireFrame::from_parts(CanId::Standard(SYNC_ID), FrameKind::Classic, &[]);
                 self.link.send(&f).await.map_err(|e| self.can_err(e))?;
+                self.syncs_sent += 1;
                 self.next_sync += self.sync_period;
                 if now > self.next_sync + self.sync_period * 1000 {
                     // Far behind (the host was busy): resume from now instead of a burst.
@@ -861,6 +865,7 @@ impl Daq for CanOpenDaq {
         self.nmt(NmtCommand::Start).await?;
         let now = Instant::now();
         self.next_sync = now;
+        self.syncs_sent = 0;
         self.last_data = now;
         self.monitor.streaming = true;
         self.monitor.heartbeat_lost = false;
@@ -903,5 +908,12 @@ impl Daq for CanOpenDaq {
         self.monitor.pending.clear();
         self.link.flush();
         Ok(())
+    }
+
+    /// The node samples on each SYNC this master sends, and only then: while the host is busy
+    /// elsewhere no sample is taken, and a host far behind resumes from now (see `pump`), so the
+    /// node's sample clock is the SYNC count, not wall-clock time.
+    fn sample_clock(&self) -> Option<u64> {
+        Some(self.syncs_sent)
     }
 }

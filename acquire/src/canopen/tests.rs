@@ -405,7 +405,11 @@ async fn the_stream_arrives_loss_free_in_several_tpdos_with_the_node_scaling() {
         "{info:?}"
     );
     daq.start().await.expect("start");
+    assert_eq!(daq.sample_clock(), Some(0), "no SYNC sent yet");
     let (blocks, faults) = collect(&mut daq, 12).await;
+    // The node samples on each SYNC: the clock is past every delivered sample.
+    let clock = daq.sample_clock().expect("the master paces the sampling");
+    assert!(clock >= 12 * 16, "{clock}");
     assert_eq!(
         daq.node_state(),
         Some(NmtState::Operational),
@@ -422,6 +426,11 @@ async fn the_stream_arrives_loss_free_in_several_tpdos_with_the_node_scaling() {
     }
     let stats = stop_node(node).await;
     assert_eq!(stats.dropped, 0);
+    assert_eq!(
+        Some(stats.syncs),
+        daq.sample_clock(),
+        "one sample per SYNC sent"
+    );
     assert!(
         stats.tpdos >= 2 * 12 * 16,
         "5 channels = 2 TPDOs per SYNC: {stats:?}"
@@ -433,6 +442,7 @@ async fn the_stream_arrives_loss_free_in_several_tpdos_with_the_node_scaling() {
     daq.configure(&config(vec![2])).await.expect("configure");
     for _ in 0..2 {
         daq.start().await.expect("start");
+        assert_eq!(daq.sample_clock(), Some(0), "the SYNC count restarts");
         let (blocks, faults) = collect(&mut daq, 3).await;
         daq.stop().await.expect("stop");
         assert!(faults.is_empty() && blocks[0].seq == 0, "{faults:?}");

@@ -46,6 +46,13 @@ pub trait Daq: Send {
     /// Stops streaming and discards what is still in flight (each discarded frame is still decoded
     /// and recorded by the implementation's byte tap, if any).
     async fn stop(&mut self) -> Result<(), DaqError>;
+
+    /// The index of the next sample the device will take, where the host paces the sampling (a
+    /// CANopen master producing SYNC): every sample from it on is taken after now. `None` where
+    /// the device's own clock paces it; the sweep then reckons from wall-clock time since START.
+    fn sample_clock(&self) -> Option<u64> {
+        None
+    }
 }
 
 /// Reads a started stream to its end: every block and fault in stream order, then the error

@@ -412,3 +412,5 @@ mod tests;
 
 #[cfg(test)]
 mod arbitrary_tests;
+#[cfg(test)]
+mod scripted;

@@ -216,7 +216,8 @@ pub(super) fn canopen_port(
 mod tests {
     use crate::stand::{PortSpec, Stand};
 
-    const STAND: &str = r#"
+    const STAND: &str = concat!(
+        r#"
 name = "canopen stand"
 [shaker]
 port = "/dev/ttyUSB0"
@@ -226,20 +227,9 @@ port = "can:can0"
 sample_rate = "2000 Hz"
 [daq.canopen]
 NODE
-[[channel]]
-name = "force"
-device_channel = 0
-kind = "force"
-sensitivity = "2.25 mV/N"
-[[channel]]
-name = "table-x"
-device_channel = 1
-kind = "acceleration"
-body = "table"
-position = ["320 mm", "0 mm", "45 mm"]
-direction = [1, 0, 0]
-sensitivity = "100 mV/g"
-"#;
+"#,
+        test_stand_channels!()
+    );
 
     fn parse(node: &str) -> Result<Stand, crate::stand::StandError> {
         Stand::parse(&STAND.replace("NODE", node), "canopen.toml")

@@ -12,6 +12,28 @@ use serde_spanned::Spanned;
 use identify::source::{Located, Quantity as Value, SourceText};
 use identify::units::Dim;
 
+/// The force and table-x channels of the stand files in this module's tests (a string
+/// literal, for `concat!`).
+#[cfg(test)]
+macro_rules! test_stand_channels {
+    () => {
+        r#"[[channel]]
+name = "force"
+device_channel = 0
+kind = "force"
+sensitivity = "2.25 mV/N"
+[[channel]]
+name = "table-x"
+device_channel = 1
+kind = "acceleration"
+body = "table"
+position = ["320 mm", "0 mm", "45 mm"]
+direction = [2, 0, 0]
+sensitivity = "100 mV/g"
+"#
+    };
+}
+
 mod broadband;
 mod canopen;
 mod generator;

@@ -1,6 +1,7 @@
 use super::*;
 
-const GOOD: &str = r#"
+const GOOD: &str = concat!(
+    r#"
 name = "test stand"
 [shaker]
 port = "sim"
@@ -10,23 +11,13 @@ max_force = "6 kN"
 port = "sim"
 sample_rate = "5120 Hz"
 samples_per_block = 64
-[[channel]]
-name = "force"
-device_channel = 0
-kind = "force"
-sensitivity = "2.25 mV/N"
-[[channel]]
-name = "table-x"
-device_channel = 1
-kind = "acceleration"
-body = "table"
-position = ["320 mm", "0 mm", "45 mm"]
-direction = [2, 0, 0]
-sensitivity = "100 mV/g"
-[truth]
+"#,
+    test_stand_channels!(),
+    r#"[truth]
 sdof = { body = "table", mass = "350 kg", stiffness = "2e8 N/m", loss_factor = 0.05, direction = [1, 0, 0] }
 noise_acceleration = "0.01 m/s2"
-"#;
+"#
+);
 
 #[test]
 fn good_stand_resolves_to_si() {

@@ -79,6 +79,33 @@ impl StepEstimator {
         self.force.iter().fold(0.0f64, |m, x| m.max((x * s).abs()))
     }
 
+    /// The force amplitude (N) of the sine behind a window clipped at ±`clip_n` (N), from the
+    /// share of its force samples at or beyond the rails: a sine of amplitude A spends
+    /// `(2/π)·acos(C/A)` of each cycle beyond ±C, so `A = C / cos(π/2 · share)`. At most ten
+    /// times `clip_n` (a window almost all at the rails says only that the force is far beyond).
+    pub fn clipped_force_amplitude(&self, clip_n: f64) -> f64 {
+        let beyond = self.force.iter().filter(|x| x.abs() >= clip_n).count();
+        let share = beyond as f64 / self.force.len().max(1) as f64;
+        clip_n / (std::f64::consts::FRAC_PI_2 * share).cos().max(0.1)
+    }
+
+    /// True if the window's force held one amplitude: the force fitted at `freq_hz` (Hz) over
+    /// the window's first and second halves agrees within `tolerance` (relative) plus four
+    /// standard deviations of the difference the fits' noise allows. A window that straddles a
+    /// drive change (data taken before it), or a response still building up, is not settled.
+    pub fn force_settled(&mut self, freq_hz: f64, tolerance: f64) -> Result<bool, ProcessError> {
+        let half = self.force.len() / 2;
+        let mut fit = |x: &[f64]| self.fitter.fit_step(&self.config, freq_hz, x, &[]);
+        let (a, b) = (
+            fit(&self.force[..half])?.force,
+            fit(&self.force[half..])?.force,
+        );
+        // An amplitude fitted from n samples of noise σ scatters by σ·√(2/n).
+        let noise = (a.noise_rms + b.noise_rms) / 2.0 * (2.0 * 2.0 / half.max(1) as f64).sqrt();
+        let (a, b) = (a.amplitude(), b.amplitude());
+        Ok((a - b).abs() <= tolerance * a.max(b) + 4.0 * noise)
+    }
+
     /// Fits the window at `freq_hz` (Hz). Phases refer to the window's first sample.
     pub fn estimate(&mut self, freq_hz: f64) -> Result<Step, ProcessError> {
         let responses: Vec<&[f64]> = self.responses.iter().map(Vec::as_slice).collect();
@@ -195,6 +222,58 @@ mod tests {
             (mse / stated - 1.0).abs() < 0.4,
             "mse {mse:e} vs stated {stated:e}"
         );
+    }
+
+    /// A window of `n` force samples (1 V/N) at `f` Hz, 5120 Hz, amplitude `amp(i)` N, noise 3 N.
+    fn force_window(f: f64, n: usize, amp: impl Fn(usize) -> f64) -> StepEstimator {
+        let mut rng = rand::rngs::StdRng::seed_from_u64(3);
+        let noise = Normal::new(0.0, 3.0).unwrap();
+        let mut est = StepEstimator::new(5120.0, &[1.0], 0);
+        for i in 0..n {
+            let x = amp(i) * (2.0 * std::f64::consts::PI * f * i as f64 / 5120.0).sin();
+            est.push_row(&[(x + noise.sample(&mut rng)) as f32]);
+        }
+        est
+    }
+
+    #[test]
+    fn a_clipped_sine_tells_its_amplitude_by_its_share_of_samples_at_the_rails() {
+        for amplitude in [4500.0, 5000.0, 8000.0] {
+            let clip = 4440.0;
+            let mut est = StepEstimator::new(5120.0, &[1.0], 0);
+            let n = 5120;
+            for i in 0..n {
+                let x: f64 =
+                    amplitude * (2.0 * std::f64::consts::PI * 37.0 * i as f64 / 5120.0).sin();
+                est.push_row(&[x.clamp(-clip, clip) as f32]);
+            }
+            let a = est.clipped_force_amplitude(clip);
+            assert!(
+                (a - amplitude).abs() < 0.01 * amplitude,
+                "{a} vs {amplitude}"
+            );
+        }
+        // Nearly all samples at the rails: only "far beyond", at most ten times the range.
+        let mut est = StepEstimator::new(5120.0, &[1.0], 0);
+        (0..100).for_each(|i| est.push_row(&[if i % 2 == 0 { 1.0 } else { -1.0 }]));
+        assert_eq!(est.clipped_force_amplitude(1.0), 10.0);
+    }
+
+    #[test]
+    fn a_window_straddling_a_drive_change_is_not_settled() {
+        let n = 2560;
+        let mut steady = force_window(40.0, n, |_| 4000.0);
+        assert!(steady.force_settled(40.0, 0.03).unwrap());
+        // The first 30 % taken before the drive rose from 3400 N to 4000 N.
+        let mut straddling =
+            force_window(40.0, n, |i| if i < 3 * n / 10 { 3400.0 } else { 4000.0 });
+        assert!(!straddling.force_settled(40.0, 0.03).unwrap());
+        // A change within the tolerance is settled enough.
+        let mut small = force_window(40.0, n, |i| if i < n / 2 { 3960.0 } else { 4000.0 });
+        assert!(small.force_settled(40.0, 0.03).unwrap());
+        // Noise alone never unsettles a weak force: 30 N against 3 N of noise.
+        let mut weak = force_window(40.0, n, |_| 30.0);
+        assert!(weak.force_settled(40.0, 0.0).unwrap());
     }
 
     #[test]

@@ -4,6 +4,7 @@
 //! recorded in the session; the sweep drives `dyn Shaker` and `dyn Daq` and does not know which.
 
 pub mod estimate;
+pub mod force_loop;
 pub mod period_force;
 pub mod periodic;
 mod progress;
@@ -26,6 +27,7 @@ use crate::session::records::{
 use crate::session::{self, SessionError, SessionHandle};
 use crate::shaker::{ForceReading, PeriodForce, ShakerError, Waveform};
 use estimate::StepEstimator;
+use force_loop::ForceLoop;
 
 /// Sweep errors. Device errors keep their port and advice.
 #[derive(Debug, thiserror::Error)]
@@ -400,27 +402,21 @@ impl<'a> Pump<'a> {
         }
     }
 
-    /// Reads (and records) the blocks the port or socket already holds, so that the next block
-    /// read was produced after the last command: settling is counted from there. Blocks queued
-    /// while the host was busy (a slow host, an emulated machine) must not count as settled
-    /// data. Caught up = a read has to wait, or the host has read as many samples as the DAQ can
-    /// have produced since START (wall-clock time × sample rate × the simulated stand's speed).
-    async fn catch_up(&mut self, fault: &mut bool) -> Result<(), SweepError> {
-        let block_s = f64::from(self.rig.stream.samples_per_block) / self.samples_per_wall_s;
-        let wait = std::time::Duration::from_secs_f64((0.5 * block_s).max(5e-4));
-        let cap = self.next_sample + (2.0 * self.samples_per_wall_s) as u64;
-        loop {
-            let produced = (self.started.elapsed().as_secs_f64() * self.samples_per_wall_s) as u64;
-            if self.next_sample >= produced || self.next_sample >= cap {
-                return Ok(());
-            }
-            match tokio::time::timeout(wait, self.next(fault)).await {
-                Err(_) => return Ok(()),
-                Ok(r) => {
-                    r?;
-                }
-            }
-        }
+    /// The first sample the DAQ takes after now: the samples before it were taken before the
+    /// last command reached the exciter, so settling counts from there. It comes from the DAQ's
+    /// sample clock — the host's own where it paces the sampling
+    /// ([`crate::daq::Daq::sample_clock`]), else wall-clock time since START × sample rate × the
+    /// simulated stand's speed — and not from what the host has read so far: blocks that arrive
+    /// late (a busy or emulated host, a buffering link) are stale however long the host took to
+    /// read them. At most two seconds of stream ahead of what was read (a simulated DAQ slowed
+    /// down by its host runs behind the wall clock, and its stream must not be waited for in
+    /// vain).
+    fn fresh_from(&self) -> u64 {
+        let clock = self.rig.daq.sample_clock().unwrap_or_else(|| {
+            (self.started.elapsed().as_secs_f64() * self.samples_per_wall_s) as u64
+        });
+        let ahead = (2.0 * self.samples_per_wall_s) as u64;
+        clock.clamp(self.next_sample, self.next_sample + ahead)
     }
 }
 
@@ -617,6 +613,8 @@ async fn stepped_inner(
     let names: Vec<String> = rig.stand.channels.iter().map(|c| c.name.clone()).collect();
     let mut estimator = StepEstimator::new(fs, &sens, force_ch);
     let max_drive = drive_limit(&rig.stand);
+    let tolerance = force_tolerance(&rig.stand, plan);
+    let mut force = ForceLoop::new(&rig.stand, plan.target_force_n, tolerance, max_drive);
     let first = freqs
         .iter()
         .enumerate()
@@ -634,7 +632,6 @@ async fn stepped_inner(
     rig.shaker.set_waveform(&Waveform::Sine).await?;
     rig.shaker.set_frequency(first).await?;
     // Start gently: half the target until the loop has measured the path gain.
-    let mut gain = 1.0f64;
     rig.shaker
         .set_force((0.5 * plan.target_force_n).min(max_drive))
         .await?;
@@ -651,7 +648,7 @@ async fn stepped_inner(
             break;
         }
         let measured =
-            measure_step(&mut pump, &mut estimator, plan, (step, f), &mut gain, stop).await?;
+            measure_step(&mut pump, &mut estimator, plan, (step, f), &mut force, stop).await?;
         let Some(m) = measured else {
             outcome.stopped = true;
             break;
@@ -702,6 +699,15 @@ fn drive_limit(stand: &crate::stand::Stand) -> f64 {
     }
 }
 
+/// The accepted relative deviation of the force from the target: the plan's, or a generator
+/// stand's amplifier tolerance (2 % by default), tighter or not.
+fn force_tolerance(stand: &crate::stand::Stand, plan: &SteppedSine) -> f64 {
+    match &stand.generator {
+        Some(g) => g.amplifier.tolerance,
+        None => plan.force_tolerance,
+    }
+}
+
 /// One step measured with the force held at the plan's target.
 struct Measured {
     estimate: process::sine::Step,
@@ -712,28 +718,25 @@ struct Measured {
     iterations: u32,
 }
 
-/// Measures step `step` at `f` (Hz): sets the drive from the path `gain` (force per commanded
-/// force, updated here), measures a window, and corrects the drive until the force is within
-/// the plan's tolerance (or the iterations run out, with a warning). A window hit by a stream
-/// fault is re-measured. `None` when the operator stopped.
+/// Measures step `step` at `f` (Hz): sets the drive the force loop predicts, measures a window,
+/// and corrects the drive until the force is within the tolerance (or the iterations run out,
+/// with a warning). A window hit by a stream fault is re-measured; so is one whose force changed
+/// within it (not settled: it holds no gain to learn). A clipped window is never kept: the loop
+/// drives less when the target lies within the force channel's range, otherwise the sweep stops.
+/// `None` when the operator stopped.
 async fn measure_step(
     pump: &mut Pump<'_>,
     estimator: &mut StepEstimator,
     plan: &SteppedSine,
     (step, f): (usize, f64),
-    gain: &mut f64,
+    force: &mut ForceLoop,
     stop: &StopSignal,
 ) -> Result<Option<Measured>, SweepError> {
     let session = pump.session;
     let fs = pump.rig.stream.sample_rate_hz;
-    let max_drive = drive_limit(&pump.rig.stand);
-    // A generator stand holds its amplifier's tolerance (2 % by default), tighter or not.
-    let tolerance = match &pump.rig.stand.generator {
-        Some(g) => g.amplifier.tolerance,
-        None => plan.force_tolerance,
-    };
+    let tolerance = force.tolerance();
     pump.rig.shaker.set_frequency(f).await?;
-    let mut drive = (plan.target_force_n / *gain).min(max_drive);
+    let mut drive = force.drive_n();
     pump.rig.shaker.set_force(drive).await?;
     event(
         session,
@@ -763,13 +766,12 @@ async fn measure_step(
             }
             Window::Measured { first_sample } => first_sample,
         };
-        let est = estimator
-            .estimate(f)
-            .map_err(|source| SweepError::Estimate {
-                step,
-                frequency_hz: f,
-                source,
-            })?;
+        let estimate = |e| SweepError::Estimate {
+            step,
+            frequency_hz: f,
+            source: e,
+        };
+        let est = estimator.estimate(f).map_err(estimate)?;
         let famp = est.force.amplitude();
         pump.rig
             .shaker
@@ -781,14 +783,28 @@ async fn measure_step(
                 measured_n: famp,
             })
             .await?;
+        let more = iterations < plan.max_iterations;
         // After the exciter's own checks (an over-force reads as such even when clipped): a
-        // clipped force that still reads below the limit would make the loop drive harder.
-        check_clipping(pump, estimator, step, f)?;
-        let err = (famp - plan.target_force_n).abs() / plan.target_force_n;
-        if famp > 0.0 {
-            *gain = famp / drive;
+        // clipped force reads low, and the loop would take it for too small and drive harder.
+        if is_clipped(pump, estimator) {
+            let amplitude = estimator.clipped_force_amplitude(force.full_scale_n());
+            if !(more && force.may_drive_less(amplitude)) {
+                return Err(clipping_error(pump, estimator, step, f));
+            }
+            force.learn(amplitude, drive);
+            iterations += 1;
+            let why = format!("force clipped at the input range (≈ {amplitude:.0} N from the share of clipped samples)");
+            drive = correct_drive(pump, force, (step, f), drive, &why).await?;
+            continue;
         }
-        if err <= tolerance || iterations >= plan.max_iterations || famp <= 0.0 {
+        if more && !estimator.force_settled(f, tolerance).map_err(estimate)? {
+            iterations += 1;
+            event(session, "retry", Some(step), Some(f), format!("force {famp:.1} N changed within the measurement window (not settled); re-measuring at drive {drive:.1} N"))?;
+            continue;
+        }
+        force.learn(famp, drive);
+        let err = (famp - plan.target_force_n).abs() / plan.target_force_n;
+        if err <= tolerance || !more || famp <= 0.0 {
             if err > tolerance {
                 event(session, "warning", Some(step), Some(f), format!("force {famp:.1} N not within {:.1} % of {} N after {iterations} corrections", tolerance * 100.0, plan.target_force_n))?;
             }
@@ -802,45 +818,53 @@ async fn measure_step(
             }));
         }
         iterations += 1;
-        let new_drive = (plan.target_force_n / *gain).min(max_drive);
-        event(
-            session,
-            "force_control",
-            Some(step),
-            Some(f),
-            format!("force {famp:.1} N → drive {drive:.1} N becomes {new_drive:.1} N"),
-        )?;
-        drive = new_drive;
-        pump.rig.shaker.set_force(drive).await?;
+        let why = format!("force {famp:.1} N");
+        drive = correct_drive(pump, force, (step, f), drive, &why).await?;
     }
 }
 
-/// Stops the step when the window's force samples reached the DAQ's input range
+/// Sets the drive the force loop now predicts, recording why (`force_control`); returns it.
+async fn correct_drive(
+    pump: &mut Pump<'_>,
+    force: &ForceLoop,
+    (step, f): (usize, f64),
+    drive: f64,
+    why: &str,
+) -> Result<f64, SweepError> {
+    let new_drive = force.drive_n();
+    event(
+        pump.session,
+        "force_control",
+        Some(step),
+        Some(f),
+        format!("{why} → drive {drive:.1} N becomes {new_drive:.1} N"),
+    )?;
+    pump.rig.shaker.set_force(new_drive).await?;
+    Ok(new_drive)
+}
+
+/// True when the window's force samples reached the DAQ's input range
 /// ([`crate::stand::CLIP_FRACTION`] of `daq.input_range`).
-fn check_clipping(
-    pump: &Pump<'_>,
-    estimator: &StepEstimator,
-    step: usize,
-    f: f64,
-) -> Result<(), SweepError> {
+fn is_clipped(pump: &Pump<'_>, estimator: &StepEstimator) -> bool {
+    let range_v = pump.rig.stand.daq.input_range_v;
+    estimator.force_peak_volts() >= crate::stand::CLIP_FRACTION * range_v
+}
+
+/// The error that stops a step whose force clipped.
+fn clipping_error(pump: &Pump<'_>, estimator: &StepEstimator, step: usize, f: f64) -> SweepError {
     let stand = &pump.rig.stand;
-    let range_v = stand.daq.input_range_v;
-    let peak_v = estimator.force_peak_volts();
-    if peak_v < crate::stand::CLIP_FRACTION * range_v {
-        return Ok(());
-    }
     let channel = stand
         .channels
         .get(stand.force_channel())
         .map(|c| c.name.clone())
         .unwrap_or_default();
-    Err(SweepError::ForceClipped {
+    SweepError::ForceClipped {
         step,
         frequency_hz: f,
         channel,
-        peak_v,
-        range_v,
-    })
+        peak_v: estimator.force_peak_volts(),
+        range_v: stand.daq.input_range_v,
+    }
 }
 
 /// How a measurement window ended.
@@ -853,8 +877,9 @@ enum Window {
     Stopped,
 }
 
-/// Catches up with the stream, lets `settle` samples pass, then collects `window` samples into
-/// `estimator`. Faults while settling do not touch the window: it starts after them.
+/// Lets `settle` samples pass from the first sample taken after now ([`Pump::fresh_from`]; the
+/// blocks before it are read and recorded), then collects `window` samples into `estimator`.
+/// Faults while settling do not touch the window: it starts after them.
 async fn measure_window(
     pump: &mut Pump<'_>,
     estimator: &mut StepEstimator,
@@ -866,8 +891,7 @@ async fn measure_window(
         return Ok(Window::Stopped);
     }
     let mut fault = false;
-    pump.catch_up(&mut fault).await?;
-    let start = pump.next_sample + settle;
+    let start = pump.fresh_from() + settle;
     estimator.clear();
     let mut window_first = None;
     while (estimator.len() as u64) < window {

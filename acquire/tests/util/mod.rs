@@ -189,3 +189,32 @@ pub fn assert_matches_truth(a: &acquire::analysis::SessionAnalysis, truth_model:
         ratios[ratios.len() - 1]
     );
 }
+
+/// Runs `measure` (of `plan`, recorded in the session start) on the rig of `bound` (the stand
+/// bound to its simulated devices) into a new session file at `path`, finished whatever
+/// happens; a failure to connect or measure comes back as text.
+pub async fn recorded<T>(
+    stand: &Stand,
+    bound: &Stand,
+    plan: &impl serde::Serialize,
+    path: &Path,
+    measure: impl AsyncFnOnce(
+        &mut acquire::rig::Rig,
+        &acquire::session::SessionHandle,
+    ) -> Result<T, acquire::sweep::SweepError>,
+) -> Result<T, String> {
+    let session = session::Session::create(path, session::SessionOptions::default())
+        .unwrap_or_else(|e| panic!("{e}"));
+    let h = session.handle();
+    acquire::sweep::log_session_start(&h, &stand.file, plan, None, &Default::default())
+        .unwrap_or_else(|e| panic!("{e}"));
+    let r = async {
+        let mut rig = acquire::rig::Rig::connect(bound, Some(&h))
+            .await
+            .map_err(|e| e.to_string())?;
+        measure(&mut rig, &h).await.map_err(|e| e.to_string())
+    }
+    .await;
+    session.finish().unwrap_or_else(|e| panic!("{e}"));
+    r
+}

@@ -3,10 +3,9 @@
 //! (`TRACe:DATA:DAC16`, refused with an error-queue answer), Tektronix AFG31000 (`TRACe:DATA
 //! EMEMory`, MSB first, a repetition frequency), a model without uploads and one over its limits.
 
+use super::scripted;
 use super::*;
 use crate::generator::arbitrary::{definite_block, CommandFramer};
-use crate::transport::MemoryTransport;
-use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use tokio::task::JoinHandle;
 
 /// One exchange: the command text the host must send, the binary block it must carry (if any),
@@ -16,41 +15,16 @@ type Exchange = (String, Option<Vec<u8>>, Vec<&'static str>);
 /// A command as received: its text and its binary block.
 type Received = (String, Option<Vec<u8>>);
 
-/// A scripted instrument that frames binary blocks as IEEE 488.2 instruments do; on an
-/// unexpected command it falls silent. Returns every command (text, block) it received.
+/// A scripted instrument that frames binary blocks as IEEE 488.2 instruments do (answers end in
+/// LF). Returns every command (text, block) it received.
 fn instrument(script: Vec<Exchange>) -> (Box<dyn Transport>, JoinHandle<Vec<Received>>) {
-    let (host, mut dev) = MemoryTransport::pair("gen", "gen-dev", 1 << 16);
-    let task = tokio::spawn(async move {
-        let mut framer = CommandFramer::new();
-        let mut got = Vec::new();
-        let mut buf = vec![0u8; 4096];
-        let mut next = 0usize;
-        let mut silent = false;
-        loop {
-            let n = match dev.read(&mut buf).await {
-                Ok(0) | Err(_) => return got,
-                Ok(n) => n,
-            };
-            let mut received = Vec::new();
-            framer.feed(&buf[..n], |c| received.push(c));
-            for c in received {
-                got.push((c.text.clone(), c.block.clone()));
-                if silent {
-                    continue;
-                }
-                match script.get(next) {
-                    Some((text, block, answers)) if *text == c.text && *block == c.block => {
-                        next += 1;
-                        for a in answers {
-                            let _ = dev.write_all(format!("{a}\n").as_bytes()).await;
-                        }
-                    }
-                    _ => silent = true,
-                }
-            }
-        }
-    });
-    (Box::new(host), task)
+    let mut framer = CommandFramer::new();
+    let frame = move |bytes: &[u8], out: &mut Vec<Received>| {
+        framer.feed(bytes, |c| out.push((c.text, c.block)))
+    };
+    scripted::instrument(script, frame, |(text, block, answers), (t, b)| {
+        (text == t && block == b).then(|| answers.iter().map(|a| format!("{a}\n")).collect())
+    })
 }
 
 fn opts(channel: u8) -> GeneratorOptions {

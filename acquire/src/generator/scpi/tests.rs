@@ -1,10 +1,10 @@
 //! The driver against recorded transcripts: the command lines a host sends and the answers the
 //! instruments give, as their programming manuals show them.
 
+use super::scripted;
 use super::*;
 use crate::shaker::scpi::{Line, LineBuffer};
 use crate::transport::MemoryTransport;
-use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use tokio::task::JoinHandle;
 
 /// One exchange: the line the host must send, and the lines the instrument answers.
@@ -14,42 +14,19 @@ const OK_K: &[&str] = &["1"];
 const NOERR_K: &[&str] = &["+0,\"No error\""];
 const NOERR: &[&str] = &["0,\"No error\""];
 
-/// A scripted instrument: answers each expected line; on an unexpected one it falls silent.
-/// Returns every line it received.
+/// A scripted instrument on text lines (answers end in CR LF). Returns every line it received.
 fn instrument(script: Vec<Exchange>) -> (Box<dyn Transport>, JoinHandle<Vec<String>>) {
-    let (host, mut dev) = MemoryTransport::pair("gen", "gen-dev", 4096);
-    let task = tokio::spawn(async move {
-        let mut lines = LineBuffer::new();
-        let mut got = Vec::new();
-        let mut buf = [0u8; 256];
-        let mut next = 0usize;
-        let mut silent = false;
-        loop {
-            let n = match dev.read(&mut buf).await {
-                Ok(0) | Err(_) => return got,
-                Ok(n) => n,
-            };
-            let mut received = Vec::new();
-            lines.feed(&buf[..n], |l| received.push(l));
-            for l in received {
-                let Line::Text(t) = l else { continue };
-                got.push(t.clone());
-                if silent {
-                    continue;
-                }
-                match script.get(next) {
-                    Some((cmd, answers)) if *cmd == t => {
-                        next += 1;
-                        for a in *answers {
-                            let _ = dev.write_all(format!("{a}\r\n").as_bytes()).await;
-                        }
-                    }
-                    _ => silent = true,
-                }
+    let mut lines = LineBuffer::new();
+    let frame = move |bytes: &[u8], out: &mut Vec<String>| {
+        lines.feed(bytes, |l| {
+            if let Line::Text(t) = l {
+                out.push(t)
             }
-        }
-    });
-    (Box::new(host), task)
+        })
+    };
+    scripted::instrument(script, frame, |(cmd, answers), t| {
+        (cmd == t).then(|| answers.iter().map(|a| format!("{a}\r\n")).collect())
+    })
 }
 
 fn opts() -> GeneratorOptions {
