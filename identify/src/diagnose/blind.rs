@@ -361,16 +361,22 @@ pub fn draw(
     let mut injected: Vec<Injected> = Vec::new();
     let mut attempts = 0;
     while injected.len() < n_effects && attempts < 200 {
-        attempts += 1;
+        // The kind is drawn once per effect and kept: a candidate of it that cannot reach its
+        // drawn signal (the variables absorb most of what it does) is drawn again within the
+        // kind, so that kinds the variables partly absorb are not left out of the suite.
         let kind = kinds[rng.random_range(0..kinds.len())];
         let of_kind: Vec<&Effect> = library.iter().filter(|e| e.kind() == kind).collect();
-        let effect = of_kind[rng.random_range(0..of_kind.len())].clone();
-        if injected.iter().any(|i| same_site(&i.effect, &effect)) {
-            continue;
-        }
-        let signal = SIGNAL.0 * (SIGNAL.1 / SIGNAL.0).powf(rng.random::<f64>());
-        if let Some(i) = inject(&mut truth, &effect, lines, (signal, noise), &mut rng)? {
-            injected.push(i);
+        for _ in 0..ATTEMPTS_PER_KIND {
+            attempts += 1;
+            let effect = of_kind[rng.random_range(0..of_kind.len())].clone();
+            if injected.iter().any(|i| same_site(&i.effect, &effect)) {
+                continue;
+            }
+            let signal = SIGNAL.0 * (SIGNAL.1 / SIGNAL.0).powf(rng.random::<f64>());
+            if let Some(i) = inject(&mut truth, &effect, lines, (signal, noise), &mut rng)? {
+                injected.push(i);
+                break;
+            }
         }
     }
     finish(
@@ -380,6 +386,9 @@ pub fn draw(
         (&mut rng, seed),
     )
 }
+
+/// Candidates (and signals) of one drawn kind tried before another kind is drawn.
+const ATTEMPTS_PER_KIND: usize = 20;
 
 /// The case of one given `effect` on `model` (the truth's values) sized so that its noise-free
 /// change of the data is `signal` (χ² units at relative noise `noise`), measured at `lines`

@@ -410,6 +410,26 @@ impl Effect {
         }
     }
 
+    /// How many tuning frequencies the data tell apart where this effect's fit may place it:
+    /// for a resonator, one per measured line within its frequency's bounds and one between
+    /// (a sharp resonance acts where a line sits); 1 for every other effect. A likelihood ratio
+    /// maximised over a tuning frequency does not follow the χ² law of a fixed one (the
+    /// nuisance frequency is undefined under the nested model); its p-value times this count
+    /// (Bonferroni) bounds the chance of a false add, as the score's does.
+    pub fn tunings_searched(&self, lines: &[f64], f_max: f64) -> usize {
+        let Effect::Resonator { .. } = self else {
+            return 1;
+        };
+        let params = self.params(f_max);
+        let Some(f) = params.iter().find(|p| p.unit == "Hz") else {
+            return 1;
+        };
+        1 + lines
+            .iter()
+            .filter(|l| (f.lower..=f.upper).contains(*l))
+            .count()
+    }
+
     /// The effect's parameters.
     pub fn params(&self, f_max: f64) -> Vec<EffectParam> {
         let p = |name, unit, nested, initial, lower, upper, scale| EffectParam {

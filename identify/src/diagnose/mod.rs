@@ -720,13 +720,21 @@ fn remove_unneeded(
     }
 }
 
-/// The measured band (Hz): lowest and highest line (at least 1 mHz, the top above the bottom).
-fn band(obs: &Observations) -> (f64, f64) {
-    let freqs: Vec<f64> = obs
+/// The distinct measured lines (Hz) of all characteristics, ascending.
+fn lines(obs: &Observations) -> Vec<f64> {
+    let mut lines: Vec<f64> = obs
         .characteristics
         .iter()
         .flat_map(|c| c.freqs_hz.iter().copied())
         .collect();
+    lines.sort_by(f64::total_cmp);
+    lines.dedup();
+    lines
+}
+
+/// The measured band (Hz): lowest and highest line (at least 1 mHz, the top above the bottom).
+fn band(obs: &Observations) -> (f64, f64) {
+    let freqs = lines(obs);
     let f_lo = freqs
         .iter()
         .copied()
@@ -1310,7 +1318,8 @@ fn backward(
             continue;
         };
         let lr = ((e.norm_squared() - cur.e.norm_squared()) / sigma2).max(0.0);
-        let p_value = residuals::chi2_tail(q as f64, lr);
+        let searched = cur.effects[k].tunings_searched(&lines(obs), f_hi) as f64;
+        let p_value = (residuals::chi2_tail(q as f64, lr) * searched).min(1.0);
         if p_value >= threshold {
             let r = Removed {
                 effect: cur.effects[k].describe(),
@@ -1671,7 +1680,9 @@ fn refit(
     let j0 = 0.5 * cur.e.norm_squared();
     let j1 = 0.5 * e.norm_squared();
     let lr = (2.0 * (j0 - j1) / sigma2).max(0.0);
-    let p_value = residuals::chi2_tail(q as f64, lr);
+    // A resonator's LR is maximised over its tuning frequency too: its p-value counts them.
+    let searched = cand.tunings_searched(&lines(obs), f_hi) as f64;
+    let p_value = (residuals::chi2_tail(q as f64, lr) * searched).min(1.0);
     let n = m as f64;
     let stop = out.stop.describe();
     let next = Current {
