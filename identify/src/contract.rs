@@ -54,6 +54,30 @@ pub struct PointMassJson {
     pub inertia: [f64; 3],
 }
 
+impl From<&PointMass> for PointMassJson {
+    fn from(p: &PointMass) -> Self {
+        PointMassJson {
+            name: p.name.clone(),
+            body: p.body,
+            point: p.point.into(),
+            mass: p.mass,
+            inertia: p.inertia,
+        }
+    }
+}
+
+impl From<&PointMassJson> for PointMass {
+    fn from(p: &PointMassJson) -> Self {
+        PointMass {
+            name: p.name.clone(),
+            body: p.body,
+            point: p.point.into(),
+            mass: p.mass,
+            inertia: p.inertia,
+        }
+    }
+}
+
 fn is_zero3(j: &[f64; 3]) -> bool {
     *j == [0.0; 3]
 }
@@ -233,17 +257,7 @@ pub fn to_json(model: &Model) -> ModelJson {
                 },
             })
             .collect(),
-        point_masses: model
-            .point_masses
-            .iter()
-            .map(|p| PointMassJson {
-                name: p.name.clone(),
-                body: p.body,
-                point: p.point.into(),
-                mass: p.mass,
-                inertia: p.inertia,
-            })
-            .collect(),
+        point_masses: model.point_masses.iter().map(PointMassJson::from).collect(),
     }
 }
 
@@ -361,17 +375,7 @@ pub fn from_json(j: &ModelJson) -> Result<Model, JsonProblem> {
         forces,
         references,
         outputs,
-        point_masses: j
-            .point_masses
-            .iter()
-            .map(|p| PointMass {
-                name: p.name.clone(),
-                body: p.body,
-                point: p.point.into(),
-                mass: p.mass,
-                inertia: p.inertia,
-            })
-            .collect(),
+        point_masses: j.point_masses.iter().map(PointMass::from).collect(),
     })
 }
 

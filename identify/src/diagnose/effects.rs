@@ -303,14 +303,13 @@ impl Effect {
                 let frame = frame_from_axis(direction);
                 let (e1, e2) = (frame.column(1).into_owned(), frame.column(2).into_owned());
                 let at = point + e1 * values[2] + e2 * values[3];
-                let dir = |v: &Vector3<f64>| format!("({:.3}, {:.3}, {:.3})", v.x, v.y, v.z);
                 Some(format!(
                     "line of action fitted through {}, 95 % region ±{:.0} mm along {} and ±{:.0} mm along {}",
                     mm(&at),
                     half(2),
-                    dir(&e1),
+                    unit_vector(&e1),
                     half(3),
-                    dir(&e2)
+                    unit_vector(&e2)
                 ))
             }
             _ => None,
@@ -328,13 +327,11 @@ impl Effect {
                       d: &Vector3<f64>,
                       tail: &str| {
             format!(
-                "spring {}–{} {at} {} along ({}, {}, {}){tail}",
+                "spring {}–{} {at} {} along {}{tail}",
                 name(&bodies[0]),
                 name(&bodies[1]),
                 mm(point),
-                crate::display::sig(d.x, 3),
-                crate::display::sig(d.y, 3),
-                crate::display::sig(d.z, 3)
+                unit_vector(d)
             )
         };
         match self {
@@ -1035,4 +1032,39 @@ pub fn split_body(model: &mut Model, name: &str, axis: usize, c: f64) -> Result<
         });
     }
     Ok(())
+}
+
+/// A unit vector for reports: three components to 0.001, a zero one as `0` (not `0.000` or
+/// a `1e-17` left by rounding).
+fn unit_vector(d: &Vector3<f64>) -> String {
+    let c = |x: f64| crate::display::sig((x * 1e3).round() / 1e3, 3);
+    format!("({}, {}, {})", c(d.x), c(d.y), c(d.z))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The demo's placed spring along (0.494, 0.855, 0.156): the frame across it has a zero
+    /// component, printed as `0`, and no component shows rounding noise.
+    #[test]
+    fn a_fitted_line_of_action_prints_its_directions_without_zeros_to_three_places() {
+        let direction = Vector3::new(0.494, 0.855, 0.156).normalize();
+        let spring = Effect::PlacedSpring {
+            bodies: [Some("spindle head".into()), Some("table".into())],
+            point: Vector3::new(0.0, 0.9, 1.15),
+            direction,
+            reach: 0.1,
+        };
+        let place = spring
+            .fitted_place(&[5e5, 0.8, 0.03, -0.01], &[1e3, 0.01, 0.04, 0.009])
+            .expect("a placed spring has a place");
+        assert!(place.contains("along (0.866, -0.5"), "{place}");
+        assert!(!place.contains("0.000") && !place.contains("e-"), "{place}");
+        let described = spring.describe();
+        assert!(
+            described.contains("along (0.494, 0.855, 0.156)"),
+            "{described}"
+        );
+    }
 }
