@@ -902,74 +902,98 @@ fn refit_leading(
     let mut not_identifiable = Vec::new();
     // The families of the best screened candidates are refitted, in parallel.
     let jobs = refit_jobs(ranking, screened, opts.refit, f_hi);
-    if let Some((best, (k, _))) = screened
+    if let Some((best, Member { effect: k, .. })) = screened
         .first()
         .zip(jobs.first().and_then(|job| job.first()))
     {
         progress(&format!(
-            "screened {} candidates by a finite step; best: {} (J {:.1} → {:.1}); refitting {} families, first {}",
+            "screened {} candidates by a finite step; best: {} (J {:.1} → {:.1}); refitting {} families ({} distinct members), first {}",
             screened.len(),
             candidates[scored[best.index].candidate].describe(),
             0.5 * cur.e.norm_squared(),
             best.criterion,
             jobs.len(),
+            jobs.iter().flatten().filter(|m| m.mirror_of.is_none()).count(),
             k.describe()
         ));
     }
-    let results = in_parallel(&jobs, |members| {
-        refit_family((model, vars, obs), opts, cur, members, f_hi, *sigma2)
-    });
-    for (members, result) in jobs.iter().zip(results) {
-        match result {
-            Ok((mut r, next, cand)) => {
-                r.equivalent = members
-                    .iter()
-                    .map(|(c, _)| c.describe())
-                    .filter(|d| *d != r.effect)
-                    .collect();
-                progress(&format!(
-                    "refit {}: ΔJ = {:.1}, LR = {:.1}, p = {:.2e}",
-                    r.effect,
-                    r.criterion_before - r.criterion_after,
-                    r.lr,
-                    r.p_value
-                ));
-                // Most significant first; p-values of large effects underflow to 0, so
-                // compare the LR's margin over its critical value at the threshold.
-                let better = best
-                    .as_ref()
-                    .is_none_or(|(b, _)| margin(&r, *threshold) > margin(&refits[*b], *threshold));
-                let why = unidentifiable(&cand.params(f_hi), &r.params)
-                    .or_else(|| partial_fix(&r, cur, *sigma2));
-                if r.p_value < *threshold {
-                    match why {
-                        None if better => best = Some((refits.len(), next)),
-                        None => {}
-                        Some(reason) => {
-                            progress(&format!("indicated but not added: {} ({reason})", r.effect));
-                            not_identifiable.push(NotTried {
-                                effect: r.effect.clone(),
-                                reason,
-                            });
-                        }
-                    }
-                }
-                if !r.converged {
-                    not_tried.push(NotTried {
-                        effect: format!("refit of {}", r.effect),
-                        reason: format!(
-                            "{}; its likelihood-ratio test used the best point reached",
-                            r.stop
-                        ),
+    // Every distinct member of those families is refitted, in parallel; a family's best refit
+    // stands for it, with the members the data cannot tell from it as its equivalents.
+    let distinct: Vec<(usize, usize)> = jobs
+        .iter()
+        .enumerate()
+        .flat_map(|(f, job)| {
+            job.iter()
+                .enumerate()
+                .filter(|(_, m)| m.mirror_of.is_none())
+                .map(move |(i, _)| (f, i))
+        })
+        .collect();
+    let mut results: Vec<Option<Result<(Refit, Current), RefitError>>> =
+        in_parallel(&distinct, |&(f, i)| {
+            refit_member((model, vars, obs), opts, cur, &jobs[f][i], f_hi, *sigma2)
+        })
+        .into_iter()
+        .map(Some)
+        .collect();
+    for (f, members) in jobs.iter().enumerate() {
+        let mut outcomes: Vec<(usize, Result<(Refit, Current), RefitError>)> = distinct
+            .iter()
+            .zip(results.iter_mut())
+            .filter(|((g, _), _)| *g == f)
+            .filter_map(|((_, i), r)| r.take().map(|r| (*i, r)))
+            .collect();
+        let Some(b) = best_member(members, &outcomes, (f_hi, *sigma2)) else {
+            if let Some((_, Err(reason))) = outcomes.first() {
+                not_tried.push(NotTried {
+                    effect: format!("refit of {}", members[0].effect.describe()),
+                    reason: reason.to_string(),
+                });
+            }
+            continue;
+        };
+        let (i, Ok((mut r, next))) = outcomes.swap_remove(b) else {
+            continue;
+        };
+        let cand = members[i].effect;
+        r.equivalent = equivalents(members, i, &outcomes, r.criterion_after, *sigma2);
+        progress(&format!(
+            "refit {}: ΔJ = {:.1}, LR = {:.1}, p = {:.2e}",
+            r.effect,
+            r.criterion_before - r.criterion_after,
+            r.lr,
+            r.p_value
+        ));
+        // Most significant first; p-values of large effects underflow to 0, so
+        // compare the LR's margin over its critical value at the threshold.
+        let better = best
+            .as_ref()
+            .is_none_or(|(b, _)| margin(&r, *threshold) > margin(&refits[*b], *threshold));
+        let why =
+            unidentifiable(&cand.params(f_hi), &r.params).or_else(|| partial_fix(&r, cur, *sigma2));
+        if r.p_value < *threshold {
+            match why {
+                None if better => best = Some((refits.len(), next)),
+                None => {}
+                Some(reason) => {
+                    progress(&format!("indicated but not added: {} ({reason})", r.effect));
+                    not_identifiable.push(NotTried {
+                        effect: r.effect.clone(),
+                        reason,
                     });
                 }
-                refits.push(r);
             }
-            Err(reason) => not_tried.push(NotTried {
-                effect: format!("refit of {}", members[0].0.describe()),
-                reason: reason.to_string(),
-            }),
         }
+        if !r.converged {
+            not_tried.push(NotTried {
+                effect: format!("refit of {}", r.effect),
+                reason: format!(
+                    "{}; its likelihood-ratio test used the best point reached",
+                    r.stop
+                ),
+            });
+        }
+        refits.push(r);
     }
     (refits, best, not_identifiable)
 }
@@ -1041,15 +1065,38 @@ fn screen_leading(
     out
 }
 
+/// A member of a refitted family: the effect and where its refit starts, or the member it is a
+/// mirror image of (same score statistic and step: the model's symmetry makes their refits
+/// equal, so only one is refitted).
+struct Member<'r> {
+    effect: &'r Effect,
+    start: Vec<f64>,
+    mirror_of: Option<usize>,
+}
+
+/// The distinct (not mirror-image) members of a family that are refitted. The score test cannot
+/// tell a family's members apart, but a finite effect can: the true placement of a large spring
+/// ends at the noise level while its look-alikes end hundreds of times above it.
+const MEMBERS_REFITTED: usize = 4;
+
+/// Two screened candidates are mirror images: their screened criteria and parameters agree to
+/// 1e-7. (Their score statistics are no guide: springs along z anywhere on a body that only
+/// translates have the same slope at zero and very different finite effects.)
+fn mirrors(a: &Screened, b: &Screened) -> bool {
+    let near = |x: f64, y: f64| (x - y).abs() <= 1e-7 * x.abs().max(y.abs()).max(1e-300);
+    near(a.criterion, b.criterion) && a.start.iter().zip(&b.start).all(|(x, y)| near(*x, *y))
+}
+
 /// The refits of a round: up to `n` families, in the order of their best screened member, each
 /// that member first (started where the screen left it) and then the family's other members
-/// (from their score steps).
+/// (from where the screen left them, or their score steps), up to [`MEMBERS_REFITTED`] distinct
+/// ones and their mirror images.
 fn refit_jobs<'r>(
     ranking: &'r Ranking,
     screened: &[Screened],
     n: usize,
     f_hi: f64,
-) -> Vec<Vec<(&'r Effect, Vec<f64>)>> {
+) -> Vec<Vec<Member<'r>>> {
     let Ranking {
         candidates,
         scored,
@@ -1070,12 +1117,39 @@ fn refit_jobs<'r>(
             continue;
         }
         taken.push(family);
-        let mut job = vec![(&candidates[scored[*j].candidate], start.clone())];
+        let mut job = vec![Member {
+            effect: &candidates[scored[*j].candidate],
+            start: start.clone(),
+            mirror_of: None,
+        }];
+        // Each member's screen, where it was screened: mirror images are refitted once.
+        let screen_of = |k: usize| screened.iter().find(|s| s.index == k);
+        let mut shown: Vec<Option<&Screened>> = vec![screen_of(*j)];
+        let mut refitted = 1;
         for &k in family.map(|f| families[f].as_slice()).unwrap_or(&[]) {
-            if k != *j {
-                let c = &candidates[scored[k].candidate];
-                job.push((c, score_start(c, scored[k].step, f_hi)));
+            if k == *j {
+                continue;
             }
+            let c = &candidates[scored[k].candidate];
+            let own = screen_of(k);
+            let mirror_of = job.iter().zip(&shown).position(|(m, s)| {
+                m.mirror_of.is_none()
+                    && m.effect.kind() == c.kind()
+                    && s.zip(own).is_some_and(|(a, b)| mirrors(a, b))
+            });
+            if mirror_of.is_none() {
+                if refitted == MEMBERS_REFITTED {
+                    continue;
+                }
+                refitted += 1;
+            }
+            shown.push(own);
+            job.push(Member {
+                effect: c,
+                start: own
+                    .map_or_else(|| score_start(c, scored[k].step, f_hi), |s| s.start.clone()),
+                mirror_of,
+            });
         }
         jobs.push(job);
     }
@@ -1115,38 +1189,93 @@ fn in_parallel<J: Sync, R: Send>(jobs: &[J], f: impl Fn(&J) -> R + Sync) -> Vec<
         .collect()
 }
 
-/// Refits a family's best screened member from where the screen left its parameters. When the
-/// misfit is large (reduced χ² above [`LARGE_MISFIT`]) the refit also explores (see [`refit`]): a
-/// large missing effect bends the fit's own variables, and the screen adjusts them to first
-/// order only. The refit, its fit and its effect.
-fn refit_family<'a>(
+/// Refits one member of a family from where the screen left its parameters (or its score
+/// step). When the misfit is large (reduced χ² above [`LARGE_MISFIT`]) the refit also explores
+/// (see [`refit`]): a large missing effect bends the fit's own variables, and the screen adjusts
+/// them to first order only.
+fn refit_member(
     (model, vars, obs): (&Model, &Variables, &Observations),
     opts: &Options,
     cur: &Current,
-    members: &[(&'a Effect, Vec<f64>)],
+    member: &Member,
     f_hi: f64,
     sigma2: f64,
-) -> Result<(Refit, Current, &'a Effect), RefitError> {
-    let Some((leader, start)) = members.first() else {
-        return Err(RefitError::TooFewObservations {
-            observations: cur.e.len(),
-            parameters: 0,
-        });
-    };
+) -> Result<(Refit, Current), RefitError> {
     let m = cur.e.len() as f64;
     let large = cur.e.norm_squared() / sigma2 > LARGE_MISFIT * m;
-    let (r, next) = refit(
+    refit(
         model,
         vars,
         obs,
         opts,
         cur,
-        leader,
-        (start, large),
+        member.effect,
+        (&member.start, large),
         f_hi,
         sigma2,
-    )?;
-    Ok((r, next, *leader))
+    )
+}
+
+/// The family's refit that stands for it: the lowest criterion among its members' refits; of
+/// members the data cannot tell from it ([`EQUIVALENT_LR`]), one whose estimates are physical
+/// and identified is preferred. Index into `outcomes`; `None` when no refit succeeded.
+fn best_member(
+    members: &[Member],
+    outcomes: &[(usize, Result<(Refit, Current), RefitError>)],
+    (f_hi, sigma2): (f64, f64),
+) -> Option<usize> {
+    let ok = || {
+        outcomes
+            .iter()
+            .enumerate()
+            .filter_map(|(k, (i, r))| r.as_ref().ok().map(|(r, _)| (k, (*i, r))))
+    };
+    let j = |(_, r): (usize, &Refit)| r.criterion_after;
+    let (_, lowest) = ok().min_by(|a, b| j(a.1).total_cmp(&j(b.1)))?;
+    let j_lowest = j(lowest);
+    let tied = |m: (usize, &Refit)| 2.0 * (j(m) - j_lowest) / sigma2 < EQUIVALENT_LR;
+    let unphysical = |(i, r): (usize, &Refit)| {
+        unidentifiable(&members[i].effect.params(f_hi), &r.params).is_some()
+    };
+    ok().filter(|(_, m)| tied(*m))
+        .min_by(|a, b| {
+            unphysical(a.1)
+                .cmp(&unphysical(b.1))
+                .then(j(a.1).total_cmp(&j(b.1)))
+        })
+        .map(|(k, _)| k)
+}
+
+/// A family member's refit is equivalent to the family's best when its likelihood ratio against
+/// it is below this (χ² with 1 degree of freedom at 95 %): the data cannot tell them apart.
+const EQUIVALENT_LR: f64 = 3.84;
+
+/// The members of a family the data cannot tell from its best refit (member `best`, criterion
+/// `j_best`): those whose refit (in `others`) ends within [`EQUIVALENT_LR`] of it, and the mirror
+/// images of those and of the best.
+fn equivalents(
+    members: &[Member],
+    best: usize,
+    others: &[(usize, Result<(Refit, Current), RefitError>)],
+    j_best: f64,
+    sigma2: f64,
+) -> Vec<String> {
+    let tied: Vec<usize> = std::iter::once(best)
+        .chain(others.iter().filter_map(|(i, r)| {
+            r.as_ref()
+                .ok()
+                .filter(|(r, _)| 2.0 * (r.criterion_after - j_best) / sigma2 < EQUIVALENT_LR)
+                .map(|_| *i)
+        }))
+        .collect();
+    members
+        .iter()
+        .enumerate()
+        .filter(|(i, m)| {
+            *i != best && (tied.contains(i) || m.mirror_of.is_some_and(|o| tied.contains(&o)))
+        })
+        .map(|(_, m)| m.effect.describe())
+        .collect()
 }
 
 /// A misfit above this reduced χ² is large: refits then explore their starts.
