@@ -445,8 +445,11 @@ pub fn diagnosis(d: &diagnose::Diagnosis, base: &str, id: &Identification) -> Di
         for c in &round.ranked {
             // The accepted refit stands for its family: the leader, or a member refitted in its
             // place (see `diagnose`'s family refits).
-            let refit =
-                accepted.filter(|a| a.effect == c.effect || a.equivalent.contains(&c.effect));
+            let refit = accepted.filter(|a| {
+                a.effect == c.effect
+                    || a.equivalent.contains(&c.effect)
+                    || a.family.contains(&c.effect)
+            });
             let effect = refit.map_or(&c.effect, |a| &a.effect);
             // Values at the final fit; none for an effect a later round removed.
             // An accepted mass whose position was then fitted is in the final model as placed.

@@ -144,8 +144,13 @@ pub struct Refit {
     /// [`Diagnosis::not_tried`].
     #[serde(skip)]
     pub converged: bool,
-    /// Placements the data cannot tell from this one (see [`Ranked::equivalent`]).
+    /// The family members the data cannot tell from this one: their refits end within a
+    /// likelihood ratio of 3.84 of it (see [`Ranked::equivalent`] for the score's look-alikes).
     pub equivalent: Vec<String>,
+    /// The score family this refit stands for (every member, refitted or not): a ranked
+    /// candidate whose family this is was accepted through this refit.
+    #[serde(skip)]
+    pub family: Vec<String>,
     /// For an accepted effect whose place was fitted: where, with its 95 % confidence region
     /// (mm, set at the final fit).
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -957,6 +962,7 @@ fn refit_leading(
         };
         let cand = members[i].effect;
         r.equivalent = equivalents(members, i, &outcomes, r.criterion_after, *sigma2);
+        r.family = family_of(ranking, members[0].effect);
         progress(&format!(
             "refit {}: ΔJ = {:.1}, LR = {:.1}, p = {:.2e}",
             r.effect,
@@ -1244,6 +1250,19 @@ fn best_member(
                 .then(j(a.1).total_cmp(&j(b.1)))
         })
         .map(|(k, _)| k)
+}
+
+/// Every member of the score family `leader` belongs to (described), or `leader` alone.
+fn family_of(ranking: &Ranking, leader: &Effect) -> Vec<String> {
+    let effect = |k: usize| &ranking.candidates[ranking.scored[k].candidate];
+    ranking
+        .families
+        .iter()
+        .find(|f| f.iter().any(|&k| std::ptr::eq(effect(k), leader)))
+        .map_or_else(
+            || vec![leader.describe()],
+            |f| f.iter().map(|&k| effect(k).describe()).collect(),
+        )
 }
 
 /// A family member's refit is equivalent to the family's best when its likelihood ratio against
@@ -1840,6 +1859,7 @@ fn refit(
         stop,
         converged: out.stop.converged(),
         equivalent: Vec::new(),
+        family: Vec::new(),
         place: None,
     };
     Ok((r, next))
