@@ -106,7 +106,7 @@ fn the_judge_matches_effects_by_kind_and_place() {
     let with = blind::draw(&model, &vars, &lines, 5, Some(false)).unwrap();
     assert!(!with.injected.is_empty());
     for i in &with.injected {
-        assert!(blind::same_site(&i.effect, &i.effect));
+        assert!(blind::same_site(&model, &i.effect, &i.effect));
         assert!(
             (blind::SIGNAL.0 * 0.9..blind::SIGNAL.1 * 1.1).contains(&i.signal),
             "{i:?}"
@@ -119,4 +119,44 @@ fn the_judge_matches_effects_by_kind_and_place() {
         again.data.characteristics[0].amplitude,
         with.data.characteristics[0].amplitude
     );
+}
+
+/// A moment stiffness acts on its bodies' relative rotation, the same at every point: the four
+/// isolators' stiffnesses about their common vertical axis are one element, judged as one; their
+/// stiffnesses along it (lever arms differ) and the actuator's about it (other bodies) are not.
+#[test]
+fn a_moment_stiffness_is_the_same_element_on_every_sde_joining_the_same_bodies() {
+    let model = load_model("fwd32j.toml");
+    let direction = |sde: &str, axis| identify::diagnose::effects::Effect::Direction {
+        sde: sde.into(),
+        axis,
+        held: 0.0,
+        psi: 0.3,
+        scale: 1e6,
+    };
+    assert!(blind::same_site(
+        &model,
+        &direction("30", 3),
+        &direction("31", 3)
+    ));
+    assert!(blind::same_site(
+        &model,
+        &direction("32", 5),
+        &direction("33", 5)
+    ));
+    assert!(!blind::same_site(
+        &model,
+        &direction("30", 0),
+        &direction("31", 0)
+    ));
+    assert!(!blind::same_site(
+        &model,
+        &direction("30", 3),
+        &direction("31", 4)
+    ));
+    assert!(!blind::same_site(
+        &model,
+        &direction("30", 3),
+        &direction("34", 3)
+    ));
 }

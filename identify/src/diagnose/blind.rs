@@ -13,7 +13,10 @@
 //! identification's variables can absorb to first order: what a fit cannot explain away), with `signal` drawn
 //! log-uniform over [`SIGNAL`]: from about twice the Bonferroni critical value of one candidate
 //! among a thousand (barely detectable once the fitted variables absorb part of it) to
-//! dominant (a misfit of reduced χ² in the hundreds).
+//! dominant (a misfit of reduced χ² in the hundreds). Sizes stay physical: a body's mass within
+//! a factor [`BODY_MASS_FACTOR`] of the model's, a point mass or resonator at most
+//! [`ADDED_MASS_SHARE`] of its host body; an effect that cannot reach its signal within them is
+//! drawn again.
 
 use std::time::Instant;
 
@@ -32,6 +35,12 @@ use crate::model::Model;
 /// Range of an injected effect's signal: its noise-free change of the data in χ² units, less
 /// what the variables absorb.
 pub const SIGNAL: (f64, f64) = (100.0, 1.0e5);
+/// An injected body mass is the model's times or divided by at most this: a body twice or half
+/// as heavy as drawn is a wrong model, a tenfold one a different machine.
+pub const BODY_MASS_FACTOR: f64 = 2.0;
+/// An injected point mass or resonator weighs at most this share of the body it is fixed to (a
+/// workpiece, a fixture, a loose cover; not a second machine on the table).
+pub const ADDED_MASS_SHARE: f64 = 0.5;
 /// Range of the relative noise σ/|q| of the data (0.5-3 %).
 pub const NOISE: (f64, f64) = (0.005, 0.03);
 /// The identification starts from the truth's values times a factor in 1 ± this.
@@ -116,9 +125,50 @@ pub enum BlindError {
 
 /// Whether `a` and `b` are the same effect for the suite: the same kind at the same place — a
 /// spring between the same two bodies (or body and ground), a mass, resonator or flexibility of
-/// the same body, the gain of the same characteristic, the damping of the same joint. (Point and
+/// the same body, the gain of the same characteristic, the damping of the same joint, a
+/// direction of the same SDE or the same moment stiffness ([`same_moment`]). (Point and
 /// direction are not compared: the fitted placement refines them.)
-pub fn same_site(a: &Effect, b: &Effect) -> bool {
+pub fn same_site(model: &Model, a: &Effect, b: &Effect) -> bool {
+    same_moment(model, a, b) || same_kind_and_place(a, b)
+}
+
+/// Whether `a` and `b` change the stiffness about parallel axes (|cos| > 0.999) of two SDEs of
+/// `model` that join the same two bodies: a moment stiffness acts on the bodies' relative
+/// rotation, which is the same at every point, so the two are one element (the four isolators'
+/// stiffnesses about their common vertical axis, say) and no data can tell them apart.
+pub fn same_moment(model: &Model, a: &Effect, b: &Effect) -> bool {
+    let (
+        Effect::Direction {
+            sde: x, axis: i, ..
+        },
+        Effect::Direction {
+            sde: y, axis: j, ..
+        },
+    ) = (a, b)
+    else {
+        return false;
+    };
+    let sde = |name: &str| model.sdes.iter().find(|s| s.name == name);
+    let (Some(p), Some(q)) = (sde(x), sde(y)) else {
+        return false;
+    };
+    let pair = |s: &crate::model::Sde| {
+        let mut v = s.bodies.to_vec();
+        v.sort();
+        v
+    };
+    *i >= 3
+        && *j >= 3
+        && pair(p) == pair(q)
+        && p.rotation
+            .column(i - 3)
+            .dot(&q.rotation.column(j - 3))
+            .abs()
+            > 0.999
+}
+
+/// [`same_site`] but for moment stiffnesses: the same kind, the same bodies or element.
+fn same_kind_and_place(a: &Effect, b: &Effect) -> bool {
     use Effect::*;
     let pair = |x: &[Option<String>; 2]| {
         let mut v = x.to_vec();
@@ -176,8 +226,8 @@ pub const RESONATOR_TOLERANCE: f64 = 0.1;
 /// starting values stand) is the injected `i`: the same site ([`same_site`]) and, for a
 /// resonator, the same tuning frequency within [`RESONATOR_TOLERANCE`] (a resonator on the right
 /// body at another frequency is another effect).
-pub fn found(i: &Injected, e: &Effect, values: &[f64]) -> bool {
-    if !same_site(&i.effect, e) {
+pub fn found(model: &Model, i: &Injected, e: &Effect, values: &[f64]) -> bool {
+    if !same_site(model, &i.effect, e) {
         return false;
     }
     let Effect::Resonator { freq_hz, .. } = e else {
@@ -302,8 +352,17 @@ fn sized(
     let (mut lo, mut hi) = match effect {
         Effect::Gain { .. } => (1e-6, 0.45),
         Effect::Damping { .. } => (1e-6, 3.0),
-        // Within the fitted range (a tenth to ten times the model's mass).
-        Effect::BodyMass { .. } => (1e-6, 2.0),
+        // A body half or twice as heavy as the model says (within the fitted range).
+        Effect::BodyMass { .. } => (1e-6, BODY_MASS_FACTOR.ln()),
+        // An added mass or resonator at most a share of the body it is fixed to.
+        Effect::Mass { body, .. } | Effect::Resonator { body, .. } => {
+            let host = r
+                .model
+                .body_index(body)
+                .map_or(f64::INFINITY, |b| r.model.bodies[b].mass);
+            let hi = (params[0].scale * 1e8).min(ADDED_MASS_SHARE * host);
+            (params[0].scale * 1e-8, hi)
+        }
         _ => (params[0].scale * 1e-8, params[0].scale * 1e8),
     };
     match chi2(hi)? {
@@ -369,7 +428,10 @@ pub fn draw(
         for _ in 0..ATTEMPTS_PER_KIND {
             attempts += 1;
             let effect = of_kind[rng.random_range(0..of_kind.len())].clone();
-            if injected.iter().any(|i| same_site(&i.effect, &effect)) {
+            if injected
+                .iter()
+                .any(|i| same_site(model, &i.effect, &effect))
+            {
                 continue;
             }
             let signal = SIGNAL.0 * (SIGNAL.1 / SIGNAL.0).powf(rng.random::<f64>());
@@ -527,7 +589,8 @@ pub fn judge(case: &BlindCase, d: &Diagnosis, seconds: f64, diagnosis_seconds: f
             .map(|a| a.params.iter().map(|p| p.value).collect())
             .unwrap_or_default()
     };
-    let hit = |e: &Effect, values: &[f64]| case.injected.iter().any(|i| found(i, e, values));
+    let hit =
+        |e: &Effect, values: &[f64]| case.injected.iter().any(|i| found(&d.model, i, e, values));
     let right_first = d.effects.first().is_some_and(|e| hit(e, &fitted(0)));
     let ranked_first = d
         .rounds
@@ -541,7 +604,7 @@ pub fn judge(case: &BlindCase, d: &Diagnosis, seconds: f64, diagnosis_seconds: f
             .effects
             .iter()
             .enumerate()
-            .find(|(k, e)| !used[*k] && found(i, e, &fitted(*k)))
+            .find(|(k, e)| !used[*k] && found(&d.model, i, e, &fitted(*k)))
         {
             Some((k, _)) => {
                 used[k] = true;
