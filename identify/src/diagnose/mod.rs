@@ -942,7 +942,7 @@ fn refit_leading(
         .map(Some)
         .collect();
     for (f, members) in jobs.iter().enumerate() {
-        let mut outcomes: Vec<(usize, Result<(Refit, Current), RefitError>)> = distinct
+        let mut outcomes: Vec<MemberRefit> = distinct
             .iter()
             .zip(results.iter_mut())
             .filter(|((g, _), _)| *g == f)
@@ -1079,6 +1079,9 @@ struct Member<'r> {
     start: Vec<f64>,
     mirror_of: Option<usize>,
 }
+
+/// A family member's refit: its index among the family's members, and the refit with its fit.
+type MemberRefit = (usize, Result<(Refit, Current), RefitError>);
 
 /// The distinct (not mirror-image) members of a family that are refitted. The score test cannot
 /// tell a family's members apart, but a finite effect can: the true placement of a large spring
@@ -1227,7 +1230,7 @@ fn refit_member(
 /// and identified is preferred. Index into `outcomes`; `None` when no refit succeeded.
 fn best_member(
     members: &[Member],
-    outcomes: &[(usize, Result<(Refit, Current), RefitError>)],
+    outcomes: &[MemberRefit],
     (f_hi, sigma2, threshold): (f64, f64, f64),
 ) -> Option<usize> {
     let ok = || {
@@ -1275,7 +1278,7 @@ const EQUIVALENT_LR: f64 = 3.84;
 fn equivalents(
     members: &[Member],
     best: usize,
-    others: &[(usize, Result<(Refit, Current), RefitError>)],
+    others: &[MemberRefit],
     j_best: f64,
     sigma2: f64,
 ) -> Vec<String> {
