@@ -45,23 +45,32 @@ fn main() {
                     .iter()
                     .map(|i| {
                         format!(
-                            "{} {:?} (signal {:.0})",
+                            "{} ({}; signal {:.0})",
                             i.effect.describe(),
-                            i.values,
+                            values(&i.effect, &i.values),
                             i.signal
                         )
+                    })
+                    .collect();
+                let added: Vec<String> = d
+                    .accepted
+                    .iter()
+                    .map(|a| {
+                        let ps: Vec<String> = a.params.iter().map(|p| p.describe()).collect();
+                        format!("{} ({})", a.effect, ps.join(", "))
                     })
                     .collect();
                 println!(
                     "seed {seed}: noise {:.1} %, injected [{}]; added [{}]; first {} ranked {} exact {} ({:.1} s)",
                     100.0 * case.noise,
                     truth.join("; "),
-                    o.added.join("; "),
+                    added.join("; "),
                     o.right_first,
                     o.ranked_first,
                     o.exact,
                     o.seconds
                 );
+                println!("  {}", diagnose::timing_text(&d));
                 outcomes.push(o);
             }
             Err(e) => println!("seed {seed}: failed: {e}"),
@@ -83,6 +92,26 @@ fn main() {
     if n == 0 || n >= 10 {
         demo_split(&root);
     }
+}
+
+/// An injected effect's parameter values, named, in report units.
+fn values(effect: &diagnose::Effect, v: &[f64]) -> String {
+    effect
+        .params(400.0)
+        .iter()
+        .zip(v)
+        .map(|(p, x)| {
+            diagnose::ParamEstimate {
+                name: p.name.into(),
+                unit: p.unit.into(),
+                value: *x,
+                std_error: 0.0,
+            }
+            .describe()
+            .replace(" ± 0.00e0", "")
+        })
+        .collect::<Vec<_>>()
+        .join(", ")
 }
 
 /// The FWD-32J demo case (truth with the actuator, model without), seeded 1 % noise: the time of

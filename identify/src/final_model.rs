@@ -464,7 +464,19 @@ fn appended_counts(d: &Diagnosis) -> Vec<(usize, usize)> {
                         (0, 0)
                     }
                 }
-                Effect::Gain { .. } | Effect::Damping { .. } => (0, 0),
+                // A law that leaves the direction out gets a parallel general element; a
+                // general element's own stiffness is written into its table.
+                Effect::Direction { sde, .. } => {
+                    let general = d.model.sde_index(sde).is_some_and(|i| {
+                        matches!(d.model.sdes[i].law, crate::model::SdeLaw::General { .. })
+                    });
+                    if general || first <= 0.0 {
+                        (0, 0)
+                    } else {
+                        (0, 1)
+                    }
+                }
+                Effect::Gain { .. } | Effect::Damping { .. } | Effect::BodyMass { .. } => (0, 0),
             }
         })
         .collect()
@@ -1240,7 +1252,47 @@ fn effect_variables(e: &Effect, a: &Refit, added: &[Sde]) -> String {
             "# (the compliance sets all six springs of both joints: fixed in the model file)\n"
                 .into()
         }
+        Effect::Direction { sde, axis, .. } => {
+            // The freed stiffness is a parameter of the element that carries it: the SDE
+            // itself (a general element) or the parallel one added.
+            let name = added.first().map_or(sde.as_str(), |s| s.name.as_str());
+            let k = fin_direction_stiffness(added.first(), a, e);
+            let (unit, factor) = if *axis < 3 {
+                ("N/um", 1e6)
+            } else {
+                ("N*m/rad", 1.0)
+            };
+            var(
+                format!("k{} {name}", axis + 1),
+                &format!("[{}]", quoted(name)),
+                &format!("k{}", axis + 1),
+                quantity(k, factor, unit),
+                quantity(if k > 0.0 { k } else { factor }, factor, unit),
+            )
+        }
+        Effect::BodyMass { body, .. } => format!(
+            "[[variable]]\nname = {}\nbodies = [{}]\nparameter = \"mJ\"\ninitial = 1.0\n",
+            quoted(&format!("mJ {body}")),
+            quoted(body)
+        ),
         Effect::Gain { .. } => String::new(),
+    }
+}
+
+/// The stiffness (SI) of a freed direction at the final fit: the added element's, or the one the
+/// estimate gives (`k` itself, or `1/(1/held + c)`).
+fn fin_direction_stiffness(added: Option<&Sde>, a: &Refit, e: &Effect) -> f64 {
+    let Effect::Direction { axis, held, .. } = e else {
+        return 0.0;
+    };
+    if let Some(s) = added {
+        return s.law.stiffness()[*axis];
+    }
+    let v = a.params.first().map_or(0.0, |p| p.value);
+    if *held > 0.0 {
+        1.0 / (1.0 / held + v.max(0.0))
+    } else {
+        v.max(0.0)
     }
 }
 

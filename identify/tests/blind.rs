@@ -15,7 +15,7 @@ use identify::identification::{synthetic, variables};
 
 /// The seeds of the subset (the first of the 200 the example runs).
 const SEEDS: std::ops::RangeInclusive<u64> = 1..=SUBSET;
-const SUBSET: u64 = 10;
+const SUBSET: u64 = 24;
 
 #[test]
 fn the_blind_subset_is_diagnosed_at_the_asserted_rates() {
@@ -27,31 +27,33 @@ fn the_blind_subset_is_diagnosed_at_the_asserted_rates() {
     .expect("variables");
     let lines = synthetic::fwd32j_lines();
     let opts = diagnose::Options::default();
-    // The cases are independent: two at a time (CI has two cores).
-    let seeds: Vec<u64> = SEEDS.collect();
+    // The cases are independent: two at a time (CI has two cores), each worker taking the next
+    // seed (their times differ tenfold).
+    let next = std::sync::atomic::AtomicU64::new(*SEEDS.start());
+    let case = |seed: u64| {
+        let case = blind::draw(&model, &vars, &lines, seed, None).expect("a blind case");
+        // The generator injects what it says: a case with effects has data that differ from
+        // the model's.
+        assert!(case
+            .injected
+            .iter()
+            .all(|i| i.signal >= blind::SIGNAL.0 * 0.9));
+        let (o, _) = blind::run(&model, &case, &opts).expect("identification and diagnosis");
+        println!("seed {seed}: {o:?}");
+        o
+    };
     let outcomes: Vec<_> = std::thread::scope(|scope| {
-        let workers: Vec<_> = seeds
-            .chunks(seeds.len().div_ceil(2))
-            .map(|chunk| {
-                let (model, vars, lines, opts) = (&model, &vars, &lines, &opts);
-                scope.spawn(move || {
-                    chunk
-                        .iter()
-                        .map(|&seed| {
-                            let case =
-                                blind::draw(model, vars, lines, seed, None).expect("a blind case");
-                            // The generator injects what it says: a case with effects has data
-                            // that differ from the model's.
-                            assert!(case
-                                .injected
-                                .iter()
-                                .all(|i| i.signal >= blind::SIGNAL.0 * 0.9));
-                            let (o, _) = blind::run(model, &case, opts)
-                                .expect("identification and diagnosis");
-                            println!("seed {seed}: {o:?}");
-                            o
-                        })
-                        .collect::<Vec<_>>()
+        let workers: Vec<_> = (0..2)
+            .map(|_| {
+                scope.spawn(|| {
+                    let mut mine = Vec::new();
+                    loop {
+                        let seed = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                        if seed > *SEEDS.end() {
+                            break mine;
+                        }
+                        mine.push(case(seed));
+                    }
                 })
             })
             .collect();
@@ -68,9 +70,11 @@ fn the_blind_subset_is_diagnosed_at_the_asserted_rates() {
     assert!(r.exact >= EXACT, "{r:?}");
 }
 
-/// Share of the subset's cases with effects whose first added effect is an injected one.
-const RIGHT_FIRST: f64 = 0.6;
-/// Share of the subset's cases that end with exactly the injected set.
+/// Share of the subset's cases with effects whose first added effect is an injected one. The
+/// subset gets 12 of its 17 (seeds 1-24); one case of margin.
+const RIGHT_FIRST: f64 = 0.64;
+/// Share of the subset's cases that end with exactly the injected set. The subset gets 18 of 24;
+/// one case of margin.
 const EXACT: f64 = 0.7;
 
 #[test]
@@ -104,7 +108,7 @@ fn the_judge_matches_effects_by_kind_and_place() {
     let with = blind::draw(&model, &vars, &lines, 5, Some(false)).unwrap();
     assert!(!with.injected.is_empty());
     for i in &with.injected {
-        assert!(blind::same_site(&i.effect, &i.effect));
+        assert!(blind::same_site(&model, &i.effect, &i.effect));
         assert!(
             (blind::SIGNAL.0 * 0.9..blind::SIGNAL.1 * 1.1).contains(&i.signal),
             "{i:?}"
@@ -117,4 +121,44 @@ fn the_judge_matches_effects_by_kind_and_place() {
         again.data.characteristics[0].amplitude,
         with.data.characteristics[0].amplitude
     );
+}
+
+/// A moment stiffness acts on its bodies' relative rotation, the same at every point: the four
+/// isolators' stiffnesses about their common vertical axis are one element, judged as one; their
+/// stiffnesses along it (lever arms differ) and the actuator's about it (other bodies) are not.
+#[test]
+fn a_moment_stiffness_is_the_same_element_on_every_sde_joining_the_same_bodies() {
+    let model = load_model("fwd32j.toml");
+    let direction = |sde: &str, axis| identify::diagnose::effects::Effect::Direction {
+        sde: sde.into(),
+        axis,
+        held: 0.0,
+        psi: 0.3,
+        scale: 1e6,
+    };
+    assert!(blind::same_site(
+        &model,
+        &direction("30", 3),
+        &direction("31", 3)
+    ));
+    assert!(blind::same_site(
+        &model,
+        &direction("32", 5),
+        &direction("33", 5)
+    ));
+    assert!(!blind::same_site(
+        &model,
+        &direction("30", 0),
+        &direction("31", 0)
+    ));
+    assert!(!blind::same_site(
+        &model,
+        &direction("30", 3),
+        &direction("31", 4)
+    ));
+    assert!(!blind::same_site(
+        &model,
+        &direction("30", 3),
+        &direction("34", 3)
+    ));
 }

@@ -277,6 +277,7 @@ fn the_final_model_file_is_the_diagnosed_model_for_every_effect_kind() {
         body: "first".into(),
         point: Vector3::new(0.1, 0.0, 0.2),
         freq_hz: 35.0,
+        tuning: [30.0, 40.0],
         scale: 10.0,
     };
     round_trip(&c, &accepting(&c, resonator, &[4.0, 33.3]));
@@ -297,6 +298,40 @@ fn the_final_model_file_is_the_diagnosed_model_for_every_effect_kind() {
     };
     let (_, vars) = round_trip(&c, &accepting(&c, damping, &[0.9]));
     assert!(vars.contains("name = \"psi k2\""), "{vars}");
+    // A direction k1's axial law leaves out, freed: a parallel general element carrying that one
+    // stiffness, its k2 a variable next time.
+    let left_out = Effect::Direction {
+        sde: "k1".into(),
+        axis: 1,
+        held: 0.0,
+        psi: 0.2,
+        scale: 1e6,
+    };
+    let (text, vars) = round_trip(&c, &accepting(&c, left_out, &[3.0e5]));
+    assert!(text.contains("name = \"k1 freed k2 1\""), "{text}");
+    assert!(vars.contains("parameter = \"k2\""), "{vars}");
+    // A direction guide 2 holds stiff, made compliant: its own k4 written in place.
+    let held = Effect::Direction {
+        sde: "guide 2".into(),
+        axis: 3,
+        held: 1.0e6,
+        psi: 0.1,
+        scale: 1e6,
+    };
+    let (text, _) = round_trip(&c, &accepting(&c, held, &[1.0e-6]));
+    assert!(
+        text.contains("500000"),
+        "k4 = 1/(1/1e6 + 1e-6) = 5e5: {text}"
+    );
+    // `second` 20 % heavier: its mass and inertias written back, mJ a variable next time.
+    let body = Effect::BodyMass {
+        body: "second".into(),
+        mass: 120.0,
+    };
+    let (text, vars) = round_trip(&c, &accepting(&c, body, &[144.0]));
+    assert!(text.contains("mass = \"144 kg\""), "{text}");
+    assert!(text.contains("\"14.4 kg m^2\""), "{text}");
+    assert!(vars.contains("parameter = \"mJ\""), "{vars}");
 }
 
 #[test]

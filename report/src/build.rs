@@ -445,8 +445,11 @@ pub fn diagnosis(d: &diagnose::Diagnosis, base: &str, id: &Identification) -> Di
         for c in &round.ranked {
             // The accepted refit stands for its family: the leader, or a member refitted in its
             // place (see `diagnose`'s family refits).
-            let refit =
-                accepted.filter(|a| a.effect == c.effect || a.equivalent.contains(&c.effect));
+            let refit = accepted.filter(|a| {
+                a.effect == c.effect
+                    || a.equivalent.contains(&c.effect)
+                    || a.family.contains(&c.effect)
+            });
             let effect = refit.map_or(&c.effect, |a| &a.effect);
             // Values at the final fit; none for an effect a later round removed.
             // An accepted mass whose position was then fitted is in the final model as placed.
@@ -456,8 +459,8 @@ pub fn diagnosis(d: &diagnose::Diagnosis, base: &str, id: &Identification) -> Di
                     .as_ref()
                     .map_or(a.effect.as_str(), |p| p.effect.as_str())
             });
-            let principal = final_effect
-                .and_then(|e| d.accepted.iter().find(|f| f.effect == e))
+            let final_refit = final_effect.and_then(|e| d.accepted.iter().find(|f| f.effect == e));
+            let principal = final_refit
                 .and_then(|a| a.params.first())
                 .map(|p| p.display());
             candidates.push(Candidate {
@@ -476,6 +479,8 @@ pub fn diagnosis(d: &diagnose::Diagnosis, base: &str, id: &Identification) -> Di
                 estimate: principal.map(|(v, _, _)| finite(v)),
                 std_error: principal.map(|(_, s, _)| finite(s)),
                 unit: principal.map(|(_, _, u)| u.to_string()).unwrap_or_default(),
+                rms_db_before: refit.map(|a| finite(a.rms_db_before)),
+                rms_db_after: refit.map(|a| finite(a.rms_db_after)),
             });
         }
     }
@@ -489,6 +494,14 @@ pub fn diagnosis(d: &diagnose::Diagnosis, base: &str, id: &Identification) -> Di
             .map(|c| LabelledValue {
                 label: c.label.clone(),
                 value: finite(c.rms_relative),
+            })
+            .collect(),
+        rms_db_error: r
+            .characteristics
+            .iter()
+            .map(|c| LabelledValue {
+                label: c.label.clone(),
+                value: finite(c.rms_db),
             })
             .collect(),
     };

@@ -291,6 +291,13 @@ pub struct Candidate {
     pub std_error: Option<f64>,
     /// Unit of estimate and std_error.
     pub unit: String,
+    /// When accepted: the RMS amplitude error (dB, every fitted point) before and after it was
+    /// added, its gain in the curves' terms beside the criterion's.
+    #[serde(default)]
+    pub rms_db_before: Option<f64>,
+    /// After.
+    #[serde(default)]
+    pub rms_db_after: Option<f64>,
 }
 
 /// How well a model fits the data.
@@ -306,6 +313,9 @@ pub struct FitQuality {
     pub reduced_chi2: f64,
     /// RMS relative amplitude error per characteristic label.
     pub rms_relative_error: Vec<LabelledValue>,
+    /// RMS amplitude error (dB) per characteristic label.
+    #[serde(default)]
+    pub rms_db_error: Vec<LabelledValue>,
 }
 
 /// A label and a number.

@@ -385,6 +385,9 @@ fn diagnosis(h: &mut String, r: &Report) {
             for l in &d.before.rms_relative_error {
                 let _ = write!(h, "<th>RMS {}</th>", e(&l.label));
             }
+            for l in &d.before.rms_db_error {
+                let _ = write!(h, "<th>RMS {} (dB)</th>", e(&l.label));
+            }
             h.push_str("</tr>\n");
             for (name, q) in [("before", &d.before), ("after", &d.after)] {
                 let p = q
@@ -399,6 +402,9 @@ fn diagnosis(h: &mut String, r: &Report) {
                 );
                 for l in &q.rms_relative_error {
                     let _ = write!(h, "<td>{}</td>", identify::display::relative(l.value));
+                }
+                for l in &q.rms_db_error {
+                    let _ = write!(h, "<td>{:.2} dB</td>", l.value);
                 }
                 h.push_str("</tr>\n");
             }
@@ -441,11 +447,15 @@ pub fn top_candidates(c: &[Candidate]) -> (Vec<&Candidate>, Vec<&Candidate>) {
 /// (no script needed).
 fn candidates(h: &mut String, all: &[Candidate]) {
     let e = escape;
-    let head = "<table class=\"candidates\"><tr><th>round</th><th class=\"l\">candidate effect</th><th class=\"l\">what and where</th><th>score statistic</th><th>p-value</th><th class=\"l\">accepted</th><th>estimate</th><th>std error</th><th class=\"l\">unit</th></tr>\n";
+    let head = "<table class=\"candidates\"><tr><th>round</th><th class=\"l\">candidate effect</th><th class=\"l\">what and where</th><th>score statistic</th><th>p-value</th><th class=\"l\">accepted</th><th>estimate</th><th>std error</th><th class=\"l\">unit</th><th>RMS error when added</th></tr>\n";
     let row = |h: &mut String, c: &Candidate| {
+        let gain = match (c.rms_db_before, c.rms_db_after) {
+            (Some(a), Some(b)) => format!("{a:.2} → {b:.2} dB"),
+            _ => "—".into(),
+        };
         let _ = writeln!(
             h,
-            "<tr{}><td>{}</td><td class=\"l\">{}</td><td class=\"l\">{}</td><td>{}</td><td>{}</td><td class=\"l\">{}</td><td>{}</td><td>{}</td><td class=\"l\">{}</td></tr>",
+            "<tr{}><td>{}</td><td class=\"l\">{}</td><td class=\"l\">{}</td><td>{}</td><td>{}</td><td class=\"l\">{}</td><td>{}</td><td>{}</td><td class=\"l\">{}</td><td>{}</td></tr>",
             if c.accepted { " class=\"accepted\"" } else { "" },
             c.round,
             e(&c.name),
@@ -455,7 +465,8 @@ fn candidates(h: &mut String, all: &[Candidate]) {
             if c.accepted { "<strong>yes</strong>" } else { "no" },
             c.estimate.map(|v| identify::display::sig(v, 4)).unwrap_or_else(|| "—".into()),
             c.std_error.map(|v| identify::display::sig(v, 2)).unwrap_or_else(|| "—".into()),
-            e(&c.unit)
+            e(&c.unit),
+            gain
         );
     };
     let (top, rest) = top_candidates(all);

@@ -9,13 +9,18 @@
 //!
 //! Sizes are set by what the effect does to the data, not by its parameter: each effect's
 //! parameter is chosen (bisection on a log scale) so that its noise-free change of the data is
-//! `signal` in χ² units (Σ((|q₁| − |q₀|)/(ε|q₀|))² over every point), with `signal` drawn
+//! `signal` in χ² units (Σ((|q₁| − |q₀|)/(ε|q₀|))² over every point, less the part the
+//! identification's variables can absorb to first order: what a fit cannot explain away), with `signal` drawn
 //! log-uniform over [`SIGNAL`]: from about twice the Bonferroni critical value of one candidate
 //! among a thousand (barely detectable once the fitted variables absorb part of it) to
-//! dominant (a misfit of reduced χ² in the hundreds).
+//! dominant (a misfit of reduced χ² in the hundreds). Sizes stay physical: a body's mass within
+//! a factor [`BODY_MASS_FACTOR`] of the model's, a point mass or resonator at most
+//! [`ADDED_MASS_SHARE`] of its host body; an effect that cannot reach its signal within them is
+//! drawn again.
 
 use std::time::Instant;
 
+use nalgebra::{DMatrix, DVector};
 use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
 use rand_distr::{Distribution, StandardNormal};
@@ -27,8 +32,15 @@ use crate::identification::{self, data, synthetic, IdentifyError, Variables};
 use crate::measured::MeasuredData;
 use crate::model::Model;
 
-/// Range of an injected effect's signal: its noise-free change of the data in χ² units.
+/// Range of an injected effect's signal: its noise-free change of the data in χ² units, less
+/// what the variables absorb.
 pub const SIGNAL: (f64, f64) = (100.0, 1.0e5);
+/// An injected body mass is the model's times or divided by at most this: a body twice or half
+/// as heavy as drawn is a wrong model, a tenfold one a different machine.
+pub const BODY_MASS_FACTOR: f64 = 2.0;
+/// An injected point mass or resonator weighs at most this share of the body it is fixed to (a
+/// workpiece, a fixture, a loose cover; not a second machine on the table).
+pub const ADDED_MASS_SHARE: f64 = 0.5;
 /// Range of the relative noise σ/|q| of the data (0.5-3 %).
 pub const NOISE: (f64, f64) = (0.005, 0.03);
 /// The identification starts from the truth's values times a factor in 1 ± this.
@@ -113,9 +125,50 @@ pub enum BlindError {
 
 /// Whether `a` and `b` are the same effect for the suite: the same kind at the same place — a
 /// spring between the same two bodies (or body and ground), a mass, resonator or flexibility of
-/// the same body, the gain of the same characteristic, the damping of the same joint. (Point and
+/// the same body, the gain of the same characteristic, the damping of the same joint, a
+/// direction of the same SDE or the same moment stiffness ([`same_moment`]). (Point and
 /// direction are not compared: the fitted placement refines them.)
-pub fn same_site(a: &Effect, b: &Effect) -> bool {
+pub fn same_site(model: &Model, a: &Effect, b: &Effect) -> bool {
+    same_moment(model, a, b) || same_kind_and_place(a, b)
+}
+
+/// Whether `a` and `b` change the stiffness about parallel axes (|cos| > 0.999) of two SDEs of
+/// `model` that join the same two bodies: a moment stiffness acts on the bodies' relative
+/// rotation, which is the same at every point, so the two are one element (the four isolators'
+/// stiffnesses about their common vertical axis, say) and no data can tell them apart.
+pub fn same_moment(model: &Model, a: &Effect, b: &Effect) -> bool {
+    let (
+        Effect::Direction {
+            sde: x, axis: i, ..
+        },
+        Effect::Direction {
+            sde: y, axis: j, ..
+        },
+    ) = (a, b)
+    else {
+        return false;
+    };
+    let sde = |name: &str| model.sdes.iter().find(|s| s.name == name);
+    let (Some(p), Some(q)) = (sde(x), sde(y)) else {
+        return false;
+    };
+    let pair = |s: &crate::model::Sde| {
+        let mut v = s.bodies.to_vec();
+        v.sort();
+        v
+    };
+    *i >= 3
+        && *j >= 3
+        && pair(p) == pair(q)
+        && p.rotation
+            .column(i - 3)
+            .dot(&q.rotation.column(j - 3))
+            .abs()
+            > 0.999
+}
+
+/// [`same_site`] but for moment stiffnesses: the same kind, the same bodies or element.
+fn same_kind_and_place(a: &Effect, b: &Effect) -> bool {
     use Effect::*;
     let pair = |x: &[Option<String>; 2]| {
         let mut v = x.to_vec();
@@ -139,8 +192,17 @@ pub fn same_site(a: &Effect, b: &Effect) -> bool {
             Flexible {
                 body: y, axis: j, ..
             },
+        )
+        | (
+            Direction {
+                sde: x, axis: i, ..
+            },
+            Direction {
+                sde: y, axis: j, ..
+            },
         ) => x == y && i == j,
         (Gain { output: x, .. }, Gain { output: y, .. }) => x == y,
+        (BodyMass { body: x, .. }, BodyMass { body: y, .. }) => x == y,
         (
             Damping {
                 variable: x,
@@ -155,6 +217,26 @@ pub fn same_site(a: &Effect, b: &Effect) -> bool {
         ) => x == y && s == t,
         _ => false,
     }
+}
+
+/// A found resonator's tuning frequency must be within this fraction of the injected one.
+pub const RESONATOR_TOLERANCE: f64 = 0.1;
+
+/// Whether the added effect `e` with fitted parameter `values` (empty: not fitted, its own
+/// starting values stand) is the injected `i`: the same site ([`same_site`]) and, for a
+/// resonator, the same tuning frequency within [`RESONATOR_TOLERANCE`] (a resonator on the right
+/// body at another frequency is another effect).
+pub fn found(model: &Model, i: &Injected, e: &Effect, values: &[f64]) -> bool {
+    if !same_site(model, &i.effect, e) {
+        return false;
+    }
+    let Effect::Resonator { freq_hz, .. } = e else {
+        return true;
+    };
+    let f = values.get(1).copied().unwrap_or(*freq_hz);
+    i.values
+        .get(1)
+        .is_some_and(|f0| (f / f0 - 1.0).abs() <= RESONATOR_TOLERANCE)
 }
 
 /// The amplitude of every characteristic of `r` at `lines` (gains applied), flattened.
@@ -178,6 +260,7 @@ fn values_at(effect: &Effect, nested: &[f64], t: f64, sign: f64, extra: f64) -> 
     match effect {
         Effect::Gain { .. } => v[0] = sign * t.min(0.45),
         Effect::Damping { value, .. } => v[0] = value * (sign * t).exp(),
+        Effect::BodyMass { mass, .. } => v[0] = mass * (sign * t).exp(),
         Effect::Spring { .. } => {
             v[0] = t;
             v[1] = extra;
@@ -191,8 +274,43 @@ fn values_at(effect: &Effect, nested: &[f64], t: f64, sign: f64, extra: f64) -> 
     v
 }
 
+/// Orthonormal columns spanning how the identification's variables move the data `q0` of `r`
+/// at `lines` (whitened by the relative noise `noise`; forward differences at the truth's
+/// values): what a fit can absorb of an effect, to first order.
+fn absorbed(
+    r: &Realized,
+    q0: &[f64],
+    lines: &[f64],
+    noise: f64,
+) -> Result<DMatrix<f64>, BlindError> {
+    let x = truth_values(&r.model, &r.vars);
+    let mut jac = DMatrix::zeros(q0.len(), x.len());
+    for (i, v) in r.vars.vars.iter().enumerate() {
+        let h = 1e-6 * x[i].abs().max(v.scale.abs()).max(f64::MIN_POSITIVE);
+        let mut xh = x.clone();
+        xh[i] += h;
+        let mut m = r.clone();
+        r.vars.apply(&mut m.model, &xh);
+        let q = amplitudes(&m, lines)?;
+        for (k, (a, b)) in q.iter().zip(q0).enumerate() {
+            jac[(k, i)] = (a - b) / (h * noise * b);
+        }
+    }
+    // The variables' units differ by ten decades (Pa/m against ψ): columns of unit length, so
+    // that the basis drops only columns that truly depend on the others.
+    for mut c in jac.column_iter_mut() {
+        let n = c.norm();
+        if n > 0.0 {
+            c /= n;
+        }
+    }
+    Ok(super::score::orthonormal_columns(&jac))
+}
+
 /// Injects `effect` into `r` with a size such that its noise-free change of the data `q0` is
-/// `signal` (χ² units at relative noise `noise`); returns the values used.
+/// `signal` in χ² units at relative noise `noise` — the part of the change the identification's
+/// variables cannot absorb (projected off [`absorbed`]): an effect the variables can mimic is
+/// not detectable, whatever it does to the data. Returns the values used.
 #[allow(clippy::too_many_arguments)]
 fn sized(
     r: &Realized,
@@ -214,6 +332,7 @@ fn sized(
         }
         _ => 0.0,
     };
+    let absorbed = absorbed(r, q0, lines, noise)?;
     let chi2 = |t: f64| -> Result<Option<f64>, BlindError> {
         let mut x = r.clone();
         let v = values_at(effect, &nested, t, sign, extra);
@@ -221,17 +340,29 @@ fn sized(
         let Ok(q) = amplitudes(&x, lines) else {
             return Ok(None);
         };
+        let d = DVector::from_iterator(
+            q.len(),
+            q.iter().zip(q0).map(|(a, b)| (a - b) / (noise * b)),
+        );
         Ok(Some(
-            q.iter()
-                .zip(q0)
-                .map(|(a, b)| ((a - b) / (noise * b)).powi(2))
-                .sum(),
+            (d.norm_squared() - (absorbed.transpose() * &d).norm_squared()).max(0.0),
         ))
     };
     // Bracket on a log scale from the parameter's own scale, then bisect.
     let (mut lo, mut hi) = match effect {
         Effect::Gain { .. } => (1e-6, 0.45),
         Effect::Damping { .. } => (1e-6, 3.0),
+        // A body half or twice as heavy as the model says (within the fitted range).
+        Effect::BodyMass { .. } => (1e-6, BODY_MASS_FACTOR.ln()),
+        // An added mass or resonator at most a share of the body it is fixed to.
+        Effect::Mass { body, .. } | Effect::Resonator { body, .. } => {
+            let host = r
+                .model
+                .body_index(body)
+                .map_or(f64::INFINITY, |b| r.model.bodies[b].mass);
+            let hi = (params[0].scale * 1e8).min(ADDED_MASS_SHARE * host);
+            (params[0].scale * 1e-8, hi)
+        }
         _ => (params[0].scale * 1e-8, params[0].scale * 1e8),
     };
     match chi2(hi)? {
@@ -275,16 +406,7 @@ pub fn draw(
     } else {
         1
     };
-    let x: Vec<f64> = vars
-        .vars
-        .iter()
-        .map(|v| {
-            v.targets
-                .first()
-                .and_then(|t| model.value(t.param).map(|p| p / t.ratio))
-                .unwrap_or(v.initial)
-        })
-        .collect();
+    let x = truth_values(model, vars);
     let labels: Vec<String> = (0..model.outputs.len()).map(|o| format!("#{o}")).collect();
     let library = super::generate::candidates(model, vars, &x, &labels, f_min, f_max);
     let mut kinds: Vec<&'static str> = library.iter().map(Effect::kind).collect();
@@ -294,44 +416,125 @@ pub fn draw(
     if kinds.is_empty() {
         return Err(BlindError::NoCandidates);
     }
-    let mut truth = Realized {
-        model: model.clone(),
-        vars: vars.clone(),
-        gains: vec![1.0; model.outputs.len()],
-    };
+    let mut truth = pristine(model, vars);
     let mut injected: Vec<Injected> = Vec::new();
     let mut attempts = 0;
     while injected.len() < n_effects && attempts < 200 {
-        attempts += 1;
+        // The kind is drawn once per effect and kept: a candidate of it that cannot reach its
+        // drawn signal (the variables absorb most of what it does) is drawn again within the
+        // kind, so that kinds the variables partly absorb are not left out of the suite.
         let kind = kinds[rng.random_range(0..kinds.len())];
         let of_kind: Vec<&Effect> = library.iter().filter(|e| e.kind() == kind).collect();
-        let effect = of_kind[rng.random_range(0..of_kind.len())].clone();
-        if injected.iter().any(|i| same_site(&i.effect, &effect)) {
-            continue;
+        for _ in 0..ATTEMPTS_PER_KIND {
+            attempts += 1;
+            let effect = of_kind[rng.random_range(0..of_kind.len())].clone();
+            if injected
+                .iter()
+                .any(|i| same_site(model, &i.effect, &effect))
+            {
+                continue;
+            }
+            let signal = SIGNAL.0 * (SIGNAL.1 / SIGNAL.0).powf(rng.random::<f64>());
+            if let Some(i) = inject(&mut truth, &effect, lines, (signal, noise), &mut rng)? {
+                injected.push(i);
+                break;
+            }
         }
-        let q0 = amplitudes(&truth, lines)?;
-        let signal = SIGNAL.0 * (SIGNAL.1 / SIGNAL.0).powf(rng.random::<f64>());
-        let Some((values, got)) = sized(
-            &truth,
-            &effect,
-            &q0,
-            lines,
-            (noise, f_max),
-            signal,
-            &mut rng,
-        )?
-        else {
-            continue;
-        };
-        effect.apply(&mut truth, &values, f_max)?;
-        injected.push(Injected {
-            effect,
-            values,
-            signal: got,
-        });
     }
+    finish(
+        (&truth, injected),
+        (vars, &x),
+        (lines, noise),
+        (&mut rng, seed),
+    )
+}
+
+/// Candidates (and signals) of one drawn kind tried before another kind is drawn.
+const ATTEMPTS_PER_KIND: usize = 20;
+
+/// The case of one given `effect` on `model` (the truth's values) sized so that its noise-free
+/// change of the data is `signal` (χ² units at relative noise `noise`), measured at `lines`
+/// (Hz), the identification started from `vars` perturbed ±[`PERTURBATION`] as [`draw`] does.
+/// `None` when no size of the effect reaches `signal`.
+pub fn with_effect(
+    model: &Model,
+    vars: &Variables,
+    lines: &[f64],
+    effect: &Effect,
+    (signal, noise): (f64, f64),
+    seed: u64,
+) -> Result<Option<BlindCase>, BlindError> {
+    let mut rng = StdRng::seed_from_u64(seed);
+    let x = truth_values(model, vars);
+    let mut truth = pristine(model, vars);
+    let Some(injected) = inject(&mut truth, effect, lines, (signal, noise), &mut rng)? else {
+        return Ok(None);
+    };
+    finish(
+        (&truth, vec![injected]),
+        (vars, &x),
+        (lines, noise),
+        (&mut rng, seed),
+    )
+    .map(Some)
+}
+
+/// The truth before any effect: `model` with `vars`, every gain 1.
+fn pristine(model: &Model, vars: &Variables) -> Realized {
+    Realized {
+        model: model.clone(),
+        vars: vars.clone(),
+        gains: vec![1.0; model.outputs.len()],
+    }
+}
+
+/// Injects `effect` into `truth` sized so that the part of its noise-free change of the data at
+/// `lines` the variables cannot absorb is `signal` (χ² units at relative noise `noise`);
+/// `None` (and `truth` unchanged) when no size of the effect reaches it.
+fn inject(
+    truth: &mut Realized,
+    effect: &Effect,
+    lines: &[f64],
+    (signal, noise): (f64, f64),
+    rng: &mut StdRng,
+) -> Result<Option<Injected>, BlindError> {
+    let f_max = lines.iter().copied().fold(0.0, f64::max);
+    let q0 = amplitudes(truth, lines)?;
+    let Some((values, got)) = sized(truth, effect, &q0, lines, (noise, f_max), signal, rng)? else {
+        return Ok(None);
+    };
+    effect.apply(truth, &values, f_max)?;
+    Ok(Some(Injected {
+        effect: effect.clone(),
+        values,
+        signal: got,
+    }))
+}
+
+/// The variables' values in `model` (a variable whose parameter is not found keeps its initial
+/// value).
+fn truth_values(model: &Model, vars: &Variables) -> Vec<f64> {
+    vars.vars
+        .iter()
+        .map(|v| {
+            v.targets
+                .first()
+                .and_then(|t| model.value(t.param).map(|p| p / t.ratio))
+                .unwrap_or(v.initial)
+        })
+        .collect()
+}
+
+/// A case from its `truth` (the effects `injected` applied): the noisy data at `lines` and the
+/// variables `vars` started from their truth's values `x` perturbed ±[`PERTURBATION`].
+fn finish(
+    (truth, injected): (&Realized, Vec<Injected>),
+    (vars, x): (&Variables, &[f64]),
+    (lines, noise): (&[f64], f64),
+    (rng, seed): (&mut StdRng, u64),
+) -> Result<BlindCase, BlindError> {
     let mut data = synthetic::amplitude_data(&truth.model, lines, noise, || {
-        StandardNormal.sample(&mut rng)
+        StandardNormal.sample(&mut *rng)
     })?;
     for (c, g) in data.characteristics.iter_mut().zip(&truth.gains) {
         c.amplitude.iter_mut().for_each(|a| *a *= g);
@@ -340,7 +543,7 @@ pub fn draw(
         }
     }
     let mut vars = vars.clone();
-    for (v, xi) in vars.vars.iter_mut().zip(&x) {
+    for (v, xi) in vars.vars.iter_mut().zip(x) {
         let f = 1.0 + rng.random_range(-PERTURBATION..PERTURBATION);
         let x0 = if *xi != 0.0 { xi * f } else { v.initial * f };
         v.initial = x0.clamp(v.lower, v.upper);
@@ -379,13 +582,21 @@ pub fn run(
 
 /// Judges diagnosis `d` of `case`.
 pub fn judge(case: &BlindCase, d: &Diagnosis, seconds: f64, diagnosis_seconds: f64) -> Outcome {
-    let hit = |e: &Effect| case.injected.iter().any(|i| same_site(&i.effect, e));
-    let right_first = d.effects.first().is_some_and(hit);
+    // The fitted values of each added effect (a resonator's tuning frequency is compared).
+    let fitted = |k: usize| -> Vec<f64> {
+        d.accepted
+            .get(k)
+            .map(|a| a.params.iter().map(|p| p.value).collect())
+            .unwrap_or_default()
+    };
+    let hit =
+        |e: &Effect, values: &[f64]| case.injected.iter().any(|i| found(&d.model, i, e, values));
+    let right_first = d.effects.first().is_some_and(|e| hit(e, &fitted(0)));
     let ranked_first = d
         .rounds
         .first()
         .and_then(|r| r.ranked.first())
-        .is_some_and(|r| r.family.iter().any(hit));
+        .is_some_and(|r| r.family.iter().any(|e| hit(e, &[])));
     // One to one: every injected effect matched by a distinct added one and nothing else added.
     let mut used = vec![false; d.effects.len()];
     let all_found = case.injected.iter().all(|i| {
@@ -393,7 +604,7 @@ pub fn judge(case: &BlindCase, d: &Diagnosis, seconds: f64, diagnosis_seconds: f
             .effects
             .iter()
             .enumerate()
-            .find(|(k, e)| !used[*k] && same_site(&i.effect, e))
+            .find(|(k, e)| !used[*k] && found(&d.model, i, e, &fitted(*k)))
         {
             Some((k, _)) => {
                 used[k] = true;

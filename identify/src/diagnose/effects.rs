@@ -9,6 +9,9 @@
 //! | a body that is not rigid: three RFEs along a principal axis joined by two SDEs | compliance c (m/N) | c = 0 |
 //! | a sensor gain error of one characteristic | g (-) | g = 0 |
 //! | a separate ψ for one joint of a ψ group | ψ of that joint | the group's ψ |
+//! | a direction an SDE's law leaves out (an isolator's rotations, a screw's lateral directions, a general element's zero) given a stiffness | k (N/m or N·m/rad) | k = 0 |
+//! | a direction a general element holds stiff (a "rigid" restraint) made compliant | c (m/N or rad/(N·m)) in series | c = 0 |
+//! | a body's mass off, its inertias scaled with it | m (kg) | the model's mass |
 //!
 //! Each effect gives its first-order action on `A(ω) = K + jD − ω²M` as rows and coefficients
 //! ([`Effect::terms`]), so that its score needs no new solve; the flexible body, whose DOFs differ,
@@ -47,6 +50,9 @@ pub enum EffectError {
     /// The effect names a body the model does not have.
     #[error("no body \"{0}\"")]
     NoBody(String),
+    /// The effect names an SDE the model does not have.
+    #[error("no SDE \"{0}\"")]
+    NoSde(String),
     /// The effect names a characteristic (output) the data does not have.
     #[error("no characteristic number {0}")]
     NoCharacteristic(usize),
@@ -133,6 +139,10 @@ pub enum Effect {
         point: Vector3<f64>,
         /// Natural frequency of the mass on its spring (Hz), the start of the refit.
         freq_hz: f64,
+        /// The tuning frequencies (Hz) this candidate stands for: its score is the best over
+        /// them, and `freq_hz` is set there (a resonator is sharply tuned, a fixed grid of
+        /// frequencies misses it).
+        tuning: [f64; 2],
         /// Typical size of the mass (kg).
         scale: f64,
     },
@@ -151,6 +161,31 @@ pub enum Effect {
         output: usize,
         /// Its label.
         label: String,
+    },
+    /// Direction `axis` (0-2 along, 3-5 about the SDE's axes 1-3) of SDE `sde` freed: a
+    /// direction its law leaves out (`held` = 0) gets a stiffness k ≥ 0; one a general element
+    /// holds at a fixed stiffness `held` > 0 (a "rigid" restraint, no variable sets it) gets a
+    /// compliance c ≥ 0 in series, `k = 1/(1/held + c)`.
+    Direction {
+        /// The SDE's name.
+        sde: String,
+        /// The direction, 0-5.
+        axis: usize,
+        /// Its stiffness in the model (N/m or N·m/rad): 0 when the law leaves it out.
+        held: f64,
+        /// ψ of the freed stiffness (the SDE's own for that direction, or its largest).
+        psi: f64,
+        /// Typical stiffness of that kind of direction in the model (the parameter's scale when
+        /// `held` = 0).
+        scale: f64,
+    },
+    /// Body `body`'s mass is `m` instead of `mass`, its principal inertias scaled by `m/mass`
+    /// (the same body, heavier or lighter: a fixture, oil, a casting off its drawing).
+    BodyMass {
+        /// The body.
+        body: String,
+        /// Its mass in the model (kg).
+        mass: f64,
     },
     /// The SDEs `sdes` (one joint) get their own `parameter` instead of variable `variable`'s.
     Damping {
@@ -208,6 +243,8 @@ impl Effect {
             Effect::Flexible { .. } => "flexible body",
             Effect::Gain { .. } => "sensor gain",
             Effect::Damping { .. } => "joint damping",
+            Effect::Direction { .. } => "SDE direction",
+            Effect::BodyMass { .. } => "body mass",
         }
     }
 
@@ -221,8 +258,23 @@ impl Effect {
             Effect::Mass { body, .. }
             | Effect::PlacedMass { body, .. }
             | Effect::Resonator { body, .. }
-            | Effect::Flexible { body, .. } => added(body),
+            | Effect::Flexible { body, .. }
+            | Effect::BodyMass { body, .. } => added(body),
+            Effect::Direction { sde, .. } => {
+                sde.starts_with(ADDED_MASS) || sde.starts_with(ADDED_RESONATOR)
+            }
             Effect::Gain { .. } | Effect::Damping { .. } => false,
+        }
+    }
+
+    /// Whether the element the effect changes is one of `base`'s (the structure's own): a freed
+    /// direction of an SDE, a body's mass. The SDEs and bodies the diagnosis added (springs,
+    /// mounts, a split body's thirds and joints) are not candidates themselves.
+    pub fn on_structure(&self, base: &Model) -> bool {
+        match self {
+            Effect::Direction { sde, .. } => base.sde_index(sde).is_some(),
+            Effect::BodyMass { body, .. } => base.body_index(body).is_some(),
+            _ => !self.on_added_body(),
         }
     }
 
@@ -321,6 +373,27 @@ impl Effect {
                 )
             }
             Effect::Gain { label, .. } => format!("gain error of {label}"),
+            Effect::Direction {
+                sde, axis, held, ..
+            } => {
+                let (what, unit, f) = direction_units(*axis);
+                if *held > 0.0 {
+                    format!(
+                        "SDE {sde}: {what} axis {} held at {} {unit}, made compliant",
+                        axis % 3 + 1,
+                        crate::display::sig(held * f, 3)
+                    )
+                } else {
+                    format!(
+                        "SDE {sde}: a stiffness {what} axis {} (its law leaves it out)",
+                        axis % 3 + 1
+                    )
+                }
+            }
+            Effect::BodyMass { body, mass } => format!(
+                "{body}'s mass off (model {} kg; inertias scaled with it)",
+                crate::display::sig(*mass, 4)
+            ),
             Effect::Damping {
                 variable_name,
                 sdes,
@@ -332,6 +405,26 @@ impl Effect {
                 sdes.join(", ")
             ),
         }
+    }
+
+    /// How many tuning frequencies the data tell apart where this effect's fit may place it:
+    /// for a resonator, one per measured line within its frequency's bounds and one between
+    /// (a sharp resonance acts where a line sits); 1 for every other effect. A likelihood ratio
+    /// maximised over a tuning frequency does not follow the χ² law of a fixed one (the
+    /// nuisance frequency is undefined under the nested model); its p-value times this count
+    /// (Bonferroni) bounds the chance of a false add, as the score's does.
+    pub fn tunings_searched(&self, lines: &[f64], f_max: f64) -> usize {
+        let Effect::Resonator { .. } = self else {
+            return 1;
+        };
+        let params = self.params(f_max);
+        let Some(f) = params.iter().find(|p| p.unit == "Hz") else {
+            return 1;
+        };
+        1 + lines
+            .iter()
+            .filter(|l| (f.lower..=f.upper).contains(*l))
+            .count()
     }
 
     /// The effect's parameters.
@@ -380,6 +473,27 @@ impl Effect {
                 vec![p("c", "m/N", 0.0, 0.0, 0.0, f64::INFINITY, *scale)]
             }
             Effect::Gain { .. } => vec![p("g", "-", 0.0, 0.0, -0.5, 0.5, 0.01)],
+            Effect::Direction {
+                axis, held, scale, ..
+            } => {
+                let rot = *axis >= 3;
+                if *held > 0.0 {
+                    let unit = if rot { "rad/(N·m)" } else { "m/N" };
+                    vec![p("c", unit, 0.0, 0.0, 0.0, f64::INFINITY, 1.0 / held)]
+                } else {
+                    let unit = if rot { "N·m/rad" } else { "N/m" };
+                    vec![p("k", unit, 0.0, 0.0, 0.0, f64::INFINITY, *scale)]
+                }
+            }
+            Effect::BodyMass { mass, .. } => vec![p(
+                "m",
+                "kg",
+                *mass,
+                *mass,
+                BODY_MASS_RANGE.0 * mass,
+                BODY_MASS_RANGE.1 * mass,
+                0.01 * mass,
+            )],
             Effect::Damping { value, .. } => {
                 vec![p(
                     "psi",
@@ -419,11 +533,32 @@ impl Effect {
                 Some(vec![row])
             }
             Effect::Mass { body, point, .. } | Effect::Resonator { body, point, .. } => {
+                // The added body's translation at the point, and its small rotary inertia
+                // (m·r², r = POINT_RADIUS) on the host's rotation.
                 let b = model.body_index(body)?;
+                let rot = model.bodies[b].rotation.transpose();
+                let mut rows: Vec<Vec<(usize, f64)>> = axes()
+                    .iter()
+                    .map(|u| point_row(model, b, point, u).to_vec())
+                    .collect();
+                for u in axes() {
+                    let r = rot * u * POINT_RADIUS;
+                    rows.push((0..3).map(|i| (6 * b + 3 + i, r[i])).collect());
+                }
+                Some(rows)
+            }
+            Effect::Direction { sde, axis, .. } => {
+                let s = model.sde_index(sde)?;
+                Some(vec![direction_row(model, &model.sdes[s], *axis)])
+            }
+            Effect::BodyMass { body, mass } => {
+                // ∂M/∂m: the body's diagonal block divided by its mass.
+                let b = model.body_index(body)?;
+                let j = model.bodies[b].inertia;
+                let d = [1.0, 1.0, 1.0, j[0] / mass, j[1] / mass, j[2] / mass];
                 Some(
-                    axes()
-                        .iter()
-                        .map(|u| point_row(model, b, point, u).to_vec())
+                    (0..6)
+                        .map(|i| vec![(6 * b + i, d[i].max(0.0).sqrt())])
                         .collect(),
                 )
             }
@@ -436,11 +571,18 @@ impl Effect {
         match self {
             Effect::Spring { psi, .. } => C64::new(1.0, psi / TWO_PI),
             Effect::Mass { .. } => C64::new(-omega * omega, 0.0),
-            Effect::Resonator { freq_hz, .. } => {
-                // Dynamic stiffness of a mass m on a spring tuned to ωr, per unit m, at m → 0.
-                let wr2 = C64::new(1.0, STRUCTURAL_PSI / TWO_PI) * (TWO_PI * freq_hz).powi(2);
-                -omega * omega * wr2 / (wr2 - omega * omega)
+            Effect::Resonator { freq_hz, .. } => resonator_coefficient(omega, *freq_hz),
+            // A stiffness k added: ∂A/∂k = (1 + jψ/2π) t tᵀ; a compliance c in series with
+            // `held`: ∂k/∂c = −held² at c = 0.
+            Effect::Direction { held, psi, .. } => {
+                let d = C64::new(1.0, psi / TWO_PI);
+                if *held > 0.0 {
+                    -d * held * held
+                } else {
+                    d
+                }
             }
+            Effect::BodyMass { .. } => C64::new(-omega * omega, 0.0),
             _ => C64::new(0.0, 0.0),
         }
     }
@@ -504,6 +646,20 @@ impl Effect {
                     split_body(model, body, *axis, gamma[0])?;
                 }
             }
+            Effect::Direction {
+                sde,
+                axis,
+                held,
+                psi,
+                ..
+            } => free_direction(model, sde, *axis, (*held, *psi), gamma[0])?,
+            Effect::BodyMass { body, mass } => {
+                let b = body_index(model, body)?;
+                let ratio = gamma[0] / mass;
+                let body = &mut model.bodies[b];
+                body.mass *= ratio;
+                body.inertia = body.inertia.map(|j| j * ratio);
+            }
             Effect::Gain { output, .. } => {
                 let g = r
                     .gains
@@ -521,6 +677,98 @@ impl Effect {
         Ok(())
     }
 }
+
+/// A body's mass may be fitted within these multiples of its modelled mass.
+pub const BODY_MASS_RANGE: (f64, f64) = (0.1, 10.0);
+
+/// Name stem of the SDEs that carry a freed direction of an SDE whose law leaves it out.
+pub const FREED_DIRECTION: &str = "freed";
+
+/// "along"/"about", the stiffness unit and its report factor of direction `axis` (0-5).
+fn direction_units(axis: usize) -> (&'static str, &'static str, f64) {
+    if axis < 3 {
+        ("along", "N/µm", 1e-6)
+    } else {
+        ("about", "N·m/rad", 1.0)
+    }
+}
+
+/// The relative motion of SDE `sde`'s two ends along (0-2) or about (3-5) its axis as a row over
+/// the model's DOFs: row `axis` of its deformation map, `G_r − G_p` (a grounded end contributes
+/// nothing).
+pub fn direction_row(model: &Model, sde: &Sde, axis: usize) -> Vec<(usize, f64)> {
+    let mut row = Vec::with_capacity(12);
+    for (side, sign) in [(0usize, -1.0), (1, 1.0)] {
+        if let Some(b) = sde.bodies[side] {
+            let body = &model.bodies[b];
+            let g = crate::system::sde_from_body(
+                &body.position,
+                &body.rotation,
+                &sde.point,
+                &sde.rotation,
+            );
+            row.extend((0..6).map(|j| (6 * b + j, sign * g[(axis, j)])));
+        }
+    }
+    row
+}
+
+/// Frees direction `axis` of SDE `name` with parameter `value`: a general element's own stiffness
+/// there is set (`held` = 0: to `value`; `held` > 0: to `1/(1/held + value)`, a compliance in
+/// series); any other law, which cannot hold a stiffness in a direction it leaves out, gets a
+/// parallel general element with that one stiffness (nothing when `value` is 0).
+fn free_direction(
+    model: &mut Model,
+    name: &str,
+    axis: usize,
+    (held, psi): (f64, f64),
+    value: f64,
+) -> Result<(), EffectError> {
+    let s = model
+        .sde_index(name)
+        .ok_or_else(|| EffectError::NoSde(name.into()))?;
+    let k = if held > 0.0 {
+        1.0 / (1.0 / held + value.max(0.0))
+    } else {
+        value.max(0.0)
+    };
+    if let SdeLaw::General { k: ks, psi: ps } = &mut model.sdes[s].law {
+        ks[axis] = k;
+        if held == 0.0 {
+            ps[axis] = psi;
+        }
+        return Ok(());
+    }
+    if k > 0.0 {
+        let mut ks = [0.0; 6];
+        ks[axis] = k;
+        let sde = &model.sdes[s];
+        let added = Sde {
+            name: fresh_name(model, &format!("{name} {FREED_DIRECTION} k{}", axis + 1)),
+            kind: SdeKind::General,
+            bodies: sde.bodies,
+            point: sde.point,
+            rotation: sde.rotation,
+            law: SdeLaw::General {
+                k: ks,
+                psi: [psi; 6],
+            },
+            enabled: true,
+        };
+        model.sdes.push(added);
+    }
+    Ok(())
+}
+
+/// Dynamic stiffness of a mass on a spring tuned to `freq_hz` (loss ψ of the structure), per
+/// unit mass, at `omega` (rad/s): the coefficient of a resonator's first-order action.
+pub fn resonator_coefficient(omega: f64, freq_hz: f64) -> C64 {
+    let wr2 = C64::new(1.0, STRUCTURAL_PSI / TWO_PI) * (TWO_PI * freq_hz).powi(2);
+    -omega * omega * wr2 / (wr2 - omega * omega)
+}
+
+/// Relative half-power width of a resonator's peak: its loss factor `ψ / 2π`.
+pub const RESONATOR_WIDTH: f64 = STRUCTURAL_PSI / TWO_PI;
 
 /// Gives the SDEs `sdes` of ψ group `variable` their own value `psi` of `parameter`, taking
 /// them out of the group.

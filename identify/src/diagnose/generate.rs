@@ -9,14 +9,18 @@
 //!   the excitation points on it (resonators at log-spaced frequencies across the band);
 //! - flexible bodies: every body along each principal axis;
 //! - sensor gains: every characteristic;
-//! - joint damping: for each ψ group, each joint (the group's SDEs between one pair of bodies).
+//! - joint damping: for each ψ group, each joint (the group's SDEs between one pair of bodies);
+//! - freed SDE directions: every direction an enabled SDE's law leaves out (an isolator's
+//!   rotations, a screw's or spring's lateral directions, a general element's zeros), and every
+//!   direction a general element holds at a stiffness no variable sets;
+//! - body masses: every body whose mass and inertias no variable sets.
 
 use nalgebra::Vector3;
 
 use super::effects::{box_sides, Effect};
 use crate::identification::variables::Tie;
 use crate::identification::Variables;
-use crate::model::{Model, ParamRef};
+use crate::model::{Model, Param, ParamName, ParamRef, SdeLaw};
 
 /// Resonator frequencies per decade of the band.
 const RESONATORS_PER_DECADE: f64 = 6.0;
@@ -49,9 +53,10 @@ pub fn candidates(
     let n_res = ((f_hi / f_lo).log10() * RESONATORS_PER_DECADE)
         .ceil()
         .max(1.0) as usize;
-    let res_freqs: Vec<f64> = (0..n_res)
-        .map(|i| f_lo * (f_hi / f_lo).powf((i as f64 + 0.5) / n_res as f64))
-        .collect();
+    // Each resonator candidate stands for a cell of tuning frequencies (its score is the best
+    // within it): the cells tile the band.
+    let edge = |i: usize| f_lo * (f_hi / f_lo).powf(i as f64 / n_res as f64);
+    let res_freqs: Vec<[f64; 2]> = (0..n_res).map(|i| [edge(i), edge(i + 1)]).collect();
     for b in 0..model.bodies.len() {
         masses_and_flexibility(model, b, &res_freqs, &mut out);
     }
@@ -62,7 +67,75 @@ pub fn candidates(
         });
     }
     damping_splits(model, vars, x, &mut out);
+    freed_directions(model, vars, &mut out);
+    body_masses(model, vars, &mut out);
     out
+}
+
+/// Every direction of an enabled SDE that its law leaves out (stiffness 0), and every direction
+/// of a general element held at a stiffness no variable sets, as a candidate to free.
+fn freed_directions(model: &Model, vars: &Variables, out: &mut Vec<Effect>) {
+    let by_vars = vars.params();
+    let typical = [0..3, 3..6].map(|r| typical_stiffness(model, r));
+    for (i, sde) in model.sdes.iter().enumerate().filter(|(_, s)| s.enabled) {
+        let k = sde.law.stiffness();
+        if k.iter().all(|v| *v == 0.0) {
+            continue;
+        }
+        let psi = sde.law.dissipation();
+        let own_psi = psi.iter().copied().fold(0.0, f64::max);
+        let general = matches!(sde.law, SdeLaw::General { .. });
+        for axis in 0..6 {
+            let set_by_var = by_vars
+                .iter()
+                .any(|r| r.sde == i && r.name == ParamName::Ki(axis as u8));
+            let candidate = if k[axis] == 0.0 {
+                !set_by_var
+            } else {
+                general && !set_by_var
+            };
+            if !candidate {
+                continue;
+            }
+            out.push(Effect::Direction {
+                sde: sde.name.clone(),
+                axis,
+                held: k[axis],
+                psi: if psi[axis] > 0.0 { psi[axis] } else { own_psi },
+                scale: typical[axis / 3],
+            });
+        }
+    }
+}
+
+/// The median nonzero stiffness of the enabled SDEs' directions `range` (0..3 translations,
+/// 3..6 rotations); 1 when there is none.
+fn typical_stiffness(model: &Model, range: std::ops::Range<usize>) -> f64 {
+    let mut v: Vec<f64> = model
+        .sdes
+        .iter()
+        .filter(|s| s.enabled)
+        .flat_map(|s| s.law.stiffness()[range.clone()].to_vec())
+        .filter(|k| *k > 0.0)
+        .collect();
+    v.sort_by(f64::total_cmp);
+    v.get(v.len() / 2).copied().unwrap_or(1.0)
+}
+
+/// Every body whose mass and inertias no variable sets, as a candidate for a mass that is off.
+fn body_masses(model: &Model, vars: &Variables, out: &mut Vec<Effect>) {
+    let by_vars = vars.model_params();
+    for (b, body) in model.bodies.iter().enumerate() {
+        let fitted = by_vars
+            .iter()
+            .any(|p| matches!(p, Param::Mass { body } | Param::Inertia { body, .. } if *body == b));
+        if !fitted && body.mass > 0.0 {
+            out.push(Effect::BodyMass {
+                body: body.name.clone(),
+                mass: body.mass,
+            });
+        }
+    }
 }
 
 /// Spring directions: the global axes and every excitation force's direction.
@@ -169,7 +242,7 @@ fn springs_to_ground(
 
 /// Point masses and resonators (tuned across the band) at body `b`'s centre, box corners and
 /// force points, and the body split along each principal axis.
-fn masses_and_flexibility(model: &Model, b: usize, res_freqs: &[f64], out: &mut Vec<Effect>) {
+fn masses_and_flexibility(model: &Model, b: usize, res_freqs: &[[f64; 2]], out: &mut Vec<Effect>) {
     let body = &model.bodies[b];
     let mut points = vec![body.position];
     let sides = box_sides(body);
@@ -186,11 +259,12 @@ fn masses_and_flexibility(model: &Model, b: usize, res_freqs: &[f64], out: &mut 
             point: *p,
             scale,
         });
-        for f in res_freqs {
+        for &[lo, hi] in res_freqs {
             out.push(Effect::Resonator {
                 body: body.name.clone(),
                 point: *p,
-                freq_hz: *f,
+                freq_hz: (lo * hi).sqrt(),
+                tuning: [lo, hi],
                 scale,
             });
         }

@@ -62,6 +62,11 @@ impl<'a> Problem<'a> {
         }
     }
 
+    /// The identification's model, without the effects.
+    pub fn base(&self) -> &Model {
+        self.base
+    }
+
     /// Number of identification variables.
     pub fn nx(&self) -> usize {
         self.vars.len()

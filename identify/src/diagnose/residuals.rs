@@ -26,6 +26,9 @@ pub struct CharacteristicResiduals {
     pub chi2: f64,
     /// RMS relative amplitude error `sqrt(mean(((|q| − |z|)/|z|)²))`.
     pub rms_relative: f64,
+    /// RMS amplitude error in dB, `sqrt(mean((20 log10(|q|/|z|))²))`: unlike the relative error
+    /// not dominated by the anti-resonance lines.
+    pub rms_db: f64,
     /// Number of runs of equal sign of the amplitude residuals along frequency.
     pub runs: usize,
     /// Their expectation for independent residuals.
@@ -67,6 +70,8 @@ pub struct ResidualAnalysis {
     pub chi2_p: Option<f64>,
     /// `2J / (observations − parameters)`: ≈ 1 at the noise level.
     pub reduced_chi2: f64,
+    /// RMS amplitude error in dB over every fitted point.
+    pub rms_db: f64,
     /// Per characteristic.
     pub characteristics: Vec<CharacteristicResiduals>,
     /// Misfit by mode band, largest excess first.
@@ -115,6 +120,7 @@ pub fn analyze(
         parameters,
         chi2_p,
         reduced_chi2,
+        rms_db: rms_db(crit, e),
         characteristics,
         bands,
         explained,
@@ -142,16 +148,18 @@ fn characteristic_residuals(
         phase: complex.then(Vec::new),
         chi2: 0.0,
         rms_relative: 0.0,
+        rms_db: 0.0,
         runs: 0,
         runs_expected: 0.0,
         runs_p: 1.0,
     };
-    let mut rel = 0.0;
+    let (mut rel, mut db, mut n_db) = (0.0, 0.0, 0usize);
     for i in range {
-        let (_, line, sigma) = points[i];
+        let (_, line, _) = points[i];
         let z = measured[i];
         c.freqs_hz.push(freqs[line]);
-        let (amp, q) = if complex {
+        let q = modelled(crit.fit(), (&points, &measured), e, i);
+        let amp = if complex {
             let d = C64::new(e[i], e[np + i]);
             let unit = if z.norm() > 0.0 {
                 z.conj() / z.norm()
@@ -163,25 +171,59 @@ fn characteristic_residuals(
                 p.push(rot.im);
             }
             c.chi2 += d.norm_sqr();
-            (rot.re, z - d * sigma)
+            rot.re
         } else {
             c.chi2 += e[i] * e[i];
-            let q = if crit.fit() == FitKind::LogAmplitude {
-                z.re * (-sigma * e[i]).exp()
-            } else {
-                z.re - sigma * e[i]
-            };
-            (e[i], C64::new(q, 0.0))
+            e[i]
         };
         c.amplitude.push(amp);
         if z.norm() > 0.0 {
             rel += ((q.norm() - z.norm()) / z.norm()).powi(2);
+            if q.norm() > 0.0 {
+                db += (20.0 * (q.norm() / z.norm()).log10()).powi(2);
+                n_db += 1;
+            }
         }
     }
     let n = c.amplitude.len().max(1);
     c.rms_relative = (rel / n as f64).sqrt();
+    c.rms_db = (db / n_db.max(1) as f64).sqrt();
     (c.runs, c.runs_expected, c.runs_p) = runs_test(&c.amplitude);
     c
+}
+
+/// The model's value at point `i` (of `points`, measured values `measured`) that the whitened
+/// residuals `e` of a fit of kind `fit` imply (`z − σe`; for
+/// the log-amplitude fit `|z| e^{−σe}`; amplitude fits give the amplitude).
+fn modelled(
+    fit: FitKind,
+    (points, measured): (&[(usize, usize, f64)], &[C64]),
+    e: &DVector<f64>,
+    i: usize,
+) -> C64 {
+    let (_, _, sigma) = points[i];
+    let z = measured[i];
+    match fit {
+        FitKind::Complex => z - C64::new(e[i], e[points.len() + i]) * sigma,
+        FitKind::LogAmplitude => C64::new(z.re * (-sigma * e[i]).exp(), 0.0),
+        FitKind::Amplitude => C64::new(z.re - sigma * e[i], 0.0),
+    }
+}
+
+/// The RMS amplitude error in dB, `sqrt(mean((20 log10(|q|/|z|))²))` over every point of `crit`
+/// whose measured and modelled amplitudes are > 0, of the fit whose whitened residuals are `e`
+/// (gains included: the residuals carry them).
+pub fn rms_db(crit: &Criterion, e: &DVector<f64>) -> f64 {
+    let (points, z) = (crit.points(), crit.measured());
+    let (mut sum, mut n) = (0.0, 0usize);
+    for (i, zi) in z.iter().enumerate() {
+        let q = modelled(crit.fit(), (&points, &z), e, i).norm();
+        if zi.norm() > 0.0 && q > 0.0 {
+            sum += (20.0 * (q / zi.norm()).log10()).powi(2);
+            n += 1;
+        }
+    }
+    (sum / n.max(1) as f64).sqrt()
 }
 
 /// The sentence that says whether the model explains the data, and if not why and where.

@@ -16,7 +16,9 @@
 //! rigid is scored in its rigid limit from the forces its joints would carry
 //! ([`flexible_first_order`]); the damping splits share one Jacobian.
 
-use super::effects::{body_index, point_row, split_body, Effect, EffectError};
+use super::effects::{
+    body_index, point_row, resonator_coefficient, split_body, Effect, EffectError, RESONATOR_WIDTH,
+};
 use super::residuals::chi2_tail;
 use crate::frf::{self, States};
 use crate::identification::Criterion;
@@ -43,6 +45,8 @@ pub struct Scored {
     /// candidates whose directions nearly coincide cannot be told apart by the data.
     #[serde(skip)]
     pub direction: DVector<f64>,
+    /// A resonator's tuning frequency (Hz) where its score is largest within its cell.
+    pub tuned_hz: Option<f64>,
 }
 
 /// The fit the scores are taken at.
@@ -111,6 +115,16 @@ pub fn score_all(
     let mut out = Vec::with_capacity(candidates.len());
     let mut dq = vec![C64::new(0.0, 0.0); outputs.len() * lines.len()];
     for (ci, cand) in candidates.iter().enumerate() {
+        if let Effect::Resonator { tuning, .. } = cand {
+            let action = Action {
+                model: &model,
+                states: &states,
+                gains: fit.gains,
+                lines: &lines,
+            };
+            out.push(tuned_resonator(ci, cand, *tuning, &action, &q, fit, &basis));
+            continue;
+        }
         let filled = fill_derivative(
             cand, &model, &states, &outputs, fit.gains, &lines, &damping, &mut dq,
         );
@@ -159,7 +173,145 @@ fn statistic(
         p_value,
         step,
         direction,
+        tuned_hz: None,
     })
+}
+
+/// What a candidate's first-order action is computed from: the model at the fit, its states
+/// (load and adjoint unit responses per line), the gains per characteristic and the lines (Hz).
+struct Action<'a> {
+    model: &'a Model,
+    states: &'a States,
+    gains: &'a [f64],
+    lines: &'a [f64],
+}
+
+/// Tuning frequencies tried per resonance width (`ψ/2π` in log-frequency) in a resonator's cell.
+const TUNING_STEPS_PER_WIDTH: f64 = 2.0;
+
+/// A resonator's score test maximised over its tuning frequency within `[lo, hi]` (Hz), its
+/// p-value multiplied by the number of independent frequencies searched (Bonferroni).
+///
+/// Its action is `c(ω; f) Σ tᵀt` over its point's three rows, with `c` the tuned mass's dynamic
+/// stiffness per unit mass ([`resonator_coefficient`]): the output changes are `c(ω_k; f) b_ok`
+/// with `b` from one pass over the states, and the whitened column is
+/// `Re c · W(b) + Im c · W(i b)` (the whitening `W` is real-linear). So every frequency costs one
+/// projection, and the search can step at a fraction of the resonance's width — a sharply tuned
+/// resonator between two grid frequencies scores where it is. Coarse steps of
+/// [`TUNING_STEPS_PER_WIDTH`] per width, then a golden-section refinement around the best.
+fn tuned_resonator(
+    ci: usize,
+    cand: &Effect,
+    [lo, hi]: [f64; 2],
+    action: &Action,
+    q: &dyn Fn(usize, usize) -> C64,
+    fit: &FitPoint,
+    basis: &DMatrix<f64>,
+) -> Result<Scored, NotScored> {
+    let rows = cand.rows(action.model).ok_or(NotScored::NoFirstOrderForm)?;
+    let nl = action.lines.len();
+    let unit = C64::new(1.0, 0.0);
+    let mut b = vec![C64::new(0.0, 0.0); action.gains.len() * nl];
+    for k in 0..nl {
+        for (o, g) in action.gains.iter().enumerate() {
+            b[o * nl + k] =
+                action
+                    .states
+                    .first_order(k, o, rows.iter().map(|r| (r.as_slice(), unit)))
+                    * g;
+        }
+    }
+    let crit = fit.crit;
+    let w_re = crit.whitened_derivative(q, |o, k| b[o * nl + k]);
+    let w_im = crit.whitened_derivative(q, |o, k| b[o * nl + k] * C64::new(0.0, 1.0));
+    let points = crit.points();
+    let line_of = |i: usize| points[i % points.len()].1;
+    let column = |f: f64| {
+        let c: Vec<C64> = action
+            .lines
+            .iter()
+            .map(|l| resonator_coefficient(TWO_PI * l, f))
+            .collect();
+        DVector::from_fn(w_re.len(), |i, _| {
+            let ck = c[line_of(i)];
+            ck.re * w_re[i] + ck.im * w_im[i]
+        })
+    };
+    // The one-sided statistic (a mass is not negative): 0 where the score lowers the mass.
+    let lm = |f: f64| {
+        let g = column(f);
+        let s = g.dot(fit.e);
+        let info = g.norm_squared() - (basis.transpose() * &g).norm_squared();
+        if s < 0.0 && info > 0.0 {
+            s * s / info
+        } else {
+            0.0
+        }
+    };
+    let (ln_lo, ln_hi) = (lo.ln(), hi.ln().max(lo.ln()));
+    let step = RESONATOR_WIDTH / TUNING_STEPS_PER_WIDTH;
+    let n = ((ln_hi - ln_lo) / step).ceil().max(1.0) as usize;
+    let (mut best, mut best_lm) = (ln_lo, f64::NEG_INFINITY);
+    for i in 0..=n {
+        let x = ln_lo + (ln_hi - ln_lo) * i as f64 / n as f64;
+        let v = lm(x.exp());
+        if v > best_lm {
+            (best, best_lm) = (x, v);
+        }
+    }
+    let h = (ln_hi - ln_lo) / n as f64;
+    let tuned = golden_max(
+        |x| lm(x.exp()),
+        (best - h).max(ln_lo),
+        (best + h).min(ln_hi),
+    )
+    .exp();
+    let tuned_cand = match cand {
+        Effect::Resonator {
+            body,
+            point,
+            tuning,
+            scale,
+            ..
+        } => Effect::Resonator {
+            body: body.clone(),
+            point: *point,
+            freq_hz: tuned,
+            tuning: *tuning,
+            scale: *scale,
+        },
+        other => other.clone(),
+    };
+    let mut s = statistic(ci, &tuned_cand, &column(tuned), fit, basis)?;
+    s.tuned_hz = Some(tuned);
+    // The best of many tuning frequencies: its p-value counts the independent ones searched —
+    // one per line in the cell (a sharp resonance acts where a line sits) and one between.
+    let searched = 1 + action
+        .lines
+        .iter()
+        .filter(|f| (lo..=hi).contains(*f))
+        .count();
+    s.p_value = (s.p_value * searched as f64).min(1.0);
+    Ok(s)
+}
+
+/// The maximum of `f` on `[a, b]` by golden-section search (a unimodal stretch; 30 steps).
+fn golden_max(f: impl Fn(f64) -> f64, mut a: f64, mut b: f64) -> f64 {
+    let r = 0.5 * (5f64.sqrt() - 1.0);
+    let (mut c, mut d) = (b - r * (b - a), a + r * (b - a));
+    let (mut fc, mut fd) = (f(c), f(d));
+    for _ in 0..30 {
+        if fc > fd {
+            (b, d, fd) = (d, c, fc);
+            c = b - r * (b - a);
+            fc = f(c);
+        } else {
+            (a, c, fc) = (c, d, fd);
+            d = a + r * (b - a);
+            fd = f(d);
+        }
+    }
+    0.5 * (a + b)
 }
 
 /// `∂ output / ∂γ` of one candidate at every (characteristic, line), into `dq[o * lines + k]`.
@@ -407,7 +559,7 @@ fn damping_jacobian(
 }
 
 /// An orthonormal basis of the column space of `j` (thin QR; near-dependent columns dropped).
-fn orthonormal_columns(j: &DMatrix<f64>) -> DMatrix<f64> {
+pub(super) fn orthonormal_columns(j: &DMatrix<f64>) -> DMatrix<f64> {
     if j.ncols() == 0 {
         return DMatrix::zeros(j.nrows(), 0);
     }
@@ -425,6 +577,126 @@ fn orthonormal_columns(j: &DMatrix<f64>) -> DMatrix<f64> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::diagnose::effects::Realized;
+
+    /// The first-order action of every candidate that acts through `A(ω)` — springs, masses,
+    /// resonators, freed SDE directions (left out, and held stiff by a general element), body
+    /// masses — against a central difference of the model with the effect applied.
+    #[test]
+    fn first_order_actions_match_a_central_difference_of_the_applied_effect() {
+        let path =
+            std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../configs/models/fwd32j.toml");
+        let fwd = crate::modelfile::load(&path).unwrap().model;
+        let chain = crate::textbook::two_in_series(100.0, 50.0, 1e6, 2e6, 0.2);
+        let vars_of = |_: &Model| crate::identification::Variables {
+            vars: Vec::new(),
+            origin: String::new(),
+            extra_starts: Vec::new(),
+        };
+        let mut checked = std::collections::BTreeMap::<&str, usize>::new();
+        for model in [&fwd, &chain] {
+            let lines = [20.0, 57.0, 131.0, 250.0, 400.0];
+            let labels: Vec<String> = (0..model.outputs.len()).map(|o| o.to_string()).collect();
+            let vars = vars_of(model);
+            let candidates =
+                crate::diagnose::generate::candidates(model, &vars, &[], &labels, 20.0, 400.0);
+            let states = frf::states(model, &lines, frf::Method::Direct).unwrap();
+            let outputs: Vec<OutputRow> = model
+                .outputs
+                .iter()
+                .map(|c| OutputRow::of(model, c))
+                .collect();
+            let gains = vec![1.0; outputs.len()];
+            let nl = lines.len();
+            let base = frf::response(model, &lines, &[], frf::Method::Direct).unwrap();
+            // A few of each kind (the first, the middle and the last).
+            let mut kinds: Vec<&str> = candidates.iter().map(Effect::kind).collect();
+            kinds.dedup();
+            for kind in kinds {
+                let of: Vec<&Effect> = candidates.iter().filter(|c| c.kind() == kind).collect();
+                for cand in [of[0], of[of.len() / 2], of[of.len() - 1]] {
+                    if cand.rows(model).is_none() {
+                        continue;
+                    }
+                    let mut dq = vec![C64::new(0.0, 0.0); outputs.len() * nl];
+                    fill_derivative(
+                        cand, model, &states, &outputs, &gains, &lines, &None, &mut dq,
+                    )
+                    .unwrap();
+                    let np = &cand.params(400.0)[0];
+                    // Large enough that the change stands above the solves' rounding (the
+                    // structure's stiffnesses span six decades), small enough to be linear.
+                    // (A resonator near a line acts strongly and nonlinearly: a smaller step.)
+                    let h = np.scale
+                        * if matches!(cand, Effect::Resonator { .. }) {
+                            1e-4
+                        } else {
+                            1e-2
+                        };
+                    let at = |g: f64| {
+                        let mut r = Realized {
+                            model: model.clone(),
+                            vars: vars.clone(),
+                            gains: gains.clone(),
+                        };
+                        let mut v: Vec<f64> = cand.params(400.0).iter().map(|p| p.nested).collect();
+                        v[0] = g;
+                        cand.apply(&mut r, &v, 400.0).unwrap();
+                        frf::response(&r.model, &lines, &[], frf::Method::Direct).unwrap()
+                    };
+                    // One-sided parameters (bounded at their nested value) by a forward
+                    // difference with Richardson extrapolation, the others centrally.
+                    let one_sided = np.lower >= np.nested;
+                    let (rp, rm, rp2) = if one_sided {
+                        (at(np.nested + h), None, Some(at(np.nested + 2.0 * h)))
+                    } else {
+                        (at(np.nested + h), Some(at(np.nested - h)), None)
+                    };
+                    for o in 0..outputs.len() {
+                        let fd: Vec<C64> = (0..nl)
+                            .map(|k| match (&rm, &rp2) {
+                                (Some(rm), _) => (rp.output(o)[k] - rm.output(o)[k]) / (2.0 * h),
+                                (None, Some(rp2)) => {
+                                    let y0 = base.output(o)[k];
+                                    let d1 = (rp.output(o)[k] - y0) / h;
+                                    let d2 = (rp2.output(o)[k] - y0) / (2.0 * h);
+                                    2.0 * d1 - d2
+                                }
+                                _ => unreachable!(),
+                            })
+                            .collect();
+                        let scale = fd.iter().map(|v| v.norm()).fold(0.0, f64::max);
+                        // An added point mass is a small body on a stiff mount (30× above the
+                        // band), a rigid mass in its first-order form.
+                        let tol = match cand {
+                            Effect::Mass { .. } => 1e-3,
+                            _ => 1e-4,
+                        };
+                        for (k, fd) in fd.into_iter().enumerate() {
+                            let a = dq[o * nl + k];
+                            assert!(
+                                (a - fd).norm() <= tol * scale + 1e-30,
+                                "{}: output {o}, {} Hz: first order {a}, difference {fd}",
+                                cand.describe(),
+                                lines[k]
+                            );
+                        }
+                    }
+                    *checked.entry(cand.kind()).or_default() += 1;
+                }
+            }
+        }
+        for kind in ["spring", "mass", "resonator", "SDE direction", "body mass"] {
+            assert!(checked.get(kind).is_some_and(|n| *n >= 3), "{checked:?}");
+        }
+        // The chain's guides hold their directions at a stiffness: those are freed as compliances.
+        let vars = vars_of(&chain);
+        let held = crate::diagnose::generate::candidates(&chain, &vars, &[], &[], 20.0, 400.0)
+            .into_iter()
+            .filter(|c| matches!(c, Effect::Direction { held, .. } if *held > 0.0))
+            .count();
+        assert!(held >= 8, "{held}");
+    }
 
     /// The rigid-limit derivative of every split body of FWD-32J against a finite difference of
     /// the split model (O(h) accurate).

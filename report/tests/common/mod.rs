@@ -81,6 +81,8 @@ pub fn many_candidates(n: usize) -> Vec<Candidate> {
                 estimate: accepted.then_some(2.5),
                 std_error: accepted.then_some(0.1),
                 unit: "N/um".into(),
+                rms_db_before: accepted.then_some(6.0),
+                rms_db_after: accepted.then_some(0.5),
             }
         })
         .collect()
@@ -97,6 +99,13 @@ pub fn diagnosis_section(f: &Fixture) -> Diagnosis {
                 value: *v,
             })
             .collect();
+    let db: Vec<LabelledValue> = rms
+        .iter()
+        .map(|l| LabelledValue {
+            label: l.label.clone(),
+            value: 20.0 * (1.0 + l.value).log10(),
+        })
+        .collect();
     Diagnosis {
         candidates: vec![
             Candidate {
@@ -109,6 +118,8 @@ pub fn diagnosis_section(f: &Fixture) -> Diagnosis {
                 estimate: Some(0.5),
                 std_error: Some(0.05),
                 unit: "N/um".into(),
+                rms_db_before: Some(6.0),
+                rms_db_after: Some(0.5),
             },
             Candidate {
                 round: 1,
@@ -120,6 +131,8 @@ pub fn diagnosis_section(f: &Fixture) -> Diagnosis {
                 estimate: None,
                 std_error: None,
                 unit: "N/um".into(),
+                rms_db_before: None,
+                rms_db_after: None,
             },
         ],
         before: FitQuality {
@@ -127,12 +140,14 @@ pub fn diagnosis_section(f: &Fixture) -> Diagnosis {
             chi2_p_value: Some(1e-6),
             reduced_chi2: 3.0,
             rms_relative_error: rms.clone(),
+            rms_db_error: db.clone(),
         },
         after: FitQuality {
             criterion: f.id.criterion,
             chi2_p_value: None,
             reduced_chi2: 1.0,
             rms_relative_error: rms,
+            rms_db_error: db,
         },
         final_model: "two masses + spring k1-body–ground".into(),
         final_parameters: vec![Parameter {
