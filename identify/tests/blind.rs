@@ -136,29 +136,19 @@ fn a_moment_stiffness_is_the_same_element_on_every_sde_joining_the_same_bodies()
         psi: 0.3,
         scale: 1e6,
     };
-    assert!(blind::same_site(
-        &model,
-        &direction("30", 3),
-        &direction("31", 3)
-    ));
-    assert!(blind::same_site(
-        &model,
-        &direction("32", 5),
-        &direction("33", 5)
-    ));
-    assert!(!blind::same_site(
-        &model,
-        &direction("30", 0),
-        &direction("31", 0)
-    ));
-    assert!(!blind::same_site(
-        &model,
-        &direction("30", 3),
-        &direction("31", 4)
-    ));
-    assert!(!blind::same_site(
-        &model,
-        &direction("30", 3),
-        &direction("34", 3)
-    ));
+    // (SDE, direction 0-5) pairs and whether they are one element.
+    let cases = [
+        (("30", 3), ("31", 3), true),
+        (("32", 5), ("33", 5), true),
+        (("30", 0), ("31", 0), false),
+        (("30", 3), ("31", 4), false),
+        (("30", 3), ("34", 3), false),
+    ];
+    for ((a, i), (b, j), same) in cases {
+        assert_eq!(
+            blind::same_site(&model, &direction(a, i), &direction(b, j)),
+            same,
+            "SDE {a} direction {i} against SDE {b} direction {j}"
+        );
+    }
 }

@@ -167,7 +167,9 @@ pub fn same_moment(model: &Model, a: &Effect, b: &Effect) -> bool {
             > 0.999
 }
 
-/// [`same_site`] but for moment stiffnesses: the same kind, the same bodies or element.
+/// The same kind at the same place: the same bodies (springs), body (masses, resonators, body
+/// masses), element and axis (flexibility, directions), characteristic (gains) or joint
+/// (damping).
 fn same_kind_and_place(a: &Effect, b: &Effect) -> bool {
     use Effect::*;
     let pair = |x: &[Option<String>; 2]| {

@@ -909,7 +909,7 @@ fn refit_leading(
     let jobs = refit_jobs(ranking, screened, opts.refit, f_hi);
     if let Some((best, Member { effect: k, .. })) = screened
         .first()
-        .zip(jobs.first().and_then(|job| job.first()))
+        .zip(jobs.first().and_then(|job| job.members.first()))
     {
         progress(&format!(
             "screened {} candidates by a finite step; best: {} (J {:.1} → {:.1}); refitting {} families ({} distinct members), first {}",
@@ -918,7 +918,10 @@ fn refit_leading(
             0.5 * cur.e.norm_squared(),
             best.criterion,
             jobs.len(),
-            jobs.iter().flatten().filter(|m| m.mirror_of.is_none()).count(),
+            jobs.iter()
+                .flat_map(|job| &job.members)
+                .filter(|m| m.mirror_of.is_none())
+                .count(),
             k.describe()
         ));
     }
@@ -928,7 +931,8 @@ fn refit_leading(
         .iter()
         .enumerate()
         .flat_map(|(f, job)| {
-            job.iter()
+            job.members
+                .iter()
                 .enumerate()
                 .filter(|(_, m)| m.mirror_of.is_none())
                 .map(move |(i, _)| (f, i))
@@ -936,12 +940,19 @@ fn refit_leading(
         .collect();
     let mut results: Vec<Option<Result<(Refit, Current), RefitError>>> =
         in_parallel(&distinct, |&(f, i)| {
-            refit_member((model, vars, obs), opts, cur, &jobs[f][i], f_hi, *sigma2)
+            refit_member(
+                (model, vars, obs),
+                opts,
+                cur,
+                &jobs[f].members[i],
+                f_hi,
+                *sigma2,
+            )
         })
         .into_iter()
         .map(Some)
         .collect();
-    for (f, members) in jobs.iter().enumerate() {
+    for (f, Job { family, members }) in jobs.iter().enumerate() {
         let mut outcomes: Vec<MemberRefit> = distinct
             .iter()
             .zip(results.iter_mut())
@@ -962,7 +973,7 @@ fn refit_leading(
         };
         let cand = members[i].effect;
         r.equivalent = equivalents(members, i, &outcomes, r.criterion_after, *sigma2);
-        r.family = family_of(ranking, members[0].effect);
+        r.family = family_of(ranking, *family, members[0].effect);
         progress(&format!(
             "refit {}: ΔJ = {:.1}, LR = {:.1}, p = {:.2e}",
             r.effect,
@@ -1071,9 +1082,16 @@ fn screen_leading(
     out
 }
 
-/// A member of a refitted family: the effect and where its refit starts, or the member it is a
-/// mirror image of (same score statistic and step: the model's symmetry makes their refits
-/// equal, so only one is refitted).
+/// The refits of one score family: its index in [`Ranking::families`] (`None` for a candidate
+/// in none of the reported families) and the members refitted, the best-screened first.
+struct Job<'r> {
+    family: Option<usize>,
+    members: Vec<Member<'r>>,
+}
+
+/// A member of a refitted family: the effect, where its refit starts, and the member it is a
+/// mirror image of, if any (see [`mirrors`]: the model's symmetry makes their refits equal, so
+/// only one is refitted).
 struct Member<'r> {
     effect: &'r Effect,
     start: Vec<f64>,
@@ -1105,15 +1123,14 @@ fn refit_jobs<'r>(
     screened: &[Screened],
     n: usize,
     f_hi: f64,
-) -> Vec<Vec<Member<'r>>> {
+) -> Vec<Job<'r>> {
     let Ranking {
         candidates,
         scored,
         families,
         ..
     } = ranking;
-    let mut taken: Vec<Option<usize>> = Vec::new();
-    let mut jobs = Vec::new();
+    let mut jobs: Vec<Job> = Vec::new();
     for Screened {
         index: j, start, ..
     } in screened
@@ -1122,11 +1139,10 @@ fn refit_jobs<'r>(
             break;
         }
         let family = families.iter().position(|f| f.contains(j));
-        if family.is_some() && taken.contains(&family) {
+        if family.is_some() && jobs.iter().any(|job| job.family == family) {
             continue;
         }
-        taken.push(family);
-        let mut job = vec![Member {
+        let mut members = vec![Member {
             effect: &candidates[scored[*j].candidate],
             start: start.clone(),
             mirror_of: None,
@@ -1141,7 +1157,7 @@ fn refit_jobs<'r>(
             }
             let c = &candidates[scored[k].candidate];
             let own = screen_of(k);
-            let mirror_of = job.iter().zip(&shown).position(|(m, s)| {
+            let mirror_of = members.iter().zip(&shown).position(|(m, s)| {
                 m.mirror_of.is_none()
                     && m.effect.kind() == c.kind()
                     && s.zip(own).is_some_and(|(a, b)| mirrors(a, b))
@@ -1153,14 +1169,14 @@ fn refit_jobs<'r>(
                 refitted += 1;
             }
             shown.push(own);
-            job.push(Member {
+            members.push(Member {
                 effect: c,
                 start: own
                     .map_or_else(|| score_start(c, scored[k].step, f_hi), |s| s.start.clone()),
                 mirror_of,
             });
         }
-        jobs.push(job);
+        jobs.push(Job { family, members });
     }
     jobs
 }
@@ -1242,7 +1258,7 @@ fn best_member(
     let j = |(_, r): (usize, &Refit)| r.criterion_after;
     let (_, lowest) = ok().min_by(|a, b| j(a.1).total_cmp(&j(b.1)))?;
     let j_lowest = j(lowest);
-    let tied = |m: (usize, &Refit)| 2.0 * (j(m) - j_lowest) / sigma2 < EQUIVALENT_LR;
+    let tied = |m: (usize, &Refit)| indistinguishable(j(m), j_lowest, sigma2);
     let unphysical = |(i, r): (usize, &Refit)| {
         unidentifiable(&members[i].effect.params(f_hi), &r.params, threshold).is_some()
     };
@@ -1255,22 +1271,24 @@ fn best_member(
         .map(|(k, _)| k)
 }
 
-/// Every member of the score family `leader` belongs to (described), or `leader` alone.
-fn family_of(ranking: &Ranking, leader: &Effect) -> Vec<String> {
-    let effect = |k: usize| &ranking.candidates[ranking.scored[k].candidate];
-    ranking
-        .families
-        .iter()
-        .find(|f| f.iter().any(|&k| std::ptr::eq(effect(k), leader)))
-        .map_or_else(
-            || vec![leader.describe()],
-            |f| f.iter().map(|&k| effect(k).describe()).collect(),
-        )
+/// Every member of the score family `family` (described), or `leader` alone when it is in none.
+fn family_of(ranking: &Ranking, family: Option<usize>, leader: &Effect) -> Vec<String> {
+    let effect = |k: usize| ranking.candidates[ranking.scored[k].candidate].describe();
+    family.map_or_else(
+        || vec![leader.describe()],
+        |f| ranking.families[f].iter().map(|&k| effect(k)).collect(),
+    )
 }
 
 /// A family member's refit is equivalent to the family's best when its likelihood ratio against
 /// it is below this (χ² with 1 degree of freedom at 95 %): the data cannot tell them apart.
 const EQUIVALENT_LR: f64 = 3.84;
+
+/// Whether a refit ending at criterion `j` is one the data cannot tell from the best, ending at
+/// `j_best`: its likelihood ratio against it is below [`EQUIVALENT_LR`].
+fn indistinguishable(j: f64, j_best: f64, sigma2: f64) -> bool {
+    2.0 * (j - j_best) / sigma2 < EQUIVALENT_LR
+}
 
 /// The members of a family the data cannot tell from its best refit (member `best`, criterion
 /// `j_best`): those whose refit (in `others`) ends within [`EQUIVALENT_LR`] of it, and the mirror
@@ -1286,7 +1304,7 @@ fn equivalents(
         .chain(others.iter().filter_map(|(i, r)| {
             r.as_ref()
                 .ok()
-                .filter(|(r, _)| 2.0 * (r.criterion_after - j_best) / sigma2 < EQUIVALENT_LR)
+                .filter(|(r, _)| indistinguishable(r.criterion_after, j_best, sigma2))
                 .map(|_| *i)
         }))
         .collect();
@@ -1340,6 +1358,7 @@ fn partial_fix(r: &Refit, cur: &Current, sigma2: f64) -> Option<String> {
 /// does. (On the blind suite every effect added with its size within 4.4 standard errors of
 /// nothing at a 95 % interval — ten of them, one on clean data — was a wrong one.)
 fn unidentifiable(params: &[EffectParam], est: &[ParamEstimate], threshold: f64) -> Option<String> {
+    let z_min = size_z(threshold);
     for (j, (np, pe)) in params.iter().zip(est).enumerate() {
         let v = pe.value;
         let tol = 1e-3 * np.scale;
@@ -1367,7 +1386,6 @@ fn unidentifiable(params: &[EffectParam], est: &[ParamEstimate], threshold: f64)
                 crate::display::sig(b, 4),
             ));
         }
-        let z_min = size_z(threshold);
         if size && !(pe.std_error.is_finite() && (v - np.nested).abs() > z_min * pe.std_error) {
             return Some(format!(
                 "{}: within {z_min:.1} standard errors of {}, the round's significance level",
