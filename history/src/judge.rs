@@ -446,36 +446,41 @@ fn judge_one(
             limits: [(centre - lim) / f, (centre + lim) / f],
             slope: cov.map(|_| nm.b / f),
         };
-        if r.abs() > cfg.shewhart_k * widen {
-            let since = prev_since(Rule::Shewhart, &p.variable).unwrap_or(run.run_id.clone());
+        // A Shewhart or EWMA alarm on this parameter: `what` fired, `change` in its display unit,
+        // `multiples` of its normal scatter. Since: the first run of this alarm's stretch.
+        let mut alarm = |rule: Rule, what: String, change: f64, multiples: f64| {
+            let since = prev_since(rule, &p.variable).unwrap_or(run.run_id.clone());
             j.alarms.push(Alarm {
-                rule: Rule::Shewhart,
+                rule,
                 subject: p.variable.clone(),
-                message: format!(
-                    "drift alarm (Shewhart): {} is {}{} {} from normal ({:+.1} × its normal scatter {} {}; limit {:.1}×) since run {since}",
+                message: format!("{what} since run {since}"),
+                since_run: since,
+                change: Some(change),
+                unit: pj.unit.clone(),
+                multiples: Some(multiples),
+            });
+        };
+        if r.abs() > cfg.shewhart_k * widen {
+            alarm(
+                Rule::Shewhart,
+                format!(
+                    "drift alarm (Shewhart): {} is {}{} {} from normal ({:+.1} × its normal scatter {} {}; limit {:.1}×)",
                     p.variable, if pj.value >= pj.centre { "+" } else { "" }, sig(pj.value - pj.centre, 3), pj.unit, r, sig(pj.scatter, 3), pj.unit, cfg.shewhart_k * widen
                 ),
-                since_run: since,
-                change: Some(pj.value - pj.centre),
-                unit: pj.unit.clone(),
-                multiples: Some(r),
-            });
+                pj.value - pj.centre,
+                r,
+            );
         }
         if z.abs() > ewma_limit {
-            // Since: the first run of this alarm's stretch.
-            let since = prev_since(Rule::Ewma, &p.variable).unwrap_or(run.run_id.clone());
-            j.alarms.push(Alarm {
-                rule: Rule::Ewma,
-                subject: p.variable.clone(),
-                message: format!(
-                    "drift alarm (EWMA): {} has drifted {}{} {} ({:+.2} × its normal scatter, limit {:.2}×) since run {since}",
+            alarm(
+                Rule::Ewma,
+                format!(
+                    "drift alarm (EWMA): {} has drifted {}{} {} ({:+.2} × its normal scatter, limit {:.2}×)",
                     p.variable, if z >= 0.0 { "+" } else { "" }, sig(z * pj.scatter, 3), pj.unit, z, ewma_limit
                 ),
-                since_run: since,
-                change: Some(z * pj.scatter),
-                unit: pj.unit.clone(),
-                multiples: Some(z),
-            });
+                z * pj.scatter,
+                z,
+            );
         }
         j.parameters.push(pj);
         normals.push((nm, p.estimate - centre));
