@@ -6,6 +6,8 @@
 // Test helpers unwrap: a panic with its message is the failure report.
 #![allow(clippy::unwrap_used)]
 
+mod common;
+
 use identify::frf::{response_params, Method};
 use identify::identification::{
     self as idn, data, synthetic, variables, Criterion, FitKind, JacobianMode, NoiseChoice, Options,
@@ -256,17 +258,7 @@ fn mass_and_stiffness_of_one_body_are_both_identified_from_exact_receptance() {
     let obs = data::validate(&d, &truth, "exact").unwrap();
     let vars = variables::parse(&single_vars(false), "vars.toml", &truth).unwrap();
     assert_eq!(vars.vars[0].unit.symbol, "kg");
-    let id = idn::identify(
-        &truth,
-        &obs,
-        &vars,
-        &Options {
-            noise: NoiseChoice::Relative(0.01),
-            ..Options::default()
-        },
-        &mut |_, _| {},
-    )
-    .unwrap();
+    let id = common::identify_at_one_percent_noise(&truth, &obs, &vars);
     let (m_hat, k_hat, psi_hat) = (id.estimate[0], id.estimate[1], id.estimate[2]);
     assert!((m_hat / m - 1.0).abs() < 1e-6, "m {m_hat} vs {m}");
     assert!((k_hat / k - 1.0).abs() < 1e-6, "k {k_hat} vs {k}");

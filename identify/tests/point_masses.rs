@@ -6,8 +6,10 @@
 // Test helpers unwrap: a panic with its message is the failure report.
 #![allow(clippy::unwrap_used)]
 
+mod common;
+
 use identify::frf::{response, response_params, Method};
-use identify::identification::{self as idn, data, synthetic, variables, NoiseChoice, Options};
+use identify::identification::{self as idn, data, synthetic, variables};
 use identify::model::{Model, Param};
 use identify::modelfile::parse_toml;
 use identify::system::System;
@@ -278,17 +280,7 @@ fn a_point_mass_is_identified_and_written_back() {
     let vars = variables::parse(VARS, "vars.toml", &start).unwrap();
     assert_eq!(vars.vars[0].unit.symbol, "kg");
     assert_eq!(vars.vars[0].sdes, "point mass sensor");
-    let id = idn::identify(
-        &start,
-        &obs,
-        &vars,
-        &Options {
-            noise: NoiseChoice::Relative(0.01),
-            ..Options::default()
-        },
-        &mut |_, _| {},
-    )
-    .unwrap();
+    let id = common::identify_at_one_percent_noise(&start, &obs, &vars);
     assert!(
         (id.estimate[0] / 2.0 - 1.0).abs() < 1e-6,
         "{:?} {} after {} iterations, J = {}",

@@ -127,6 +127,26 @@ pub fn fit_two_mass(
     id
 }
 
+/// The default identification of `vars` against `obs`, starting from `model`, with the noise
+/// taken as 1 % of each amplitude: the fit of exact data, which states no variances of its own.
+pub fn identify_at_one_percent_noise(
+    model: &Model,
+    obs: &data::Observations,
+    vars: &variables::Variables,
+) -> idn::Identification {
+    idn::identify(
+        model,
+        obs,
+        vars,
+        &Options {
+            noise: NoiseChoice::Relative(0.01),
+            ..Options::default()
+        },
+        &mut |_, _| {},
+    )
+    .unwrap()
+}
+
 /// Every column of `model`'s Jacobian for `params` at `freqs` (Hz), on both solve paths, against
 /// central differences of the direct response (step 10⁻⁶ of the value, of 10⁻³ at least): the
 /// difference may be 10⁻⁵ of the column plus `floor` × the output's largest value over the
