@@ -100,30 +100,29 @@ impl FrfUnit {
 
     /// The SI unit of this kind of value, for notes: `(m/s²)/N`.
     pub fn si_text(&self) -> &'static str {
-        if self.per_base_motion {
-            return "m/m";
-        }
-        match (self.quantity, self.per_force) {
-            (Quantity::Displacement, true) => "m/N",
-            (Quantity::Velocity, true) => "(m/s)/N",
-            (Quantity::Acceleration, true) => "(m/s²)/N",
-            (Quantity::Displacement, false) => "m",
-            (Quantity::Velocity, false) => "m/s",
-            (Quantity::Acceleration, false) => "m/s²",
-        }
+        self.kind_and_si_text().1
     }
 
     /// `receptance`, `mobility`, `accelerance` (per force), `transmissibility`, or the
     /// quantity's name.
     pub fn kind(&self) -> &'static str {
+        self.kind_and_si_text().0
+    }
+
+    /// [`Self::kind`] and [`Self::si_text`] from one table, so that a kind's name and its unit
+    /// stand on one row.
+    fn kind_and_si_text(&self) -> (&'static str, &'static str) {
         if self.per_base_motion {
-            return "transmissibility";
+            return ("transmissibility", "m/m");
         }
-        match (self.quantity, self.per_force) {
-            (Quantity::Displacement, true) => "receptance",
-            (Quantity::Velocity, true) => "mobility",
-            (Quantity::Acceleration, true) => "accelerance",
-            (q, false) => q.as_str(),
+        let q = self.quantity;
+        match (q, self.per_force) {
+            (Quantity::Displacement, true) => ("receptance", "m/N"),
+            (Quantity::Velocity, true) => ("mobility", "(m/s)/N"),
+            (Quantity::Acceleration, true) => ("accelerance", "(m/s²)/N"),
+            (Quantity::Displacement, false) => (q.as_str(), "m"),
+            (Quantity::Velocity, false) => (q.as_str(), "m/s"),
+            (Quantity::Acceleration, false) => (q.as_str(), "m/s²"),
         }
     }
 }
