@@ -392,13 +392,7 @@ async fn the_stream_arrives_loss_free_in_several_tpdos_with_the_node_scaling() {
         .await
         .expect("configure");
     assert_eq!(info.sample_rate_hz, 2000.0);
-    assert_eq!(
-        info.channels
-            .iter()
-            .map(|c| c.device_channel)
-            .collect::<Vec<_>>(),
-        channels
-    );
+    assert_eq!(info.device_channels(), channels);
     let vpc = 0.000_305_175_781_25;
     assert!(
         info.channels.iter().all(|c| c.volts_per_count == vpc),

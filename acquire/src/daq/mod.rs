@@ -98,6 +98,14 @@ pub struct StreamInfo {
     pub samples_per_block: u16,
 }
 
+impl StreamInfo {
+    /// The announced channels' device numbers in block order: what a configure request's
+    /// [`DaqConfig::channels`] must equal.
+    pub fn device_channels(&self) -> Vec<u16> {
+        self.channels.iter().map(|c| c.device_channel).collect()
+    }
+}
+
 /// A block of simultaneously sampled channels.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct SampleBlock {

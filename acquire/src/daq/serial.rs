@@ -327,7 +327,7 @@ impl<T: Transport> Daq for SerialDaq<T> {
             .await?
         {
             Message::Announce(info) => {
-                let got: Vec<u16> = info.channels.iter().map(|c| c.device_channel).collect();
+                let got = info.device_channels();
                 if got != config.channels || info.samples_per_block != config.samples_per_block {
                     return Err(DaqError::Announcement {
                         port: self.port.clone(),
