@@ -124,6 +124,12 @@ fn runtime() -> tokio::runtime::Runtime {
         .expect("tokio runtime")
 }
 
+/// Runs a CAN test's body on a fresh runtime, once vcan0 is known to be up.
+fn on_vcan<T>(test: impl std::future::Future<Output = T>) -> T {
+    require_vcan();
+    runtime().block_on(test)
+}
+
 /// The simulated DAQ's signal: a deterministic pattern per channel and sample, so that every
 /// received value can be checked exactly.
 fn pattern(channel: u16, index: u64) -> i32 {
@@ -211,13 +217,7 @@ async fn acquire_clean(
     };
     let info = daq.configure(&config).await.expect("configure");
     assert_eq!(info.sample_rate_hz, rate);
-    assert_eq!(
-        info.channels
-            .iter()
-            .map(|c| c.device_channel)
-            .collect::<Vec<_>>(),
-        channels
-    );
+    assert_eq!(info.device_channels(), channels);
     daq.start().await.expect("start");
     for want in 0..blocks {
         match daq.next_event().await.expect("next event") {
@@ -259,8 +259,7 @@ async fn acquire_clean(
 #[test]
 #[ignore = "needs vcan0: run by vcan_suite (in the qemu VM when the host has no CAN)"]
 fn classic_frames_acquisition_against_simulated_daq() {
-    require_vcan();
-    runtime().block_on(async {
+    on_vcan(async {
         tokio::time::timeout(
             Duration::from_secs(30),
             acquire_clean(0x110, FrameKind::Classic, vec![0, 2, 5], 16, 2000.0, 25),
@@ -273,8 +272,7 @@ fn classic_frames_acquisition_against_simulated_daq() {
 #[test]
 #[ignore = "needs vcan0: run by vcan_suite (in the qemu VM when the host has no CAN)"]
 fn fd_frames_acquisition_against_simulated_daq() {
-    require_vcan();
-    runtime().block_on(async {
+    on_vcan(async {
         tokio::time::timeout(
             Duration::from_secs(30),
             acquire_clean(0x120, FrameKind::Fd, vec![7, 1, 3, 0], 64, 25_600.0, 50),
@@ -287,8 +285,7 @@ fn fd_frames_acquisition_against_simulated_daq() {
 #[test]
 #[ignore = "needs vcan0: run by vcan_suite (in the qemu VM when the host has no CAN)"]
 fn injected_faults_are_all_reported_and_no_damaged_block_is_delivered() {
-    require_vcan();
-    runtime().block_on(async {
+    on_vcan(async {
         tokio::time::timeout(Duration::from_secs(40), async {
             let (host, mut dev) = settings_pair(0x130, FrameKind::Classic);
             dev.faults = SimFaults {
@@ -394,7 +391,8 @@ fn block_frames(
     (block, frames)
 }
 
-fn decode_frames<'a>(frames: impl IntoIterator<Item = &'a [u8]>) -> Vec<Message> {
+/// Asserts that the data of `frames` reassemble without a fault into one message: `block`.
+fn assert_frames_carry<'a>(frames: impl IntoIterator<Item = &'a [u8]>, block: WireBlock) {
     let mut r = Reassembler::new();
     let mut out = Vec::new();
     for f in frames {
@@ -404,7 +402,7 @@ fn decode_frames<'a>(frames: impl IntoIterator<Item = &'a [u8]>) -> Vec<Message>
             out.push(Message::decode(m).expect("valid message"));
         }
     }
-    out
+    assert_eq!(out, vec![Message::Block(block)]);
 }
 
 fn cansend(frame: &str) {
@@ -422,8 +420,7 @@ fn cansend(frame: &str) {
 #[test]
 #[ignore = "needs vcan0: run by vcan_suite (in the qemu VM when the host has no CAN)"]
 fn frames_injected_by_cansend_are_decoded() {
-    require_vcan();
-    runtime().block_on(async {
+    on_vcan(async {
         for (kind, id) in [
             (FrameKind::Classic, CanId::Standard(0x142)),
             (FrameKind::Fd, CanId::Extended(0x18FF_0142)),
@@ -445,10 +442,7 @@ fn frames_injected_by_cansend_are_decoded() {
             }
             sender.await.expect("cansend task");
             assert_eq!(got, frames, "{kind:?}: frames as cansend sent them");
-            assert_eq!(
-                decode_frames(got.iter().map(WireFrame::data)),
-                vec![Message::Block(block)]
-            );
+            assert_frames_carry(got.iter().map(WireFrame::data), block);
         }
     });
 }
@@ -456,8 +450,7 @@ fn frames_injected_by_cansend_are_decoded() {
 #[test]
 #[ignore = "needs vcan0: run by vcan_suite (in the qemu VM when the host has no CAN)"]
 fn candump_sees_the_frames_our_sender_emits() {
-    require_vcan();
-    runtime().block_on(async {
+    on_vcan(async {
         for (kind, id) in [
             (FrameKind::Classic, CanId::Standard(0x152)),
             (FrameKind::Fd, CanId::Standard(0x153)),
@@ -515,10 +508,7 @@ fn candump_sees_the_frames_our_sender_emits() {
                         .collect()
                 })
                 .collect();
-            assert_eq!(
-                decode_frames(bytes.iter().map(Vec::as_slice)),
-                vec![Message::Block(block)]
-            );
+            assert_frames_carry(bytes.iter().map(Vec::as_slice), block);
         }
     });
 }
@@ -526,8 +516,7 @@ fn candump_sees_the_frames_our_sender_emits() {
 #[test]
 #[ignore = "needs vcan0: run by vcan_suite (in the qemu VM when the host has no CAN)"]
 fn error_frames_are_reported_and_bus_off_ends_the_stream() {
-    require_vcan();
-    runtime().block_on(async {
+    on_vcan(async {
         tokio::time::timeout(Duration::from_secs(30), async {
             let (host, dev) = settings_pair(0x160, FrameKind::Fd);
             let sim = spawn_sim(dev);
@@ -583,20 +572,39 @@ fn error_frames_are_reported_and_bus_off_ends_the_stream() {
 #[test]
 #[ignore = "needs vcan0: run by vcan_suite (in the qemu VM when the host has no CAN)"]
 fn bad_interfaces_give_errors_naming_them() {
-    require_vcan();
-    runtime().block_on(async {
+    on_vcan(async {
         let e = CanBus::open("nocan7").expect_err("no such interface");
         let msg = e.to_string();
-        assert!(matches!(e, CanError::UnknownInterface { .. }) && msg.contains("nocan7") && msg.contains("ip link"), "{msg}");
-        assert!(matches!(CanDaq::open("nocan7", CanDaqSettings::default()), Err(CanError::UnknownInterface { .. })));
+        assert!(
+            matches!(e, CanError::UnknownInterface { .. })
+                && msg.contains("nocan7")
+                && msg.contains("ip link"),
+            "{msg}"
+        );
+        assert!(matches!(
+            CanDaq::open("nocan7", CanDaqSettings::default()),
+            Err(CanError::UnknownInterface { .. })
+        ));
         // A network interface that is not CAN.
-        assert!(matches!(CanBus::open("lo"), Err(CanError::UnknownInterface { .. })));
+        assert!(matches!(
+            CanBus::open("lo"),
+            Err(CanError::UnknownInterface { .. })
+        ));
         // Clashing identifiers are refused before touching the bus.
-        let clash = CanDaqSettings { data_id: CanId::Standard(0x100), ..CanDaqSettings::default() };
-        assert!(matches!(CanDaq::open(IFACE, clash), Err(CanError::Config { .. })));
+        let clash = CanDaqSettings {
+            data_id: CanId::Standard(0x100),
+            ..CanDaqSettings::default()
+        };
+        assert!(matches!(
+            CanDaq::open(IFACE, clash),
+            Err(CanError::Config { .. })
+        ));
 
         let ip = |args: &str| {
-            let st = Command::new("ip").args(args.split_whitespace()).status().expect("run ip");
+            let st = Command::new("ip")
+                .args(args.split_whitespace())
+                .status()
+                .expect("run ip");
             assert!(
                 st.success(),
                 "ip {args} failed: this test creates vcan9 and needs root (in the VM it is); run with IDENT_VCAN_FORCE_VM=1 to use the VM"
@@ -609,27 +617,46 @@ fn bad_interfaces_give_errors_naming_them() {
         let bus = CanBus::open("vcan9").expect("open vcan9");
         let fd = WireFrame::from_parts(CanId::Standard(1), FrameKind::Fd, &[1; 12]);
         let e = bus.send(&fd).await.expect_err("FD on a classic interface");
-        assert!(matches!(e, CanError::FdNotSupported { .. }) && e.to_string().contains("mtu 72"), "{e}");
+        assert!(
+            matches!(e, CanError::FdNotSupported { .. }) && e.to_string().contains("mtu 72"),
+            "{e}"
+        );
         let classic = WireFrame::from_parts(CanId::Standard(1), FrameKind::Classic, &[1; 8]);
         bus.send(&classic).await.expect("classic frame on vcan9");
         // Interface down.
         ip("link set vcan9 down");
-        let e = bus.send(&classic).await.expect_err("send on a down interface");
-        assert!(matches!(e, CanError::InterfaceDown { .. }) && e.to_string().contains("ip link set vcan9 up"), "{e}");
+        let e = bus
+            .send(&classic)
+            .await
+            .expect_err("send on a down interface");
+        assert!(
+            matches!(e, CanError::InterfaceDown { .. })
+                && e.to_string().contains("ip link set vcan9 up"),
+            "{e}"
+        );
         ip("link del dev vcan9");
         // A device that never answers: timeout naming the interface and identifiers.
-        let quiet = CanDaqSettings { command_id: CanId::Standard(0x170), status_id: CanId::Standard(0x171), data_id: CanId::Standard(0x172), ..CanDaqSettings::default() };
+        let quiet = CanDaqSettings {
+            command_id: CanId::Standard(0x170),
+            status_id: CanId::Standard(0x171),
+            data_id: CanId::Standard(0x172),
+            ..CanDaqSettings::default()
+        };
         let mut daq = CanDaq::open(IFACE, quiet).expect("open");
         let e = daq.identify().await.expect_err("nobody answers");
-        assert!(matches!(e, DaqError::Timeout { .. }) && e.to_string().contains(IFACE) && e.to_string().contains("171"), "{e}");
+        assert!(
+            matches!(e, DaqError::Timeout { .. })
+                && e.to_string().contains(IFACE)
+                && e.to_string().contains("171"),
+            "{e}"
+        );
     });
 }
 
 #[test]
 #[ignore = "needs vcan0: run by vcan_suite (in the qemu VM when the host has no CAN)"]
 fn device_refusals_and_misuse_are_clear_errors() {
-    require_vcan();
-    runtime().block_on(async {
+    on_vcan(async {
         tokio::time::timeout(Duration::from_secs(30), async {
             let (host, dev) = settings_pair(0x180, FrameKind::Classic);
             let sim = spawn_sim(dev);
@@ -685,8 +712,7 @@ fn device_refusals_and_misuse_are_clear_errors() {
 #[ignore = "needs vcan0: run by vcan_suite (in the qemu VM when the host has no CAN)"]
 fn lost_answers_are_asked_again_and_the_stream_starts_clean() {
     use acquire::can::codec::kind;
-    require_vcan();
-    runtime().block_on(async {
+    on_vcan(async {
         tokio::time::timeout(Duration::from_secs(60), async {
             let (host, mut dev) = settings_pair(0x190, FrameKind::Classic);
             dev.faults.lose_answers = vec![kind::CONFIGURE, kind::START];
@@ -937,27 +963,12 @@ fn throughput_benchmark() {
 #[test]
 #[ignore = "needs vcan0: run by vcan_suite (in the qemu VM when the host has no CAN)"]
 fn stepped_sine_over_vcan_recovers_the_truth_characteristics() {
-    use acquire::sweep::{FrequencyList, SteppedSine};
     require_vcan();
     let dir = tempfile::tempdir().expect("temp dir");
     let stand = can_stand(dir.path(), 2.0, 0x300, FrameKind::Fd);
-    let plan = SteppedSine {
-        frequencies: FrequencyList::Log {
-            start: 20.0,
-            stop: 400.0,
-            n: 6,
-        },
-        ..SteppedSine::default()
-    };
+    let plan = log_stepped_sine(20.0, 400.0, 6);
     let path = dir.path().join("vcan.mcap");
-    let started = Instant::now();
     let live = sweep_over_vcan(&stand, &plan, &path, IFACE, 90);
-    eprintln!(
-        "vcan sweep: {} steps in {:.1} s, {} stream faults",
-        live.steps.len(),
-        started.elapsed().as_secs_f64(),
-        live.faults
-    );
     assert_eq!(live.steps.len(), 6);
     let a = assert_replay_equals_live(&path, &live);
     // The CAN frames themselves are in the session (every byte received and sent).
@@ -1096,27 +1107,12 @@ fn canopen_node_over_vcan_streams_loss_free_and_reports_emcy_and_lost_heartbeat(
 #[test]
 #[ignore = "needs vcan0: run by vcan_suite (in the qemu VM when the host has no CAN)"]
 fn stepped_sine_through_the_canopen_stand_file() {
-    use acquire::sweep::{FrequencyList, SteppedSine};
     require_vcan();
     let dir = tempfile::tempdir().expect("temp dir");
     let stand = canopen_stand_in(dir.path());
-    let plan = SteppedSine {
-        frequencies: FrequencyList::Log {
-            start: 40.0,
-            stop: 300.0,
-            n: 4,
-        },
-        ..SteppedSine::default()
-    };
+    let plan = log_stepped_sine(40.0, 300.0, 4);
     let path = dir.path().join("canopen.mcap");
-    let started = Instant::now();
     let live = sweep_over_vcan(&stand, &plan, &path, &format!("{IFACE} node 5"), 120);
-    eprintln!(
-        "canopen sweep: {} steps in {:.1} s, {} stream faults",
-        live.steps.len(),
-        started.elapsed().as_secs_f64(),
-        live.faults
-    );
     assert_eq!(live.steps.len(), 4);
     let _ = assert_replay_equals_live(&path, &live);
     // Every CANopen frame (SDO configuration, SYNC, TPDOs, heartbeats) is in the session, and so
@@ -1162,19 +1158,12 @@ fn canopen_stand_in(dir: &Path) -> acquire::stand::Stand {
 fn a_canopen_node_lost_mid_sweep_ends_it_with_the_session_intact() {
     use acquire::session::{Session, SessionOptions};
     use acquire::sim::SimStand;
-    use acquire::sweep::{self, FrequencyList, NoProgress, SteppedSine, StopSignal};
+    use acquire::sweep::{self, NoProgress, StopSignal};
     require_vcan();
     let dir = tempfile::tempdir().expect("temp dir");
     let mut stand = canopen_stand_in(dir.path());
     stand.faults.daq_silent_after_blocks = Some(40);
-    let plan = SteppedSine {
-        frequencies: FrequencyList::Log {
-            start: 40.0,
-            stop: 300.0,
-            n: 6,
-        },
-        ..SteppedSine::default()
-    };
+    let plan = log_stepped_sine(40.0, 300.0, 6);
     let path = dir.path().join("lost.mcap");
     let err = runtime().block_on(async {
         tokio::time::timeout(Duration::from_secs(120), async {
@@ -1229,8 +1218,18 @@ fn a_canopen_node_lost_mid_sweep_ends_it_with_the_session_intact() {
     );
 }
 
+/// The short stepped sines of the tests over vcan0: `n` log-spaced lines from `start` to `stop`
+/// (Hz), the rest as default (the VM is emulated, so they are kept short).
+fn log_stepped_sine(start: f64, stop: f64, n: usize) -> acquire::sweep::SteppedSine {
+    acquire::sweep::SteppedSine {
+        frequencies: acquire::sweep::FrequencyList::Log { start, stop, n },
+        ..acquire::sweep::SteppedSine::default()
+    }
+}
+
 /// A stepped sine over the simulated stand whose DAQ is on vcan0 (the rig's DAQ must report
-/// `daq_port`), recorded to `path`, within `limit_s` seconds.
+/// `daq_port`), recorded to `path`, within `limit_s` seconds; prints its steps, time and stream
+/// faults.
 fn sweep_over_vcan(
     stand: &acquire::stand::Stand,
     plan: &acquire::sweep::SteppedSine,
@@ -1241,7 +1240,8 @@ fn sweep_over_vcan(
     use acquire::session::{Session, SessionOptions};
     use acquire::sim::SimStand;
     use acquire::sweep::{self, NoProgress, StopSignal};
-    runtime().block_on(async {
+    let started = Instant::now();
+    let live = runtime().block_on(async {
         tokio::time::timeout(Duration::from_secs(limit_s), async {
             let sim =
                 SimStand::start_can(stand, IFACE).expect("simulated stand with its DAQ on vcan0");
@@ -1270,7 +1270,14 @@ fn sweep_over_vcan(
         })
         .await
         .unwrap_or_else(|_| panic!("sweep over vcan0 finishes within {limit_s} s"))
-    })
+    });
+    eprintln!(
+        "sweep over {daq_port}: {} steps in {:.1} s, {} stream faults",
+        live.steps.len(),
+        started.elapsed().as_secs_f64(),
+        live.faults
+    );
+    live
 }
 
 /// The sweep's events recorded in the session at `path`, one a line: the force loop's trail
@@ -1309,8 +1316,7 @@ fn assert_replay_equals_live(
 #[test]
 #[ignore = "needs vcan0 and python3 with canopen: run by vcan_suite (in the qemu VM, the host's python shared)"]
 fn python_canopen_node_on_vcan_is_configured_and_streams_loss_free() {
-    require_vcan();
-    runtime().block_on(async {
+    on_vcan(async {
         let mut child = python_node::spawn(&["--bus", IFACE]);
         let daq = open_python_node(&mut child);
         python_node::identified_configured_over_sdo_and_streams_loss_free(child, daq).await;
@@ -1321,8 +1327,7 @@ fn python_canopen_node_on_vcan_is_configured_and_streams_loss_free() {
 #[test]
 #[ignore = "needs vcan0 and python3 with canopen: run by vcan_suite (in the qemu VM, the host's python shared)"]
 fn python_canopen_node_on_vcan_emcy_and_heartbeat_loss_are_detected() {
-    require_vcan();
-    runtime().block_on(async {
+    on_vcan(async {
         let mut child = python_node::spawn(&[
             "--bus",
             IFACE,
