@@ -65,18 +65,7 @@ fn fwd32j_synthetic_recovery_from_the_initial_values() {
         id.criterion
     );
     println!("truth vs identified:");
-    for (i, v) in vars.vars.iter().enumerate() {
-        let f = v.unit.factor;
-        println!(
-            "{:<20} truth {:>10.5} initial {:>10.5} identified {:>10.5} se {:>10.5} ({:+.2} se)",
-            v.name,
-            xt[i] / f,
-            id.initial[i] / f,
-            id.estimate[i] / f,
-            id.uncertainty.std_error[i] / f,
-            (id.estimate[i] - xt[i]) / id.uncertainty.std_error[i]
-        );
-    }
+    common::deviations_from_truth(&id, &xt);
     assert!(id.stop.converged(), "{}", id.stop.describe());
     assert_eq!(
         lines.len(),

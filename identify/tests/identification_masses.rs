@@ -74,28 +74,6 @@ fn truth_of(truth: &Model, model: &Model, vars: &variables::Variables) -> Vec<f6
         .collect()
 }
 
-/// `(estimate − truth)/SE` per variable, printed.
-fn deviations(id: &Identification, xt: &[f64]) -> Vec<f64> {
-    id.variables
-        .vars
-        .iter()
-        .enumerate()
-        .map(|(i, v)| {
-            let se = id.uncertainty.std_error[i];
-            let z = (id.estimate[i] - xt[i]) / se;
-            let f = v.unit.factor;
-            println!(
-                "{:<22} truth {:>10.5} identified {:>10.5} se {:>9.5} ({z:+.2} se)",
-                v.name,
-                xt[i] / f,
-                id.estimate[i] / f,
-                se / f
-            );
-            z
-        })
-        .collect()
-}
-
 #[test]
 fn freeing_the_masses_recovers_fwd32j_from_masses_20_percent_off() {
     let truth = load_model("fwd32j.toml");
@@ -111,14 +89,14 @@ fn freeing_the_masses_recovers_fwd32j_from_masses_20_percent_off() {
     let held = vars_for(&model, false);
     let held_id = fit(&model, &obs, &held);
     println!("masses held:\n{}", idn::report::text(&held_id));
-    let held_z = deviations(&held_id, &truth_of(&truth, &model, &held));
+    let held_z = common::deviations_from_truth(&held_id, &truth_of(&truth, &model, &held));
 
     let free = vars_for(&model, true);
     assert_eq!(free.len(), held.len() + model.bodies.len());
     let free_id = fit(&model, &obs, &free);
     println!("masses free:\n{}", idn::report::text(&free_id));
     let xt = truth_of(&truth, &model, &free);
-    let free_z = deviations(&free_id, &xt);
+    let free_z = common::deviations_from_truth(&free_id, &xt);
 
     assert!(free_id.stop.converged(), "{}", free_id.stop.describe());
     for (v, z) in free.vars.iter().zip(&free_z) {
@@ -177,7 +155,7 @@ fn a_ten_percent_gain_error_of_one_characteristic_is_recovered_on_fwd32j() {
     let g = vars.len() - 1;
     let mut xt = truth_of(&truth, &initial, &vars);
     xt[g] = 1.1;
-    let z = deviations(&id, &xt);
+    let z = common::deviations_from_truth(&id, &xt);
     assert!(id.stop.converged(), "{}", id.stop.describe());
     assert!(
         z[g].abs() < 3.0,

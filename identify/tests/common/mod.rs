@@ -147,6 +147,31 @@ pub fn identify_at_one_percent_noise(
     .unwrap()
 }
 
+/// `(estimate − truth)/SE` per variable of `id`, `xt` the truth; each variable printed as a row
+/// of a "truth vs identified" table in its display unit (truth, initial, identified, standard
+/// error, deviation).
+pub fn deviations_from_truth(id: &idn::Identification, xt: &[f64]) -> Vec<f64> {
+    id.variables
+        .vars
+        .iter()
+        .enumerate()
+        .map(|(i, v)| {
+            let se = id.uncertainty.std_error[i];
+            let z = (id.estimate[i] - xt[i]) / se;
+            let f = v.unit.factor;
+            println!(
+                "{:<22} truth {:>10.5} initial {:>10.5} identified {:>10.5} se {:>10.5} ({z:+.2} se)",
+                v.name,
+                xt[i] / f,
+                id.initial[i] / f,
+                id.estimate[i] / f,
+                se / f
+            );
+            z
+        })
+        .collect()
+}
+
 /// Every column of `model`'s Jacobian for `params` at `freqs` (Hz), on both solve paths, against
 /// central differences of the direct response (step 10⁻⁶ of the value, of 10⁻³ at least): the
 /// difference may be 10⁻⁵ of the column plus `floor` × the output's largest value over the
