@@ -248,6 +248,28 @@ impl Effect {
         }
     }
 
+    /// Where the effect acts, without its point: the bodies a spring joins (sorted; ground is
+    /// `None`), the body of a mass, resonator, flexibility or body mass, the SDE of a direction,
+    /// the SDEs of a damping split, the characteristic of a gain. Two effects of one kind and
+    /// site differ only in their point or direction.
+    pub fn site(&self) -> Vec<Option<&str>> {
+        match self {
+            Effect::Spring { bodies, .. } | Effect::PlacedSpring { bodies, .. } => {
+                let mut v: Vec<Option<&str>> = bodies.iter().map(|b| b.as_deref()).collect();
+                v.sort();
+                v
+            }
+            Effect::Mass { body, .. }
+            | Effect::PlacedMass { body, .. }
+            | Effect::Resonator { body, .. }
+            | Effect::Flexible { body, .. }
+            | Effect::BodyMass { body, .. } => vec![Some(body)],
+            Effect::Direction { sde, .. } => vec![Some(sde)],
+            Effect::Damping { sdes, .. } => sdes.iter().map(|s| Some(s.as_str())).collect(),
+            Effect::Gain { label, .. } => vec![Some(label)],
+        }
+    }
+
     /// Whether the effect acts on a body the diagnosis added (a point mass's or resonator's).
     pub fn on_added_body(&self) -> bool {
         let added = |b: &str| b.starts_with(ADDED_MASS) || b.starts_with(ADDED_RESONATOR);

@@ -944,7 +944,7 @@ fn refit_leading(
                 (model, vars, obs),
                 opts,
                 cur,
-                &jobs[f].members[i],
+                (&jobs[f].members[i], i == 0),
                 f_hi,
                 *sigma2,
             )
@@ -959,7 +959,7 @@ fn refit_leading(
             .filter(|((g, _), _)| *g == f)
             .filter_map(|((_, i), r)| r.take().map(|r| (*i, r)))
             .collect();
-        let Some(b) = best_member(members, &outcomes, (f_hi, *sigma2, *threshold)) else {
+        let Some(b) = best_member(members, &outcomes, (f_hi, *threshold)) else {
             if let Some((_, Err(reason))) = outcomes.first() {
                 not_tried.push(NotTried {
                     effect: format!("refit of {}", members[0].effect.describe()),
@@ -972,7 +972,7 @@ fn refit_leading(
             continue;
         };
         let cand = members[i].effect;
-        r.equivalent = equivalents(members, i, &outcomes, r.criterion_after, *sigma2);
+        r.equivalent = equivalents(members, (i, &r), &outcomes, *threshold);
         r.family = family_of(ranking, *family, members[0].effect);
         progress(&format!(
             "refit {}: ΔJ = {:.1}, LR = {:.1}, p = {:.2e}",
@@ -986,7 +986,7 @@ fn refit_leading(
         let better = best
             .as_ref()
             .is_none_or(|(b, _)| margin(&r, *threshold) > margin(&refits[*b], *threshold));
-        let why = unidentifiable(&cand.params(f_hi), &r.params, *threshold)
+        let why = unidentifiable(&cand.params(f_hi), &r.params, (f_hi, *threshold))
             .or_else(|| partial_fix(&r, cur, *sigma2));
         if r.p_value < *threshold {
             match why {
@@ -1116,8 +1116,8 @@ fn mirrors(a: &Screened, b: &Screened) -> bool {
 
 /// The refits of a round: up to `n` families, in the order of their best screened member, each
 /// that member first (started where the screen left it) and then the family's other members
-/// (from where the screen left them, or their score steps), up to [`MEMBERS_REFITTED`] distinct
-/// ones and their mirror images.
+/// (from where the screen left them, or their score steps): the best of each other kind, then
+/// the rest up to [`MEMBERS_REFITTED`] distinct ones in all, and their mirror images.
 fn refit_jobs<'r>(
     ranking: &'r Ranking,
     screened: &[Screened],
@@ -1151,10 +1151,10 @@ fn refit_jobs<'r>(
         let screen_of = |k: usize| screened.iter().find(|s| s.index == k);
         let mut shown: Vec<Option<&Screened>> = vec![screen_of(*j)];
         let mut refitted = 1;
-        for &k in family.map(|f| families[f].as_slice()).unwrap_or(&[]) {
-            if k == *j {
-                continue;
-            }
+        let mut kinds = vec![members[0].effect.kind()];
+        for k in kinds_first(*j, family.map_or(&[], |f| families[f].as_slice()), |k| {
+            &candidates[scored[k].candidate]
+        }) {
             let c = &candidates[scored[k].candidate];
             let own = screen_of(k);
             let mirror_of = members.iter().zip(&shown).position(|(m, s)| {
@@ -1163,9 +1163,11 @@ fn refit_jobs<'r>(
                     && s.zip(own).is_some_and(|(a, b)| mirrors(a, b))
             });
             if mirror_of.is_none() {
-                if refitted == MEMBERS_REFITTED {
+                let new_kind = !kinds.contains(&c.kind());
+                if refitted >= MEMBERS_REFITTED && !new_kind {
                     continue;
                 }
+                kinds.push(c.kind());
                 refitted += 1;
             }
             shown.push(own);
@@ -1179,6 +1181,37 @@ fn refit_jobs<'r>(
         jobs.push(Job { family, members });
     }
     jobs
+}
+
+/// A family's members but its `leader` (indices, best score first) reordered: each other kind's
+/// best member first, then each other site's best ([`Effect::site`]: the bodies a spring joins,
+/// the body a resonator hangs on ...), then the rest, each group in score order. The score cannot tell a
+/// family's members apart — an isolator's moment stiffness from a spring to the ground making
+/// the same moment, a resonator on the table from one on the knee tuned alike — a finite effect
+/// can, so each kind and site gets a refit before a second point of the same.
+fn kinds_first<'r>(
+    leader: usize,
+    family: &[usize],
+    effect: impl Fn(usize) -> &'r Effect,
+) -> Vec<usize> {
+    let mut kinds = vec![effect(leader).kind()];
+    let mut sites = vec![(effect(leader).kind(), effect(leader).site())];
+    let mut groups: [Vec<usize>; 3] = Default::default();
+    for &k in family.iter().filter(|&&k| k != leader) {
+        let e = effect(k);
+        let site = (e.kind(), e.site());
+        let group = if !kinds.contains(&e.kind()) {
+            0
+        } else if !sites.contains(&site) {
+            1
+        } else {
+            2
+        };
+        kinds.push(e.kind());
+        sites.push(site);
+        groups[group].push(k);
+    }
+    groups.concat()
 }
 
 /// `f` over `jobs` on the machine's cores (scoped threads taking the next job in turn); the
@@ -1215,19 +1248,20 @@ fn in_parallel<J: Sync, R: Send>(jobs: &[J], f: impl Fn(&J) -> R + Sync) -> Vec<
 }
 
 /// Refits one member of a family from where the screen left its parameters (or its score
-/// step). When the misfit is large (reduced χ² above [`LARGE_MISFIT`]) the refit also explores
-/// (see [`refit`]): a large missing effect bends the fit's own variables, and the screen adjusts
-/// them to first order only.
+/// step). When the misfit is large (reduced χ² above [`LARGE_MISFIT`]) the family's `leader`
+/// (its best-screened member) also explores (see [`refit`]): a large missing effect bends the
+/// fit's own variables, and the screen adjusts them to first order only. The other members only
+/// refit: exploring them too doubled the blind suite's time and changed 1 of its 200 verdicts.
 fn refit_member(
     (model, vars, obs): (&Model, &Variables, &Observations),
     opts: &Options,
     cur: &Current,
-    member: &Member,
+    (member, leader): (&Member, bool),
     f_hi: f64,
     sigma2: f64,
 ) -> Result<(Refit, Current), RefitError> {
     let m = cur.e.len() as f64;
-    let large = cur.e.norm_squared() / sigma2 > LARGE_MISFIT * m;
+    let large = leader && cur.e.norm_squared() / sigma2 > LARGE_MISFIT * m;
     refit(
         model,
         vars,
@@ -1241,13 +1275,16 @@ fn refit_member(
     )
 }
 
-/// The family's refit that stands for it: the lowest criterion among its members' refits; of
-/// members the data cannot tell from it ([`EQUIVALENT_LR`]), one whose estimates are physical
-/// and identified is preferred. Index into `outcomes`; `None` when no refit succeeded.
+/// The family's refit that stands for it: the one whose likelihood ratio stands furthest above
+/// its critical value at the round's `threshold` ([`margin`]: the lowest criterion among members
+/// with as many parameters, the fewer parameters otherwise — an isolator's one moment stiffness
+/// before a two-parameter spring that does as well); of members the data cannot tell from it
+/// ([`EQUIVALENT_LR`]), one whose estimates are physical and identified is preferred. Index
+/// into `outcomes`; `None` when no refit succeeded.
 fn best_member(
     members: &[Member],
     outcomes: &[MemberRefit],
-    (f_hi, sigma2, threshold): (f64, f64, f64),
+    (f_hi, threshold): (f64, f64),
 ) -> Option<usize> {
     let ok = || {
         outcomes
@@ -1255,18 +1292,21 @@ fn best_member(
             .enumerate()
             .filter_map(|(k, (i, r))| r.as_ref().ok().map(|(r, _)| (k, (*i, r))))
     };
-    let j = |(_, r): (usize, &Refit)| r.criterion_after;
-    let (_, lowest) = ok().min_by(|a, b| j(a.1).total_cmp(&j(b.1)))?;
-    let j_lowest = j(lowest);
-    let tied = |m: (usize, &Refit)| indistinguishable(j(m), j_lowest, sigma2);
+    let m = |(_, r): (usize, &Refit)| margin(r, threshold);
+    let (_, highest) = ok().max_by(|a, b| m(a.1).total_cmp(&m(b.1)))?;
     let unphysical = |(i, r): (usize, &Refit)| {
-        unidentifiable(&members[i].effect.params(f_hi), &r.params, threshold).is_some()
+        unidentifiable(
+            &members[i].effect.params(f_hi),
+            &r.params,
+            (f_hi, threshold),
+        )
+        .is_some()
     };
-    ok().filter(|(_, m)| tied(*m))
+    ok().filter(|(_, x)| indistinguishable(x.1, highest.1, threshold))
         .min_by(|a, b| {
             unphysical(a.1)
                 .cmp(&unphysical(b.1))
-                .then(j(a.1).total_cmp(&j(b.1)))
+                .then(m(b.1).total_cmp(&m(a.1)))
         })
         .map(|(k, _)| k)
 }
@@ -1284,27 +1324,27 @@ fn family_of(ranking: &Ranking, family: Option<usize>, leader: &Effect) -> Vec<S
 /// it is below this (χ² with 1 degree of freedom at 95 %): the data cannot tell them apart.
 const EQUIVALENT_LR: f64 = 3.84;
 
-/// Whether a refit ending at criterion `j` is one the data cannot tell from the best, ending at
-/// `j_best`: its likelihood ratio against it is below [`EQUIVALENT_LR`].
-fn indistinguishable(j: f64, j_best: f64, sigma2: f64) -> bool {
-    2.0 * (j - j_best) / sigma2 < EQUIVALENT_LR
+/// Whether refit `r` is one the data cannot tell from `best`: its likelihood ratio's margin
+/// over its critical value ([`margin`]) is within [`EQUIVALENT_LR`] of the best's (for the same
+/// number of parameters, their likelihood ratio against each other is below it).
+fn indistinguishable(r: &Refit, best: &Refit, threshold: f64) -> bool {
+    margin(best, threshold) - margin(r, threshold) < EQUIVALENT_LR
 }
 
-/// The members of a family the data cannot tell from its best refit (member `best`, criterion
-/// `j_best`): those whose refit (in `others`) ends within [`EQUIVALENT_LR`] of it, and the mirror
-/// images of those and of the best.
+/// The members of a family the data cannot tell from its best refit (member `best`): those whose
+/// refit (in `others`) is [`indistinguishable`] from it, and the mirror images of those and of
+/// the best.
 fn equivalents(
     members: &[Member],
-    best: usize,
+    (best, refit): (usize, &Refit),
     others: &[MemberRefit],
-    j_best: f64,
-    sigma2: f64,
+    threshold: f64,
 ) -> Vec<String> {
     let tied: Vec<usize> = std::iter::once(best)
         .chain(others.iter().filter_map(|(i, r)| {
             r.as_ref()
                 .ok()
-                .filter(|(r, _)| indistinguishable(r.criterion_after, j_best, sigma2))
+                .filter(|(r, _)| indistinguishable(r, refit, threshold))
                 .map(|_| *i)
         }))
         .collect();
@@ -1352,15 +1392,28 @@ fn partial_fix(r: &Refit, cur: &Current, sigma2: f64) -> Option<String> {
 
 /// Why an effect's refitted estimates `est` (of parameters `params`) do not make it a physical,
 /// identified effect, or `None` when they do: every parameter away from its bounds (but the
-/// nested bound of its size, and a ψ of zero), and the size parameter away from its nested value
+/// nested bound of its size, and a ψ of zero), a tuning frequency within the measured band (top
+/// `f_hi`, Hz: a resonator tuned above it shows the data no resonance, and within the band acts
+/// as the point mass it carries), and the size parameter away from its nested value
 /// by at least [`size_z`]`(threshold)` Cramér-Rao standard errors — its confidence interval at
 /// the round's own significance level excludes the effect's absence, as its likelihood ratio
 /// does. (On the blind suite every effect added with its size within 4.4 standard errors of
 /// nothing at a 95 % interval — ten of them, one on clean data — was a wrong one.)
-fn unidentifiable(params: &[EffectParam], est: &[ParamEstimate], threshold: f64) -> Option<String> {
+fn unidentifiable(
+    params: &[EffectParam],
+    est: &[ParamEstimate],
+    (f_hi, threshold): (f64, f64),
+) -> Option<String> {
     let z_min = size_z(threshold);
     for (j, (np, pe)) in params.iter().zip(est).enumerate() {
         let v = pe.value;
+        if np.unit == "Hz" && v > f_hi {
+            return Some(format!(
+                "{}: tuned above the band's top, {} Hz; the data show no resonance, only the mass",
+                pe.describe(),
+                crate::display::sig(f_hi, 4)
+            ));
+        }
         let tol = 1e-3 * np.scale;
         let size = j == 0;
         let lower_hit = np.lower.is_finite()
@@ -1634,7 +1687,7 @@ fn place(
     let p = residuals::chi2_tail(dof, lr);
     // A place at the edge of its reach, or a size the data cannot tell from zero, is not a
     // placement: the candidate's stays.
-    (p < threshold && unidentifiable(&cand_params, &r.params, threshold).is_none())
+    (p < threshold && unidentifiable(&cand_params, &r.params, (f_hi, threshold)).is_none())
         .then_some((r, next))
 }
 
@@ -2156,5 +2209,77 @@ fn before_after_text(s: &mut String, d: &Diagnosis) {
             crate::display::relative(a.rms_relative),
             crate::display::relative(b.rms_relative)
         );
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use nalgebra::Vector3;
+
+    use super::*;
+
+    fn resonator(body: &str) -> Effect {
+        Effect::Resonator {
+            body: body.into(),
+            point: Vector3::zeros(),
+            freq_hz: 100.0,
+            tuning: [80.0, 120.0],
+            scale: 1.0,
+        }
+    }
+
+    fn spring(a: &str, b: &str) -> Effect {
+        Effect::Spring {
+            bodies: [Some(a.into()), Some(b.into())],
+            point: Vector3::zeros(),
+            direction: Vector3::z(),
+            psi: 0.3,
+        }
+    }
+
+    /// Each other kind's best member comes first, then each other site's, then the rest, each in
+    /// score order; the leader is left out wherever it stands.
+    #[test]
+    fn a_familys_members_are_refitted_each_kind_and_site_first() {
+        let family = [
+            spring("knee", "table"),   // 0: a second point of the leader's site
+            spring("column", "table"), // 1: another site
+            resonator("table"),        // 2: another kind
+            spring("knee", "table"),   // 3: the leader
+            resonator("knee"),         // 4: another site of that kind
+            resonator("table"),        // 5: a second point of a site already taken
+            spring("column", "table"), // 6: likewise
+        ];
+        let order = kinds_first(3, &[0, 1, 2, 3, 4, 5, 6], |k| &family[k]);
+        assert_eq!(order, vec![2, 1, 4, 0, 5, 6]);
+    }
+
+    fn estimate(name: &str, unit: &str, value: f64, std_error: f64) -> ParamEstimate {
+        ParamEstimate {
+            name: name.into(),
+            unit: unit.into(),
+            value,
+            std_error,
+        }
+    }
+
+    /// A resonator the data put above the measured band is not added as one (its size is
+    /// otherwise clear); within the band the same estimates are an identified effect.
+    #[test]
+    fn a_resonator_tuned_above_the_band_is_not_identifiable() {
+        let params = resonator("table").params(400.0);
+        let at = |f: f64| {
+            vec![
+                estimate("m", "kg", 90.0, 2.0),
+                estimate("f", "Hz", f, 0.2 * f),
+            ]
+        };
+        let why = unidentifiable(&params, &at(450.0), (400.0, 1e-5))
+            .expect("a resonance above the band is not identified");
+        assert!(
+            why.contains("above the band") && why.contains("400 Hz"),
+            "{why}"
+        );
+        assert_eq!(unidentifiable(&params, &at(350.0), (400.0, 1e-5)), None);
     }
 }

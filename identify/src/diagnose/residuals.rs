@@ -362,9 +362,24 @@ fn mode_bands(model: &Model, chars: &[CharacteristicResiduals], crit: &Criterion
     bands
 }
 
-/// `P(X ≥ x)` for `X ~ χ²(dof)`; NaN when `dof` is not positive.
+/// `P(X ≥ x)` for `X ~ χ²(dof)`, accurate far into the tail (the survival function, not
+/// `1 − cdf`, which is 0 below 1e-16 and made every large effect's p-value tie); NaN when `dof`
+/// is not positive.
 pub(crate) fn chi2_tail(dof: f64, x: f64) -> f64 {
-    ChiSquared::new(dof)
-        .map(|d| 1.0 - d.cdf(x))
-        .unwrap_or(f64::NAN)
+    ChiSquared::new(dof).map(|d| d.sf(x)).unwrap_or(f64::NAN)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::chi2_tail;
+
+    /// Far in the tail, where `1 − cdf` is 0: P(χ²₁ ≥ 100) = erfc(√50) = 1.5239706048320995e-23
+    /// (Python's `math.erfc`, and scipy's `chi2.sf(100, 1)`); two large statistics stay ordered.
+    #[test]
+    fn the_chi2_tail_is_accurate_far_beyond_1e_16() {
+        let p = chi2_tail(1.0, 100.0);
+        assert!((p / 1.5239706048320995e-23 - 1.0).abs() < 1e-9, "{p:e}");
+        assert!(chi2_tail(2.0, 300.0) > chi2_tail(2.0, 310.0));
+        assert!(chi2_tail(2.0, 310.0) > 0.0);
+    }
 }
