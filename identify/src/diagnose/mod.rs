@@ -1116,8 +1116,9 @@ fn mirrors(a: &Screened, b: &Screened) -> bool {
 
 /// The refits of a round: up to `n` families, in the order of their best screened member, each
 /// that member first (started where the screen left it) and then the family's other members
-/// (from where the screen left them, or their score steps): the best of each other kind, then
-/// the rest up to [`MEMBERS_REFITTED`] distinct ones in all, and their mirror images.
+/// (from where the screen left them, or their score steps) in [`kinds_first`] order: the best of
+/// each other kind always, then other sites and points up to [`MEMBERS_REFITTED`] distinct ones
+/// in all, and their mirror images.
 fn refit_jobs<'r>(
     ranking: &'r Ranking,
     screened: &[Screened],
@@ -1185,10 +1186,10 @@ fn refit_jobs<'r>(
 
 /// A family's members but its `leader` (indices, best score first) reordered: each other kind's
 /// best member first, then each other site's best ([`Effect::site`]: the bodies a spring joins,
-/// the body a resonator hangs on ...), then the rest, each group in score order. The score cannot tell a
-/// family's members apart — an isolator's moment stiffness from a spring to the ground making
-/// the same moment, a resonator on the table from one on the knee tuned alike — a finite effect
-/// can, so each kind and site gets a refit before a second point of the same.
+/// the body a resonator hangs on ...), then the rest, each group in score order. The score
+/// cannot tell a family's members apart — an isolator's moment stiffness from a spring to the
+/// ground making the same moment, a resonator on the table from one on the knee tuned alike — a
+/// finite effect can, so each kind and site gets a refit before a second point of the same.
 fn kinds_first<'r>(
     leader: usize,
     family: &[usize],
