@@ -1152,10 +1152,11 @@ fn refit_jobs<'r>(
         let screen_of = |k: usize| screened.iter().find(|s| s.index == k);
         let mut shown: Vec<Option<&Screened>> = vec![screen_of(*j)];
         let mut refitted = 1;
-        let mut kinds = vec![members[0].effect.kind()];
-        for k in kinds_first(*j, family.map_or(&[], |f| families[f].as_slice()), |k| {
-            &candidates[scored[k].candidate]
-        }) {
+        let (order, other_kinds) =
+            kinds_first(*j, family.map_or(&[], |f| families[f].as_slice()), |k| {
+                &candidates[scored[k].candidate]
+            });
+        for (place, k) in order.into_iter().enumerate() {
             let c = &candidates[scored[k].candidate];
             let own = screen_of(k);
             let mirror_of = members.iter().zip(&shown).position(|(m, s)| {
@@ -1164,11 +1165,9 @@ fn refit_jobs<'r>(
                     && s.zip(own).is_some_and(|(a, b)| mirrors(a, b))
             });
             if mirror_of.is_none() {
-                let new_kind = !kinds.contains(&c.kind());
-                if refitted >= MEMBERS_REFITTED && !new_kind {
+                if refitted >= MEMBERS_REFITTED && place >= other_kinds {
                     continue;
                 }
-                kinds.push(c.kind());
                 refitted += 1;
             }
             shown.push(own);
@@ -1190,29 +1189,29 @@ fn refit_jobs<'r>(
 /// cannot tell a family's members apart — an isolator's moment stiffness from a spring to the
 /// ground making the same moment, a resonator on the table from one on the knee tuned alike — a
 /// finite effect can, so each kind and site gets a refit before a second point of the same.
+/// With the order, how many of its first members are the other kinds' best (none of them can
+/// be a mirror image of an earlier member: mirrors are of one kind).
 fn kinds_first<'r>(
     leader: usize,
     family: &[usize],
     effect: impl Fn(usize) -> &'r Effect,
-) -> Vec<usize> {
-    let mut kinds = vec![effect(leader).kind()];
-    let mut sites = vec![(effect(leader).kind(), effect(leader).site())];
+) -> (Vec<usize>, usize) {
+    let site_of = |e: &'r Effect| (e.kind(), e.site());
+    let mut sites = vec![site_of(effect(leader))];
     let mut groups: [Vec<usize>; 3] = Default::default();
     for &k in family.iter().filter(|&&k| k != leader) {
-        let e = effect(k);
-        let site = (e.kind(), e.site());
-        let group = if !kinds.contains(&e.kind()) {
+        let site = site_of(effect(k));
+        let group = if sites.iter().all(|(kind, _)| *kind != site.0) {
             0
         } else if !sites.contains(&site) {
             1
         } else {
             2
         };
-        kinds.push(e.kind());
         sites.push(site);
         groups[group].push(k);
     }
-    groups.concat()
+    (groups.concat(), groups[0].len())
 }
 
 /// `f` over `jobs` on the machine's cores (scoped threads taking the next job in turn); the
@@ -1321,8 +1320,10 @@ fn family_of(ranking: &Ranking, family: Option<usize>, leader: &Effect) -> Vec<S
     )
 }
 
-/// A family member's refit is equivalent to the family's best when its likelihood ratio against
-/// it is below this (χ² with 1 degree of freedom at 95 %): the data cannot tell them apart.
+/// A family member's refit is equivalent to the family's best when its LR's margin over its
+/// critical value is within this of the best's ([`indistinguishable`]; for the same number of
+/// parameters, their likelihood ratio against each other: χ² with 1 degree of freedom at 95 %):
+/// the data cannot tell them apart.
 const EQUIVALENT_LR: f64 = 3.84;
 
 /// Whether refit `r` is one the data cannot tell from `best`: its likelihood ratio's margin
@@ -2252,7 +2253,7 @@ mod tests {
             spring("column", "table"), // 6: likewise
         ];
         let order = kinds_first(3, &[0, 1, 2, 3, 4, 5, 6], |k| &family[k]);
-        assert_eq!(order, vec![2, 1, 4, 0, 5, 6]);
+        assert_eq!(order, (vec![2, 1, 4, 0, 5, 6], 1));
     }
 
     fn estimate(name: &str, unit: &str, value: f64, std_error: f64) -> ParamEstimate {
