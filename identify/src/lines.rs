@@ -512,12 +512,7 @@ mod tests {
     }
 
     fn fwd32j() -> System {
-        let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
-        System::assemble(
-            &crate::modelfile::load(&root.join("configs/models/fwd32j.toml"))
-                .expect("model")
-                .model,
-        )
+        System::assemble(&crate::modelfile::fwd32j())
     }
 
     #[test]

@@ -51,6 +51,20 @@ pub enum LoadError {
     },
 }
 
+/// A file of the repository, for the crate's unit tests (`rel` from the repository's root).
+#[cfg(test)]
+pub(crate) fn repo_file(rel: &str) -> std::path::PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("..").join(rel)
+}
+
+/// The FWD-32J model (`configs/models/fwd32j.toml`), for the crate's unit tests.
+#[cfg(test)]
+pub(crate) fn fwd32j() -> Model {
+    load(&repo_file("configs/models/fwd32j.toml"))
+        .expect("configs/models/fwd32j.toml loads")
+        .model
+}
+
 /// Loads a model file: resolved JSON if the file starts with `{`, TOML otherwise.
 pub fn load(path: &Path) -> Result<Loaded, LoadError> {
     let io = |source| LoadError::Io {

@@ -382,15 +382,9 @@ mod tests {
     /// theirs.
     #[test]
     fn springs_between_two_bodies_stand_where_both_reach() {
-        let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
-        let model = crate::modelfile::load(&root.join("configs/models/fwd32j.toml"))
-            .unwrap()
-            .model;
-        let vars = crate::identification::variables::load(
-            &root.join("configs/identification/fwd32j.toml"),
-            &model,
-        )
-        .unwrap();
+        let model = crate::modelfile::fwd32j();
+        let vars_file = crate::modelfile::repo_file("configs/identification/fwd32j.toml");
+        let vars = crate::identification::variables::load(&vars_file, &model).unwrap();
         let x: Vec<f64> = vars.vars.iter().map(|v| v.initial).collect();
         let labels = ["u1".to_string(), "u2".into(), "u3".into()];
         let library = candidates(&model, &vars, &x, &labels, 20.0, 400.0);

@@ -584,9 +584,7 @@ mod tests {
     /// masses — against a central difference of the model with the effect applied.
     #[test]
     fn first_order_actions_match_a_central_difference_of_the_applied_effect() {
-        let path =
-            std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../configs/models/fwd32j.toml");
-        let fwd = crate::modelfile::load(&path).unwrap().model;
+        let fwd = crate::modelfile::fwd32j();
         let chain = crate::textbook::two_in_series(100.0, 50.0, 1e6, 2e6, 0.2);
         let vars_of = |_: &Model| crate::identification::Variables {
             vars: Vec::new(),
@@ -702,9 +700,7 @@ mod tests {
     /// the split model (O(h) accurate).
     #[test]
     fn flexible_body_derivative_matches_a_finite_difference_of_the_split_model() {
-        let path =
-            std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../configs/models/fwd32j.toml");
-        let model = crate::modelfile::load(&path).unwrap().model;
+        let model = crate::modelfile::fwd32j();
         let lines = [20.0, 57.0, 131.0, 250.0, 400.0];
         let states = frf::states(&model, &lines, frf::Method::Direct).unwrap();
         let outputs: Vec<OutputRow> = model
