@@ -19,8 +19,8 @@
 
 use nalgebra::{Matrix3, Vector3};
 
-use crate::identification::variables::Variables;
-use crate::model::{Body, Model, ParamName, ParamRef, Sde, SdeKind, SdeLaw};
+use crate::identification::variables::{Target, Variables};
+use crate::model::{Body, Model, Param, ParamName, ParamRef, Sde, SdeKind, SdeLaw};
 use crate::modelfile::frame_from_axis;
 
 /// Two-sided 95 % normal quantile: a confidence interval is `estimate ± Z95 σ`.
@@ -674,7 +674,7 @@ impl Effect {
                 held,
                 psi,
                 ..
-            } => free_direction(model, sde, *axis, (*held, *psi), gamma[0])?,
+            } => free_direction(r, sde, *axis, (*held, *psi), gamma[0])?,
             Effect::BodyMass { body, mass } => {
                 let b = body_index(model, body)?;
                 let ratio = gamma[0] / mass;
@@ -738,14 +738,18 @@ pub fn direction_row(model: &Model, sde: &Sde, axis: usize) -> Vec<(usize, f64)>
 /// Frees direction `axis` of SDE `name` with parameter `value`: a general element's own stiffness
 /// there is set (`held` = 0: to `value`; `held` > 0: to `1/(1/held + value)`, a compliance in
 /// series); any other law, which cannot hold a stiffness in a direction it leaves out, gets a
-/// parallel general element with that one stiffness (nothing when `value` is 0).
+/// parallel general element with that one stiffness (nothing when `value` is 0). A stiffness the
+/// law left out takes the SDE's ψ `psi`; where a variable sets that ψ of the SDE, the freed
+/// direction joins its targets, so that its ψ follows the fit rather than staying at the value
+/// the candidate was drawn with.
 fn free_direction(
-    model: &mut Model,
+    r: &mut Realized,
     name: &str,
     axis: usize,
     (held, psi): (f64, f64),
     value: f64,
 ) -> Result<(), EffectError> {
+    let model = &mut r.model;
     let s = model
         .sde_index(name)
         .ok_or_else(|| EffectError::NoSde(name.into()))?;
@@ -754,14 +758,21 @@ fn free_direction(
     } else {
         value.max(0.0)
     };
-    if let SdeLaw::General { k: ks, psi: ps } = &mut model.sdes[s].law {
+    let source = psi_source(&model.sdes[s].law, axis);
+    let freed = if let SdeLaw::General { k: ks, psi: ps } = &mut model.sdes[s].law {
         ks[axis] = k;
-        if held == 0.0 {
-            ps[axis] = psi;
+        if held > 0.0 {
+            return Ok(());
         }
-        return Ok(());
-    }
-    if k > 0.0 {
+        ps[axis] = psi;
+        ParamRef {
+            sde: s,
+            name: ParamName::PsiI(axis as u8),
+        }
+    } else {
+        if k == 0.0 {
+            return Ok(());
+        }
         let mut ks = [0.0; 6];
         ks[axis] = k;
         let sde = &model.sdes[s];
@@ -778,8 +789,60 @@ fn free_direction(
             enabled: true,
         };
         model.sdes.push(added);
-    }
+        ParamRef {
+            sde: model.sdes.len() - 1,
+            name: ParamName::PsiI(axis as u8),
+        }
+    };
+    follow_psi(
+        &mut r.vars,
+        ParamRef {
+            sde: s,
+            name: source,
+        },
+        freed,
+    );
     Ok(())
+}
+
+/// The parameter of `law` whose ψ a stiffness freed in direction `axis` takes: the direction's
+/// own ψ where the law has one there, else its largest (as [`generate`](super::generate) draws
+/// the candidate's `psi`).
+fn psi_source(law: &SdeLaw, axis: usize) -> ParamName {
+    let own = law.dissipation();
+    let axis = if own[axis] > 0.0 {
+        axis
+    } else {
+        (0..6).fold(0, |best, a| if own[a] > own[best] { a } else { best })
+    };
+    match law {
+        SdeLaw::Contact { .. } if matches!(axis, 0 | 4 | 5) => ParamName::PsiN,
+        SdeLaw::Contact { .. } => ParamName::PsiT,
+        SdeLaw::Axial { .. } => ParamName::Psi,
+        SdeLaw::Isolator { .. } if axis == 0 => ParamName::PsiN,
+        SdeLaw::Isolator { .. } => ParamName::PsiT,
+        SdeLaw::General { .. } => ParamName::PsiI(axis as u8),
+    }
+}
+
+/// Adds `freed` to the targets of the variable that sets `source` (with its ratio), if any.
+fn follow_psi(vars: &mut Variables, source: ParamRef, freed: ParamRef) {
+    for v in &mut vars.vars {
+        let ratio = v
+            .targets
+            .iter()
+            .find(|t| t.param.sde() == Some(source))
+            .map(|t| t.ratio);
+        if let Some(ratio) = ratio {
+            if !v.targets.iter().any(|t| t.param.sde() == Some(freed)) {
+                v.targets.push(Target {
+                    param: Param::Sde(freed),
+                    ratio,
+                });
+            }
+            return;
+        }
+    }
 }
 
 /// Dynamic stiffness of a mass on a spring tuned to `freq_hz` (loss ψ of the structure), per
@@ -1066,6 +1129,86 @@ fn unit_vector(d: &Vector3<f64>) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::identification::variables;
+    use crate::modelfile::{fwd32j, repo_file};
+
+    /// FWD-32J with its variables, every gain 1.
+    fn fwd32j_realized() -> Realized {
+        let model = fwd32j();
+        let vars = variables::load(&repo_file("configs/identification/fwd32j.toml"), &model)
+            .expect("configs/identification/fwd32j.toml loads");
+        let gains = vec![1.0; model.outputs.len()];
+        Realized { model, vars, gains }
+    }
+
+    /// SDE 34's axis 2, which its axial law leaves out, freed with ψ 0.6 drawn from the fit.
+    fn freed_34() -> Effect {
+        Effect::Direction {
+            sde: "34".into(),
+            axis: 1,
+            held: 0.0,
+            psi: 0.6,
+            scale: 1e6,
+        }
+    }
+
+    /// SDE 34's ψ is the "screw/actuator psi" variable's: the stiffness freed beside it joins
+    /// that variable's targets, so a refit that moves the SDE's ψ moves the freed direction's
+    /// with it (before, it stayed at the ψ the candidate was drawn with, and a base fit that had
+    /// pushed the group's ψ far off left the true freed direction unable to fit: blind seed
+    /// 1021's refit ended at J 168.9 instead of 50.1).
+    #[test]
+    fn a_freed_direction_takes_the_psi_the_variable_of_its_sde_sets() {
+        let mut r = fwd32j_realized();
+        let n = r.model.sdes.len();
+        freed_34().apply(&mut r, &[3.0e6], 400.0).expect("applies");
+        assert_eq!(r.model.sdes.len(), n + 1, "a parallel general element");
+        let freed = ParamRef {
+            sde: n,
+            name: ParamName::PsiI(1),
+        };
+        let group = r
+            .vars
+            .vars
+            .iter()
+            .position(|v| v.name == "screw/actuator psi")
+            .expect("the ψ group");
+        assert!(
+            r.vars.vars[group]
+                .targets
+                .iter()
+                .any(|t| t.param == Param::Sde(freed)),
+            "{:?}",
+            r.vars.vars[group].targets
+        );
+        let mut x = r.vars.initial();
+        x[group] = 0.42;
+        let vars = r.vars.clone();
+        vars.apply(&mut r.model, &x);
+        assert_eq!(r.model.param(freed), Some(0.42));
+        // The ψ group's joint-damping candidates still list only its joints, not the element.
+        let candidates = super::super::generate::candidates(&r.model, &r.vars, &x, &[], 1.0, 400.0);
+        let listed = candidates.iter().any(|c| {
+            matches!(c, Effect::Damping { sdes, .. } if sdes.iter().any(|s| s.contains("freed")))
+        });
+        assert!(!listed, "a freed direction is no joint of a ψ group");
+    }
+
+    /// Where no variable sets the SDE's ψ, the freed direction keeps the ψ it was drawn with.
+    #[test]
+    fn a_freed_direction_keeps_its_psi_where_no_variable_sets_the_sde_s() {
+        let mut r = fwd32j_realized();
+        r.vars.vars.retain(|v| v.name != "screw/actuator psi");
+        let before = r.vars.clone();
+        let n = r.model.sdes.len();
+        freed_34().apply(&mut r, &[3.0e6], 400.0).expect("applies");
+        let freed = ParamRef {
+            sde: n,
+            name: ParamName::PsiI(1),
+        };
+        assert_eq!(r.model.param(freed), Some(0.6));
+        assert_eq!(r.vars, before, "no variable gains a target");
+    }
 
     /// The demo's placed spring along (0.494, 0.855, 0.156): the frame across it has a zero
     /// component, printed as `0`, and no component shows rounding noise.

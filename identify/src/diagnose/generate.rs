@@ -332,7 +332,9 @@ fn damping_splits(model: &Model, vars: &Variables, x: &[f64], out: &mut Vec<Effe
         let refs: Vec<ParamRef> = v.targets.iter().filter_map(|t| t.param.sde()).collect();
         let Some(first) = refs.first() else { continue };
         let mut joints: Vec<([Option<usize>; 2], Vec<String>)> = Vec::new();
-        for r in &refs {
+        // A direction the diagnosis freed follows its SDE's ψ as a target of another name
+        // (`psi1`..`psi6`): it is not a joint of the group.
+        for r in refs.iter().filter(|r| r.name == first.name) {
             let sde = &model.sdes[r.sde];
             let mut key = sde.bodies;
             key.sort();
