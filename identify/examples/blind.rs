@@ -28,6 +28,8 @@ fn main() {
     let lines = synthetic::fwd32j_lines();
     let opts = diagnose::Options::default();
     let mut outcomes = Vec::new();
+    // Cases with effects not exactly found: (the data cannot tell, the search missed).
+    let mut misses = (0, 0);
     for seed in first..first + n {
         let case = blind::draw(&model, &vars, &lines, seed, None).expect("case");
         if let Some(kind) = &kind {
@@ -71,6 +73,18 @@ fn main() {
                     o.seconds
                 );
                 println!("  {}", diagnose::timing_text(&d));
+                if !o.exact && !case.injected.is_empty() {
+                    let starts = [d.estimate.clone(), case.vars.initial()];
+                    let j = blind::truth_form(&model, &case, &starts, &opts).expect("truth's form");
+                    let missed = blind::missed(d.after.criterion, j);
+                    println!(
+                        "  not exact: the diagnosis ends at J {:.1}, the truth's own form refitted at {:.1}: {}",
+                        d.after.criterion,
+                        j,
+                        if missed { "the search missed it" } else { "the data cannot tell them apart" }
+                    );
+                    *if missed { &mut misses.1 } else { &mut misses.0 } += 1;
+                }
                 outcomes.push(o);
             }
             Err(e) => println!("seed {seed}: failed: {e}"),
@@ -88,6 +102,13 @@ fn main() {
         100.0 * r.false_add,
         r.median_seconds,
         r.median_diagnosis_seconds
+    );
+    println!(
+        "of the {} cases with effects not exactly found, {} end within LR {} of the truth's own form refitted (the data cannot tell them apart), {} above it (the search missed it)",
+        misses.0 + misses.1,
+        misses.0,
+        diagnose::EQUIVALENT_LR,
+        misses.1
     );
     if n == 0 || n >= 10 {
         demo_split(&root);

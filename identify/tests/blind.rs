@@ -152,3 +152,55 @@ fn a_moment_stiffness_is_the_same_element_on_every_sde_joining_the_same_bodies()
         );
     }
 }
+
+/// The suite's own yardstick for a miss: the truth's form (the model with exactly the hidden
+/// effect), refitted from the identification's start with the effect at its true size, ends at
+/// the noise level — J near half the number of residuals — and a fit without the effect is
+/// judged to have missed it, while one within 3.84 in likelihood ratio of the truth is not.
+#[test]
+fn the_truth_s_own_form_fits_to_the_noise_and_judges_a_miss() {
+    let model = load_model("fwd32j.toml");
+    let vars = variables::load(
+        &common::repo().join("configs/identification/fwd32j.toml"),
+        &model,
+    )
+    .expect("variables");
+    let lines = synthetic::fwd32j_lines();
+    let mass = identify::diagnose::effects::Effect::Mass {
+        body: "upper saddle".into(),
+        point: nalgebra::Vector3::new(0.3, 0.68, 0.83),
+        scale: 10.0,
+    };
+    let case = blind::with_effect(&model, &vars, &lines, &mass, (900.0, 0.02), 7)
+        .unwrap()
+        .expect("a 900-signal point mass");
+    let opts = diagnose::Options::default();
+    let truth = blind::truth_form(&model, &case, &[case.vars.initial()], &opts).unwrap();
+    let m: usize = case
+        .data
+        .characteristics
+        .iter()
+        .map(|c| c.amplitude.len())
+        .sum();
+    let m = m as f64;
+    assert!(
+        truth < 0.5 * (m + 4.0 * (2.0 * m).sqrt()),
+        "J {truth} for {m} residuals"
+    );
+    let obs = identify::identification::data::validate(&case.data, &model, "blind case").unwrap();
+    let without = identify::identification::identify(
+        &model,
+        &obs,
+        &case.vars,
+        &opts.identification,
+        &mut |_, _| {},
+    )
+    .unwrap();
+    assert!(
+        blind::missed(without.criterion, truth),
+        "J {} without the mass, {truth} with it",
+        without.criterion
+    );
+    assert!(!blind::missed(truth + 1.9, truth));
+    assert!(blind::missed(truth + 2.0, truth));
+}

@@ -677,3 +677,55 @@ pub fn rates(outcomes: &[Outcome]) -> Rates {
         median_diagnosis_seconds: median(&|o| o.diagnosis_seconds),
     }
 }
+
+/// The criterion J (½‖e‖², χ² units over two) the truth's own form reaches on `case`: the
+/// identification model with exactly the injected effects, every variable and effect parameter
+/// refitted from each of `starts` (variable values, SI; the example gives the diagnosis' final
+/// variables and the identification's start) with the effects at their true values — the lowest
+/// end. A diagnosis that is not exact but ends within [`super::EQUIVALENT_LR`] of it in likelihood
+/// ratio found an answer the data cannot tell from the truth ([`missed`] is false); one above it
+/// missed what the truth explains.
+pub fn truth_form(
+    model: &Model,
+    case: &BlindCase,
+    starts: &[Vec<f64>],
+    opts: &Options,
+) -> Result<f64, BlindError> {
+    let obs = data::validate(&case.data, model, "blind case")?;
+    let f_hi = super::band(&obs).1;
+    let effects: Vec<Effect> = case.injected.iter().map(|i| i.effect.clone()).collect();
+    let truth: Vec<f64> = case
+        .injected
+        .iter()
+        .flat_map(|i| i.values.iter().copied())
+        .collect();
+    let mut p =
+        super::problem::Problem::new(model, &case.vars, &obs, &opts.identification, effects, f_hi);
+    let (lo, hi) = p.bounds();
+    let mut best = f64::INFINITY;
+    for x in starts {
+        let u = DVector::from_iterator(
+            p.scale.len(),
+            x.iter().chain(&truth).zip(&p.scale).map(|(v, s)| v / s),
+        );
+        let out = identification::optimize::minimize(
+            opts.identification.optimizer,
+            &mut p,
+            &u,
+            &lo,
+            &hi,
+            &opts.identification.settings,
+            &mut |_| {},
+        )
+        .map_err(DiagnoseError::from)?;
+        best = best.min(out.criterion);
+    }
+    Ok(best)
+}
+
+/// Whether a diagnosis ending at criterion `diagnosed` missed what the truth's own form explains
+/// (`truth`, both J = ½χ²): its likelihood ratio against the truth's exceeds
+/// [`super::EQUIVALENT_LR`]. Otherwise the data cannot tell the diagnosis from the truth.
+pub fn missed(diagnosed: f64, truth: f64) -> bool {
+    2.0 * (diagnosed - truth) > super::EQUIVALENT_LR
+}

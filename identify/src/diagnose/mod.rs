@@ -1324,7 +1324,7 @@ fn family_of(ranking: &Ranking, family: Option<usize>, leader: &Effect) -> Vec<S
 /// critical value is within this of the best's ([`indistinguishable`]; for the same number of
 /// parameters, their likelihood ratio against each other: χ² with 1 degree of freedom at 95 %):
 /// the data cannot tell them apart.
-const EQUIVALENT_LR: f64 = 3.84;
+pub const EQUIVALENT_LR: f64 = 3.84;
 
 /// Whether refit `r` is one the data cannot tell from `best`: its likelihood ratio's margin
 /// over its critical value ([`margin`]) is within [`EQUIVALENT_LR`] of the best's (for the same
