@@ -9,7 +9,7 @@ mod common;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-use common::{ident, root};
+use common::{assert_success, ident, root};
 
 fn python_with_numpy() -> &'static str {
     let ok = Command::new("python3")
@@ -57,27 +57,15 @@ fn compare_with_numpy(model: &Path, freqs: &str) -> f64 {
         "-o",
         json.to_str().unwrap(),
     ]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    assert_success(&out);
     let ours = ident(&["frf", json.to_str().unwrap(), "--hz", freqs, "--json"]);
-    assert!(
-        ours.status.success(),
-        "{}",
-        String::from_utf8_lossy(&ours.stderr)
-    );
+    assert_success(&ours);
     let theirs = Command::new(python_with_numpy())
         .arg(root().join("tests/python/contract_frf.py"))
         .args([json.to_str().unwrap(), freqs])
         .output()
         .unwrap();
-    assert!(
-        theirs.status.success(),
-        "{}",
-        String::from_utf8_lossy(&theirs.stderr)
-    );
+    assert_success(&theirs);
     let a: serde_json::Value = serde_json::from_slice(&ours.stdout).unwrap();
     let b: serde_json::Value = serde_json::from_slice(&theirs.stdout).unwrap();
     assert_eq!(a["freqs_hz"], b["freqs_hz"]);
@@ -125,11 +113,7 @@ fn frf_csv_and_json_forms() {
         "5",
         "--log",
     ]);
-    assert!(
-        csv.status.success(),
-        "{}",
-        String::from_utf8_lossy(&csv.stderr)
-    );
+    assert_success(&csv);
     let text = String::from_utf8(csv.stdout).unwrap();
     let lines: Vec<&str> = text.lines().collect();
     assert_eq!(lines.len(), 6, "{text}");
@@ -213,11 +197,7 @@ fn process_exports_uff58_that_pyuff_reads_back_to_the_same_frfs() {
         "--uff",
         uff.to_str().unwrap(),
     ]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    assert_success(&out);
     let script = r#"
 import json, sys
 import pyuff
@@ -301,11 +281,7 @@ print(json.dumps([{
 fn modes_and_sensitivity_run_on_the_textbook_model() {
     let m = root().join("configs/models/textbook-two-mass.toml");
     let out = ident(&["modes", m.to_str().unwrap()]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    assert_success(&out);
     let out = ident(&[
         "sensitivity",
         m.to_str().unwrap(),
@@ -315,11 +291,7 @@ fn modes_and_sensitivity_run_on_the_textbook_model() {
         "100",
         "--json",
     ]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    assert_success(&out);
     let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     assert!(!v["params"].as_array().unwrap().is_empty());
 }

@@ -871,11 +871,7 @@ impl SessionAnalysis {
     /// the principal axes' u1..r3), each with its units in records 8-11.
     pub fn to_uff(&self) -> Vec<process::uff::Function> {
         let freqs: Vec<f64> = self.steps.iter().map(|s| s.frequency_hz).collect();
-        let force = self
-            .channels
-            .iter()
-            .position(|c| c.kind == ChannelKind::Force)
-            .unwrap_or(0);
+        let force = crate::stand::force_channel(&self.channels);
         let mut out = Vec::new();
         for (c, ch) in self.channels.iter().enumerate() {
             if c == force {

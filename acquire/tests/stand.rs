@@ -507,6 +507,23 @@ async fn wrong_identities_are_refused() {
     .await
 }
 
+/// The path of a pseudo-terminal for `role` whose "device" answers every line with `junk`.
+fn garbage_port(role: &str, junk: &'static [u8]) -> String {
+    let pty = pty_pair(role).unwrap();
+    tokio::spawn(garbage_device(pty.device, junk));
+    pty.path
+}
+
+/// What a shaker controller answering every line with `junk` makes of `*IDN?`.
+async fn garbage_shaker_identity(junk: &'static [u8], opts: ShakerOptions) -> ShakerError {
+    let path = garbage_port("shaker", junk);
+    let mut sh = ScpiShaker::new(
+        open_serial(&path, &SerialSettings::default()).unwrap(),
+        opts,
+    );
+    sh.identify().await.unwrap_err()
+}
+
 /// A "device" that answers every line with noise.
 async fn garbage_device(mut io: acquire::transport::SerialTransport, junk: &'static [u8]) {
     use tokio::io::{AsyncReadExt, AsyncWriteExt};
@@ -532,34 +549,15 @@ async fn devices_answering_garbage_are_reported() {
             retries: 1,
         };
         // Text without line ends (wrong baud rate): timeout with a hint.
-        let pty = pty_pair("shaker").unwrap();
-        let path = pty.path.clone();
-        let io = pty.device;
-        tokio::spawn(garbage_device(io, b"\xfe\x13\x88garbage"));
-        let mut sh = ScpiShaker::new(
-            open_serial(&path, &SerialSettings::default()).unwrap(),
-            opts.clone(),
-        );
-        let e = sh.identify().await.unwrap_err();
+        let e = garbage_shaker_identity(b"\xfe\x13\x88garbage", opts.clone()).await;
         assert!(matches!(e, ShakerError::Timeout { .. }), "{e}");
         assert!(e.to_string().contains("without a line end"), "{e}");
         // A line that is not an identity.
-        let pty = pty_pair("shaker").unwrap();
-        let path = pty.path.clone();
-        let io = pty.device;
-        tokio::spawn(garbage_device(io, b"hello world\n"));
-        let mut sh = ScpiShaker::new(
-            open_serial(&path, &SerialSettings::default()).unwrap(),
-            opts,
-        );
-        let e = sh.identify().await.unwrap_err();
+        let e = garbage_shaker_identity(b"hello world\n", opts).await;
         assert!(matches!(e, ShakerError::Garbled { .. }), "{e}");
         assert!(e.to_string().contains("hello world"), "{e}");
         // A DAQ port with a text device on it.
-        let pty = pty_pair("daq").unwrap();
-        let path = pty.path.clone();
-        let io = pty.device;
-        tokio::spawn(garbage_device(io, b"OK\r\n>"));
+        let path = garbage_port("daq", b"OK\r\n>");
         let mut daq = SerialDaq::new(
             open_serial(&path, &SerialSettings::default()).unwrap(),
             DaqOptions {

@@ -9,9 +9,9 @@
 
 mod common;
 
-use common::load_model;
+use common::{load_model, load_variables};
 use identify::diagnose::{self, blind};
-use identify::identification::{synthetic, variables};
+use identify::identification::synthetic;
 
 /// The seeds of the subset (the first of the 200 the example runs).
 const SEEDS: std::ops::RangeInclusive<u64> = 1..=SUBSET;
@@ -20,11 +20,7 @@ const SUBSET: u64 = 24;
 #[test]
 fn the_blind_subset_is_diagnosed_at_the_asserted_rates() {
     let model = load_model("fwd32j.toml");
-    let vars = variables::load(
-        &common::repo().join("configs/identification/fwd32j.toml"),
-        &model,
-    )
-    .expect("variables");
+    let vars = load_variables("fwd32j.toml", &model);
     let lines = synthetic::fwd32j_lines();
     let opts = diagnose::Options::default();
     // The cases are independent: two at a time (CI has two cores), each worker taking the next
@@ -80,11 +76,7 @@ const EXACT: f64 = 0.75;
 #[test]
 fn the_judge_matches_effects_by_kind_and_place() {
     let model = load_model("fwd32j.toml");
-    let vars = variables::load(
-        &common::repo().join("configs/identification/fwd32j.toml"),
-        &model,
-    )
-    .expect("variables");
+    let vars = load_variables("fwd32j.toml", &model);
     let lines = synthetic::fwd32j_lines();
     let clean = blind::draw(&model, &vars, &lines, 5, Some(true)).unwrap();
     assert!(clean.injected.is_empty());

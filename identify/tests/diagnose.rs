@@ -8,7 +8,7 @@
 
 mod common;
 
-use common::load_model;
+use common::{load_model, load_variables};
 use identify::diagnose::{self, diagnose, Effect};
 use identify::frf::{self, Method};
 use identify::identification::{self as idn, data, variables, Options};
@@ -32,13 +32,7 @@ struct Case {
 
 fn fit(model_file: &str, vars_file: &str, data: &MeasuredData) -> Case {
     let model = load_model(model_file);
-    let vars = variables::load(
-        &common::repo()
-            .join("configs/identification")
-            .join(vars_file),
-        &model,
-    )
-    .expect("variables");
+    let vars = load_variables(vars_file, &model);
     let obs = data::validate(data, &model, "synthetic").expect("data");
     let id = idn::identify(&model, &obs, &vars, &Options::default(), &mut |_, _| {})
         .expect("identification");

@@ -9,20 +9,11 @@
 
 mod common;
 
-use common::load_model;
+use common::{load_model, load_variables};
 use identify::diagnose::{self, blind, generate, Effect};
-use identify::identification::{self as idn, data, synthetic, variables, Options};
-use identify::model::Model;
+use identify::identification::{self as idn, data, synthetic, Options};
 use rand::rngs::StdRng;
 use rand::SeedableRng;
-
-fn fwd32j_vars(model: &Model) -> variables::Variables {
-    variables::load(
-        &common::repo().join("configs/identification/fwd32j.toml"),
-        model,
-    )
-    .expect("variables")
-}
 
 /// The accepted effects' gain is shown in dB and in the criterion, and the dB error fell.
 fn assert_gain_in_db(d: &diagnose::Diagnosis) {
@@ -50,7 +41,7 @@ fn assert_gain_in_db(d: &diagnose::Diagnosis) {
 #[ignore = "known failure (issue 15): the freed direction is not among the leading candidates; a point mass and two resonators are added instead"]
 fn a_stiffness_a_joint_is_modelled_without_is_found_by_freeing_that_direction() {
     let model = load_model("fwd32j.toml");
-    let vars = fwd32j_vars(&model);
+    let vars = load_variables("fwd32j.toml", &model);
     let lines = synthetic::fwd32j_lines();
     let labels: Vec<String> = (0..model.outputs.len()).map(|o| o.to_string()).collect();
     let x: Vec<f64> = vars.vars.iter().map(|v| v.initial).collect();
@@ -90,7 +81,7 @@ fn a_body_heavier_than_its_drawing_is_found_as_its_mass() {
     truth.bodies[t].mass *= 1.2;
     truth.bodies[t].inertia = truth.bodies[t].inertia.map(|j| j * 1.2);
     let data = common::fwd32j_data(&truth, 0.01, &mut StdRng::seed_from_u64(7));
-    let vars = fwd32j_vars(&model);
+    let vars = load_variables("fwd32j.toml", &model);
     let obs = data::validate(&data, &model, "synthetic").unwrap();
     let id = idn::identify(&model, &obs, &vars, &Options::default(), &mut |_, _| {}).unwrap();
     let d = diagnose::diagnose(

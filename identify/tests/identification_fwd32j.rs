@@ -8,19 +8,11 @@
 
 mod common;
 
-use common::load_model;
+use common::{load_model, load_variables};
 use identify::identification::{self as idn, data, variables, Optimizer, Options, Settings};
 use identify::model::Model;
 use rand::rngs::StdRng;
 use rand::SeedableRng;
-
-fn vars_for(model: &Model) -> variables::Variables {
-    variables::load(
-        &common::repo().join("configs/identification/fwd32j.toml"),
-        model,
-    )
-    .expect("variables file loads")
-}
 
 fn truth_values(truth: &Model, vars: &variables::Variables) -> Vec<f64> {
     vars.vars
@@ -42,7 +34,7 @@ fn fwd32j_synthetic_recovery_from_the_initial_values() {
     let d = common::fwd32j_data(&truth, 0.01, &mut rng);
     let obs = data::validate(&d, &initial, "synthetic").unwrap();
     assert_eq!(obs.points(), 114);
-    let vars = vars_for(&initial);
+    let vars = load_variables("fwd32j.toml", &initial);
     assert_eq!(vars.len(), 20);
     let xt = truth_values(&truth, &vars);
     let opts = Options {
@@ -129,7 +121,7 @@ fn fwd32j_synthetic_recovery_from_the_initial_values() {
 #[test]
 fn fwd32j_cramer_rao_errors_are_calibrated() {
     let truth = load_model("fwd32j.toml");
-    let vars = vars_for(&truth);
+    let vars = load_variables("fwd32j.toml", &truth);
     let xt_all = truth_values(&truth, &vars);
     let rel = 0.01;
     let mut rng = StdRng::seed_from_u64(2026);
@@ -209,7 +201,7 @@ fn fwd32j_group_damping_is_identifiable_individual_joint_damping_is_not() {
     let d = common::fwd32j_data(&truth, 0.01, &mut rng);
     let obs = data::validate(&d, &truth, "synthetic").unwrap();
     let opts = Options::default();
-    let group = vars_for(&truth);
+    let group = load_variables("fwd32j.toml", &truth);
     let ug = idn::uncertainty_at(&truth, &obs, &group, &opts).unwrap();
     let gi = group
         .vars

@@ -9,7 +9,7 @@
 
 mod common;
 
-use common::load_model;
+use common::{load_model, load_variables};
 use identify::identification::{self as idn, data, variables, Identification, Options, Settings};
 use identify::model::Model;
 use rand::rngs::StdRng;
@@ -33,16 +33,14 @@ fn perturbed(rng: &mut StdRng) -> (Model, Vec<f64>) {
 /// `configs/identification/fwd32j.toml`, or with `masses` `fwd32j-masses.toml` (the same and one
 /// `mJ` factor per body).
 fn vars_for(model: &Model, masses: bool) -> variables::Variables {
-    let file = if masses {
-        "fwd32j-masses.toml"
-    } else {
-        "fwd32j.toml"
-    };
-    variables::load(
-        &common::repo().join("configs/identification").join(file),
+    load_variables(
+        if masses {
+            "fwd32j-masses.toml"
+        } else {
+            "fwd32j.toml"
+        },
         model,
     )
-    .unwrap()
 }
 
 fn fit(model: &Model, obs: &data::Observations, vars: &variables::Variables) -> Identification {

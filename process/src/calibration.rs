@@ -4,7 +4,7 @@
 use identify::Quantity;
 use num_complex::Complex;
 
-use crate::error::{invalid, ProcessError, Result};
+use crate::error::{check_count, invalid, ProcessError, Result};
 
 type C64 = Complex<f64>;
 
@@ -72,13 +72,7 @@ fn order(q: Quantity) -> i32 {
 /// `(jω)^(n_to − n_from)` (accelerance = jω·mobility = −ω²·receptance). Integrating (to a lower
 /// order) at 0 Hz is an error.
 pub fn convert(freqs_hz: &[f64], h: &mut [C64], from: Quantity, to: Quantity) -> Result<()> {
-    if freqs_hz.len() != h.len() {
-        return Err(ProcessError::ChannelCount {
-            what: "FRF values (one per frequency)",
-            expected: freqs_hz.len(),
-            got: h.len(),
-        });
-    }
+    check_count("FRF values (one per frequency)", freqs_hz.len(), h.len())?;
     let p = order(to) - order(from);
     if p == 0 {
         return Ok(());

@@ -158,3 +158,16 @@ pub(crate) fn invalid(
         reason: reason.into(),
     }
 }
+
+/// A [`ProcessError::ChannelCount`] of `what` unless `got` is `expected`.
+pub(crate) fn check_count(what: &'static str, expected: usize, got: usize) -> Result<()> {
+    if got == expected {
+        Ok(())
+    } else {
+        Err(ProcessError::ChannelCount {
+            what,
+            expected,
+            got,
+        })
+    }
+}

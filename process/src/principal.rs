@@ -15,7 +15,7 @@ use num_complex::Complex;
 
 use identify::Body;
 
-use crate::error::{ProcessError, Result};
+use crate::error::{check_count, ProcessError, Result};
 
 type C64 = Complex<f64>;
 
@@ -156,13 +156,7 @@ impl RigidFit {
     /// only translations are fitted) and returns the rigidity indicator. No allocation.
     pub fn fit_line(&self, y: &[C64], q: &mut [C64; 6]) -> Result<f64> {
         let n = self.a.nrows();
-        if y.len() != n {
-            return Err(ProcessError::ChannelCount {
-                what: "sensor channels",
-                expected: n,
-                got: y.len(),
-            });
-        }
+        check_count("sensor channels", n, y.len())?;
         *q = [C64::default(); 6];
         for (d, qd) in q.iter_mut().enumerate().take(self.dofs) {
             *qd = (0..n).map(|i| y[i] * self.pinv[(d, i)]).sum();
@@ -181,13 +175,7 @@ impl RigidFit {
     /// translations are fitted.
     pub fn variance(&self, channel_variance: &[f64]) -> Result<[f64; 6]> {
         let n = self.a.nrows();
-        if channel_variance.len() != n {
-            return Err(ProcessError::ChannelCount {
-                what: "channel variances",
-                expected: n,
-                got: channel_variance.len(),
-            });
-        }
+        check_count("channel variances", n, channel_variance.len())?;
         let mut out = [0.0; 6];
         for (d, o) in out.iter_mut().enumerate().take(self.dofs) {
             *o = (0..n)
@@ -200,21 +188,9 @@ impl RigidFit {
     /// Fits every line: `channels[i][k]` is channel i's FRF at `freqs_hz[k]`.
     pub fn transform(&self, freqs_hz: &[f64], channels: &[Vec<C64>]) -> Result<PrincipalResponse> {
         let n = self.a.nrows();
-        if channels.len() != n {
-            return Err(ProcessError::ChannelCount {
-                what: "sensor channels",
-                expected: n,
-                got: channels.len(),
-            });
-        }
+        check_count("sensor channels", n, channels.len())?;
         for c in channels {
-            if c.len() != freqs_hz.len() {
-                return Err(ProcessError::ChannelCount {
-                    what: "frequency lines of a sensor FRF",
-                    expected: freqs_hz.len(),
-                    got: c.len(),
-                });
-            }
+            check_count("frequency lines of a sensor FRF", freqs_hz.len(), c.len())?;
         }
         let mut y = vec![C64::default(); n];
         let mut out = PrincipalResponse {
@@ -247,13 +223,7 @@ impl RigidFit {
         sensor_responses: &[usize],
     ) -> Result<PrincipalResponse> {
         let n = self.a.nrows();
-        if sensor_responses.len() != n {
-            return Err(ProcessError::ChannelCount {
-                what: "sensor-to-response indices",
-                expected: n,
-                got: sensor_responses.len(),
-            });
-        }
+        check_count("sensor-to-response indices", n, sensor_responses.len())?;
         if reference >= frf.references {
             return Err(ProcessError::ChannelCount {
                 what: "references in the FRF (reference index out of range)",

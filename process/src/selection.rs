@@ -7,7 +7,7 @@
 use identify::{measured::QuantityName, Measurement, Quantity};
 use num_complex::Complex;
 
-use crate::error::{invalid, ProcessError, Result};
+use crate::error::{check_count, invalid, ProcessError, Result};
 
 type C64 = Complex<f64>;
 
@@ -87,21 +87,13 @@ fn check_selection(
     coherence: Option<&[f64]>,
     config: &SelectionConfig,
 ) -> Result<()> {
-    if magnitude.len() != freqs_hz.len() {
-        return Err(ProcessError::ChannelCount {
-            what: "magnitudes (one per frequency)",
-            expected: freqs_hz.len(),
-            got: magnitude.len(),
-        });
-    }
+    check_count(
+        "magnitudes (one per frequency)",
+        freqs_hz.len(),
+        magnitude.len(),
+    )?;
     if let Some(c) = coherence {
-        if c.len() != freqs_hz.len() {
-            return Err(ProcessError::ChannelCount {
-                what: "coherences (one per frequency)",
-                expected: freqs_hz.len(),
-                got: c.len(),
-            });
-        }
+        check_count("coherences (one per frequency)", freqs_hz.len(), c.len())?;
     }
     if config.count == 0 {
         return Err(invalid("count", 0, "select at least one point"));
@@ -232,21 +224,13 @@ pub fn to_measurement(
             "the model's excitation amplitude, > 0 (N)",
         ));
     }
-    if h.len() != freqs_hz.len() {
-        return Err(ProcessError::ChannelCount {
-            what: "FRF values (one per frequency)",
-            expected: freqs_hz.len(),
-            got: h.len(),
-        });
-    }
+    check_count("FRF values (one per frequency)", freqs_hz.len(), h.len())?;
     for opt in [coherence, variance].into_iter().flatten() {
-        if opt.len() != freqs_hz.len() {
-            return Err(ProcessError::ChannelCount {
-                what: "coherence/variance values (one per frequency)",
-                expected: freqs_hz.len(),
-                got: opt.len(),
-            });
-        }
+        check_count(
+            "coherence/variance values (one per frequency)",
+            freqs_hz.len(),
+            opt.len(),
+        )?;
     }
     let mut last = f64::NEG_INFINITY;
     for &k in points {

@@ -9,7 +9,7 @@ use std::sync::Arc;
 use num_complex::Complex;
 use rustfft::{Fft, FftPlanner};
 
-use crate::error::{invalid, ProcessError, Result};
+use crate::error::{check_count, invalid, ProcessError, Result};
 use crate::window::Window;
 
 type C64 = Complex<f64>;
@@ -236,12 +236,8 @@ impl Welch {
             });
         }
         let channels = reference_names.len() + response_names.len();
-        if !config.full_scale.is_empty() && config.full_scale.len() != channels {
-            return Err(ProcessError::ChannelCount {
-                what: "full-scale values",
-                expected: channels,
-                got: config.full_scale.len(),
-            });
+        if !config.full_scale.is_empty() {
+            check_count("full-scale values", channels, config.full_scale.len())?;
         }
         let ref_window = config.reference_window.coefficients(n)?;
         let resp_window = config.response_window.coefficients(n)?;
@@ -300,20 +296,8 @@ impl Welch {
     /// Feeds the next block of samples: `references[i]` and `responses[j]` are consecutive samples
     /// of each channel, all of the same length.
     pub fn push(&mut self, references: &[&[f64]], responses: &[&[f64]]) -> Result<()> {
-        if references.len() != self.references {
-            return Err(ProcessError::ChannelCount {
-                what: "reference channels",
-                expected: self.references,
-                got: references.len(),
-            });
-        }
-        if responses.len() != self.responses {
-            return Err(ProcessError::ChannelCount {
-                what: "response channels",
-                expected: self.responses,
-                got: responses.len(),
-            });
-        }
+        check_count("reference channels", self.references, references.len())?;
+        check_count("response channels", self.responses, responses.len())?;
         let len = references[0].len();
         for (c, ch) in references.iter().chain(responses).enumerate() {
             if ch.len() != len {

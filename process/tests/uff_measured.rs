@@ -180,21 +180,34 @@ fn the_same_frfs_in_any_unit_and_file_give_the_same_estimates() {
 /// The case's FRFs as UFF58b (ident's writer) in `num`/`den` (record 9/10 labels) with the
 /// values in that unit: `h` (m/N) times (jω)^power / scale.
 fn uff_in(f: &[f64], h: &[Vec<C64>], num: &str, den: &str, scale: f64, power: i32) -> Vec<u8> {
-    let sets: Vec<uff::Function> = [1i64, 2]
+    let values = h
         .iter()
-        .zip(h)
-        .map(|(node, ho)| {
-            let v = ho
-                .iter()
+        .map(|ho| {
+            ho.iter()
                 .zip(f)
                 .map(|(z, fk)| z * C64::new(0.0, 2.0 * PI * fk).powi(power) / scale)
-                .collect();
-            let mut g = uff::Function::frf("units", 0.0, 0.0, v);
-            g.abscissa = uff::Abscissa::Uneven(f.to_vec());
-            g.response_node = *node;
-            g.response_dir = 3;
-            g.reference_node = 9;
-            g.reference_dir = 3;
+                .collect()
+        })
+        .collect();
+    uff_58b("units", uff::function_type::FRF, f, values, 9, (num, den))
+}
+
+/// `values` at the lines `f`, one per response node 1, 2 along +Z against node `reference` along
+/// +Z, as a UFF58b file of functions `name` of type `kind` labelled `num`/`den` (records 9/10).
+fn uff_58b(
+    name: &str,
+    kind: u32,
+    f: &[f64],
+    values: Vec<Vec<C64>>,
+    reference: i64,
+    (num, den): (&str, &str),
+) -> Vec<u8> {
+    let sets: Vec<uff::Function> = [1i64, 2]
+        .into_iter()
+        .zip(values)
+        .map(|(node, v)| {
+            let mut g = uff::Function::frf_between(name, f.to_vec(), v, (node, 3), (reference, 3));
+            g.func_type = kind;
             g.axes[1].units = num.into();
             g.axes[2].units = den.into();
             g
@@ -431,24 +444,11 @@ fn transmissibilities_in_g_per_g_or_any_like_ratio_are_read_exactly() {
         (uff::function_type::TRANSMISSIBILITY, "m/s^2", "", 1.0),
     ];
     for (kind, num, den, factor) in forms {
-        let sets: Vec<uff::Function> = [1i64, 2]
+        let values = t
             .iter()
-            .zip(&t)
-            .map(|(node, to)| {
-                let mut g =
-                    uff::Function::frf("table", 0.0, 0.0, to.iter().map(|z| z * factor).collect());
-                g.func_type = kind;
-                g.abscissa = uff::Abscissa::Uneven(f.clone());
-                g.response_node = *node;
-                g.response_dir = 3;
-                g.reference_node = 100;
-                g.reference_dir = 3;
-                g.axes[1].units = num.into();
-                g.axes[2].units = den.into();
-                g
-            })
+            .map(|to| to.iter().map(|z| z * factor).collect())
             .collect();
-        let bytes = uff::to_bytes(&sets, uff::Encoding::Binary).unwrap();
+        let bytes = uff_58b("table", kind, &f, values, 100, (num, den));
         let file = uff::parse_file(&bytes, "table.uff").unwrap();
         let (channels, _) = uff::measured_channels(&file, "table.uff").unwrap();
         let map = measurement_map::parse(TABLE_MAP, "map.toml", &model).unwrap();

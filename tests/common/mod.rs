@@ -58,6 +58,13 @@ pub fn identify_mapped(
     ident(&args)
 }
 
+/// Asserts that a run (of `ident` or another program) succeeded; its stderr is the failure
+/// message.
+#[track_caller]
+pub fn assert_success(o: &Output) {
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+}
+
 /// Bytes a run printed, as text.
 pub fn utf8(b: &[u8]) -> String {
     String::from_utf8_lossy(b).into_owned()

@@ -61,6 +61,19 @@ fn config(channels: Vec<u16>) -> DaqConfig {
     }
 }
 
+/// Node 5 on `bus` with `faults`, and a master streaming its `channels`.
+async fn streaming(
+    bus: &MemoryBus,
+    faults: SimNodeFaults,
+    channels: Vec<u16>,
+) -> (Node, CanOpenDaq) {
+    let node = start_node(bus, 5, faults);
+    let mut daq = master(bus, settings(5));
+    daq.configure(&config(channels)).await.expect("configure");
+    daq.start().await.expect("start");
+    (node, daq)
+}
+
 async fn stop_node(n: Node) -> SimNodeStats {
     let _ = n.0.send(());
     n.1.await.expect("node task").expect("node ran")
@@ -452,13 +465,8 @@ async fn lost_tpdo_frames_become_gaps_and_the_delivered_blocks_stay_exact() {
         drop_tpdo_every: Some(97),
         ..SimNodeFaults::default()
     };
-    let node = start_node(&bus, 5, faults);
-    let mut daq = master(&bus, settings(5));
     let channels = vec![0, 1, 2, 3];
-    daq.configure(&config(channels.clone()))
-        .await
-        .expect("configure");
-    daq.start().await.expect("start");
+    let (node, mut daq) = streaming(&bus, faults, channels.clone()).await;
     let (blocks, faults) = collect(&mut daq, 20).await;
     daq.stop().await.expect("stop");
     let stats = stop_node(node).await;
@@ -493,10 +501,7 @@ async fn a_lost_heartbeat_is_a_device_fault_then_the_stream_times_out() {
         silent_after_syncs: Some(100),
         ..SimNodeFaults::default()
     };
-    let node = start_node(&bus, 5, faults);
-    let mut daq = master(&bus, settings(5));
-    daq.configure(&config(vec![0, 1])).await.expect("configure");
-    daq.start().await.expect("start");
+    let (node, mut daq) = streaming(&bus, faults, vec![0, 1]).await;
     let (events, err) = events_until_error(&mut daq).await;
     let lost: Vec<&str> = events.iter().filter_map(DaqEvent::device_fault).collect();
     assert_eq!(lost.len(), 1, "{lost:?}");
@@ -517,10 +522,7 @@ async fn an_emcy_is_recorded_with_its_error_code_and_the_stream_goes_on() {
         emcy_at_sync: Some((40, 0x5030)),
         ..SimNodeFaults::default()
     };
-    let node = start_node(&bus, 5, faults);
-    let mut daq = master(&bus, settings(5));
-    daq.configure(&config(vec![4])).await.expect("configure");
-    daq.start().await.expect("start");
+    let (node, mut daq) = streaming(&bus, faults, vec![4]).await;
     let (blocks, faults) = collect(&mut daq, 6).await;
     daq.stop().await.expect("stop");
     assert_eq!(faults.len(), 1, "{faults:?}");

@@ -236,33 +236,33 @@ mod tests {
     fn the_builtin_table_reads_and_recognises_the_manuals_identities() {
         let t = builtin().unwrap();
         assert!(t.len() >= 5);
-        let name = |m: &str, model: &str| for_identity(&id(m, model)).unwrap().map(|e| e.name);
-        assert_eq!(
-            name("Keysight Technologies", "33512B").as_deref(),
-            Some("Keysight 33500B/33600A")
-        );
-        assert_eq!(
-            name("Agilent Technologies", "33522A").as_deref(),
-            Some("Keysight 33500B/33600A")
-        );
-        assert_eq!(
-            name("Keysight Technologies", "33622A").as_deref(),
-            Some("Keysight 33500B/33600A")
-        );
-        assert_eq!(
-            name("Rigol Technologies", "DG1062Z").as_deref(),
-            Some("Rigol DG800/DG1000Z")
-        );
-        assert_eq!(
-            name("Rigol Technologies", "DG812").as_deref(),
-            Some("Rigol DG800/DG1000Z")
-        );
-        assert_eq!(
-            name("TEKTRONIX", "AFG31022").as_deref(),
-            Some("Tektronix AFG31000")
-        );
-        assert_eq!(name("Keysight Technologies", "34461A"), None, "a DMM");
-        assert_eq!(name("ACME", "FG-1"), None);
+        // (manufacturer, model, the table recognising it; none for a DMM and an unknown maker)
+        let identities = [
+            (
+                "Keysight Technologies",
+                "33512B",
+                Some("Keysight 33500B/33600A"),
+            ),
+            (
+                "Agilent Technologies",
+                "33522A",
+                Some("Keysight 33500B/33600A"),
+            ),
+            (
+                "Keysight Technologies",
+                "33622A",
+                Some("Keysight 33500B/33600A"),
+            ),
+            ("Rigol Technologies", "DG1062Z", Some("Rigol DG800/DG1000Z")),
+            ("Rigol Technologies", "DG812", Some("Rigol DG800/DG1000Z")),
+            ("TEKTRONIX", "AFG31022", Some("Tektronix AFG31000")),
+            ("Keysight Technologies", "34461A", None),
+            ("ACME", "FG-1", None),
+        ];
+        for (maker, model, want) in identities {
+            let got = for_identity(&id(maker, model)).unwrap().map(|e| e.name);
+            assert_eq!(got.as_deref(), want, "{maker} {model}");
+        }
         assert!(by_name("generic").unwrap().is_some());
         // Arbitrary waveforms: every named model but the plain SCPI-99 table.
         for m in &t {

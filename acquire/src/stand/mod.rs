@@ -771,10 +771,7 @@ impl Stand {
 
     /// The force channel's index in stream order (validated to exist exactly once).
     pub fn force_channel(&self) -> usize {
-        self.channels
-            .iter()
-            .position(|c| c.kind == ChannelKind::Force)
-            .unwrap_or(0)
+        force_channel(&self.channels)
     }
 
     /// The DAQ configuration this stand asks for.
@@ -785,6 +782,15 @@ impl Stand {
             samples_per_block: self.daq.samples_per_block,
         }
     }
+}
+
+/// The index of the force channel among `channels` (stream order), the first one when none is a
+/// force channel (a stand file has exactly one).
+pub fn force_channel(channels: &[Channel]) -> usize {
+    channels
+        .iter()
+        .position(|c| c.kind == ChannelKind::Force)
+        .unwrap_or(0)
 }
 
 /// The stand's exciter: `[shaker]`, or `[generator]` with `[amplifier]` (never both), and the

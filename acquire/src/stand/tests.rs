@@ -61,83 +61,69 @@ fn duplicate_device_channel_names_both_channels_and_line() {
 
 #[test]
 fn inconsistent_channel_maps_are_rejected_with_locations() {
+    // (text of the good stand file, what it is replaced by, what the error says)
     let cases = [
         (
-            GOOD.replace(
-                "kind = \"force\"\nsensitivity = \"2.25 mV/N\"",
-                "kind = \"acceleration\"\nsensitivity = \"1 V/g\"\nbody=\"table\"\nposition=[0,0,0]\ndirection=[0,0,1]",
-            ),
+            "kind = \"force\"\nsensitivity = \"2.25 mV/N\"",
+            "kind = \"acceleration\"\nsensitivity = \"1 V/g\"\nbody=\"table\"\nposition=[0,0,0]\ndirection=[0,0,1]",
             "exactly one `kind = \"force\"`",
         ),
         (
-            GOOD.replace(
-                "kind = \"force\"",
-                "kind = \"acceleration\"\nbody=\"table\"\nposition=[0,0,0]\ndirection=[0,0,1]",
-            ),
+            "kind = \"force\"",
+            "kind = \"acceleration\"\nbody=\"table\"\nposition=[0,0,0]\ndirection=[0,0,1]",
             "is the unit of a force sensor, but the channel's kind is Acceleration",
         ),
+        ("name = \"table-x\"", "name = \"force\"", "already used on line"),
+        ("direction = [2, 0, 0]", "direction = [0, 0, 0]", "zero length"),
         (
-            GOOD.replace("name = \"table-x\"", "name = \"force\""),
-            "already used on line",
-        ),
-        (
-            GOOD.replace("direction = [2, 0, 0]", "direction = [0, 0, 0]"),
-            "zero length",
-        ),
-        (
-            GOOD.replace("body = \"table\"\nposition", "body = \"spindle\"\nposition"),
+            "body = \"table\"\nposition",
+            "body = \"spindle\"\nposition",
             "body `spindle` is not in the truth model",
         ),
+        ("direction = [2, 0, 0]\n", "", "needs `direction`"),
         (
-            GOOD.replace("direction = [2, 0, 0]\n", ""),
-            "needs `direction`",
-        ),
-        (
-            GOOD.replace("\"100 mV/g\"", "\"100 mm\""),
+            "\"100 mV/g\"",
+            "\"100 mm\"",
             "an accelerometer sensitivity, e.g. \"100 mV/g\"",
         ),
-        (GOOD.replace("\"100 mV/g\"", "-1"), "must be > 0"),
+        ("\"100 mV/g\"", "-1", "must be > 0"),
         (
-            GOOD.replace("identity = \"IDENT-SIM,SHAKER-4K\"", "identity = \"IDENT-SIM,SHAKER-4K\"\nbaud = 0"),
+            "identity = \"IDENT-SIM,SHAKER-4K\"",
+            "identity = \"IDENT-SIM,SHAKER-4K\"\nbaud = 0",
             "shaker.baud = 0: give the serial line's bit rate",
         ),
         (
-            GOOD.replace("samples_per_block = 64", "samples_per_block = 64\nbaud = 0"),
+            "samples_per_block = 64",
+            "samples_per_block = 64\nbaud = 0",
             "daq.baud = 0",
         ),
         (
-            GOOD.replace("samples_per_block = 64", "samples_per_block = 64\ninputs = 0"),
+            "samples_per_block = 64",
+            "samples_per_block = 64\ninputs = 0",
             "daq.inputs must be ≥ 1",
         ),
         (
-            GOOD.replace("samples_per_block = 64", "samples_per_block = 64\ninputs = 1"),
+            "samples_per_block = 64",
+            "samples_per_block = 64\ninputs = 1",
             "device_channel 1 is beyond the DAQ's 1 inputs (numbered 0 to 0)",
         ),
-        (
-            GOOD.replace("samples_per_block = 64", "samples_per_block = 4000"),
-            "do not fit",
-        ),
-        (
-            GOOD.replace("kind = \"force\"", "kind = \"velocity\""),
-            "unknown variant",
-        ),
-        (
-            GOOD.replace("[truth]", "[truth]\nsped = 3"),
-            "unknown field",
-        ),
-        (
-            GOOD.replace(
-                "port = \"sim\"\nsample_rate",
-                "port = \"/dev/x\"\nsample_rate",
-            )
-            .replace("port = \"sim\"\nidentity", "port = \"/dev/x\"\nidentity"),
-            "also the shaker's port",
-        ),
+        ("samples_per_block = 64", "samples_per_block = 4000", "do not fit"),
+        ("kind = \"force\"", "kind = \"velocity\"", "unknown variant"),
+        ("[truth]", "[truth]\nsped = 3", "unknown field"),
+        // Both ports, the shaker's and the DAQ's.
+        ("port = \"sim\"", "port = \"/dev/x\"", "also the shaker's port"),
     ];
-    for (text, want) in cases {
-        let e = err(&text);
-        assert!(e.message.contains(want), "want {want:?}, got {e}");
-        assert!(e.line >= 1, "{e}");
+    for (from, to, want) in cases {
+        assert!(
+            GOOD.contains(from),
+            "{from:?} is not in the good stand file"
+        );
+        let e = err(&GOOD.replace(from, to));
+        assert!(
+            e.message.contains(want),
+            "{from:?} → {to:?}: want {want:?}, got {e}"
+        );
+        assert!(e.line >= 1, "{from:?} → {to:?}: {e}");
     }
 }
 

@@ -1068,10 +1068,7 @@ pub fn period_averager(
     let (n, lo, hi) = broadband_period(plan, fs)?;
     let names: Vec<&str> = channels.iter().map(|c| c.name.as_str()).collect();
     let sens: Vec<f64> = channels.iter().map(|c| c.sensitivity).collect();
-    let force = channels
-        .iter()
-        .position(|c| c.kind == crate::stand::ChannelKind::Force)
-        .unwrap_or(0);
+    let force = crate::stand::force_channel(channels);
     let averager = periodic::PeriodAverager::new(
         fs,
         n,
@@ -1095,12 +1092,7 @@ async fn broadband_inner(
     let (mut averager, lo, hi) =
         period_averager(plan, rig.stream.sample_rate_hz, &rig.stand.channels)?;
     let (period_samples, _, _) = broadband_period(plan, rig.stream.sample_rate_hz)?;
-    let force_channel = rig
-        .stand
-        .channels
-        .iter()
-        .position(|c| c.kind == crate::stand::ChannelKind::Force)
-        .unwrap_or(0);
+    let force_channel = rig.stand.force_channel();
     let mut force = period_force::PeriodForceMonitor::new(
         period_samples,
         force_channel,

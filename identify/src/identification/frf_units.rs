@@ -23,7 +23,7 @@
 use std::f64::consts::{FRAC_PI_2, PI};
 
 use crate::measured::Measurement;
-use crate::model::{Characteristic, Model, Quantity};
+use crate::model::{Characteristic, Model, PointForce, Quantity};
 use crate::units::{parse_quantity, Dim};
 
 /// The unit of measured values of a translational response.
@@ -155,8 +155,13 @@ fn transmissibility(t: &str) -> Option<f64> {
 /// Amplitude of the model's declared excitation (N): the first force's magnitude, the
 /// convention of [`crate::MeasuredData`] (characteristics are the response to it).
 pub fn excitation_amplitude(model: &Model) -> Option<f64> {
-    model
-        .forces
+    first_force_amplitude(&model.forces)
+}
+
+/// The first of `forces`' magnitude (N), when it is a finite positive one: the amplitude the
+/// characteristics of an excitation are the response to.
+fn first_force_amplitude(forces: &[PointForce]) -> Option<f64> {
+    forces
         .first()
         .map(|f| f.force.norm())
         .filter(|f| f.is_finite() && *f > 0.0)
@@ -210,10 +215,7 @@ pub fn to_model_convention(
                 Some(crate::model::Reference {
                     excitation: crate::model::Excitation::Forces(f),
                     ..
-                }) => f
-                    .first()
-                    .map(|f| f.force.norm())
-                    .filter(|f| f.is_finite() && *f > 0.0),
+                }) => first_force_amplitude(f),
                 Some(_) => {
                     return Err(format!(
                         "{label}: the data are per unit force ({}), but reference \"{name}\" is a base motion: give transmissibilities with a transmissibility unit (unit = \"g/g\", \"m/m\", \"(m/s^2)/(m/s^2)\")",

@@ -27,6 +27,14 @@ pub fn load_model(name: &str) -> Model {
         .model
 }
 
+/// A variables file of `configs/identification/`, e.g. `fwd32j.toml`, against `model`; panics
+/// naming the file when it cannot load.
+pub fn load_variables(name: &str, model: &Model) -> variables::Variables {
+    let p = repo().join("configs/identification").join(name);
+    variables::load(&p, model)
+        .unwrap_or_else(|e| panic!("the variables {} are needed by this test: {e}", p.display()))
+}
+
 /// The synthetic FWD-32J measurement (`identification::synthetic`): 38 log-spaced lines over
 /// 20-400 Hz per characteristic, multiplicative Gaussian noise of relative σ `rel`, variances
 /// stated.
