@@ -152,11 +152,7 @@ fn a_moment_stiffness_is_the_same_element_on_every_sde_joining_the_same_bodies()
 #[test]
 fn the_truth_s_own_form_fits_to_the_noise_and_judges_a_miss() {
     let model = load_model("fwd32j.toml");
-    let vars = variables::load(
-        &common::repo().join("configs/identification/fwd32j.toml"),
-        &model,
-    )
-    .expect("variables");
+    let vars = load_variables("fwd32j.toml", &model);
     let lines = synthetic::fwd32j_lines();
     let mass = identify::diagnose::effects::Effect::Mass {
         body: "upper saddle".into(),
