@@ -28,8 +28,8 @@ fn main() {
     let lines = synthetic::fwd32j_lines();
     let opts = diagnose::Options::default();
     let mut outcomes = Vec::new();
-    // Cases with effects not exactly found: (the data cannot tell, the search missed).
-    let mut misses = (0, 0);
+    // Cases with effects not exactly found, by verdict.
+    let mut misses: Vec<blind::Miss> = Vec::new();
     for seed in first..first + n {
         let case = blind::draw(&model, &vars, &lines, seed, None).expect("case");
         if let Some(kind) = &kind {
@@ -76,14 +76,18 @@ fn main() {
                 if !o.exact && !case.injected.is_empty() {
                     let starts = [d.estimate.clone(), case.vars.initial()];
                     let j = blind::truth_form(&model, &case, &starts, &opts).expect("truth's form");
-                    let missed = blind::missed(d.after.criterion, j);
+                    let miss = blind::miss(d.after.criterion, j, d.after.observations);
                     println!(
                         "  not exact: the diagnosis ends at J {:.1}, the truth's own form refitted at {:.1}: {}",
                         d.after.criterion,
                         j,
-                        if missed { "the search missed it" } else { "the data cannot tell them apart" }
+                        match miss {
+                            blind::Miss::CannotTell => "the data cannot tell them apart",
+                            blind::Miss::Missed => "the search missed it",
+                            blind::Miss::Undecided => "the truth's own refit is off the noise level too (undecided)",
+                        }
                     );
-                    *if missed { &mut misses.1 } else { &mut misses.0 } += 1;
+                    misses.push(miss);
                 }
                 outcomes.push(o);
             }
@@ -103,12 +107,14 @@ fn main() {
         r.median_seconds,
         r.median_diagnosis_seconds
     );
+    let count = |m: blind::Miss| misses.iter().filter(|&&x| x == m).count();
     println!(
-        "of the {} cases with effects not exactly found, {} end within LR {} of the truth's own form refitted (the data cannot tell them apart), {} above it (the search missed it)",
-        misses.0 + misses.1,
-        misses.0,
+        "of the {} cases with effects not exactly found, {} end within LR {} of the truth's own form refitted (the data cannot tell them apart), {} above it (the search missed it), {} undecided (the truth's own refit is off the noise level too)",
+        misses.len(),
+        count(blind::Miss::CannotTell),
         diagnose::EQUIVALENT_LR,
-        misses.1
+        count(blind::Miss::Missed),
+        count(blind::Miss::Undecided)
     );
     if n == 0 || n >= 10 {
         demo_split(&root);

@@ -184,11 +184,18 @@ fn the_truth_s_own_form_fits_to_the_noise_and_judges_a_miss() {
         &mut |_, _| {},
     )
     .unwrap();
-    assert!(
-        blind::missed(without.criterion, truth),
+    let m = m as usize;
+    assert_eq!(
+        blind::miss(without.criterion, truth, m),
+        blind::Miss::Missed,
         "J {} without the mass, {truth} with it",
         without.criterion
     );
-    assert!(!blind::missed(truth + 1.9, truth));
-    assert!(blind::missed(truth + 2.0, truth));
+    assert_eq!(blind::miss(truth + 1.9, truth, m), blind::Miss::CannotTell);
+    assert_eq!(blind::miss(truth + 2.0, truth, m), blind::Miss::Missed);
+    // A truth's form that ends far above the noise gives no verdict.
+    assert_eq!(
+        blind::miss(truth, 10.0 * m as f64, m),
+        blind::Miss::Undecided
+    );
 }

@@ -682,9 +682,7 @@ pub fn rates(outcomes: &[Outcome]) -> Rates {
 /// identification model with exactly the injected effects, every variable and effect parameter
 /// refitted from each of `starts` (variable values, SI; the example gives the diagnosis' final
 /// variables and the identification's start) with the effects at their true values — the lowest
-/// end. A diagnosis that is not exact but ends within [`super::EQUIVALENT_LR`] of it in likelihood
-/// ratio found an answer the data cannot tell from the truth ([`missed`] is false); one above it
-/// missed what the truth explains.
+/// end; [`miss`] judges a diagnosis that is not exact by it.
 pub fn truth_form(
     model: &Model,
     case: &BlindCase,
@@ -723,9 +721,31 @@ pub fn truth_form(
     Ok(best)
 }
 
-/// Whether a diagnosis ending at criterion `diagnosed` missed what the truth's own form explains
-/// (`truth`, both J = ½χ²): its likelihood ratio against the truth's exceeds
-/// [`super::EQUIVALENT_LR`]. Otherwise the data cannot tell the diagnosis from the truth.
-pub fn missed(diagnosed: f64, truth: f64) -> bool {
-    2.0 * (diagnosed - truth) > super::EQUIVALENT_LR
+/// What a case that is not exact says of its diagnosis, judged by the truth's own form refitted
+/// ([`truth_form`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Miss {
+    /// The diagnosis ends within [`super::EQUIVALENT_LR`] of the truth's form in likelihood
+    /// ratio (or below it): the data cannot tell its answer from the truth.
+    CannotTell,
+    /// The truth's form fits the data better by more than that: the search missed it.
+    Missed,
+    /// The diagnosis ends no higher than the truth's form refitted from the starts given, but
+    /// that refit is off the noise level (2J above the number of residuals by more than four of
+    /// its standard deviations): the truth's best fit may be lower still; no verdict.
+    Undecided,
+}
+
+/// The verdict on a diagnosis ending at criterion `diagnosed` against the truth's form's
+/// `truth` (both J = ½χ²) over `observations` residuals.
+pub fn miss(diagnosed: f64, truth: f64, observations: usize) -> Miss {
+    // The truth's refit is a point of its form: its best fit is at least as good.
+    let m = observations as f64;
+    if 2.0 * (diagnosed - truth) > super::EQUIVALENT_LR {
+        Miss::Missed
+    } else if 2.0 * truth > m + 4.0 * (2.0 * m).sqrt() {
+        Miss::Undecided
+    } else {
+        Miss::CannotTell
+    }
 }
