@@ -2,7 +2,9 @@
 //! undeclared effects drawn across every kind of the candidate library (or none), placed across
 //! the model's bodies and body pairs, sized from barely detectable to dominant — their noisy data,
 //! an identification started from parameters perturbed ±30 %, and the judgement of a diagnosis of
-//! it (the right effect first? exactly the injected set? anything added to clean data?).
+//! it (the right effect first? exactly the injected set? anything added to clean data?), and of
+//! a case it got wrong: could the data tell its answer from the truth at all ([`truth_form`],
+//! [`miss`])?
 //!
 //! One generator for the CI test (`identify/tests/blind.rs`, a few dozen seeded cases asserting
 //! the rates) and the example that measures them over hundreds (`identify/examples/blind.rs`).
