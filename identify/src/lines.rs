@@ -16,8 +16,8 @@
 //! `max |a_ij|`, or with a zero or non-finite pivot, is marked [`Batch::accurate`]` = false`, and
 //! the caller solves it again with partial pivoting.
 //!
-//! Invariants: buffers are sized once per system size ([`Batch::new`]); [`Batch::factor`] and
-//! [`Batch::solve`] allocate nothing.
+//! Invariants: buffers are sized once per system size ([`Batch::new`]); `Batch::factor` and
+//! `Batch::solve` allocate nothing.
 
 use crate::system::{ParamBlock, System};
 use crate::C64;

@@ -56,9 +56,10 @@ pub fn generalized_force(
 /// ([`generalized_force`]), so the output's adjoint load is that force (reciprocity).
 ///
 /// An output responds to one excitation, the solve's right-hand side `column`
-/// ([`System::load_column`]). Under base motion the load is `ω² M T u_b` ([`System::assemble`]), so
-/// the solution is scaled by `ω²` (`base`), and an absolute output adds the base's own rigid
-/// motion, `offset = row · T u_b` (parameter-free: the Jacobian is the relative one's).
+/// ([`System::load_entry`]). Under base motion the load is `ω² M T u_b`
+/// ([`System::assemble`]), so the solution is scaled by `ω²` (`base`), and an absolute output
+/// adds the base's own rigid motion, `offset = row · T u_b` (parameter-free: the Jacobian is the
+/// relative one's).
 #[derive(Debug, Clone, PartialEq)]
 pub struct OutputRow {
     /// `(global DOF, coefficient)`, at most six, zeros left out.
@@ -341,7 +342,7 @@ pub struct System {
     /// Generalized force vector P (n) of the model's excitation (reference 0).
     pub load: Vec<f64>,
     /// The load of each further reference ([`Model::references`]), solved as right-hand side
-    /// `1 + outputs + i` ([`System::load_column`]); `M T u_b` for a base motion.
+    /// `1 + outputs + i` ([`System::load_entry`]); `M T u_b` for a base motion.
     pub reference_loads: Vec<Vec<f64>>,
     /// Per reference (0 = the model's excitation): the base's rigid motion `T u_b` per DOF when
     /// that reference is a base motion (its load `M T u_b` then depends on the masses too).

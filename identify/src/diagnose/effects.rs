@@ -14,8 +14,8 @@
 //! | a body's mass off, its inertias scaled with it | m (kg) | the model's mass |
 //!
 //! Each effect gives its first-order action on `A(ω) = K + jD − ω²M` as rows and coefficients
-//! ([`Effect::terms`]), so that its score needs no new solve; the flexible body, whose DOFs differ,
-//! is the exception (one extra solve, see `score`).
+//! ([`Effect::rows`], [`Effect::coefficient`]), so that its score needs no new solve; the
+//! flexible body, whose DOFs differ, is the exception (one extra solve, see `score`).
 
 use nalgebra::{Matrix3, Vector3};
 

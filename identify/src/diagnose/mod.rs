@@ -1321,7 +1321,7 @@ fn family_of(ranking: &Ranking, family: Option<usize>, leader: &Effect) -> Vec<S
 }
 
 /// A family member's refit is equivalent to the family's best when its LR's margin over its
-/// critical value is within this of the best's ([`indistinguishable`]; for the same number of
+/// critical value is within this of the best's (`indistinguishable`; for the same number of
 /// parameters, their likelihood ratio against each other: χ² with 1 degree of freedom at 95 %):
 /// the data cannot tell them apart.
 pub const EQUIVALENT_LR: f64 = 3.84;

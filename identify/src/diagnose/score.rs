@@ -14,7 +14,7 @@
 //! Every `g` comes from one set of solves ([`frf::states`]): a spring's, mass's or resonator's
 //! first-order action `∂q_o = −w_oᵀ ΔA q` costs O(its support) per line; a body that is not
 //! rigid is scored in its rigid limit from the forces its joints would carry
-//! ([`flexible_first_order`]); the damping splits share one Jacobian.
+//! (`flexible_first_order`); the damping splits share one Jacobian.
 
 use super::effects::{
     body_index, point_row, resonator_coefficient, split_body, Effect, EffectError, RESONATOR_WIDTH,
