@@ -794,35 +794,35 @@ fn free_direction(
             name: ParamName::PsiI(axis as u8),
         }
     };
-    follow_psi(
-        &mut r.vars,
-        ParamRef {
-            sde: s,
-            name: source,
-        },
-        freed,
-    );
+    if let Some(name) = source {
+        follow_psi(&mut r.vars, ParamRef { sde: s, name }, freed);
+    }
     Ok(())
 }
 
-/// The parameter of `law` whose ψ a stiffness freed in direction `axis` takes: the direction's
-/// own ψ where the law has one there, else its largest (as [`generate`](super::generate) draws
-/// the candidate's `psi`).
-fn psi_source(law: &SdeLaw, axis: usize) -> ParamName {
+/// The direction whose ψ a stiffness freed in direction `axis` of `law` takes: `axis` itself
+/// where the law has a ψ there, else the direction of its largest ψ. The candidate's `psi` is
+/// drawn there ([`generate`](super::generate)), and [`free_direction`] follows the parameter
+/// that sets it.
+pub(super) fn psi_axis(law: &SdeLaw, axis: usize) -> usize {
     let own = law.dissipation();
-    let axis = if own[axis] > 0.0 {
+    if own[axis] > 0.0 {
         axis
     } else {
         (0..6).fold(0, |best, a| if own[a] > own[best] { a } else { best })
-    };
-    match law {
-        SdeLaw::Contact { .. } if matches!(axis, 0 | 4 | 5) => ParamName::PsiN,
-        SdeLaw::Contact { .. } => ParamName::PsiT,
-        SdeLaw::Axial { .. } => ParamName::Psi,
-        SdeLaw::Isolator { .. } if axis == 0 => ParamName::PsiN,
-        SdeLaw::Isolator { .. } => ParamName::PsiT,
-        SdeLaw::General { .. } => ParamName::PsiI(axis as u8),
     }
+}
+
+/// The parameter of `law` that sets the ψ of direction [`psi_axis`]`(law, axis)`.
+fn psi_source(law: &SdeLaw, axis: usize) -> Option<ParamName> {
+    let axis = psi_axis(law, axis);
+    law.params()
+        .into_iter()
+        .filter(|p| p.is_dissipation())
+        .find(|p| {
+            law.derivative(*p)
+                .is_some_and(|(_, dpsi)| dpsi[axis] != 0.0)
+        })
 }
 
 /// Adds `freed` to the targets of the variable that sets `source` (with its ratio), if any.

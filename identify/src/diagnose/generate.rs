@@ -83,7 +83,6 @@ fn freed_directions(model: &Model, vars: &Variables, out: &mut Vec<Effect>) {
             continue;
         }
         let psi = sde.law.dissipation();
-        let own_psi = psi.iter().copied().fold(0.0, f64::max);
         let general = matches!(sde.law, SdeLaw::General { .. });
         for axis in 0..6 {
             let set_by_var = by_vars
@@ -101,7 +100,7 @@ fn freed_directions(model: &Model, vars: &Variables, out: &mut Vec<Effect>) {
                 sde: sde.name.clone(),
                 axis,
                 held: k[axis],
-                psi: if psi[axis] > 0.0 { psi[axis] } else { own_psi },
+                psi: psi[super::effects::psi_axis(&sde.law, axis)],
                 scale: typical[axis / 3],
             });
         }
