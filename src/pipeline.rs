@@ -236,7 +236,7 @@ pub struct BroadbandSwept {
 }
 
 /// Runs a broadband measurement (`stand`'s `[broadband]` plan) into a new session file, like
-/// [`sweep`] does a stepped sine (`opts.resume` and `opts.done` are for stepped sines: leave them
+/// [`sweep()`] does a stepped sine (`opts.resume` and `opts.done` are for stepped sines: leave them
 /// empty).
 pub fn broadband_sweep(
     stand: &Stand,

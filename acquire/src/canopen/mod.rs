@@ -13,7 +13,7 @@
 //!   repository (`configs/canopen/ident-sim-daq.eds`), answering SDO and NMT, sending SYNC-triggered
 //!   TPDOs from a signal, heartbeats, and EMCY on injected faults.
 //!
-//! Everything runs over a [`CanLink`]: the SocketCAN [`CanBus`](crate::can::CanBus) on a stand,
+//! Everything runs over a [`CanLink`]: the SocketCAN [`CanBus`] on a stand,
 //! the in-memory [`MemoryBus`] in tests. docs/canopen.md describes what is supported.
 
 pub mod eds;
@@ -229,7 +229,7 @@ impl CanLink for MemoryEndpoint {
     }
 }
 
-/// A [`CanLink`] whose every frame, sent and received, is copied to a [`ByteTap`] in
+/// A [`CanLink`] whose every frame, sent and received, is copied to a [`ByteTap`](crate::transport::ByteTap) in
 /// `cansend`/`candump -L` lines (`605#4018100100000000\n`), as the DAQ-over-CAN driver records its
 /// frames into the session. CANopen frames are small and many (SYNC and TPDOs per sample), so
 /// consecutive lines of one direction are handed over together, up to 4 KiB: on a change of

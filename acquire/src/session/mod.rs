@@ -5,8 +5,8 @@
 //!
 //! Writing happens on a dedicated thread; [`SessionHandle`]s (cheap clones) serialize messages in
 //! the caller and queue them without blocking. A message is never dropped silently: a failed
-//! writer makes every later [`SessionHandle::log`] return an error, and bytes the
-//! [`ByteTap`](crate::transport::ByteTap) could not queue are counted and reported.
+//! writer makes every later `SessionHandle::log` return an error, and bytes the
+//! [`ByteTap`] could not queue are counted and reported.
 
 pub mod records;
 pub mod schema;

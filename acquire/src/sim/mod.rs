@@ -1,6 +1,6 @@
 //! The simulated stand: a shaker controller and a DAQ that serve the real protocols (SCPI and the
 //! COBS/CRC stream) over pseudo-terminals — or any [`Transport`] — driven by a truth
-//! [`Plant`](plant::Plant), with sensor noise and configurable faults. Every injected fault is
+//! [`Plant`], with sensor noise and configurable faults. Every injected fault is
 //! logged so tests can check that the host detected each one.
 
 pub mod generator;

@@ -6,7 +6,7 @@
 //! periods, counted from the stream's first sample, after `settle` periods, without a stream fault
 //! or a gap, are the segments of a Welch estimate ([`process::spectra::Welch`]: rectangular window,
 //! no overlap, no detrending — leakage-free for a periodic drive) and the FRFs are H1
-//! ([`process::estimate`]) of every channel against the force, per newton (samples are volts /
+//! ([`process::estimate()`]) of every channel against the force, per newton (samples are volts /
 //! sensitivity, in SI). Buffers are allocated once.
 
 use process::estimate::{estimate, Estimator};

@@ -13,7 +13,7 @@
 //!    stability between consecutive orders, tolerances as [`StabilityTolerances`]), automatic pole
 //!    selection (stable poles clustered across orders) and the user's override (a list of
 //!    approximate frequencies).
-//! 3. [`lsfd`]: residues by linear least squares in the frequency domain with lower and upper
+//! 3. [`lsfd()`]: residues by linear least squares in the frequency domain with lower and upper
 //!    residuals, the residue matrix of each mode split into mode shape × participation (rank 1).
 //! 4. [`mac`] and [`complexity`]: modal assurance criterion between shape sets and the modal
 //!    complexity factor of a shape.
