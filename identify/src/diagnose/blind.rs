@@ -17,7 +17,8 @@
 //! among a thousand (barely detectable once the fitted variables absorb part of it) to
 //! dominant (a misfit of reduced χ² in the hundreds). Sizes stay physical: a body's mass within
 //! a factor [`BODY_MASS_FACTOR`] of the model's, a point mass or resonator at most
-//! [`ADDED_MASS_SHARE`] of its host body; an effect that cannot reach its signal within them is
+//! [`ADDED_MASS_SHARE`] of its host body, a joint's own ψ within the candidate's range (0 to 4π);
+//! an effect that cannot reach its signal within them is
 //! drawn again.
 
 use std::time::Instant;
@@ -355,6 +356,11 @@ fn sized(
     // Bracket on a log scale from the parameter's own scale, then bisect.
     let (mut lo, mut hi) = match effect {
         Effect::Gain { .. } => (1e-6, 0.45),
+        // A joint's own ψ up to 20× or 1/20 of its group's, within the range the candidate fits
+        // (at most 4π: a loss factor of 2).
+        Effect::Damping { value, .. } if sign > 0.0 => {
+            (1e-6, (params[0].upper / value).ln().min(3.0))
+        }
         Effect::Damping { .. } => (1e-6, 3.0),
         // A body half or twice as heavy as the model says (within the fitted range).
         Effect::BodyMass { .. } => (1e-6, BODY_MASS_FACTOR.ln()),
