@@ -23,7 +23,8 @@ pub struct DiagnoseArgs {
     /// Add at most this many effects.
     #[arg(long, default_value_t = 3)]
     pub max_effects: usize,
-    /// Refit the best this many candidate families per round.
+    /// Refit this many candidate families per round, the best screened first (and the score's
+    /// leading family when the screen left it out).
     #[arg(long, default_value_t = 5)]
     pub refit: usize,
     /// Write the diagnosis as JSON to this file (docs/diagnosis.md).
