@@ -2276,6 +2276,55 @@ mod tests {
         assert_eq!(order, (vec![2, 1, 4, 0, 5, 6], 1));
     }
 
+    /// The refits go to the `n` families the screen puts first, and to the score's leading
+    /// family as well when the screen puts it after them.
+    #[test]
+    fn the_score_s_leading_family_is_refitted_wherever_the_screen_puts_it() {
+        let candidates = vec![
+            spring("ground", "column"), // the score's first family
+            resonator("table"),
+            resonator("knee"),
+            spring("knee", "table"),
+        ];
+        let scored: Vec<score::Scored> = (0..candidates.len())
+            .map(|i| score::Scored {
+                candidate: i,
+                statistic: 100.0 - i as f64,
+                p_value: 1e-9 * (i + 1) as f64,
+                step: 1.0,
+                direction: DVector::zeros(1),
+                tuned_hz: None,
+            })
+            .collect();
+        let ranking = Ranking {
+            candidates,
+            scored,
+            families: vec![vec![0], vec![1], vec![2], vec![3]],
+            ranked: Vec::new(),
+            threshold: 1e-5,
+            sigma2: 1.0,
+        };
+        // The screen puts the score's leader last.
+        let screened: Vec<Screened> = [3, 1, 2, 0]
+            .iter()
+            .enumerate()
+            .map(|(r, &index)| Screened {
+                index,
+                criterion: 10.0 + r as f64,
+                start: vec![1.0],
+            })
+            .collect();
+        let families = |n: usize| -> Vec<Option<usize>> {
+            refit_jobs(&ranking, &screened, n, 400.0)
+                .iter()
+                .map(|job| job.family)
+                .collect()
+        };
+        assert_eq!(families(2), [Some(3), Some(1), Some(0)]);
+        // Where the screen already takes it, nothing is added.
+        assert_eq!(families(4), [Some(3), Some(1), Some(2), Some(0)]);
+    }
+
     fn estimate(name: &str, unit: &str, value: f64, std_error: f64) -> ParamEstimate {
         ParamEstimate {
             name: name.into(),
