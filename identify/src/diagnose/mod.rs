@@ -1126,13 +1126,13 @@ fn refit_jobs<'r>(
     n: usize,
     f_hi: f64,
 ) -> Vec<Job<'r>> {
-    let family_of = |j: usize| ranking.families.iter().position(|f| f.contains(&j));
+    let families = &ranking.families;
     let mut jobs: Vec<Job> = Vec::new();
     for s in screened {
         if jobs.len() == n {
             break;
         }
-        let family = family_of(s.index);
+        let family = families.iter().position(|f| f.contains(&s.index));
         if family.is_some() && jobs.iter().any(|job| job.family == family) {
             continue;
         }
@@ -1141,7 +1141,9 @@ fn refit_jobs<'r>(
     // The score's leading family is refitted too: the screen's first-order view of the fit's
     // own parameters can rank a large effect's true candidate below look-alikes (blind seed
     // 3062: a moment stiffness the score put first, screened below five springs).
-    let leader = screened.iter().find(|s| family_of(s.index) == Some(0));
+    let leader = families
+        .first()
+        .and_then(|f| screened.iter().find(|s| f.contains(&s.index)));
     if let Some(s) = leader.filter(|_| !jobs.iter().any(|job| job.family == Some(0))) {
         jobs.push(family_job(ranking, screened, s, Some(0), f_hi));
     }
