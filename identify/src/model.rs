@@ -165,6 +165,23 @@ impl ParamName {
 }
 
 impl SdeLaw {
+    /// Whether the law has no stiffness in direction `axis` (0-2 along, 3-5 about the SDE's
+    /// axes 1-3) whatever its parameters' values: an axial spring's five other directions, an
+    /// isolator's rotations, a contact's directions whose area or second moment is 0, a general
+    /// element's springs at 0. (A contact whose fitted kn is 0 still has its normal direction.)
+    pub fn leaves_out(&self, axis: usize) -> bool {
+        match *self {
+            SdeLaw::Contact {
+                area,
+                moments: [j1, j2, j3],
+                ..
+            } => [area, area, area, j1, j2, j3][axis] == 0.0,
+            SdeLaw::Axial { .. } => axis != 0,
+            SdeLaw::Isolator { .. } => axis >= 3,
+            SdeLaw::General { k, .. } => k[axis] == 0.0,
+        }
+    }
+
     /// The six stiffnesses in the SDE frame (N/m for 1-3, N·m/rad for 4-6).
     pub fn stiffness(&self) -> [f64; 6] {
         match *self {

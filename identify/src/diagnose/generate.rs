@@ -72,14 +72,21 @@ pub fn candidates(
     out
 }
 
-/// Every direction of an enabled SDE that its law leaves out (stiffness 0), and every direction
-/// of a general element held at a stiffness no variable sets, as a candidate to free.
+/// Every direction of an enabled SDE that its law leaves out ([`SdeLaw::leaves_out`]), and
+/// every direction of a general element held at a stiffness no variable sets, as a candidate
+/// to free. An SDE with no stiffness at all is no connection unless a variable sets one of its
+/// stiffnesses: a fit can drive that one to 0 (blind seed 3230: the table actuator's axial
+/// stiffness went to 0 to mimic its missing lateral one, and so the lateral one was no longer a
+/// candidate).
 fn freed_directions(model: &Model, vars: &Variables, out: &mut Vec<Effect>) {
     let by_vars = vars.params();
     let typical = [0..3, 3..6].map(|r| typical_stiffness(model, r));
     for (i, sde) in model.sdes.iter().enumerate().filter(|(_, s)| s.enabled) {
         let k = sde.law.stiffness();
-        if k.iter().all(|v| *v == 0.0) {
+        let fitted = by_vars
+            .iter()
+            .any(|r| r.sde == i && !r.name.is_dissipation());
+        if k.iter().all(|v| *v == 0.0) && !fitted {
             continue;
         }
         let psi = sde.law.dissipation();
@@ -88,10 +95,10 @@ fn freed_directions(model: &Model, vars: &Variables, out: &mut Vec<Effect>) {
             let set_by_var = by_vars
                 .iter()
                 .any(|r| r.sde == i && r.name == ParamName::Ki(axis as u8));
-            let candidate = if k[axis] == 0.0 {
+            let candidate = if general {
                 !set_by_var
             } else {
-                general && !set_by_var
+                sde.law.leaves_out(axis)
             };
             if !candidate {
                 continue;
@@ -376,6 +383,35 @@ fn typical_psi(model: &Model) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The table actuator (SDE 34, an axial spring) whose fitted stiffness went to 0 keeps its
+    /// five other directions as candidates to free; with no variable setting its stiffness it
+    /// is no connection and has none.
+    #[test]
+    fn an_sde_whose_fitted_stiffness_is_0_keeps_the_directions_its_law_leaves_out() {
+        let mut model = crate::modelfile::fwd32j();
+        let vars_file = crate::modelfile::repo_file("configs/identification/fwd32j.toml");
+        let vars = crate::identification::variables::load(&vars_file, &model).unwrap();
+        let s = model.sde_index("34").unwrap();
+        model.sdes[s].law = SdeLaw::Axial { k: 0.0, psi: 0.3 };
+        let freed = |vars: &Variables| -> Vec<usize> {
+            let x: Vec<f64> = vars.vars.iter().map(|v| v.initial).collect();
+            candidates(&model, vars, &x, &["u1".to_string()], 20.0, 400.0)
+                .iter()
+                .filter_map(|e| match e {
+                    Effect::Direction { sde, axis, .. } if sde == "34" => Some(*axis),
+                    _ => None,
+                })
+                .collect()
+        };
+        assert_eq!(freed(&vars), [1, 2, 3, 4, 5]);
+        let none = Variables {
+            origin: "none".into(),
+            vars: Vec::new(),
+            extra_starts: Vec::new(),
+        };
+        assert!(freed(&none).is_empty());
+    }
 
     /// FWD-32J's springs between two bodies stand where both reach: the exciter joins the
     /// spindle head to the table at its ball and its bracket, the bracket on top of the table is
