@@ -38,7 +38,7 @@ fn assert_gain_in_db(d: &diagnose::Diagnosis) {
 /// spring somewhere else) and estimate its stiffness within 3 standard errors. Ignored while it
 /// fails (run it with `--ignored`): the freed direction does not reach the leading candidates.
 #[test]
-#[ignore = "known failure (issue 15): the freed direction is not among the leading candidates; a point mass and two resonators are added instead"]
+#[ignore = "known failure (issue 15): the freed direction is not among the leading candidates; the column's flexibility and two springs are added instead"]
 fn a_stiffness_a_joint_is_modelled_without_is_found_by_freeing_that_direction() {
     let model = load_model("fwd32j.toml");
     let vars = load_variables("fwd32j.toml", &model);
