@@ -1166,12 +1166,13 @@ fn refit_jobs<'r>(
     f_hi: f64,
 ) -> Vec<Job<'r>> {
     let families = &ranking.families;
+    let family_index = |j: usize| families.iter().position(|f| f.contains(&j));
     let mut jobs: Vec<Job> = Vec::new();
     for s in screened {
         if jobs.len() == n {
             break;
         }
-        let family = families.iter().position(|f| f.contains(&s.index));
+        let family = family_index(s.index);
         if family.is_some() && jobs.iter().any(|job| job.family == family) {
             continue;
         }
@@ -1193,6 +1194,9 @@ fn refit_jobs<'r>(
     // stiffness screened at J 2283 against 2340 before, below resonators at 600-900; refitted,
     // it ends at the noise level, J 52). Where the misfit is small the screen is close to the
     // refit and these jobs would only cost time.
+    if !large {
+        return jobs;
+    }
     let significant = |s: &Screened, effect: &Effect| {
         let lr = 2.0 * (base_j - s.criterion) / ranking.sigma2;
         ChiSquared::new(effect.params(f_hi).len() as f64)
@@ -1200,15 +1204,20 @@ fn refit_jobs<'r>(
     };
     let mut by_score: Vec<&Screened> = screened.iter().collect();
     by_score.sort_by_key(|s| s.index);
-    for s in by_score.into_iter().filter(|_| large) {
+    for s in by_score {
         let effect = &ranking.candidates[ranking.scored[s.index].candidate];
         let taken = jobs
             .iter()
             .flat_map(|job| &job.members)
             .any(|m| m.effect.kind() == effect.kind());
         if !taken && significant(s, effect) {
-            let family = families.iter().position(|f| f.contains(&s.index));
-            jobs.push(family_job(ranking, screened, s, family, f_hi));
+            jobs.push(family_job(
+                ranking,
+                screened,
+                s,
+                family_index(s.index),
+                f_hi,
+            ));
         }
     }
     jobs
@@ -1940,12 +1949,17 @@ fn refit(
     // better valley for a large effect but can be a worse one for a small effect (a start that
     // fits best before the refit is not the one that fits best after it). The better end wins.
     let mut given: Option<DVector<f64>> = None;
+    // The current fit's variables and effects with the new effect's parameters at `st` (SI,
+    // clamped to their bounds), scaled.
+    let start_at = |st: &[f64]| {
+        let new = new_params
+            .iter()
+            .zip(st)
+            .map(|(np, x)| x.clamp(np.lower, np.upper) / np.scale);
+        DVector::from_iterator(cur.u.len() + q, cur.u.iter().copied().chain(new))
+    };
     for st in screen::effect_starts(&new_params, start, explore) {
-        let mut u: Vec<f64> = cur.u.iter().copied().collect();
-        for (np, x) in new_params.iter().zip(&st) {
-            u.push(x.clamp(np.lower, np.upper) / np.scale);
-        }
-        let u = DVector::from_vec(u);
+        let u = start_at(&st);
         // A start that cannot be evaluated is skipped (the first is kept so that the
         // minimizer reports why).
         let j = p
@@ -1995,14 +2009,7 @@ fn refit(
     // 3186: an isolator's moment stiffness refitted from the screen's size ends at J 2246, from
     // its score step at the noise level, J 52).
     if let Some(step) = step {
-        let mut u: Vec<f64> = cur.u.iter().copied().collect();
-        u.extend(
-            new_params
-                .iter()
-                .zip(step)
-                .map(|(np, x)| x.clamp(np.lower, np.upper) / np.scale),
-        );
-        others.push(DVector::from_vec(u));
+        others.push(start_at(step));
     }
     // A large missing effect bends the fit's own parameters to mimic it, and the refit can stay
     // in that valley: the variables' initial values, with the effect at its best start, are a
