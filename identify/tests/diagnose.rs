@@ -97,6 +97,19 @@ fn the_missing_hydraulic_actuator_is_found_added_and_the_fit_reaches_the_noise_f
         k.std_error
     );
     assert_eq!(d.accepted.len(), 1, "nothing else should be added");
+    // Its family's refit reaches the noise level, so round 1 refits the leading families only
+    // (the score's leader among them), not also each kind they leave out.
+    let leading = diagnose::Options::default().refit + 1;
+    assert!(
+        d.rounds[0].refits.len() <= leading,
+        "round 1 refitted {} families: {:?}",
+        d.rounds[0].refits.len(),
+        d.rounds[0]
+            .refits
+            .iter()
+            .map(|r| &r.effect)
+            .collect::<Vec<_>>()
+    );
     assert_eq!(
         d.outside_library, None,
         "explained: no outside-the-library verdict"

@@ -52,9 +52,9 @@ pub struct Options {
     /// At most this many effects are added.
     pub max_effects: usize,
     /// Refit this many candidate families of each round, the best screened first (and the
-    /// score's leading family when the screen left it out; when the misfit is large, also the
-    /// family of each kind's best-scored candidate none of them holds, where its screen is
-    /// significant).
+    /// score's leading family when the screen left it out; when the misfit is large and their
+    /// refits leave it above the noise level, also the family of each kind's best-scored
+    /// candidate none of them holds, where its screen is significant).
     pub refit: usize,
     /// How the identification was run (fit kind, noise model, optimizer settings).
     pub identification: identification::Options,
@@ -898,57 +898,31 @@ fn refit_leading(
     progress: &mut dyn FnMut(&str),
 ) -> (Vec<Refit>, Option<(usize, Current)>, Vec<NotTried>) {
     let Ranking {
-        candidates,
-        scored,
-        families: _,
-        ranked: _,
-        threshold,
-        sigma2,
+        threshold, sigma2, ..
     } = ranking;
     let mut refits: Vec<Refit> = Vec::new();
     let mut best: Option<(usize, Current)> = None;
     let mut not_identifiable = Vec::new();
-    // The families of the best screened candidates are refitted, in parallel.
-    let large = cur.e.norm_squared() / sigma2 > LARGE_MISFIT * cur.e.len() as f64;
-    let jobs = refit_jobs(
-        ranking,
-        screened,
-        (opts.refit, 0.5 * cur.e.norm_squared(), large),
-        f_hi,
-    );
-    if let Some((best, Member { effect: k, .. })) = screened
-        .first()
-        .zip(jobs.first().and_then(|job| job.members.first()))
-    {
-        progress(&format!(
-            "screened {} candidates by a finite step; best: {} (J {:.1} → {:.1}); refitting {} families ({} distinct members), first {}",
-            screened.len(),
-            candidates[scored[best.index].candidate].describe(),
-            0.5 * cur.e.norm_squared(),
-            best.criterion,
-            jobs.len(),
-            jobs.iter()
-                .flat_map(|job| &job.members)
-                .filter(|m| m.mirror_of.is_none())
-                .count(),
-            k.describe()
-        ));
-    }
-    // Every distinct member of those families is refitted, in parallel; a family's best refit
-    // stands for it, with the members the data cannot tell from it as its equivalents.
-    let distinct: Vec<(usize, usize)> = jobs
-        .iter()
-        .enumerate()
-        .flat_map(|(f, job)| {
-            job.members
-                .iter()
-                .enumerate()
-                .filter(|(_, m)| m.mirror_of.is_none())
-                .map(move |(i, _)| (f, i))
-        })
-        .collect();
-    let mut results: Vec<Option<Result<(Refit, Current), RefitError>>> =
-        in_parallel(&distinct, |&(f, i)| {
+    // The families of the best screened candidates are refitted, in parallel; when the misfit
+    // is large and their best refit leaves it above the noise level (χ² at the diagnosis's
+    // level), so are the families of the kinds they leave out (see [`kind_jobs`]).
+    let m = cur.e.len();
+    let large = cur.e.norm_squared() / sigma2 > LARGE_MISFIT * m as f64;
+    let base_j = 0.5 * cur.e.norm_squared();
+    let mut jobs = refit_jobs(ranking, screened, opts.refit, f_hi);
+    let run = |jobs: &[Job]| -> Vec<Vec<MemberRefit>> {
+        let distinct: Vec<(usize, usize)> = jobs
+            .iter()
+            .enumerate()
+            .flat_map(|(f, job)| {
+                job.members
+                    .iter()
+                    .enumerate()
+                    .filter(|(_, m)| m.mirror_of.is_none())
+                    .map(move |(i, _)| (f, i))
+            })
+            .collect();
+        let results = in_parallel(&distinct, |&(f, i)| {
             refit_member(
                 (model, vars, obs),
                 opts,
@@ -957,17 +931,36 @@ fn refit_leading(
                 f_hi,
                 *sigma2,
             )
-        })
-        .into_iter()
-        .map(Some)
-        .collect();
+        });
+        let mut outcomes: Vec<Vec<MemberRefit>> = jobs.iter().map(|_| Vec::new()).collect();
+        for ((f, i), r) in distinct.into_iter().zip(results) {
+            outcomes[f].push((i, r));
+        }
+        outcomes
+    };
+    report_jobs(&jobs, screened, ranking, base_j, progress);
+    let mut outcomes = run(&jobs);
+    let least = outcomes
+        .iter()
+        .flatten()
+        .filter_map(|(_, r)| r.as_ref().ok())
+        .map(|(r, _)| r.criterion_after)
+        .fold(base_j, f64::min);
+    if large && residuals::chi2_tail(m as f64, 2.0 * least / sigma2) < opts.alpha {
+        let more = kind_jobs(ranking, screened, &jobs, base_j, f_hi);
+        if !more.is_empty() {
+            progress(&format!(
+                "the best refit leaves J {least:.1}, above the noise level: refitting the best of {} kinds the leading families leave out",
+                more.len()
+            ));
+            outcomes.extend(run(&more));
+            jobs.extend(more);
+        }
+    }
+    // A family's best refit stands for it, with the members the data cannot tell from it as
+    // its equivalents.
     for (f, Job { family, members }) in jobs.iter().enumerate() {
-        let mut outcomes: Vec<MemberRefit> = distinct
-            .iter()
-            .zip(results.iter_mut())
-            .filter(|((g, _), _)| *g == f)
-            .filter_map(|((_, i), r)| r.take().map(|r| (*i, r)))
-            .collect();
+        let mut outcomes = std::mem::take(&mut outcomes[f]);
         let Some(b) = best_member(members, &outcomes, (f_hi, *threshold)) else {
             if let Some((_, Err(reason))) = outcomes.first() {
                 not_tried.push(NotTried {
@@ -1155,24 +1148,20 @@ fn mirrors(a: &Screened, b: &Screened) -> bool {
 /// that member first (started where the screen left it) and then the family's other members
 /// (from where the screen left them, or their score steps) in [`kinds_first`] order: the best of
 /// each other kind always, then other sites and points up to [`MEMBERS_REFITTED`] distinct ones
-/// in all, and their mirror images. The score's leading family is always among them; and when
-/// the misfit is `large` (see [`LARGE_MISFIT`]), the family of each kind's best-scored screened
-/// candidate whose kind none of the jobs holds, where its screen alone is significant against
-/// the current criterion `base_j`.
+/// in all, and their mirror images. The score's leading family is always among them.
 fn refit_jobs<'r>(
     ranking: &'r Ranking,
     screened: &[Screened],
-    (n, base_j, large): (usize, f64, bool),
+    n: usize,
     f_hi: f64,
 ) -> Vec<Job<'r>> {
     let families = &ranking.families;
-    let family_index = |j: usize| families.iter().position(|f| f.contains(&j));
     let mut jobs: Vec<Job> = Vec::new();
     for s in screened {
         if jobs.len() == n {
             break;
         }
-        let family = family_index(s.index);
+        let family = families.iter().position(|f| f.contains(&s.index));
         if family.is_some() && jobs.iter().any(|job| job.family == family) {
             continue;
         }
@@ -1187,40 +1176,76 @@ fn refit_jobs<'r>(
     if let Some(s) = leader.filter(|_| !jobs.iter().any(|job| job.family == Some(0))) {
         jobs.push(family_job(ranking, screened, s, Some(0), f_hi));
     }
-    // When the misfit is large, so is the family of each other kind's best-scored screened
-    // candidate whose screen alone is significant: the screen re-adjusts the fit's own
-    // variables to first order only, and a large effect of one kind can screen far above its
-    // refit, below partial fixes of another kind (blind seed 3186: an isolator's moment
-    // stiffness screened at J 2283 against 2340 before, below resonators at 600-900; refitted,
-    // it ends at the noise level, J 52). Where the misfit is small the screen is close to the
-    // refit and these jobs would only cost time.
-    if !large {
-        return jobs;
-    }
+    jobs
+}
+
+/// The refits of the kinds the leading families' `jobs` leave out, for when their refits leave
+/// the misfit large: of each such kind, the family of its best-scored screened candidate, where
+/// that candidate's screen alone is significant against the current criterion `base_j`.
+///
+/// The screen re-adjusts the fit's own variables to first order only, and a large effect of
+/// one kind can screen far above its refit, below partial fixes of another kind (blind seed
+/// 3186: an isolator's moment stiffness screened at J 2283 against 2340 before, below
+/// resonators at 600-900; refitted, it ends at the noise level, J 52). Where the leading
+/// families' refits bring the misfit down, these would only cost time.
+fn kind_jobs<'r>(
+    ranking: &'r Ranking,
+    screened: &[Screened],
+    jobs: &[Job],
+    base_j: f64,
+    f_hi: f64,
+) -> Vec<Job<'r>> {
     let significant = |s: &Screened, effect: &Effect| {
         let lr = 2.0 * (base_j - s.criterion) / ranking.sigma2;
         ChiSquared::new(effect.params(f_hi).len() as f64)
             .is_ok_and(|c| lr > c.inverse_cdf(1.0 - ranking.threshold))
     };
+    let mut kinds: Vec<&str> = jobs
+        .iter()
+        .flat_map(|job| &job.members)
+        .map(|m| m.effect.kind())
+        .collect();
     let mut by_score: Vec<&Screened> = screened.iter().collect();
     by_score.sort_by_key(|s| s.index);
+    let mut more = Vec::new();
     for s in by_score {
         let effect = &ranking.candidates[ranking.scored[s.index].candidate];
-        let taken = jobs
-            .iter()
-            .flat_map(|job| &job.members)
-            .any(|m| m.effect.kind() == effect.kind());
-        if !taken && significant(s, effect) {
-            jobs.push(family_job(
-                ranking,
-                screened,
-                s,
-                family_index(s.index),
-                f_hi,
-            ));
+        if !kinds.contains(&effect.kind()) && significant(s, effect) {
+            let family = ranking.families.iter().position(|f| f.contains(&s.index));
+            let job = family_job(ranking, screened, s, family, f_hi);
+            kinds.extend(job.members.iter().map(|m| m.effect.kind()));
+            more.push(job);
         }
     }
-    jobs
+    more
+}
+
+/// Reports a round's screen and the refits it leads to.
+fn report_jobs(
+    jobs: &[Job],
+    screened: &[Screened],
+    ranking: &Ranking,
+    base_j: f64,
+    progress: &mut dyn FnMut(&str),
+) {
+    let Some((best, first)) = screened
+        .first()
+        .zip(jobs.first().and_then(|job| job.members.first()))
+    else {
+        return;
+    };
+    progress(&format!(
+        "screened {} candidates by a finite step; best: {} (J {base_j:.1} → {:.1}); refitting {} families ({} distinct members), first {}",
+        screened.len(),
+        ranking.candidates[ranking.scored[best.index].candidate].describe(),
+        best.criterion,
+        jobs.len(),
+        jobs.iter()
+            .flat_map(|job| &job.members)
+            .filter(|m| m.mirror_of.is_none())
+            .count(),
+        first.effect.describe()
+    ));
 }
 
 /// The refit job of family `family` (of [`Ranking::families`]; `None` for a candidate in none)
@@ -2420,7 +2445,7 @@ mod tests {
         // The screen puts the score's leader last.
         let screened = screened_in_order(&[3, 1, 2, 0], &[1.0]);
         let families = |n: usize| -> Vec<Option<usize>> {
-            refit_jobs(&ranking, &screened, (n, 20.0, true), 400.0)
+            refit_jobs(&ranking, &screened, n, 400.0)
                 .iter()
                 .map(|job| job.family)
                 .collect()
@@ -2430,10 +2455,9 @@ mod tests {
         assert_eq!(families(4), [Some(3), Some(1), Some(2), Some(0)]);
     }
 
-    /// When the misfit is large, a kind none of the leading families holds gets the family of
-    /// its best-scored screened candidate refitted, where that candidate's screen is
-    /// significant by itself (LR = 2ΔJ/σ̂² above the round's critical value for its
-    /// parameters); otherwise it is left out.
+    /// A kind none of the leading families holds gets the family of its best-scored screened
+    /// candidate refitted, where that candidate's screen is significant by itself (LR =
+    /// 2ΔJ/σ̂² above the round's critical value for its parameters); otherwise it is left out.
     #[test]
     fn a_kind_left_out_of_the_leading_families_is_refitted_where_its_screen_is_significant() {
         let candidates = vec![
@@ -2446,21 +2470,21 @@ mod tests {
         // The resonator on the knee screens better than the one on the table, which the
         // score put first.
         let screened = screened_in_order(&[0, 1, 3, 2], &[1.0, 100.0]);
-        let jobs = |base_j: f64, large: bool| -> Vec<(Option<usize>, usize)> {
-            refit_jobs(&ranking, &screened, (2, base_j, large), 400.0)
-                .iter()
+        let leading = refit_jobs(&ranking, &screened, 2, 400.0);
+        let families = |jobs: &[Job]| -> Vec<(Option<usize>, usize)> {
+            jobs.iter()
                 .map(|job| (job.family, job.members.len()))
                 .collect()
         };
+        assert_eq!(families(&leading), [(Some(0), 1), (Some(1), 1)]);
         // LR 2 × (100 − 13) = 174 for 2 parameters: the table's resonator's family.
-        assert_eq!(
-            jobs(100.0, true),
-            [(Some(0), 1), (Some(1), 1), (Some(2), 1)]
-        );
+        let more = kind_jobs(&ranking, &screened, &leading, 100.0, 400.0);
+        assert_eq!(families(&more), [(Some(2), 1)]);
         // LR 2 × (14 − 13) = 2: not significant, no resonator is refitted.
-        assert_eq!(jobs(14.0, true), [(Some(0), 1), (Some(1), 1)]);
-        // A small misfit: the screen is trusted.
-        assert_eq!(jobs(100.0, false), [(Some(0), 1), (Some(1), 1)]);
+        assert!(kind_jobs(&ranking, &screened, &leading, 14.0, 400.0).is_empty());
+        // Where the leading families hold every kind there is nothing to add.
+        let all = refit_jobs(&ranking, &screened, 4, 400.0);
+        assert!(kind_jobs(&ranking, &screened, &all, 100.0, 400.0).is_empty());
     }
 
     fn estimate(name: &str, unit: &str, value: f64, std_error: f64) -> ParamEstimate {
