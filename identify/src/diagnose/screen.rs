@@ -21,15 +21,22 @@ use crate::identification::EvalError;
 pub(super) const REFIT_START_FRACTIONS: [f64; 4] = [1.0, 0.3, 0.1, 0.03];
 /// And where the effect's size is its nested value ± its scale times ten to these powers.
 pub(super) const REFIT_SIZE_DECADES: [i32; 6] = [-2, -1, 0, 1, 2, 3];
+/// And, where the nested value is itself a size (a split joint group's ψ, a body's mass), at
+/// these multiples of it: ψ divides the resonance peaks, and a joint's own ψ can be a fraction
+/// or a multiple of its group's, far from any step of the group's size (blind seeds 3315 and
+/// 3336: a split ψ of 0.39 and 6.9 from a group at 1.45 and 2.6, whose refits stopped at 0.94 and
+/// did not reach 6.9 from the additive steps).
+pub(super) const REFIT_SIZE_FACTORS: [f64; 7] = [0.03, 0.1, 0.2, 0.3, 0.5, 2.0, 3.0];
 /// Tuning frequencies of a resonator's starting grid across its range.
 const RESONATOR_GRID: usize = 24;
 /// Iterations of the screen's minimization over a candidate's own parameters.
 const SCREEN_ITERATIONS: usize = 5;
 
 /// Starting values (SI) of a new effect's parameters: `start`, and with `explore` also the way
-/// there from the nested values ([`REFIT_START_FRACTIONS`]) and the size over decades of its
-/// scale on either side of the nested value ([`REFIT_SIZE_DECADES`]; for a large effect the score
-/// step is no guide). `start` comes first.
+/// there from the nested values ([`REFIT_START_FRACTIONS`]), the size over decades of its scale
+/// on either side of the nested value ([`REFIT_SIZE_DECADES`]; for a large effect the score step
+/// is no guide) and, for a positive nested size, multiples of it ([`REFIT_SIZE_FACTORS`]).
+/// `start` comes first; sizes outside the bounds are left out.
 pub(super) fn effect_starts(params: &[EffectParam], start: &[f64], explore: bool) -> Vec<Vec<f64>> {
     let fractions: &[f64] = if explore {
         &REFIT_START_FRACTIONS
@@ -47,14 +54,18 @@ pub(super) fn effect_starts(params: &[EffectParam], start: &[f64], explore: bool
         })
         .collect();
     if let Some(np) = params.first().filter(|_| explore) {
-        for d in REFIT_SIZE_DECADES {
-            for sign in [1.0, -1.0] {
-                let x0 = np.nested + sign * np.scale * 10f64.powi(d);
-                if x0 > np.lower && x0 < np.upper {
-                    let mut v = start.to_vec();
-                    v[0] = x0;
-                    out.push(v);
-                }
+        let steps = REFIT_SIZE_DECADES
+            .iter()
+            .flat_map(|&d| [1.0, -1.0].map(|sign| np.nested + sign * np.scale * 10f64.powi(d)));
+        let multiples = REFIT_SIZE_FACTORS
+            .iter()
+            .filter(|_| np.nested > 0.0)
+            .map(|f| f * np.nested);
+        for x0 in steps.chain(multiples) {
+            if x0 > np.lower && x0 < np.upper {
+                let mut v = start.to_vec();
+                v[0] = x0;
+                out.push(v);
             }
         }
     }
@@ -242,4 +253,49 @@ pub(super) fn screen(
     };
     let values = g.iter().zip(&params).map(|(u, p)| u * p.scale).collect();
     Some((j, values))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const PSI_MAX: f64 = 4.0 * std::f64::consts::PI;
+
+    fn param(nested: f64, scale: f64, upper: f64) -> EffectParam {
+        EffectParam {
+            name: "x",
+            unit: "-",
+            nested,
+            initial: nested,
+            lower: 0.0,
+            upper,
+            scale,
+        }
+    }
+
+    /// A split ψ starts at fractions and multiples of its group's value, where the additive
+    /// steps of its scale do not reach (blind seeds 3315, 3336); a size nested at 0 (a spring's
+    /// stiffness) has no multiples, and no start leaves the bounds.
+    #[test]
+    fn a_positive_nested_size_is_also_started_at_multiples_of_it() {
+        let sizes = |p: &EffectParam| -> Vec<f64> {
+            effect_starts(std::slice::from_ref(p), &[p.nested], true)
+                .iter()
+                .map(|v| v[0])
+                .collect()
+        };
+        let near = |xs: &[f64], x: f64| xs.iter().any(|y| (y / x).ln().abs() < 0.35);
+        let psi = sizes(&param(1.45, 1.45, PSI_MAX));
+        assert!(near(&psi, 0.39) && near(&psi, 4.3), "{psi:?}");
+        assert!(psi.iter().all(|&x| x > 0.0 && x < PSI_MAX));
+        // A stiffness: the start on the way from 0, then one step up per decade.
+        let stiffness = sizes(&param(0.0, 1e6, f64::INFINITY));
+        let steps = REFIT_START_FRACTIONS.len() + REFIT_SIZE_DECADES.len();
+        assert_eq!(stiffness.len(), steps, "{stiffness:?}");
+        // Without `explore`, only the given start.
+        assert_eq!(
+            effect_starts(&[param(1.45, 1.45, PSI_MAX)], &[2.0], false),
+            [vec![2.0]]
+        );
+    }
 }
