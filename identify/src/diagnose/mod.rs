@@ -1790,24 +1790,25 @@ fn place(
     };
     let dof = offsets[0].len() as f64;
     let cand_params = cand.params(f_hi);
-    let (r, next) = offsets
-        .iter()
-        .filter_map(|o| {
-            let st: Vec<f64> = start.iter().chain(o).copied().collect();
-            refit(
-                model,
-                vars,
-                obs,
-                opts,
-                base,
-                &cand,
-                (&st, None),
-                f_hi,
-                sigma2,
-            )
-            .ok()
-        })
-        .min_by(|a, b| a.1.e.norm_squared().total_cmp(&b.1.e.norm_squared()))?;
+    // The starting places are refitted in parallel.
+    let (r, next) = in_parallel(&offsets, |o| {
+        let st: Vec<f64> = start.iter().chain(o).copied().collect();
+        refit(
+            model,
+            vars,
+            obs,
+            opts,
+            base,
+            &cand,
+            (&st, None),
+            f_hi,
+            sigma2,
+        )
+        .ok()
+    })
+    .into_iter()
+    .flatten()
+    .min_by(|a, b| a.1.e.norm_squared().total_cmp(&b.1.e.norm_squared()))?;
     let lr = ((fixed.e.norm_squared() - next.e.norm_squared()) / sigma2).max(0.0);
     let p = residuals::chi2_tail(dof, lr);
     // A place at the edge of its reach, or a size the data cannot tell from zero, is not a
