@@ -1179,8 +1179,8 @@ fn refit_jobs<'r>(
     jobs
 }
 
-/// The refits of the kinds the leading families' `jobs` leave out, for when their refits leave
-/// the misfit large: of each such kind, the family of its best-scored screened candidate, where
+/// The refits of the kinds the leading families' `jobs` leave out, for when the misfit was large
+/// and their refits leave it above the noise level: of each such kind, the family of its best-scored screened candidate, where
 /// that candidate's screen alone is significant against the current criterion `base_j`.
 ///
 /// The screen re-adjusts the fit's own variables to first order only, and a large effect of
