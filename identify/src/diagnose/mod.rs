@@ -785,6 +785,13 @@ struct Ranking {
     sigma2: f64,
 }
 
+impl Ranking {
+    /// The index in [`Ranking::families`] of the family holding scored candidate `j`, if any.
+    fn family_index(&self, j: usize) -> Option<usize> {
+        self.families.iter().position(|f| f.contains(&j))
+    }
+}
+
 /// Generates the candidates on the current fit of `pc` and ranks them at family-wise level
 /// `alpha`; those that cannot be scored go to `not_tried`.
 fn rank(
@@ -927,7 +934,7 @@ fn refit_leading(
                 (model, vars, obs),
                 opts,
                 cur,
-                (&jobs[f].members[i], i == 0),
+                (&jobs[f].members[i], large && i == 0),
                 f_hi,
                 *sigma2,
             )
@@ -1161,7 +1168,7 @@ fn refit_jobs<'r>(
         if jobs.len() == n {
             break;
         }
-        let family = families.iter().position(|f| f.contains(&s.index));
+        let family = ranking.family_index(s.index);
         if family.is_some() && jobs.iter().any(|job| job.family == family) {
             continue;
         }
@@ -1180,8 +1187,9 @@ fn refit_jobs<'r>(
 }
 
 /// The refits of the kinds the leading families' `jobs` leave out, for when the misfit was large
-/// and their refits leave it above the noise level: of each such kind, the family of its best-scored screened candidate, where
-/// that candidate's screen alone is significant against the current criterion `base_j`.
+/// and their refits leave it above the noise level: of each such kind, the family of its
+/// best-scored screened candidate, where that candidate's screen alone is significant against
+/// the current criterion `base_j`.
 ///
 /// The screen re-adjusts the fit's own variables to first order only, and a large effect of
 /// one kind can screen far above its refit, below partial fixes of another kind (blind seed
@@ -1211,8 +1219,7 @@ fn kind_jobs<'r>(
     for s in by_score {
         let effect = &ranking.candidates[ranking.scored[s.index].candidate];
         if !kinds.contains(&effect.kind()) && significant(s, effect) {
-            let family = ranking.families.iter().position(|f| f.contains(&s.index));
-            let job = family_job(ranking, screened, s, family, f_hi);
+            let job = family_job(ranking, screened, s, ranking.family_index(s.index), f_hi);
             kinds.extend(job.members.iter().map(|m| m.effect.kind()));
             more.push(job);
         }
@@ -1371,20 +1378,19 @@ fn in_parallel<J: Sync, R: Send>(jobs: &[J], f: impl Fn(&J) -> R + Sync) -> Vec<
 }
 
 /// Refits one member of a family from where the screen left its parameters (or its score
-/// step). When the misfit is large (reduced χ² above [`LARGE_MISFIT`]) the family's `leader`
-/// (its best-screened member) also explores (see [`refit`]): a large missing effect bends the
-/// fit's own variables, and the screen adjusts them to first order only. The other members only
-/// refit: exploring them too doubled the blind suite's time and changed 1 of its 200 verdicts.
+/// step); with `explore` also from its score step and the other starts of [`refit`]. The caller
+/// explores a family's leader (its best-screened member) when the misfit is large (reduced χ²
+/// above [`LARGE_MISFIT`]): a large missing effect bends the fit's own variables, and the screen
+/// adjusts them to first order only. The other members only refit: exploring them too doubled
+/// the blind suite's time and changed 1 of its 200 verdicts.
 fn refit_member(
     (model, vars, obs): (&Model, &Variables, &Observations),
     opts: &Options,
     cur: &Current,
-    (member, leader): (&Member, bool),
+    (member, explore): (&Member, bool),
     f_hi: f64,
     sigma2: f64,
 ) -> Result<(Refit, Current), RefitError> {
-    let m = cur.e.len() as f64;
-    let large = leader && cur.e.norm_squared() / sigma2 > LARGE_MISFIT * m;
     refit(
         model,
         vars,
@@ -1392,7 +1398,10 @@ fn refit_member(
         opts,
         cur,
         member.effect,
-        (&member.start, large.then_some(member.score_step.as_slice())),
+        (
+            &member.start,
+            explore.then_some(member.score_step.as_slice()),
+        ),
         f_hi,
         sigma2,
     )
