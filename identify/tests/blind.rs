@@ -69,9 +69,9 @@ fn the_blind_subset_is_diagnosed_at_the_asserted_rates() {
 /// Share of the subset's cases with effects whose first added effect is an injected one. The
 /// subset gets 13 of its 17 (seeds 1-24); one case of margin.
 const RIGHT_FIRST: f64 = 0.70;
-/// Share of the subset's cases that end with exactly the injected set. The subset gets 19 of 24;
-/// one case of margin.
-const EXACT: f64 = 0.75;
+/// Share of the subset's cases that end with exactly the injected set. The subset gets 20 of 24
+/// (19 before the short refits); one case of margin.
+const EXACT: f64 = 0.79;
 
 #[test]
 fn the_judge_matches_effects_by_kind_and_place() {
