@@ -1327,17 +1327,8 @@ fn short_refits(
         let out = [u0, fresh]
             .iter()
             .filter_map(|u| {
-                let min = optimize::minimize;
-                min(
-                    opts.identification.optimizer,
-                    &mut p,
-                    u,
-                    &lo,
-                    &hi,
-                    &settings,
-                    &mut |_| {},
-                )
-                .ok()
+                let optimizer = opts.identification.optimizer;
+                optimize::minimize(optimizer, &mut p, u, &lo, &hi, &settings, &mut |_| {}).ok()
             })
             .min_by(|a, b| a.criterion.total_cmp(&b.criterion))?;
         let start = params
