@@ -1195,17 +1195,7 @@ fn refit_jobs<'r>(
     f_hi: f64,
 ) -> Vec<Job<'r>> {
     let families = &ranking.families;
-    let mut jobs: Vec<Job> = Vec::new();
-    for s in screened {
-        if jobs.len() == n {
-            break;
-        }
-        let family = ranking.family_index(s.index);
-        if family.is_some() && jobs.iter().any(|job| job.family == family) {
-            continue;
-        }
-        jobs.push(family_job(ranking, screened, s, family, f_hi));
-    }
+    let mut jobs = family_jobs(ranking, screened, screened, &[], n, f_hi);
     // The score's leading family is refitted too: the screen's first-order view of the fit's
     // own parameters can rank a large effect's true candidate below look-alikes (blind seed
     // 3062: a moment stiffness the score put first, screened below five springs).
@@ -1314,15 +1304,8 @@ fn short_refits(
             .map_or(step.clone(), |s| s.start.clone());
         let mut starts = screen::effect_starts(&params, &given, true);
         starts.push(step);
-        let u0 = starts
-            .iter()
-            .map(|x| with_effect(&cur.u, &params, x))
-            .map(|u| {
-                let e = p.eval(&u, false).map(|(e, _)| e.norm_squared());
-                (e.unwrap_or(f64::INFINITY), u)
-            })
-            .min_by(|a, b| a.0.total_cmp(&b.0))?
-            .1;
+        let starts = starts.iter().map(|x| with_effect(&cur.u, &params, x));
+        let (_, u0) = lowest_start(&mut p, starts)?;
         let fresh = from_initial(&u0, vars, &p.scale);
         let out = [u0, fresh]
             .iter()
@@ -1358,19 +1341,33 @@ fn refined_jobs<'r>(
     (n, least): (usize, f64),
     f_hi: f64,
 ) -> Vec<Job<'r>> {
-    let mut more: Vec<Job> = Vec::new();
-    for s in refined.iter().filter(|s| s.criterion < least) {
-        if more.len() == n {
+    let below = refined.iter().filter(|s| s.criterion < least);
+    family_jobs(ranking, screened, below, jobs, n, f_hi)
+}
+
+/// Up to `n` refit jobs (see [`family_job`]) led by `leads` in their order, one per family, none
+/// of a family a job of `held` holds (a candidate in no family leads a job of its own).
+fn family_jobs<'r, 's>(
+    ranking: &'r Ranking,
+    screened: &[Screened],
+    leads: impl IntoIterator<Item = &'s Screened>,
+    held: &[Job],
+    n: usize,
+    f_hi: f64,
+) -> Vec<Job<'r>> {
+    let mut jobs: Vec<Job> = Vec::new();
+    for s in leads {
+        if jobs.len() == n {
             break;
         }
         let family = ranking.family_index(s.index);
-        let held = |job: &Job| family.is_some() && job.family == family;
-        if jobs.iter().chain(&more).any(held) {
+        let holds = |job: &Job| family.is_some() && job.family == family;
+        if held.iter().chain(&jobs).any(holds) {
             continue;
         }
-        more.push(family_job(ranking, screened, s, family, f_hi));
+        jobs.push(family_job(ranking, screened, s, family, f_hi));
     }
-    more
+    jobs
 }
 
 /// Reports a round's screen and the refits it leads to.
@@ -2124,29 +2121,16 @@ fn refit(
     // nested values, whichever fits best: a score step far outside the linear range (a large
     // effect) must not start the refit in a worse valley than the current fit's.
     let (lo, hi) = p.bounds();
-    let mut u0: Option<DVector<f64>> = None;
-    let mut j_start = f64::INFINITY;
     // The given start itself (the first) is always refitted: the best-fitting start is a
     // better valley for a large effect but can be a worse one for a small effect (a start that
     // fits best before the refit is not the one that fits best after it). The better end wins.
-    let mut given: Option<DVector<f64>> = None;
     let start_at = |st: &[f64]| with_effect(&cur.u, &new_params, st);
-    for st in screen::effect_starts(&new_params, start, explore) {
-        let u = start_at(&st);
-        // A start that cannot be evaluated is skipped (the first is kept so that the
-        // minimizer reports why).
-        let j = p
-            .eval(&u, false)
-            .map_or(f64::INFINITY, |(e, _)| e.norm_squared());
-        if given.is_none() {
-            given = Some(u.clone());
-        }
-        if u0.is_none() || j < j_start {
-            j_start = j;
-            u0 = Some(u);
-        }
-    }
-    let (Some(mut u0), Some(given)) = (u0, given) else {
+    let starts: Vec<DVector<f64>> = screen::effect_starts(&new_params, start, explore)
+        .iter()
+        .map(|st| start_at(st))
+        .collect();
+    let given = starts.first().cloned();
+    let (Some((j_start, mut u0)), Some(given)) = (lowest_start(&mut p, starts), given) else {
         return Err(RefitError::TooFewObservations {
             observations: m,
             parameters: p.scale.len(),
@@ -2237,6 +2221,24 @@ fn refit(
         place: None,
     };
     Ok((r, next))
+}
+
+/// The start of `starts` where the criterion is lowest (the first of equals), and that criterion;
+/// a start that cannot be evaluated counts as infinitely bad (so that, when none can be, the
+/// minimizer started from the first reports why). `None` when there is no start.
+fn lowest_start(
+    p: &mut Problem,
+    starts: impl IntoIterator<Item = DVector<f64>>,
+) -> Option<(f64, DVector<f64>)> {
+    starts
+        .into_iter()
+        .map(|u| {
+            let j = p
+                .eval(&u, false)
+                .map_or(f64::INFINITY, |(e, _)| e.norm_squared());
+            (j, u)
+        })
+        .min_by(|a, b| a.0.total_cmp(&b.0))
 }
 
 /// The point `u` (scaled) with the variables at their initial values: a start outside the valley
