@@ -1100,9 +1100,7 @@ fn screen_leading(
     let results = in_parallel(&leading, |&j| {
         let s = &ranking.scored[j];
         let cand = &ranking.candidates[s.candidate];
-        let mut effects = cur.effects.clone();
-        effects.push(cand.clone());
-        let mut p = Problem::new(model, vars, obs, &opts.identification, effects, f_hi);
+        let mut p = extended((model, vars, obs), opts, cur, cand, f_hi);
         let params = cand.params(f_hi);
         let starts = screen::size_starts(&params, &score_start(cand, s.step, f_hi));
         let resonator = matches!(cand, Effect::Resonator { .. });
@@ -1114,9 +1112,27 @@ fn screen_leading(
             }
         })
     });
+    lowest_first(results)
+}
+
+/// The screens or short refits that ended, lowest criterion first.
+fn lowest_first(results: Vec<Option<Screened>>) -> Vec<Screened> {
     let mut out: Vec<Screened> = results.into_iter().flatten().collect();
     out.sort_by(|a, b| a.criterion.total_cmp(&b.criterion));
     out
+}
+
+/// The problem of the current effects and `cand`: the fit extended by one candidate.
+fn extended<'a>(
+    (model, vars, obs): (&'a Model, &'a Variables, &'a Observations),
+    opts: &'a Options,
+    cur: &Current,
+    cand: &Effect,
+    f_hi: f64,
+) -> Problem<'a> {
+    let mut effects = cur.effects.clone();
+    effects.push(cand.clone());
+    Problem::new(model, vars, obs, &opts.identification, effects, f_hi)
 }
 
 /// Of each kind of effect, the best-scored candidates screened besides the leading
@@ -1292,9 +1308,7 @@ fn short_refits(
     let n = cur.u.len();
     let ends = in_parallel(&todo, |&j| {
         let cand = effect(j);
-        let mut effects = cur.effects.clone();
-        effects.push(cand.clone());
-        let mut p = Problem::new(model, vars, obs, &opts.identification, effects, f_hi);
+        let mut p = extended((model, vars, obs), opts, cur, cand, f_hi);
         let params = cand.params(f_hi);
         let (lo, hi) = p.bounds();
         let step = score_start(cand, ranking.scored[j].step, f_hi);
@@ -1325,9 +1339,7 @@ fn short_refits(
             start,
         })
     });
-    let mut out: Vec<Screened> = ends.into_iter().flatten().collect();
-    out.sort_by(|a, b| a.criterion.total_cmp(&b.criterion));
-    out
+    lowest_first(ends)
 }
 
 /// The refit jobs of the short refits `refined` that went below `least` (the best refit so
@@ -2098,16 +2110,7 @@ fn refit(
 ) -> Result<(Refit, Current), RefitError> {
     let step = explore.filter(|step| *step != start);
     let explore = explore.is_some();
-    let mut effects = cur.effects.clone();
-    effects.push(cand.clone());
-    let mut p = Problem::new(
-        model,
-        vars,
-        obs,
-        &opts.identification,
-        effects.clone(),
-        f_hi,
-    );
+    let mut p = extended((model, vars, obs), opts, cur, cand, f_hi);
     let new_params = cand.params(f_hi);
     let q = new_params.len();
     let m = cur.e.len();
@@ -2192,7 +2195,7 @@ fn refit(
     let n = m as f64;
     let stop = out.stop.describe();
     let next = Current {
-        effects,
+        effects: p.effects.clone(),
         u: out.u,
         e,
         jac,
