@@ -1310,7 +1310,6 @@ fn short_refits(
         max_iterations: SHORT_REFIT_ITERATIONS,
         ..opts.identification.settings
     };
-    let n = cur.u.len();
     let ends = in_parallel(&todo, |&j| {
         let cand = effect(j);
         let mut p = extended((model, vars, obs), opts, cur, cand, f_hi);
@@ -1333,11 +1332,9 @@ fn short_refits(
                 optimize::minimize(optimizer, &mut p, u, &lo, &hi, &settings, &mut |_| {}).ok()
             })
             .min_by(|a, b| a.criterion.total_cmp(&b.criterion))?;
-        let start = params
-            .iter()
-            .zip(out.u.iter().skip(n))
-            .map(|(np, v)| v * np.scale)
-            .collect();
+        // The new effect's parameters (SI) are the last of the effects'.
+        let (_, gamma) = p.split(&out.u);
+        let start = gamma[gamma.len() - params.len()..].to_vec();
         Some(Screened {
             index: j,
             criterion: out.criterion,
