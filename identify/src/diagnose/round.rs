@@ -441,7 +441,8 @@ pub(super) fn mirrors(a: &Screened, b: &Screened) -> bool {
 /// that member first (started where the screen left it) and then the family's other members
 /// (from where the screen left them, or their score steps) in [`kinds_first`] order: the best of
 /// each other kind always, then other sites and points up to [`MEMBERS_REFITTED`] distinct ones
-/// in all, and their mirror images. The score's leading family is always among them.
+/// in all, and their mirror images. The score's [`SCORE_FAMILIES_REFITTED`] leading families are
+/// always among them.
 pub(super) fn refit_jobs<'r>(
     ranking: &'r Ranking,
     screened: &[Screened],
@@ -450,17 +451,23 @@ pub(super) fn refit_jobs<'r>(
 ) -> Vec<Job<'r>> {
     let families = &ranking.families;
     let mut jobs = family_jobs(ranking, screened, screened, &[], n, f_hi);
-    // The score's leading family is refitted too: the screen's first-order view of the fit's
+    // The score's leading families are refitted too: the screen's first-order view of the fit's
     // own parameters can rank a large effect's true candidate below look-alikes (blind seed
-    // 3062: a moment stiffness the score put first, screened below five springs).
-    let leader = families
-        .first()
-        .and_then(|f| screened.iter().find(|s| f.contains(&s.index)));
-    if let Some(s) = leader.filter(|_| !jobs.iter().any(|job| job.family == Some(0))) {
-        jobs.push(family_job(ranking, screened, s, Some(0), f_hi));
+    // 3062: a moment stiffness the score put first, screened below five springs), and a small
+    // effect's screen differs from its look-alikes' by less than the noise (blind seed 3726: a
+    // moment stiffness the score put second, screened tenth, J 58.3 against 56.8; refitted, it
+    // is the only effect to pass).
+    for (f, family) in families.iter().enumerate().take(SCORE_FAMILIES_REFITTED) {
+        let leader = screened.iter().find(|s| family.contains(&s.index));
+        if let Some(s) = leader.filter(|_| !jobs.iter().any(|job| job.family == Some(f))) {
+            jobs.push(family_job(ranking, screened, s, Some(f), f_hi));
+        }
     }
     jobs
 }
+
+/// The score's leading families refitted whatever their screens (see [`refit_jobs`]).
+pub(super) const SCORE_FAMILIES_REFITTED: usize = 2;
 
 /// The refits of the kinds the leading families' `jobs` leave out, for when the misfit was large
 /// and their refits leave it above the noise level: of each such kind, the family of its
@@ -506,12 +513,43 @@ pub(super) fn kind_jobs<'r>(
 /// Candidates of each kind given a short refit (see [`short_refits`]): as many distinct scores.
 pub(super) const SHORT_REFITS_PER_KIND: usize = 12;
 
+/// Candidates of each kind given a short refit although their score rules them out (see
+/// [`pulled_against`]).
+pub(super) const PULLED_PER_KIND: usize = 3;
+
+/// Each kind's `per_kind` candidates (the strongest pull first, [`score::Scored::pull`]) that a
+/// one-sided score test rules out — its score would take a stiffness or a mass below its nested
+/// value — though the data pull on them as hard as on a plausible one: a large effect can lower
+/// J where a small one raises it. Blind seed 3654: an actuator's missing lateral stiffness of
+/// 12 N/µm scored 0, last of 1088, and is the second strongest pull of its kind. Resonators are
+/// left out: their score is taken at the tuning that lowers J most, which has no meaning where
+/// none does.
+pub(super) fn pulled_against(ranking: &Ranking, per_kind: usize) -> Vec<usize> {
+    let gate = ranking.plausible();
+    let mut against: Vec<usize> = (0..ranking.scored.len())
+        .filter(|&j| {
+            let s = &ranking.scored[j];
+            s.statistic == 0.0 && s.tuned_hz.is_none() && residuals::chi2_tail(1.0, s.pull) < gate
+        })
+        .collect();
+    against.sort_by(|&a, &b| ranking.scored[b].pull.total_cmp(&ranking.scored[a].pull));
+    let kind = |j: usize| ranking.candidates[ranking.scored[j].candidate].kind();
+    let mut taken: Vec<usize> = Vec::new();
+    for j in against {
+        if taken.iter().filter(|&&t| kind(t) == kind(j)).count() < per_kind {
+            taken.push(j);
+        }
+    }
+    taken
+}
+
 /// Iterations of a short refit.
 pub(super) const SHORT_REFIT_ITERATIONS: usize = 40;
 
 /// The short refits of a round whose leading refits leave the misfit large and above the noise
 /// level: the plausible candidates (the leading ones and each kind's first
-/// [`SHORT_REFITS_PER_KIND`] distinct scores) that no refit job holds, each one's parameters and
+/// [`SHORT_REFITS_PER_KIND`] distinct scores) and those the score rules out but the data pull
+/// on hardest ([`pulled_against`]) that no refit job holds, each one's parameters and
 /// the fit's variables fitted together for at most [`SHORT_REFIT_ITERATIONS`] iterations from
 /// the best of the exploring starts (see [`screen::effect_starts`]), at the current fit and with
 /// the variables at their initial values ([`from_initial`]). The lower criterion reached and the
@@ -535,8 +573,10 @@ pub(super) fn short_refits(
             .flat_map(|job| &job.members)
             .any(|m| std::ptr::eq(m.effect, effect(j)))
     };
+    let against = pulled_against(ranking, PULLED_PER_KIND);
     let todo: Vec<usize> = leading_of_each_kind(ranking, SHORT_REFITS_PER_KIND)
         .into_iter()
+        .chain(against.iter().copied())
         .filter(|&j| !refitted(j))
         .collect();
     let settings = optimize::Settings {
@@ -549,12 +589,18 @@ pub(super) fn short_refits(
         let params = cand.params(f_hi);
         let (lo, hi) = p.bounds();
         let step = score_start(cand, ranking.scored[j].step, f_hi);
-        let given = screened
-            .iter()
-            .find(|s| s.index == j)
-            .map_or(step.clone(), |s| s.start.clone());
+        // A score ruling the effect out steps below its nested value: start from the sizes
+        // explored around its initial value instead.
+        let ruled_out = against.contains(&j);
+        let given = match screened.iter().find(|s| s.index == j) {
+            Some(s) => s.start.clone(),
+            None if ruled_out => params.iter().map(|np| np.initial).collect(),
+            None => step.clone(),
+        };
         let mut starts = screen::effect_starts(&params, &given, true);
-        starts.push(step);
+        if !ruled_out {
+            starts.push(step);
+        }
         let starts = starts.iter().map(|x| with_effect(&cur.u, &params, x));
         let (_, u0) = lowest_start(&mut p, starts)?;
         let fresh = from_initial(&u0, vars, &p.scale);
@@ -1228,6 +1274,7 @@ mod tests {
             .map(|i| score::Scored {
                 candidate: i,
                 statistic: 100.0 - i as f64,
+                pull: 100.0 - i as f64,
                 p_value: 1e-9 * (i + 1) as f64,
                 step: 1.0,
                 direction: DVector::zeros(1),
@@ -1242,6 +1289,29 @@ mod tests {
             threshold: 1e-5,
             sigma2: 1.0,
         }
+    }
+
+    /// The candidates a one-sided score rules out enter the short refits by their pull: each
+    /// kind's strongest first, up to the number per kind, none whose pull is implausible and no
+    /// resonator (its tuning means nothing where no tuning lowers J).
+    #[test]
+    fn the_strongest_pulls_a_score_rules_out_get_short_refits() {
+        let mut ranking = ranked_as_listed(vec![
+            spring("knee", "table"),   // 0: plausible, not ruled out
+            spring("column", "table"), // 1: ruled out, pull 30
+            spring("knee", "column"),  // 2: ruled out, pull 50
+            spring("knee", "saddle"),  // 3: ruled out, pull 40
+            spring("column", "knee"),  // 4: ruled out, pull 20: beyond the number per kind
+            resonator("table"),        // 5: ruled out, pull 90: a resonator
+            spring("table", "saddle"), // 6: ruled out, pull 1: implausible
+        ]);
+        let pulls = [30.0, 50.0, 40.0, 20.0, 90.0, 1.0];
+        for (s, pull) in ranking.scored[1..].iter_mut().zip(pulls) {
+            (s.statistic, s.p_value, s.step, s.pull) = (0.0, 1.0, -1.0, pull);
+        }
+        ranking.scored[5].tuned_hz = Some(100.0);
+        assert_eq!(pulled_against(&ranking, 3), vec![2, 3, 1]);
+        assert_eq!(pulled_against(&ranking, 1), vec![2]);
     }
 
     /// The screen of the scored candidates `order` (indices), best first, at J = 10, 11, …,

@@ -35,8 +35,13 @@ const TWO_PI: f64 = 2.0 * std::f64::consts::PI;
 pub struct Scored {
     /// Index into the candidate list.
     pub candidate: usize,
-    /// LM statistic.
+    /// LM statistic (0 where a one-sided test's score points below the nested value).
     pub statistic: f64,
+    /// The LM statistic whatever the score's sign: where the one-sided `statistic` is 0 (the
+    /// score would take a stiffness or a mass below its nested value), how strongly the data
+    /// still pull on the effect. A large effect can lower J where a small one raises it.
+    #[serde(skip)]
+    pub pull: f64,
     /// p-value (one-sided where the effect is bounded at its nested value).
     pub p_value: f64,
     /// One Gauss-Newton step for γ from the nested value, with the variables re-adjusted (SI).
@@ -170,6 +175,7 @@ fn statistic(
     Ok(Scored {
         candidate: ci,
         statistic: if one_sided && step <= 0.0 { 0.0 } else { lm },
+        pull: lm,
         p_value,
         step,
         direction,
