@@ -333,20 +333,13 @@ fn diagnose_variant(
     std::fs::write(&vars_file, vars).unwrap();
     let json_file = dir.path().join("diagnosis.json");
     let data = root().join("data/dtop-three-storey/three-storey-hammer.uff");
-    let out = common::ident(&[
+    let out = common::mapped(
         "diagnose",
-        p(&model_file),
-        "--data",
-        p(&data),
-        "--map",
-        p(&ex.join("map.toml")),
-        "--vars",
-        p(&vars_file),
-        "--band",
-        "3:40",
-        "--json",
-        p(&json_file),
-    ]);
+        &model_file,
+        (&data, &ex.join("map.toml")),
+        &vars_file,
+        &["--band", "3:40", "--json", p(&json_file)],
+    );
     // Exit 1: the diagnosis ends with the model not explaining the data to its noise level
     // (the example's model form lacks effects of its own, docs/real-structure.md §8).
     assert!(matches!(out.status.code(), Some(0 | 1)), "{}", text(&out));

@@ -44,8 +44,20 @@ pub fn identify_mapped(
     vars: &Path,
     extra: &[&str],
 ) -> Output {
+    mapped("identify", model, (data, map), vars, extra)
+}
+
+/// Runs `ident command` (`identify`, `diagnose`) on `model` with the measured file `data` read
+/// through the measurement map `map` and the variables file `vars`, then the flags `extra`.
+pub fn mapped(
+    command: &str,
+    model: &Path,
+    (data, map): (&Path, &Path),
+    vars: &Path,
+    extra: &[&str],
+) -> Output {
     let mut args = vec![
-        "identify",
+        command,
         p(model),
         "--data",
         p(data),
