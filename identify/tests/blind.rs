@@ -199,3 +199,33 @@ fn the_truth_s_own_form_fits_to_the_noise_and_judges_a_miss() {
         blind::Miss::Undecided
     );
 }
+
+/// A large resonator scores nearly alike on a dozen bodies' points, and the screen puts another
+/// body first: blind seed 3703's 61.5 kg resonator at 34.9 Hz on the overarm's centre scores
+/// 37th and the round accepts it on the knee (J 152 where the truth refits at 33). Refitted at
+/// every body's attachment points it is moved to the overarm, found alone and sized right.
+#[test]
+fn a_large_resonator_accepted_on_the_wrong_body_is_moved_to_its_own() {
+    let model = load_model("fwd32j.toml");
+    let vars = load_variables("fwd32j.toml", &model);
+    let lines = synthetic::fwd32j_lines();
+    let case = blind::draw(&model, &vars, &lines, 3703, None).unwrap();
+    let (o, d) = blind::run(&model, &case, &diagnose::Options::default()).unwrap();
+    assert!(o.right_first && o.exact, "{o:?}");
+    let first = &d.rounds[0];
+    let accepted = &first.refits[first.accepted.unwrap()];
+    assert!(!accepted.effect.contains("overarm"), "{}", accepted.effect);
+    assert!(
+        first.relocated.iter().any(|m| m.effect.contains("overarm")),
+        "{:?}",
+        first.relocated
+    );
+    // The resonator's mass and tuning against the injected ones, within 3 standard errors.
+    let truth = &case.injected[0].values;
+    for (p, x) in d.accepted[0].params.iter().zip(truth) {
+        assert!(
+            (p.value - x).abs() <= 3.0 * p.std_error,
+            "{p:?} against {x}"
+        );
+    }
+}

@@ -279,9 +279,9 @@ fn springs_to_ground(
     }
 }
 
-/// Point masses and resonators (tuned across the band) at body `b`'s centre, box corners and
-/// force points, and the body split along each principal axis.
-fn masses_and_flexibility(model: &Model, b: usize, res_freqs: &[[f64; 2]], out: &mut Vec<Effect>) {
+/// Where a point mass or resonator can sit on body `b`: its centre, its box's corners and the
+/// points where the characteristics' forces act on it (global, m; no point twice).
+pub(super) fn attachment_points(model: &Model, b: usize) -> Vec<Vector3<f64>> {
     let body = &model.bodies[b];
     let mut points = vec![body.position];
     let sides = box_sides(body);
@@ -291,8 +291,16 @@ fn masses_and_flexibility(model: &Model, b: usize, res_freqs: &[[f64; 2]], out: 
         push_unique(&mut points, body.position + body.rotation * local);
     }
     force_points(model, b).for_each(|p| push_unique(&mut points, p));
+    points
+}
+
+/// Point masses and resonators (tuned across the band) at body `b`'s centre, box corners and
+/// force points, and the body split along each principal axis.
+fn masses_and_flexibility(model: &Model, b: usize, res_freqs: &[[f64; 2]], out: &mut Vec<Effect>) {
+    let body = &model.bodies[b];
+    let sides = box_sides(body);
     let scale = 0.01 * body.mass;
-    for p in &points {
+    for p in &attachment_points(model, b) {
         out.push(Effect::Mass {
             body: body.name.clone(),
             point: *p,

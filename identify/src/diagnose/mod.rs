@@ -51,7 +51,7 @@ pub use text::{final_text, gain_text, text};
 
 use base::base_fit;
 pub use base::BaseFit;
-use placement::{placed, remove_unneeded};
+use placement::{placed, relocate_earlier, relocated, remove_unneeded};
 use round::{rank, refit_leading, screen_leading};
 
 use crate::identification::optimize::{self, Residuals as _};
@@ -215,6 +215,10 @@ pub struct Round {
     pub accepted: Option<usize>,
     /// Earlier effects dropped after this round's was added: the data no longer need them.
     pub removed: Vec<Removed>,
+    /// Point masses and resonators moved to another body's attachment point where they fit
+    /// better: the round's accepted one (replacing the candidate the round accepted), then
+    /// earlier ones, refitted there with the later effects in.
+    pub relocated: Vec<Refit>,
     /// The accepted point mass or spring refitted with its place free, when the data prefer the
     /// fitted place (it then replaces the candidate placement).
     pub placed: Option<Refit>,
@@ -461,6 +465,7 @@ pub fn diagnose(
             threshold: ranking.threshold,
             accepted: best.as_ref().map(|(i, _)| *i),
             removed: Vec::new(),
+            relocated: Vec::new(),
             placed: None,
             not_identifiable,
         };
@@ -471,6 +476,15 @@ pub fn diagnose(
         };
         progress(&format!("accepted: {}", refits[i].effect));
         let chosen = refits[i].clone();
+        let (chosen, next) = relocated(
+            (model, vars, obs),
+            opts,
+            &cur,
+            (chosen, next),
+            (f_hi, ranking.sigma2, ranking.threshold),
+            &mut round,
+            progress,
+        );
         let (chosen, next) = placed(
             (model, vars, obs),
             opts,
@@ -483,6 +497,14 @@ pub fn diagnose(
         accepted.push(chosen);
         cur = next;
         remove_unneeded(
+            (model, vars, obs),
+            opts,
+            (&mut cur, &mut accepted),
+            (f_hi, ranking.sigma2, ranking.threshold),
+            &mut round,
+            progress,
+        );
+        relocate_earlier(
             (model, vars, obs),
             opts,
             (&mut cur, &mut accepted),
@@ -528,7 +550,11 @@ fn final_fit(
         .filter(|n| {
             !accepted
                 .iter()
-                .chain(rounds.iter().flat_map(|r| r.placed.iter()))
+                .chain(
+                    rounds
+                        .iter()
+                        .flat_map(|r| r.placed.iter().chain(&r.relocated)),
+                )
                 .any(|a| n.effect == format!("refit of {}", a.effect) || n.effect == a.effect)
         })
         .collect();

@@ -188,6 +188,13 @@ pub(super) fn round_text(s: &mut String, i: usize, r: &Round) {
             f.bic_change
         );
     }
+    for m in &r.relocated {
+        let _ = writeln!(
+            s,
+            "    moved: {} (J {:.1} there, the best of the same effect refitted at its other places)",
+            m.effect, m.criterion_after
+        );
+    }
     if let Some(p) = &r.placed {
         let ps: Vec<String> = p.params.iter().map(ParamEstimate::describe).collect();
         let _ = writeln!(
