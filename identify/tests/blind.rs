@@ -67,10 +67,10 @@ fn the_blind_subset_is_diagnosed_at_the_asserted_rates() {
 }
 
 /// Share of the subset's cases with effects whose first added effect is an injected one. The
-/// subset gets 13 of its 17 (seeds 1-24); one case of margin.
+/// subset gets 14 of its 17 (seeds 1-24); two cases of margin.
 const RIGHT_FIRST: f64 = 0.70;
-/// Share of the subset's cases that end with exactly the injected set. The subset gets 20 of 24
-/// (19 before the short refits); one case of margin.
+/// Share of the subset's cases that end with exactly the injected set. The subset gets 21 of 24
+/// (19 before the short refits); two cases of margin.
 const EXACT: f64 = 0.79;
 
 #[test]
@@ -228,4 +228,36 @@ fn a_large_resonator_accepted_on_the_wrong_body_is_moved_to_its_own() {
             "{p:?} against {x}"
         );
     }
+}
+
+/// A joint's own ψ several times its group's changes the peaks far from linearly: blind seed
+/// 3711's slideway ψ_t of 4.76 scores 261st (LM 3.7) and screens at J 63.7 against 65.9 before,
+/// and nothing was added. The misfit is small but above the noise level, so every damping split
+/// gets a short refit; this one ends at the noise level and is found alone, sized right.
+#[test]
+fn a_damping_split_the_score_misses_is_found_by_its_short_refit() {
+    let model = load_model("fwd32j.toml");
+    let vars = load_variables("fwd32j.toml", &model);
+    let lines = synthetic::fwd32j_lines();
+    let case = blind::draw(&model, &vars, &lines, 3711, None).unwrap();
+    let (o, d) = blind::run(&model, &case, &diagnose::Options::default()).unwrap();
+    assert!(o.right_first && o.exact, "{o:?}");
+    // The score alone would not have put it among the plausible candidates.
+    let first = &d.rounds[0];
+    let split = "psi_t for SDE 8, 9, 10, 11";
+    assert!(
+        !first
+            .ranked
+            .iter()
+            .take(10)
+            .any(|r| r.effect.contains(split) || r.equivalent.iter().any(|e| e.contains(split))),
+        "{:?}",
+        first.ranked
+    );
+    let truth = case.injected[0].values[0];
+    let psi = &d.accepted[0].params[0];
+    assert!(
+        (psi.value - truth).abs() <= 3.0 * psi.std_error,
+        "{psi:?} against {truth}"
+    );
 }

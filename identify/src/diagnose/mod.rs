@@ -51,7 +51,7 @@ pub use text::{final_text, gain_text, text};
 
 use base::base_fit;
 pub use base::BaseFit;
-use placement::{placed, relocate_earlier, relocated, remove_unneeded};
+use placement::after_acceptance;
 use round::{rank, refit_leading, screen_leading};
 
 use crate::identification::optimize::{self, Residuals as _};
@@ -390,6 +390,39 @@ pub enum RefitError {
     Eval(#[from] EvalError),
 }
 
+/// What every step of a diagnosis works on: the model, its variables, the data, the options,
+/// and the top of the measured band (Hz: it bounds a resonator's tuning).
+#[derive(Clone, Copy)]
+struct Setting<'a> {
+    model: &'a Model,
+    vars: &'a Variables,
+    obs: &'a Observations,
+    opts: &'a Options,
+    f_hi: f64,
+}
+
+impl<'a> Setting<'a> {
+    /// The identification problem with `effects` added to the model.
+    fn problem(&self, effects: Vec<Effect>) -> Problem<'a> {
+        Problem::new(
+            self.model,
+            self.vars,
+            self.obs,
+            &self.opts.identification,
+            effects,
+            self.f_hi,
+        )
+    }
+}
+
+/// A round's noise level and significance: σ̂² of the fit the round starts from and the
+/// round's Bonferroni threshold (a p-value).
+#[derive(Clone, Copy)]
+struct Level {
+    sigma2: f64,
+    threshold: f64,
+}
+
 /// The state of the extended fit after a round.
 struct Current {
     effects: Vec<Effect>,
@@ -412,7 +445,6 @@ pub fn diagnose(
         return Err(DiagnoseError::Alpha(opts.alpha));
     }
     let (f_lo, f_hi) = band(obs);
-    let iopts = &opts.identification;
     let labels: Vec<String> = obs
         .characteristics
         .iter()
@@ -423,7 +455,14 @@ pub fn diagnose(
         unit: "s",
         ..Timing::default()
     };
-    let mut p0 = Problem::new(model, vars, obs, iopts, Vec::new(), f_hi);
+    let setting = Setting {
+        model,
+        vars,
+        obs,
+        opts,
+        f_hi,
+    };
+    let mut p0 = setting.problem(Vec::new());
     let (mut cur, base) = base_fit((model, vars, obs), &mut p0, id, opts, progress)?;
     timing.base_fit = clock.elapsed().as_secs_f64();
     let before = analysis(&p0, &cur, opts)?;
@@ -434,7 +473,7 @@ pub fn diagnose(
     let mut not_tried = untestable();
     for _ in 0..opts.max_effects {
         let t = std::time::Instant::now();
-        let pc = Problem::new(model, vars, obs, iopts, cur.effects.clone(), f_hi);
+        let pc = setting.problem(cur.effects.clone());
         let ranking = rank(&pc, &cur, &labels, (f_lo, f_hi), opts.alpha, &mut not_tried)?;
         progress(&format!(
             "ranked {} candidates; best: {}",
@@ -445,15 +484,13 @@ pub fn diagnose(
                 .map(|s| ranking.candidates[s.candidate].describe())
                 .unwrap_or_default()
         ));
-        let screened = screen_leading((model, vars, obs), opts, &cur, &ranking, f_hi);
+        let screened = screen_leading(setting, &cur, &ranking);
         timing.ranking += t.elapsed().as_secs_f64();
         let t = std::time::Instant::now();
         let (refits, best, not_identifiable) = refit_leading(
-            (model, vars, obs),
-            opts,
+            setting,
             &cur,
             (&ranking, &screened),
-            f_hi,
             &mut not_tried,
             progress,
         );
@@ -475,50 +512,21 @@ pub fn diagnose(
             break;
         };
         progress(&format!("accepted: {}", refits[i].effect));
-        let chosen = refits[i].clone();
-        let (chosen, next) = relocated(
-            (model, vars, obs),
-            opts,
-            &cur,
-            (chosen, next),
-            (f_hi, ranking.sigma2, ranking.threshold),
-            &mut round,
-            progress,
-        );
-        let (chosen, next) = placed(
-            (model, vars, obs),
-            opts,
-            &cur,
-            (chosen, next),
-            (f_hi, ranking.sigma2, ranking.threshold),
-            &mut round,
-            progress,
-        );
-        accepted.push(chosen);
-        cur = next;
-        remove_unneeded(
-            (model, vars, obs),
-            opts,
+        let level = ranking.level();
+        let chosen = (refits[i].clone(), next);
+        after_acceptance(
+            setting,
+            level,
+            chosen,
             (&mut cur, &mut accepted),
-            (f_hi, ranking.sigma2, ranking.threshold),
-            &mut round,
-            progress,
-        );
-        relocate_earlier(
-            (model, vars, obs),
-            opts,
-            (&mut cur, &mut accepted),
-            (f_hi, ranking.sigma2, ranking.threshold),
             &mut round,
             progress,
         );
         rounds.push(round);
     }
     let mut d = final_fit(
-        (model, vars, obs),
-        opts,
+        setting,
         cur,
-        f_hi,
         (before, rounds, accepted, not_tried),
         progress,
     )?;
@@ -531,10 +539,8 @@ pub fn diagnose(
 /// The diagnosis at the final fit `cur`: the residual analysis after, the accepted effects'
 /// values and errors there (a later effect or a removal moved them), the final model.
 fn final_fit(
-    (model, vars, obs): (&Model, &Variables, &Observations),
-    opts: &Options,
+    setting: Setting,
     cur: Current,
-    f_hi: f64,
     (before, rounds, mut accepted, not_tried): (
         ResidualAnalysis,
         Vec<Round>,
@@ -543,7 +549,7 @@ fn final_fit(
     ),
     progress: &mut dyn FnMut(&str),
 ) -> Result<Diagnosis, DiagnoseError> {
-    let iopts = &opts.identification;
+    let Setting { opts, f_hi, .. } = setting;
     // A refit that stopped short but was accepted all the same is not "not tried".
     let not_tried: Vec<NotTried> = not_tried
         .into_iter()
@@ -558,7 +564,7 @@ fn final_fit(
                 .any(|a| n.effect == format!("refit of {}", a.effect) || n.effect == a.effect)
         })
         .collect();
-    let pf = Problem::new(model, vars, obs, iopts, cur.effects.clone(), f_hi);
+    let pf = setting.problem(cur.effects.clone());
     let after = analysis(&pf, &cur, opts)?;
     progress(&format!("after: {}", after.verdict));
     // Effects refitted after their own round (a later effect, a removal) moved: report their

@@ -14,17 +14,38 @@ pub(super) const RELOCATIONS_REFITTED: usize = 3;
 /// Iterations of a relocation's short refit at each place.
 pub(super) const RELOCATION_ITERATIONS: usize = 10;
 
-/// Backward elimination after an acceptance: drops, one at a time, every earlier effect the
-/// later ones made unnecessary (recorded in `round.removed`).
-pub(super) fn remove_unneeded(
-    (model, vars, obs): (&Model, &Variables, &Observations),
-    opts: &Options,
+/// The steps after a round accepts the refit `chosen` (with its fit `next`) on the fit `cur`
+/// with the effects `accepted` so far: the effect moved to the body where it fits best
+/// ([`relocated`]) and its place refined ([`placed`]), then added to `accepted` and `cur`; the
+/// earlier effects it made unnecessary dropped ([`remove_unneeded`]), and each earlier point mass
+/// or resonator moved where it fits best now ([`relocate_earlier`]). Each step is recorded in
+/// `round`.
+pub(super) fn after_acceptance(
+    setting: Setting,
+    level: Level,
+    chosen: (Refit, Current),
     (cur, accepted): (&mut Current, &mut Vec<Refit>),
-    (f_hi, sigma2, threshold): (f64, f64, f64),
     round: &mut Round,
     progress: &mut dyn FnMut(&str),
 ) {
-    while let Some((k, r, next)) = backward(model, vars, obs, opts, cur, f_hi, sigma2, threshold) {
+    let chosen = relocated(setting, level, cur, chosen, round, progress);
+    let (chosen, next) = placed(setting, level, cur, chosen, round, progress);
+    accepted.push(chosen);
+    *cur = next;
+    remove_unneeded(setting, level, (cur, accepted), round, progress);
+    relocate_earlier(setting, level, (cur, accepted), round, progress);
+}
+
+/// Backward elimination after an acceptance: drops, one at a time, every earlier effect the
+/// later ones made unnecessary (recorded in `round.removed`).
+fn remove_unneeded(
+    setting: Setting,
+    level: Level,
+    (cur, accepted): (&mut Current, &mut Vec<Refit>),
+    round: &mut Round,
+    progress: &mut dyn FnMut(&str),
+) {
+    while let Some((k, r, next)) = backward(setting, level, cur) {
         progress(&format!(
             "removed: {} (no longer needed: LR = {:.1}, p = {:.2e})",
             r.effect, r.lr, r.p_value
@@ -37,18 +58,15 @@ pub(super) fn remove_unneeded(
 
 /// The accepted refit with its location refined where that is significantly better (recorded
 /// in `round.placed`), and the fit that goes with it.
-pub(super) fn placed(
-    (model, vars, obs): (&Model, &Variables, &Observations),
-    opts: &Options,
+fn placed(
+    setting: Setting,
+    level: Level,
     cur: &Current,
     (chosen, next): (Refit, Current),
-    (f_hi, sigma2, threshold): (f64, f64, f64),
     round: &mut Round,
     progress: &mut dyn FnMut(&str),
 ) -> (Refit, Current) {
-    let Some((placed, better)) = place(
-        model, vars, obs, opts, cur, &next, &chosen, f_hi, sigma2, threshold,
-    ) else {
+    let Some((placed, better)) = place(setting, level, (cur, &next), &chosen) else {
         return (chosen, next);
     };
     progress(&format!(
@@ -66,21 +84,15 @@ pub(super) fn placed(
 
 /// The accepted point mass or resonator moved to the place where it fits best (see
 /// [`relocate`]; recorded in `round.relocated`), and the fit that goes with it.
-pub(super) fn relocated(
-    (model, vars, obs): (&Model, &Variables, &Observations),
-    opts: &Options,
+fn relocated(
+    setting: Setting,
+    level: Level,
     cur: &Current,
     (chosen, next): (Refit, Current),
-    (f_hi, sigma2, threshold): (f64, f64, f64),
     round: &mut Round,
     progress: &mut dyn FnMut(&str),
 ) -> (Refit, Current) {
-    let Some((moved, better)) = relocate(
-        (model, vars, obs),
-        opts,
-        (cur, &next),
-        (f_hi, sigma2, threshold),
-    ) else {
+    let Some((moved, better)) = relocate(setting, level, (cur, &next)) else {
         return (chosen, next);
     };
     progress(&format!(
@@ -109,12 +121,14 @@ pub(super) fn relocated(
 /// (Springs were moved the same way between pairs of bodies along their direction, and that
 /// lost blind seed 3756: a vertical spring to the ground under the table, accepted while a gain
 /// error was still missing, fitted lower on the overarm then and stayed there; no case gained.)
-pub(super) fn relocate(
-    (model, vars, obs): (&Model, &Variables, &Observations),
-    opts: &Options,
+fn relocate(
+    setting: Setting,
+    Level { sigma2, threshold }: Level,
     (base, fixed): (&Current, &Current),
-    (f_hi, sigma2, threshold): (f64, f64, f64),
 ) -> Option<(Refit, Current)> {
+    let Setting {
+        model, opts, f_hi, ..
+    } = setting;
     let effect = fixed.effects.last()?;
     let places = places(model, effect);
     // A partial fix is no guide to where the effect is.
@@ -122,9 +136,7 @@ pub(super) fn relocate(
         return None;
     }
     let q = effect.params(f_hi).len();
-    let problem =
-        |effects: Vec<Effect>| Problem::new(model, vars, obs, &opts.identification, effects, f_hi);
-    let gamma = problem(fixed.effects.clone()).split(&fixed.u).1;
+    let gamma = setting.problem(fixed.effects.clone()).split(&fixed.u).1;
     let values = gamma[gamma.len() - q..].to_vec();
     let settings = optimize::Settings {
         max_iterations: RELOCATION_ITERATIONS,
@@ -133,7 +145,7 @@ pub(super) fn relocate(
     let short: Vec<Option<f64>> = in_parallel(&places, |(cand, _)| {
         let mut effects = base.effects.clone();
         effects.push(cand.clone());
-        let mut p = problem(effects);
+        let mut p = setting.problem(effects);
         let (lo, hi) = p.bounds();
         let u0 = with_effect(&base.u, &cand.params(f_hi), &values);
         let optimizer = opts.identification.optimizer;
@@ -156,7 +168,7 @@ pub(super) fn relocate(
     let params = effect.params(f_hi);
     let (r, next) = in_parallel(&better, |(_, cand)| {
         let start = (values.as_slice(), Some(values.as_slice()));
-        refit(model, vars, obs, opts, base, cand, start, f_hi, sigma2).ok()
+        refit(setting, base, cand, start, sigma2).ok()
     })
     .into_iter()
     .flatten()
@@ -222,24 +234,19 @@ fn places(model: &Model, effect: &Effect) -> Vec<(Effect, bool)> {
 /// what the new one explains (a first identification in a poor local minimum, a placement next to
 /// the true one). Refits without each earlier effect and returns the first one the data no longer
 /// need (LR p-value not below `threshold`), with the fit without it.
-#[allow(clippy::too_many_arguments)]
-pub(super) fn backward(
-    model: &Model,
-    vars: &Variables,
-    obs: &Observations,
-    opts: &Options,
+fn backward(
+    setting: Setting,
+    Level { sigma2, threshold }: Level,
     cur: &Current,
-    f_hi: f64,
-    sigma2: f64,
-    threshold: f64,
 ) -> Option<(usize, Removed, Current)> {
+    let f_hi = setting.f_hi;
     for k in 0..cur.effects.len().saturating_sub(1) {
-        let Some(without) = refitted_without((model, vars, obs), opts, cur, k, f_hi) else {
+        let Some(without) = refitted_without(setting, cur, k) else {
             continue;
         };
         let q = cur.effects[k].params(f_hi).len();
         let lr = ((without.e.norm_squared() - cur.e.norm_squared()) / sigma2).max(0.0);
-        let searched = cur.effects[k].tunings_searched(&lines(obs), f_hi) as f64;
+        let searched = cur.effects[k].tunings_searched(&lines(setting.obs), f_hi) as f64;
         let p_value = (residuals::chi2_tail(q as f64, lr) * searched).min(1.0);
         if p_value >= threshold {
             let r = Removed {
@@ -263,14 +270,9 @@ fn param_range(cur: &Current, k: usize, f_hi: f64) -> std::ops::Range<usize> {
 
 /// The fit `cur` refitted without its effect `k` (from `cur`'s point); `None` when the refit
 /// fails.
-fn refitted_without(
-    (model, vars, obs): (&Model, &Variables, &Observations),
-    opts: &Options,
-    cur: &Current,
-    k: usize,
-    f_hi: f64,
-) -> Option<Current> {
-    let skip = param_range(cur, k, f_hi);
+fn refitted_without(setting: Setting, cur: &Current, k: usize) -> Option<Current> {
+    let opts = setting.opts;
+    let skip = param_range(cur, k, setting.f_hi);
     let effects: Vec<Effect> = (0..cur.effects.len())
         .filter(|&j| j != k)
         .map(|j| cur.effects[j].clone())
@@ -281,7 +283,7 @@ fn refitted_without(
             .filter(|i| !skip.contains(i))
             .map(|i| cur.u[i]),
     );
-    let mut p = Problem::new(model, vars, obs, &opts.identification, effects, f_hi);
+    let mut p = setting.problem(effects);
     let (lo, hi) = p.bounds();
     let settings = &opts.identification.settings;
     let out = optimize::minimize(
@@ -326,27 +328,25 @@ fn reordered(cur: &Current, order: &[usize], f_hi: f64) -> Current {
 /// missing is then put right (blind seed 3704: a 217 Hz resonator on the knee taken on the lower
 /// saddle, J 108.6 against 110.2, before the overarm's point mass was in; with it, the knee ends
 /// at J 40.7 against 48.5, LR 15.6, where the χ² test already passes).
-pub(super) fn relocate_earlier(
-    (model, vars, obs): (&Model, &Variables, &Observations),
-    opts: &Options,
+fn relocate_earlier(
+    setting: Setting,
+    level: Level,
     (cur, accepted): (&mut Current, &mut [Refit]),
-    (f_hi, sigma2, threshold): (f64, f64, f64),
     round: &mut Round,
     progress: &mut dyn FnMut(&str),
 ) {
+    let f_hi = setting.f_hi;
     let n = cur.effects.len();
     for (k, earlier) in accepted.iter_mut().enumerate().take(n.saturating_sub(1)) {
-        if places(model, &cur.effects[k]).len() < 2 {
+        if places(setting.model, &cur.effects[k]).len() < 2 {
             continue;
         }
-        let Some(base) = refitted_without((model, vars, obs), opts, cur, k, f_hi) else {
+        let Some(base) = refitted_without(setting, cur, k) else {
             continue;
         };
         let last: Vec<usize> = (0..n).filter(|&j| j != k).chain([k]).collect();
         let fixed = reordered(cur, &last, f_hi);
-        let ctx = (f_hi, sigma2, threshold);
-        let moved = relocate((model, vars, obs), opts, (&base, &fixed), ctx);
-        let Some((moved, next)) = moved else {
+        let Some((moved, next)) = relocate(setting, level, (&base, &fixed)) else {
             continue;
         };
         progress(&format!(
@@ -366,21 +366,16 @@ pub(super) fn relocate_earlier(
 /// An accepted point mass or spring sits at the nearest candidate point, not where the effect
 /// is: refit it with its place free too — a mass's position (±half the host body's largest
 /// side), a spring's line of action across its direction (±half the largest side of the bodies
-/// it joins) — from `base` (the fit before it was added), from several starting places. Kept when the place parameters beat the
-/// round's threshold against the candidate placement `fixed` (LR test).
-#[allow(clippy::too_many_arguments)]
-pub(super) fn place(
-    model: &Model,
-    vars: &Variables,
-    obs: &Observations,
-    opts: &Options,
-    base: &Current,
-    fixed: &Current,
+/// it joins) — from `base` (the fit before it was added), from several starting places. Kept
+/// when the place parameters beat the round's threshold against the candidate placement `fixed`
+/// (LR test).
+fn place(
+    setting: Setting,
+    Level { sigma2, threshold }: Level,
+    (base, fixed): (&Current, &Current),
     accepted: &Refit,
-    f_hi: f64,
-    sigma2: f64,
-    threshold: f64,
 ) -> Option<(Refit, Current)> {
+    let Setting { model, f_hi, .. } = setting;
     let half_side = |name: &str| {
         model
             .bodies
@@ -453,18 +448,7 @@ pub(super) fn place(
     // The starting places are refitted in parallel.
     let (r, next) = in_parallel(&offsets, |o| {
         let st: Vec<f64> = start.iter().chain(o).copied().collect();
-        refit(
-            model,
-            vars,
-            obs,
-            opts,
-            base,
-            &cand,
-            (&st, None),
-            f_hi,
-            sigma2,
-        )
-        .ok()
+        refit(setting, base, &cand, (&st, None), sigma2).ok()
     })
     .into_iter()
     .flatten()

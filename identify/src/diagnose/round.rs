@@ -31,6 +31,14 @@ impl Ranking {
     fn plausible(&self) -> f64 {
         (1000.0 * self.threshold).min(1.0)
     }
+
+    /// The round's noise level and significance threshold.
+    pub(super) fn level(&self) -> Level {
+        Level {
+            sigma2: self.sigma2,
+            threshold: self.threshold,
+        }
+    }
 }
 
 /// Generates the candidates on the current fit of `pc` and ranks them at family-wise level
@@ -137,14 +145,13 @@ pub(super) fn rank(
 /// Refits the leading families (up to `opts.refit`) whose score makes them plausible; returns
 /// every refit and the most significant one that passes the round's threshold, with its fit.
 pub(super) fn refit_leading(
-    (model, vars, obs): (&Model, &Variables, &Observations),
-    opts: &Options,
+    setting: Setting,
     cur: &Current,
     (ranking, screened): (&Ranking, &[Screened]),
-    f_hi: f64,
     not_tried: &mut Vec<NotTried>,
     progress: &mut dyn FnMut(&str),
 ) -> (Vec<Refit>, Option<(usize, Current)>, Vec<NotTried>) {
+    let Setting { opts, f_hi, .. } = setting;
     let Ranking {
         threshold, sigma2, ..
     } = ranking;
@@ -154,7 +161,9 @@ pub(super) fn refit_leading(
     // The families of the best screened candidates are refitted, in parallel; when the misfit
     // is large and their best refit leaves it above the noise level (χ² at the diagnosis's
     // level), so are the families of the kinds they leave out (see [`kind_jobs`]), and if that
-    // still leaves it there, those whose short refits went lower (see [`short_refits`]).
+    // still leaves it there, those whose short refits went lower (see [`short_refits`]). When
+    // the misfit is small but above the noise level, the joint-damping splits get short refits
+    // (see [`Short::DampingSplits`]).
     let m = cur.e.len();
     let large = cur.e.norm_squared() / sigma2 > LARGE_MISFIT * m as f64;
     let base_j = 0.5 * cur.e.norm_squared();
@@ -173,11 +182,9 @@ pub(super) fn refit_leading(
             .collect();
         let results = in_parallel(&distinct, |&(f, i)| {
             refit_member(
-                (model, vars, obs),
-                opts,
+                setting,
                 cur,
                 (&jobs[f].members[i], large && i == 0),
-                f_hi,
                 *sigma2,
             )
         });
@@ -216,9 +223,15 @@ pub(super) fn refit_leading(
         }
     }
     let least = least(&outcomes);
-    if large && above_noise(least) {
-        let model = (model, vars, obs);
-        let refined = short_refits(model, opts, cur, ranking, (screened, &jobs), f_hi);
+    let short = if large && above_noise(least) {
+        Some(Short::Leading)
+    } else if !large && above_noise(base_j) {
+        Some(Short::DampingSplits)
+    } else {
+        None
+    };
+    if let Some(short) = short {
+        let refined = short_refits(setting, cur, ranking, (screened, &jobs), short);
         let more = refined_jobs(
             ranking,
             (screened, &refined),
@@ -313,32 +326,20 @@ pub(super) const SCREENED: usize = 30;
 /// when there is nothing to find). `(index into ranking.scored, screened criterion J, the
 /// effect's parameters there (SI))`, best (lowest J) first; candidates that cannot be evaluated
 /// are left out.
-pub(super) fn screen_leading(
-    (model, vars, obs): (&Model, &Variables, &Observations),
-    opts: &Options,
-    cur: &Current,
-    ranking: &Ranking,
-    f_hi: f64,
-) -> Vec<Screened> {
+pub(super) fn screen_leading(setting: Setting, cur: &Current, ranking: &Ranking) -> Vec<Screened> {
+    let f_hi = setting.f_hi;
     let leading = leading_of_each_kind(ranking, SCREENED_PER_KIND);
     if leading.is_empty() {
         return Vec::new();
     }
-    let pc = Problem::new(
-        model,
-        vars,
-        obs,
-        &opts.identification,
-        cur.effects.clone(),
-        f_hi,
-    );
+    let pc = setting.problem(cur.effects.clone());
     let free = free_columns(&pc, &cur.u);
     let jfree = DMatrix::from_fn(cur.jac.nrows(), free.len(), |r, c| cur.jac[(r, free[c])]);
     let basis = score::orthonormal_columns(&jfree);
     let results = in_parallel(&leading, |&j| {
         let s = &ranking.scored[j];
         let cand = &ranking.candidates[s.candidate];
-        let mut p = extended((model, vars, obs), opts, cur, cand, f_hi);
+        let mut p = extended(setting, cur, cand);
         let params = cand.params(f_hi);
         let starts = screen::size_starts(&params, &score_start(cand, s.step, f_hi));
         let resonator = matches!(cand, Effect::Resonator { .. });
@@ -361,16 +362,10 @@ pub(super) fn lowest_first(results: Vec<Option<Screened>>) -> Vec<Screened> {
 }
 
 /// The problem of the current effects and `cand`: the fit extended by one candidate.
-pub(super) fn extended<'a>(
-    (model, vars, obs): (&'a Model, &'a Variables, &'a Observations),
-    opts: &'a Options,
-    cur: &Current,
-    cand: &Effect,
-    f_hi: f64,
-) -> Problem<'a> {
+pub(super) fn extended<'a>(setting: Setting<'a>, cur: &Current, cand: &Effect) -> Problem<'a> {
     let mut effects = cur.effects.clone();
     effects.push(cand.clone());
-    Problem::new(model, vars, obs, &opts.identification, effects, f_hi)
+    setting.problem(effects)
 }
 
 /// Of each kind of effect, the best-scored candidates screened besides the leading
@@ -546,46 +541,95 @@ pub(super) fn pulled_against(ranking: &Ranking, per_kind: usize) -> Vec<usize> {
 /// Iterations of a short refit.
 pub(super) const SHORT_REFIT_ITERATIONS: usize = 40;
 
-/// The short refits of a round whose leading refits leave the misfit large and above the noise
-/// level: the plausible candidates (the leading ones and each kind's first
-/// [`SHORT_REFITS_PER_KIND`] distinct scores) and those the score rules out but the data pull
-/// on hardest ([`pulled_against`]) that no refit job holds, each one's parameters and
-/// the fit's variables fitted together for at most [`SHORT_REFIT_ITERATIONS`] iterations from
-/// the best of the exploring starts (see [`screen::effect_starts`]), at the current fit and with
-/// the variables at their initial values ([`from_initial`]). The lower criterion reached and the
-/// effect's parameters there, lowest first.
+/// The candidates a round's short refits take (see [`short_refits`]).
+#[derive(Clone, Copy, PartialEq, Eq, Debug)]
+pub(super) enum Short {
+    /// Where the misfit is large: the plausible candidates (the leading ones and each kind's
+    /// first [`SHORT_REFITS_PER_KIND`] distinct scores), those the score rules out but the
+    /// data pull on hardest ([`pulled_against`]) and every candidate of the kinds that have no
+    /// point ([`unplaced`]), each also from the variables' initial values.
+    Leading,
+    /// Where the misfit is small but above the noise level: every joint-damping split, from
+    /// the current fit only. A joint's own ψ several times its group's changes the resonance
+    /// peaks far from linearly, and its score and screen, taken at the group's value, see
+    /// little of it (blind seed 3711: a slideway's ψ_t of 4.8 split from its group, score rank
+    /// 261 of 1089 at LM 3.7, screened at J 63.7 against 65.9 before; refitted, it ends at the
+    /// noise level, J 47.8, LR 36). A model has few splits (about a dozen on FWD-32J).
+    DampingSplits,
+}
+
+/// Whether `effect` is of a kind with no point: an SDE's direction, a body's flexibility or
+/// mass, a joint-damping split, a sensor's gain. There is one per element and axis (tens on
+/// FWD-32J, against hundreds of springs, masses and resonators at points), and their scores are
+/// no guide to a finite effect: the variables mimic their first-order action, not their finite
+/// one (blind seed 3782: an actuator's missing lateral stiffness of 5.9 N/µm scores 484th of
+/// 1089, at LM 2.1; refitted it ends at the noise level, J 43.7 against 145.2 before and 75.8
+/// for the best of the others).
+pub(super) fn unplaced(effect: &Effect) -> bool {
+    !matches!(
+        effect,
+        Effect::Spring { .. }
+            | Effect::PlacedSpring { .. }
+            | Effect::Mass { .. }
+            | Effect::PlacedMass { .. }
+            | Effect::Resonator { .. }
+    )
+}
+
+/// The short refits of a round whose leading refits leave the misfit above the noise level:
+/// the candidates `short` names that no refit job holds, each one's parameters and the fit's
+/// variables fitted together for at most [`SHORT_REFIT_ITERATIONS`] iterations from the best of
+/// the exploring starts (see [`screen::effect_starts`]), at the current fit and (for
+/// [`Short::Leading`]) with the variables at their initial values ([`from_initial`]). The lower
+/// criterion reached and the effect's parameters there, lowest first.
 ///
 /// The screen moves the fit's variables to first order only, and a large effect can need them to
 /// move far: an actuator's missing lateral stiffness (5.3 N/µm on FWD-32J, scored 238th) screens
 /// at J 524 against 589 before, far above partial fixes at 286, and refitted it ends at the noise
 /// level, J 35, after 26 iterations, the first ten of which gain little.
 pub(super) fn short_refits(
-    (model, vars, obs): (&Model, &Variables, &Observations),
-    opts: &Options,
+    setting: Setting,
     cur: &Current,
     ranking: &Ranking,
     (screened, jobs): (&[Screened], &[Job]),
-    f_hi: f64,
+    short: Short,
 ) -> Vec<Screened> {
+    let Setting {
+        vars, opts, f_hi, ..
+    } = setting;
     let effect = |j: usize| &ranking.candidates[ranking.scored[j].candidate];
     let refitted = |j: usize| {
         jobs.iter()
             .flat_map(|job| &job.members)
             .any(|m| std::ptr::eq(m.effect, effect(j)))
     };
-    let against = pulled_against(ranking, PULLED_PER_KIND);
-    let todo: Vec<usize> = leading_of_each_kind(ranking, SHORT_REFITS_PER_KIND)
-        .into_iter()
-        .chain(against.iter().copied())
-        .filter(|&j| !refitted(j))
-        .collect();
+    let against = match short {
+        Short::Leading => pulled_against(ranking, PULLED_PER_KIND),
+        Short::DampingSplits => Vec::new(),
+    };
+    let todo: Vec<usize> = match short {
+        Short::Leading => leading_of_each_kind(ranking, SHORT_REFITS_PER_KIND)
+            .into_iter()
+            .chain(against.iter().copied())
+            .chain((0..ranking.scored.len()).filter(|&j| unplaced(effect(j))))
+            .fold(Vec::new(), |mut todo, j| {
+                if !todo.contains(&j) {
+                    todo.push(j);
+                }
+                todo
+            }),
+        Short::DampingSplits => (0..ranking.scored.len())
+            .filter(|&j| matches!(effect(j), Effect::Damping { .. }))
+            .collect(),
+    };
+    let todo: Vec<usize> = todo.into_iter().filter(|&j| !refitted(j)).collect();
     let settings = optimize::Settings {
         max_iterations: SHORT_REFIT_ITERATIONS,
         ..opts.identification.settings
     };
     let ends = in_parallel(&todo, |&j| {
         let cand = effect(j);
-        let mut p = extended((model, vars, obs), opts, cur, cand, f_hi);
+        let mut p = extended(setting, cur, cand);
         let params = cand.params(f_hi);
         let (lo, hi) = p.bounds();
         let step = score_start(cand, ranking.scored[j].step, f_hi);
@@ -603,12 +647,12 @@ pub(super) fn short_refits(
         }
         let starts = starts.iter().map(|x| with_effect(&cur.u, &params, x));
         let (_, u0) = lowest_start(&mut p, starts)?;
-        let fresh = from_initial(&u0, vars, &p.scale);
-        let out = [u0, fresh]
-            .iter()
+        let fresh = (short == Short::Leading).then(|| fresh_start(&mut p, &u0, &params, vars));
+        let out = std::iter::once(u0)
+            .chain(fresh)
             .filter_map(|u| {
                 let optimizer = opts.identification.optimizer;
-                optimize::minimize(optimizer, &mut p, u, &lo, &hi, &settings, &mut |_| {}).ok()
+                optimize::minimize(optimizer, &mut p, &u, &lo, &hi, &settings, &mut |_| {}).ok()
             })
             .min_by(|a, b| a.criterion.total_cmp(&b.criterion))?;
         // The new effect's parameters (SI) are the last of the effects'.
@@ -820,27 +864,13 @@ pub(super) fn in_parallel<J: Sync, R: Send>(jobs: &[J], f: impl Fn(&J) -> R + Sy
 /// adjusts them to first order only. The other members only refit: exploring them too doubled
 /// the blind suite's time and changed 1 of its 200 verdicts.
 pub(super) fn refit_member(
-    (model, vars, obs): (&Model, &Variables, &Observations),
-    opts: &Options,
+    setting: Setting,
     cur: &Current,
     (member, explore): (&Member, bool),
-    f_hi: f64,
     sigma2: f64,
 ) -> Result<(Refit, Current), RefitError> {
-    refit(
-        model,
-        vars,
-        obs,
-        opts,
-        cur,
-        member.effect,
-        (
-            &member.start,
-            explore.then_some(member.score_step.as_slice()),
-        ),
-        f_hi,
-        sigma2,
-    )
+    let step = explore.then_some(member.score_step.as_slice());
+    refit(setting, cur, member.effect, (&member.start, step), sigma2)
 }
 
 /// The family's refit that stands for it: the one whose likelihood ratio stands furthest above
@@ -1056,22 +1086,24 @@ pub(super) fn families(ranked: &[score::Scored], n: usize) -> Vec<Vec<usize>> {
 /// parameters' values) or, with `explore` (the score step's values), from the best of the starts
 /// around it (see [`screen::REFIT_START_FRACTIONS`], [`screen::REFIT_SIZE_DECADES`]; a
 /// resonator's tuning frequency also on a grid across its range, refined around the best), from
-/// the score step and from the variables' initial values too; the lowest end wins.
-#[allow(clippy::too_many_arguments)]
+/// the score step and from a [`fresh_start`] too; the lowest end wins.
 pub(super) fn refit(
-    model: &Model,
-    vars: &Variables,
-    obs: &Observations,
-    opts: &Options,
+    setting: Setting,
     cur: &Current,
     cand: &Effect,
     (start, explore): (&[f64], Option<&[f64]>),
-    f_hi: f64,
     sigma2: f64,
 ) -> Result<(Refit, Current), RefitError> {
+    let Setting {
+        vars,
+        obs,
+        opts,
+        f_hi,
+        ..
+    } = setting;
     let step = explore.filter(|step| *step != start);
     let explore = explore.is_some();
-    let mut p = extended((model, vars, obs), opts, cur, cand, f_hi);
+    let mut p = extended(setting, cur, cand);
     let new_params = cand.params(f_hi);
     let q = new_params.len();
     let m = cur.e.len();
@@ -1108,7 +1140,7 @@ pub(super) fn refit(
         screen::tune_resonator(&mut objective, &mut u0, j_start, (&lo, &hi));
     }
     let settings = opts.identification.settings;
-    let scale = p.scale.clone();
+    let fresh = explore.then(|| fresh_start(&mut p, &u0, &new_params, vars));
     let mut minimize_from = |u: &DVector<f64>| {
         optimize::minimize(
             opts.identification.optimizer,
@@ -1133,11 +1165,8 @@ pub(super) fn refit(
         others.push(start_at(step));
     }
     // A large missing effect bends the fit's own parameters to mimic it, and the refit can stay
-    // in that valley: the variables' initial values, with the effect at its best start, are a
-    // start outside it.
-    if explore {
-        others.push(from_initial(&u0, vars, &scale));
-    }
+    // in that valley: the variables' initial values are a start outside it.
+    others.extend(fresh);
     for u in others {
         if let Ok(other) = minimize_from(&u) {
             if other.criterion < out.criterion {
@@ -1213,6 +1242,52 @@ pub(super) fn from_initial(u: &DVector<f64>, vars: &Variables, scale: &[f64]) ->
         fresh[i] = x / scale[i];
     }
     fresh
+}
+
+/// Steps per decade of the size grid of [`fresh_start`].
+pub(super) const FRESH_SIZES_PER_DECADE: i32 = 4;
+/// Decades of an effect's scale the size grid of [`fresh_start`] spans on either side of its
+/// nested value: wider than the refit's starts ([`screen::REFIT_SIZE_DECADES`]), as the grid
+/// costs one evaluation a size and a scale is only a guess (a flexibility's is the stiffest
+/// joint's compliance: blind seed 3759's column compliance of 1.8e-9 m/N is four decades above
+/// its scale of 1.1e-13 m/N).
+pub(super) const FRESH_SIZE_DECADES: std::ops::RangeInclusive<i32> = -2..=6;
+
+/// The start of problem `p` (extended by a new effect with parameters `params`, the last of
+/// `u`) outside the valley where a large missing effect has bent the fit's own parameters: the
+/// variables at their initial values ([`from_initial`]) and the effect's size (its first
+/// parameter) the one of `u` or of a grid ([`FRESH_SIZES_PER_DECADE`] steps a decade across
+/// [`FRESH_SIZE_DECADES`] of its scale on either side of its nested value) where the
+/// misfit there is least. With the variables back at their nominal values, the misfit is least
+/// in the effect's own valley, which the bent fit hides (blind seed 3798: the overarm's missing
+/// compliance of 1.03e-9 m/N; short refits from the bent fit at every size from 1e-12 to
+/// 5.6e-10 m/N end near 4.5e-10 m/N at J ≈ 2590, and three other effects were added; from the
+/// nominal variables with sizes of 5.6e-10 to 1.0e-9 m/N they end at the noise level, J 51.7).
+pub(super) fn fresh_start(
+    p: &mut Problem,
+    u: &DVector<f64>,
+    params: &[EffectParam],
+    vars: &Variables,
+) -> DVector<f64> {
+    let fresh = from_initial(u, vars, &p.scale);
+    let Some(np) = params.first() else {
+        return fresh;
+    };
+    let at = u.len() - params.len();
+    let (first, last) = (
+        FRESH_SIZE_DECADES.start() * FRESH_SIZES_PER_DECADE,
+        FRESH_SIZE_DECADES.end() * FRESH_SIZES_PER_DECADE,
+    );
+    let sizes = (first..=last)
+        .map(|k| np.scale * 10f64.powf(f64::from(k) / f64::from(FRESH_SIZES_PER_DECADE)))
+        .flat_map(|step| [np.nested + step, np.nested - step])
+        .filter(|x| *x > np.lower && *x < np.upper);
+    let grid = sizes.map(|x| {
+        let mut v = fresh.clone();
+        v[at] = x / np.scale;
+        v
+    });
+    lowest_start(p, std::iter::once(fresh.clone()).chain(grid)).map_or(fresh, |(_, v)| v)
 }
 
 /// The fit's scaled variables `u` followed by a new effect's parameters at `x` (SI, clamped to
