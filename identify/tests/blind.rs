@@ -206,11 +206,7 @@ fn the_truth_s_own_form_fits_to_the_noise_and_judges_a_miss() {
 /// every body's attachment points it is moved to the overarm, found alone and sized right.
 #[test]
 fn a_large_resonator_accepted_on_the_wrong_body_is_moved_to_its_own() {
-    let model = load_model("fwd32j.toml");
-    let vars = load_variables("fwd32j.toml", &model);
-    let lines = synthetic::fwd32j_lines();
-    let case = blind::draw(&model, &vars, &lines, 3703, None).unwrap();
-    let (o, d) = blind::run(&model, &case, &diagnose::Options::default()).unwrap();
+    let (case, o, d) = diagnosed(3703);
     assert!(o.right_first && o.exact, "{o:?}");
     let first = &d.rounds[0];
     let accepted = &first.refits[first.accepted.unwrap()];
@@ -236,11 +232,7 @@ fn a_large_resonator_accepted_on_the_wrong_body_is_moved_to_its_own() {
 /// gets a short refit; this one ends at the noise level and is found alone, sized right.
 #[test]
 fn a_damping_split_the_score_misses_is_found_by_its_short_refit() {
-    let model = load_model("fwd32j.toml");
-    let vars = load_variables("fwd32j.toml", &model);
-    let lines = synthetic::fwd32j_lines();
-    let case = blind::draw(&model, &vars, &lines, 3711, None).unwrap();
-    let (o, d) = blind::run(&model, &case, &diagnose::Options::default()).unwrap();
+    let (case, o, d) = diagnosed(3711);
     assert!(o.right_first && o.exact, "{o:?}");
     // The score alone would not have put it among the plausible candidates.
     let first = &d.rounds[0];
@@ -260,4 +252,14 @@ fn a_damping_split_the_score_misses_is_found_by_its_short_refit() {
         (psi.value - truth).abs() <= 3.0 * psi.std_error,
         "{psi:?} against {truth}"
     );
+}
+
+/// Blind case `seed` drawn on FWD-32J and diagnosed with the default options.
+fn diagnosed(seed: u64) -> (blind::BlindCase, blind::Outcome, diagnose::Diagnosis) {
+    let model = load_model("fwd32j.toml");
+    let vars = load_variables("fwd32j.toml", &model);
+    let lines = synthetic::fwd32j_lines();
+    let case = blind::draw(&model, &vars, &lines, seed, None).unwrap();
+    let (o, d) = blind::run(&model, &case, &diagnose::Options::default()).unwrap();
+    (case, o, d)
 }

@@ -16,20 +16,32 @@ pub(super) const RELOCATION_ITERATIONS: usize = 10;
 
 /// The steps after a round accepts the refit `chosen` (with its fit `next`) on the fit `cur`
 /// with the effects `accepted` so far: the effect moved to the body where it fits best
-/// ([`relocated`]) and its place refined ([`placed`]), then added to `accepted` and `cur`; the
+/// ([`relocate`]) and its place refined ([`place`]), then added to `accepted` and `cur`; the
 /// earlier effects it made unnecessary dropped ([`remove_unneeded`]), and each earlier point mass
 /// or resonator moved where it fits best now ([`relocate_earlier`]). Each step is recorded in
 /// `round`.
 pub(super) fn after_acceptance(
     setting: Setting,
     level: Level,
-    chosen: (Refit, Current),
+    (mut chosen, mut next): (Refit, Current),
     (cur, accepted): (&mut Current, &mut Vec<Refit>),
     round: &mut Round,
     progress: &mut dyn FnMut(&str),
 ) {
-    let chosen = relocated(setting, level, cur, chosen, round, progress);
-    let (chosen, next) = placed(setting, level, cur, chosen, round, progress);
+    if let Some((moved, better)) = relocate(setting, level, (cur, &next)) {
+        progress(&format!(
+            "moved: {} → {} (J {:.1} → {:.1})",
+            chosen.effect, moved.effect, chosen.criterion_after, moved.criterion_after
+        ));
+        round.relocated.push(moved.clone());
+        (chosen, next) = (moved, better);
+    }
+    if let Some((placed, better)) = place(setting, level, (cur, &next), &chosen) {
+        let params: Vec<String> = placed.params.iter().map(ParamEstimate::describe).collect();
+        progress(&format!("placed: {}", params.join(", ")));
+        round.placed = Some(placed.clone());
+        (chosen, next) = (placed, better);
+    }
     accepted.push(chosen);
     *cur = next;
     remove_unneeded(setting, level, (cur, accepted), round, progress);
@@ -54,53 +66,6 @@ fn remove_unneeded(
         round.removed.push(r);
         *cur = next;
     }
-}
-
-/// The accepted refit with its location refined where that is significantly better (recorded
-/// in `round.placed`), and the fit that goes with it.
-fn placed(
-    setting: Setting,
-    level: Level,
-    cur: &Current,
-    (chosen, next): (Refit, Current),
-    round: &mut Round,
-    progress: &mut dyn FnMut(&str),
-) -> (Refit, Current) {
-    let Some((placed, better)) = place(setting, level, (cur, &next), &chosen) else {
-        return (chosen, next);
-    };
-    progress(&format!(
-        "placed: {}",
-        placed
-            .params
-            .iter()
-            .map(ParamEstimate::describe)
-            .collect::<Vec<_>>()
-            .join(", ")
-    ));
-    round.placed = Some(placed.clone());
-    (placed, better)
-}
-
-/// The accepted point mass or resonator moved to the place where it fits best (see
-/// [`relocate`]; recorded in `round.relocated`), and the fit that goes with it.
-fn relocated(
-    setting: Setting,
-    level: Level,
-    cur: &Current,
-    (chosen, next): (Refit, Current),
-    round: &mut Round,
-    progress: &mut dyn FnMut(&str),
-) -> (Refit, Current) {
-    let Some((moved, better)) = relocate(setting, level, (cur, &next)) else {
-        return (chosen, next);
-    };
-    progress(&format!(
-        "moved: {} → {} (J {:.1} → {:.1})",
-        chosen.effect, moved.effect, chosen.criterion_after, moved.criterion_after
-    ));
-    round.relocated.push(moved.clone());
-    (moved, better)
 }
 
 /// A point mass or resonator acts through the motion of the point it hangs on, and with a large
