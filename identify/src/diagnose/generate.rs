@@ -41,15 +41,7 @@ pub fn candidates(
     f_lo: f64,
     f_hi: f64,
 ) -> Vec<Effect> {
-    let directions = spring_directions(model);
-    let psi = typical_psi(model);
-    let mut out = Vec::new();
-    for a in 0..model.bodies.len() {
-        for b in (a + 1)..model.bodies.len() {
-            springs_between(model, (a, b), &directions, psi, &mut out);
-        }
-        springs_to_ground(model, a, &directions, psi, &mut out);
-    }
+    let mut out = springs(model, typical_psi(model));
     let n_res = ((f_hi / f_lo).log10() * RESONATORS_PER_DECADE)
         .ceil()
         .max(1.0) as usize;
@@ -142,6 +134,20 @@ fn body_masses(model: &Model, vars: &Variables, out: &mut Vec<Effect>) {
             });
         }
     }
+}
+
+/// Every spring candidate (ψ `psi` for the score): between each pair of bodies
+/// ([`springs_between`]) and from each body to the ground ([`springs_to_ground`]).
+pub(super) fn springs(model: &Model, psi: f64) -> Vec<Effect> {
+    let directions = spring_directions(model);
+    let mut out = Vec::new();
+    for a in 0..model.bodies.len() {
+        for b in (a + 1)..model.bodies.len() {
+            springs_between(model, (a, b), &directions, psi, &mut out);
+        }
+        springs_to_ground(model, a, &directions, psi, &mut out);
+    }
+    out
 }
 
 /// Spring directions: the global axes and every excitation force's direction.

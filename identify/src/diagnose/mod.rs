@@ -215,9 +215,10 @@ pub struct Round {
     pub accepted: Option<usize>,
     /// Earlier effects dropped after this round's was added: the data no longer need them.
     pub removed: Vec<Removed>,
-    /// Point masses and resonators moved to another body's attachment point where they fit
-    /// better: the round's accepted one (replacing the candidate the round accepted), then
-    /// earlier ones, refitted there with the later effects in.
+    /// Point masses and resonators moved to another body's attachment point, and earlier
+    /// springs to another pair of bodies, where they fit better: the round's accepted one
+    /// (replacing the candidate the round accepted), then earlier ones, refitted there with the
+    /// later effects in.
     pub relocated: Vec<Refit>,
     /// The accepted point mass or spring refitted with its place free, when the data prefer the
     /// fitted place (it then replaces the candidate placement).
