@@ -254,6 +254,39 @@ fn a_damping_split_the_score_misses_is_found_by_its_short_refit() {
     );
 }
 
+/// An SDE's missing stiffness is taken for a spring between the two bodies it joins: blind seed
+/// 3818's SDE 12 (the column-knee screw) lacks 1518 N/µm along its axis 2, and round 1 accepts a
+/// spring between the column and the knee at the noise level (J 50.9), never refitting the SDE's
+/// own direction. Once nothing more is significant, the swap tries the other kinds on the column
+/// and the knee and replaces the spring by the SDE's direction (J 46.0, one parameter fewer).
+#[test]
+fn an_sde_stiffness_taken_for_a_spring_between_its_bodies_is_swapped_for_it() {
+    let (case, o, d) = diagnosed(3818);
+    assert!(o.exact, "{o:?}");
+    let first = &d.rounds[0];
+    let accepted = &first.refits[first.accepted.unwrap()];
+    assert_eq!(accepted.kind, "spring", "{}", accepted.effect);
+    let replaced: Vec<_> = d.rounds.iter().flat_map(|r| &r.replaced).collect();
+    assert_eq!(replaced.len(), 1, "{replaced:?}");
+    assert!(
+        replaced[0].effect.contains("spring column–knee"),
+        "{replaced:?}"
+    );
+    assert_eq!(d.accepted.len(), 1);
+    assert_eq!(
+        d.accepted[0].kind, "SDE direction",
+        "{}",
+        d.accepted[0].effect
+    );
+    // The stiffness against the injected one, within 3 standard errors.
+    let truth = case.injected[0].values[0];
+    let k = &d.accepted[0].params[0];
+    assert!(
+        (k.value - truth).abs() <= 3.0 * k.std_error,
+        "{k:?} against {truth}"
+    );
+}
+
 /// Blind case `seed` drawn on FWD-32J and diagnosed with the default options.
 fn diagnosed(seed: u64) -> (blind::BlindCase, blind::Outcome, diagnose::Diagnosis) {
     let model = load_model("fwd32j.toml");

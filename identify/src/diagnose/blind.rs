@@ -86,8 +86,9 @@ pub struct Outcome {
     pub seed: u64,
     /// Number of injected effects.
     pub injected: usize,
-    /// The first effect the diagnosis accepted is one of the injected ones (same kind and place,
-    /// see [`same_site`]); false on clean data.
+    /// The first effect of the final answer — the first the diagnosis accepted, as a later
+    /// relocation or swap left it — is one of the injected ones (same kind and place, see
+    /// [`same_site`]); false on clean data.
     pub right_first: bool,
     /// The first family of the first round's ranking holds an injected effect.
     pub ranked_first: bool,

@@ -136,6 +136,62 @@ fn body_masses(model: &Model, vars: &Variables, out: &mut Vec<Effect>) {
     }
 }
 
+/// The candidates of other kinds than `effect`'s that act on a body it acts on (the bodies a
+/// spring joins, the body of a mass, resonator, flexibility or body mass, the two bodies of an
+/// SDE's direction): point masses at the bodies' attachment points, the bodies'
+/// flexibilities and masses, and the freed directions of every SDE attached to them. A
+/// look-alike of another kind accepted in place of the effect the model lacks acts on the same
+/// bodies (blind seed 3818: SDE 12's missing stiffness along its axis 2, between the column and
+/// the knee, taken for a spring between the column and the knee). None for a sensor's gain or a
+/// joint-damping split.
+pub(super) fn alternatives(model: &Model, vars: &Variables, effect: &Effect) -> Vec<Effect> {
+    let touched = bodies_of(model, effect);
+    let on_touched = |b: &Option<usize>| b.is_some_and(|b| touched.contains(&b));
+    let mut out = Vec::new();
+    for &b in &touched {
+        masses_and_flexibility(model, b, &[], &mut out);
+    }
+    let mut directions = Vec::new();
+    freed_directions(model, vars, &mut directions);
+    out.extend(directions.into_iter().filter(|d| {
+        match d {
+            Effect::Direction { sde, .. } => model
+                .sde_index(sde)
+                .is_some_and(|i| model.sdes[i].bodies.iter().any(on_touched)),
+            _ => false,
+        }
+    }));
+    let mut masses = Vec::new();
+    body_masses(model, vars, &mut masses);
+    out.extend(masses.into_iter().filter(|m| match m {
+        Effect::BodyMass { body, .. } => on_touched(&model.body_index(body)),
+        _ => false,
+    }));
+    out.retain(|c| c.kind() != effect.kind());
+    out
+}
+
+/// The bodies `effect` acts on (indices into `model.bodies`; the ground is left out).
+fn bodies_of(model: &Model, effect: &Effect) -> Vec<usize> {
+    match effect {
+        Effect::Spring { bodies, .. } | Effect::PlacedSpring { bodies, .. } => bodies
+            .iter()
+            .flatten()
+            .filter_map(|b| model.body_index(b))
+            .collect(),
+        Effect::Mass { body, .. }
+        | Effect::PlacedMass { body, .. }
+        | Effect::Resonator { body, .. }
+        | Effect::Flexible { body, .. }
+        | Effect::BodyMass { body, .. } => model.body_index(body).into_iter().collect(),
+        Effect::Direction { sde, .. } => model
+            .sde_index(sde)
+            .map(|i| model.sdes[i].bodies.iter().flatten().copied().collect())
+            .unwrap_or_default(),
+        Effect::Gain { .. } | Effect::Damping { .. } => Vec::new(),
+    }
+}
+
 /// Every spring candidate (ψ `psi` for the score): between each pair of bodies
 /// ([`springs_between`]) and from each body to the ground ([`springs_to_ground`]).
 pub(super) fn springs(model: &Model, psi: f64) -> Vec<Effect> {
@@ -462,5 +518,51 @@ mod tests {
         let way = model.sdes.iter().find(|s| s.name == "23").unwrap().point;
         assert!(springs_at("knee", "lower saddle", way.into()) > 0);
         assert!(reaches(&model.bodies[0], &model.bodies[0].position));
+    }
+
+    /// A spring between the column and the knee has, among its alternatives, SDE 12's missing
+    /// stiffness along its axis 2 (blind seed 3818), the two bodies' flexibilities and point
+    /// masses, and no spring and nothing on a body it does not touch; a sensor's gain has none.
+    #[test]
+    fn a_springs_alternatives_are_the_other_kinds_on_the_bodies_it_joins() {
+        let model = crate::modelfile::fwd32j();
+        let vars_file = crate::modelfile::repo_file("configs/identification/fwd32j.toml");
+        let vars = crate::identification::variables::load(&vars_file, &model).unwrap();
+        let spring = Effect::Spring {
+            bodies: [Some("column".into()), Some("knee".into())],
+            point: Vector3::new(0.0, 0.75, 0.1),
+            direction: Vector3::y(),
+            psi: 0.3,
+        };
+        let found = alternatives(&model, &vars, &spring);
+        let has = |kind: &str, site: &str| {
+            found
+                .iter()
+                .any(|e| e.kind() == kind && e.site() == [Some(site)])
+        };
+        assert!(found
+            .iter()
+            .any(|e| matches!(e, Effect::Direction { sde, axis: 1, .. } if sde == "12")));
+        for body in ["column", "knee"] {
+            assert!(has("flexible body", body), "{body}'s flexibility");
+            assert!(has("mass", body), "point masses on the {body}");
+        }
+        assert!(!found.iter().any(|e| e.kind() == "spring"));
+        let joins = |sde: &str, body: &str| {
+            let (s, b) = (model.sde_index(sde).unwrap(), model.body_index(body));
+            model.sdes[s].bodies.contains(&b)
+        };
+        for e in &found {
+            let on_touched = match e {
+                Effect::Direction { sde, .. } => joins(sde, "column") || joins(sde, "knee"),
+                _ => e.site() == [Some("column")] || e.site() == [Some("knee")],
+            };
+            assert!(on_touched, "{} acts on neither body", e.describe());
+        }
+        let gain = Effect::Gain {
+            output: 0,
+            label: "u1".into(),
+        };
+        assert!(alternatives(&model, &vars, &gain).is_empty());
     }
 }

@@ -12,11 +12,14 @@
 //!    significant is accepted if its likelihood-ratio test passes at `α / (number of candidates
 //!    ranked)` (Bonferroni: the family-wise false-alarm rate stays at α although hundreds are
 //!    looked at). Repeat until nothing significant is left.
+//! 5. Then each accepted effect is tried against the effects of other kinds on the same bodies,
+//!    and swapped for one the data prefer; after a swap the loop goes on.
 //!
 //! This file holds the records (options, refits, rounds, the diagnosis) and the loop itself
 //! ([`diagnose`]); its steps live beside it: `base.rs` the converged base fit, `round.rs` one
 //! round's ranking, screen, refits and choice, `placement.rs` the place refinement and backward
-//! check after an acceptance, `text.rs` the report in the paper's units.
+//! check after an acceptance, `swap.rs` the swap of an accepted effect for one of another kind,
+//! `text.rs` the report in the paper's units.
 //!
 //! ```no_run
 //! use identify::diagnose::{diagnose, Options};
@@ -38,6 +41,7 @@ pub mod residuals;
 mod round;
 pub mod score;
 mod screen;
+mod swap;
 mod text;
 
 use nalgebra::{DMatrix, DVector};
@@ -53,6 +57,7 @@ use base::base_fit;
 pub use base::BaseFit;
 use placement::after_acceptance;
 use round::{rank, refit_leading, screen_leading};
+use swap::swap_accepted;
 
 use crate::identification::optimize::{self, Residuals as _};
 use crate::identification::{self, EvalError, Identification, Observations, Variables};
@@ -220,6 +225,9 @@ pub struct Round {
     /// (replacing the candidate the round accepted), then earlier ones, refitted there with the
     /// later effects in.
     pub relocated: Vec<Refit>,
+    /// Accepted effects replaced, once no candidate was significant any more, by an effect of
+    /// another kind on the same bodies that the data prefer (a round that accepted nothing).
+    pub replaced: Vec<Replaced>,
     /// The accepted point mass or spring refitted with its place free, when the data prefer the
     /// fitted place (it then replaces the candidate placement).
     pub placed: Option<Refit>,
@@ -227,6 +235,15 @@ pub struct Round {
     /// parameter or a confidence interval that includes the nested value ("indicated but not
     /// identifiable").
     pub not_identifiable: Vec<NotTried>,
+}
+
+/// An accepted effect replaced by one of another kind on the same bodies.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Replaced {
+    /// The effect replaced: what and where.
+    pub effect: String,
+    /// The refit of the effect that replaced it (in the fit without the replaced one).
+    pub by: Refit,
 }
 
 /// An effect accepted in an earlier round and dropped by the backward check.
@@ -351,6 +368,8 @@ pub struct Timing {
     pub ranking: f64,
     /// The candidates' refits, every round.
     pub refits: f64,
+    /// The swaps of accepted effects for effects of other kinds (see `swap.rs`).
+    pub swaps: f64,
     /// Placement refinement, backward checks and the final analysis.
     pub other: f64,
 }
@@ -359,8 +378,8 @@ pub struct Timing {
 pub fn timing_text(d: &Diagnosis) -> String {
     let t = &d.timing;
     format!(
-        "time: base fit {:.2} s, ranking {:.2} s, refits {:.2} s, placement and checks {:.2} s",
-        t.base_fit, t.ranking, t.refits, t.other
+        "time: base fit {:.2} s, ranking {:.2} s, refits {:.2} s, swaps {:.2} s, placement and checks {:.2} s",
+        t.base_fit, t.ranking, t.refits, t.swaps, t.other
     )
 }
 
@@ -472,7 +491,12 @@ pub fn diagnose(
     let mut rounds = Vec::new();
     let mut accepted = Vec::new();
     let mut not_tried = untestable();
-    for _ in 0..opts.max_effects {
+    // Rounds left: each may accept one effect; a round that replaces one instead gives its
+    // round back (an effect is tried for a swap once, so this ends).
+    let mut rounds_left = opts.max_effects;
+    let mut swap_tried = Vec::new();
+    while rounds_left > 0 {
+        rounds_left -= 1;
         let t = std::time::Instant::now();
         let pc = setting.problem(cur.effects.clone());
         let ranking = rank(&pc, &cur, &labels, (f_lo, f_hi), opts.alpha, &mut not_tried)?;
@@ -504,11 +528,25 @@ pub fn diagnose(
             accepted: best.as_ref().map(|(i, _)| *i),
             removed: Vec::new(),
             relocated: Vec::new(),
+            replaced: Vec::new(),
             placed: None,
             not_identifiable,
         };
         let Some((i, next)) = best else {
+            let t = std::time::Instant::now();
+            let swapped = swap_accepted(
+                setting,
+                ranking.level(),
+                (&mut cur, &mut accepted),
+                (&mut round, &mut swap_tried),
+                progress,
+            );
+            timing.swaps += t.elapsed().as_secs_f64();
             rounds.push(round);
+            if swapped {
+                rounds_left += 1;
+                continue;
+            }
             progress("nothing significant left");
             break;
         };
@@ -531,7 +569,11 @@ pub fn diagnose(
         (before, rounds, accepted, not_tried),
         progress,
     )?;
-    timing.other = clock.elapsed().as_secs_f64() - timing.base_fit - timing.ranking - timing.refits;
+    timing.other = clock.elapsed().as_secs_f64()
+        - timing.base_fit
+        - timing.ranking
+        - timing.refits
+        - timing.swaps;
     d.timing = timing;
     d.base = base;
     Ok(d)
@@ -557,11 +599,10 @@ fn final_fit(
         .filter(|n| {
             !accepted
                 .iter()
-                .chain(
-                    rounds
-                        .iter()
-                        .flat_map(|r| r.placed.iter().chain(&r.relocated)),
-                )
+                .chain(rounds.iter().flat_map(|r| {
+                    let by = r.replaced.iter().map(|x| &x.by);
+                    r.placed.iter().chain(&r.relocated).chain(by)
+                }))
                 .any(|a| n.effect == format!("refit of {}", a.effect) || n.effect == a.effect)
         })
         .collect();

@@ -250,7 +250,7 @@ fn param_range(cur: &Current, k: usize, f_hi: f64) -> std::ops::Range<usize> {
 
 /// The fit `cur` refitted without its effect `k` (from `cur`'s point); `None` when the refit
 /// fails.
-fn refitted_without(setting: Setting, cur: &Current, k: usize) -> Option<Current> {
+pub(super) fn refitted_without(setting: Setting, cur: &Current, k: usize) -> Option<Current> {
     let opts = setting.opts;
     let skip = param_range(cur, k, setting.f_hi);
     let effects: Vec<Effect> = (0..cur.effects.len())
@@ -289,7 +289,7 @@ fn refitted_without(setting: Setting, cur: &Current, k: usize) -> Option<Current
 
 /// `cur` with its effects in the order `order` (indices into `cur.effects`): the variables
 /// first, then each effect's parameters in the new order, in `u` and in the Jacobian's columns.
-fn reordered(cur: &Current, order: &[usize], f_hi: f64) -> Current {
+pub(super) fn reordered(cur: &Current, order: &[usize], f_hi: f64) -> Current {
     let nx = param_range(cur, 0, f_hi).start;
     let index: Vec<usize> = (0..nx)
         .chain(order.iter().flat_map(|&k| param_range(cur, k, f_hi)))
@@ -383,7 +383,7 @@ fn relocate_earlier(
 /// it joins) — from `base` (the fit before it was added), from several starting places. Kept
 /// when the place parameters beat the round's threshold against the candidate placement `fixed`
 /// (LR test).
-fn place(
+pub(super) fn place(
     setting: Setting,
     Level { sigma2, threshold }: Level,
     (base, fixed): (&Current, &Current),

@@ -195,6 +195,13 @@ pub(super) fn round_text(s: &mut String, i: usize, r: &Round) {
             m.effect, m.criterion_after
         );
     }
+    for x in &r.replaced {
+        let _ = writeln!(
+            s,
+            "    replaced: {} → {} (J {:.1} there, an effect of another kind on the same bodies)",
+            x.effect, x.by.effect, x.by.criterion_after
+        );
+    }
     if let Some(p) = &r.placed {
         let ps: Vec<String> = p.params.iter().map(ParamEstimate::describe).collect();
         let _ = writeln!(
