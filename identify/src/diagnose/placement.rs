@@ -302,6 +302,14 @@ pub(super) fn reordered(cur: &Current, order: &[usize], f_hi: f64) -> Current {
     }
 }
 
+/// `cur` with its last effect put back at index `k` (the others keep their order): an earlier
+/// effect refitted last, as [`relocate_earlier`] and the swap refit it, returned to its place.
+pub(super) fn put_back(cur: &Current, k: usize, f_hi: f64) -> Current {
+    let n = cur.effects.len();
+    let order: Vec<usize> = (0..k).chain([n - 1]).chain(k..n - 1).collect();
+    reordered(cur, &order, f_hi)
+}
+
 /// Where [`relocate_earlier`] tries an earlier spring `effect`: the effect itself (its own
 /// place) and every spring candidate along its direction, between every pair of bodies and to
 /// the ground ([`generate::springs`]). Empty for the other kinds.
@@ -370,8 +378,7 @@ fn relocate_earlier(
             0.5 * cur.e.norm_squared(),
             moved.criterion_after
         ));
-        let back: Vec<usize> = (0..n - 1).take(k).chain([n - 1]).chain(k..n - 1).collect();
-        *cur = reordered(&next, &back, f_hi);
+        *cur = put_back(&next, k, f_hi);
         *earlier = moved.clone();
         round.relocated.push(moved);
     }
@@ -523,8 +530,8 @@ mod tests {
         assert_eq!(order, [0.0, 1.0, 4.0, 5.0, 6.0, 2.0, 3.0]);
         assert_eq!(last.jac.row(0).transpose(), last.u);
         assert!(matches!(last.effects[2], Effect::Resonator { .. }));
-        // And back where it was, as `relocate_earlier` puts a moved effect.
-        let back = reordered(&last, &[2, 0, 1], f_hi);
+        // And back where it was, as `relocate_earlier` and the swap put a moved effect.
+        let back = put_back(&last, 0, f_hi);
         assert_eq!(back.u, cur.u);
         assert_eq!(back.jac, cur.jac);
         assert_eq!(back.effects, cur.effects);

@@ -4,7 +4,7 @@
 //! another kind (a spring between the two bodies an SDE joins for that SDE's missing stiffness)
 //! can only be put right by a swap.
 
-use super::placement::{place, refitted_without, reordered};
+use super::placement::{place, put_back, refitted_without};
 use super::round::{extended, fresh_start, in_parallel, refit, unidentifiable, with_effect};
 use super::*;
 
@@ -82,8 +82,7 @@ pub(super) fn swap_accepted(
             0.5 * cur.e.norm_squared(),
             by.criterion_after
         ));
-        let back: Vec<usize> = (0..n - 1).take(k).chain([n - 1]).chain(k..n - 1).collect();
-        *cur = reordered(&next, &back, f_hi);
+        *cur = put_back(&next, k, f_hi);
         tried.push(cur.effects[k].describe());
         round.replaced.push(Replaced {
             effect: earlier.effect.clone(),
