@@ -63,11 +63,12 @@ fn main() {
                     })
                     .collect();
                 println!(
-                    "seed {seed}: noise {:.1} %, injected [{}]; added [{}]; first {} ranked {} exact {} ({:.1} s)",
+                    "seed {seed}: noise {:.1} %, injected [{}]; added [{}]; first {} named {} ranked {} exact {} ({:.1} s)",
                     100.0 * case.noise,
                     truth.join("; "),
                     added.join("; "),
                     o.right_first,
+                    o.named_first,
                     o.ranked_first,
                     o.exact,
                     o.seconds
@@ -96,11 +97,12 @@ fn main() {
     }
     let r = blind::rates(&outcomes);
     println!(
-        "\n{} cases ({} with effects, {} clean): right first {:.1} % (ranked first {:.1} %), exact set {:.1} %, false adds on clean {:.1} %, median wall time {:.2} s per case ({:.2} s diagnosis)",
+        "\n{} cases ({} with effects, {} clean): right first {:.1} % (named first {:.1} %, ranked first {:.1} %), exact set {:.1} %, false adds on clean {:.1} %, median wall time {:.2} s per case ({:.2} s diagnosis)",
         outcomes.len(),
         r.with_effects,
         r.clean,
         100.0 * r.right_first,
+        100.0 * r.named_first,
         100.0 * r.ranked_first,
         100.0 * r.exact,
         100.0 * r.false_add,

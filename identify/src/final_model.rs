@@ -575,6 +575,9 @@ fn provenance(d: &Diagnosis, a: &Refit) -> String {
         );
     }
     let _ = writeln!(s, "# estimates at the final fit: {}", estimates_text(a));
+    for e in &a.equivalent {
+        let _ = writeln!(s, "# the data cannot tell it from: {}", e.describe());
+    }
     s
 }
 

@@ -85,7 +85,7 @@ fn the_missing_hydraulic_actuator_is_found_added_and_the_fit_reaches_the_noise_f
     );
     let added = d.accepted.first().expect("an effect is added");
     assert!(
-        added.effect == actuator || added.equivalent.iter().any(|e| e == actuator),
+        added.effect == actuator || added.equivalent.iter().any(|e| e.describe() == actuator),
         "added: {added:?}"
     );
     // Its stiffness: the truth is 0.5639 N/µm.

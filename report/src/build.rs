@@ -447,7 +447,7 @@ pub fn diagnosis(d: &diagnose::Diagnosis, base: &str, id: &Identification) -> Di
             // place (see `diagnose`'s family refits).
             let refit = accepted.filter(|a| {
                 a.effect == c.effect
-                    || a.equivalent.contains(&c.effect)
+                    || a.equivalent.iter().any(|e| e.describe() == c.effect)
                     || a.family.contains(&c.effect)
             });
             let effect = refit.map_or(&c.effect, |a| &a.effect);
@@ -520,6 +520,15 @@ pub fn diagnosis(d: &diagnose::Diagnosis, base: &str, id: &Identification) -> Di
             )
         })
         .collect();
+    let look_alikes: Vec<String> = d
+        .accepted
+        .iter()
+        .filter(|a| !a.equivalent.is_empty())
+        .map(|a| {
+            let alike: Vec<String> = a.equivalent.iter().map(|e| e.describe()).collect();
+            format!("{} ≡ {}", a.effect, alike.join("; "))
+        })
+        .collect();
     let final_model = if added.is_empty() {
         format!("{base} (no effect added)")
     } else {
@@ -530,6 +539,7 @@ pub fn diagnosis(d: &diagnose::Diagnosis, base: &str, id: &Identification) -> Di
         before: fit(&d.before),
         after: fit(&d.after),
         final_model,
+        look_alikes,
         final_parameters: final_parameters(d, id),
         explained: d.after.explained,
         verdict: match &d.outside_library {

@@ -245,6 +245,10 @@ pub struct Diagnosis {
     pub after: FitQuality,
     /// One line on the final model (e.g. `"fwd32j-no-actuator + spring spindle head–table"`).
     pub final_model: String,
+    /// For each added effect the data cannot tell from others (their refits end within a
+    /// likelihood ratio of 3.84 of it): `"<effect> ≡ <other>; <other>"`.
+    #[serde(default)]
+    pub look_alikes: Vec<String>,
     /// The final model's variables when an effect was added: `identified` is the value at the
     /// final (extended) fit with its Cramér-Rao error there, `initial` the superseded first fit's
     /// value. Empty when nothing was added: the identification's table is final.

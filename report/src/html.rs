@@ -151,6 +151,13 @@ fn final_model(h: &mut String, r: &Report) {
          superseded.</span></p>",
         e(&d.final_model)
     );
+    if !d.look_alikes.is_empty() {
+        h.push_str("<p>The data cannot tell these added effects from the alternatives after \"≡\" (their refits end within a likelihood ratio of 3.84):</p>\n<ul>\n");
+        for l in &d.look_alikes {
+            let _ = writeln!(h, "<li>{}</li>", e(l));
+        }
+        h.push_str("</ul>\n");
+    }
     h.push_str("<table><tr><th class=\"l\">variable</th><th class=\"l\">SDEs</th><th class=\"l\">unit</th><th>final</th><th>std error</th><th>σ/x</th><th>first fit (superseded)</th><th class=\"l\">note</th></tr>\n");
     for p in &d.final_parameters {
         let _ = writeln!(

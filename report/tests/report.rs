@@ -201,6 +201,8 @@ fn html_is_self_contained_with_every_plot() {
         "titles are escaped"
     );
     assert!(html.contains("ALARM") && html.contains("outcome: alarm"));
+    // An added effect the data cannot tell from others is shown with them, under the final model.
+    assert!(html.contains("<li>spring k1-body–ground ≡ spring k2-body–ground</li>"));
     // Every parameter row is in the table.
     for p in &r.identification.parameters {
         assert!(html.contains(&format!("<td class=\"l\">{}</td>", p.variable)));

@@ -88,8 +88,12 @@ pub struct Outcome {
     pub injected: usize,
     /// The first effect of the final answer — the first the diagnosis accepted, as a later
     /// relocation or swap left it — is one of the injected ones (same kind and place, see
-    /// [`same_site`]); false on clean data.
+    /// [`same_site`]), or one of the effects it reports the data cannot tell from it (its
+    /// `equivalent`, "≡"); false on clean data.
     pub right_first: bool,
+    /// The first effect of the final answer is itself one of the injected ones: `right_first`
+    /// without its equivalents.
+    pub named_first: bool,
     /// The first family of the first round's ranking holds an injected effect.
     pub ranked_first: bool,
     /// The final set of added effects is the injected set, one to one (on clean data: nothing).
@@ -602,7 +606,11 @@ pub fn judge(case: &BlindCase, d: &Diagnosis, seconds: f64, diagnosis_seconds: f
     };
     let hit =
         |e: &Effect, values: &[f64]| case.injected.iter().any(|i| found(&d.model, i, e, values));
-    let right_first = d.effects.first().is_some_and(|e| hit(e, &fitted(0)));
+    let named_first = d.effects.first().is_some_and(|e| hit(e, &fitted(0)));
+    let right_first = named_first
+        || d.accepted
+            .first()
+            .is_some_and(|a| a.equivalent.iter().any(|e| hit(e, &[])));
     let ranked_first = d
         .rounds
         .first()
@@ -629,6 +637,7 @@ pub fn judge(case: &BlindCase, d: &Diagnosis, seconds: f64, diagnosis_seconds: f
         seed: case.seed,
         injected: case.injected.len(),
         right_first,
+        named_first,
         ranked_first,
         exact,
         false_add: case.injected.is_empty() && !d.effects.is_empty(),
@@ -645,8 +654,11 @@ pub struct Rates {
     pub with_effects: usize,
     /// Clean cases.
     pub clean: usize,
-    /// Share of the cases with effects whose first accepted effect is an injected one.
+    /// Share of the cases with effects whose first accepted effect, or one it reports the data
+    /// cannot tell from it, is an injected one ([`Outcome::right_first`]).
     pub right_first: f64,
+    /// Share of the cases with effects whose first accepted effect is itself an injected one.
+    pub named_first: f64,
     /// Share of the cases with effects whose first ranked family holds an injected one.
     pub ranked_first: f64,
     /// Share of all cases whose final set is exactly the injected one.
@@ -679,6 +691,7 @@ pub fn rates(outcomes: &[Outcome]) -> Rates {
         with_effects: with.len(),
         clean,
         right_first: share(with.iter().filter(|o| o.right_first).count(), with.len()),
+        named_first: share(with.iter().filter(|o| o.named_first).count(), with.len()),
         ranked_first: share(with.iter().filter(|o| o.ranked_first).count(), with.len()),
         exact: share(outcomes.iter().filter(|o| o.exact).count(), outcomes.len()),
         false_add: share(outcomes.iter().filter(|o| o.false_add).count(), clean),

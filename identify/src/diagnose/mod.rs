@@ -56,7 +56,7 @@ pub use text::{final_text, gain_text, text};
 use base::base_fit;
 pub use base::BaseFit;
 use placement::after_acceptance;
-use round::{rank, refit_leading, screen_leading};
+use round::{rank, refit_leading, screen_leading, Refitted};
 use swap::swap_accepted;
 
 use crate::identification::optimize::{self, Residuals as _};
@@ -168,9 +168,12 @@ pub struct Refit {
     /// [`Diagnosis::not_tried`].
     #[serde(skip)]
     pub converged: bool,
-    /// The family members the data cannot tell from this one: their refits end within a
-    /// likelihood ratio of 3.84 of it (see [`Ranked::equivalent`] for the score's look-alikes).
-    pub equivalent: Vec<String>,
+    /// The effects the data cannot tell from this one: the family members and, for an accepted
+    /// effect, the other refits of its round that the round could have accepted, whose refits end
+    /// within a likelihood ratio of 3.84 of it (see [`Ranked::equivalent`] for the score's
+    /// look-alikes). Described in the JSON.
+    #[serde(serialize_with = "described")]
+    pub equivalent: Vec<Effect>,
     /// The score family this refit stands for (every member, refitted or not): a ranked
     /// candidate whose family this is was accepted through this refit.
     #[serde(skip)]
@@ -179,6 +182,11 @@ pub struct Refit {
     /// (mm, set at the final fit).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub place: Option<String>,
+}
+
+/// Serializes effects as their descriptions, the JSON's form of an effect.
+fn described<S: serde::Serializer>(effects: &[Effect], s: S) -> Result<S::Ok, S::Error> {
+    s.collect_seq(effects.iter().map(Effect::describe))
 }
 
 /// One ranked candidate.
@@ -512,7 +520,12 @@ pub fn diagnose(
         let screened = screen_leading(setting, &cur, &ranking);
         timing.ranking += t.elapsed().as_secs_f64();
         let t = std::time::Instant::now();
-        let (refits, best, not_identifiable) = refit_leading(
+        let Refitted {
+            refits,
+            best,
+            not_identifiable,
+            contenders,
+        } = refit_leading(
             setting,
             &cur,
             (&ranking, &screened),
@@ -556,7 +569,7 @@ pub fn diagnose(
         after_acceptance(
             setting,
             level,
-            chosen,
+            (chosen, &contenders),
             (&mut cur, &mut accepted),
             &mut round,
             progress,

@@ -5,7 +5,7 @@
 
 use nalgebra::Vector3;
 
-use super::round::{in_parallel, refit, unidentifiable, with_effect};
+use super::round::{in_parallel, look_alikes, refit, unidentifiable, with_effect, Contender};
 use super::*;
 
 /// Places whose short refit ends below the effect's own place's are refitted in full, at most
@@ -24,22 +24,25 @@ pub(super) const SPRING_RELOCATION_ITERATIONS: usize = 30;
 /// The steps after a round accepts the refit `chosen` (with its fit `next`) on the fit `cur`
 /// with the effects `accepted` so far: a point mass or resonator moved to the body where it fits
 /// best ([`relocate`]) and the effect's place refined ([`place`]), then added to `accepted` and
-/// `cur`; the earlier effects it made unnecessary dropped ([`remove_unneeded`]), and each earlier
+/// `cur` with the round's `contenders` the data cannot tell from it among its equivalents
+/// ([`look_alikes`]); the earlier effects it made unnecessary dropped ([`remove_unneeded`]), and each earlier
 /// point mass, resonator or spring moved where it fits best now ([`relocate_earlier`]). Each step
 /// is recorded in `round`.
 pub(super) fn after_acceptance(
     setting: Setting,
     level: Level,
-    (mut chosen, mut next): (Refit, Current),
+    ((mut chosen, mut next), contenders): ((Refit, Current), &[Contender]),
     (cur, accepted): (&mut Current, &mut Vec<Refit>),
     round: &mut Round,
     progress: &mut dyn FnMut(&str),
 ) {
+    let own = next.effects.last().cloned();
     // A spring is not moved here: see `relocate_earlier`.
-    let places = next
-        .effects
-        .last()
+    let places = own
+        .as_ref()
         .map_or_else(Vec::new, |e| points(setting.model, e));
+    // The family members the data cannot tell from the effect stand for its own place.
+    let mut equivalent = std::mem::take(&mut chosen.equivalent);
     if let Some((moved, better)) = relocate(setting, level, (cur, &next), &places) {
         progress(&format!(
             "moved: {} → {} (J {:.1} → {:.1})",
@@ -47,6 +50,7 @@ pub(super) fn after_acceptance(
         ));
         round.relocated.push(moved.clone());
         (chosen, next) = (moved, better);
+        equivalent.clear();
     }
     if let Some((placed, better)) = place(setting, level, (cur, &next), &chosen) {
         let params: Vec<String> = placed.params.iter().map(ParamEstimate::describe).collect();
@@ -54,6 +58,11 @@ pub(super) fn after_acceptance(
         round.placed = Some(placed.clone());
         (chosen, next) = (placed, better);
     }
+    if let Some(own) = &own {
+        let more = look_alikes(contenders, (&chosen, own), &equivalent, level.threshold);
+        equivalent.extend(more);
+    }
+    chosen.equivalent = equivalent;
     accepted.push(chosen);
     *cur = next;
     remove_unneeded(setting, level, (cur, accepted), round, progress);

@@ -142,15 +142,29 @@ pub(super) fn rank(
     })
 }
 
-/// Refits the leading families (up to `opts.refit`) whose score makes them plausible; returns
-/// every refit and the most significant one that passes the round's threshold, with its fit.
+/// What a round's refits found.
+pub(super) struct Refitted {
+    /// The refit that stands for each family refitted.
+    pub(super) refits: Vec<Refit>,
+    /// The most significant of them that passes the round's threshold and is physical (index
+    /// into `refits`), with its fit.
+    pub(super) best: Option<(usize, Current)>,
+    /// The significant ones that were not physical or identifiable, and why.
+    pub(super) not_identifiable: Vec<NotTried>,
+    /// Every member refit the round could have accepted.
+    pub(super) contenders: Vec<Contender>,
+}
+
+/// Refits the leading families (up to `opts.refit`) whose score makes them plausible: every
+/// refit, the most significant one that passes the round's threshold with its fit, and the
+/// others it could have accepted.
 pub(super) fn refit_leading(
     setting: Setting,
     cur: &Current,
     (ranking, screened): (&Ranking, &[Screened]),
     not_tried: &mut Vec<NotTried>,
     progress: &mut dyn FnMut(&str),
-) -> (Vec<Refit>, Option<(usize, Current)>, Vec<NotTried>) {
+) -> Refitted {
     let Setting { opts, f_hi, .. } = setting;
     let Ranking {
         threshold, sigma2, ..
@@ -158,6 +172,7 @@ pub(super) fn refit_leading(
     let mut refits: Vec<Refit> = Vec::new();
     let mut best: Option<(usize, Current)> = None;
     let mut not_identifiable = Vec::new();
+    let mut contenders = Vec::new();
     // The families of the best screened candidates are refitted, in parallel; when the misfit
     // is large and their best refit leaves it above the noise level (χ² at the diagnosis's
     // level), so are the families of the kinds they leave out (see [`kind_jobs`]), and if that
@@ -252,6 +267,12 @@ pub(super) fn refit_leading(
     // its equivalents.
     for (f, Job { family, members }) in jobs.iter().enumerate() {
         let mut outcomes = std::mem::take(&mut outcomes[f]);
+        contenders.extend(contenders_of(
+            members,
+            &outcomes,
+            cur,
+            (f_hi, ranking.level()),
+        ));
         let Some(b) = best_member(members, &outcomes, (f_hi, *threshold)) else {
             if let Some((_, Err(reason))) = outcomes.first() {
                 not_tried.push(NotTried {
@@ -305,7 +326,41 @@ pub(super) fn refit_leading(
         }
         refits.push(r);
     }
-    (refits, best, not_identifiable)
+    Refitted {
+        refits,
+        best,
+        not_identifiable,
+        contenders,
+    }
+}
+
+/// The member refits of one family (`outcomes`, from the fit `cur`) the round could accept,
+/// each with its mirror images (see [`Contender`]).
+fn contenders_of(
+    members: &[Member],
+    outcomes: &[MemberRefit],
+    cur: &Current,
+    (f_hi, Level { sigma2, threshold }): (f64, Level),
+) -> Vec<Contender> {
+    outcomes
+        .iter()
+        .filter_map(|(i, r)| Some((*i, &r.as_ref().ok()?.0)))
+        .filter(|(i, r)| {
+            let params = members[*i].effect.params(f_hi);
+            r.p_value < threshold
+                && unidentifiable(&params, &r.params, (f_hi, super::swap::SWAP_LEVEL)).is_none()
+                && partial_fix(r, cur, sigma2).is_none()
+        })
+        .map(|(i, r)| Contender {
+            effects: members
+                .iter()
+                .enumerate()
+                .filter(|(k, m)| *k == i || m.mirror_of == Some(i))
+                .map(|(_, m)| m.effect.clone())
+                .collect(),
+            margin: margin(r, threshold),
+        })
+        .collect()
 }
 
 /// One candidate's finite-step screen.
@@ -933,7 +988,7 @@ pub(super) fn equivalents(
     (best, refit): (usize, &Refit),
     others: &[MemberRefit],
     threshold: f64,
-) -> Vec<String> {
+) -> Vec<Effect> {
     let tied: Vec<usize> = std::iter::once(best)
         .chain(others.iter().filter_map(|(i, r)| {
             r.as_ref()
@@ -948,8 +1003,47 @@ pub(super) fn equivalents(
         .filter(|(i, m)| {
             *i != best && (tied.contains(i) || m.mirror_of.is_some_and(|o| tied.contains(&o)))
         })
-        .map(|(_, m)| m.effect.describe())
+        .map(|(_, m)| m.effect.clone())
         .collect()
+}
+
+/// A member refit of a round that the round itself could have accepted: significant at its
+/// threshold, physical, not a partial fix, and its size identifiable at 95 % (the swap's level,
+/// [`super::swap::SWAP_LEVEL`], for the same reason: an effect ranked against one already
+/// significant; blind seed 3891's true stiff spring, 2371 N/µm, ends within LR 1.6 of the
+/// accepted one with too wide an interval for the round's level). When its margin is within
+/// [`EQUIVALENT_LR`] of the accepted effect's, the data cannot tell the two apart
+/// ([`look_alikes`]).
+pub(super) struct Contender {
+    /// The refitted effect, then its mirror images.
+    pub(super) effects: Vec<Effect>,
+    /// Its likelihood ratio's margin over its critical value at the round's threshold
+    /// ([`margin`]).
+    pub(super) margin: f64,
+}
+
+/// The effects of `contenders` the data cannot tell from `chosen` (their margins within
+/// [`EQUIVALENT_LR`] of its own; all are refits from the same fit), other than `chosen`'s own
+/// and those in `listed`, in the order given.
+pub(super) fn look_alikes(
+    contenders: &[Contender],
+    (chosen, own): (&Refit, &Effect),
+    listed: &[Effect],
+    threshold: f64,
+) -> Vec<Effect> {
+    let m = margin(chosen, threshold);
+    let mut out: Vec<Effect> = Vec::new();
+    for c in contenders
+        .iter()
+        .filter(|c| (c.margin - m).abs() < EQUIVALENT_LR)
+    {
+        for e in &c.effects {
+            if e != own && !listed.contains(e) && !out.contains(e) {
+                out.push(e.clone());
+            }
+        }
+    }
+    out
 }
 
 /// A misfit above this reduced χ² is large: refits then explore their starts.
@@ -1057,10 +1151,14 @@ pub(super) fn size_z(threshold: f64) -> f64 {
 
 /// How far a refit's LR exceeds the critical value of its test at `threshold`.
 pub(super) fn margin(r: &Refit, threshold: f64) -> f64 {
-    let crit = ChiSquared::new(r.dof as f64)
+    r.lr - critical(r.dof, threshold)
+}
+
+/// The critical value of an LR test on `dof` parameters at level `threshold`.
+pub(super) fn critical(dof: usize, threshold: f64) -> f64 {
+    ChiSquared::new(dof as f64)
         .map(|c| c.inverse_cdf(1.0 - threshold))
-        .unwrap_or(f64::INFINITY);
-    r.lr - crit
+        .unwrap_or(f64::INFINITY)
 }
 
 /// Groups the ranked candidates (best first) into families of near-identical projected
@@ -1323,6 +1421,66 @@ mod tests {
             direction: Vector3::z(),
             psi: 0.3,
         }
+    }
+
+    /// A refit of `effect` with likelihood ratio `lr` on `dof` parameters.
+    fn refit_of(effect: &Effect, lr: f64, dof: usize) -> Refit {
+        Refit {
+            effect: effect.describe(),
+            kind: effect.kind().into(),
+            criterion_before: 100.0,
+            criterion_after: 100.0 - lr / 2.0,
+            lr,
+            dof,
+            p_value: residuals::chi2_tail(dof as f64, lr),
+            aic_change: 0.0,
+            bic_change: 0.0,
+            rms_db_before: 0.0,
+            rms_db_after: 0.0,
+            params: Vec::new(),
+            stop: String::new(),
+            converged: true,
+            equivalent: Vec::new(),
+            family: Vec::new(),
+            place: None,
+        }
+    }
+
+    /// The round's other refits whose margins are within 3.84 of the accepted one's, either
+    /// side, are its look-alikes with their mirror images; the accepted effect itself and those
+    /// already listed are left out. A margin counts the refit's parameters: a one-parameter
+    /// refit's is its LR less a lower critical value than a two-parameter one's.
+    #[test]
+    fn the_rounds_refits_within_a_likelihood_ratio_of_384_are_look_alikes() {
+        let threshold = 1e-5;
+        let own = spring("ground", "overarm");
+        let chosen = refit_of(&own, 100.0, 2);
+        let m = margin(&chosen, threshold);
+        let contender = |effects: Vec<Effect>, margin: f64| Contender { effects, margin };
+        let contenders = [
+            contender(vec![own.clone()], m),
+            contender(
+                vec![spring("ground", "head"), spring("ground", "head2")],
+                m - 3.5,
+            ),
+            contender(vec![resonator("knee")], m + 3.0),
+            contender(vec![spring("ground", "column")], m - 4.0),
+            contender(vec![resonator("table")], m + 1.0),
+            contender(vec![resonator("saddle")], m - 3.83),
+            contender(vec![resonator("column")], m + 3.85),
+        ];
+        let listed = [resonator("table")];
+        let alike = look_alikes(&contenders, (&chosen, &own), &listed, threshold);
+        assert_eq!(
+            alike,
+            vec![
+                spring("ground", "head"),
+                spring("ground", "head2"),
+                resonator("knee"),
+                resonator("saddle"),
+            ]
+        );
+        assert!(margin(&refit_of(&own, 100.0, 1), threshold) > m + 3.0);
     }
 
     /// Each other kind's best member comes first, then each other site's, then the rest, each in

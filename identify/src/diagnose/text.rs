@@ -28,6 +28,14 @@ pub fn text(d: &Diagnosis) -> String {
         let ps: Vec<String> = a.params.iter().map(ParamEstimate::describe).collect();
         let _ = writeln!(s, "  added: {} ({})", a.effect, ps.join(", "));
         let _ = writeln!(s, "         {}", gain_text(a));
+        if !a.equivalent.is_empty() {
+            let alike: Vec<String> = a.equivalent.iter().map(Effect::describe).collect();
+            let _ = writeln!(
+                s,
+                "         ≡ the data cannot tell it from: {}",
+                first_three(&alike)
+            );
+        }
         if let Some(place) = &a.place {
             let _ = writeln!(s, "         {place}");
         }
@@ -133,6 +141,17 @@ pub fn final_text(id: &Identification, d: &Diagnosis) -> String {
     s
 }
 
+/// The first three of `items`, then how many more.
+fn first_three(items: &[String]) -> String {
+    let more = items.len().saturating_sub(3);
+    let tail = if more > 0 {
+        format!(" and {more} more")
+    } else {
+        String::new()
+    };
+    format!("{}{tail}", items[..items.len().min(3)].join("; "))
+}
+
 /// What an accepted effect gained when it was added: the RMS amplitude error in dB over every
 /// fitted point, and the criterion.
 pub fn gain_text(a: &Refit) -> String {
@@ -158,14 +177,7 @@ pub(super) fn round_text(s: &mut String, i: usize, r: &Round) {
             c.rank, c.kind, c.statistic, c.p_value, c.effect
         );
         if !c.equivalent.is_empty() {
-            let shown: Vec<&str> = c.equivalent.iter().take(3).map(String::as_str).collect();
-            let more = c.equivalent.len().saturating_sub(3);
-            let tail = if more > 0 {
-                format!(" and {more} more")
-            } else {
-                String::new()
-            };
-            let _ = writeln!(s, "          ≡ {}{tail}", shown.join("; "));
+            let _ = writeln!(s, "          ≡ {}", first_three(&c.equivalent));
         }
     }
     for (k, f) in r.refits.iter().enumerate() {

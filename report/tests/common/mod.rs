@@ -150,6 +150,7 @@ pub fn diagnosis_section(f: &Fixture) -> Diagnosis {
             rms_db_error: db,
         },
         final_model: "two masses + spring k1-body–ground".into(),
+        look_alikes: vec!["spring k1-body–ground ≡ spring k2-body–ground".into()],
         final_parameters: vec![Parameter {
             variable: "k1".into(),
             sdes: "k1".into(),
