@@ -1033,17 +1033,28 @@ pub(super) fn look_alikes(
 ) -> Vec<Effect> {
     let m = margin(chosen, threshold);
     let mut out: Vec<Effect> = Vec::new();
-    for c in contenders
-        .iter()
-        .filter(|c| (c.margin - m).abs() < EQUIVALENT_LR)
-    {
-        for e in &c.effects {
-            if e != own && !listed.contains(e) && !out.contains(e) {
-                out.push(e.clone());
-            }
+    let tied = contenders.iter().filter(|c| tied(c.margin, m));
+    let others = tied
+        .flat_map(|c| &c.effects)
+        .filter(|e| *e != own && !listed.contains(e));
+    add_new(&mut out, others.cloned());
+    out
+}
+
+/// Whether two refits from the same fit, with LR margins `a` and `b` over their critical values
+/// ([`margin`]), are ones the data cannot tell apart: the margins within [`EQUIVALENT_LR`],
+/// either way.
+pub(super) fn tied(a: f64, b: f64) -> bool {
+    (a - b).abs() < EQUIVALENT_LR
+}
+
+/// Appends to `list` each of `effects` not in it yet, in order.
+pub(super) fn add_new(list: &mut Vec<Effect>, effects: impl IntoIterator<Item = Effect>) {
+    for e in effects {
+        if !list.contains(&e) {
+            list.push(e);
         }
     }
-    out
 }
 
 /// A misfit above this reduced χ² is large: refits then explore their starts.

@@ -6,7 +6,8 @@
 
 use super::placement::{place, put_back, refitted_without};
 use super::round::{
-    critical, extended, fresh_start, in_parallel, margin, refit, unidentifiable, with_effect,
+    add_new, critical, extended, fresh_start, in_parallel, margin, refit, tied, unidentifiable,
+    with_effect,
 };
 use super::*;
 
@@ -80,11 +81,7 @@ pub(super) fn swap_accepted(
         };
         let (swap, alike) = best_alternative(setting, level, (&base, cur, k), &alternatives);
         let Some((mut by, mut next)) = swap else {
-            for e in alike {
-                if !earlier.equivalent.contains(&e) {
-                    earlier.equivalent.push(e);
-                }
-            }
+            add_new(&mut earlier.equivalent, alike);
             continue;
         };
         if let Some(placed) = place(setting, level, (&base, &next), &by) {
@@ -170,7 +167,7 @@ fn best_alternative(
         (base.e.norm_squared() - fixed.e.norm_squared()) / sigma2 - critical(q, threshold);
     let alike = refitted
         .iter()
-        .filter(|(r, ..)| (margin(r, threshold) - fixed_margin).abs() < EQUIVALENT_LR)
+        .filter(|(r, ..)| tied(margin(r, threshold), fixed_margin))
         .map(|(.., cand)| (*cand).clone())
         .collect();
     let best = refitted
