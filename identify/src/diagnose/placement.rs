@@ -5,7 +5,10 @@
 
 use nalgebra::Vector3;
 
-use super::round::{in_parallel, look_alikes, refit, unidentifiable, with_effect, Contender};
+use super::round::{
+    excess_removed, extended, in_parallel, look_alikes, refit, short_refit, unidentifiable,
+    with_effect, Contender,
+};
 use super::*;
 
 /// Places whose short refit ends below the effect's own place's are refitted in full, at most
@@ -110,7 +113,7 @@ fn relocate(
     (base, fixed): (&Current, &Current),
     places: &[(Effect, bool)],
 ) -> Option<(Refit, Current)> {
-    let Setting { opts, f_hi, .. } = setting;
+    let f_hi = setting.f_hi;
     let effect = fixed.effects.last()?;
     // A partial fix is no guide to where the effect is.
     if places.len() < 2 || partial(base, fixed, sigma2) {
@@ -125,20 +128,11 @@ fn relocate(
         Effect::Spring { .. } | Effect::PlacedSpring { .. } => SPRING_RELOCATION_ITERATIONS,
         _ => RELOCATION_ITERATIONS,
     };
-    let settings = optimize::Settings {
-        max_iterations,
-        ..opts.identification.settings
-    };
     let short: Vec<Option<f64>> = in_parallel(places, |(cand, _)| {
-        let mut effects = base.effects.clone();
-        effects.push(cand.clone());
-        let mut p = setting.problem(effects);
-        let (lo, hi) = p.bounds();
-        let u0 = with_effect(&base.u, &cand.params(f_hi), &values_of(cand));
-        let optimizer = opts.identification.optimizer;
-        optimize::minimize(optimizer, &mut p, &u0, &lo, &hi, &settings, &mut |_| {})
-            .ok()
-            .map(|out| out.criterion)
+        let mut p = extended(setting, base, cand);
+        let params = cand.params(f_hi);
+        let u0 = with_effect(&base.u, &params, &values_of(cand));
+        short_refit(setting, &mut p, [u0], (params.len(), max_iterations)).map(|(j, _)| j)
     });
     let own_j = places
         .iter()
@@ -177,8 +171,9 @@ pub(super) const RELOCATION_MIN_SHARE: f64 = 0.5;
 /// spring was then found on the overarm instead.
 fn partial(base: &Current, fixed: &Current, sigma2: f64) -> bool {
     let j = |c: &Current| 0.5 * c.e.norm_squared();
-    let noise = 0.5 * sigma2 * fixed.e.len().saturating_sub(fixed.u.len()) as f64;
-    j(base) - j(fixed) < RELOCATION_MIN_SHARE * (j(base) - noise)
+    let dof = fixed.e.len().saturating_sub(fixed.u.len()) as f64;
+    excess_removed((j(base), j(fixed)), dof, sigma2)
+        .is_some_and(|share| share < RELOCATION_MIN_SHARE)
 }
 
 /// Where [`relocate`] tries `effect`, and whether each is its own place: a point mass or

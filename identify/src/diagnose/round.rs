@@ -649,9 +649,7 @@ pub(super) fn short_refits(
     (screened, jobs): (&[Screened], &[Job]),
     short: Short,
 ) -> Vec<Screened> {
-    let Setting {
-        vars, opts, f_hi, ..
-    } = setting;
+    let Setting { vars, f_hi, .. } = setting;
     let effect = |j: usize| &ranking.candidates[ranking.scored[j].candidate];
     let refitted = |j: usize| {
         jobs.iter()
@@ -678,15 +676,10 @@ pub(super) fn short_refits(
             .collect(),
     };
     let todo: Vec<usize> = todo.into_iter().filter(|&j| !refitted(j)).collect();
-    let settings = optimize::Settings {
-        max_iterations: SHORT_REFIT_ITERATIONS,
-        ..opts.identification.settings
-    };
     let ends = in_parallel(&todo, |&j| {
         let cand = effect(j);
         let mut p = extended(setting, cur, cand);
         let params = cand.params(f_hi);
-        let (lo, hi) = p.bounds();
         let step = score_start(cand, ranking.scored[j].step, f_hi);
         // A score ruling the effect out steps below its nested value: start from the sizes
         // explored around its initial value instead.
@@ -703,19 +696,16 @@ pub(super) fn short_refits(
         let starts = starts.iter().map(|x| with_effect(&cur.u, &params, x));
         let (_, u0) = lowest_start(&mut p, starts)?;
         let fresh = (short == Short::Leading).then(|| fresh_start(&mut p, &u0, &params, vars));
-        let out = std::iter::once(u0)
-            .chain(fresh)
-            .filter_map(|u| {
-                let optimizer = opts.identification.optimizer;
-                optimize::minimize(optimizer, &mut p, &u, &lo, &hi, &settings, &mut |_| {}).ok()
-            })
-            .min_by(|a, b| a.criterion.total_cmp(&b.criterion))?;
-        // The new effect's parameters (SI) are the last of the effects'.
-        let (_, gamma) = p.split(&out.u);
-        let start = gamma[gamma.len() - params.len()..].to_vec();
+        let starts = std::iter::once(u0).chain(fresh);
+        let (criterion, start) = short_refit(
+            setting,
+            &mut p,
+            starts,
+            (params.len(), SHORT_REFIT_ITERATIONS),
+        )?;
         Some(Screened {
             index: j,
-            criterion: out.criterion,
+            criterion,
             start,
         })
     });
@@ -1078,15 +1068,22 @@ pub(super) const MIN_EXCESS_SHARE: f64 = 0.1;
 /// the misfit is large, not because it is the effect the data lack — stacking such fixes hides an
 /// effect outside the library instead of naming it.
 pub(super) fn partial_fix(r: &Refit, cur: &Current, sigma2: f64) -> Option<String> {
-    let m = cur.e.len() as f64;
-    let excess = 2.0 * r.criterion_before / sigma2 - m;
-    let removed = 2.0 * (r.criterion_before - r.criterion_after) / sigma2;
-    (excess > 0.0 && removed < MIN_EXCESS_SHARE * excess).then(|| {
+    let dof = cur.e.len() as f64;
+    let share = excess_removed((r.criterion_before, r.criterion_after), dof, sigma2)?;
+    (share < MIN_EXCESS_SHARE).then(|| {
         format!(
             "removes only {:.0} % of the misfit above the noise level: a partial fix",
-            100.0 * removed / excess
+            100.0 * share
         )
     })
+}
+
+/// The share of the misfit above the noise level that going from criterion `before` to `after`
+/// removes (`(J₀ − J₁)/(J₀ − σ̂²·dof/2)`, with `dof` the lines less what the noise level counts
+/// as fitted); `None` when `before` is at or below the noise level (nothing to remove).
+pub(super) fn excess_removed((before, after): (f64, f64), dof: f64, sigma2: f64) -> Option<f64> {
+    let excess = before - 0.5 * sigma2 * dof;
+    (excess > 0.0).then(|| (before - after) / excess)
 }
 
 /// Why an effect's refitted estimates `est` (of parameters `params`) do not make it a physical,
@@ -1323,6 +1320,31 @@ pub(super) fn refit(
         place: None,
     };
     Ok((r, next))
+}
+
+/// A short refit of `p`, the fit extended by one effect with `q` parameters (the last of its
+/// point): minimized from each of `starts`, `max_iterations` at most, the lowest end's criterion
+/// and the effect's parameters there (SI). `None` when no start could be minimized.
+pub(super) fn short_refit(
+    setting: Setting,
+    p: &mut Problem,
+    starts: impl IntoIterator<Item = DVector<f64>>,
+    (q, max_iterations): (usize, usize),
+) -> Option<(f64, Vec<f64>)> {
+    let fit = &setting.opts.identification;
+    let settings = optimize::Settings {
+        max_iterations,
+        ..fit.settings
+    };
+    let (lo, hi) = p.bounds();
+    let out = starts
+        .into_iter()
+        .filter_map(|u| {
+            optimize::minimize(fit.optimizer, p, &u, &lo, &hi, &settings, &mut |_| {}).ok()
+        })
+        .min_by(|a, b| a.criterion.total_cmp(&b.criterion))?;
+    let (_, gamma) = p.split(&out.u);
+    Some((out.criterion, gamma[gamma.len() - q..].to_vec()))
 }
 
 /// The start of `starts` where the criterion is lowest (the first of equals), and that criterion;
@@ -1693,5 +1715,17 @@ mod tests {
             "{why}"
         );
         assert_eq!(unidentifiable(&params, &at(350.0), (400.0, 1e-5)), None);
+    }
+
+    /// The share of the misfit above the noise level an effect removes: 100 lines at σ̂² = 1
+    /// expect J = 50, so J 150 → 100 removes half of the excess of 100; a fit already at the
+    /// noise level has no excess to share.
+    #[test]
+    fn an_effect_s_share_counts_only_the_misfit_above_the_noise_level() {
+        let share = excess_removed((150.0, 100.0), 100.0, 1.0).expect("an excess");
+        assert!((share - 0.5).abs() < 1e-12, "{share}");
+        assert!((excess_removed((150.0, 140.0), 100.0, 1.0).unwrap() - 0.1).abs() < 1e-12);
+        assert_eq!(excess_removed((50.0, 40.0), 100.0, 1.0), None);
+        assert_eq!(excess_removed((45.0, 40.0), 100.0, 1.0), None);
     }
 }

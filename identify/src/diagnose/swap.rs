@@ -6,8 +6,8 @@
 
 use super::placement::{place, put_back, refitted_without};
 use super::round::{
-    add_new, critical, extended, fresh_start, in_parallel, margin, refit, tied, unidentifiable,
-    with_effect,
+    add_new, critical, extended, fresh_start, in_parallel, margin, refit, short_refit, tied,
+    unidentifiable, with_effect,
 };
 use super::*;
 
@@ -118,17 +118,10 @@ fn best_alternative(
     (base, fixed, k): (&Current, &Current, usize),
     alternatives: &[Effect],
 ) -> (Option<(Refit, Current)>, Vec<Effect>) {
-    let Setting {
-        vars, opts, f_hi, ..
-    } = setting;
-    let settings = optimize::Settings {
-        max_iterations: SWAP_ITERATIONS,
-        ..opts.identification.settings
-    };
+    let Setting { vars, f_hi, .. } = setting;
     let short = in_parallel(alternatives, |cand| {
         let mut p = extended(setting, base, cand);
         let params = cand.params(f_hi);
-        let (lo, hi) = p.bounds();
         let initial: Vec<f64> = params.iter().map(|np| np.initial).collect();
         let u = fresh_start(
             &mut p,
@@ -136,11 +129,7 @@ fn best_alternative(
             &params,
             vars,
         );
-        let optimizer = opts.identification.optimizer;
-        let out =
-            optimize::minimize(optimizer, &mut p, &u, &lo, &hi, &settings, &mut |_| {}).ok()?;
-        let (_, gamma) = p.split(&out.u);
-        Some((out.criterion, gamma[gamma.len() - params.len()..].to_vec()))
+        short_refit(setting, &mut p, [u], (params.len(), SWAP_ITERATIONS))
     });
     let fixed_j = 0.5 * fixed.e.norm_squared();
     let window = fixed_j + 0.5 * LOOK_ALIKE_WINDOW * sigma2;
