@@ -20,11 +20,8 @@ use acquire::sweep::{
     SweepProgress,
 };
 use anyhow::Context;
-use identify::diagnose;
-use identify::identification::{
-    self, data, report as table, variables, Identification, Observations, Variables,
-};
-use identify::Model;
+use identify::{self, data, report as table, variables, Identification, Observations, Variables};
+use rfe::Model;
 
 /// The identification set-up: the model to identify (never the truth) and its decision variables.
 #[derive(Debug, Clone)]
@@ -260,10 +257,10 @@ pub fn broadband_sweep(
 /// local minimum for about one sweep in five — data that differ by under 1 % send it there (a
 /// criterion 38× the good minimum's); three more starts spread over the bounds find the good
 /// minimum (0.24 s instead of 0.1 s in release).
-pub fn identification_options() -> identification::Options {
-    identification::Options {
+pub fn identification_options() -> identify::Options {
+    identify::Options {
         starts: 4,
-        ..identification::Options::default()
+        ..identify::Options::default()
     }
 }
 
@@ -288,7 +285,7 @@ pub struct Analysis {
 pub fn analyse(
     session: &Path,
     setup: &Setup,
-    opts: &identification::Options,
+    opts: &identify::Options,
 ) -> anyhow::Result<Analysis> {
     let a = characteristics(session, &AnalysisOptions::default())?;
     let mut messages = Vec::new();
@@ -321,7 +318,7 @@ pub fn analyse(
     }
     messages.extend(a.notes.iter().cloned());
     let obs = data::validate(&a.measured, &setup.model, &session.display().to_string())?;
-    let id = identification::identify(&setup.model, &obs, &setup.vars, opts, &mut |_, p| {
+    let id = identify::identify(&setup.model, &obs, &setup.vars, opts, &mut |_, p| {
         tracing::info!(?p, "iteration")
     })?;
     // The score test projects the fit's own directions out of the residual, so it ranks candidates
@@ -443,13 +440,13 @@ pub fn write_report(
     w("identification.csv", &table::csv(id))?;
     w(
         "identified-model.json",
-        &serde_json::to_string_pretty(&identify::contract::to_json(&id.model))?,
+        &serde_json::to_string_pretty(&rfe::contract::to_json(&id.model))?,
     )?;
     if let Some((_, d)) = &a.diagnosis {
         w("diagnosis.json", &serde_json::to_string_pretty(d)?)?;
         w(
             "diagnosed-model.json",
-            &serde_json::to_string_pretty(&identify::contract::to_json(&d.model))?,
+            &serde_json::to_string_pretty(&rfe::contract::to_json(&d.model))?,
         )?;
     }
     if let Some(text) = &setup.model_text {
@@ -474,17 +471,17 @@ pub fn write_report(
     Ok((r, written))
 }
 
-/// The final model as TOML and the variables file for the next run (`identify::final_model`):
+/// The final model as TOML and the variables file for the next run (`diagnose::final_model`):
 /// the diagnosis's final fit when it ran, else the identification's.
 pub fn final_files(setup: &Setup, a: &Analysis) -> anyhow::Result<(String, String)> {
     let id = &a.identification;
     let d = a.diagnosis.as_ref().map(|(_, d)| d);
-    let source = identify::final_model::Source {
+    let source = diagnose::final_model::Source {
         origin: &setup.model_file,
         text: setup.model_text.as_deref(),
     };
-    let model = identify::final_model::model_toml(source, id, d)?;
-    let vars = identify::final_model::variables_toml("final-model.toml", id, d)?;
+    let model = diagnose::final_model::model_toml(source, id, d)?;
+    let vars = diagnose::final_model::variables_toml("final-model.toml", id, d)?;
     Ok((model, vars))
 }
 

@@ -90,7 +90,7 @@ fn sweep_then_process_gives_data_for_identify() {
     assert_process_equals_live(&s[0], &dir.path().join("p"), 8);
     let stem = name.trim_end_matches(".mcap");
     let measured = dir.path().join("p").join(format!("{stem}.measured.json"));
-    let m: identify::MeasuredData =
+    let m: rfe::MeasuredData =
         serde_json::from_str(&std::fs::read_to_string(&measured).unwrap()).unwrap();
     assert_eq!(m.characteristics.len(), 3);
     assert!(m
@@ -106,7 +106,7 @@ fn sweep_then_process_gives_data_for_identify() {
     );
     // The CSV form reads back into the same data through identification's own loader.
     let csv = dir.path().join("p").join(format!("{stem}.measured.csv"));
-    let back = identify::identification::data::load(&csv).unwrap_or_else(|e| panic!("{e}"));
+    let back = identify::data::load(&csv).unwrap_or_else(|e| panic!("{e}"));
     assert_eq!(back.characteristics.len(), 3);
     for (a, b) in back.characteristics.iter().zip(&m.characteristics) {
         assert_eq!(a.freqs_hz, b.freqs_hz);
@@ -115,13 +115,12 @@ fn sweep_then_process_gives_data_for_identify() {
         }
     }
     // And identification accepts it against the model (validation only: a fit is tested elsewhere).
-    let model = identify::modelfile::load(
+    let model = rfe::modelfile::load(
         &PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("configs/models/fwd32j-initial.toml"),
     )
     .unwrap()
     .model;
-    identify::identification::data::validate(&m, &model, "measured.json")
-        .unwrap_or_else(|e| panic!("{e}"));
+    identify::data::validate(&m, &model, "measured.json").unwrap_or_else(|e| panic!("{e}"));
 }
 
 #[test]

@@ -9,9 +9,9 @@ use std::path::{Path, PathBuf};
 
 use common::{identify_two_mass, p, root, utf8, TWO_MASS};
 
-use identify::frf::{self, Method};
 use process::uff;
 use process::C64;
+use rfe::frf::{self, Method};
 
 /// k1 and k2 of the two-mass chain started at 14 and 7 N/µm.
 const VARS: &str = include_str!("../configs/identification/textbook-two-mass.toml");
@@ -30,9 +30,7 @@ body = "second"
 
 /// The two-mass chain's exact receptances (per N; its excitation is 1 N) at `f`.
 fn receptances(f: &[f64]) -> Vec<Vec<C64>> {
-    let model = identify::modelfile::load(&root().join(TWO_MASS))
-        .unwrap()
-        .model;
+    let model = rfe::modelfile::load(&root().join(TWO_MASS)).unwrap().model;
     let r = frf::response(&model, f, &[], Method::Direct).unwrap();
     (0..2).map(|o| r.output(o).to_vec()).collect()
 }

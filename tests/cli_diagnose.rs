@@ -4,7 +4,7 @@
 use std::path::PathBuf;
 use std::process::Command;
 
-use identify::identification::synthetic;
+use identify::synthetic;
 use rand::SeedableRng;
 use rand_distr::{Distribution, StandardNormal};
 
@@ -18,7 +18,7 @@ fn ident() -> Command {
 
 /// Table characteristics of the full FWD-32J model (with its actuator), 1 % noise, stated variances.
 fn write_data(path: &std::path::Path) {
-    let truth = identify::modelfile::load(&root().join("configs/models/fwd32j.toml"))
+    let truth = rfe::modelfile::load(&root().join("configs/models/fwd32j.toml"))
         .expect("model")
         .model;
     let mut rng = rand::rngs::StdRng::seed_from_u64(3);
@@ -79,7 +79,7 @@ fn diagnose_finds_the_missing_actuator_from_files() {
     // is the diagnosis's; --write-vars: the next run's variables, which load against it.
     let toml = std::fs::read_to_string(dir.path().join("final.toml")).expect("final model");
     assert!(toml.contains("# Added by `ident diagnose`"), "{toml}");
-    let fin = identify::modelfile::parse_toml(&toml, "final.toml")
+    let fin = rfe::modelfile::parse_toml(&toml, "final.toml")
         .expect("the final model loads")
         .model;
     let spring = fin
@@ -96,8 +96,8 @@ fn diagnose_finds_the_missing_actuator_from_files() {
         spring.law
     );
     let vars = std::fs::read_to_string(dir.path().join("next.toml")).expect("next variables");
-    let next = identify::identification::variables::parse(&vars, "next.toml", &fin)
-        .expect("the next variables load");
+    let next =
+        identify::variables::parse(&vars, "next.toml", &fin).expect("the next variables load");
     assert!(
         next.vars.iter().any(|v| v.name == "k diagnosed spring 1"),
         "{vars}"

@@ -11,7 +11,7 @@ mod common;
 use std::path::Path;
 
 use common::{ident, json, root, text};
-use identify::identification::synthetic;
+use identify::synthetic;
 use rand::rngs::StdRng;
 use rand::SeedableRng;
 use rand_distr::{Distribution, StandardNormal};
@@ -54,7 +54,7 @@ fn the_demos_final_model_file_reproduces_the_reports_final_curves() {
     let o = ident(&["model", "check", model_file.to_str().unwrap()]);
     assert_eq!(o.status.code(), Some(0), "{}", text(&o));
     // Its FRF at the measured lines is the report's final stage.
-    let model = identify::modelfile::load(&model_file).unwrap().model;
+    let model = rfe::modelfile::load(&model_file).unwrap().model;
     let mut compared = 0;
     for c in r["characteristics"].as_array().unwrap() {
         let freqs = floats(&c["freqs_hz"]);
@@ -152,7 +152,7 @@ fn a_resolved_json_model_is_written_as_toml_and_the_next_run_starts_at_the_estim
     ]);
     assert_eq!(o.status.code(), Some(0), "{}", text(&o));
     std::fs::write(p("model.json"), &o.stdout).unwrap();
-    let truth = identify::modelfile::load(&p("model.json")).unwrap().model;
+    let truth = rfe::modelfile::load(&p("model.json")).unwrap().model;
     let mut rng = StdRng::seed_from_u64(4);
     let data =
         synthetic::amplitude_data(&truth, &synthetic::log_lines(10.0, 60.0, 40), 0.01, || {
@@ -183,7 +183,7 @@ fn a_resolved_json_model_is_written_as_toml_and_the_next_run_starts_at_the_estim
     let o = ident(&["model", "check", &s(&p("final.toml"))]);
     assert_eq!(o.status.code(), Some(0), "{}", text(&o));
     // The written model holds the estimates; the next run starts there and stays.
-    let back = identify::modelfile::load(&p("final.toml")).unwrap().model;
+    let back = rfe::modelfile::load(&p("final.toml")).unwrap().model;
     for row in table["table"].as_array().unwrap() {
         let name = row["sdes"].as_str().unwrap();
         let k = back

@@ -10,11 +10,11 @@ use std::process::Output;
 
 use common::{ident, identify_two_mass, p, root, utf8, TWO_MASS};
 
-use identify::identification::{data, synthetic};
-use identify::measured::MeasuredData;
+use identify::{data, synthetic};
 use rand::rngs::StdRng;
 use rand::SeedableRng;
 use rand_distr::{Distribution, StandardNormal};
+use rfe::measured::MeasuredData;
 
 /// Truth of the two-mass chain: k1 = 20 N/µm, k2 = 5 N/µm (the model file's values).
 const K1: f64 = 2.0e7;
@@ -25,7 +25,7 @@ const TWO_MASS_VARS: &str = include_str!("../configs/identification/textbook-two
 
 /// 1 % noise on both outputs of the two-mass chain, 40 lines over 10-60 Hz, seeded.
 fn two_mass_data(seed: u64) -> MeasuredData {
-    let truth = identify::modelfile::load(&root().join(TWO_MASS))
+    let truth = rfe::modelfile::load(&root().join(TWO_MASS))
         .expect("two-mass model")
         .model;
     let mut rng = StdRng::seed_from_u64(seed);
@@ -166,10 +166,10 @@ fn a_converged_fit_reports_the_table_and_writes_the_updated_model() {
         toml.contains("# Textbook case: two masses in series"),
         "comments kept"
     );
-    let back = identify::modelfile::parse_toml(&toml, "model.toml")
+    let back = rfe::modelfile::parse_toml(&toml, "model.toml")
         .unwrap()
         .model;
-    let json = identify::modelfile::load(&out_dir.join("model.json"))
+    let json = rfe::modelfile::load(&out_dir.join("model.json"))
         .unwrap()
         .model;
     for (name, x) in ["k1", "k2"].iter().zip(&identified) {
@@ -187,7 +187,7 @@ fn a_converged_fit_reports_the_table_and_writes_the_updated_model() {
 #[test]
 fn the_fwd32j_problem_is_identified_from_the_papers_initial_values() {
     let c = Case::new();
-    let truth = identify::modelfile::load(&root().join("configs/models/fwd32j.toml"))
+    let truth = rfe::modelfile::load(&root().join("configs/models/fwd32j.toml"))
         .unwrap()
         .model;
     let mut rng = StdRng::seed_from_u64(32);
@@ -237,10 +237,10 @@ fn the_fwd32j_problem_is_identified_from_the_papers_initial_values() {
         toml.contains("MPa/um\""),
         "contact stiffness keeps its unit"
     );
-    let back = identify::modelfile::parse_toml(&toml, "model.toml")
+    let back = rfe::modelfile::parse_toml(&toml, "model.toml")
         .unwrap()
         .model;
-    assert!(identify::modelfile::load(&out_dir.join("model.json")).is_ok());
+    assert!(rfe::modelfile::load(&out_dir.join("model.json")).is_ok());
     let s6 = back.sdes.iter().find(|s| s.name == "6").unwrap();
     assert_eq!(s6.law.stiffness()[0], 0.0);
 }
@@ -278,7 +278,7 @@ fn the_iteration_limit_exits_1_and_keeps_the_best_point() {
     );
     // The files are still written, with the best point in the model.
     let toml = std::fs::read_to_string(out_dir.join("model.toml")).unwrap();
-    let back = identify::modelfile::parse_toml(&toml, "model.toml")
+    let back = rfe::modelfile::parse_toml(&toml, "model.toml")
         .unwrap()
         .model;
     let k1 = back
@@ -447,7 +447,7 @@ fn the_problem_export_holds_what_an_external_fit_needs() {
     assert!(o.stdout.is_empty(), "no fit, no report");
     let j: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
-    assert_eq!(j["format"], identify::identification::problem::FORMAT);
+    assert_eq!(j["format"], identify::problem::FORMAT);
     assert_eq!(j["fit"], "amplitude");
     assert_eq!(j["lines_hz"].as_array().unwrap().len(), 40);
     let obs = j["observations"].as_array().unwrap();

@@ -6,7 +6,7 @@ mod common;
 
 use common::{identify_two_mass, p, root, utf8, TWO_MASS};
 
-use identify::identification::synthetic;
+use identify::synthetic;
 use rand::rngs::StdRng;
 use rand::SeedableRng;
 use rand_distr::{Distribution, StandardNormal};
@@ -22,8 +22,8 @@ fn vars() -> String {
     s
 }
 
-fn two_mass() -> identify::Model {
-    identify::modelfile::load(&root().join(TWO_MASS))
+fn two_mass() -> rfe::Model {
+    rfe::modelfile::load(&root().join(TWO_MASS))
         .expect("two-mass model")
         .model
 }
@@ -89,14 +89,14 @@ fn a_mass_variable_is_identified_and_printed_in_kg_with_its_error() {
     assert!((xj - x).abs() < 1e-3, "{mass}");
 
     // The updated model carries the fitted mass; the next variables file starts there.
-    let model = identify::modelfile::load(&out.join("model.toml"))
+    let model = rfe::modelfile::load(&out.join("model.toml"))
         .expect("updated model loads")
         .model;
     let m2 = model.bodies[model.body_index("second").expect("second")].mass;
     assert!((m2 - xj).abs() < 1e-6 * xj, "{m2} vs {xj}");
     let next_text = std::fs::read_to_string(&next).expect("next vars");
     assert!(next_text.contains("bodies = [\"second\"]"), "{next_text}");
-    let reread = identify::identification::variables::parse(&next_text, "next", &truth)
+    let reread = identify::variables::parse(&next_text, "next", &truth)
         .expect("the next variables file loads");
     let v = reread
         .vars
@@ -141,7 +141,7 @@ fn the_python_baseline_reads_mass_point_mass_and_gain_terms_and_reaches_the_same
     // two springs, the first body's mass, the sensor's mass and the second output's gain.
     let dir = tempfile::tempdir().expect("temp dir");
     let (model_file, model_text) = model_with_sensor(dir.path());
-    let truth = identify::modelfile::parse_toml(&model_text, "model.toml")
+    let truth = rfe::modelfile::parse_toml(&model_text, "model.toml")
         .expect("model with a sensor")
         .model;
     let mut rng = StdRng::seed_from_u64(3);

@@ -7,9 +7,9 @@ mod common;
 
 use common::{ident, identify_mapped, p, root, utf8, TWO_MASS};
 
-use identify::frf::{self, Method};
-use identify::model::{Characteristic, PointOutput, Quantity};
 use process::uff;
+use rfe::frf::{self, Method};
+use rfe::model::{Characteristic, PointOutput, Quantity};
 
 /// k1 and k2 of the two-mass chain started at 14 and 7 N/µm.
 const VARS: &str = include_str!("../configs/identification/textbook-two-mass.toml");
@@ -56,9 +56,7 @@ fn identify_fits_two_references_of_point_outputs_from_a_uff_file() {
     let text = std::fs::read_to_string(root().join(TWO_MASS)).unwrap() + HAMMER;
     let model_path = dir.path().join("two-mass-hammer.toml");
     std::fs::write(&model_path, &text).unwrap();
-    let mut truth = identify::modelfile::parse_toml(&text, "model")
-        .unwrap()
-        .model;
+    let mut truth = rfe::modelfile::parse_toml(&text, "model").unwrap().model;
     let sensors = [
         (0, [0.15, -0.05, 0.02], [0.1, 0.3, 1.0]),
         (1, [-0.09, 0.04, 1.0], [0.0, 0.0, 1.0]),
@@ -120,7 +118,7 @@ fn identify_fits_two_references_of_point_outputs_from_a_uff_file() {
     let written = dir.path().join("identified.toml");
     let o = identify(&["--write-model", p(&written)]);
     assert_eq!(o.status.code(), Some(0), "{}", utf8(&o.stderr));
-    let back = identify::modelfile::load(&written).unwrap().model;
+    let back = rfe::modelfile::load(&written).unwrap().model;
     let points: Vec<(u8, bool)> = back
         .outputs
         .iter()

@@ -14,7 +14,7 @@
 //! 3. fits each body's rigid-body motion at its centre of mass in its principal central axes
 //!    ([`process::principal::RigidFit`]; translations when the layout cannot observe rotations),
 //!    with the rigidity residual, and
-//! 4. scales to the model's nominal excitation into [`identify::MeasuredData`]
+//! 4. scales to the model's nominal excitation into [`rfe::MeasuredData`]
 //!    ([`process::selection::to_measurement`]), with each point's variance.
 //!
 //! A broadband session is replayed through the live sweep's
@@ -39,11 +39,11 @@
 
 use std::path::{Path, PathBuf};
 
-use identify::{MeasuredData, Quantity};
 use nalgebra::Vector3;
 use num_complex::Complex;
 use process::principal::{Dofs, RigidFit, Sensor};
 use process::selection::{to_measurement, CharacteristicSpec};
+use rfe::{MeasuredData, Quantity};
 use serde::Serialize;
 
 use crate::session::records::{
@@ -273,7 +273,7 @@ pub fn characteristics(
             "stepped-sine steps"
         },
         replayed.dropped.len(),
-        identify::display::sig(geometry.nominal_force_n, 6),
+        rfe::display::sig(geometry.nominal_force_n, 6),
         geometry.source
     );
     Ok(SessionAnalysis {
@@ -747,7 +747,7 @@ fn body_characteristics(
     steps: &mut [StepAnalysis],
     notes: &mut Vec<String>,
     cx: &Cx,
-) -> Result<Vec<identify::Measurement>, AnalysisError> {
+) -> Result<Vec<rfe::Measurement>, AnalysisError> {
     let idx: Vec<usize> = (0..channels.len())
         .filter(|&c| {
             channels[c].kind != ChannelKind::Force

@@ -11,7 +11,7 @@ for like:
 
 - the same criterion J = 1/2 sum((|z| - |q(x)|) / sigma)^2 on the same observations;
 - the same scaled variables u = x / scale, the same start, the same bounds;
-- the FRF by numpy: M, K, D assembled as identify/src/system.rs does (independently written from
+- the FRF by numpy: M, K, D assembled as rfe/src/system.rs does (independently written from
   docs/model-json.md; a point mass adds its 6x6 block with the parallel-axis terms to its body's),
   one batched dense complex solve over all lines; a gain multiplies its characteristics' outputs;
 - `--jac analytic` (default): the adjoint Jacobian that ident uses, dq_o/dp = -(T w_o)^T dK_c (T q)

@@ -16,8 +16,8 @@
 //! and the judgement says why. Limits are widened for the baseline's own error (`√(1 + 1/n)`, and
 //! the regression's prediction interval with a covariate).
 
-use identify::display::sig;
 use nalgebra::{DMatrix, DVector};
+use rfe::display::sig;
 use serde::{Deserialize, Serialize};
 use statrs::distribution::{ContinuousCDF, FisherSnedecor};
 

@@ -100,7 +100,7 @@ pub fn model_hash(bytes: &[u8]) -> String {
 /// when the symbol is not a unit of a stiffness, a contact stiffness, a rotational stiffness or a
 /// pure number.
 pub fn unit_factor(symbol: &str) -> Option<f64> {
-    use identify::units::{parse_quantity, Dim};
+    use rfe::units::{parse_quantity, Dim};
     let s = symbol.trim();
     if s == "-" || s.is_empty() {
         return Some(1.0);

@@ -14,19 +14,19 @@ use std::process::Command;
 use std::time::Instant;
 
 use criterion::{criterion_group, criterion_main, Criterion as Bench};
-use identify::identification::{self as idn, data, variables, JacobianMode, Options};
-use identify::measured::MeasuredData;
-use identify::model::Model;
+use identify::{self as idn, data, variables, JacobianMode, Options};
 use rand::rngs::StdRng;
 use rand::SeedableRng;
 use rand_distr::{Distribution, StandardNormal};
+use rfe::measured::MeasuredData;
+use rfe::model::Model;
 
 fn root() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..")
 }
 
 fn load(name: &str) -> Model {
-    identify::modelfile::load(&root().join("configs/models").join(name))
+    rfe::modelfile::load(&root().join("configs/models").join(name))
         .expect("FWD-32J model")
         .model
 }

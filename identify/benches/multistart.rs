@@ -14,7 +14,7 @@ use std::path::PathBuf;
 use std::process::Command;
 use std::time::Instant;
 
-use identify::identification::{self as idn, data, starts, variables, Options};
+use identify::{self as idn, data, starts, variables, Options};
 use rand::rngs::StdRng;
 use rand::SeedableRng;
 use rand_distr::{Distribution, StandardNormal};
@@ -60,10 +60,10 @@ fn main() {
     let truth_k: Vec<f64> = (0..FLOORS)
         .map(|i| 52.5e3 * (0.75 + 0.05 * i as f64))
         .collect();
-    let truth = identify::modelfile::parse_toml(&frame(&truth_k), "truth.toml")
+    let truth = rfe::modelfile::parse_toml(&frame(&truth_k), "truth.toml")
         .expect("truth")
         .model;
-    let model = identify::modelfile::parse_toml(&frame(&[52.5e3; FLOORS]), "frame.toml")
+    let model = rfe::modelfile::parse_toml(&frame(&[52.5e3; FLOORS]), "frame.toml")
         .expect("model")
         .model;
     let mut vars_text = String::new();

@@ -5,17 +5,17 @@
 // Test and benchmark helpers unwrap: a panic with its message is the failure report.
 #![allow(clippy::unwrap_used)]
 
-use identify::frf::{self, Method};
-use identify::identification::{
+use identify::{
     self as idn, data, report, variables, AtBound, Criterion, FitKind, JacobianMode, NoiseChoice,
     NoiseSource, Optimizer, Options, Settings, StopReason,
 };
-use identify::measured::{MeasuredData, Measurement, QuantityName};
-use identify::model::Model;
-use identify::textbook;
 use rand::rngs::StdRng;
 use rand::SeedableRng;
 use rand_distr::{Distribution, StandardNormal};
+use rfe::frf::{self, Method};
+use rfe::measured::{MeasuredData, Measurement, QuantityName};
+use rfe::model::Model;
+use rfe::textbook;
 
 fn truth() -> Model {
     textbook::two_in_series(400.0, 120.0, 2.0e7, 5.0e6, 0.5)
@@ -32,12 +32,12 @@ fn measured(model: &Model, rel: f64, seed: u64) -> MeasuredData {
         characteristics: (0..2)
             .map(|o| {
                 let q = r.output(o);
-                let noisy: Vec<identify::C64> = q
+                let noisy: Vec<rfe::C64> = q
                     .iter()
                     .map(|v| {
                         let a: f64 = StandardNormal.sample(&mut rng);
                         let b: f64 = StandardNormal.sample(&mut rng);
-                        v + identify::C64::new(a, b) * (rel * v.norm() / std::f64::consts::SQRT_2)
+                        v + rfe::C64::new(a, b) * (rel * v.norm() / std::f64::consts::SQRT_2)
                     })
                     .collect();
                 // γ² such that the H1 amplitude variance (1 − γ²)/(2 n γ²)·|z|² equals the
@@ -395,9 +395,9 @@ fn tied_and_scaled_variables_move_their_parameters_together() {
     );
     let k2 = id
         .model
-        .param(identify::ParamRef {
+        .param(rfe::ParamRef {
             sde: 1,
-            name: identify::ParamName::K,
+            name: rfe::ParamName::K,
         })
         .unwrap();
     assert!((k2 / 5.0e6 - 1.0).abs() < 1e-6);
@@ -409,16 +409,16 @@ fn the_updated_model_is_written_back_into_the_toml_text() {
     let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("../configs/models/textbook-two-mass.toml");
     let text = std::fs::read_to_string(&path).unwrap();
-    let m = identify::modelfile::parse_toml(&text, "two-mass.toml")
+    let m = rfe::modelfile::parse_toml(&text, "two-mass.toml")
         .unwrap()
         .model;
     let d = measured(&m, 0.0, 1);
     // Start away from the file's values and fit back to them.
     let mut start = m.clone();
     start.set_param(
-        identify::ParamRef {
+        rfe::ParamRef {
             sde: 0,
-            name: identify::ParamName::K,
+            name: rfe::ParamName::K,
         },
         1.4e7,
     );
@@ -427,9 +427,7 @@ fn the_updated_model_is_written_back_into_the_toml_text() {
     let id = idn::identify(&start, &obs, &vars, &Options::default(), &mut |_, _| {}).unwrap();
     let out = report::update_toml(&text, "two-mass.toml", &id).unwrap();
     assert!(out.contains("# Textbook case"), "comments are kept");
-    let back = identify::modelfile::parse_toml(&out, "out.toml")
-        .unwrap()
-        .model;
+    let back = rfe::modelfile::parse_toml(&out, "out.toml").unwrap().model;
     for v in &vars.vars {
         for t in &v.targets {
             let a = back.value(t.param).unwrap();
@@ -438,8 +436,8 @@ fn the_updated_model_is_written_back_into_the_toml_text() {
         }
     }
     // The resolved JSON of the updated model loads back to the same stiffnesses.
-    let json = serde_json::to_string(&identify::contract::to_json(&id.model)).unwrap();
-    let j = identify::modelfile::parse_json(&json, "model.json")
+    let json = serde_json::to_string(&rfe::contract::to_json(&id.model)).unwrap();
+    let j = rfe::modelfile::parse_json(&json, "model.json")
         .unwrap()
         .model;
     assert_eq!(j.sdes[0].law.stiffness(), id.model.sdes[0].law.stiffness());

@@ -9,10 +9,10 @@
 mod common;
 
 use common::{load_model, load_variables};
-use identify::identification::{self as idn, data, variables, Optimizer, Options, Settings};
-use identify::model::Model;
+use identify::{self as idn, data, variables, Optimizer, Options, Settings};
 use rand::rngs::StdRng;
 use rand::SeedableRng;
+use rfe::model::Model;
 
 fn truth_values(truth: &Model, vars: &variables::Variables) -> Vec<f64> {
     vars.vars
@@ -95,7 +95,7 @@ fn fwd32j_synthetic_recovery_from_the_initial_values() {
         "comments kept"
     );
     assert!(out.contains("MPa/um\""), "contact stiffness keeps its unit");
-    let back = identify::modelfile::parse_toml(&out, "updated.toml")
+    let back = rfe::modelfile::parse_toml(&out, "updated.toml")
         .unwrap()
         .model;
     for (i, v) in vars.vars.iter().enumerate() {

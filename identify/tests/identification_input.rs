@@ -4,12 +4,12 @@
 // Test and benchmark helpers unwrap: a panic with its message is the failure report.
 #![allow(clippy::unwrap_used)]
 
-use identify::identification::{data, variables};
-use identify::measured::{MeasuredData, Measurement, QuantityName};
-use identify::textbook;
+use identify::{data, variables};
 use proptest::prelude::*;
+use rfe::measured::{MeasuredData, Measurement, QuantityName};
+use rfe::textbook;
 
-fn model() -> identify::Model {
+fn model() -> rfe::Model {
     textbook::two_in_series(400.0, 120.0, 2.0e7, 5.0e6, 0.5)
 }
 
@@ -79,12 +79,12 @@ fn csv_and_toml_with_a_byte_order_mark_read_as_without() {
         data::parse_csv(csv, "bom.csv").unwrap()
     );
     let model = "[[body]]\nname = \"b\"\nmass = 2\nposition = [0, 0, 0]\ninertia = [1, 1, 1]\n";
-    let plain = identify::modelfile::parse_toml(model, "m.toml").unwrap();
-    let bom = identify::modelfile::parse_toml(&format!("\u{feff}{model}"), "m.toml").unwrap();
+    let plain = rfe::modelfile::parse_toml(model, "m.toml").unwrap();
+    let bom = rfe::modelfile::parse_toml(&format!("\u{feff}{model}"), "m.toml").unwrap();
     assert_eq!(bom.model, plain.model);
     // Errors in a file with a BOM still point at the right line and column.
     let bad = "\u{feff}[[body]]\nname = \"b\"\nmass = \"2 furlong\"\nposition = [0, 0, 0]\ninertia = [1, 1, 1]\n";
-    let e = identify::modelfile::parse_toml(bad, "m.toml")
+    let e = rfe::modelfile::parse_toml(bad, "m.toml")
         .unwrap_err()
         .to_string();
     assert!(e.starts_with("m.toml:3:8:"), "{e}");
@@ -315,7 +315,7 @@ fn variables_file_errors_are_located_and_explained() {
 #[test]
 fn the_fwd32j_variables_file_has_the_papers_twenty_variables() {
     let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
-    let m = identify::modelfile::load(&root.join("configs/models/fwd32j-initial.toml"))
+    let m = rfe::modelfile::load(&root.join("configs/models/fwd32j-initial.toml"))
         .unwrap()
         .model;
     let v = variables::load(&root.join("configs/identification/fwd32j.toml"), &m).unwrap();

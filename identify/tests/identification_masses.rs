@@ -10,10 +10,10 @@
 mod common;
 
 use common::{load_model, load_variables};
-use identify::identification::{self as idn, data, variables, Identification, Options, Settings};
-use identify::model::Model;
+use identify::{self as idn, data, variables, Identification, Options, Settings};
 use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
+use rfe::model::Model;
 
 /// `fwd32j-initial.toml` with each body's mass and principal inertias scaled by 0.8 or 1.2.
 fn perturbed(rng: &mut StdRng) -> (Model, Vec<f64>) {
@@ -140,7 +140,7 @@ fn a_ten_percent_gain_error_of_one_characteristic_is_recovered_on_fwd32j() {
             *x *= 1.21;
         }
     }
-    let label = format!("table {}", identify::model::DOF_NAMES[c.dof as usize]);
+    let label = format!("table {}", rfe::model::DOF_NAMES[c.dof as usize]);
     let obs = data::validate(&d, &initial, "synthetic").unwrap();
     let mut text =
         std::fs::read_to_string(common::repo().join("configs/identification/fwd32j.toml")).unwrap();

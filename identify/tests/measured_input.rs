@@ -4,14 +4,14 @@
 // Test helpers unwrap: a panic with its message is the failure report.
 #![allow(clippy::unwrap_used)]
 
-use identify::frf::{self, Method};
-use identify::identification::measurement_map::{self, ChannelName, MeasuredChannel};
-use identify::identification::{
-    self as idn, data, frf_units::FrfUnit, misfit, plausibility, report, variables, Options,
-};
-use identify::measured::{MeasuredData, Measurement, QuantityName};
-use identify::model::Model;
-use identify::textbook;
+use identify::measurement_map;
+use identify::{self as idn, data, misfit, plausibility, report, variables, Options};
+use rfe::frf::{self, Method};
+use rfe::frf_units::FrfUnit;
+use rfe::measured::{ChannelName, MeasuredChannel};
+use rfe::measured::{MeasuredData, Measurement, QuantityName};
+use rfe::model::Model;
+use rfe::textbook;
 
 fn model() -> Model {
     textbook::two_in_series(400.0, 120.0, 2.0e7, 5.0e6, 0.5)

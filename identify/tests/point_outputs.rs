@@ -9,11 +9,11 @@
 mod common;
 
 use common::load_model;
-use identify::frf::{self, Method};
-use identify::identification::NoiseChoice;
-use identify::model::{Characteristic, Model, Param, PointOutput, Quantity};
-use identify::{textbook, C64};
+use identify::NoiseChoice;
 use nalgebra::Vector3;
+use rfe::frf::{self, Method};
+use rfe::model::{Characteristic, Model, Param, PointOutput, Quantity};
+use rfe::{textbook, C64};
 
 const TWO_PI: f64 = 2.0 * std::f64::consts::PI;
 
@@ -184,7 +184,7 @@ point = "100 50 0 mm"
 direction = [0, 3, 4]
 quantity = "acceleration"
 "#;
-    let loaded = identify::modelfile::parse_toml(&text, "point.toml").unwrap();
+    let loaded = rfe::modelfile::parse_toml(&text, "point.toml").unwrap();
     let m = &loaded.model;
     assert_eq!(m.outputs.len(), 2);
     assert_eq!(m.outputs[0].at, None);
@@ -193,8 +193,8 @@ quantity = "acceleration"
     assert!((Vector3::from(at.direction) - Vector3::new(0.0, 0.6, 0.8)).norm() < 1e-15);
     assert_eq!(m.outputs[1].dof, 2, "nearest principal axis: u3");
     // JSON contract round trip.
-    let json = identify::contract::to_json(m);
-    let back = identify::contract::from_json(&json).unwrap();
+    let json = rfe::contract::to_json(m);
+    let back = rfe::contract::from_json(&json).unwrap();
     assert_eq!(back.outputs, m.outputs);
 
     for (bad, says) in [
@@ -214,7 +214,7 @@ quantity = "acceleration"
             "no `dof`",
         ),
     ] {
-        let e = identify::modelfile::parse_toml(&bad, "point.toml")
+        let e = rfe::modelfile::parse_toml(&bad, "point.toml")
             .unwrap_err()
             .to_string();
         assert!(e.contains("point.toml:") && e.contains(says), "{e}");

@@ -7,16 +7,16 @@
 // Test helpers unwrap: a panic with its message is the failure report.
 #![allow(clippy::unwrap_used)]
 
-use identify::identification::prefit::{modal_prefit, with_start, MeasuredMode};
-use identify::identification::{self as idn, data, synthetic, variables, FitKind, Options};
-use identify::model::Model;
+use identify::prefit::{modal_prefit, with_start, MeasuredMode};
+use identify::{self as idn, data, synthetic, variables, FitKind, Options};
 use rand::SeedableRng;
 use rand_distr::{Distribution, StandardNormal};
+use rfe::model::Model;
 
 fn example() -> Model {
     let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("../examples/real-three-storey/model.toml");
-    identify::modelfile::load(&path).unwrap().model
+    rfe::modelfile::load(&path).unwrap().model
 }
 
 /// The storey stiffnesses 10× off in opposite directions and ψ 12× (the example's far start).
@@ -65,7 +65,7 @@ fn a_start_from_the_measured_modes_reaches_the_truth_where_the_naive_start_does_
     );
 
     // The measured modes: the truth's complex modes in the band (an ideal modal extraction).
-    let modes: Vec<MeasuredMode> = identify::modes::complex(&truth)
+    let modes: Vec<MeasuredMode> = rfe::modes::complex(&truth)
         .unwrap()
         .into_iter()
         .filter(|m| m.freq_hz > 3.0 && m.freq_hz < 40.0)

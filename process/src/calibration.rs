@@ -1,8 +1,8 @@
 //! Channel calibration (sensitivity, offset, units) and conversion between receptance
 //! (displacement/force), mobility (velocity/force) and accelerance (acceleration/force).
 
-use identify::Quantity;
 use num_complex::Complex;
+use rfe::Quantity;
 
 use crate::error::{check_count, invalid, ProcessError, Result};
 

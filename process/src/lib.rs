@@ -1,7 +1,7 @@
 //! # process — from sampled force and acceleration to principal-axis characteristics
 //!
 //! The chain that turns what the DAQ recorded into what identification consumes
-//! ([`identify::MeasuredData`]):
+//! ([`rfe::MeasuredData`]):
 //!
 //! 1. [`spectra`]: streaming Welch auto/cross-spectral matrices (rustfft planned once, buffers
 //!    reused, bounded memory), with the windows of [`window`] (rectangular, Hann, Hamming,
@@ -13,7 +13,7 @@
 //! 4. [`principal`]: per frequency, the least-squares 6-DOF rigid-body motion of a solid at its
 //!    centre of mass in its principal axes, with a rigidity indicator.
 //! 5. [`selection`]: picking identification points (log spread, denser at resonances, coherent
-//!    lines only) and building [`identify::Measurement`]s.
+//!    lines only) and building [`rfe::Measurement`]s.
 //!
 //! Exchange: [`uff`] (universal file dataset 58, ASCII and binary 58b), [`npy`] (NumPy arrays).
 //!
@@ -53,5 +53,5 @@ pub use estimate::{estimate, Estimator, Frf};
 pub use spectra::{cross_spectra, CrossSpectra, Detrend, Signal, Welch, WelchConfig};
 pub use window::Window;
 
-/// Complex double (same type as [`identify::C64`]).
+/// Complex double (same type as [`rfe::C64`]).
 pub type C64 = num_complex::Complex<f64>;

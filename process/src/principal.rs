@@ -13,7 +13,7 @@
 use nalgebra::{DMatrix, Vector3};
 use num_complex::Complex;
 
-use identify::Body;
+use rfe::Body;
 
 use crate::error::{check_count, ProcessError, Result};
 

@@ -1,11 +1,11 @@
 //! Selection of identification points from a measured characteristic (as the paper did by hand:
-//! about 38 per characteristic) and assembly of [`identify::Measurement`]s.
+//! about 38 per characteristic) and assembly of [`rfe::Measurement`]s.
 //!
 //! Points are spread with a density that is uniform in log-frequency plus a bump of extra density
 //! around each resonance peak; lines whose coherence is below a threshold are never chosen.
 
-use identify::{measured::QuantityName, Measurement, Quantity};
 use num_complex::Complex;
+use rfe::{measured::QuantityName, Measurement, Quantity};
 
 use crate::error::{check_count, invalid, ProcessError, Result};
 

@@ -15,9 +15,9 @@ use std::path::Path;
 
 use num_complex::Complex;
 
-use identify::identification::frf_units::FrfUnit;
-use identify::identification::measurement_map::{ChannelName, MeasuredChannel};
-use identify::model::Quantity;
+use rfe::frf_units::FrfUnit;
+use rfe::measured::{ChannelName, MeasuredChannel};
+use rfe::model::Quantity;
 
 use crate::error::{ProcessError, Result};
 
@@ -1047,7 +1047,7 @@ fn ascii_values(c: &mut Cursor, dataset: usize, layout: &Layout) -> Result<Vec<f
 }
 
 /// The FRFs of a UFF file (function type 4) as measured channels for identification
-/// ([`identify::identification::measurement_map`] maps them onto a model): response node and
+/// (the `identify` crate's `measurement_map` maps them onto a model): response node and
 /// direction, reference, abscissa converted to Hz (record 8's unit; Hz when it gives none, and
 /// noted), values as amplitude and phase, the unit from records 9-10 (the ordinate's numerator
 /// and denominator units labels, checked against the numerator's specific data type), and the
@@ -1170,7 +1170,7 @@ fn frequencies_hz(
     } else if label.eq_ignore_ascii_case("rad/s") {
         1.0 / (2.0 * std::f64::consts::PI)
     } else {
-        identify::units::parse_quantity(&format!("1 {label}"), identify::units::Dim::FREQUENCY)
+        rfe::units::parse_quantity(&format!("1 {label}"), rfe::units::Dim::FREQUENCY)
             .map_err(|e| format!("field 'units label' \"{label}\": {e}; use Hz, kHz or rad/s"))?
     };
     Ok(f.x().into_iter().map(|x| x * factor).collect())

@@ -1,14 +1,14 @@
 //! The whole chain on synthetic data: force + 8 accelerometers on a rigid table -> Welch H1 ->
-//! principal-axis motion (with propagated variance) -> selected points -> identify::Measurement.
+//! principal-axis motion (with propagated variance) -> selected points -> rfe::Measurement.
 #![allow(clippy::unwrap_used, clippy::needless_range_loop, missing_docs)]
 
 mod common;
 
-use identify::{Body, Quantity};
 use nalgebra::{Matrix3, Rotation3, Vector3};
 use process::principal::{Dofs, RigidFit, Sensor};
 use process::selection::{select_points, to_measurement, CharacteristicSpec, SelectionConfig};
 use process::{estimate, spectra::Welch, Estimator, WelchConfig, Window};
+use rfe::{Body, Quantity};
 
 #[test]
 fn signals_to_principal_axis_measurement() {

@@ -3,11 +3,11 @@
 //! degenerate layouts.
 #![allow(clippy::unwrap_used, clippy::needless_range_loop, missing_docs)]
 
-use identify::Body;
 use nalgebra::{Matrix3, Rotation3, Vector3};
 use process::principal::{Dofs, RigidFit, Sensor};
 use process::C64;
 use rand::{Rng, SeedableRng};
+use rfe::Body;
 
 fn body(rng: &mut impl Rng) -> Body {
     let rot = Rotation3::from_euler_angles(

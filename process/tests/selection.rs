@@ -1,11 +1,11 @@
-//! Selection of identification points and assembly of `identify::Measurement`.
+//! Selection of identification points and assembly of `rfe::Measurement`.
 #![allow(clippy::unwrap_used, missing_docs)]
 
 mod common;
 
-use identify::Quantity;
 use process::selection::{select_points, to_measurement, CharacteristicSpec, SelectionConfig};
 use process::C64;
+use rfe::Quantity;
 
 fn characteristic() -> (Vec<f64>, Vec<C64>, Vec<f64>) {
     // Two resonances (60 Hz and 300 Hz) of a receptance-like FRF on a 0.25 Hz grid to 1 kHz.
@@ -108,7 +108,7 @@ fn measurement_is_scaled_by_the_nominal_force() {
     }
     assert_eq!(m.averages, Some(10));
     // The result is what identify reads.
-    let json = serde_json::to_string(&identify::MeasuredData {
+    let json = serde_json::to_string(&rfe::MeasuredData {
         source: "test".into(),
         characteristics: vec![m],
     })

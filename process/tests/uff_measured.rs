@@ -6,13 +6,13 @@
 
 mod common;
 
-use identify::frf::{self, Method};
-use identify::identification::{self as idn, data, measurement_map, variables, Options};
-use identify::model::Model;
-use identify::textbook;
-use identify::MeasuredData;
+use identify::{self as idn, data, measurement_map, variables, Options};
 use process::uff;
 use process::C64;
+use rfe::frf::{self, Method};
+use rfe::model::Model;
+use rfe::textbook;
+use rfe::MeasuredData;
 use std::f64::consts::PI;
 use std::path::Path;
 
@@ -148,7 +148,7 @@ fn the_same_frfs_in_any_unit_and_file_give_the_same_estimates() {
         for (o, m) in d.characteristics.iter().enumerate() {
             assert_eq!(
                 m.quantity,
-                identify::measured::QuantityName::Displacement,
+                rfe::measured::QuantityName::Displacement,
                 "{name}"
             );
             for (k, fk) in f.iter().enumerate() {
@@ -396,7 +396,7 @@ fn a_file_without_frfs_says_what_it_holds() {
 /// The two-mass chain on a shaker table moving along z (`[[reference]] "table"`), declared
 /// outputs: both bodies' u3 displacement. Its absolute transmissibilities x/x_b at `f`.
 fn on_a_table(f: &[f64]) -> (Model, Vec<Vec<C64>>) {
-    use identify::model::{Characteristic, Excitation, Reference};
+    use rfe::model::{Characteristic, Excitation, Reference};
     let mut m = textbook::two_in_series(400.0, 120.0, 2.0e7, 5.0e6, 0.5);
     m.references.push(Reference {
         name: "table".into(),

@@ -5,14 +5,12 @@
 //! fit uses both, and the map's mistakes are errors naming the file, line and field.
 #![allow(clippy::unwrap_used, missing_docs)]
 
-use identify::frf::{self, Method};
-use identify::identification::{self as idn, data, measurement_map, variables, Options};
-use identify::model::{
-    Characteristic, Excitation, Model, PointForce, PointOutput, Quantity, Reference,
-};
-use identify::textbook;
+use identify::{self as idn, data, measurement_map, variables, Options};
 use process::uff;
 use process::C64;
+use rfe::frf::{self, Method};
+use rfe::model::{Characteristic, Excitation, Model, PointForce, PointOutput, Quantity, Reference};
+use rfe::textbook;
 
 const VARS: &str = include_str!("../../configs/identification/textbook-two-mass-psi.toml");
 
@@ -105,7 +103,7 @@ fn uff_bytes(m: &Model) -> Vec<u8> {
     uff::to_bytes(&sets, uff::Encoding::Binary).unwrap()
 }
 
-fn channels(m: &Model) -> Vec<measurement_map::MeasuredChannel> {
+fn channels(m: &Model) -> Vec<rfe::measured::MeasuredChannel> {
     let file = uff::parse_file(&uff_bytes(m), "mimo.uff").unwrap();
     uff::measured_channels(&file, "mimo.uff").unwrap().0
 }

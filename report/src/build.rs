@@ -2,9 +2,9 @@
 //! a dense log grid across the band (with the model's resonances on it), the natural frequencies
 //! in the band, standardized residuals, the parameter table and the sensitivity map.
 
-use identify::identification::data::{Observations, Observed};
-use identify::identification::{report as table, Identification};
-use identify::{diagnose, frf, modes, sensitivity, Model, Quantity};
+use identify::data::{Observations, Observed};
+use identify::{report as table, Identification};
+use rfe::{frf, modes, sensitivity, Model, Quantity};
 
 use crate::document::*;
 use crate::ReportError;
@@ -186,7 +186,7 @@ pub fn measured_band(obs: &Observations) -> Option<(f64, f64)> {
     Some((lo, hi))
 }
 
-/// The modes of `model` (`identify::modes::complex`, with their loss factors) whose natural
+/// The modes of `model` (`rfe::modes::complex`, with their loss factors) whose natural
 /// frequency lies in `band` (Hz), numbered as `ident modes` numbers them.
 pub fn modes_in_band(
     model: &Model,
@@ -404,8 +404,8 @@ pub fn sensitivity_map(
             }
         })?;
     let outputs = model.outputs.len();
-    let label = |p: &identify::Param| match p {
-        identify::Param::Sde(r) => format!("SDE {} {}", model.sdes[r.sde].name, r.name.as_str()),
+    let label = |p: &rfe::Param| match p {
+        rfe::Param::Sde(r) => format!("SDE {} {}", model.sdes[r.sde].name, r.name.as_str()),
         other => model.label(*other),
     };
     Ok(SensitivityMap {
@@ -645,7 +645,7 @@ pub fn build(inputs: Inputs<'_>) -> Result<Report, ReportError> {
         .diagnosis
         .as_ref()
         .is_some_and(|(d, _)| !d.final_parameters.is_empty());
-    if let Some(m) = identify::identification::misfit::misfit(id).filter(|_| !diagnosed) {
+    if let Some(m) = identify::misfit::misfit(id).filter(|_| !diagnosed) {
         messages.insert(0, m.message);
     }
     if !id.stop.converged() {
@@ -735,7 +735,7 @@ mod tests {
 
     #[test]
     fn modes_in_band_number_like_ident_modes() {
-        let m = identify::textbook::two_in_series(400.0, 120.0, 2.0e7, 5.0e6, 0.5);
+        let m = rfe::textbook::two_in_series(400.0, 120.0, 2.0e7, 5.0e6, 0.5);
         let all = modes::complex(&m).unwrap();
         let elastic: Vec<f64> = all.iter().map(|x| x.freq_hz).filter(|f| *f > 1.0).collect();
         assert!(elastic.len() >= 2, "{elastic:?}");

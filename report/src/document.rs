@@ -176,7 +176,7 @@ pub struct StageModes {
     pub modes: Vec<NaturalMode>,
 }
 
-/// One mode of a model (`identify::modes::complex`).
+/// One mode of a model (`rfe::modes::complex`).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct NaturalMode {
@@ -191,7 +191,7 @@ pub struct NaturalMode {
 
 /// One row of the Table-1-like table, in the variable's display unit: the record `ident identify`
 /// writes as its table, so the two cannot drift apart.
-pub use identify::identification::report::Row as Parameter;
+pub use identify::report::Row as Parameter;
 
 /// The identification's outcome.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

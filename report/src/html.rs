@@ -3,7 +3,7 @@
 
 use std::fmt::Write;
 
-use identify::identification::report::num;
+use identify::report::num;
 
 use crate::document::*;
 use crate::{plot, ReportError};
@@ -166,10 +166,10 @@ fn final_model(h: &mut String, r: &Report) {
             e(&p.variable),
             e(&p.sdes),
             e(&p.unit),
-            identify::display::sig(p.identified, 5),
-            p.std_error.map(|s| identify::display::sig(s, 3)).unwrap_or_else(|| "—".into()),
-            p.variability.map(identify::display::relative).unwrap_or_else(|| "—".into()),
-            identify::display::sig(p.initial, 5),
+            rfe::display::sig(p.identified, 5),
+            p.std_error.map(|s| rfe::display::sig(s, 3)).unwrap_or_else(|| "—".into()),
+            p.variability.map(rfe::display::relative).unwrap_or_else(|| "—".into()),
+            rfe::display::sig(p.initial, 5),
             p.at_bound.as_deref().map(|b| format!("at {b} bound")).unwrap_or_default()
         );
     }
@@ -219,7 +219,7 @@ fn characteristics(h: &mut String, r: &Report) -> Result<(), ReportError> {
                 h,
                 "<td>{:.2} dB ({})</td>",
                 s.rms_db_error,
-                identify::display::relative(s.rms_relative_error)
+                rfe::display::relative(s.rms_relative_error)
             );
         }
         let _ = writeln!(
@@ -294,8 +294,8 @@ fn model_picture(h: &mut String, r: &Report) -> Result<(), ReportError> {
         } else {
             "s"
         },
-        identify::display::sig(p.band_hz[0], 4),
-        identify::display::sig(p.band_hz[1], 4)
+        rfe::display::sig(p.band_hz[0], 4),
+        rfe::display::sig(p.band_hz[1], 4)
     );
     if p.modes_omitted > 0 {
         let _ = write!(
@@ -343,7 +343,7 @@ fn parameters(h: &mut String, r: &Report) -> Result<(), ReportError> {
             num(p.initial),
             num(p.identified),
             p.std_error.map(num).unwrap_or_else(|| "undetermined".into()),
-            p.variability.map(identify::display::relative).unwrap_or_else(|| "—".into()),
+            p.variability.map(rfe::display::relative).unwrap_or_else(|| "—".into()),
             p.at_bound.as_ref().map(|b| format!("at {} bound", e(b))).unwrap_or_default()
         );
     }
@@ -399,7 +399,7 @@ fn diagnosis(h: &mut String, r: &Report) {
             for (name, q) in [("before", &d.before), ("after", &d.after)] {
                 let p = q
                     .chi2_p_value
-                    .map(identify::display::p_value)
+                    .map(rfe::display::p_value)
                     .unwrap_or_else(|| "— (noise level unknown)".into());
                 let _ = write!(
                     h,
@@ -408,7 +408,7 @@ fn diagnosis(h: &mut String, r: &Report) {
                     q.reduced_chi2
                 );
                 for l in &q.rms_relative_error {
-                    let _ = write!(h, "<td>{}</td>", identify::display::relative(l.value));
+                    let _ = write!(h, "<td>{}</td>", rfe::display::relative(l.value));
                 }
                 for l in &q.rms_db_error {
                     let _ = write!(h, "<td>{:.2} dB</td>", l.value);
@@ -467,11 +467,11 @@ fn candidates(h: &mut String, all: &[Candidate]) {
             c.round,
             e(&c.name),
             e(&c.location),
-            identify::display::sig(c.statistic, 3),
-            identify::display::p_value(c.p_value),
+            rfe::display::sig(c.statistic, 3),
+            rfe::display::p_value(c.p_value),
             if c.accepted { "<strong>yes</strong>" } else { "no" },
-            c.estimate.map(|v| identify::display::sig(v, 4)).unwrap_or_else(|| "—".into()),
-            c.std_error.map(|v| identify::display::sig(v, 2)).unwrap_or_else(|| "—".into()),
+            c.estimate.map(|v| rfe::display::sig(v, 4)).unwrap_or_else(|| "—".into()),
+            c.std_error.map(|v| rfe::display::sig(v, 2)).unwrap_or_else(|| "—".into()),
             e(&c.unit),
             gain
         );

@@ -16,8 +16,8 @@
 //! and its mode shapes as a drawing), [`html`] (the page).
 //!
 //! ```
-//! use identify::identification::{data, identify, variables, Options};
-//! use identify::{frf, textbook, MeasuredData, Measurement};
+//! use identify::{data, identify, variables, Options};
+//! use rfe::{frf, textbook, MeasuredData, Measurement};
 //! // Measure a two-mass textbook model, fit its two stiffnesses, and report.
 //! let truth = textbook::two_in_series(400.0, 120.0, 2.0e7, 5.0e6, 0.5);
 //! let freqs: Vec<f64> = (0..30).map(|i| 10.0 + 2.0 * i as f64).collect();
@@ -26,7 +26,7 @@
 //!     source: "synthetic".into(),
 //!     characteristics: (0..2).map(|o| Measurement {
 //!         body: truth.bodies[o].name.clone(), dof: 2,
-//!         quantity: identify::measured::QuantityName::Displacement,
+//!         quantity: rfe::measured::QuantityName::Displacement,
 //!         freqs_hz: freqs.clone(), amplitude: r.output(o).iter().map(|v| v.norm()).collect(),
 //!         phase_rad: None, variance: None, coherence: None, averages: None, at: None, reference: None, relative: false,
 //!     }).collect(),
@@ -63,7 +63,7 @@ pub enum ReportError {
         /// Stage (`initial`, `identified`, `diagnosed`).
         stage: String,
         /// Solver error.
-        source: identify::frf::SolveError,
+        source: rfe::frf::SolveError,
     },
     /// A plot could not be drawn.
     #[error("report: cannot draw the {chart} chart: {source}")]

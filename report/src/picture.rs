@@ -10,11 +10,11 @@
 //!
 //! Units: metres, kilograms, newtons, radians, hertz (SI) in the data; pixels only on the page.
 
-use identify::model::{Body, SdeKind, DOF_NAMES};
-use identify::{modes, Model};
 use nalgebra::{Matrix3, Vector3};
 use plotters::prelude::*;
 use plotters::style::text_anchor::{HPos, Pos, VPos};
+use rfe::model::{Body, SdeKind, DOF_NAMES};
+use rfe::{modes, Model};
 use serde::{Deserialize, Serialize};
 
 use crate::plot::DrawError;
@@ -149,13 +149,13 @@ fn vec3(a: &[f64; 3]) -> Vector3<f64> {
 /// side was clamped.
 ///
 /// From `J1 = m(b² + c²)/12` and its cyclic forms, `a² = 6(J2 + J3 − J1)/m`
-/// (`identify::diagnose::effects::box_sides`). Inertias no uniform box has (`J1 > J2 + J3`,
+/// (`diagnose::effects::box_sides`). Inertias no uniform box has (`J1 > J2 + J3`,
 /// e.g. a point mass on an arm) make a square negative, and a flat plate makes it zero: such sides,
 /// and any side shorter than [`MIN_SIDE_FRACTION`] of the longest, are drawn at that fraction (at
 /// least [`MIN_SIDE`]) so the box stays visible; `clamped` is then true. The drawing is a picture,
 /// not the mass distribution.
 pub fn equivalent_box(body: &Body) -> ([f64; 3], bool) {
-    let sides = identify::diagnose::effects::box_sides(body);
+    let sides = diagnose::effects::box_sides(body);
     let longest = sides
         .iter()
         .copied()
@@ -729,9 +729,9 @@ fn short(name: &str) -> String {
 
 fn force_text(f: f64) -> String {
     if f >= 1000.0 {
-        format!("{} kN", identify::display::sig(f / 1000.0, 3))
+        format!("{} kN", rfe::display::sig(f / 1000.0, 3))
     } else {
-        format!("{} N", identify::display::sig(f, 3))
+        format!("{} N", rfe::display::sig(f, 3))
     }
 }
 
@@ -992,7 +992,7 @@ pub fn model_svg(p: &ModelPicture) -> Result<String, ReportError> {
         ))?;
         label(
             area,
-            &format!("{} m", identify::display::sig(bar_m, 2)),
+            &format!("{} m", rfe::display::sig(bar_m, 2)),
             (x1 + 6, y - 2),
             11,
             BODY,
@@ -1040,8 +1040,8 @@ pub fn mode_svg(p: &ModelPicture, index: usize) -> Result<String, ReportError> {
             &format!(
                 "Mode {}: {} Hz, loss factor η {}",
                 index + 1,
-                identify::display::sig(mode.freq_hz, 4),
-                identify::display::sig(mode.loss_factor, 2)
+                rfe::display::sig(mode.freq_hz, 4),
+                rfe::display::sig(mode.loss_factor, 2)
             ),
             (10, 13),
             13,

@@ -217,7 +217,7 @@ type Chart<'a, 'b, X, Y> = ChartContext<'a, SVGBackend<'b>, Cartesian2d<X, Y>>;
 
 /// Label of a tick on a frequency or ratio axis: three significant digits, no float noise.
 fn tick(v: f64) -> String {
-    identify::display::sig(v, 3)
+    rfe::display::sig(v, 3)
 }
 
 /// Draws the mesh of a chart over frequency: the x axis in Hz with [`tick`] labels, `y_desc` and
@@ -336,11 +336,7 @@ where
         .collect();
     chart.draw_series(labelled.iter().map(|m| {
         Text::new(
-            format!(
-                "mode {} · {} Hz",
-                m.number,
-                identify::display::sig(m.freq_hz, 3)
-            ),
+            format!("mode {} · {} Hz", m.number, rfe::display::sig(m.freq_hz, 3)),
             (m.freq_hz, y.at(0.03)),
             label.clone(),
         )
@@ -516,7 +512,7 @@ where
     Y: Ranged<ValueType = f64> + ValueFormatter<f64>,
 {
     frequency_mesh(chart, "(measured − model) / σ", &|v| {
-        format!("{}σ", identify::display::sig(*v, 2))
+        format!("{}σ", rfe::display::sig(*v, 2))
     })?;
     let red = RGBColor(200, 80, 80);
     for lim in [-2.0, 2.0] {

@@ -42,7 +42,7 @@ fn noted_boxes(text: &str) -> Vec<(String, [f64; 3])> {
 fn fwd32j_boxes_from_masses_and_inertias_are_the_noted_boxes() {
     let path = configs().join("fwd32j.toml");
     let text = std::fs::read_to_string(&path).unwrap();
-    let model = identify::modelfile::load(&path).unwrap().model;
+    let model = rfe::modelfile::load(&path).unwrap().model;
     let p = picture::describe(&model, &model, [10.0, 300.0]).unwrap();
     let noted = noted_boxes(&text);
     assert_eq!(noted.len(), model.bodies.len(), "every body notes its box");
@@ -69,10 +69,10 @@ fn fwd32j_boxes_from_masses_and_inertias_are_the_noted_boxes() {
 
 #[test]
 fn the_actuator_a_diagnosis_adds_is_marked_and_the_band_modes_are_stored() {
-    let full = identify::modelfile::load(&configs().join("fwd32j.toml"))
+    let full = rfe::modelfile::load(&configs().join("fwd32j.toml"))
         .unwrap()
         .model;
-    let without = identify::modelfile::load(&configs().join("fwd32j-no-actuator.toml"))
+    let without = rfe::modelfile::load(&configs().join("fwd32j-no-actuator.toml"))
         .unwrap()
         .model;
     let band = [20.0, 200.0];
@@ -89,8 +89,8 @@ fn the_actuator_a_diagnosis_adds_is_marked_and_the_band_modes_are_stored() {
         "SDE 34 is disabled in the identification model"
     );
     assert!(p.bodies.iter().all(|b| !b.added));
-    // The band's modes, as identify::modes finds them.
-    let all = identify::modes::complex(&full).unwrap();
+    // The band's modes, as rfe::modes finds them.
+    let all = rfe::modes::complex(&full).unwrap();
     let expected: Vec<f64> = all
         .iter()
         .map(|m| m.freq_hz)
@@ -145,11 +145,7 @@ fn the_page_draws_the_picture_and_one_figure_per_band_mode_from_the_json_alone()
         "one figure per stored mode"
     );
     for (i, m) in p.modes.iter().enumerate() {
-        let title = format!(
-            "Mode {}: {} Hz",
-            i + 1,
-            identify::display::sig(m.freq_hz, 4)
-        );
+        let title = format!("Mode {}: {} Hz", i + 1, rfe::display::sig(m.freq_hz, 4));
         assert!(html.contains(&title), "{title}");
     }
     // Every body is labelled in the picture.

@@ -12,7 +12,7 @@ use std::path::PathBuf;
 use std::process::Command;
 
 use common::*;
-use identify::frf;
+use rfe::frf;
 use serde_json::Value;
 
 fn docs() -> PathBuf {
@@ -260,7 +260,7 @@ fn dense_curves_are_log_spaced_cover_the_band_keep_the_peaks_and_match_a_direct_
                     (d.amplitude[k] - v.norm()).abs() <= 1e-9 * v.norm(),
                     "line {k}"
                 );
-                let z = identify::C64::from_polar(d.amplitude[k], phase[k]);
+                let z = rfe::C64::from_polar(d.amplitude[k], phase[k]);
                 assert!((z - v).norm() <= 1e-9 * v.norm(), "phase at line {k}");
             }
         }

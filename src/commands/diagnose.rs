@@ -6,8 +6,8 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 
 use anyhow::Context;
-use identify::diagnose::{self, diagnose};
-use identify::identification as idn;
+
+use identify::{self as idn};
 
 use super::emit;
 use super::identify::{setup, write_final, IdentifyArgs};
@@ -60,7 +60,7 @@ pub fn run(a: DiagnoseArgs) -> anyhow::Result<ExitCode> {
         identification: opts,
     };
     let started = std::time::Instant::now();
-    let d = diagnose(&model, &obs, &vars, &id, &dopts, &mut |line| {
+    let d = diagnose::diagnose(&model, &obs, &vars, &id, &dopts, &mut |line| {
         tracing::info!("diagnose: {line}")
     })
     .context("diagnosis")?;
@@ -87,7 +87,7 @@ pub fn run(a: DiagnoseArgs) -> anyhow::Result<ExitCode> {
     if let Some(p) = &a.out_model {
         emit(
             Some(p),
-            &(serde_json::to_string_pretty(&identify::contract::to_json(&d.model))? + "\n"),
+            &(serde_json::to_string_pretty(&rfe::contract::to_json(&d.model))? + "\n"),
         )?;
     }
     write_final(&a.identify, &id, Some(&d))?;

@@ -30,9 +30,9 @@ pub fn run(a: FrfArgs) -> anyhow::Result<ExitCode> {
     let model = load_model(&a.model)?;
     anyhow::ensure!(!model.outputs.is_empty(), "{}: the model declares no [[output]] characteristics; add one, e.g. [[output]] body = \"table\" dofs = [\"u1\", \"u2\", \"u3\"]", a.model.display());
     let freqs = a.lines.freqs((1.0, 200.0))?;
-    let r = identify::frf::response(&model, &freqs, &[], a.method.into())?;
+    let r = rfe::frf::response(&model, &freqs, &[], a.method.into())?;
     let text = if a.json {
-        serde_json::to_string(&identify::contract::frf_json(&model, &r))? + "\n"
+        serde_json::to_string(&rfe::contract::frf_json(&model, &r))? + "\n"
     } else {
         let mut s = String::from("freq_hz");
         for c in &model.outputs {

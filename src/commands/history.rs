@@ -109,7 +109,7 @@ pub fn run(a: HistoryArgs) -> anyhow::Result<ExitCode> {
                     r.outcome,
                     r.parameters.len(),
                     r.reduced_chi2
-                        .map(|c| identify::display::sig(c, 4))
+                        .map(|c| rfe::display::sig(c, 4))
                         .unwrap_or_default(),
                     r.effects.join("; ")
                 );
@@ -136,7 +136,7 @@ pub fn run(a: HistoryArgs) -> anyhow::Result<ExitCode> {
                     .filter(|x| x.subject == variable || x.subject == "parameter vector")
                     .map(|x| x.rule.as_str())
                     .collect();
-                let sig = |v: f64| identify::display::sig(v, 5);
+                let sig = |v: f64| rfe::display::sig(v, 5);
                 println!(
                     "{}\t{}\t{}\t{}\t{}\t{}\t{}\t{}\t{}",
                     r.run_id,

@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 use anyhow::Context;
-use identify::identification::{
+use identify::{
     self as idn, data, report, variables, FitKind, JacobianMode, NoiseChoice, Optimizer, Options,
     Settings,
 };
@@ -195,9 +195,9 @@ pub struct IdentifyArgs {
 pub fn write_final(
     a: &IdentifyArgs,
     id: &idn::Identification,
-    diagnosis: Option<&::identify::diagnose::Diagnosis>,
+    diagnosis: Option<&::diagnose::Diagnosis>,
 ) -> anyhow::Result<()> {
-    use ::identify::final_model;
+    use ::diagnose::final_model;
     if a.write_model.is_none() && a.write_vars.is_none() {
         return Ok(());
     }
@@ -256,7 +256,7 @@ fn line_choice(a: &IdentifyArgs) -> idn::line_choice::LineChoice {
 /// `ident identify` and `ident diagnose`).
 pub fn setup(
     a: &IdentifyArgs,
-) -> anyhow::Result<(identify::Model, idn::Observations, idn::Variables, Options)> {
+) -> anyhow::Result<(rfe::Model, idn::Observations, idn::Variables, Options)> {
     let model = load_model(&a.model)?;
     let measured = super::measured::load(&a.data, a.map.as_deref(), &model)?;
     let measured = super::measured::choose_lines(&measured, &line_choice(a), a.points, &a.data)?;
@@ -319,7 +319,7 @@ pub fn setup(
 /// extraction, the variables file's start alone, saying why.
 fn start(
     how: StartArg,
-    model: &identify::Model,
+    model: &rfe::Model,
     obs: &idn::Observations,
     vars: idn::Variables,
     fit: FitKind,
@@ -352,7 +352,7 @@ fn build(
     workflow: &str,
     obs: &idn::Observations,
     id: &idn::Identification,
-    diagnosis: Option<(::report::Diagnosis, &identify::Model)>,
+    diagnosis: Option<(::report::Diagnosis, &rfe::Model)>,
 ) -> anyhow::Result<::report::Report> {
     let title = format!("ident {workflow}: {}", model_name(a));
     let ctx = ReportContext {
@@ -388,7 +388,7 @@ pub fn write_report(
     workflow: &str,
     obs: &idn::Observations,
     id: &idn::Identification,
-    diagnosis: Option<(::report::Diagnosis, &identify::Model)>,
+    diagnosis: Option<(::report::Diagnosis, &rfe::Model)>,
 ) -> anyhow::Result<::report::Written> {
     let r = build(a, workflow, obs, id, diagnosis)?;
     let written = ::report::write(&r, dir)?;
@@ -404,7 +404,7 @@ pub fn record_history(
     workflow: &str,
     obs: &idn::Observations,
     id: &idn::Identification,
-    diagnosis: Option<(::report::Diagnosis, &identify::Model)>,
+    diagnosis: Option<(::report::Diagnosis, &rfe::Model)>,
 ) -> anyhow::Result<()> {
     let r = build(a, workflow, obs, id, diagnosis)?;
     let run_id = format!("{workflow}-{}", r.created_utc.replace(':', ""));
@@ -482,8 +482,7 @@ pub fn run(a: IdentifyArgs) -> anyhow::Result<ExitCode> {
         emit(Some(&dir.join("report.txt")), &text)?;
         emit(Some(&dir.join("table.json")), &json)?;
         emit(Some(&dir.join("table.csv")), &csv)?;
-        let resolved =
-            serde_json::to_string_pretty(&identify::contract::to_json(&id.model))? + "\n";
+        let resolved = serde_json::to_string_pretty(&rfe::contract::to_json(&id.model))? + "\n";
         emit(Some(&dir.join("model.json")), &resolved)?;
         let original = std::fs::read_to_string(&a.model)
             .with_context(|| format!("cannot re-read {}", a.model.display()))?;

@@ -7,9 +7,9 @@
 use std::path::Path;
 
 use anyhow::Context;
-use identify::identification::line_choice::LineChoice;
-use identify::identification::{data, measurement_map, plausibility, Observations};
-use identify::{MeasuredData, Model};
+use identify::line_choice::LineChoice;
+use identify::{data, measurement_map, plausibility, Observations};
+use rfe::{MeasuredData, Model};
 
 /// Loads `path` (UFF with `map`, else JSON/CSV) in the model's convention.
 pub fn load(path: &Path, map: Option<&Path>, model: &Model) -> anyhow::Result<MeasuredData> {
@@ -80,7 +80,7 @@ pub fn choose_lines(
 }
 
 /// Decimates one characteristic to at most `n` lines (`process::selection::select_points`).
-fn decimate(m: &mut identify::Measurement, n: usize, origin: &str) -> anyhow::Result<()> {
+fn decimate(m: &mut rfe::Measurement, n: usize, origin: &str) -> anyhow::Result<()> {
     let before = m.freqs_hz.len();
     if before <= n {
         return Ok(());
@@ -97,7 +97,7 @@ fn decimate(m: &mut identify::Measurement, n: usize, origin: &str) -> anyhow::Re
     for k in chosen {
         keep[k] = true;
     }
-    identify::identification::line_choice::retain(m, &keep);
+    identify::line_choice::retain(m, &keep);
     eprintln!(
         "lines: {}: decimated from {before} to {} lines (log-uniform, denser at the resonance peaks)",
         m.label(),

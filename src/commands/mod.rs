@@ -24,8 +24,8 @@ use std::path::Path;
 use anyhow::Context;
 
 /// Loads a model file (TOML or resolved JSON), printing its warnings to stderr.
-pub fn load_model(path: &Path) -> anyhow::Result<::identify::Model> {
-    let loaded = ::identify::modelfile::load(path)?;
+pub fn load_model(path: &Path) -> anyhow::Result<::rfe::Model> {
+    let loaded = ::rfe::modelfile::load(path)?;
     for w in &loaded.warnings {
         eprintln!("{w}");
     }
@@ -97,12 +97,12 @@ pub enum MethodArg {
     Modal,
 }
 
-impl From<MethodArg> for ::identify::frf::Method {
+impl From<MethodArg> for ::rfe::frf::Method {
     fn from(m: MethodArg) -> Self {
         match m {
-            MethodArg::Auto => ::identify::frf::Method::Auto,
-            MethodArg::Direct => ::identify::frf::Method::Direct,
-            MethodArg::Modal => ::identify::frf::Method::Modal,
+            MethodArg::Auto => ::rfe::frf::Method::Auto,
+            MethodArg::Direct => ::rfe::frf::Method::Direct,
+            MethodArg::Modal => ::rfe::frf::Method::Modal,
         }
     }
 }

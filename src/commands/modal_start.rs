@@ -4,10 +4,10 @@
 //! stiffness variables to match their frequencies (and ψ to their loss factors).
 
 use anyhow::{bail, Context};
-use identify::identification::{self as idn, prefit};
-use identify::model::Quantity;
+use identify::{self as idn, prefit};
 use process::modal::{self, FrfKind, LscfSettings, ModalData, SelectionSettings};
 use process::C64;
+use rfe::model::Quantity;
 
 /// Highest LSCF order (as `ident modes-from-data`'s default).
 const MAX_ORDER: usize = 40;
@@ -18,7 +18,7 @@ const MAX_ORDER: usize = 40;
 /// would multiply each row by that reference's own participation. They must share their lines
 /// and carry phases.
 pub fn measured_modes(
-    model: &identify::Model,
+    model: &rfe::Model,
     obs: &idn::Observations,
 ) -> anyhow::Result<Vec<prefit::MeasuredMode>> {
     let reference = obs
@@ -129,7 +129,7 @@ pub fn measured_modes(
 
 /// The variables with their start moved by the modal pre-fit; what was done goes to stderr.
 pub fn modal_start(
-    model: &identify::Model,
+    model: &rfe::Model,
     obs: &idn::Observations,
     vars: &idn::Variables,
 ) -> anyhow::Result<idn::Variables> {

@@ -50,7 +50,7 @@ pub fn run(args: ModelArgs) -> anyhow::Result<ExitCode> {
                 println!(
                     "  {} point masses, {} kg in all (in the total)",
                     m.point_masses.len(),
-                    identify::display::sig(added, 4)
+                    rfe::display::sig(added, 4)
                 );
             }
             let enabled = m.sdes.iter().filter(|s| s.enabled).count();
@@ -76,7 +76,7 @@ pub fn run(args: ModelArgs) -> anyhow::Result<ExitCode> {
             output,
         } => {
             let m = load_model(&model)?;
-            let text = serde_json::to_string_pretty(&identify::contract::to_json(&m))? + "\n";
+            let text = serde_json::to_string_pretty(&rfe::contract::to_json(&m))? + "\n";
             emit(output.as_deref(), &text)?;
             Ok(ExitCode::SUCCESS)
         }

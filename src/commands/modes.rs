@@ -25,9 +25,9 @@ pub struct ModesArgs {
 pub fn run(a: ModesArgs) -> anyhow::Result<ExitCode> {
     let model = load_model(&a.model)?;
     let modes = if a.complex {
-        identify::modes::complex(&model)?
+        rfe::modes::complex(&model)?
     } else {
-        identify::modes::undamped(&model)?
+        rfe::modes::undamped(&model)?
     };
     let modes: Vec<_> = modes
         .into_iter()

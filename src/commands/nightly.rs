@@ -175,8 +175,7 @@ impl Config {
         let text = std::fs::read_to_string(path)
             .with_context(|| format!("cannot read the nightly job file {}", path.display()))?;
         let mut c: Config = toml::from_str(&text).map_err(|e| {
-            let (l, col) =
-                identify::source::line_col(&text, e.span().map(|s| s.start).unwrap_or(0));
+            let (l, col) = rfe::source::line_col(&text, e.span().map(|s| s.start).unwrap_or(0));
             anyhow::anyhow!(
                 "{}:{l}:{col}: {} (keys: configs/README.md#nightly)",
                 path.display(),

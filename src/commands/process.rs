@@ -97,7 +97,7 @@ pub fn steps_csv(a: &SessionAnalysis) -> String {
 pub fn run(a: ProcessArgs) -> anyhow::Result<ExitCode> {
     let opts = AnalysisOptions {
         geometry_model: a.geometry.clone(),
-        quantity: a.quantity.as_deref().and_then(::identify::Quantity::parse),
+        quantity: a.quantity.as_deref().and_then(::rfe::Quantity::parse),
         ..AnalysisOptions::default()
     };
     let an = characteristics(&a.session, &opts)?;

@@ -6,8 +6,8 @@
 use std::path::PathBuf;
 use std::process::ExitCode;
 
-use identify::identification as idn;
-use identify::model::Param;
+use identify::{self as idn};
+use rfe::model::Param;
 
 use super::{load_model, Lines, MethodArg};
 
@@ -47,7 +47,7 @@ struct Row {
 }
 
 /// The rows of the SDE parameters.
-fn sde_rows(model: &identify::Model, s: &identify::sensitivity::Sensitivity) -> Vec<Row> {
+fn sde_rows(model: &rfe::Model, s: &rfe::sensitivity::Sensitivity) -> Vec<Row> {
     let n = s.outputs;
     s.params
         .iter()
@@ -67,17 +67,17 @@ fn sde_rows(model: &identify::Model, s: &identify::sensitivity::Sensitivity) -> 
 /// SDE parameters) and gains (a gain g scales its characteristics: MI = 1/g there, relative MI
 /// 1; 0 elsewhere).
 fn variable_rows(
-    model: &identify::Model,
+    model: &rfe::Model,
     vars: &idn::Variables,
     freqs: &[f64],
-    method: identify::frf::Method,
+    method: rfe::frf::Method,
 ) -> anyhow::Result<Vec<Row>> {
     let physical: Vec<Param> = vars
         .model_params()
         .into_iter()
         .filter(|p| p.sde().is_none())
         .collect();
-    let (mi, relative) = identify::sensitivity::band_mi(model, freqs, &physical, method)?;
+    let (mi, relative) = rfe::sensitivity::band_mi(model, freqs, &physical, method)?;
     let n = model.outputs.len();
     let name_of = |p: &Param| match *p {
         Param::Mass { body } | Param::Inertia { body, .. } => {
@@ -106,11 +106,11 @@ fn variable_rows(
                 continue;
             };
             let g = v.initial * t.ratio;
-            let own = |c: &identify::model::Characteristic| c.body == body && c.dof == dof;
+            let own = |c: &rfe::model::Characteristic| c.body == body && c.dof == dof;
             rows.push(Row {
                 label: model.label(t.param),
                 names: serde_json::json!({
-                    "characteristic": format!("{} {}", model.bodies[body].name, identify::model::DOF_NAMES[dof as usize]),
+                    "characteristic": format!("{} {}", model.bodies[body].name, rfe::model::DOF_NAMES[dof as usize]),
                     "param": "gain",
                 }),
                 value: Some(g),
@@ -132,7 +132,7 @@ pub fn run(a: SensitivityArgs) -> anyhow::Result<ExitCode> {
         a.model.display()
     );
     let freqs = a.lines.freqs((1.0, 200.0))?;
-    let s = identify::sensitivity::band_sensitivity(&model, &freqs, &[], a.method.into())?;
+    let s = rfe::sensitivity::band_sensitivity(&model, &freqs, &[], a.method.into())?;
     let mut rows = sde_rows(&model, &s);
     if let Some(path) = &a.vars {
         let vars = idn::variables::load(path, &model)?;

@@ -105,7 +105,7 @@ pub fn plant_for(truth: &Truth, channels: &[Channel]) -> Result<Box<dyn Plant>, 
             }))
         }
         TruthModel::ModelFile(p) => {
-            let loaded = identify::modelfile::load(p).map_err(|e| PlantError(e.to_string()))?;
+            let loaded = rfe::modelfile::load(p).map_err(|e| PlantError(e.to_string()))?;
             Ok(Box::new(ModelPlant::new(
                 loaded.model,
                 channels,
@@ -117,11 +117,11 @@ pub fn plant_for(truth: &Truth, channels: &[Channel]) -> Result<Box<dyn Plant>, 
 
 /// An RFE model (from `identify`) as truth. An accelerometer at `x` on body `b` with global unit
 /// direction `d` measures `−ω² dᵀ R_b (u + θ × R_bᵀ(x − c_b))`, where `u`, `θ` are the body's
-/// translation and rotation in its principal axes (from [`identify::frf::dof_response`]) and
+/// translation and rotation in its principal axes (from [`rfe::frf::dof_response`]) and
 /// `R_b` is `global_from_body`. Responses are divided by the magnitude of the model's first
 /// declared excitation force (for a force pair: the exciter's force), so they are per newton.
 pub struct ModelPlant {
-    model: identify::Model,
+    model: rfe::Model,
     /// (body index, offset from the centre of mass in body axes, direction in body axes).
     sensors: Vec<(usize, [f64; 3], [f64; 3])>,
     force_n: f64,
@@ -130,7 +130,7 @@ pub struct ModelPlant {
 impl ModelPlant {
     /// Resolves the acceleration channels against the model's bodies.
     pub fn new(
-        model: identify::Model,
+        model: rfe::Model,
         channels: &[Channel],
         origin: &str,
     ) -> Result<ModelPlant, PlantError> {
@@ -172,8 +172,8 @@ impl Plant for ModelPlant {
         self.sensors.len()
     }
     fn response(&self, freqs_hz: &[f64]) -> Result<Vec<Vec<C64>>, PlantError> {
-        let q = identify::frf::dof_response(&self.model, freqs_hz)
-            .map_err(|e| PlantError(e.to_string()))?;
+        let q =
+            rfe::frf::dof_response(&self.model, freqs_hz).map_err(|e| PlantError(e.to_string()))?;
         Ok(q.iter()
             .zip(freqs_hz)
             .map(|(q, &f)| {
@@ -229,7 +229,7 @@ mod tests {
         use nalgebra::Vector3;
         let path =
             std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../configs/models/fwd32j.toml");
-        let model = identify::modelfile::load(&path).unwrap().model;
+        let model = rfe::modelfile::load(&path).unwrap().model;
         let b = 0;
         let body = model.bodies[b].clone();
         let offset = Vector3::new(0.21, -0.13, 0.08);
@@ -252,7 +252,7 @@ mod tests {
         let plant = ModelPlant::new(model.clone(), &channels, "fwd32j").unwrap();
         let freqs = [15.0, 80.0];
         let r = plant.response(&freqs).unwrap();
-        let q = identify::frf::dof_response(&model, &freqs).unwrap();
+        let q = rfe::frf::dof_response(&model, &freqs).unwrap();
         let fnorm = model.forces[0].force.norm();
         for (k, f) in freqs.iter().enumerate() {
             let w2 = (2.0 * std::f64::consts::PI * f).powi(2);

@@ -6,8 +6,8 @@
 use serde::Deserialize;
 use serde_spanned::Spanned;
 
-use identify::source::Quantity as Value;
-use identify::units::Dim;
+use rfe::source::Quantity as Value;
+use rfe::units::Dim;
 
 use super::{Ctx, GeneratorStand, StandError};
 use crate::device::DeviceIdentity;

@@ -9,7 +9,7 @@ use std::time::Duration;
 use serde::{Deserialize, Serialize};
 use serde_spanned::Spanned;
 
-use identify::units::Dim;
+use rfe::units::Dim;
 
 use super::{Ctx, StandError, Value};
 use crate::canopen::eds::{EdsError, ObjectDictionary};

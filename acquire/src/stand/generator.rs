@@ -8,8 +8,8 @@ use std::time::Duration;
 use serde::{Deserialize, Serialize};
 use serde_spanned::Spanned;
 
-use identify::source::Quantity as Value;
-use identify::units::Dim;
+use rfe::source::Quantity as Value;
+use rfe::units::Dim;
 
 use super::{baud, Ctx, PortSpec, ShakerPort, StandError};
 use crate::generator::dialect::{self, DialectOverrides};
@@ -240,7 +240,7 @@ pub(super) fn per(
                 .find(|(name, _)| *name == den.trim())
                 .map(|(_, f)| *f)
                 .ok_or_else(bad)?;
-            identify::units::parse_quantity(num, dim).map_err(|_| bad())? / factor
+            rfe::units::parse_quantity(num, dim).map_err(|_| bad())? / factor
         }
     };
     if x.is_finite() && x > 0.0 {

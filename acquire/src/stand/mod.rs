@@ -9,8 +9,8 @@ use std::time::Duration;
 use serde::{Deserialize, Serialize};
 use serde_spanned::Spanned;
 
-use identify::source::{Located, Quantity as Value, SourceText};
-use identify::units::Dim;
+use rfe::source::{Located, Quantity as Value, SourceText};
+use rfe::units::Dim;
 
 /// The force and table-x channels of the stand files in this module's tests (a string
 /// literal, for `concat!`).
@@ -87,7 +87,7 @@ pub struct Geometry {
     /// Bodies that carry accelerometers, in first-use order.
     pub bodies: Vec<BodyGeometry>,
     /// Amplitude of the model's declared excitation force (N): characteristics are the response
-    /// to it (`identify::MeasuredData` convention).
+    /// to it (`rfe::MeasuredData` convention).
     pub nominal_force_n: f64,
     /// The model's declared output characteristics on these bodies (what identification uses).
     #[serde(default)]
@@ -122,7 +122,7 @@ pub struct BodyGeometry {
 
 impl BodyGeometry {
     /// From an `identify` body.
-    pub fn from_body(b: &identify::Body) -> BodyGeometry {
+    pub fn from_body(b: &rfe::Body) -> BodyGeometry {
         let r = &b.rotation;
         BodyGeometry {
             name: b.name.clone(),
@@ -138,9 +138,9 @@ impl BodyGeometry {
     }
 
     /// As an `identify` body.
-    pub fn to_body(&self) -> identify::Body {
+    pub fn to_body(&self) -> rfe::Body {
         let r = &self.rotation;
-        identify::Body {
+        rfe::Body {
             name: self.name.clone(),
             mass: self.mass,
             inertia: self.inertia,
@@ -497,7 +497,7 @@ impl<'a> Ctx<'a> {
     }
 
     fn line_of(&self, span: Range<usize>) -> usize {
-        identify::source::line_col(self.src.text, span.start).0
+        rfe::source::line_col(self.src.text, span.start).0
     }
 
     fn value(&self, v: &Spanned<Value>, dim: Dim, what: &str) -> Result<f64, StandError> {
@@ -627,7 +627,7 @@ impl Stand {
 
     /// Parses and validates stand-file text; `file` is used in messages.
     pub fn parse(text: &str, file: &str) -> Result<Stand, StandError> {
-        let text = identify::source::strip_bom(text);
+        let text = rfe::source::strip_bom(text);
         let cx = Ctx::new(file, text);
         let raw: RawStand = toml::from_str(text).map_err(|e| {
             let span = e.span().unwrap_or(0..0);
@@ -694,7 +694,7 @@ impl Stand {
         let span_of = |key: &str| text.find(key).unwrap_or(0);
         let cx = Ctx::new(&self.file, &text);
         let at_geometry = |msg: String| cx.at(span_of("[geometry]")..span_of("[geometry]"), msg);
-        let loaded = identify::modelfile::load(&path)
+        let loaded = rfe::modelfile::load(&path)
             .map_err(|e| at_geometry(format!("geometry.model {}: {e}", path.display())))?;
         let model = loaded.model;
         let nominal_force_n = model.forces.first().map(|f| f.force.norm()).unwrap_or(0.0);

@@ -147,7 +147,7 @@ pub fn model_sim_stand_in(dir: &Path, speed: Option<f64>) -> Stand {
 /// stated noise is not absurdly pessimistic (the median error is at least 1/20 σ).
 /// Returns the number of points checked.
 pub fn assert_matches_truth(a: &acquire::analysis::SessionAnalysis, truth_model: &Path) {
-    let truth = identify::modelfile::load(truth_model)
+    let truth = rfe::modelfile::load(truth_model)
         .unwrap_or_else(|e| panic!("{e}"))
         .model;
     let mut ratios = Vec::new();
@@ -158,7 +158,7 @@ pub fn assert_matches_truth(a: &acquire::analysis::SessionAnalysis, truth_model:
             .iter()
             .position(|x| *x == c)
             .expect("a declared output of the truth model");
-        let r = identify::frf::response(&truth, &m.freqs_hz, &[], identify::frf::Method::Auto)
+        let r = rfe::frf::response(&truth, &m.freqs_hz, &[], rfe::frf::Method::Auto)
             .expect("truth FRF");
         let phase = m.phase_rad.as_ref().expect("phases measured");
         let var = m.variance.as_ref().expect("variances stated");

@@ -8,11 +8,11 @@
 
 use history::judge::{judge_series, JudgeConfig, Rule};
 use history::record::{model_hash, Covariate, ParameterRecord, RunRecord};
-use identify::identification::{self as idn, data, synthetic, variables, Options};
-use identify::model::Model;
+use identify::{self as idn, data, synthetic, variables, Options};
 use rand::rngs::StdRng;
 use rand::SeedableRng;
 use rand_distr::{Distribution, StandardNormal};
+use rfe::model::Model;
 
 /// The night-to-night story.
 #[derive(Debug, Clone)]
@@ -46,7 +46,7 @@ impl Default for Scenario {
 
 /// The simulated stand: a 3-block chain (two slideway joints, four isolators).
 pub fn stand() -> (Model, variables::Variables) {
-    let model = identify::textbook::chain(3);
+    let model = rfe::textbook::chain(3);
     let vars = variables::parse(
         r#"
 [[variable]]

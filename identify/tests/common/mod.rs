@@ -6,13 +6,13 @@
 
 use std::path::PathBuf;
 
-use identify::frf::{self, Method};
-use identify::identification::{self as idn, data, synthetic, variables};
-use identify::identification::{FitKind, NoiseChoice, Options, Settings};
-use identify::measured::{MeasuredData, Measurement, QuantityName};
-use identify::model::{Model, Param};
+use identify::{self as idn, data, synthetic, variables};
+use identify::{FitKind, NoiseChoice, Options, Settings};
 use rand::rngs::StdRng;
 use rand_distr::{Distribution, StandardNormal};
+use rfe::frf::{self, Method};
+use rfe::measured::{MeasuredData, Measurement, QuantityName};
+use rfe::model::{Model, Param};
 
 /// The repository's root folder.
 pub fn repo() -> PathBuf {
@@ -22,7 +22,7 @@ pub fn repo() -> PathBuf {
 /// A model of `configs/models/`, e.g. `fwd32j.toml`; panics naming the file when it cannot load.
 pub fn load_model(name: &str) -> Model {
     let p = repo().join("configs/models").join(name);
-    identify::modelfile::load(&p)
+    rfe::modelfile::load(&p)
         .unwrap_or_else(|e| panic!("the model {} is needed by this test: {e}", p.display()))
         .model
 }

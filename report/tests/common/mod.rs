@@ -4,11 +4,11 @@
 
 #![allow(dead_code)]
 
-use identify::identification::{data, identify, variables, Identification, Observations, Options};
-use identify::{frf, textbook, MeasuredData, Measurement, Model};
+use identify::{data, identify, variables, Identification, Observations, Options};
 use rand::SeedableRng;
 use rand_distr::{Distribution, Normal};
 use report::document::*;
+use rfe::{frf, textbook, MeasuredData, Measurement, Model};
 
 pub struct Fixture {
     pub truth: Model,
@@ -31,7 +31,7 @@ pub fn fixture(seed: u64) -> Fixture {
             .map(|o| Measurement {
                 body: truth.bodies[o].name.clone(),
                 dof: 2,
-                quantity: identify::measured::QuantityName::Displacement,
+                quantity: rfe::measured::QuantityName::Displacement,
                 freqs_hz: freqs.clone(),
                 amplitude: r
                     .output(o)

@@ -1,0 +1,217 @@
+//! The fit of a model extended by effects: the identification's variables plus every effect's
+//! parameters, as one least-squares problem for the identification's minimizers.
+//!
+//! The variables keep their analytic Jacobian (the identification criterion); an effect's
+//! parameters, which may change the model's structure (a new body, a split body), get
+//! forward-difference columns — a handful of extra solves per iteration.
+
+use nalgebra::{DMatrix, DVector};
+
+use super::effects::{Effect, EffectParam, Realized};
+use identify::{self, Criterion, EvalError, FitKind, JacobianMode, Observations, Variables};
+use rfe::model::Model;
+
+/// The extended fit problem. Optimizers see `u = value / scale`: the variables first, then
+/// each effect's parameters in order.
+pub struct Problem<'a> {
+    base: &'a Model,
+    vars: &'a Variables,
+    obs: &'a Observations,
+    opts: &'a identify::Options,
+    /// The effects, in the order they are applied.
+    pub effects: Vec<Effect>,
+    /// Their parameters, flattened.
+    pub params: Vec<EffectParam>,
+    /// Highest measured frequency (Hz): sets stiff mounts above the band.
+    pub f_max: f64,
+    /// Scale of every `u`.
+    pub scale: Vec<f64>,
+    /// Model evaluations (each over all lines).
+    pub evaluations: usize,
+}
+
+impl<'a> Problem<'a> {
+    /// The problem for `effects` on top of the identification (`base`, `vars`, `obs`).
+    pub fn new(
+        base: &'a Model,
+        vars: &'a Variables,
+        obs: &'a Observations,
+        opts: &'a identify::Options,
+        effects: Vec<Effect>,
+        f_max: f64,
+    ) -> Problem<'a> {
+        let params: Vec<EffectParam> = effects.iter().flat_map(|e| e.params(f_max)).collect();
+        let scale = vars
+            .vars
+            .iter()
+            .map(|v| v.scale)
+            .chain(params.iter().map(|p| p.scale))
+            .collect();
+        Problem {
+            base,
+            vars,
+            obs,
+            opts,
+            effects,
+            params,
+            f_max,
+            scale,
+            evaluations: 0,
+        }
+    }
+
+    /// The identification's model, without the effects.
+    pub fn base(&self) -> &Model {
+        self.base
+    }
+
+    /// Number of identification variables.
+    pub fn nx(&self) -> usize {
+        self.vars.len()
+    }
+
+    /// `(x, γ)` in SI from scaled `u`.
+    pub fn split(&self, u: &DVector<f64>) -> (Vec<f64>, Vec<f64>) {
+        let v: Vec<f64> = u.iter().zip(&self.scale).map(|(u, s)| u * s).collect();
+        let (x, g) = v.split_at(self.nx());
+        (x.to_vec(), g.to_vec())
+    }
+
+    /// Bounds of `u`.
+    pub fn bounds(&self) -> (DVector<f64>, DVector<f64>) {
+        let lo = self
+            .vars
+            .vars
+            .iter()
+            .map(|v| v.lower)
+            .chain(self.params.iter().map(|p| p.lower));
+        let hi = self
+            .vars
+            .vars
+            .iter()
+            .map(|v| v.upper)
+            .chain(self.params.iter().map(|p| p.upper));
+        let n = self.scale.len();
+        (
+            DVector::from_iterator(n, lo.zip(&self.scale).map(|(l, s)| l / s)),
+            DVector::from_iterator(n, hi.zip(&self.scale).map(|(h, s)| h / s)),
+        )
+    }
+
+    /// The model, variables and gains with effect parameters `gamma` (SI).
+    pub fn realize(&self, gamma: &[f64]) -> Result<Realized, EvalError> {
+        let mut r = Realized {
+            model: self.base.clone(),
+            vars: self.vars.clone(),
+            gains: vec![1.0; self.obs.characteristics.len()],
+        };
+        let mut at = 0;
+        for e in &self.effects {
+            let n = e.params(self.f_max).len();
+            e.apply(&mut r, &gamma[at..at + n], self.f_max)?;
+            at += n;
+        }
+        Ok(r)
+    }
+
+    /// The identification criterion of a realized model.
+    pub fn criterion(&self, r: &Realized) -> Result<Criterion, EvalError> {
+        Criterion::new(
+            &r.model,
+            self.obs,
+            &r.vars,
+            self.opts.fit,
+            self.opts.noise,
+            self.opts.frf_method,
+        )
+        .map_err(|e| EvalError::Setup(Box::new(e)))
+    }
+
+    /// Whitened residuals with the gains applied: `e' = (1 − G) z/σ + G e`, i.e. `(z − G q)/σ`
+    /// (log-amplitude fit: `e − ln G / σ`).
+    fn gained(crit: &Criterion, e: &mut DVector<f64>, gains: &[f64]) {
+        if gains.iter().all(|g| *g == 1.0) {
+            return;
+        }
+        let z = crit.measured();
+        let np = z.len();
+        let log = crit.fit() == FitKind::LogAmplitude;
+        for (i, (o, _, sigma)) in crit.points().into_iter().enumerate() {
+            let g = gains[o];
+            if log {
+                e[i] -= g.ln() / sigma;
+                continue;
+            }
+            e[i] = (1.0 - g) * z[i].re / sigma + g * e[i];
+            if e.len() > np {
+                e[np + i] = (1.0 - g) * z[i].im / sigma + g * e[np + i];
+            }
+        }
+    }
+
+    /// Whitened residuals at `(x, γ)`, with the Jacobian in scaled `u` if asked.
+    pub fn residuals(
+        &mut self,
+        x: &[f64],
+        gamma: &[f64],
+        jacobian: bool,
+    ) -> Result<(DVector<f64>, Option<DMatrix<f64>>), EvalError> {
+        let r = self.realize(gamma)?;
+        let mut crit = self.criterion(&r)?;
+        let (mut e, jx) = crit.evaluate(x, jacobian.then_some(JacobianMode::Analytic))?;
+        self.evaluations += 1;
+        Self::gained(&crit, &mut e, &r.gains);
+        if e.iter().any(|v| !v.is_finite()) {
+            return Err(EvalError::NotFinite("extended model's response"));
+        }
+        let Some(jx) = jx else { return Ok((e, None)) };
+        let (m, nx) = (e.len(), x.len());
+        let mut jac = DMatrix::zeros(m, nx + gamma.len());
+        let points = crit.points();
+        // A gain scales the response, so the amplitude residuals' derivatives; a log-amplitude
+        // residual's derivative does not change with it.
+        let log = crit.fit() == FitKind::LogAmplitude;
+        for c in 0..nx {
+            for i in 0..m {
+                let o = points[i % points.len()].0;
+                let g = if log { 1.0 } else { r.gains[o] };
+                jac[(i, c)] = jx[(i, c)] * g * self.scale[c];
+            }
+        }
+        let mut g = gamma.to_vec();
+        for j in 0..gamma.len() {
+            let p = &self.params[j];
+            let h = 1e-5 * gamma[j].abs().max(p.scale);
+            // Step inside the bounds.
+            let h = if gamma[j] + h > p.upper { -h } else { h };
+            g[j] = gamma[j] + h;
+            let rh = self.realize(&g)?;
+            let mut ch = self.criterion(&rh)?;
+            let (mut eh, _) = ch.evaluate(x, None)?;
+            self.evaluations += 1;
+            Self::gained(&ch, &mut eh, &rh.gains);
+            g[j] = gamma[j];
+            let col = (eh - &e) / h * self.scale[nx + j];
+            jac.set_column(nx + j, &col);
+        }
+        if jac.iter().any(|v| !v.is_finite()) {
+            return Err(EvalError::NotFinite("extended model's Jacobian"));
+        }
+        Ok((e, Some(jac)))
+    }
+}
+
+impl identify::optimize::Residuals for Problem<'_> {
+    fn eval(
+        &mut self,
+        u: &DVector<f64>,
+        jacobian: bool,
+    ) -> Result<(DVector<f64>, Option<DMatrix<f64>>), EvalError> {
+        let (x, g) = self.split(u);
+        self.residuals(&x, &g, jacobian)
+    }
+
+    fn cheap_jacobian(&self) -> bool {
+        self.params.is_empty()
+    }
+}

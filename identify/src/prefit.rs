@@ -1,0 +1,377 @@
+//! Modal pre-fit: a start for the FRF fit from the measured modes. Each measured mode is paired
+//! with a model mode visible at the characteristics (by MAC there when the measured shapes are
+//! given, else by order), then the stiffness variables are updated to match the measured natural
+//! frequencies by damped Gauss-Newton in log-parameters with analytic eigen-sensitivities
+//! `∂λ/∂p = φᵀ (∂K/∂p) φ` (mass-normalized φ; M does not depend on the variables), the pairs
+//! tracked from one step to the next by MAC. ψ variables start at 2π times the mean measured loss
+//! factor when the measured modes carry one.
+
+use rfe::model::Model;
+use rfe::system::System;
+use rfe::C64;
+
+use super::variables::Variables;
+
+/// One measured mode.
+#[derive(Debug, Clone, PartialEq)]
+pub struct MeasuredMode {
+    /// Natural frequency (Hz), > 0.
+    pub freq_hz: f64,
+    /// Loss factor η (= 2ζ), when known.
+    pub loss_factor: Option<f64>,
+    /// Mode shape at the model's output characteristics (in `model.outputs` order), when known.
+    pub shape: Option<Vec<C64>>,
+}
+
+/// One measured mode and the model mode paired with it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Pair {
+    /// Index into the measured modes.
+    pub measured: usize,
+    /// Measured frequency (Hz).
+    pub measured_hz: f64,
+    /// The paired model mode's frequency at the initial values (Hz).
+    pub model_hz_before: f64,
+    /// Its frequency after the pre-fit (Hz).
+    pub model_hz_after: f64,
+    /// MAC between the measured and the model shape at the characteristics (after), when the
+    /// measured shape is known.
+    pub mac: Option<f64>,
+}
+
+/// The outcome of a modal pre-fit.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Prefit {
+    /// The new start (SI), one value per variable.
+    pub start: Vec<f64>,
+    /// The pairs, in measured order (a measured mode the model has no place for is left out).
+    pub pairs: Vec<Pair>,
+    /// Gauss-Newton iterations done.
+    pub iterations: usize,
+    /// RMS of ln(f_model / f_measured) over the pairs, before and after.
+    pub rms_log_freq: (f64, f64),
+}
+
+/// Why a pre-fit could not be done.
+#[derive(Debug, thiserror::Error)]
+pub enum PrefitError {
+    /// Nothing to match.
+    #[error("modal pre-fit: no measured mode to match")]
+    NoModes,
+    /// A measured frequency that is not a positive number.
+    #[error("modal pre-fit: measured mode {0} has frequency {1} Hz (must be > 0)")]
+    BadFrequency(usize, f64),
+    /// No stiffness variable to move.
+    #[error("modal pre-fit: no stiffness variable to update (only ψ variables)")]
+    NoStiffness,
+    /// More measured modes than model modes visible at the characteristics.
+    #[error("modal pre-fit: {measured} measured modes but the model has {model} modes visible at its output characteristics")]
+    TooManyModes {
+        /// Measured modes.
+        measured: usize,
+        /// Elastic model modes.
+        model: usize,
+    },
+    /// The model's eigenproblem failed.
+    #[error("modal pre-fit: {0}")]
+    Eigen(String),
+}
+
+/// Largest step in ln x per iteration (a factor 3).
+const MAX_LOG_STEP: f64 = 1.0986;
+
+/// Undamped modes of `model`: (λ = ω², mass-normalized φ over all DOFs), elastic ones only
+/// (ω above 1e-6 of the largest), ascending.
+fn elastic_modes(model: &Model, sys: &System) -> Result<Vec<(f64, Vec<f64>)>, PrefitError> {
+    let modes = rfe::modes::undamped(model).map_err(|e| PrefitError::Eigen(e.to_string()))?;
+    let top = modes.iter().map(|m| m.freq_hz).fold(0.0, f64::max);
+    Ok(modes
+        .into_iter()
+        .filter(|m| m.freq_hz > 1e-6 * top)
+        .map(|m| {
+            let phi: Vec<f64> = m.shape.iter().map(|v| v.re).collect();
+            let norm = sys.mass_inner(&phi, &phi).sqrt();
+            let w = 2.0 * std::f64::consts::PI * m.freq_hz;
+            (w * w, phi.iter().map(|p| p / norm).collect())
+        })
+        .collect())
+}
+
+/// MAC of two real-or-complex vectors.
+fn mac(a: &[C64], b: &[C64]) -> f64 {
+    let ab: C64 = a.iter().zip(b).map(|(x, y)| x.conj() * y).sum();
+    let aa: f64 = a.iter().map(|x| x.norm_sqr()).sum();
+    let bb: f64 = b.iter().map(|x| x.norm_sqr()).sum();
+    if aa > 0.0 && bb > 0.0 {
+        ab.norm_sqr() / (aa * bb)
+    } else {
+        0.0
+    }
+}
+
+/// Mass-weighted MAC of two model shapes (mode tracking).
+fn mac_mass(a: &[f64], b: &[f64], sys: &System) -> f64 {
+    let ab = sys.mass_inner(a, b);
+    ab * ab / (sys.mass_inner(a, a) * sys.mass_inner(b, b))
+}
+
+fn shape_at_outputs(sys: &System, phi: &[f64]) -> Vec<C64> {
+    sys.output_rows
+        .iter()
+        .map(|row| C64::new(row.taps.iter().map(|&(d, c)| c * phi[d]).sum(), 0.0))
+        .collect()
+}
+
+/// Share of a mass-normalized mode's kinetic energy at the output characteristics' DOFs: the
+/// modes the measurement can see.
+fn visibility(sys: &System, phi: &[f64]) -> f64 {
+    let mut dofs: Vec<usize> = sys
+        .output_rows
+        .iter()
+        .flat_map(|row| row.taps.iter().map(|&(d, _)| d))
+        .collect();
+    dofs.sort_unstable();
+    dofs.dedup();
+    dofs.iter().map(|&d| sys.mass[d] * phi[d] * phi[d]).sum()
+}
+
+/// A mode is visible when at least this share of its kinetic energy is at the outputs' DOFs.
+const VISIBLE: f64 = 0.01;
+
+/// Pairs measured modes with distinct visible model modes (see [`VISIBLE`]), as
+/// `(measured, model)` index pairs. With every measured shape known: greedily by the highest MAC
+/// at the characteristics over all pairs (ties to the nearer frequency), as many pairs as there
+/// are visible modes or measured modes (a measured mode the model has no place for stays
+/// unpaired). Without shapes: by order (the measured modes ascending onto the lowest visible model
+/// modes ascending: a first model may be far off in frequency but rarely in the order of its
+/// modes); then every measured mode needs a visible model mode.
+fn pair_initial(
+    sys: &System,
+    model_modes: &[(f64, Vec<f64>)],
+    measured: &[MeasuredMode],
+) -> Result<Vec<(usize, usize)>, PrefitError> {
+    let visible: Vec<usize> = (0..model_modes.len())
+        .filter(|&j| visibility(sys, &model_modes[j].1) >= VISIBLE)
+        .collect();
+    let shapes: Option<Vec<&Vec<C64>>> = measured.iter().map(|m| m.shape.as_ref()).collect();
+    let Some(shapes) = shapes else {
+        if visible.len() < measured.len() {
+            return Err(PrefitError::TooManyModes {
+                measured: measured.len(),
+                model: visible.len(),
+            });
+        }
+        let mut order: Vec<usize> = (0..measured.len()).collect();
+        order.sort_by(|&a, &b| measured[a].freq_hz.total_cmp(&measured[b].freq_hz));
+        return Ok(order
+            .into_iter()
+            .enumerate()
+            .map(|(k, r)| (r, visible[k]))
+            .collect());
+    };
+    let mut scored: Vec<(f64, usize, usize)> = Vec::new();
+    for (r, s) in shapes.iter().enumerate() {
+        let lam_m = (2.0 * std::f64::consts::PI * measured[r].freq_hz).powi(2);
+        for &j in &visible {
+            let near = (model_modes[j].0 / lam_m).ln().abs();
+            scored.push((
+                mac(s, &shape_at_outputs(sys, &model_modes[j].1)) - 1e-3 * near,
+                r,
+                j,
+            ));
+        }
+    }
+    scored.sort_by(|a, b| b.0.total_cmp(&a.0));
+    let (mut used_r, mut used_j) = (vec![false; measured.len()], vec![false; model_modes.len()]);
+    let mut out = Vec::new();
+    for (_, r, j) in scored {
+        if !used_r[r] && !used_j[j] {
+            used_r[r] = true;
+            used_j[j] = true;
+            out.push((r, j));
+        }
+    }
+    out.sort_unstable();
+    Ok(out)
+}
+
+/// The modal pre-fit of `vars` on `model` to the `measured` modes: the new start and what was
+/// matched. The model's other values are left as they are.
+pub fn modal_prefit(
+    model: &Model,
+    vars: &Variables,
+    measured: &[MeasuredMode],
+) -> Result<Prefit, PrefitError> {
+    if measured.is_empty() {
+        return Err(PrefitError::NoModes);
+    }
+    for (i, m) in measured.iter().enumerate() {
+        if !(m.freq_hz.is_finite() && m.freq_hz > 0.0) {
+            return Err(PrefitError::BadFrequency(i, m.freq_hz));
+        }
+    }
+    let stiff: Vec<usize> = (0..vars.len())
+        .filter(|&i| !vars.vars[i].dissipation && vars.vars[i].initial > 0.0)
+        .collect();
+    if stiff.is_empty() {
+        return Err(PrefitError::NoStiffness);
+    }
+    let mut x = vars.initial();
+    let at = |x: &[f64]| {
+        let mut m = model.clone();
+        vars.apply(&mut m, x);
+        m
+    };
+    let m0 = at(&x);
+    let sys0 = System::assemble(&m0);
+    let modes0 = elastic_modes(&m0, &sys0)?;
+    let paired = pair_initial(&sys0, &modes0, measured)?;
+    let lam_meas: Vec<f64> = paired
+        .iter()
+        .map(|&(r, _)| (2.0 * std::f64::consts::PI * measured[r].freq_hz).powi(2))
+        .collect();
+    let before: Vec<f64> = paired.iter().map(|&(_, j)| modes0[j].0).collect();
+    let mut shapes: Vec<Vec<f64>> = paired.iter().map(|&(_, j)| modes0[j].1.clone()).collect();
+    let mut lam: Vec<f64> = before.clone();
+    let rms = |lam: &[f64]| -> f64 {
+        (lam.iter()
+            .zip(&lam_meas)
+            .map(|(a, b)| (0.5 * (a / b).ln()).powi(2))
+            .sum::<f64>()
+            / lam.len() as f64)
+            .sqrt()
+    };
+    let rms_before = rms(&lam);
+    let mut mu = 1e-3;
+    let mut iterations = 0;
+    for _ in 0..50 {
+        let cur = rms(&lam);
+        if cur < 1e-8 {
+            break;
+        }
+        iterations += 1;
+        // Sensitivities at x: ∂λ_r/∂x_i = φ_rᵀ (∂K/∂x_i) φ_r; K is linear in every stiffness
+        // parameter, so ∂K/∂x_i = (K(x + h e_i) − K(x)) / h exactly (up to round-off).
+        let sys = System::assemble(&at(&x));
+        let n = sys.n;
+        let quad = |k: &[f64], phi: &[f64]| -> f64 {
+            (0..n)
+                .map(|a| phi[a] * (0..n).map(|b| k[a * n + b] * phi[b]).sum::<f64>())
+                .sum()
+        };
+        let mut jac = nalgebra::DMatrix::<f64>::zeros(paired.len(), stiff.len());
+        for (c, &i) in stiff.iter().enumerate() {
+            let h = x[i].abs().max(vars.vars[i].scale.abs()) * 1e-3;
+            let mut xh = x.clone();
+            xh[i] += h;
+            let kh = System::assemble(&at(&xh)).k;
+            let dk: Vec<f64> = kh.iter().zip(&sys.k).map(|(a, b)| (a - b) / h).collect();
+            for (r, phi) in shapes.iter().enumerate() {
+                // ∂ ln λ / ∂ ln x
+                jac[(r, c)] = quad(&dk, phi) * x[i] / lam[r];
+            }
+        }
+        let res = nalgebra::DVector::from_iterator(
+            paired.len(),
+            lam_meas.iter().zip(&lam).map(|(m, l)| (m / l).ln()),
+        );
+        // Damped Gauss-Newton (Levenberg) in ln x, trying larger damping until the match improves.
+        let mut accepted = false;
+        for _ in 0..20 {
+            let a = jac.transpose() * &jac
+                + nalgebra::DMatrix::<f64>::identity(stiff.len(), stiff.len()) * mu;
+            let Some(step) = a.cholesky().map(|c| c.solve(&(jac.transpose() * &res))) else {
+                mu *= 10.0;
+                continue;
+            };
+            let big = step.amax();
+            let step = if big > MAX_LOG_STEP {
+                step * (MAX_LOG_STEP / big)
+            } else {
+                step
+            };
+            let mut xn = x.clone();
+            for (c, &i) in stiff.iter().enumerate() {
+                let v = &vars.vars[i];
+                xn[i] = (x[i] * step[c].exp()).clamp(v.lower.max(f64::MIN_POSITIVE), v.upper);
+            }
+            let mn = at(&xn);
+            let sn = System::assemble(&mn);
+            let modes = elastic_modes(&mn, &sn)?;
+            // Track each pair to the model mode most like its previous shape.
+            let mut taken = vec![false; modes.len()];
+            let mut next = Vec::with_capacity(shapes.len());
+            for s in &shapes {
+                let j = (0..modes.len())
+                    .filter(|&j| !taken[j])
+                    .max_by(|&a, &b| {
+                        mac_mass(s, &modes[a].1, &sn).total_cmp(&mac_mass(s, &modes[b].1, &sn))
+                    })
+                    .unwrap_or(0);
+                taken[j] = true;
+                next.push(j);
+            }
+            let lam_n: Vec<f64> = next.iter().map(|&j| modes[j].0).collect();
+            if rms(&lam_n) < cur {
+                x = xn;
+                lam = lam_n;
+                shapes = next.iter().map(|&j| modes[j].1.clone()).collect();
+                mu = (mu / 10.0).max(1e-9);
+                accepted = true;
+                break;
+            }
+            mu *= 10.0;
+        }
+        if !accepted {
+            break;
+        }
+    }
+    // ψ from the measured loss factors: a ψ shared by all elements gives every mode η = ψ/2π.
+    let etas: Vec<f64> = paired
+        .iter()
+        .filter_map(|&(r, _)| measured[r].loss_factor)
+        .collect();
+    if etas.len() == paired.len() {
+        let eta = etas.iter().sum::<f64>() / etas.len() as f64;
+        for (i, v) in vars.vars.iter().enumerate() {
+            if v.dissipation && eta.is_finite() && eta > 0.0 {
+                x[i] = (2.0 * std::f64::consts::PI * eta).clamp(v.lower, v.upper);
+            }
+        }
+    }
+    let sys = System::assemble(&at(&x));
+    let pairs = paired
+        .iter()
+        .enumerate()
+        .map(|(k, &(r, _))| Pair {
+            measured: r,
+            measured_hz: measured[r].freq_hz,
+            model_hz_before: before[k].sqrt() / (2.0 * std::f64::consts::PI),
+            model_hz_after: lam[k].sqrt() / (2.0 * std::f64::consts::PI),
+            mac: measured[r]
+                .shape
+                .as_ref()
+                .map(|s| mac(s, &shape_at_outputs(&sys, &shapes[k]))),
+        })
+        .collect();
+    Ok(Prefit {
+        start: x,
+        pairs,
+        iterations,
+        rms_log_freq: (rms_before, rms(&lam)),
+    })
+}
+
+/// `vars` with their initial values replaced by `start` (e.g. a pre-fit's). A scale that was the
+/// default (`|initial|`) follows the new start, so the optimizer sees the variables near 1 as it
+/// would had the file given that start; an explicit scale is kept.
+pub fn with_start(vars: &Variables, start: &[f64]) -> Variables {
+    let mut v = vars.clone();
+    for (var, &x) in v.vars.iter_mut().zip(start) {
+        if var.scale == var.initial.abs() && x != 0.0 {
+            var.scale = x.abs();
+        }
+        var.initial = x;
+    }
+    v
+}
