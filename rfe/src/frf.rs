@@ -58,7 +58,7 @@ pub enum Work {
 impl Method {
     /// The path [`Method::Auto`] picks for `n` DOFs, `lines` frequency lines and `work`: the
     /// cheaper by a cost model fitted to measurements (FWD-32J with 0–74 parameters and chains of
-    /// 24–240 DOFs, 20–600 lines; `cargo bench -p rfe --bench frf`, group
+    /// 24–240 DOFs, 20–600 lines; `cargo bench -p identify --bench frf_lines`, group
     /// `fwd32j_direct_vs_modal_by_lines`). Estimated seconds:
     /// - direct: `lines · 2.4e-10 n^2.7` (one batched `L Δ Lᵀ` per line; the adjoint Jacobian
     ///   adds little);

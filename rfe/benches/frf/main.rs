@@ -1,7 +1,7 @@
 //! FRF + full Jacobian of the FWD-32J model at 114 lines: direct path, modal path, and the plain
-//! per-frequency dense solve (`baseline.rs`) as the baseline, in one run. Then the two paths
-//! against the number of lines, with the Jacobian of the identification's 20 variables: where
-//! [`Method::Auto`] should switch from direct to modal.
+//! per-frequency dense solve (`baseline.rs`) as the baseline, in one run. The two paths against
+//! the number of lines, where [`Method::Auto`] switches, are `identify`'s `frf_lines` bench
+//! (they take the identification's variables).
 //!
 //! `cargo bench -p rfe --bench frf`
 
@@ -60,31 +60,5 @@ fn fwd32j(c: &mut Criterion) {
     g.finish();
 }
 
-/// Direct against modal, FRF plus the Jacobian of the FWD-32J identification's parameters, from
-/// 38 to 600 lines: the break-even [`Method::Auto`] uses.
-fn lines_break_even(c: &mut Criterion) {
-    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
-    let model = rfe::modelfile::load(&root.join("configs/models/fwd32j-initial.toml"))
-        .expect("FWD-32J initial model")
-        .model;
-    let vars = identify::variables::load(&root.join("configs/identification/fwd32j.toml"), &model)
-        .expect("variables");
-    let params = vars.params();
-    let mut g = c.benchmark_group("fwd32j_direct_vs_modal_by_lines");
-    g.sample_size(10);
-    g.measurement_time(std::time::Duration::from_secs(2));
-    for lines in [38usize, 75, 114, 150, 225, 300, 600] {
-        let freqs: Vec<f64> = (0..lines)
-            .map(|i| 3.0 * (1000.0f64 / 3.0).powf(i as f64 / (lines - 1) as f64))
-            .collect();
-        for (name, method) in [("direct", Method::Direct), ("modal", Method::Modal)] {
-            g.bench_with_input(criterion::BenchmarkId::new(name, lines), &freqs, |b, f| {
-                b.iter(|| response(&model, f, &params, method).unwrap())
-            });
-        }
-    }
-    g.finish();
-}
-
-criterion_group!(benches, fwd32j, lines_break_even);
+criterion_group!(benches, fwd32j);
 criterion_main!(benches);
