@@ -521,8 +521,9 @@ mod tests {
     }
 
     /// A spring between the column and the knee has, among its alternatives, SDE 12's missing
-    /// stiffness along its axis 2 (the SDE those two bodies share), the two bodies' flexibilities and point
-    /// masses, and no spring and nothing on a body it does not touch; a sensor's gain has none.
+    /// stiffness along its axis 2 (the SDE those two bodies share), the two bodies' flexibilities
+    /// and point masses, and no spring and nothing on a body it does not touch; a sensor's gain
+    /// has none.
     #[test]
     fn a_springs_alternatives_are_the_other_kinds_on_the_bodies_it_joins() {
         let model = crate::test_support::fwd32j();

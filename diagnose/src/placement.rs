@@ -96,7 +96,8 @@ fn remove_unneeded(
 /// effect the score and the screen, both first-order statistics taken at the fit without it,
 /// cannot tell which body's point that is: the same resonator on a dozen bodies' points scores
 /// within 15 % (a large resonator on the overarm can be accepted on the knee, several times the
-/// noise level above its refit on the overarm). So the effect last in `fixed`, at its fitted values, is short-refitted
+/// noise level above its refit on the overarm). So the effect last in `fixed`, at its fitted
+/// values, is short-refitted
 /// ([`RELOCATION_ITERATIONS`], [`SPRING_RELOCATION_ITERATIONS`] for a spring; the model's
 /// variables free) from `base`, the fit without it, at each of `places` (with whether each is the
 /// effect's own: [`points`], and for an earlier spring [`lines_of_action`]); those whose short

@@ -1003,7 +1003,8 @@ pub(super) fn equivalents(
 /// threshold, physical, not a partial fix, and its size identifiable at 95 % (the swap's level,
 /// [`super::swap::SWAP_LEVEL`], for the same reason: an effect ranked against one already
 /// significant, and a very stiff spring's Cramér-Rao interval is wide although its LR is
-/// large, so the round's Bonferroni level would leave out true look-alikes). When its margin is within
+/// large, so the round's Bonferroni level would leave out true look-alikes). When its margin is
+/// within
 /// [`EQUIVALENT_LR`] of the accepted effect's, the data cannot tell the two apart
 /// ([`look_alikes`]).
 pub(super) struct Contender {
