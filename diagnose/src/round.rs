@@ -1,6 +1,16 @@
-//! One round of the closed loop: rank every candidate by its score, screen the leading ones by a
-//! finite step, refit the most promising families (more when the misfit is large), and choose the
-//! most significant effect that is physical.
+//! One round of the closed loop: rank every candidate by its score ([`rank`]), screen the
+//! leading ones by a finite step ([`screen_leading`]), refit the most promising families
+//! ([`refit_leading`]), and choose the most significant effect that is physical and identifiable.
+//!
+//! `refit_leading` escalates while the misfit stays above the noise level: first the `--refit`
+//! families the screen puts first and the score's leading ones; when the misfit is large and
+//! their best refit leaves it above the noise level, the kind jobs ([`kind_jobs`]: the best
+//! screened family of each kind they leave out, where its screen is significant); if still
+//! above, short refits ([`short_refits`], [`Short::Leading`]) of the plausible candidates, the
+//! strongest pulls the score rules out and every candidate of the kinds without a point, whose
+//! families are refitted in full when they end below the best refit. Where the misfit is small
+//! but above the noise level, the damping splits get the short refits ([`Short::DampingSplits`]).
+//! The refits' starts and the equivalents ("≡") of the chosen one are also decided here.
 
 use super::*;
 use identify::stats::chi2_tail;
