@@ -1161,9 +1161,8 @@ mod tests {
 
     /// SDE 34's ψ is the "screw/actuator psi" variable's: the stiffness freed beside it joins
     /// that variable's targets, so a refit that moves the SDE's ψ moves the freed direction's
-    /// with it (before, it stayed at the ψ the candidate was drawn with, and a base fit that had
-    /// pushed the group's ψ far off left the true freed direction unable to fit: blind seed
-    /// 1021's refit ended at J 168.9 instead of 50.1).
+    /// with it (a freed direction held at the ψ it was drawn with could not fit where the base
+    /// fit had pushed the group's ψ far from the truth to absorb misfit).
     #[test]
     fn a_freed_direction_takes_the_psi_the_variable_of_its_sde_sets() {
         let mut r = fwd32j_realized();

@@ -67,9 +67,9 @@ pub fn candidates(
 /// Every direction of an enabled SDE that its law leaves out ([`SdeLaw::leaves_out`]), and
 /// every direction of a general element held at a stiffness no variable sets, as a candidate
 /// to free. An SDE with no stiffness at all is no connection unless a variable sets one of its
-/// stiffnesses: a fit can drive that one to 0 (blind seed 3230: the table actuator's axial
-/// stiffness went to 0 to mimic its missing lateral one, and so the lateral one was no longer a
-/// candidate).
+/// stiffnesses: a fit can drive that one to 0 (a table actuator whose fitted axial stiffness went
+/// to 0 to mimic its missing lateral stiffness), and the candidates follow the law's form, not
+/// the fit's values, so that the missing lateral one stays a candidate.
 fn freed_directions(model: &Model, vars: &Variables, out: &mut Vec<Effect>) {
     let by_vars = vars.params();
     let typical = [0..3, 3..6].map(|r| typical_stiffness(model, r));
@@ -141,8 +141,8 @@ fn body_masses(model: &Model, vars: &Variables, out: &mut Vec<Effect>) {
 /// SDE's direction): point masses at the bodies' attachment points, the bodies'
 /// flexibilities and masses, and the freed directions of every SDE attached to them. A
 /// look-alike of another kind accepted in place of the effect the model lacks acts on the same
-/// bodies (blind seed 3818: SDE 12's missing stiffness along its axis 2, between the column and
-/// the knee, taken for a spring between the column and the knee). None for a sensor's gain or a
+/// bodies (an SDE's missing stiffness along one of its axes, between two bodies, taken for a
+/// spring between the same two bodies). None for a sensor's gain or a
 /// joint-damping split.
 pub(super) fn alternatives(model: &Model, vars: &Variables, effect: &Effect) -> Vec<Effect> {
     let touched = bodies_of(model, effect);
@@ -521,8 +521,9 @@ mod tests {
     }
 
     /// A spring between the column and the knee has, among its alternatives, SDE 12's missing
-    /// stiffness along its axis 2 (blind seed 3818), the two bodies' flexibilities and point
-    /// masses, and no spring and nothing on a body it does not touch; a sensor's gain has none.
+    /// stiffness along its axis 2 (the SDE those two bodies share), the two bodies' flexibilities
+    /// and point masses, and no spring and nothing on a body it does not touch; a sensor's gain
+    /// has none.
     #[test]
     fn a_springs_alternatives_are_the_other_kinds_on_the_bodies_it_joins() {
         let model = crate::test_support::fwd32j();

@@ -1,25 +1,56 @@
-//! Closing the loop after a fit: find the residual, trace it to an effect the model lacks, add
-//! it, and report the error before and after.
+//! Closing the loop after a fit: does the model explain the data to the noise level, and if
+//! not, which effect does it lack? Each round adds at most one effect, chosen by a
+//! likelihood-ratio test at a Bonferroni level over every candidate looked at, so the
+//! family-wise false-alarm rate per diagnosis stays at `alpha`. The loop, as [`diagnose`] runs it:
 //!
-//! 1. [`residuals`]: standardized residuals, χ² goodness of fit against R, runs test along
-//!    frequency, the mode bands where the misfit concentrates, and a verdict.
-//! 2. [`generate`]: a library of nested candidate [`effects`] built from the model's geometry
-//!    (springs to bodies or ground, point masses, resonators, flexible bodies, sensor gains, a
-//!    joint's own damping) — hundreds for a machine-tool model.
-//! 3. [`score`]: every candidate ranked by a score (Lagrange-multiplier) test at the current fit,
-//!    from one set of solves — about the cost of one Jacobian, not one fit per candidate.
-//! 4. The best few are refitted fully with their parameters free ([`problem`]) and the most
-//!    significant is accepted if its likelihood-ratio test passes at `α / (number of candidates
-//!    ranked)` (Bonferroni: the family-wise false-alarm rate stays at α although hundreds are
-//!    looked at). Repeat until nothing significant is left.
-//! 5. Then each accepted effect is tried against the effects of other kinds on the same bodies,
-//!    and swapped for one the data prefer; after a swap the loop goes on.
+//! 1. **Base fit** (`base.rs`): the identification's estimate continued with the same optimizer
+//!    until it converges (up to `BASE_CONTINUATIONS` runs); when it does not, or the converged
+//!    fit does not explain the data, a multi-start fit (`BASE_STARTS` starts) as well, the better
+//!    kept. Every refit below starts from this fit with the same settings, so a likelihood ratio
+//!    measures the effect and not further optimisation. [`residuals`] then gives the verdict
+//!    "before": χ² against R, runs test along frequency, the mode bands holding the misfit.
+//! 2. **Candidates** ([`generate`], [`effects`]): a library of nested effects built from the
+//!    model's geometry and laws — springs, point masses, resonators, flexible bodies, sensor
+//!    gains, a joint's own damping, an SDE's left-out or held-stiff directions, a body's mass:
+//!    about a thousand on FWD-32J, each equal to the current model at its nested value.
+//! 3. **Ranking** (`round.rs`, [`score`]): every candidate's score (Lagrange-multiplier) test at
+//!    the current fit, from one set of solves; near-identical first-order actions
+//!    (|cos| ≥ 0.99) form one family. The round's threshold is `alpha / candidates ranked`.
+//! 4. **Screen** (`screen.rs`): the score is a slope at the nested value and understates large
+//!    effects, so the 30 leading plausible candidates and each kind's two best are screened by a
+//!    finite step: their own parameters fitted with the variables re-adjusted to first order.
+//! 5. **Refit of the leading families** (`round.rs`, `refit_leading`): the `--refit` families the
+//!    screen puts first and the score's two leading families are refitted with every variable
+//!    and the effect's parameters free (each kind and site in a family gets its own refit).
+//!    When the misfit is large (reduced χ² > 2) and the best refit still leaves it above the
+//!    noise level, it escalates: (a) **kind jobs**, the best screened family of each kind the
+//!    leading families leave out, where its screen alone is significant; (b) if still above,
+//!    **short refits** (40 iterations, also from the variables' initial values) of each kind's
+//!    plausible candidates, the strongest pulls the one-sided score rules out, and every
+//!    candidate of the kinds without a point, the families whose short refit ends below the best
+//!    refit then refitted in full. When the misfit is small but above the noise level, the
+//!    **damping splits** get the short refits instead.
+//! 6. **Acceptance** (`round.rs`): the most significant refit is accepted when its LR beats the
+//!    round's Bonferroni threshold, its estimates are physical (none at a bound, a resonator
+//!    tuned within the band), its size stands from its nested value at the round's own level
+//!    (identifiability), and it removes at least 10 % of the misfit above the noise level (else
+//!    a partial fix). The refits the data cannot tell from it (LR within 3.84) are its "≡".
+//! 7. **After acceptance** (`placement.rs`): a point mass or resonator is moved to the body's
+//!    point where it fits best; a point mass's position or a spring's line of action is refined
+//!    with its place free; the **backward check** drops earlier effects the new one made
+//!    unnecessary; earlier masses, resonators and springs are relocated now the new one is in.
+//! 8. **Swap** (`swap.rs`): in a round that accepts nothing, each accepted effect is tried once
+//!    against the effects of other kinds on the same bodies and replaced by one the data prefer;
+//!    a swap gives the round back and the loop goes on. Otherwise the loop ends (or after
+//!    `max_effects` acceptances).
+//! 9. **Final fit and verdict** (`final_fit`): the residual analysis "after", the accepted
+//!    effects' estimates and standard errors at the final fit, and, when the data are still not
+//!    explained, the verdict OUTSIDE THE LIBRARY with the band and characteristics holding the
+//!    remaining misfit. [`final_model`] writes the diagnosed model.
 //!
-//! This file holds the records (options, refits, rounds, the diagnosis) and the loop itself
-//! ([`diagnose`]); its steps live beside it: `base.rs` the converged base fit, `round.rs` one
-//! round's ranking, screen, refits and choice, `placement.rs` the place refinement and backward
-//! check after an acceptance, `swap.rs` the swap of an accepted effect for one of another kind,
-//! `text.rs` the report in the paper's units.
+//! This file holds the records (options, refits, rounds, the diagnosis) and the loop itself;
+//! `text.rs` writes the report in the paper's units. `docs/diagnosis.md` gives the statistics,
+//! the options, the JSON and the measured performance.
 //!
 //! ```no_run
 //! use diagnose::{diagnose, Options};
@@ -72,8 +103,8 @@ pub struct Options {
     /// At most this many effects are added.
     pub max_effects: usize,
     /// Refit this many candidate families of each round, the best screened first (and the
-    /// score's leading family when the screen left it out; when the misfit is large and their
-    /// refits leave it above the noise level, also the family of each kind's best-scored
+    /// score's two leading families when the screen left them out; when the misfit is large and
+    /// their refits leave it above the noise level, also the family of each kind's best-scored
     /// candidate none of them holds, where its screen is significant, and then up to this many
     /// more whose short refits went below the best refit).
     pub refit: usize,

@@ -19,10 +19,9 @@ pub(super) const RELOCATIONS_REFITTED: usize = 3;
 pub(super) const RELOCATION_ITERATIONS: usize = 10;
 /// Iterations of a relocation's short refit at each place, for a spring: a spring moved to
 /// another pair of bodies is a new load path, and the model's variables take longer to follow
-/// it than a mass moved to another point. Blind seed 3756 (a vertical spring to the ground under
-/// the table, first taken on the upper saddle): after 10 iterations the true place is 6th of 150
-/// (J 674 against the best's 277, and the three refitted in full all miss it); after 30 it is
-/// first (J 97.7), and its full refit ends at the noise level.
+/// it than a mass moved to another point: measured on the blind suite, after 10 iterations a
+/// spring's true place can rank below several wrong ones (so the few refitted in full miss it),
+/// after 30 it ranks first.
 pub(super) const SPRING_RELOCATION_ITERATIONS: usize = 30;
 
 /// The steps after a round accepts the refit `chosen` (with its fit `next`) on the fit `cur`
@@ -96,9 +95,9 @@ fn remove_unneeded(
 /// A point mass or resonator acts through the motion of the point it hangs on, and with a large
 /// effect the score and the screen, both first-order statistics taken at the fit without it,
 /// cannot tell which body's point that is: the same resonator on a dozen bodies' points scores
-/// within 15 % (blind seed 3703: a 61 kg resonator at 35 Hz on the overarm's centre scored 37th
-/// and was accepted on the knee at J 152; refitted on the overarm it ends at 33, the noise
-/// level). So the effect last in `fixed`, at its fitted values, is short-refitted
+/// within 15 % (a large resonator on the overarm can be accepted on the knee, several times the
+/// noise level above its refit on the overarm). So the effect last in `fixed`, at its fitted
+/// values, is short-refitted
 /// ([`RELOCATION_ITERATIONS`], [`SPRING_RELOCATION_ITERATIONS`] for a spring; the model's
 /// variables free) from `base`, the fit without it, at each of `places` (with whether each is the
 /// effect's own: [`points`], and for an earlier spring [`lines_of_action`]); those whose short
@@ -167,9 +166,9 @@ pub(super) const RELOCATION_MIN_SHARE: f64 = 0.5;
 
 /// Whether the effect `fixed` adds to `base` removes less than [`RELOCATION_MIN_SHARE`] of
 /// `base`'s misfit above the noise level (`J − σ̂²(m − p)/2`): a partial fix, whose best place
-/// chases the rest of the misfit. Blind seed 3756: a resonator taken for a spring to the ground
-/// under the table (J 5564 → 3493, 37 % of the excess) fitted better on the upper saddle, and the
-/// spring was then found on the overarm instead.
+/// chases the rest of the misfit (a resonator standing in for a missing spring to the ground
+/// fits better wherever it takes some other part of the misfit, and moving it there leads the
+/// later rounds astray).
 fn partial(base: &Current, fixed: &Current, sigma2: f64) -> bool {
     let j = |c: &Current| 0.5 * c.e.norm_squared();
     let dof = fixed.e.len().saturating_sub(fixed.u.len()) as f64;
@@ -337,15 +336,14 @@ fn lines_of_action(model: &Model, effect: &Effect) -> Vec<(Effect, bool)> {
 /// later effects are in (see [`relocate`], from the fit without it; a spring along its direction
 /// to any pair of bodies, [`lines_of_action`]), its place then refined ([`place`]); a move
 /// replaces it in place, in `accepted` and in `cur` (recorded in `round.relocated`). An effect
-/// placed while another was missing is then put right (blind seed 3704: a 217 Hz resonator on
-/// the knee taken on the lower saddle, J 108.6 against 110.2, before the overarm's point mass was
-/// in; with it, the knee ends at J 40.7 against 48.5, LR 15.6, where the χ² test already
-/// passes).
+/// placed while another was missing is then put right: two neighbouring places can fit alike
+/// while the other effect's misfit dominates, and once it is in, the data tell them apart
+/// (by an LR well above the threshold, where the χ² test already passes).
 ///
 /// A spring is moved only here, not when it is accepted: accepted while another effect is
-/// missing, its best place chases that one too (blind seed 3756: a vertical spring to the ground
-/// under the table, accepted while a gain error was still missing, fitted better on the overarm
-/// then; moved at acceptance it stayed there).
+/// missing, its best place chases that one too (a vertical spring to the ground under the table,
+/// accepted while a sensor's gain error is still missing, fits better elsewhere then; moved at
+/// acceptance it would stay there).
 fn relocate_earlier(
     setting: Setting,
     level: Level,
@@ -543,7 +541,7 @@ mod tests {
     }
 
     /// An earlier spring is tried again along its own direction between every pair of bodies and
-    /// to the ground, its own place first (blind seed 3756: from the upper saddle to the face
+    /// to the ground, its own place first (so a spring on the upper saddle can move to the face
     /// under the table), and never at its own place twice; other kinds have no lines of action.
     #[test]
     fn an_earlier_spring_is_tried_along_its_direction_on_every_pair_of_bodies() {

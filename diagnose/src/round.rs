@@ -1,6 +1,16 @@
-//! One round of the closed loop: rank every candidate by its score, screen the leading ones by a
-//! finite step, refit the most promising families (more when the misfit is large), and choose the
-//! most significant effect that is physical.
+//! One round of the closed loop: rank every candidate by its score ([`rank`]), screen the
+//! leading ones by a finite step ([`screen_leading`]), refit the most promising families
+//! ([`refit_leading`]), and choose the most significant effect that is physical and identifiable.
+//!
+//! `refit_leading` escalates while the misfit stays above the noise level: first the `--refit`
+//! families the screen puts first and the score's leading ones; when the misfit is large and
+//! their best refit leaves it above the noise level, the kind jobs ([`kind_jobs`]: the best
+//! screened family of each kind they leave out, where its screen is significant); if still
+//! above, short refits ([`short_refits`], [`Short::Leading`]) of the plausible candidates, the
+//! strongest pulls the score rules out and every candidate of the kinds without a point, whose
+//! families are refitted in full when they end below the best refit. Where the misfit is small
+//! but above the noise level, the damping splits get the short refits ([`Short::DampingSplits`]).
+//! The refits' starts and the equivalents ("≡") of the chosen one are also decided here.
 
 use super::*;
 use identify::stats::chi2_tail;
@@ -221,9 +231,10 @@ pub(super) fn refit_leading(
             .fold(base_j, f64::min)
     };
     // The noise level of a refit: χ² for the observations less the fit's parameters and the
-    // candidate's size, as the verdict counts them. (Counting all m observations took blind
-    // seed 3698's best refit, at reduced χ² 1.46, for the noise level: the batches below were
-    // skipped and a resonator stood in for an actuator's missing lateral stiffness.)
+    // candidate's size, as the verdict counts them. Counting all m observations would make the
+    // test too lenient by p + 1 degrees of freedom: a refit at a reduced χ² near 1.5 can pass
+    // for the noise level, the escalation below is skipped and a partial fix stands in for the
+    // missing effect.
     let dof = m.saturating_sub(cur.u.len() + 1).max(1) as f64;
     let above_noise = |j: f64| chi2_tail(dof, 2.0 * j / sigma2) < opts.alpha;
     if large && above_noise(least(&outcomes)) {
@@ -427,8 +438,8 @@ pub(super) fn extended<'a>(setting: Setting<'a>, cur: &Current, cand: &Effect) -
 /// Of each kind of effect, the best-scored candidates screened besides the leading
 /// [`SCREENED`] (candidates with equal scores, e.g. the moment stiffnesses of the isolators
 /// under one body, count once). A large missing effect of one kind can score below tens of
-/// another's that fit part of it (blind seed 3186: an isolator's moment stiffness, score rank
-/// 50, below 49 resonators and springs); its refit ends at the noise level.
+/// another's that fit part of it (an isolator's missing moment stiffness can score below dozens
+/// of resonators and springs that each mimic part of it, and still refit to the noise level).
 pub(super) const SCREENED_PER_KIND: usize = 2;
 
 /// The candidates screened (indices into `ranking.scored`, best score first): the first
@@ -503,11 +514,10 @@ pub(super) fn refit_jobs<'r>(
     let families = &ranking.families;
     let mut jobs = family_jobs(ranking, screened, screened, &[], n, f_hi);
     // The score's leading families are refitted too: the screen's first-order view of the fit's
-    // own parameters can rank a large effect's true candidate below look-alikes (blind seed
-    // 3062: a moment stiffness the score put first, screened below five springs), and a small
-    // effect's screen differs from its look-alikes' by less than the noise (blind seed 3726: a
-    // moment stiffness the score put second, screened tenth, J 58.3 against 56.8; refitted, it
-    // is the only effect to pass).
+    // own parameters can rank a large effect's true candidate below look-alikes (a moment
+    // stiffness the score puts first can screen below springs to the ground that make a similar
+    // moment), and a small effect's screen differs from its look-alikes' by less than the noise
+    // (a difference in J of one or two), so the score's order is kept for its leaders.
     for (f, family) in families.iter().enumerate().take(SCORE_FAMILIES_REFITTED) {
         let leader = screened.iter().find(|s| family.contains(&s.index));
         if let Some(s) = leader.filter(|_| !jobs.iter().any(|job| job.family == Some(f))) {
@@ -526,9 +536,9 @@ pub(super) const SCORE_FAMILIES_REFITTED: usize = 2;
 /// the current criterion `base_j`.
 ///
 /// The screen re-adjusts the fit's own variables to first order only, and a large effect of
-/// one kind can screen far above its refit, below partial fixes of another kind (blind seed
-/// 3186: an isolator's moment stiffness screened at J 2283 against 2340 before, below
-/// resonators at 600-900; refitted, it ends at the noise level, J 52). Where the leading
+/// one kind can screen far above its refit, below partial fixes of another kind (an isolator's
+/// large missing moment stiffness screens barely below the fit without it while resonators
+/// screen at a third of it; refitted, it alone reaches the noise level). Where the leading
 /// families' refits bring the misfit down, these would only cost time.
 pub(super) fn kind_jobs<'r>(
     ranking: &'r Ranking,
@@ -571,8 +581,9 @@ pub(super) const PULLED_PER_KIND: usize = 3;
 /// Each kind's `per_kind` candidates (the strongest pull first, [`score::Scored::pull`]) that a
 /// one-sided score test rules out — its score would take a stiffness or a mass below its nested
 /// value — though the data pull on them as hard as on a plausible one: a large effect can lower
-/// J where a small one raises it. Blind seed 3654: an actuator's missing lateral stiffness of
-/// 12 N/µm scored 0, last of 1088, and is the second strongest pull of its kind. Resonators are
+/// J where a small one raises it: the fit's variables, moved to mimic the effect, make the first
+/// step wrong-signed (an actuator's large missing lateral stiffness can score 0, last of a
+/// thousand, while the data pull on it harder than on almost any other of its kind). Resonators are
 /// left out: their score is taken at the tuning that lowers J most, which has no meaning where
 /// none does.
 pub(super) fn pulled_against(ranking: &Ranking, per_kind: usize) -> Vec<usize> {
@@ -608,9 +619,9 @@ pub(super) enum Short {
     /// Where the misfit is small but above the noise level: every joint-damping split, from
     /// the current fit only. A joint's own ψ several times its group's changes the resonance
     /// peaks far from linearly, and its score and screen, taken at the group's value, see
-    /// little of it (blind seed 3711: a slideway's ψ_t of 4.8 split from its group, score rank
-    /// 261 of 1089 at LM 3.7, screened at J 63.7 against 65.9 before; refitted, it ends at the
-    /// noise level, J 47.8, LR 36). A model has few splits (about a dozen on FWD-32J).
+    /// little of it (a slideway's ψ several times its group's can score in the hundreds and
+    /// screen within a few units of J of the fit without it, yet refit to the noise level). A
+    /// model has few splits (about a dozen on FWD-32J), so refitting them all is cheap.
     DampingSplits,
 }
 
@@ -618,9 +629,9 @@ pub(super) enum Short {
 /// mass, a joint-damping split, a sensor's gain. There is one per element and axis (tens on
 /// FWD-32J, against hundreds of springs, masses and resonators at points), and their scores are
 /// no guide to a finite effect: the variables mimic their first-order action, not their finite
-/// one (blind seed 3782: an actuator's missing lateral stiffness of 5.9 N/µm scores 484th of
-/// 1089, at LM 2.1; refitted it ends at the noise level, J 43.7 against 145.2 before and 75.8
-/// for the best of the others).
+/// one (an actuator's missing lateral stiffness can score in the middle of a thousand
+/// candidates, not plausible at first order, and still be the only effect whose refit reaches
+/// the noise level).
 pub(super) fn unplaced(effect: &Effect) -> bool {
     !matches!(
         effect,
@@ -1001,8 +1012,9 @@ pub(super) fn equivalents(
 /// A member refit of a round that the round itself could have accepted: significant at its
 /// threshold, physical, not a partial fix, and its size identifiable at 95 % (the swap's level,
 /// [`super::swap::SWAP_LEVEL`], for the same reason: an effect ranked against one already
-/// significant; blind seed 3891's true stiff spring, 2371 N/µm, ends within LR 1.6 of the
-/// accepted one with too wide an interval for the round's level). When its margin is within
+/// significant, and a very stiff spring's Cramér-Rao interval is wide although its LR is
+/// large, so the round's Bonferroni level would leave out true look-alikes). When its margin is
+/// within
 /// [`EQUIVALENT_LR`] of the accepted effect's, the data cannot tell the two apart
 /// ([`look_alikes`]).
 pub(super) struct Contender {
@@ -1265,9 +1277,9 @@ pub(super) fn refit(
         others.push(given);
     }
     // The score step is a start of its own: the screen's best size, where the fit's variables
-    // moved to first order only, can lie in another valley than the effect's refit (blind seed
-    // 3186: an isolator's moment stiffness refitted from the screen's size ends at J 2246, from
-    // its score step at the noise level, J 52).
+    // moved to first order only, can lie in another valley than the effect's refit (a large
+    // moment stiffness refitted from the screen's size can stop at the misfit it started from,
+    // and from its score step reach the noise level).
     if let Some(step) = step {
         others.push(start_at(step));
     }
@@ -1381,8 +1393,8 @@ pub(super) const FRESH_SIZES_PER_DECADE: i32 = 4;
 /// Decades of an effect's scale the size grid of [`fresh_start`] spans on either side of its
 /// nested value: wider than the refit's starts ([`screen::REFIT_SIZE_DECADES`]), as the grid
 /// costs one evaluation a size and a scale is only a guess (a flexibility's is the stiffest
-/// joint's compliance: blind seed 3759's column compliance of 1.8e-9 m/N is four decades above
-/// its scale of 1.1e-13 m/N).
+/// joint's compliance, about 1e-13 m/N on FWD-32J, and a missing flexibility of a column or an
+/// overarm lies near 1e-9 m/N, four decades above it).
 pub(super) const FRESH_SIZE_DECADES: std::ops::RangeInclusive<i32> = -2..=6;
 
 /// The start of problem `p` (extended by a new effect with parameters `params`, the last of
@@ -1391,10 +1403,10 @@ pub(super) const FRESH_SIZE_DECADES: std::ops::RangeInclusive<i32> = -2..=6;
 /// parameter) the one of `u` or of a grid ([`FRESH_SIZES_PER_DECADE`] steps a decade across
 /// [`FRESH_SIZE_DECADES`] of its scale on either side of its nested value) where the
 /// misfit there is least. With the variables back at their nominal values, the misfit is least
-/// in the effect's own valley, which the bent fit hides (blind seed 3798: the overarm's missing
-/// compliance of 1.03e-9 m/N; short refits from the bent fit at every size from 1e-12 to
-/// 5.6e-10 m/N end near 4.5e-10 m/N at J ≈ 2590, and three other effects were added; from the
-/// nominal variables with sizes of 5.6e-10 to 1.0e-9 m/N they end at the noise level, J 51.7).
+/// in the effect's own valley, which the bent fit hides: with a large missing flexibility the
+/// fit's stiffnesses move to mimic it, short refits from that fit stop at a fraction of the
+/// true compliance with the misfit still tens of times the noise level, whatever size they
+/// start from, while from the nominal variables they reach the noise level.
 pub(super) fn fresh_start(
     p: &mut Problem,
     u: &DVector<f64>,

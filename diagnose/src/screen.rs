@@ -23,9 +23,9 @@ pub(super) const REFIT_START_FRACTIONS: [f64; 4] = [1.0, 0.3, 0.1, 0.03];
 pub(super) const REFIT_SIZE_DECADES: [i32; 6] = [-2, -1, 0, 1, 2, 3];
 /// And, where the nested value is itself a size (a split joint group's ψ, a body's mass), at
 /// these multiples of it: ψ divides the resonance peaks, and a joint's own ψ can be a fraction
-/// or a multiple of its group's, far from any step of the group's size (blind seed 3315: a split
-/// ψ of 0.39 from a group at 1.45, whose refit from those steps stopped at 0.94 and was not
-/// added; with these starts it is found, as is seed 3336's split ψ of 7.6).
+/// or a multiple of its group's, far from any step of the group's size (a split ψ at a quarter
+/// of its group's, refitted from the additive steps, stops half-way and is not added; these
+/// starts reach it, and a split ψ five times its group's).
 pub(super) const REFIT_SIZE_FACTORS: [f64; 7] = [0.03, 0.1, 0.2, 0.3, 0.5, 2.0, 3.0];
 /// Tuning frequencies of a resonator's starting grid across its range.
 const RESONATOR_GRID: usize = 24;
@@ -274,7 +274,7 @@ mod tests {
     }
 
     /// A split ψ starts at fractions and multiples of its group's value, where the additive
-    /// steps of its scale do not reach (blind seeds 3315, 3336); a size nested at 0 (a spring's
+    /// steps of its scale do not reach; a size nested at 0 (a spring's
     /// stiffness) has no multiples, and no start leaves the bounds.
     #[test]
     fn a_positive_nested_size_is_also_started_at_multiples_of_it() {

@@ -13,10 +13,10 @@ use super::*;
 
 /// Iterations of an alternative's short refit. It starts from the model's variables at their
 /// initial values (see [`fresh_start`]): the fit without the accepted effect has bent them to
-/// mimic it. Blind seeds 3818 and 3663 (an SDE's missing stiffness taken for a spring): after 10
-/// iterations the true alternative is first in one and not among the first five in the other,
-/// after 20 it is first in both and at its full refit's criterion. From the fit without the
-/// effect instead, 40 iterations find it in 3663 only.
+/// mimic it. Measured on the blind suite where an SDE's missing stiffness was taken for a spring:
+/// after 10 iterations the true alternative is not always among the first few, after 20 it is
+/// first and at its full refit's criterion; from the fit without the effect instead, even 40
+/// iterations do not always find it.
 pub(super) const SWAP_ITERATIONS: usize = 20;
 
 /// Alternatives whose short refit ends below the accepted fit, or less than
@@ -25,19 +25,19 @@ pub(super) const SWAPS_REFITTED: usize = 3;
 
 /// How far above the accepted fit (in likelihood ratio) an alternative's short refit may end and
 /// still be refitted in full: a short refit stops before its end, and the full one may end where
-/// the data cannot tell it from the accepted effect. Blind seed 3923: SDE 29's missing stiffness
-/// along its axis 2 (7131 N/µm), accepted as a spring between the knee and the lower saddle at
-/// the noise level; the truth's own form, with one parameter fewer, refits to a criterion 3.0
-/// above the answer's: within the margin, so the SDE's direction is listed beside the spring.
+/// the data cannot tell it from the accepted effect: an SDE's missing stiffness accepted as a
+/// spring between the same two bodies at the noise level, whose own form (one parameter fewer)
+/// refits to a criterion a few units above the answer's, is within the margin and is listed
+/// beside the spring.
 pub(super) const LOOK_ALIKE_WINDOW: f64 = 2.0 * EQUIVALENT_LR;
 
 /// The significance level at which an alternative's size must stand from its nested value (its
 /// 95 % interval excludes it). Not the round's (Bonferroni over a thousand candidates): the
 /// alternative replaces an effect already significant at that level, and what the swap decides
 /// is which of the two forms the data prefer. The Cramér-Rao interval of a stiffness is a poor
-/// guide to a large one (blind seed 3663: SDE 12's missing stiffness about its axis 1,
-/// 3.4e8 ± 0.87e8 N·m/rad, 3.9 standard errors, where its LR against the fit without it is
-/// above 120).
+/// guide to a large one: an SDE's missing moment stiffness can stand only about 4 standard
+/// errors from zero where its LR against the fit without it is above 100 (the likelihood is far
+/// from quadratic in a large stiffness).
 pub(super) const SWAP_LEVEL: f64 = 0.05;
 
 /// Each accepted effect not yet in `tried` (by description; each is then added to it) replaced,
@@ -52,10 +52,9 @@ pub(super) const SWAP_LEVEL: f64 = 0.05;
 /// A swap replaces the effect in place, in `accepted` and in `cur` (recorded in
 /// `round.replaced`). Whether any effect was replaced.
 ///
-/// Blind seed 3818: SDE 12's missing stiffness along its axis 2 (1518 N/µm) was accepted as a
-/// spring between the column and the knee along the exciter's direction, J 97.2 → 50.9, at the
-/// noise level (χ² p 0.25); the SDE's direction itself was never refitted, and refitted it ends
-/// at J 46.0 with one parameter fewer.
+/// The case it is for: an SDE's missing stiffness along one of its axes accepted as a spring
+/// between the same two bodies, at the noise level; the SDE's direction itself was never
+/// refitted in its round, and refitted it ends lower, with one parameter fewer.
 pub(super) fn swap_accepted(
     setting: Setting,
     level: Level,
