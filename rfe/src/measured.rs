@@ -105,7 +105,7 @@ impl Measurement {
     }
 
     /// [`Characteristic::reference`] of this measurement in `model`: 0 for none, `u8::MAX` for a
-    /// name the model does not have (which no output carries; [`crate::identification::data::validate`]
+    /// name the model does not have (which no output carries; `identify::data::validate`
     /// says so).
     pub fn reference_index(&self, model: &crate::Model) -> u8 {
         match &self.reference {

@@ -95,7 +95,7 @@ pub fn sde_table<'a>(
 }
 
 /// Writes the parameters `params` of `law` into an `[[sde]]` table, each in the convention of
-/// the key it replaces (see [`update_toml`]).
+/// the key it replaces (as `identify::report::update_toml` writes an identification).
 pub fn write_params(table: &mut toml_edit::Table, law: &SdeLaw, params: &[ParamName]) {
     for &p in params {
         let value = law.get(p).unwrap_or(0.0);
