@@ -184,10 +184,19 @@ impl GeneratorExciter {
                 tokio::time::sleep_until(t + RAMP_TICK.div_f64(self.speed)).await;
             }
         }
-        let set = self.gen.set_amplitude(v).await?;
+        let result = self.gen.set_amplitude(v).await;
         if self.on {
             self.last_change = Some(tokio::time::Instant::now());
         }
+        let set = match result {
+            Ok(set) => set,
+            Err(e) => {
+                // The instrument may have taken the value before it failed (an error-queue entry,
+                // a lost confirmation): a ramp-down starts from the higher of the two.
+                self.volts = self.volts.max(v);
+                return Err(e.into());
+            }
+        };
         self.volts = set;
         self.settings += 1;
         self.record(DriveKind::Amplitude, None);

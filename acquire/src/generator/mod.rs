@@ -239,6 +239,16 @@ pub enum GeneratorError {
         /// The accepted deviation.
         tolerance: f64,
     },
+    /// A setting was sent but the instrument did not confirm it (`*OPC?` unanswered).
+    #[error("signal generator {instrument}: `{command}` was sent but not confirmed: {source}")]
+    Unconfirmed {
+        /// Port and identity.
+        instrument: String,
+        /// The setting.
+        command: String,
+        /// What happened to the confirmation.
+        source: Box<GeneratorError>,
+    },
     /// The connection dropped while a setting was being sent; it was reopened and the setting
     /// sent again, and then this happened.
     #[error("signal generator {instrument}: the connection dropped while `{command}` was being sent and was reopened; sending it again: {source}")]

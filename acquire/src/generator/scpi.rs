@@ -229,7 +229,14 @@ impl ScpiGenerator {
 
     /// `*OPC?` answers `1`, then the error queue is empty; errors are blamed on `command`.
     async fn confirmed(&mut self, command: &str) -> Result<(), GeneratorError> {
-        let opc = self.query("*OPC?").await?;
+        let opc = self.query("*OPC?").await.map_err(|e| match e {
+            GeneratorError::Timeout { .. } => GeneratorError::Unconfirmed {
+                instrument: self.instrument.clone(),
+                command: command.to_string(),
+                source: Box::new(e),
+            },
+            e => e,
+        })?;
         if opc.trim().trim_start_matches('+') != "1" {
             return Err(self.garbled("*OPC?", opc));
         }
