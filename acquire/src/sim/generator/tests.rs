@@ -182,7 +182,9 @@ fn the_error_queue_overflows_into_350_as_the_standard_says() {
             garbage: false,
         });
     }
-    let entries: Vec<String> = (0..11).map(|_| answer(&g, "SYST:ERR?")).collect();
+    let entries: Vec<String> = (0..11)
+        .map(|_| g.apply("SYST:ERR?").unwrap().unwrap())
+        .collect();
     assert_eq!(entries[0], "-113,\"Undefined header\"");
     assert_eq!(entries[9], "-350,\"Queue overflow\"");
     assert_eq!(entries[10], "+0,\"No error\"");
@@ -247,4 +249,46 @@ async fn the_driver_runs_clean_against_the_tektronix_afg31022() {
 #[tokio::test]
 async fn the_driver_runs_clean_against_the_plain_generator() {
     driver_runs_clean_against(Emulation::plain()).await;
+}
+
+#[tokio::test]
+async fn an_upload_cut_by_a_dropped_connection_is_sent_again_whole() {
+    // The connection closes as the 33522B receives the upload: the driver reopens it, finds the
+    // waveform missing when it selects it, and repeats the whole sequence on the new connection.
+    let mut sim = generator(&Emulation::keysight_33522b());
+    sim.setup.faults.drop_before = Some(CommandMatch {
+        contains: "DATA:ARBitrary:DAC".into(),
+        nth: 1,
+    });
+    let connect = |sim: &SimGenerator| -> Box<dyn crate::transport::Transport> {
+        let (host, dev) = MemoryTransport::pair("gen", "gen-dev", 1 << 20);
+        let served = sim.clone();
+        tokio::spawn(async move { served.serve(dev, false).await });
+        Box::new(host)
+    };
+    let first = connect(&sim);
+    let mut spare = Some(connect(&sim));
+    let mut g = ScpiGenerator::new(first, GeneratorOptions::default()).with_reconnect(Box::new(
+        move || {
+            let next = spare.take();
+            Box::pin(async move {
+                next.ok_or_else(|| crate::transport::TransportError::Socket {
+                    port: "mem:gen".into(),
+                    detail: "no more connections".into(),
+                })
+            })
+        },
+    ));
+    g.identify().await.unwrap();
+    g.prepare_sine().await.unwrap();
+    let samples: Vec<f64> = (0..512).map(|i| ((i % 64) as f64 / 32.0) - 1.0).collect();
+    let codes = g.play_arbitrary(&samples, 5120.0).await.unwrap();
+    assert_eq!(codes.len(), 512);
+    let kinds: Vec<&str> = lock(&sim.shared).injected.iter().map(|f| f.kind).collect();
+    assert_eq!(kinds, ["generator_drop_before"]);
+    let st = sim.state();
+    let (name, played) = st.uploaded.clone().unwrap();
+    assert_eq!((name.as_str(), played.samples.len()), ("IDENT", 512));
+    assert_eq!(st.selected.as_deref(), Some("IDENT"));
+    assert!(st.arbitrary && (st.sample_rate_hz - 5120.0).abs() < 1e-9);
 }
