@@ -150,7 +150,10 @@ impl Dictionary {
     /// - more than 8 entries or 64 bits: 0x06040042; an entry that is not mappable or whose
     ///   length is not its object's: 0x06040041; an entry naming no object: 0x06020000.
     fn check_tpdo_write(&self, a: Address, value: &[u8]) -> Result<(), AbortCode> {
-        let (comm, map) = ((0x1800..0x1A00).contains(&a.index), (0x1A00..0x1C00).contains(&a.index));
+        let (comm, map) = (
+            (0x1800..0x1A00).contains(&a.index),
+            (0x1A00..0x1C00).contains(&a.index),
+        );
         if !(comm || map) {
             return Ok(());
         }
@@ -189,7 +192,8 @@ impl Dictionary {
         match self.values.get(&target) {
             _ if m == 0 => Ok(()),
             Some(t)
-                if t.pdo_mappable && t.data_type.size().is_some_and(|s| s as u32 * 8 == m & 0xFF) =>
+                if t.pdo_mappable
+                    && t.data_type.size().is_some_and(|s| s as u32 * 8 == m & 0xFF) =>
             {
                 Ok(())
             }
@@ -266,8 +270,12 @@ impl SimCanOpenNode {
         stop: tokio::sync::oneshot::Receiver<()>,
     ) -> Result<SimNodeStats, CanError> {
         let mut run = NodeRun::new(&self);
-        run.send(&mut *link, cob(HEARTBEAT_BASE, self.node_id), &[NmtState::BootUp.code()])
-            .await?;
+        run.send(
+            &mut *link,
+            cob(HEARTBEAT_BASE, self.node_id),
+            &[NmtState::BootUp.code()],
+        )
+        .await?;
         tokio::pin!(stop);
         loop {
             let hb_ms = run.heartbeat_ms();
@@ -386,8 +394,12 @@ impl<'a> NodeRun<'a> {
                 }
                 self.server = SdoServer::default();
                 self.od.state = NmtState::PreOperational;
-                self.send(link, cob(HEARTBEAT_BASE, self.node), &[NmtState::BootUp.code()])
-                    .await?;
+                self.send(
+                    link,
+                    cob(HEARTBEAT_BASE, self.node),
+                    &[NmtState::BootUp.code()],
+                )
+                .await?;
                 self.next_hb = Instant::now();
             }
             None => {}
@@ -403,7 +415,8 @@ impl<'a> NodeRun<'a> {
         }
         self.stats.sdo_requests += 1;
         if let Some(answer) = self.server.handle(d, &mut self.od) {
-            self.send(link, cob(SDO_TX_BASE, self.node), &answer).await?;
+            self.send(link, cob(SDO_TX_BASE, self.node), &answer)
+                .await?;
         }
         if self.heartbeat_ms() != hb_ms {
             self.next_hb = Instant::now();
@@ -431,8 +444,12 @@ impl<'a> NodeRun<'a> {
             if at == self.total_syncs {
                 self.od.set(Address::new(0x1001, 0), &[0x01]);
                 let c = code.to_le_bytes();
-                self.send(link, cob(EMCY_BASE, self.node), &[c[0], c[1], 0x01, 0, 0, 0, 0, 0])
-                    .await?;
+                self.send(
+                    link,
+                    cob(EMCY_BASE, self.node),
+                    &[c[0], c[1], 0x01, 0, 0, 0, 0, 0],
+                )
+                .await?;
             }
         }
         self.sample_inputs(signal);

@@ -375,9 +375,17 @@ mod tests {
     fn limits_name_what_is_exceeded() {
         let d = dialect(DataFormat::BinaryBlock, ByteOrder::Little, 0, 16383);
         assert!(d.check(4096, 5120.0).is_ok());
-        assert!(d.check(20000, 5120.0).unwrap_err().to_string().contains("8..16384"));
+        assert!(d
+            .check(20000, 5120.0)
+            .unwrap_err()
+            .to_string()
+            .contains("8..16384"));
         assert!(d.check(4, 5120.0).is_err());
-        assert!(d.check(4096, 1e9).unwrap_err().to_string().contains("60000000"));
+        assert!(d
+            .check(4096, 1e9)
+            .unwrap_err()
+            .to_string()
+            .contains("60000000"));
     }
 
     #[test]

@@ -192,8 +192,14 @@ mod tests {
         assert_eq!(k.idle_peak(Load::HighImpedance).unwrap(), 0.001);
         assert_eq!(k.idle_peak(Load::FiftyOhm).unwrap(), 0.0005);
         // The old idle amplitude (1 mVpp) is refused at a high impedance, as the instrument does.
-        let e = k.amplitude_to_send(0.0005, Load::HighImpedance).unwrap_err();
-        assert!(e.to_string().contains("0.002..20 Vpp into a high impedance"), "{e}");
+        let e = k
+            .amplitude_to_send(0.0005, Load::HighImpedance)
+            .unwrap_err();
+        assert!(
+            e.to_string()
+                .contains("0.002..20 Vpp into a high impedance"),
+            "{e}"
+        );
         assert!(k.amplitude_to_send(0.0005, Load::FiftyOhm).is_ok());
         assert!(k.amplitude_to_send(10.0, Load::HighImpedance).is_ok());
         assert!(k.amplitude_to_send(10.01, Load::HighImpedance).is_err());
@@ -218,6 +224,9 @@ mod tests {
         let mut k = keysight();
         k.amplitude_high_z_vpp = None;
         let e = k.idle_peak(Load::HighImpedance).unwrap_err().to_string();
-        assert!(e.contains("no `amplitude_high_z_vpp`") && e.contains("data sheet"), "{e}");
+        assert!(
+            e.contains("no `amplitude_high_z_vpp`") && e.contains("data sheet"),
+            "{e}"
+        );
     }
 }

@@ -288,15 +288,20 @@ impl ScpiGenerator {
             Ok(g) if self.reconnects == before => g,
             _ => {
                 self.set(line).await?;
-                self.query(query).await.map_err(|e| GeneratorError::AfterReconnect {
-                    instrument: self.instrument.clone(),
-                    command: line.to_string(),
-                    source: Box::new(e),
-                })?
+                self.query(query)
+                    .await
+                    .map_err(|e| GeneratorError::AfterReconnect {
+                        instrument: self.instrument.clone(),
+                        command: line.to_string(),
+                        source: Box::new(e),
+                    })?
             }
         };
+        // Within the resolution, or within half a unit of the answer's last printed digit (an
+        // instrument may print fewer digits than it keeps).
+        let printed = 0.5 * last_digit(got.trim()) * (1.0 + 1e-9);
         match got.trim().parse::<f64>() {
-            Ok(v) if (v - sent).abs() <= tolerance => Ok(()),
+            Ok(v) if (v - sent).abs() <= tolerance.max(printed) => Ok(()),
             _ => Err(GeneratorError::ReadBack {
                 instrument: self.instrument.clone(),
                 command: line.to_string(),
@@ -383,10 +388,7 @@ impl ScpiGenerator {
 
     /// The command table for `id`: the stand's named one, or the built-in one for its model,
     /// with the stand's overrides; its name and arbitrary-waveform upload.
-    fn choose_dialect(
-        &self,
-        id: &DeviceIdentity,
-    ) -> Result<ChosenTable, GeneratorError> {
+    fn choose_dialect(&self, id: &DeviceIdentity) -> Result<ChosenTable, GeneratorError> {
         let known = || dialect::known_names().join(", ");
         let base = match &self.opts.dialect {
             Some(name) => {
@@ -417,6 +419,20 @@ struct ChosenTable {
     name: String,
     arbitrary: Option<ArbitraryDialect>,
     limits: Option<ModelLimits>,
+}
+
+/// The value of one unit in the last digit a number is printed with (`5.4288E+01` → 0.001,
+/// `120.5` → 0.1, `50` → 1); 0 for what is not a number.
+fn last_digit(answer: &str) -> f64 {
+    let (mantissa, exponent) = match answer.split_once(['E', 'e']) {
+        Some((m, e)) => (m, e.trim_start_matches('+').parse::<i32>().unwrap_or(0)),
+        None => (answer, 0),
+    };
+    if mantissa.parse::<f64>().is_err() {
+        return 0.0;
+    }
+    let decimals = mantissa.split_once('.').map_or(0, |(_, d)| d.len()) as i32;
+    10f64.powi(exponent - decimals)
 }
 
 /// The query that reads back what a setting template sets: its header with `?`
@@ -471,9 +487,11 @@ impl Generator for ScpiGenerator {
         let hz = limits.frequency(hz).map_err(|e| self.out_of_limits(e))?;
         let tolerance = limits.frequency_tolerance(hz);
         let ch = self.opts.channel;
-        let line = dialect::fill(&d.frequency, ch, &dialect::number(hz));
+        let text = dialect::number(hz);
+        let sent = text.parse().unwrap_or(hz);
+        let line = dialect::fill(&d.frequency, ch, &text);
         let query = query_of(&d.frequency, ch);
-        self.set_and_verify(&line, &query, hz, tolerance).await
+        self.set_and_verify(&line, &query, sent, tolerance).await
     }
 
     async fn set_amplitude(&mut self, volts_peak: f64) -> Result<f64, GeneratorError> {
@@ -486,9 +504,11 @@ impl Generator for ScpiGenerator {
         let value = d.unit.from_peak(peak);
         let tolerance = limits.amplitude_tolerance(value);
         let ch = self.opts.channel;
-        let line = dialect::fill(&d.amplitude, ch, &dialect::number(value));
+        let text = dialect::number(value);
+        let sent = text.parse().unwrap_or(value);
+        let line = dialect::fill(&d.amplitude, ch, &text);
         let query = query_of(&d.amplitude, ch);
-        self.set_and_verify(&line, &query, value, tolerance).await?;
+        self.set_and_verify(&line, &query, sent, tolerance).await?;
         Ok(peak)
     }
 
@@ -619,6 +639,21 @@ impl ScpiGenerator {
 
 #[cfg(test)]
 mod tests;
+
+#[cfg(test)]
+mod read_back_tests {
+    use super::last_digit;
+
+    #[test]
+    fn the_last_printed_digit_of_each_manuals_number_form() {
+        assert!((last_digit("+1.20500000000000E+02") - 1e-12).abs() < 1e-24);
+        assert!((last_digit("5.4288E+01") - 1e-3).abs() < 1e-15);
+        assert!((last_digit("5.428835E+01") - 1e-5).abs() < 1e-18);
+        assert_eq!(last_digit("120.5"), 0.1);
+        assert_eq!(last_digit("50"), 1.0);
+        assert_eq!(last_digit("ON"), 0.0);
+    }
+}
 
 #[cfg(test)]
 mod arbitrary_tests;

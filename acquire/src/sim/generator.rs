@@ -194,8 +194,7 @@ pub struct SimGenerator {
 impl SimGenerator {
     pub(super) fn new(setup: SimGeneratorSetup, shared: SharedRef) -> SimGenerator {
         let id = &setup.identity;
-        let mut emulation =
-            Emulation::for_identity(&format!("{},{}", id.manufacturer, id.model));
+        let mut emulation = Emulation::for_identity(&format!("{},{}", id.manufacturer, id.model));
         // The stand's own channel count when a plain generator is told to use more.
         emulation.channels = emulation.channels.max(setup.channel);
         SimGenerator {
@@ -316,7 +315,9 @@ impl SimGenerator {
             return Disposition::Apply;
         };
         let seq = self.lock_state().log.len() as u64;
-        lock(&self.shared).injected.push(InjectedFault { kind, seq });
+        lock(&self.shared)
+            .injected
+            .push(InjectedFault { kind, seq });
         d
     }
 
@@ -358,8 +359,7 @@ impl SimGenerator {
     fn header(&self, text: &str) -> Result<header::Header, ScpiFault> {
         let h = canonical(text)?;
         let e = &self.emulation;
-        if h
-            .optional
+        if h.optional
             .iter()
             .any(|n| !matches!(*n, "SOURCE" | "NEXT") && !e.optional_nodes.contains(n))
         {
@@ -403,10 +403,17 @@ impl SimGenerator {
                 (name, h.channel, words(block, !swapped, true)?)
             }
             (Upload::RigolDac16, ["TRAC", "DATA", "DAC16"]) => {
-                if args.len() != 3 || args[0] != "VOLATILE" || !matches!(args[1].as_str(), "END" | "CON") {
+                if args.len() != 3
+                    || args[0] != "VOLATILE"
+                    || !matches!(args[1].as_str(), "END" | "CON")
+                {
                     return Err((-109, "Missing parameter;VOLATILE,END,<block>".into()));
                 }
-                ("VOLATILE".to_string(), h.channel, words(block, false, false)?)
+                (
+                    "VOLATILE".to_string(),
+                    h.channel,
+                    words(block, false, false)?,
+                )
             }
             (Upload::TektronixEmem, ["TRAC", "DATA"]) => {
                 let channel = match args.first().map(String::as_str) {
@@ -414,7 +421,11 @@ impl SimGenerator {
                     Some("EMEMORY2" | "EMEM2") => 2,
                     _ => return Err((-224, "Illegal parameter value".into())),
                 };
-                (format!("EMEMORY{channel}"), channel, words(block, true, false)?)
+                (
+                    format!("EMEMORY{channel}"),
+                    channel,
+                    words(block, true, false)?,
+                )
             }
             _ => return Err(undefined()),
         };
@@ -430,7 +441,10 @@ impl SimGenerator {
         if codes.len() < min_points {
             return Err(self.out_of_range());
         }
-        if codes.iter().any(|&c| (f64::from(c) - mid).abs() > full_scale) {
+        if codes
+            .iter()
+            .any(|&c| (f64::from(c) - mid).abs() > full_scale)
+        {
             return Err(self.out_of_range());
         }
         if channel != self.setup.channel {

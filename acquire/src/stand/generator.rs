@@ -213,7 +213,10 @@ fn check_model_range(
     let ([_, hi], source) = range.map_err(|e| {
         cx.at(
             rg.span(),
-            format!("the generator's command table `{}` ({from}): {e}", entry.name),
+            format!(
+                "the generator's command table `{}` ({from}): {e}",
+                entry.name
+            ),
         )
     })?;
     let limit = g.amplifier.voltage_limit_v;

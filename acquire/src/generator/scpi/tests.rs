@@ -188,7 +188,10 @@ async fn tektronix_afg31022_in_vrms_with_two_queued_errors() {
         ("SOURce1:VOLTage:LEVel:IMMediate:AMPLitude 1.414214", &[]),
         ("*OPC?", OK_K),
         (e, NOERR),
-        ("SOURce1:VOLTage:LEVel:IMMediate:AMPLitude?", &["1.4142E+00"]),
+        (
+            "SOURce1:VOLTage:LEVel:IMMediate:AMPLitude?",
+            &["1.4142E+00"],
+        ),
         ("OUTPut1:STATe ON", &[]),
         ("*OPC?", OK_K),
         (e, &["-221,\"Settings conflict; amplitude\""]),
@@ -357,7 +360,9 @@ fn dropping_connection() -> Box<dyn Transport> {
         let mut buf = vec![0u8; 256];
         let mut seen = String::new();
         loop {
-            let Ok(n) = dev.read(&mut buf).await else { return };
+            let Ok(n) = dev.read(&mut buf).await else {
+                return;
+            };
             if n == 0 {
                 return;
             }
@@ -403,7 +408,8 @@ async fn a_setting_lost_with_the_connection_is_sent_again_and_read_back() {
         &["+1.20000000000000E+02"],
     ));
     let (io2, dev) = instrument(script.clone());
-    let mut g = ScpiGenerator::new(dropping_connection(), opts()).with_reconnect(reconnect_once(io2));
+    let mut g =
+        ScpiGenerator::new(dropping_connection(), opts()).with_reconnect(reconnect_once(io2));
     g.identify().await.unwrap();
     g.set_frequency(120.0).await.unwrap();
     drop(g);
@@ -424,11 +430,15 @@ async fn an_error_after_a_dropped_connection_says_the_connection_dropped() {
         (e, NOERR_K),
     ];
     let (io2, _dev) = instrument(script);
-    let mut g = ScpiGenerator::new(dropping_connection(), opts()).with_reconnect(reconnect_once(io2));
+    let mut g =
+        ScpiGenerator::new(dropping_connection(), opts()).with_reconnect(reconnect_once(io2));
     g.identify().await.unwrap();
     let err = g.set_frequency(120.0).await.unwrap_err();
     let msg = err.to_string();
-    assert!(matches!(err, GeneratorError::AfterReconnect { .. }), "{msg}");
+    assert!(
+        matches!(err, GeneratorError::AfterReconnect { .. }),
+        "{msg}"
+    );
     assert!(
         msg.contains("connection dropped while `SOURce1:FREQuency 120` was being sent"),
         "{msg}"
@@ -439,10 +449,7 @@ async fn an_error_after_a_dropped_connection_says_the_connection_dropped() {
 #[tokio::test]
 async fn a_setting_that_does_not_read_back_is_an_error() {
     let e = "SYSTem:ERRor?";
-    let mut script: Vec<Exchange> = vec![(
-        "*IDN?",
-        &["Keysight Technologies,33512B,MY1,1.0"],
-    )];
+    let mut script: Vec<Exchange> = vec![("*IDN?", &["Keysight Technologies,33512B,MY1,1.0"])];
     script.extend(read_back(
         "SOURce1:FREQuency 120",
         e,
@@ -455,5 +462,8 @@ async fn a_setting_that_does_not_read_back_is_an_error() {
     g.identify().await.unwrap();
     let err = g.set_frequency(120.0).await.unwrap_err();
     assert!(matches!(err, GeneratorError::ReadBack { .. }), "{err}");
-    assert!(err.to_string().contains("`SOURce1:FREQuency?` reads back"), "{err}");
+    assert!(
+        err.to_string().contains("`SOURce1:FREQuency?` reads back"),
+        "{err}"
+    );
 }

@@ -131,7 +131,15 @@ const PLAIN_FUNCTIONS: &[(&str, &str)] = &[
 
 /// The optional nodes the Tektronix and Rigol manuals list (`VOLTage[:LEVel][:IMMediate]
 /// [:AMPLitude]`, `FREQuency[:FIXed]`, `FUNCtion[:SHAPe]`, `OUTPut[:STATe]`).
-const LEVEL_NODES: &[&str] = &["LEVEL", "IMMEDIATE", "AMPLITUDE", "FIXED", "SHAPE", "STATE", "CW"];
+const LEVEL_NODES: &[&str] = &[
+    "LEVEL",
+    "IMMEDIATE",
+    "AMPLITUDE",
+    "FIXED",
+    "SHAPE",
+    "STATE",
+    "CW",
+];
 
 impl Emulation {
     /// Keysight 33522B (two channels, 30 MHz): the 33500B Series Operating and Service Guide and
@@ -359,7 +367,10 @@ mod tests {
         assert_eq!(r.number(120.5), "1.205000E+02");
         assert_eq!(r.state(true), "ON");
         assert_eq!(r.error_entry(0, "No error"), "0,\"No error\"");
-        assert_eq!(Emulation::tektronix_afg31022().number(9.99996), "1.0000E+01");
+        assert_eq!(
+            Emulation::tektronix_afg31022().number(9.99996),
+            "1.0000E+01"
+        );
         for e in Emulation::all() {
             for x in [1e-6, 0.002, 3.5, 120.5, 2.5e7] {
                 let back: f64 = e.number(x).parse().unwrap();
@@ -374,12 +385,18 @@ mod tests {
         assert_eq!(k.function("ARB"), Some("ARB"));
         assert_eq!(k.function("ARBitrary"), None);
         assert_eq!(k.function("sinusoid"), Some("SINUSOID"));
-        assert_eq!(Emulation::tektronix_afg31022().function("EMEM1"), Some("EMEMORY1"));
+        assert_eq!(
+            Emulation::tektronix_afg31022().function("EMEM1"),
+            Some("EMEMORY1")
+        );
         assert_eq!(
             Emulation::for_identity("Keysight Technologies,33522B").model,
             "33522B"
         );
-        assert_eq!(Emulation::for_identity("IDENT-SIM,SIGGEN-2").model, "SIGGEN-2");
+        assert_eq!(
+            Emulation::for_identity("IDENT-SIM,SIGGEN-2").model,
+            "SIGGEN-2"
+        );
         assert_eq!(Emulation::for_identity("").model, "SIGGEN-2");
         assert_eq!(k.amplitude_vpp(true), (0.002, 20.0));
     }

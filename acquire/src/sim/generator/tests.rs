@@ -202,7 +202,12 @@ async fn driver_runs_clean_against(e: Emulation) {
     let id = g.identify().await.unwrap();
     assert_eq!(id.model, e.model);
     g.prepare_sine().await.unwrap();
-    assert_eq!(sim.state().volts_peak, 0.001, "{}: idles at 2 mVpp", e.model);
+    assert_eq!(
+        sim.state().volts_peak,
+        0.001,
+        "{}: idles at 2 mVpp",
+        e.model
+    );
     g.set_frequency(123.4).await.unwrap();
     assert_eq!(g.set_amplitude(2.5).await.unwrap(), 2.5);
     g.set_output(true).await.unwrap();
@@ -219,7 +224,11 @@ async fn driver_runs_clean_against(e: Emulation) {
     let (_, played) = st.uploaded.clone().unwrap();
     assert_eq!(played.samples.len(), 1000, "{}", e.model);
     assert!((played.sample_rate_hz - 5120.0).abs() < 1e-6, "{}", e.model);
-    assert!(st.arbitrary && st.selected.is_some(), "{}: selected", e.model);
+    assert!(
+        st.arbitrary && st.selected.is_some(),
+        "{}: selected",
+        e.model
+    );
     let worst = samples
         .iter()
         .zip(&played.samples)
