@@ -214,7 +214,7 @@ impl GeneratorExciter {
                 GeneratorError::Limits {
                     instrument: self.port.clone(),
                     model: self.gen.model_name().to_string(),
-                    source,
+                    source: Box::new(source),
                 }
                 .into()
             })
@@ -251,10 +251,10 @@ impl GeneratorExciter {
             return Err(GeneratorError::Limits {
                 instrument: self.port.clone(),
                 model,
-                source: super::limits::LimitError::NoRange {
+                source: Box::new(super::limits::LimitError::NoRange {
                     field: "amplitude_high_z_vpp",
                     load: "into a high impedance",
-                },
+                }),
             }
             .into());
         };
@@ -262,7 +262,7 @@ impl GeneratorExciter {
             GeneratorError::Limits {
                 instrument: self.port.clone(),
                 model: model.clone(),
-                source: e,
+                source: Box::new(e),
             }
             .into()
         };

@@ -221,7 +221,7 @@ pub enum GeneratorError {
         /// The command table's name.
         model: String,
         /// What is outside which range.
-        source: limits::LimitError,
+        source: Box<limits::LimitError>,
     },
     /// A setting the instrument accepted reads back as something else.
     #[error("signal generator {instrument}: `{command}` was accepted, but `{query}` reads back {got:?} where {sent} was sent (resolution {tolerance}); the setting did not take: check the command table (dialect) and the generator's front panel (remote lock, another controller)")]

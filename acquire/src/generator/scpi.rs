@@ -318,10 +318,10 @@ impl ScpiGenerator {
         self.limits.as_ref().ok_or_else(|| GeneratorError::Limits {
             instrument: self.instrument.clone(),
             model: self.model.clone(),
-            source: super::limits::LimitError::NoRange {
+            source: Box::new(super::limits::LimitError::NoRange {
                 field: "[model.limits]",
                 load: "or any other range",
-            },
+            }),
         })
     }
 
@@ -329,7 +329,7 @@ impl ScpiGenerator {
         GeneratorError::Limits {
             instrument: self.instrument.clone(),
             model: self.model.clone(),
-            source,
+            source: Box::new(source),
         }
     }
 
