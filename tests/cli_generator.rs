@@ -60,7 +60,9 @@ fn demo_through_the_generator_stand_finds_the_actuator() {
             s.frequency_hz,
             s.force_amplitude_n
         );
-        assert!(s.generator_settings.unwrap() >= 2, "{s:?}");
+        // The frequency, and an amplitude when the drive changes on the generator's grid
+        // (0.1 mVpp): a line whose drive rounds to the previous one needs none.
+        assert!(s.generator_settings.unwrap() >= 1, "{s:?}");
     }
     assert!(drive.iter().all(|d| d.volts_peak <= 8.0));
     assert_eq!(

@@ -40,6 +40,19 @@ pub enum RigError {
     /// The DAQ's CAN interface could not be opened.
     #[error(transparent)]
     Can(#[from] crate::can::CanError),
+    /// The DAQ refused the stand file's channels (an input it does not have): found when the
+    /// stream is configured, before the drive is switched on.
+    #[error("{file}: the DAQ ({identity}) has no input for the stand's channels {channels}: {source}; fix `device_channel` of the [[channel]] sections to the DAQ's inputs (and give their number as daq.inputs, so the stand file is checked when it is read)")]
+    Channels {
+        /// Stand file.
+        file: String,
+        /// The DAQ's identity.
+        identity: String,
+        /// The channels asked for, `name = device_channel`.
+        channels: String,
+        /// The DAQ's refusal.
+        source: DaqError,
+    },
 }
 
 /// Opens a generator stand's signal generator (serial port or raw TCP socket, every byte tapped
@@ -107,6 +120,27 @@ fn open_generator(
             }
         })
     })
+}
+
+/// A configure refusal that names an input (`-224`, "no input"): the stand file's channels,
+/// named; any other error as it is.
+fn channels_refused(stand: &Stand, identity: &DeviceIdentity, e: DaqError) -> RigError {
+    match &e {
+        DaqError::Rejected { code: -224, .. } | DaqError::Announcement { .. } => {
+            let channels: Vec<String> = stand
+                .channels
+                .iter()
+                .map(|c| format!("{} = {}", c.name, c.device_channel))
+                .collect();
+            RigError::Channels {
+                file: stand.file.clone(),
+                identity: identity.to_idn(),
+                channels: channels.join(", "),
+                source: e,
+            }
+        }
+        _ => e.into(),
+    }
 }
 
 /// A connected stand.
@@ -258,8 +292,13 @@ impl Rig {
                 })?;
             }
         }
+        // The DAQ's inputs are checked (the stream configured) before the exciter is prepared,
+        // so that a wrong channel number stops the run before anything drives the structure.
+        let stream = daq
+            .configure(&stand.daq_config())
+            .await
+            .map_err(|e| channels_refused(stand, &daq_identity, e))?;
         shaker.reset().await?;
-        let stream = daq.configure(&stand.daq_config()).await?;
         if let Some(s) = session {
             s.record(&DaqStreamRecord {
                 port: daq.port().to_string(),

@@ -1,7 +1,11 @@
 //! Force control through a SCPI signal generator and a power amplifier on the simulated stand,
 //! over a local TCP socket and over a pseudo-terminal: every line's force within the amplifier's
-//! tolerance, the ramp and limits held, an amplifier trip and an over-force ending with the
-//! generator's output off and a complete session; bad stand files named by field.
+//! tolerance, the ramp rate held on the generator's timestamped log, the limits held; the
+//! stepped sine against each emulated instrument (Keysight 33522B, Rigol DG1062Z, Tektronix
+//! AFG31022) with no command refused; faults — an amplifier trip, an over-force, a dropped
+//! connection before and after a setting, an error-queue entry mid-ramp, an instrument that stops
+//! answering — ending with the generator's output off and a complete session; bad stand files
+//! named by field.
 
 // Test helpers unwrap: a panic with its message is the failure report.
 #![allow(clippy::unwrap_used)]
@@ -11,11 +15,12 @@ mod util;
 use std::collections::BTreeSet;
 use std::path::Path;
 
-use acquire::generator::exciter::IDLE_V;
+use acquire::generator::dialect;
+use acquire::generator::limits::Load;
 use acquire::session;
 use acquire::session::records::{DriveKind, DriveRecord, SweepEvent};
-use acquire::sim::generator::GeneratorState;
-use acquire::sim::SimStand;
+use acquire::sim::generator::{CommandMatch, GeneratorFaults, GeneratorState};
+use acquire::sim::{SimSetup, SimStand};
 use acquire::stand::{GeneratorAddress, Stand};
 use acquire::sweep::{self, FrequencyList, NoProgress, StepResult, SteppedSine, StopSignal};
 use util::*;
@@ -46,6 +51,16 @@ fn plan(n: usize) -> SteppedSine {
     }
 }
 
+/// The plain simulated generator's idle amplitude (V peak): its smallest into a high impedance.
+fn idle_v() -> f64 {
+    let l = dialect::by_name("IDENT-SIM SIGGEN")
+        .unwrap()
+        .unwrap()
+        .limits
+        .unwrap();
+    l.idle_peak(Load::HighImpedance).unwrap()
+}
+
 /// Runs `plan` on `stand`'s simulated generator stand into `path`; returns the sweep's result
 /// (as text on error), the generator's final state and the stand's injected faults.
 async fn run(
@@ -72,7 +87,24 @@ async fn run_over(
     GeneratorState,
     Vec<&'static str>,
 ) {
-    let sim = SimStand::start(stand).unwrap();
+    run_with(stand, plan, path, usbtmc, GeneratorFaults::default()).await
+}
+
+/// [`run_over`] with the simulated generator's connection and instrument `faults`.
+async fn run_with(
+    stand: &Stand,
+    plan: &SteppedSine,
+    path: &Path,
+    usbtmc: bool,
+    faults: GeneratorFaults,
+) -> (
+    Result<sweep::SweepOutcome, String>,
+    GeneratorState,
+    Vec<&'static str>,
+) {
+    let mut setup = SimSetup::from_stand(stand).unwrap();
+    setup.generator.as_mut().unwrap().device.faults = faults;
+    let sim = SimStand::start_with(setup).unwrap();
     let mut bound = sim.bind(stand);
     if usbtmc {
         let g = bound.generator.as_mut().unwrap();
@@ -94,31 +126,52 @@ async fn run_over(
     (r, state, injected)
 }
 
-/// Checks the ramp: while the output was on, no amplitude setting rose by more than one ramp step.
+/// Checks the ramp on the generator's timestamped log: the output was switched on at the idle
+/// amplitude only, and while it was on every amplitude change moved by at most `ramp_rate` ×
+/// the stand time since the previous change (or the switch-on) — on every path: switch-on, between
+/// lines, corrections, ramp-down, abort. Stand time is wall-clock time × the stand's speed.
 fn assert_ramp_respected(stand: &Stand, state: &GeneratorState) {
     let amp = &stand.generator.as_ref().unwrap().amplifier;
     let step = amp.ramp_step_v();
+    let speed = stand.truth.as_ref().map_or(1.0, |t| t.speed);
+    // One amplitude step of the instrument (0.1 mVpp): what its rounding may add.
+    let quantum = 0.5e-4 + 1e-9;
     let mut last: Option<f64> = None;
+    let mut changed_at: Option<std::time::Duration> = None;
     let mut on = false;
     let mut ramps = 0;
+    let mut fastest: f64 = 0.0;
     for a in &state.log {
         match a.what {
             "output" => {
                 // Switched on at the idle amplitude only.
                 if a.output_on && !on {
-                    assert!(last.unwrap() <= IDLE_V + 1e-9, "output on at {last:?} V");
+                    assert!(last.unwrap() <= idle_v() + 1e-9, "output on at {last:?} V");
+                    changed_at = Some(a.at);
                 }
                 on = a.output_on;
             }
             "amplitude" => {
                 if let (true, Some(prev)) = (on, last) {
+                    let dv = (a.value - prev).abs();
                     assert!(
-                        a.value - prev <= step + 1e-9,
-                        "amplitude rose {prev} → {} V in one setting (ramp step {step} V)",
+                        dv <= step + quantum,
+                        "amplitude moved {prev} → {} V in one setting (ramp step {step} V)",
                         a.value
                     );
-                    if (a.value - prev).abs() > 1e-9 {
+                    if dv > 1e-9 {
                         ramps += 1;
+                        let since = changed_at.map_or(0.0, |t| (a.at - t).as_secs_f64()) * speed;
+                        assert!(
+                            dv <= amp.ramp_rate_v_per_s * since + quantum,
+                            "amplitude moved {prev} → {} V {:.1} ms (stand time) after the previous change: {:.0} V/s against ramp_rate {} V/s",
+                            a.value,
+                            1e3 * since,
+                            dv / since,
+                            amp.ramp_rate_v_per_s
+                        );
+                        fastest = fastest.max(dv / since);
+                        changed_at = Some(a.at);
                     }
                 }
                 assert!(
@@ -132,6 +185,7 @@ fn assert_ramp_respected(stand: &Stand, state: &GeneratorState) {
         }
     }
     assert!(ramps > 0, "no amplitude change while on");
+    assert!(fastest <= amp.ramp_rate_v_per_s * 1.01, "{fastest} V/s");
 }
 
 /// The `/drive` records and the session's steps.
@@ -165,8 +219,8 @@ async fn holds_every_line_over(tcp: bool, usbtmc: bool) {
             100.0 * err
         );
         assert!(
-            s.generator_settings.unwrap() >= 2,
-            "frequency and at least one amplitude"
+            s.generator_settings.unwrap() >= 1,
+            "the frequency, and an amplitude when the drive changes on the generator's grid"
         );
     }
     // The transfer is learned: after the first line, lines converge in one or two corrections.
@@ -257,7 +311,7 @@ async fn fault_ends_safely(tcp: bool, fault: &str, expect: &str, injected_kind: 
     assert_eq!(injected, vec![injected_kind]);
     assert!(!state.output_on, "the generator's output was left on");
     assert!(
-        state.volts_peak <= IDLE_V + 1e-9,
+        state.volts_peak <= idle_v() + 1e-9,
         "not ramped down: {} V",
         state.volts_peak
     );
@@ -296,7 +350,7 @@ async fn a_clipped_force_channel_ends_with_the_output_off() {
         assert!(e.contains("output switched off"), "{e}");
         assert!(injected.is_empty(), "{injected:?}");
         assert!(!state.output_on, "the generator's output was left on");
-        assert!(state.volts_peak <= IDLE_V + 1e-9, "not ramped down");
+        assert!(state.volts_peak <= idle_v() + 1e-9, "not ramped down");
         let (drive, steps, events) = drive_and_steps(&path);
         assert!(
             steps.is_empty(),
@@ -495,4 +549,251 @@ fn bad_generator_stand_files_name_the_field_and_the_fix() {
 
 fn line_of(text: &str, needle: &str) -> usize {
     text.lines().position(|l| l.contains(needle)).unwrap() + 1
+}
+
+/// The generator stand driving the emulation of `identity` (`manufacturer,model`) over TCP.
+fn emulated_stand(identity: &str) -> Stand {
+    let mut s = generator_stand(true);
+    s.generator.as_mut().unwrap().identity = identity.into();
+    s.shaker.identity = identity.into();
+    s
+}
+
+/// The whole stepped sine against an emulated instrument, with the command table `*IDN?`
+/// picks: no command refused (any error-queue entry would stop the sweep), every line's force
+/// within tolerance, the ramp held, the idle amplitude the model's smallest at high impedance.
+async fn sweeps_clean_against(identity: &str, model: &str) {
+    let stand = emulated_stand(identity);
+    let (_d, path) = temp_file("emulated.mcap");
+    let (r, state, injected) = run(&stand, &plan(4), &path).await;
+    let o = r.unwrap_or_else(|e| panic!("{identity}: {e}"));
+    assert!(injected.is_empty(), "{injected:?}");
+    assert_eq!(o.steps.len(), 4);
+    for s in &o.steps {
+        assert!((s.force_amplitude_n / 4000.0 - 1.0).abs() <= 0.02, "{s:?}");
+    }
+    assert!(!state.output_on && state.load_ohm.is_infinite());
+    let idle = dialect::by_name(model).unwrap().unwrap().limits.unwrap();
+    let idle = idle.idle_peak(Load::HighImpedance).unwrap();
+    assert_eq!(idle, 0.001, "2 mVpp into a high impedance");
+    let first = state.log.iter().find(|a| a.what == "amplitude").unwrap();
+    assert_eq!(first.value, idle, "{identity}: the idle amplitude");
+    assert_ramp_respected(&stand, &state);
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_stepped_sine_runs_clean_against_a_keysight_33522b() {
+    // Regression: the idle amplitude was 1 mVpp after `OUTPut1:LOAD INFinity`, which the
+    // 33500B refuses (-222) — the sweep stopped during preparation.
+    bounded(
+        120,
+        sweeps_clean_against("Keysight Technologies,33522B", "Keysight 33500B/33600A"),
+    )
+    .await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_stepped_sine_runs_clean_against_a_rigol_dg1062z() {
+    bounded(
+        120,
+        sweeps_clean_against("Rigol Technologies,DG1062Z", "Rigol DG800/DG1000Z"),
+    )
+    .await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_stepped_sine_runs_clean_against_a_tektronix_afg31022() {
+    bounded(
+        120,
+        sweeps_clean_against("TEKTRONIX,AFG31022", "Tektronix AFG31000"),
+    )
+    .await;
+}
+
+fn at(contains: &str, nth: u64) -> Option<CommandMatch> {
+    Some(CommandMatch {
+        contains: contains.into(),
+        nth,
+    })
+}
+
+/// A connection dropped around the third line's frequency setting: the driver reopens it, sends
+/// the setting again and reads it back, and the sweep completes with every line at its own
+/// frequency.
+async fn a_dropped_connection_completes(faults: GeneratorFaults, kind: &str) {
+    let stand = generator_stand(true);
+    let plan = plan(5);
+    let (_d, path) = temp_file("drop.mcap");
+    let (r, state, injected) = run_with(&stand, &plan, &path, false, faults).await;
+    let o = r.unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(injected, vec![kind]);
+    assert_eq!(o.steps.len(), 5);
+    let want = plan.frequencies.frequencies().unwrap();
+    let set: Vec<f64> = state
+        .log
+        .iter()
+        .filter(|a| a.what == "frequency")
+        .map(|a| a.value)
+        .collect();
+    for (s, f) in o.steps.iter().zip(&want) {
+        assert!((s.frequency_hz - f).abs() < 1e-6 * f, "{s:?}");
+        assert!((s.force_amplitude_n / 4000.0 - 1.0).abs() <= 0.02, "{s:?}");
+        assert!(
+            set.iter().any(|x| (x - f).abs() < 1e-6 * f),
+            "{f} Hz never reached the generator: {set:?}"
+        );
+    }
+    // The generator's last frequency setting was the last line's.
+    assert!((set.last().unwrap() - want.last().unwrap()).abs() < 1e-3);
+    assert!(!state.output_on);
+    assert_ramp_respected(&stand, &state);
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_setting_lost_with_a_dropped_connection_is_sent_again() {
+    // Regression: the driver re-sent only `*OPC?` and `SYSTem:ERRor?` after reconnecting; the
+    // frequency setting was lost and the line ran at the previous frequency.
+    let faults = GeneratorFaults {
+        drop_before: at("FREQ ", 3),
+        ..Default::default()
+    };
+    bounded(
+        120,
+        a_dropped_connection_completes(faults, "generator_drop_before"),
+    )
+    .await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_connection_dropped_after_a_setting_completes() {
+    let faults = GeneratorFaults {
+        drop_after: at("FREQ ", 3),
+        ..Default::default()
+    };
+    bounded(
+        120,
+        a_dropped_connection_completes(faults, "generator_drop_after"),
+    )
+    .await;
+}
+
+/// A fault that stops the sweep: the error names the instrument, the command and `cause`; the
+/// output is off (the generator's state, which the driver read back), the amplitude ramped down
+/// at the ramp rate, the lines before kept in a complete session with the error recorded.
+async fn stops_safely(
+    faults: GeneratorFaults,
+    kind: &str,
+    command: &str,
+    cause: &str,
+    min_steps: usize,
+) {
+    let mut stand = generator_stand(true);
+    stand.generator.as_mut().unwrap().timeout = std::time::Duration::from_millis(300);
+    stand.generator.as_mut().unwrap().retries = 1;
+    let (_d, path) = temp_file("stop.mcap");
+    let (r, state, injected) = run_with(&stand, &plan(5), &path, false, faults).await;
+    let e = r.unwrap_err();
+    assert_eq!(injected, vec![kind]);
+    assert!(e.contains("IDENT-SIM SIGGEN-2 on tcp:127.0.0.1:"), "{e}");
+    assert!(e.contains(command) && e.contains(cause), "{e}");
+    assert!(!state.output_on, "the generator's output was left on");
+    assert!(state.volts_peak <= idle_v() + 1e-9, "not ramped down");
+    assert_ramp_respected(&stand, &state);
+    let last_output = state.log.iter().rev().find(|a| a.what == "output").unwrap();
+    assert!(!last_output.output_on);
+    let (drive, steps, events) = drive_and_steps(&path);
+    assert!(
+        steps.len() >= min_steps,
+        "the lines before the fault are kept"
+    );
+    assert!(events
+        .iter()
+        .any(|ev| ev.kind == "error" && ev.detail.contains(cause)));
+    assert_eq!(
+        drive.last().map(|d| (d.kind, d.output_on)),
+        Some((DriveKind::Output, false))
+    );
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn an_error_queue_entry_mid_ramp_ends_with_the_output_off() {
+    // Amplitude settings: the idle one of the preparation, the switch-on drive while off, the
+    // idle one before the output goes on, then the switch-on ramp: the fourth is its first step.
+    let faults = GeneratorFaults {
+        error_at: Some((
+            CommandMatch {
+                contains: "VOLT ".into(),
+                nth: 4,
+            },
+            -222,
+            "Data out of range".into(),
+        )),
+        ..Default::default()
+    };
+    bounded(
+        120,
+        stops_safely(
+            faults,
+            "generator_error",
+            "`SOUR1:VOLT ",
+            "-222,\"Data out of range\"",
+            0,
+        ),
+    )
+    .await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn an_instrument_that_stops_answering_ends_with_the_output_off() {
+    // The socket hangs at the third line's frequency: the driver times out naming the command,
+    // then reopens the connection to ramp down and switch the output off.
+    let faults = GeneratorFaults {
+        silent_from: at("FREQ ", 3),
+        ..Default::default()
+    };
+    bounded(
+        120,
+        stops_safely(faults, "generator_silent", "`SOUR1:FREQ ", "no answer", 1),
+    )
+    .await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_channel_the_daq_does_not_have_is_refused_before_the_drive_is_on() {
+    bounded(60, async {
+        // device_channel = 99 on the 8-input simulated DAQ: refused when the stream is
+        // configured, naming the stand file, the field and the fix; the generator's output was
+        // never switched on.
+        let mut stand = generator_stand(false);
+        let last = stand.channels.len() - 1;
+        stand.channels[last].device_channel = 99;
+        let (_d, path) = temp_file("ch99.mcap");
+        let (r, state, _) = run(&stand, &plan(3), &path).await;
+        let e = r.unwrap_err();
+        assert!(e.contains("fwd32j-generator-sim.toml"), "{e}");
+        assert!(
+            e.contains("table-c-z = 99") && e.contains("no input 99"),
+            "{e}"
+        );
+        assert!(e.contains("fix `device_channel`"), "{e}");
+        assert!(state.log.iter().all(|a| !a.output_on), "{:?}", state.log);
+    })
+    .await;
+}
+
+#[test]
+fn a_ramp_rate_of_zero_is_refused_naming_the_field() {
+    let good = std::fs::read_to_string(
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../configs/stands/fwd32j-generator-sim.toml"),
+    )
+    .unwrap()
+    .replace(
+        "[geometry]\nmodel = \"../models/fwd32j-no-actuator.toml\"\n",
+        "",
+    );
+    let bad = good.replacen("ramp_rate = \"20 V/s\"", "ramp_rate = \"0 V/s\"", 1);
+    let e = Stand::parse(&bad, "gen.toml").unwrap_err();
+    assert_eq!(e.line, line_of(&good, "ramp_rate = \""));
+    assert!(e.message.contains("amplifier.ramp_rate must be > 0"), "{e}");
+    assert!(e.to_string().contains("gen.toml"), "{e}");
 }

@@ -75,9 +75,9 @@ impl DataType {
     }
 
     /// The little-endian bytes of a value written as in an EDS (`0x1A`, `-3`, `2.5e-4`, text).
-    pub fn encode(self, text: &str) -> Result<Vec<u8>, String> {
+    pub fn encode(self, text: &str) -> Result<Vec<u8>, EncodeError> {
         let t = text.trim();
-        let int = || -> Result<i128, String> {
+        let int = || -> Result<i128, EncodeError> {
             let (neg, body) = match t.strip_prefix('-') {
                 Some(b) => (true, b),
                 None => (false, t),
@@ -86,14 +86,20 @@ impl DataType {
                 Some(h) => i128::from_str_radix(h, 16),
                 None => body.parse::<i128>(),
             }
-            .map_err(|e| format!("`{t}` is not an integer: {e}"))?;
+            .map_err(|e| EncodeError::NotInteger {
+                text: t.to_string(),
+                detail: e.to_string(),
+            })?;
             Ok(if neg { -v } else { v })
         };
         let fit = |v: i128, lo: i128, hi: i128| {
             if (lo..=hi).contains(&v) {
                 Ok(v)
             } else {
-                Err(format!("{v} does not fit {self:?}"))
+                Err(EncodeError::DoesNotFit {
+                    value: v,
+                    data_type: self,
+                })
             }
         };
         Ok(match self {
@@ -117,12 +123,18 @@ impl DataType {
                 .to_vec(),
             DataType::Real32 => t
                 .parse::<f32>()
-                .map_err(|e| format!("`{t}` is not a number: {e}"))?
+                .map_err(|e| EncodeError::NotNumber {
+                    text: t.to_string(),
+                    detail: e.to_string(),
+                })?
                 .to_le_bytes()
                 .to_vec(),
             DataType::Real64 => t
                 .parse::<f64>()
-                .map_err(|e| format!("`{t}` is not a number: {e}"))?
+                .map_err(|e| EncodeError::NotNumber {
+                    text: t.to_string(),
+                    detail: e.to_string(),
+                })?
                 .to_le_bytes()
                 .to_vec(),
             DataType::VisibleString | DataType::OctetString | DataType::Domain => {
@@ -130,6 +142,35 @@ impl DataType {
             }
         })
     }
+}
+
+/// A value written as in an EDS that its data type cannot hold.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum EncodeError {
+    /// Not an integer (decimal or `0x` hexadecimal).
+    #[error("`{text}` is not an integer: {detail}")]
+    NotInteger {
+        /// The text.
+        text: String,
+        /// What the parser said.
+        detail: String,
+    },
+    /// Outside the type's range.
+    #[error("{value} does not fit {data_type:?}")]
+    DoesNotFit {
+        /// The value.
+        value: i128,
+        /// The type.
+        data_type: DataType,
+    },
+    /// Not a floating-point number.
+    #[error("`{text}` is not a number: {detail}")]
+    NotNumber {
+        /// The text.
+        text: String,
+        /// What the parser said.
+        detail: String,
+    },
 }
 
 /// Read/write access of an entry (`AccessType`).

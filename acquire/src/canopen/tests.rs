@@ -239,17 +239,87 @@ async fn sdo_aborts_are_typed_errors_naming_the_object_and_code() {
             other => panic!("{a}: expected an abort, got {other:?}"),
         }
     }
-    // Mapping a non-mappable object is refused by the node.
-    let r = daq
-        .write(
-            Address::new(0x1A00, 1),
-            &((0x1008u32 << 16) | 8).to_le_bytes(),
-        )
-        .await;
-    assert!(
-        matches!(r, Err(DaqError::Rejected { code, .. }) if code as u32 == 0x0604_0041),
-        "{r:?}"
+    // The PDO mapping as CiA 301 §7.5.2.36 has it changed: not while the TPDO exists, not an
+    // entry while sub-index 0 is not 0, and only objects that can be mapped; a TPDO that
+    // exists keeps its COB-ID (§7.5.2.35).
+    let abort = |r: Result<(), DaqError>| match r {
+        Err(DaqError::Rejected { code, .. }) => code as u32,
+        other => panic!("expected an abort, got {other:?}"),
+    };
+    let map =
+        |index: u16, sub: u8, bits: u32| (u32::from(index) << 16) | (u32::from(sub) << 8) | bits;
+    let entry = map(0x7100, 1, 16).to_le_bytes();
+    let cob = u32::from_le_bytes(
+        daq.read(Address::new(0x1800, 1))
+            .await
+            .unwrap()
+            .try_into()
+            .unwrap(),
     );
+    if cob & 0x8000_0000 == 0 {
+        let moved = (cob + 1).to_le_bytes();
+        assert_eq!(
+            abort(daq.write(Address::new(0x1800, 1), &moved).await),
+            0x0609_0030
+        );
+        assert_eq!(
+            abort(daq.write(Address::new(0x1A00, 1), &entry).await),
+            0x0601_0000
+        );
+    }
+    daq.write(Address::new(0x1800, 1), &(cob | 0x8000_0000).to_le_bytes())
+        .await
+        .unwrap();
+    let count = daq.read(Address::new(0x1A00, 0)).await.unwrap()[0];
+    if count != 0 {
+        assert_eq!(
+            abort(daq.write(Address::new(0x1A00, 1), &entry).await),
+            0x0601_0000
+        );
+    }
+    daq.write(Address::new(0x1A00, 0), &[0]).await.unwrap();
+    let not_mappable = map(0x1008, 0, 8).to_le_bytes();
+    assert_eq!(
+        abort(daq.write(Address::new(0x1A00, 1), &not_mappable).await),
+        0x0604_0041
+    );
+    let wrong_length = map(0x7100, 1, 32).to_le_bytes();
+    assert_eq!(
+        abort(daq.write(Address::new(0x1A00, 1), &wrong_length).await),
+        0x0604_0041
+    );
+    let missing = map(0x7100, 0x7F, 16).to_le_bytes();
+    assert_eq!(
+        abort(daq.write(Address::new(0x1A00, 1), &missing).await),
+        0x0602_0000
+    );
+    for s in 1..=5 {
+        daq.write(Address::new(0x1A00, s), &entry).await.unwrap();
+    }
+    // Five 16-bit entries are 80 bits, more than a CAN frame's 64.
+    assert_eq!(
+        abort(daq.write(Address::new(0x1A00, 0), &[5]).await),
+        0x0604_0042
+    );
+    assert_eq!(
+        abort(daq.write(Address::new(0x1A00, 0), &[9]).await),
+        0x0604_0042
+    );
+    daq.write(Address::new(0x1A00, 0), &[4]).await.unwrap();
+    // Operational: the node's stream is reconfigured in pre-operational only (0x08000022).
+    daq.nmt(crate::canopen::NmtCommand::Start).await.unwrap();
+    assert_eq!(
+        abort(daq.write(Address::new(0x1A00, 0), &[0]).await),
+        0x0800_0022
+    );
+    assert_eq!(
+        abort(daq.write(Address::new(0x1800, 2), &[1]).await),
+        0x0800_0022
+    );
+    daq.nmt(crate::canopen::NmtCommand::PreOperational)
+        .await
+        .unwrap();
+    daq.write(Address::new(0x1A00, 0), &[0]).await.unwrap();
     // The session goes on: the next transfer works.
     assert_eq!(
         daq.read(Address::new(0x1018, 4))

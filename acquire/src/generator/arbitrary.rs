@@ -69,23 +69,47 @@ pub struct ArbitraryDialect {
     pub max_sample_rate_hz: f64,
 }
 
+/// A waveform beyond one model's arbitrary-waveform limits.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum ArbitraryLimitError {
+    /// Too few or too many points for one upload.
+    #[error("{points} points, the model takes {min}..{max} per upload")]
+    Points {
+        /// Points asked for.
+        points: usize,
+        /// Fewest the model takes.
+        min: usize,
+        /// Most the model takes.
+        max: usize,
+    },
+    /// A sample rate the model does not play.
+    #[error("a sample rate of {rate_hz} Sa/s, the model plays at most {max_hz} Sa/s")]
+    SampleRate {
+        /// Rate asked for (Sa/s).
+        rate_hz: f64,
+        /// Highest the model plays (Sa/s).
+        max_hz: f64,
+    },
+}
+
 impl ArbitraryDialect {
-    /// Checks a waveform of `points` at `sample_rate_hz` against the model's limits; the message
+    /// Checks a waveform of `points` at `sample_rate_hz` against the model's limits; the error
     /// names what is exceeded and the limit.
-    pub fn check(&self, points: usize, sample_rate_hz: f64) -> Result<(), String> {
+    pub fn check(&self, points: usize, sample_rate_hz: f64) -> Result<(), ArbitraryLimitError> {
         if points < self.min_points || points > self.max_points {
-            return Err(format!(
-                "{points} points, the model takes {}..{} per upload",
-                self.min_points, self.max_points
-            ));
+            return Err(ArbitraryLimitError::Points {
+                points,
+                min: self.min_points,
+                max: self.max_points,
+            });
         }
         if !(sample_rate_hz.is_finite() && sample_rate_hz > 0.0)
             || sample_rate_hz > self.max_sample_rate_hz
         {
-            return Err(format!(
-                "a sample rate of {sample_rate_hz} Sa/s, the model plays at most {} Sa/s",
-                self.max_sample_rate_hz
-            ));
+            return Err(ArbitraryLimitError::SampleRate {
+                rate_hz: sample_rate_hz,
+                max_hz: self.max_sample_rate_hz,
+            });
         }
         Ok(())
     }
@@ -351,9 +375,17 @@ mod tests {
     fn limits_name_what_is_exceeded() {
         let d = dialect(DataFormat::BinaryBlock, ByteOrder::Little, 0, 16383);
         assert!(d.check(4096, 5120.0).is_ok());
-        assert!(d.check(20000, 5120.0).unwrap_err().contains("8..16384"));
+        assert!(d
+            .check(20000, 5120.0)
+            .unwrap_err()
+            .to_string()
+            .contains("8..16384"));
         assert!(d.check(4, 5120.0).is_err());
-        assert!(d.check(4096, 1e9).unwrap_err().contains("60000000"));
+        assert!(d
+            .check(4096, 1e9)
+            .unwrap_err()
+            .to_string()
+            .contains("60000000"));
     }
 
     #[test]

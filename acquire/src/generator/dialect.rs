@@ -149,6 +149,9 @@ pub struct ModelEntry {
     pub model_prefixes: Vec<String>,
     /// Its commands.
     pub commands: Dialect,
+    /// Its ranges from the data sheet.
+    #[serde(default)]
+    pub limits: Option<super::limits::ModelLimits>,
     /// Its arbitrary-waveform upload, if it has one.
     #[serde(default)]
     pub arbitrary: Option<super::arbitrary::ArbitraryDialect>,
@@ -264,13 +267,31 @@ mod tests {
             assert_eq!(got.as_deref(), want, "{maker} {model}");
         }
         assert!(by_name("generic").unwrap().is_some());
-        // Arbitrary waveforms: every named model but the plain SCPI-99 table.
+        // Arbitrary waveforms: every named model but the plain SCPI-99 table. Ranges: every
+        // table, both loads, the high-impedance range twice the 50 Ω one (the same voltage).
         for m in &t {
+            let l = m
+                .limits
+                .as_ref()
+                .unwrap_or_else(|| panic!("{} has no limits", m.name));
+            let (a, b) = (
+                l.amplitude_50_ohm_vpp.unwrap(),
+                l.amplitude_high_z_vpp.unwrap(),
+            );
+            assert_eq!([2.0 * a[0], 2.0 * a[1]], b, "{}", m.name);
+            assert!(!l.source.is_empty() && l.frequency_hz[0] < l.frequency_hz[1]);
             assert_eq!(m.arbitrary.is_some(), m.name != "generic", "{}", m.name);
             if let Some(a) = &m.arbitrary {
                 assert!(a.upload.contains("{block}"), "{}", m.name);
                 assert!(a.code_min < a.code_max && a.min_points < a.max_points);
                 assert!(a.check(5120, 5120.0).is_ok(), "{}", m.name);
+                // The manual's spelling of the arbitrary function: `ARB` (33500B), never a
+                // long form the manual does not list.
+                assert!(
+                    a.select.iter().all(|c| !c.ends_with("ARBitrary")),
+                    "{}",
+                    m.name
+                );
             }
         }
         assert!(by_name("nonsense").unwrap().is_none());

@@ -1,6 +1,8 @@
 //! Generator + power amplifier + shaker as an exciter whose force loop the host closes: the sweep
 //! asks for a force, this turns it into the generator's voltage through the amplifier's gain
-//! estimate, ramps the amplitude at the stand's rate, holds the voltage and force limits, and
+//! estimate, ramps the amplitude at the stand's rate (timed from the previous amplitude change,
+//! on every path: switch-on, between lines, ramp-down, abort), keeps every amplitude inside the
+//! model's data-sheet range, holds the voltage and force limits, and
 //! records every setting and every measured force in the session (`/drive`). A broadband drive
 //! (periodic random, burst random, chirp) is uploaded as an arbitrary waveform played at the DAQ's
 //! sample rate, its amplitude set from the gain estimate, checked on every period's measured force
@@ -10,6 +12,7 @@ use std::time::Duration;
 
 use async_trait::async_trait;
 
+use super::limits::Load;
 use super::waveform::{self, DriveWaveform};
 use super::{Generator, GeneratorError};
 use crate::device::DeviceIdentity;
@@ -43,9 +46,6 @@ impl Amplifier {
 
 /// Time between two amplitude settings of a ramp (stand time).
 pub const RAMP_TICK: Duration = Duration::from_millis(50);
-
-/// The amplitude the output idles at (V peak): the smallest every model accepts (1 mVpp).
-pub const IDLE_V: f64 = 0.0005;
 
 /// A measured force below this fraction of what the drive should give means the force signal is
 /// lost (amplifier tripped, shaker disconnected, force sensor cable).
@@ -81,6 +81,14 @@ pub struct GeneratorExciter {
     amp: Amplifier,
     port: String,
     volts: f64,
+    /// The amplitude the output idles at (V peak): the smallest the model accepts into a high
+    /// impedance (from its data sheet, known after [`Shaker::reset`]).
+    idle_v: f64,
+    /// When the last amplitude change while the output was on (or the switch-on) was confirmed:
+    /// the next change waits one ramp tick from it.
+    last_change: Option<tokio::time::Instant>,
+    /// The smallest amplitude step of the model (V peak).
+    quantum_v: f64,
     on: bool,
     frequency_hz: f64,
     settings: u32,
@@ -106,7 +114,10 @@ impl GeneratorExciter {
             gen,
             amp,
             port,
-            volts: IDLE_V,
+            volts: 0.0,
+            idle_v: 0.0,
+            last_change: None,
+            quantum_v: 0.0,
             on: false,
             frequency_hz: 0.0,
             settings: 0,
@@ -126,6 +137,11 @@ impl GeneratorExciter {
     /// The amplitude now set (V peak).
     pub fn volts(&self) -> f64 {
         self.volts
+    }
+
+    /// The amplitude the output idles at (V peak), after [`Shaker::reset`].
+    pub fn idle_volts(&self) -> f64 {
+        self.idle_v
     }
 
     fn record(&self, kind: DriveKind, reading: Option<&ForceReading>) {
@@ -159,22 +175,60 @@ impl GeneratorExciter {
         }
     }
 
+    /// One amplitude setting. While the output is on it waits until one ramp tick has passed
+    /// since the previous change was confirmed, so that no two changes come closer than the
+    /// ramp rate allows, whichever path (switch-on, line, ramp-down, abort) sends them.
     async fn set_volts(&mut self, v: f64) -> Result<(), ShakerError> {
-        self.gen.set_amplitude(v).await?;
-        self.volts = v;
+        if self.on {
+            if let Some(t) = self.last_change {
+                tokio::time::sleep_until(t + RAMP_TICK.div_f64(self.speed)).await;
+            }
+        }
+        let result = self.gen.set_amplitude(v).await;
+        if self.on {
+            self.last_change = Some(tokio::time::Instant::now());
+        }
+        let set = match result {
+            Ok(set) => set,
+            Err(e) => {
+                // The instrument may have taken the value before it failed (an error-queue entry,
+                // a lost confirmation): a ramp-down starts from the higher of the two.
+                self.volts = self.volts.max(v);
+                return Err(e.into());
+            }
+        };
+        self.volts = set;
         self.settings += 1;
         self.record(DriveKind::Amplitude, None);
         Ok(())
     }
 
+    /// `v` (V peak) on the model's amplitude grid, at least the idle amplitude, checked against
+    /// the model's range into a high impedance.
+    fn sendable(&self, v: f64) -> Result<f64, ShakerError> {
+        let Some(l) = self.gen.limits() else {
+            return Ok(v.max(self.idle_v));
+        };
+        l.amplitude_to_send(v.max(self.idle_v), Load::HighImpedance)
+            .map_err(|source| {
+                GeneratorError::Limits {
+                    instrument: self.port.clone(),
+                    model: self.gen.model_name().to_string(),
+                    source: Box::new(source),
+                }
+                .into()
+            })
+    }
+
     /// Moves the amplitude to `target` (V peak): in one setting while the output is off, in
-    /// steps of at most [`Amplifier::ramp_step_v`] one [`RAMP_TICK`] apart while it is on.
+    /// steps of at most [`Amplifier::ramp_step_v`] (less one amplitude step of the model, so
+    /// that the instrument's rounding cannot exceed it) one [`RAMP_TICK`] apart while it is on.
     async fn ramp_to(&mut self, target: f64) -> Result<(), ShakerError> {
+        let target = self.sendable(target)?;
         if !self.on {
             return self.set_volts(target).await;
         }
-        let step = self.amp.ramp_step_v();
-        let tick = RAMP_TICK.div_f64(self.speed);
+        let step = (self.amp.ramp_step_v() - self.quantum_v).max(self.quantum_v);
         loop {
             let delta = target - self.volts;
             if delta.abs() <= 1e-9 {
@@ -186,29 +240,60 @@ impl GeneratorExciter {
             if last {
                 return Ok(());
             }
-            tokio::time::sleep(tick).await;
         }
+    }
+
+    /// Checks, before the output is ever switched on, that the stand's limits fit the model's
+    /// range: the idle amplitude and the voltage limit within it.
+    fn check_model_range(&mut self) -> Result<(), ShakerError> {
+        let model = self.gen.model_name().to_string();
+        let Some(l) = self.gen.limits().cloned() else {
+            return Err(GeneratorError::Limits {
+                instrument: self.port.clone(),
+                model,
+                source: Box::new(super::limits::LimitError::NoRange {
+                    field: "amplitude_high_z_vpp",
+                    load: "into a high impedance",
+                }),
+            }
+            .into());
+        };
+        let range = |e| -> ShakerError {
+            GeneratorError::Limits {
+                instrument: self.port.clone(),
+                model: model.clone(),
+                source: Box::new(e),
+            }
+            .into()
+        };
+        let [lo, hi] = l.amplitude_peak(Load::HighImpedance).map_err(range)?;
+        self.idle_v = lo;
+        self.quantum_v = 0.5 * l.amplitude_step_vpp;
+        if self.amp.voltage_limit_v > hi + 1e-12 {
+            return Err(self.limit(format!(
+                "amplifier.voltage_limit {} V peak is above what the {model} delivers into the amplifier's high impedance ({hi} V peak = {} Vpp, {}); lower amplifier.voltage_limit in the stand file to at most {hi} V",
+                self.amp.voltage_limit_v,
+                2.0 * hi,
+                l.source
+            )));
+        }
+        Ok(())
     }
 
     /// Ramps down and switches the output off, then checks that the instrument says it is off.
     async fn switch_off(&mut self) -> Result<(), ShakerError> {
         let ramped = if self.on {
-            self.ramp_to(IDLE_V).await
+            self.ramp_to(self.idle_v).await
         } else {
             Ok(())
         };
         // Off even when the ramp failed (a generator error mid-ramp).
         self.gen.set_output(false).await?;
+        self.last_change = None;
         self.on = false;
         self.settings += 1;
+        // The driver read the state back: a generator still on failed the call above.
         self.record(DriveKind::Output, None);
-        if self.gen.output().await? {
-            return Err(GeneratorError::OutputStillOn {
-                instrument: self.port.clone(),
-                command: "output off".into(),
-            }
-            .into());
-        }
         ramped
     }
 }
@@ -224,10 +309,12 @@ impl Shaker for GeneratorExciter {
     }
 
     async fn reset(&mut self) -> Result<(), ShakerError> {
+        self.check_model_range()?;
         self.gen.prepare_sine().await?;
         // `prepare_sine` switched the output off and set the idle amplitude.
         self.on = false;
-        self.volts = IDLE_V;
+        self.last_change = None;
+        self.volts = self.idle_v;
         self.record(DriveKind::Output, None);
         self.record(DriveKind::Amplitude, None);
         Ok(())
@@ -238,7 +325,7 @@ impl Shaker for GeneratorExciter {
             if self.broadband.take().is_some() {
                 self.switch_off().await?;
                 self.gen.prepare_sine().await?;
-                self.volts = IDLE_V;
+                self.volts = self.idle_v;
             }
             return Ok(());
         }
@@ -302,7 +389,7 @@ impl Shaker for GeneratorExciter {
             Some(b) => b.volts_per_plan_newton(self.amp.gain_n_per_v),
             None => 1.0 / self.amp.gain_n_per_v,
         };
-        let volts = (newtons * per_newton).max(IDLE_V);
+        let volts = (newtons * per_newton).max(self.idle_v);
         if volts > self.amp.voltage_limit_v {
             return Err(self.limit(format!(
                 "over-voltage: {newtons:.1} N needs {volts:.3} V at the estimated {:.1} N/V, above amplifier.voltage_limit {:.3} V",
@@ -319,11 +406,14 @@ impl Shaker for GeneratorExciter {
         if self.on {
             return Ok(());
         }
-        // Switch on at the idle amplitude, then ramp to the amplitude set while off.
+        // Switch on at the idle amplitude, then ramp to the amplitude set while off; the
+        // switch-on is the first change the ramp is timed from.
         let target = self.volts;
-        self.set_volts(IDLE_V).await?;
+        let idle = self.idle_v;
+        self.set_volts(idle).await?;
         self.gen.set_output(true).await?;
         self.on = true;
+        self.last_change = Some(tokio::time::Instant::now());
         self.settings += 1;
         self.record(DriveKind::Output, None);
         self.ramp_to(target).await

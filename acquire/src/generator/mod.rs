@@ -7,6 +7,7 @@
 pub mod arbitrary;
 pub mod dialect;
 pub mod exciter;
+pub mod limits;
 pub mod scpi;
 pub mod waveform;
 
@@ -30,19 +31,26 @@ pub trait Generator: Send {
     /// Asks the instrument who it is (`*IDN?`) and selects its command table.
     async fn identify(&mut self) -> Result<DeviceIdentity, GeneratorError>;
     /// `*RST`, `*CLS`, then: output off, high-impedance load, sine, amplitude unit, zero offset,
-    /// the smallest amplitude. Call after [`Generator::identify`].
+    /// the smallest amplitude the model accepts into a high impedance. Call after
+    /// [`Generator::identify`].
     async fn prepare_sine(&mut self) -> Result<(), GeneratorError>;
-    /// Sine frequency (Hz).
+    /// Sine frequency (Hz), read back.
     async fn set_frequency(&mut self, hz: f64) -> Result<(), GeneratorError>;
-    /// Sine amplitude (V peak).
-    async fn set_amplitude(&mut self, volts_peak: f64) -> Result<(), GeneratorError>;
-    /// Switches the output on or off.
+    /// Sine amplitude (V peak), sent on the model's amplitude grid and read back; returns the
+    /// amplitude set (V peak). Refused before sending when outside the model's range.
+    async fn set_amplitude(&mut self, volts_peak: f64) -> Result<f64, GeneratorError>;
+    /// Switches the output on or off, and reads the state back.
     async fn set_output(&mut self, on: bool) -> Result<(), GeneratorError>;
     /// Asks whether the output is on.
     async fn output(&mut self) -> Result<bool, GeneratorError>;
     /// The name of the command table in use (after [`Generator::identify`]).
     fn model_name(&self) -> &str {
         ""
+    }
+    /// The model's ranges from its data sheet (after [`Generator::identify`]); `None` if its
+    /// table has none.
+    fn limits(&self) -> Option<&limits::ModelLimits> {
+        None
     }
     /// The model's arbitrary-waveform upload and its limits (after [`Generator::identify`]);
     /// `None` if the model has none.
@@ -204,6 +212,54 @@ pub enum GeneratorError {
     /// The built-in command table is unreadable (a defect of this build).
     #[error(transparent)]
     Table(#[from] dialect::TableError),
+    /// A value outside the model's range, or a model table without the range needed; refused
+    /// before it is sent.
+    #[error("signal generator {instrument}: the {model}: {source}")]
+    Limits {
+        /// Port and identity.
+        instrument: String,
+        /// The command table's name.
+        model: String,
+        /// What is outside which range.
+        source: Box<limits::LimitError>,
+    },
+    /// A setting the instrument accepted reads back as something else.
+    #[error("signal generator {instrument}: `{command}` was accepted, but `{query}` reads back {got:?} where {sent} was sent (resolution {tolerance}); the setting did not take: check the command table (dialect) and the generator's front panel (remote lock, another controller)")]
+    ReadBack {
+        /// Port and identity.
+        instrument: String,
+        /// The setting.
+        command: String,
+        /// The query that read it back.
+        query: String,
+        /// The value sent.
+        sent: f64,
+        /// The answer.
+        got: String,
+        /// The accepted deviation.
+        tolerance: f64,
+    },
+    /// A setting was sent but the instrument did not confirm it (`*OPC?` unanswered).
+    #[error("signal generator {instrument}: `{command}` was sent but not confirmed: {source}")]
+    Unconfirmed {
+        /// Port and identity.
+        instrument: String,
+        /// The setting.
+        command: String,
+        /// What happened to the confirmation.
+        source: Box<GeneratorError>,
+    },
+    /// The connection dropped while a setting was being sent; it was reopened and the setting
+    /// sent again, and then this happened.
+    #[error("signal generator {instrument}: the connection dropped while `{command}` was being sent and was reopened; sending it again: {source}")]
+    AfterReconnect {
+        /// Port and identity.
+        instrument: String,
+        /// The setting in flight.
+        command: String,
+        /// What happened after the reconnect.
+        source: Box<GeneratorError>,
+    },
 }
 
 impl GeneratorError {

@@ -1,6 +1,7 @@
 //! The host driver for SCPI function generators over any [`Transport`] (serial, raw TCP socket):
-//! line terminator, answer timeout and retries, one reconnect when the connection drops, `*OPC?`
-//! after every setting and the error queue read until it is empty.
+//! line terminator, answer timeout and retries, one reconnect when the connection drops (the
+//! setting in flight sent again), `*OPC?` after every setting and the error queue read until it is
+//! empty, every value inside the model's data-sheet ranges and read back within its resolution.
 
 use std::future::Future;
 use std::pin::Pin;
@@ -10,6 +11,7 @@ use async_trait::async_trait;
 
 use super::arbitrary::{ArbitraryDialect, RateSetting};
 use super::dialect::{self, Dialect, DialectOverrides};
+use super::limits::{Load, ModelLimits};
 use super::{Generator, GeneratorError};
 use crate::device::DeviceIdentity;
 use crate::shaker::scpi::{also_queued, parse_bool_answer, parse_error_entry};
@@ -67,6 +69,12 @@ pub struct ScpiGenerator {
     /// The command table's name and its arbitrary-waveform upload.
     model: String,
     arbitrary: Option<ArbitraryDialect>,
+    limits: Option<ModelLimits>,
+    /// Connections reopened so far: a setting during which this changed is sent again.
+    reconnects: u64,
+    /// The instrument stopped answering on this connection: the next command reopens it first
+    /// (an LXI socket that hung), so that the output can still be switched off.
+    stale: bool,
 }
 
 impl ScpiGenerator {
@@ -82,6 +90,9 @@ impl ScpiGenerator {
             dialect: None,
             model: String::new(),
             arbitrary: None,
+            limits: None,
+            reconnects: 0,
+            stale: false,
         }
     }
 
@@ -101,8 +112,18 @@ impl ScpiGenerator {
         r.map_err(|e| GeneratorError::from_io(&self.instrument, e))
     }
 
-    /// Opens the connection again, if a way to do so was given; `false` if not.
+    /// Opens the connection again after it dropped, if a way to do so was given; `false` if
+    /// not. Counted: a setting in flight meanwhile is sent again.
     async fn reopen(&mut self) -> Result<bool, GeneratorError> {
+        let reopened = self.reopen_link().await?;
+        if reopened {
+            self.reconnects += 1;
+        }
+        Ok(reopened)
+    }
+
+    /// Replaces the connection with a new one, if a way to open one was given.
+    async fn reopen_link(&mut self) -> Result<bool, GeneratorError> {
         let Some(r) = self.reconnect.as_mut() else {
             return Ok(false);
         };
@@ -112,8 +133,18 @@ impl ScpiGenerator {
         Ok(true)
     }
 
+    /// Reopens a connection on which the instrument stopped answering, before the next command.
+    async fn refresh(&mut self) -> Result<(), GeneratorError> {
+        if self.stale {
+            self.stale = false;
+            self.reopen_link().await?;
+        }
+        Ok(())
+    }
+
     /// Sends `line` (no answer expected), reconnecting once if the connection dropped.
     pub async fn write(&mut self, line: &str) -> Result<(), GeneratorError> {
+        self.refresh().await?;
         match self.send(line).await {
             Err(GeneratorError::Disconnected { .. }) if self.reopen().await? => {
                 self.send(line).await
@@ -124,7 +155,10 @@ impl ScpiGenerator {
 
     /// Sends a query and returns its answer line: re-sent after a timeout, and once after a
     /// reconnect when the connection dropped.
+    /// A query that times out after all its retries marks the connection stale: the next
+    /// command reopens it first.
     pub async fn query(&mut self, line: &str) -> Result<String, GeneratorError> {
+        self.refresh().await?;
         let mut reconnected = false;
         loop {
             match self.query_once(line).await {
@@ -132,6 +166,10 @@ impl ScpiGenerator {
                     if !reconnected && self.reopen().await? =>
                 {
                     reconnected = true;
+                }
+                Err(e @ GeneratorError::Timeout { .. }) => {
+                    self.stale = self.reconnect.is_some();
+                    return Err(e);
                 }
                 r => return r,
             }
@@ -167,6 +205,7 @@ impl ScpiGenerator {
     /// Sends raw bytes (a command with a binary block), reconnecting once if the connection
     /// dropped.
     async fn write_bytes(&mut self, bytes: &[u8]) -> Result<(), GeneratorError> {
+        self.refresh().await?;
         match self.send_bytes(bytes).await {
             Err(GeneratorError::Disconnected { .. }) if self.reopen().await? => {
                 self.send_bytes(bytes).await
@@ -180,26 +219,118 @@ impl ScpiGenerator {
         r.map_err(|e| GeneratorError::from_io(&self.instrument, e))
     }
 
-    /// Like [`ScpiGenerator::set`] for a command carrying data: `text` (for messages) and its
-    /// bytes.
-    async fn set_raw(&mut self, text: &str, bytes: &[u8]) -> Result<(), GeneratorError> {
+    /// A command carrying data (`text` for messages, and its bytes), confirmed: `*OPC?` answers
+    /// `1`, then the error queue is read until it is empty. Not sent again after a reconnect
+    /// (an upload is repeated whole by [`Generator::play_arbitrary`]).
+    async fn confirm_raw(&mut self, text: &str, bytes: &[u8]) -> Result<(), GeneratorError> {
         self.write_bytes(bytes).await?;
-        let opc = self.query("*OPC?").await?;
+        self.confirmed(text).await
+    }
+
+    /// `*OPC?` answers `1`, then the error queue is empty; errors are blamed on `command`.
+    async fn confirmed(&mut self, command: &str) -> Result<(), GeneratorError> {
+        let opc = self.query("*OPC?").await.map_err(|e| match e {
+            GeneratorError::Timeout { .. } => GeneratorError::Unconfirmed {
+                instrument: self.instrument.clone(),
+                command: command.to_string(),
+                source: Box::new(e),
+            },
+            e => e,
+        })?;
         if opc.trim().trim_start_matches('+') != "1" {
             return Err(self.garbled("*OPC?", opc));
         }
-        self.check_errors(text).await
+        self.check_errors(command).await
     }
 
     /// Sends a setting, waits for it to complete (`*OPC?` answers `1`), then reads the error
-    /// queue until it says `0,"No error"`; any entry fails the call, naming the command.
+    /// queue until it says `0,"No error"`; any entry fails the call, naming the command. When the
+    /// connection dropped meanwhile (and was reopened), whether the setting reached the
+    /// instrument is unknown: it is sent again on the new connection (settings are idempotent),
+    /// and a failure then says that the connection dropped.
     pub async fn set(&mut self, line: &str) -> Result<(), GeneratorError> {
-        self.write(line).await?;
-        let opc = self.query("*OPC?").await?;
-        if opc.trim().trim_start_matches('+') != "1" {
-            return Err(self.garbled("*OPC?", opc));
+        let before = self.reconnects;
+        let first = match self.write(line).await {
+            Ok(()) => self.confirmed(line).await,
+            Err(e) => Err(e),
+        };
+        if self.reconnects == before {
+            return first;
         }
-        self.check_errors(line).await
+        tracing::warn!(
+            "signal generator {}: connection reopened during `{line}`; sending it again",
+            self.instrument
+        );
+        let again = match self.write(line).await {
+            Ok(()) => self.confirmed(line).await,
+            Err(e) => Err(e),
+        };
+        again.map_err(|e| GeneratorError::AfterReconnect {
+            instrument: self.instrument.clone(),
+            command: line.to_string(),
+            source: Box::new(e),
+        })
+    }
+
+    /// A setting whose value is then read back with `query` and compared with `sent` within
+    /// `tolerance`; a reconnect during the read-back sends the setting again once.
+    async fn set_and_verify(
+        &mut self,
+        line: &str,
+        query: &str,
+        sent: f64,
+        tolerance: f64,
+    ) -> Result<(), GeneratorError> {
+        self.set(line).await?;
+        let before = self.reconnects;
+        let got = self.query(query).await;
+        let got = match got {
+            Ok(g) if self.reconnects == before => g,
+            _ => {
+                self.set(line).await?;
+                self.query(query)
+                    .await
+                    .map_err(|e| GeneratorError::AfterReconnect {
+                        instrument: self.instrument.clone(),
+                        command: line.to_string(),
+                        source: Box::new(e),
+                    })?
+            }
+        };
+        // Within the resolution, or within half a unit of the answer's last printed digit (an
+        // instrument may print fewer digits than it keeps).
+        let printed = 0.5 * last_digit(got.trim()) * (1.0 + 1e-9);
+        match got.trim().parse::<f64>() {
+            Ok(v) if (v - sent).abs() <= tolerance.max(printed) => Ok(()),
+            _ => Err(GeneratorError::ReadBack {
+                instrument: self.instrument.clone(),
+                command: line.to_string(),
+                query: query.to_string(),
+                sent,
+                got,
+                tolerance,
+            }),
+        }
+    }
+
+    /// The model's ranges, or the error that the table has none.
+    fn model_limits(&self) -> Result<&ModelLimits, GeneratorError> {
+        self.limits.as_ref().ok_or_else(|| GeneratorError::Limits {
+            instrument: self.instrument.clone(),
+            model: self.model.clone(),
+            source: Box::new(super::limits::LimitError::NoRange {
+                field: "[model.limits]",
+                load: "or any other range",
+            }),
+        })
+    }
+
+    fn out_of_limits(&self, source: super::limits::LimitError) -> GeneratorError {
+        GeneratorError::Limits {
+            instrument: self.instrument.clone(),
+            model: self.model.clone(),
+            source: Box::new(source),
+        }
     }
 
     /// Reads the error queue until it is empty; errors are blamed on `command`.
@@ -257,10 +388,7 @@ impl ScpiGenerator {
 
     /// The command table for `id`: the stand's named one, or the built-in one for its model,
     /// with the stand's overrides; its name and arbitrary-waveform upload.
-    fn choose_dialect(
-        &self,
-        id: &DeviceIdentity,
-    ) -> Result<(Dialect, String, Option<ArbitraryDialect>), GeneratorError> {
+    fn choose_dialect(&self, id: &DeviceIdentity) -> Result<ChosenTable, GeneratorError> {
         let known = || dialect::known_names().join(", ");
         let base = match &self.opts.dialect {
             Some(name) => {
@@ -276,12 +404,42 @@ impl ScpiGenerator {
                 known: known(),
             })?,
         };
-        Ok((
-            self.opts.overrides.apply(&base.commands),
-            base.name,
-            base.arbitrary,
-        ))
+        Ok(ChosenTable {
+            commands: self.opts.overrides.apply(&base.commands),
+            name: base.name,
+            arbitrary: base.arbitrary,
+            limits: base.limits,
+        })
     }
+}
+
+/// The command table chosen for an instrument.
+struct ChosenTable {
+    commands: Dialect,
+    name: String,
+    arbitrary: Option<ArbitraryDialect>,
+    limits: Option<ModelLimits>,
+}
+
+/// The value of one unit in the last digit a number is printed with (`5.4288E+01` → 0.001,
+/// `120.5` → 0.1, `50` → 1); 0 for what is not a number.
+fn last_digit(answer: &str) -> f64 {
+    let (mantissa, exponent) = match answer.split_once(['E', 'e']) {
+        Some((m, e)) => (m, e.trim_start_matches('+').parse::<i32>().unwrap_or(0)),
+        None => (answer, 0),
+    };
+    if mantissa.parse::<f64>().is_err() {
+        return 0.0;
+    }
+    let decimals = mantissa.split_once('.').map_or(0, |(_, d)| d.len()) as i32;
+    10f64.powi(exponent - decimals)
+}
+
+/// The query that reads back what a setting template sets: its header with `?`
+/// (`SOURce{ch}:VOLTage {value}` → `SOURce1:VOLTage?`).
+fn query_of(template: &str, channel: u8) -> String {
+    let header = template.split_whitespace().next().unwrap_or(template);
+    format!("{}?", dialect::fill(header, channel, ""))
 }
 
 #[async_trait]
@@ -294,15 +452,20 @@ impl Generator for ScpiGenerator {
         let answer = self.query("*IDN?").await?;
         let id = DeviceIdentity::parse_idn(&answer).ok_or_else(|| self.garbled("*IDN?", answer))?;
         self.instrument = format!("{} {} on {}", id.manufacturer, id.model, self.port);
-        let (d, model, arbitrary) = self.choose_dialect(&id)?;
-        self.dialect = Some(d);
-        self.model = model;
-        self.arbitrary = arbitrary;
+        let t = self.choose_dialect(&id)?;
+        self.dialect = Some(t.commands);
+        self.model = t.name;
+        self.arbitrary = t.arbitrary;
+        self.limits = t.limits;
         Ok(id)
     }
 
     async fn prepare_sine(&mut self) -> Result<(), GeneratorError> {
         let d = self.commands()?.clone();
+        let idle = self
+            .model_limits()?
+            .idle_peak(Load::HighImpedance)
+            .map_err(|e| self.out_of_limits(e))?;
         let ch = self.opts.channel;
         self.write("*CLS").await?;
         self.set("*RST").await?;
@@ -313,35 +476,66 @@ impl Generator for ScpiGenerator {
         self.set(&dialect::fill(&d.voltage_unit, ch, d.unit.word()))
             .await?;
         self.set(&dialect::fill(&d.offset, ch, "0")).await?;
-        // The smallest amplitude every model accepts (1 mVpp).
-        self.set(&dialect::fill(
-            &d.amplitude,
-            ch,
-            &dialect::number(d.unit.from_peak(0.0005)),
-        ))
-        .await
+        // The smallest amplitude the model accepts into the high impedance just set.
+        self.set_amplitude(idle).await.map(|_| ())
     }
 
     async fn set_frequency(&mut self, hz: f64) -> Result<(), GeneratorError> {
         self.check("frequency (Hz)", hz)?;
-        let d = self.commands()?;
-        let line = dialect::fill(&d.frequency, self.opts.channel, &dialect::number(hz));
-        self.set(&line).await
+        let d = self.commands()?.clone();
+        let limits = self.model_limits()?;
+        let hz = limits.frequency(hz).map_err(|e| self.out_of_limits(e))?;
+        let tolerance = limits.frequency_tolerance(hz);
+        let ch = self.opts.channel;
+        let text = dialect::number(hz);
+        let sent = text.parse().unwrap_or(hz);
+        let line = dialect::fill(&d.frequency, ch, &text);
+        let query = query_of(&d.frequency, ch);
+        self.set_and_verify(&line, &query, sent, tolerance).await
     }
 
-    async fn set_amplitude(&mut self, volts_peak: f64) -> Result<(), GeneratorError> {
+    async fn set_amplitude(&mut self, volts_peak: f64) -> Result<f64, GeneratorError> {
         self.check("amplitude (V peak)", volts_peak)?;
-        let d = self.commands()?;
-        let value = dialect::number(d.unit.from_peak(volts_peak));
-        let line = dialect::fill(&d.amplitude, self.opts.channel, &value);
-        self.set(&line).await
+        let d = self.commands()?.clone();
+        let limits = self.model_limits()?;
+        let peak = limits
+            .amplitude_to_send(volts_peak, Load::HighImpedance)
+            .map_err(|e| self.out_of_limits(e))?;
+        let value = d.unit.from_peak(peak);
+        let tolerance = limits.amplitude_tolerance(value);
+        let ch = self.opts.channel;
+        let text = dialect::number(value);
+        let sent = text.parse().unwrap_or(value);
+        let line = dialect::fill(&d.amplitude, ch, &text);
+        let query = query_of(&d.amplitude, ch);
+        self.set_and_verify(&line, &query, sent, tolerance).await?;
+        Ok(peak)
     }
 
     async fn set_output(&mut self, on: bool) -> Result<(), GeneratorError> {
         let d = self.commands()?;
         let word = if on { &d.on } else { &d.off };
         let line = dialect::fill(&d.output, self.opts.channel, word);
-        self.set(&line).await
+        self.set(&line).await?;
+        let state = self.output().await?;
+        if state == on {
+            return Ok(());
+        }
+        if !on {
+            return Err(GeneratorError::OutputStillOn {
+                instrument: self.instrument.clone(),
+                command: line,
+            });
+        }
+        let query = dialect::fill(&self.commands()?.output_query, self.opts.channel, "");
+        Err(GeneratorError::ReadBack {
+            instrument: self.instrument.clone(),
+            command: line,
+            query,
+            sent: 1.0,
+            got: "off".into(),
+            tolerance: 0.0,
+        })
     }
 
     async fn output(&mut self) -> Result<bool, GeneratorError> {
@@ -359,6 +553,10 @@ impl Generator for ScpiGenerator {
         self.arbitrary.as_ref()
     }
 
+    fn limits(&self) -> Option<&ModelLimits> {
+        self.limits.as_ref()
+    }
+
     async fn play_arbitrary(
         &mut self,
         samples: &[f64],
@@ -371,14 +569,46 @@ impl Generator for ScpiGenerator {
                 model: self.model.clone(),
             });
         };
-        a.check(samples.len(), sample_rate_hz).map_err(|detail| {
-            GeneratorError::ArbitraryLimit {
+        a.check(samples.len(), sample_rate_hz)
+            .map_err(|e| GeneratorError::ArbitraryLimit {
                 instrument: self.instrument.clone(),
                 model: self.model.clone(),
-                detail,
+                detail: e.to_string(),
                 fix: "use fewer points (a shorter period) or a lower sample rate".into(),
+            })?;
+        // A connection dropped during the sequence leaves the instrument's memory unknown: the
+        // whole sequence (clear, upload, select, rate) is sent again once on the new connection.
+        let before = self.reconnects;
+        match self.upload_and_select(&a, samples, sample_rate_hz).await {
+            Ok(codes) if self.reconnects == before => Ok(codes),
+            first => {
+                if self.reconnects == before {
+                    return first;
+                }
+                tracing::warn!(
+                    "signal generator {}: connection reopened during the upload; uploading again",
+                    self.instrument
+                );
+                let again = self.upload_and_select(&a, samples, sample_rate_hz).await;
+                again.map_err(|e| GeneratorError::AfterReconnect {
+                    instrument: self.instrument.clone(),
+                    command: a.upload.clone(),
+                    source: Box::new(e),
+                })
             }
-        })?;
+        }
+    }
+}
+
+impl ScpiGenerator {
+    /// The arbitrary waveform's settings before the upload, the upload, the selection and the
+    /// rate; the DAC codes sent.
+    async fn upload_and_select(
+        &mut self,
+        a: &ArbitraryDialect,
+        samples: &[f64],
+        sample_rate_hz: f64,
+    ) -> Result<Vec<i32>, GeneratorError> {
         let ch = self.opts.channel;
         for c in &a.before_upload {
             self.set(&dialect::fill(c, ch, "")).await?;
@@ -393,7 +623,7 @@ impl Generator for ScpiGenerator {
         bytes.extend_from_slice(&data);
         bytes.extend_from_slice(tail.as_bytes());
         let text = format!("{head}<{} points>{tail}", codes.len());
-        self.set_raw(&text, &bytes).await?;
+        self.confirm_raw(&text, &bytes).await?;
         for c in &a.select {
             self.set(&dialect::fill(c, ch, "")).await?;
         }
@@ -409,6 +639,21 @@ impl Generator for ScpiGenerator {
 
 #[cfg(test)]
 mod tests;
+
+#[cfg(test)]
+mod read_back_tests {
+    use super::last_digit;
+
+    #[test]
+    fn the_last_printed_digit_of_each_manuals_number_form() {
+        assert!((last_digit("+1.20500000000000E+02") - 1e-12).abs() < 1e-24);
+        assert!((last_digit("5.4288E+01") - 1e-3).abs() < 1e-15);
+        assert!((last_digit("5.428835E+01") - 1e-5).abs() < 1e-18);
+        assert_eq!(last_digit("120.5"), 0.1);
+        assert_eq!(last_digit("50"), 1.0);
+        assert_eq!(last_digit("ON"), 0.0);
+    }
+}
 
 #[cfg(test)]
 mod arbitrary_tests;

@@ -1,15 +1,20 @@
-//! The simulated signal generator + power amplifier + shaker: serves the SCPI function-generator
-//! command set (long and short forms, the manuals' optional nodes, channel suffixes, an error
-//! queue) on a pseudo-terminal or a local TCP port, and turns the generator's volts into the
-//! exciter's force through the amplifier's true gain — which the simulated DAQ then measures
-//! through the shaker–structure interaction like any other force. An arbitrary waveform uploaded
-//! as a binary block (`SOUR:DATA:ARB:DAC name,#...`) is played at the sample rate set, looping.
-//! Injectable faults: the amplifier trips (force drops to nothing, the generator's output stays
-//! on) or surges.
+//! The simulated signal generator + power amplifier + shaker: emulates a Keysight 33522B, a Rigol
+//! DG1062Z, a Tektronix AFG31022 or a plain SCPI generator ([`emulation`]) on a pseudo-terminal or
+//! a local TCP port — refusing what that instrument's manual refuses (headers, parameter words,
+//! ranges by load, channels) with its error numbers and texts, keeping its state and answering
+//! queries in its format — and turns the generator's volts into the exciter's force through the
+//! amplifier's true gain, which the simulated DAQ then measures through the shaker–structure
+//! interaction like any other force. An uploaded arbitrary waveform is played at the sample rate
+//! set, looping. Every accepted setting is logged with the time it arrived. Injectable faults:
+//! the amplifier trips or surges; the connection drops before or after a command; the instrument
+//! stops answering on a connection; an error-queue entry appears.
+
+pub mod emulation;
+mod header;
 
 use std::collections::VecDeque;
 use std::sync::{Arc, Mutex};
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 use super::signal::ArbitraryDrive;
 use super::{lock, send_answer, InjectedFault, SharedRef};
@@ -17,21 +22,17 @@ use crate::device::DeviceIdentity;
 use crate::generator::arbitrary::{CommandFramer, FramedCommand};
 use crate::shaker::scpi::Function;
 use crate::transport::Transport;
+use emulation::{Emulation, Upload, MIN_FREQUENCY_HZ};
+use header::{canonical, undefined, ScpiFault};
 
-/// Most points the simulated generator's arbitrary memory holds.
-pub const MAX_ARBITRARY_POINTS: usize = 65_536;
-
-/// Highest arbitrary sample rate of the simulated generator (Sa/s).
-pub const MAX_SAMPLE_RATE_HZ: f64 = 1e6;
-
-/// Largest peak voltage the simulated generator delivers into a high-impedance load (V), like
-/// the 20 Vpp of the real instruments.
-pub const MAX_VOLTS_PEAK: f64 = 10.0;
+/// Most error-queue entries kept (the last becomes `-350,"Queue overflow"`).
+const QUEUE_LENGTH: usize = 10;
 
 /// What the simulated generator and amplifier are.
 #[derive(Debug, Clone, PartialEq)]
 pub struct SimGeneratorSetup {
-    /// The `*IDN?` answer.
+    /// The `*IDN?` answer; its manufacturer and model choose the emulated instrument
+    /// ([`Emulation::for_identity`]; any other identity gets the plain generator).
     pub identity: DeviceIdentity,
     /// The channel wired to the amplifier (the other channel drives nothing).
     pub channel: u8,
@@ -43,10 +44,39 @@ pub struct SimGeneratorSetup {
     pub amplifier_surge_after_lines: Option<u64>,
     /// Gain factor of a surge.
     pub surge_factor: f64,
+    /// Faults of the connection and the instrument.
+    pub faults: GeneratorFaults,
 }
 
-/// One setting the simulated generator accepted, for tests: what and the value (V peak, Hz,
-/// 1/0 for the output).
+/// The `nth` command (counted from 1 over the generator's life) whose text contains `contains`,
+/// compared case-insensitively with the text as sent (`"VOLT "` matches `SOUR1:VOLT 0.002`, not
+/// `SOUR1:VOLT:UNIT VPP`; give the spelling of the command table in use).
+#[derive(Debug, Clone, PartialEq)]
+pub struct CommandMatch {
+    /// Text the command contains.
+    pub contains: String,
+    /// Which occurrence (1 = the first).
+    pub nth: u64,
+}
+
+/// Faults the simulated generator injects, each once.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct GeneratorFaults {
+    /// The connection closes when this command arrives, before it is applied (the setting is
+    /// lost on the way). Connection faults act on a TCP connection (`sim:tcp`); a pty is never
+    /// closed by its device.
+    pub drop_before: Option<CommandMatch>,
+    /// The connection closes right after this command is applied, before anything is answered.
+    pub drop_after: Option<CommandMatch>,
+    /// The instrument stops answering on this connection from this command on (applies nothing
+    /// more on it); a new connection is served normally (an LXI socket that hung).
+    pub silent_from: Option<CommandMatch>,
+    /// This command is applied and the error-queue entry `code,"message"` appears with it.
+    pub error_at: Option<(CommandMatch, i32, String)>,
+}
+
+/// One setting the simulated generator accepted, for tests: what, the value (V peak at the
+/// amplifier's high-impedance input, Hz, 1/0 for the output), and when it arrived.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Accepted {
     /// `amplitude`, `frequency`, `output`.
@@ -55,6 +85,8 @@ pub struct Accepted {
     pub value: f64,
     /// Output state after it.
     pub output_on: bool,
+    /// Wall-clock time since the generator started when it was applied.
+    pub at: Duration,
 }
 
 /// The simulated generator's state (channel `channel` of [`SimGeneratorSetup`]).
@@ -62,7 +94,8 @@ pub struct Accepted {
 pub struct GeneratorState {
     /// Output on.
     pub output_on: bool,
-    /// Amplitude (V peak at a high-impedance load).
+    /// Amplitude as the instrument shows it (V peak) for its load setting; the voltage at the
+    /// amplifier's high-impedance input is twice it when the load is left at 50 Ω.
     pub volts_peak: f64,
     /// Frequency (Hz).
     pub frequency_hz: f64,
@@ -81,11 +114,11 @@ pub struct GeneratorState {
     pub gain_factor: f64,
     /// Frequency settings received.
     pub lines: u64,
-    /// The arbitrary function selected (`FUNC ARB`).
+    /// The arbitrary function selected.
     pub arbitrary: bool,
     /// The waveform in volatile memory (name, its samples −1..1), once uploaded.
     pub uploaded: Option<(String, Arc<ArbitraryDrive>)>,
-    /// The waveform `FUNC:ARB` selected.
+    /// The waveform selected to play.
     pub selected: Option<String>,
     /// Arbitrary sample rate (Sa/s).
     pub sample_rate_hz: f64,
@@ -97,6 +130,7 @@ pub struct GeneratorState {
 }
 
 impl Default for GeneratorState {
+    /// The state after `*RST` (the manuals' defaults: 1 kHz, 100 mVpp, 50 Ω, output off).
     fn default() -> Self {
         GeneratorState {
             output_on: false,
@@ -120,45 +154,105 @@ impl Default for GeneratorState {
     }
 }
 
+impl GeneratorState {
+    fn high_z(&self) -> bool {
+        self.load_ohm.is_infinite()
+    }
+
+    fn accept(&mut self, what: &'static str, value: f64, at: Duration) {
+        let output_on = self.output_on;
+        self.log.push(Accepted {
+            what,
+            value,
+            output_on,
+            at,
+        });
+    }
+}
+
+/// What a fault does to one arriving command.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Disposition {
+    Apply,
+    DropBefore,
+    DropAfter,
+    Silent,
+}
+
 /// A simulated generator shared by its connections and the simulated DAQ.
 #[derive(Clone)]
 pub struct SimGenerator {
     setup: SimGeneratorSetup,
+    emulation: Emulation,
     state: Arc<Mutex<GeneratorState>>,
     shared: SharedRef,
+    started: Instant,
+    /// Commands received, per fault pattern: (drop_before, drop_after, silent_from, error_at).
+    counts: Arc<Mutex<[u64; 4]>>,
 }
 
 impl SimGenerator {
     pub(super) fn new(setup: SimGeneratorSetup, shared: SharedRef) -> SimGenerator {
+        let id = &setup.identity;
+        let mut emulation = Emulation::for_identity(&format!("{},{}", id.manufacturer, id.model));
+        // The stand's own channel count when a plain generator is told to use more.
+        emulation.channels = emulation.channels.max(setup.channel);
         SimGenerator {
             setup,
+            emulation,
             state: Arc::new(Mutex::new(GeneratorState::default())),
             shared,
+            started: Instant::now(),
+            counts: Arc::new(Mutex::new([0; 4])),
         }
     }
 
     /// The generator's state now.
     pub fn state(&self) -> GeneratorState {
-        self.state.lock().unwrap_or_else(|p| p.into_inner()).clone()
+        self.lock_state().clone()
     }
 
-    /// Serves one connection until it closes (a TCP client leaving) or, on a pty, forever.
+    /// The instrument emulated.
+    pub fn emulation(&self) -> &Emulation {
+        &self.emulation
+    }
+
+    fn lock_state(&self) -> std::sync::MutexGuard<'_, GeneratorState> {
+        self.state.lock().unwrap_or_else(|p| p.into_inner())
+    }
+
+    /// Serves one connection until it closes (a TCP client leaving, or a dropped-connection
+    /// fault) or, on a pty, forever.
     pub(super) async fn serve<T: Transport>(&self, mut io: T, pty: bool) {
         let mut framer = CommandFramer::new();
         let mut buf = vec![0u8; 4096];
+        let mut silent = false;
         loop {
             let Some(got) = read_commands(&mut io, &mut framer, &mut buf, &self.shared, pty).await
             else {
                 return;
             };
             for c in got {
+                if silent {
+                    continue;
+                }
+                let disposition = self.disposition(&c.text);
+                match disposition {
+                    Disposition::DropBefore if !pty => return,
+                    Disposition::Silent => {
+                        silent = true;
+                        continue;
+                    }
+                    _ => {}
+                }
                 let answer = if c.garbage {
                     self.push_error(-100, "Command error");
                     None
                 } else {
                     self.handle(&c)
                 };
-                if !send_answer(&mut io, answer).await {
+                let dropped = disposition == Disposition::DropAfter && !pty;
+                if dropped || !send_answer(&mut io, answer).await {
                     return;
                 }
             }
@@ -184,9 +278,52 @@ impl SimGenerator {
         }
     }
 
+    /// Counts `text` against each fault's pattern and says what happens to it; an `error_at`
+    /// fault queues its entry here (the command is then applied as usual).
+    fn disposition(&self, text: &str) -> Disposition {
+        let f = &self.setup.faults;
+        let upper = text.to_ascii_uppercase();
+        let mut counts = self.counts.lock().unwrap_or_else(|p| p.into_inner());
+        let mut hit = |i: usize, m: &Option<CommandMatch>| -> bool {
+            let Some(m) = m else { return false };
+            if !upper.contains(&m.contains.to_ascii_uppercase()) {
+                return false;
+            }
+            counts[i] += 1;
+            counts[i] == m.nth
+        };
+        let (before, after, silent) = (
+            hit(0, &f.drop_before),
+            hit(1, &f.drop_after),
+            hit(2, &f.silent_from),
+        );
+        let error = f
+            .error_at
+            .as_ref()
+            .filter(|(m, _, _)| hit(3, &Some(m.clone())));
+        drop(counts);
+        let (kind, d) = if before {
+            ("generator_drop_before", Disposition::DropBefore)
+        } else if silent {
+            ("generator_silent", Disposition::Silent)
+        } else if after {
+            ("generator_drop_after", Disposition::DropAfter)
+        } else if let Some((_, code, message)) = error {
+            self.push_error(*code, message);
+            ("generator_error", Disposition::Apply)
+        } else {
+            return Disposition::Apply;
+        };
+        let seq = self.lock_state().log.len() as u64;
+        lock(&self.shared)
+            .injected
+            .push(InjectedFault { kind, seq });
+        d
+    }
+
     fn push_error(&self, code: i32, message: &str) {
-        let mut st = self.state.lock().unwrap_or_else(|p| p.into_inner());
-        if st.errors.len() >= 10 {
+        let mut st = self.lock_state();
+        if st.errors.len() >= QUEUE_LENGTH {
             st.errors.pop_back();
             st.errors.push_back((-350, "Queue overflow".into()));
         } else {
@@ -209,245 +346,162 @@ impl SimGenerator {
         }
     }
 
-    /// `SOUR{ch}:DATA:ARB:DAC name,<block>`: signed 16-bit codes, most-significant byte first
-    /// unless `FORM:BORD SWAP`.
-    fn upload(&self, text: &str, block: &[u8]) -> Result<Option<String>, (i32, String)> {
-        let (header, args) = text
+    fn out_of_range(&self) -> ScpiFault {
+        (-222, self.emulation.out_of_range.into())
+    }
+
+    fn elapsed(&self) -> Duration {
+        self.started.elapsed()
+    }
+
+    /// The header checked against the emulated instrument's manual: its optional nodes, its
+    /// load node, its channels.
+    fn header(&self, text: &str) -> Result<header::Header, ScpiFault> {
+        let h = canonical(text)?;
+        let e = &self.emulation;
+        if h.optional
+            .iter()
+            .any(|n| !matches!(*n, "SOURCE" | "NEXT") && !e.optional_nodes.contains(n))
+        {
+            return Err(undefined());
+        }
+        let load_node = |n: &str| match n {
+            "LOAD" => Some("LOAD"),
+            "IMP" => Some("IMPEDANCE"),
+            _ => None,
+        };
+        if let (Some(&"OUTP"), Some(n)) = (h.path.first(), h.path.get(1).and_then(|n| load_node(n)))
+        {
+            if !e.load_nodes.contains(&n) {
+                return Err(undefined());
+            }
+        }
+        if !(1..=e.channels).contains(&h.channel) {
+            return Err((-114, "Header suffix out of range".into()));
+        }
+        Ok(h)
+    }
+
+    /// A command that carried a binary block: the emulated instrument's upload.
+    fn upload(&self, text: &str, block: &[u8]) -> Result<Option<String>, ScpiFault> {
+        let (head, args) = text
             .trim()
             .split_once(char::is_whitespace)
             .unwrap_or((text, ""));
-        let (path, channel) = canonical(header)?;
-        if path != ["DATA", "ARB", "DAC"] {
-            return Err((-113, "Undefined header".into()));
-        }
-        let name = args
-            .trim()
-            .trim_end_matches(',')
-            .trim()
-            .to_ascii_uppercase();
-        if name.is_empty() || name.len() > 12 || !args.trim().ends_with(',') {
-            return Err((-109, "Missing parameter;name,<block>".into()));
-        }
-        if !block.len().is_multiple_of(2) {
-            return Err((-161, "Invalid block data;odd byte count".into()));
-        }
-        let points = block.len() / 2;
-        if points > MAX_ARBITRARY_POINTS {
+        let h = self.header(head)?;
+        let args: Vec<String> = args
+            .split(',')
+            .map(|a| a.trim().to_ascii_uppercase())
+            .collect();
+        let (name, channel, codes) = match (self.emulation.upload, h.path.as_slice()) {
+            (Upload::KeysightDac, ["DATA", "ARB", "DAC"]) => {
+                let name = args.first().cloned().unwrap_or_default();
+                if name.is_empty() || name.len() > 12 || args.len() != 2 {
+                    return Err((-109, "Missing parameter;name,<block>".into()));
+                }
+                let swapped = self.lock_state().swapped;
+                (name, h.channel, words(block, !swapped, true)?)
+            }
+            (Upload::RigolDac16, ["TRAC", "DATA", "DAC16"]) => {
+                if args.len() != 3
+                    || args[0] != "VOLATILE"
+                    || !matches!(args[1].as_str(), "END" | "CON")
+                {
+                    return Err((-109, "Missing parameter;VOLATILE,END,<block>".into()));
+                }
+                (
+                    "VOLATILE".to_string(),
+                    h.channel,
+                    words(block, false, false)?,
+                )
+            }
+            (Upload::TektronixEmem, ["TRAC", "DATA"]) => {
+                let channel = match args.first().map(String::as_str) {
+                    Some("EMEMORY1" | "EMEM1" | "EMEMORY" | "EMEM") => 1,
+                    Some("EMEMORY2" | "EMEM2") => 2,
+                    _ => return Err((-224, "Illegal parameter value".into())),
+                };
+                (
+                    format!("EMEMORY{channel}"),
+                    channel,
+                    words(block, true, false)?,
+                )
+            }
+            _ => return Err(undefined()),
+        };
+        let e = &self.emulation;
+        if codes.len() > e.max_points {
             return Err((-223, "Too much data".into()));
         }
-        if points < 8 {
-            return Err((-222, "Data out of range;at least 8 points".into()));
+        let (min_points, full_scale, mid) = match e.upload {
+            Upload::KeysightDac => (8, 32767.0, 0.0),
+            Upload::RigolDac16 => (8, 8191.5, 8191.5),
+            Upload::TektronixEmem => (2, 8191.5, 8191.5),
+        };
+        if codes.len() < min_points {
+            return Err(self.out_of_range());
         }
-        let mut st = self.state.lock().unwrap_or_else(|p| p.into_inner());
-        let samples = block
-            .chunks_exact(2)
-            .map(|b| {
-                let w = if st.swapped {
-                    i16::from_le_bytes([b[0], b[1]])
-                } else {
-                    i16::from_be_bytes([b[0], b[1]])
-                };
-                f64::from(w.max(-32767)) / 32767.0
-            })
-            .collect();
+        if codes
+            .iter()
+            .any(|&c| (f64::from(c) - mid).abs() > full_scale)
+        {
+            return Err(self.out_of_range());
+        }
         if channel != self.setup.channel {
             return Ok(None);
         }
+        let samples = codes
+            .iter()
+            .map(|&c| (f64::from(c) - mid) / full_scale)
+            .collect();
+        let mut st = self.lock_state();
+        let rate = st.sample_rate_hz;
         st.uploaded = Some((
-            name,
+            name.clone(),
             Arc::new(ArbitraryDrive {
                 samples,
-                sample_rate_hz: st.sample_rate_hz,
+                sample_rate_hz: rate,
             }),
         ));
+        if e.upload == Upload::RigolDac16 && args.get(1).map(String::as_str) == Some("END") {
+            // END switches the channel to the waveform just loaded.
+            st.selected = Some(name);
+            st.arbitrary = true;
+            st.sine = false;
+        }
         self.drive(&st);
         Ok(None)
     }
 
-    fn apply(&self, line: &str) -> Result<Option<String>, (i32, String)> {
+    /// One command without a block: common commands, the error queue, then the settings and
+    /// queries of the emulated instrument.
+    fn apply(&self, line: &str) -> Result<Option<String>, ScpiFault> {
         let line = line.trim();
-        let (header, args) = match line.split_once(char::is_whitespace) {
+        let (head, args) = match line.split_once(char::is_whitespace) {
             Some((h, a)) => (h, a.trim()),
             None => (line, ""),
         };
-        let query = header.ends_with('?');
-        let header = header.trim_end_matches('?');
-        if let Some(common) = header.strip_prefix('*') {
+        let query = head.ends_with('?');
+        let head = head.trim_end_matches('?');
+        if let Some(common) = head.strip_prefix('*') {
             return self.common(&common.to_ascii_uppercase(), query);
         }
-        let (path, channel) = canonical(header)?;
-        if !(1..=2).contains(&channel) {
-            return Err((-114, "Header suffix out of range".into()));
+        let h = self.header(head)?;
+        let mut st = self.lock_state();
+        if h.path == ["SYST", "ERR"] && query {
+            let (code, message) = st.errors.pop_front().unwrap_or((0, "No error".into()));
+            return Ok(Some(self.emulation.error_entry(code, &message)));
         }
-        let mut st = self.state.lock().unwrap_or_else(|p| p.into_inner());
-        if path == ["SYST", "ERR"] && query {
-            return Ok(Some(match st.errors.pop_front() {
-                Some((c, m)) => format!("{c},\"{m}\""),
-                None => "0,\"No error\"".into(),
-            }));
-        }
-        // Channel 2 is not wired: it accepts settings and drives nothing.
-        let ours = channel == self.setup.channel;
+        // Only the amplifier's channel is wired: the other accepts settings and drives nothing.
+        let ours = h.channel == self.setup.channel;
         let mut scratch = GeneratorState::default();
         let s: &mut GeneratorState = if ours { &mut st } else { &mut scratch };
-        let answer = match (path.as_slice(), query) {
-            (["FUNC"], false) => {
-                let w = word(args);
-                s.sine = match w.as_str() {
-                    "SIN" | "SINUSOID" => true,
-                    "SQU" | "SQUARE" | "RAMP" | "PULS" | "PULSE" | "NOIS" | "NOISE" | "DC"
-                    | "ARB" | "ARBITRARY" | "PRBS" | "TRI" | "TRIANGLE" => false,
-                    _ => return Err((-224, "Illegal parameter value".into())),
-                };
-                s.arbitrary = matches!(w.as_str(), "ARB" | "ARBITRARY");
-                None
-            }
-            (["FUNC"], true) => Some(
-                if s.sine {
-                    "SIN"
-                } else if s.arbitrary {
-                    "ARB"
-                } else {
-                    "NOIS"
-                }
-                .into(),
-            ),
-            (["FUNC", "ARB"], false) => {
-                let name = args.trim().trim_matches('"').to_ascii_uppercase();
-                if s.uploaded.as_ref().map(|(n, _)| n) != Some(&name) {
-                    return Err((-224, "Illegal parameter value;no such arb waveform".into()));
-                }
-                s.selected = Some(name);
-                None
-            }
-            (["FUNC", "ARB", "SRAT"], false) => {
-                let r = number(args)?;
-                if !(1e-6..=MAX_SAMPLE_RATE_HZ).contains(&r) {
-                    return Err((-222, "Data out of range".into()));
-                }
-                s.sample_rate_hz = r;
-                if let Some((_, a)) = &mut s.uploaded {
-                    *a = Arc::new(ArbitraryDrive {
-                        samples: a.samples.clone(),
-                        sample_rate_hz: r,
-                    });
-                }
-                None
-            }
-            (["FUNC", "ARB", "SRAT"], true) => Some(format!("{:E}", s.sample_rate_hz)),
-            (["DATA", "VOL", "CLE"], false) => {
-                s.uploaded = None;
-                s.selected = None;
-                None
-            }
-            (["FORM", "BORD"], false) => {
-                s.swapped = match word(args).as_str() {
-                    "NORM" | "NORMAL" => false,
-                    "SWAP" | "SWAPPED" => true,
-                    _ => return Err((-224, "Illegal parameter value".into())),
-                };
-                None
-            }
-            (["FREQ"], false) => {
-                let f = number(args)?;
-                if !(1e-6..=20e6).contains(&f) {
-                    return Err((-222, "Data out of range".into()));
-                }
-                s.frequency_hz = f;
-                if ours {
-                    s.lines += 1;
-                    s.log.push(Accepted {
-                        what: "frequency",
-                        value: f,
-                        output_on: s.output_on,
-                    });
-                }
-                None
-            }
-            (["FREQ"], true) => Some(format!("{:E}", s.frequency_hz)),
-            (["VOLT"], false) => {
-                let x = number(args)?;
-                let peak = if s.vrms {
-                    x * std::f64::consts::SQRT_2
-                } else {
-                    0.5 * x
-                };
-                if !(0.0005 - 1e-12..=MAX_VOLTS_PEAK).contains(&peak)
-                    || peak + s.offset_v.abs() > MAX_VOLTS_PEAK
-                {
-                    return Err((-222, "Data out of range".into()));
-                }
-                s.volts_peak = peak;
-                s.log.push(Accepted {
-                    what: "amplitude",
-                    value: peak,
-                    output_on: s.output_on,
-                });
-                None
-            }
-            (["VOLT"], true) => Some(format!(
-                "{:E}",
-                if s.vrms {
-                    s.volts_peak / std::f64::consts::SQRT_2
-                } else {
-                    2.0 * s.volts_peak
-                }
-            )),
-            (["VOLT", "UNIT"], false) => {
-                s.vrms = match word(args).as_str() {
-                    "VPP" => false,
-                    "VRMS" => true,
-                    "DBM" => {
-                        return Err((-221, "Settings conflict;dBm needs a 50 Ohm load".into()))
-                    }
-                    _ => return Err((-224, "Illegal parameter value".into())),
-                };
-                None
-            }
-            (["VOLT", "UNIT"], true) => Some(if s.vrms { "VRMS" } else { "VPP" }.into()),
-            (["VOLT", "OFFS"], false) => {
-                let v = number(args)?;
-                if v.abs() + s.volts_peak > MAX_VOLTS_PEAK {
-                    return Err((-222, "Data out of range".into()));
-                }
-                s.offset_v = v;
-                None
-            }
-            (["VOLT", "OFFS"], true) => Some(format!("{:E}", s.offset_v)),
-            (["OUTP"], false) => {
-                s.output_on = match word(args).as_str() {
-                    "ON" | "1" => true,
-                    "OFF" | "0" => false,
-                    _ => return Err((-224, "Illegal parameter value".into())),
-                };
-                let on = s.output_on;
-                s.log.push(Accepted {
-                    what: "output",
-                    value: f64::from(u8::from(on)),
-                    output_on: on,
-                });
-                None
-            }
-            (["OUTP"], true) => Some(if s.output_on { "1" } else { "0" }.into()),
-            (["OUTP", "LOAD"] | ["OUTP", "IMP"], false) => {
-                s.load_ohm = match word(args).as_str() {
-                    "INF" | "INFINITY" | "MAX" | "MAXIMUM" => f64::INFINITY,
-                    _ => {
-                        let r = number(args)?;
-                        if !(1.0..=10_000.0).contains(&r) {
-                            return Err((-222, "Data out of range".into()));
-                        }
-                        r
-                    }
-                };
-                None
-            }
-            (["OUTP", "LOAD"] | ["OUTP", "IMP"], true) => Some(if s.load_ohm.is_infinite() {
-                "9.9E+37".into()
-            } else {
-                format!("{:E}", s.load_ohm)
-            }),
-            _ => return Err((-113, "Undefined header".into())),
+        let at = self.elapsed();
+        let answer = if query {
+            Some(self.query(&h.path, s)?)
+        } else {
+            self.set(&h.path, args, s, at)?;
+            None
         };
         if ours && !query {
             self.faults(&mut st);
@@ -456,41 +510,256 @@ impl SimGenerator {
         Ok(answer)
     }
 
+    /// A query's answer, in the emulated instrument's format.
+    fn query(&self, path: &[&str], s: &GeneratorState) -> Result<String, ScpiFault> {
+        let e = &self.emulation;
+        Ok(match path {
+            ["FUNC"] => if s.sine {
+                "SIN"
+            } else if s.arbitrary {
+                match e.upload {
+                    Upload::KeysightDac => "ARB",
+                    Upload::RigolDac16 => "USER",
+                    Upload::TektronixEmem => "EMEM1",
+                }
+            } else {
+                "NOIS"
+            }
+            .into(),
+            ["FUNC", "ARB", "SRAT"] => e.number(s.sample_rate_hz),
+            ["FREQ"] => e.number(s.frequency_hz),
+            ["VOLT"] => e.number(if s.vrms {
+                s.volts_peak / std::f64::consts::SQRT_2
+            } else {
+                2.0 * s.volts_peak
+            }),
+            ["VOLT", "UNIT"] => if s.vrms { "VRMS" } else { "VPP" }.into(),
+            ["VOLT", "OFFS"] => e.number(s.offset_v),
+            ["OUTP"] => e.state(s.output_on).into(),
+            ["OUTP", "LOAD" | "IMP"] => {
+                if s.high_z() {
+                    e.number(9.9e37)
+                } else {
+                    e.number(s.load_ohm)
+                }
+            }
+            _ => return Err(undefined()),
+        })
+    }
+
+    /// A setting, refused as the emulated instrument refuses it.
+    fn set(
+        &self,
+        path: &[&str],
+        args: &str,
+        s: &mut GeneratorState,
+        at: Duration,
+    ) -> Result<(), ScpiFault> {
+        match path {
+            ["FUNC"] => self.set_function(args, s),
+            ["FUNC", "ARB"] => self.select_arbitrary(args, s),
+            ["FUNC", "ARB", "SRAT"] => self.set_sample_rate(args, s),
+            ["FUNC", "ARB", "MODE"] if self.emulation.upload == Upload::RigolDac16 => {
+                match word(args).as_str() {
+                    "SRATE" | "SRAT" | "FREQ" | "FREQUENCY" => Ok(()),
+                    _ => Err((-224, "Illegal parameter value".into())),
+                }
+            }
+            ["DATA", "VOL", "CLE"] if self.emulation.upload == Upload::KeysightDac => {
+                s.uploaded = None;
+                s.selected = None;
+                Ok(())
+            }
+            ["FORM", "BORD"] if self.emulation.upload == Upload::KeysightDac => {
+                s.swapped = match word(args).as_str() {
+                    "NORM" | "NORMAL" => false,
+                    "SWAP" | "SWAPPED" => true,
+                    _ => return Err((-224, "Illegal parameter value".into())),
+                };
+                Ok(())
+            }
+            ["FREQ"] => self.set_frequency(args, s, at),
+            ["VOLT"] => self.set_amplitude(args, s, at),
+            ["VOLT", "UNIT"] => {
+                s.vrms = match word(args).as_str() {
+                    "VPP" => false,
+                    "VRMS" => true,
+                    "DBM" if s.high_z() => {
+                        return Err((-221, "Settings conflict;dBm needs a 50 Ohm load".into()))
+                    }
+                    "DBM" => return Err((-224, "Illegal parameter value".into())),
+                    _ => return Err((-224, "Illegal parameter value".into())),
+                };
+                Ok(())
+            }
+            ["VOLT", "OFFS"] => {
+                let v = number(args)?;
+                if v.abs() + s.volts_peak > self.emulation.offset_limit_v(s.high_z()) {
+                    return Err(self.out_of_range());
+                }
+                s.offset_v = v;
+                Ok(())
+            }
+            ["OUTP"] => {
+                s.output_on = match word(args).as_str() {
+                    "ON" | "1" => true,
+                    "OFF" | "0" => false,
+                    _ => return Err((-224, "Illegal parameter value".into())),
+                };
+                s.accept("output", f64::from(u8::from(s.output_on)), at);
+                Ok(())
+            }
+            ["OUTP", "LOAD" | "IMP"] => self.set_load(args, s),
+            _ => Err(undefined()),
+        }
+    }
+
+    /// `FUNCtion <word>`: only the words the manual lists.
+    fn set_function(&self, args: &str, s: &mut GeneratorState) -> Result<(), ScpiFault> {
+        let e = &self.emulation;
+        let w = word(args);
+        let Some(f) = e.function(&w) else {
+            return Err((-224, "Illegal parameter value".into()));
+        };
+        s.sine = f == "SINUSOID";
+        s.arbitrary = f == e.arbitrary_word || (f == "ARBITRARY" && e.arbitrary_word == "ARB");
+        if s.arbitrary && e.upload == Upload::TektronixEmem {
+            // The edit memory plays what was loaded into it.
+            s.selected = s.uploaded.as_ref().map(|(n, _)| n.clone());
+        }
+        Ok(())
+    }
+
+    /// `FUNCtion:ARBitrary <name>` (Keysight): a waveform in volatile memory.
+    fn select_arbitrary(&self, args: &str, s: &mut GeneratorState) -> Result<(), ScpiFault> {
+        if self.emulation.upload != Upload::KeysightDac {
+            return Err(undefined());
+        }
+        let name = args.trim().trim_matches('"').to_ascii_uppercase();
+        if s.uploaded.as_ref().map(|(n, _)| n) != Some(&name) {
+            return Err((-224, "Illegal parameter value;no such arb waveform".into()));
+        }
+        s.selected = Some(name);
+        Ok(())
+    }
+
+    /// `FUNCtion:ARBitrary:SRATe <Sa/s>` (Keysight, Rigol).
+    fn set_sample_rate(&self, args: &str, s: &mut GeneratorState) -> Result<(), ScpiFault> {
+        if self.emulation.upload == Upload::TektronixEmem {
+            return Err(undefined());
+        }
+        let r = number(args)?;
+        if !(1e-6..=self.emulation.max_sample_rate_hz).contains(&r) {
+            return Err(self.out_of_range());
+        }
+        set_rate(s, r);
+        Ok(())
+    }
+
+    /// `FREQuency <Hz>`: the sine's frequency, or (Tektronix, edit memory playing) the
+    /// waveform's repetition frequency.
+    fn set_frequency(
+        &self,
+        args: &str,
+        s: &mut GeneratorState,
+        at: Duration,
+    ) -> Result<(), ScpiFault> {
+        let f = number(args)?;
+        let e = &self.emulation;
+        if e.upload == Upload::TektronixEmem && s.arbitrary {
+            let points = s.uploaded.as_ref().map_or(0, |(_, a)| a.samples.len());
+            let rate = f * points as f64;
+            if !(rate > 0.0 && rate <= e.max_sample_rate_hz) {
+                return Err(self.out_of_range());
+            }
+            set_rate(s, rate);
+            return Ok(());
+        }
+        if !(MIN_FREQUENCY_HZ..=e.max_frequency_hz).contains(&f) {
+            return Err(self.out_of_range());
+        }
+        s.frequency_hz = f;
+        s.lines += 1;
+        s.accept("frequency", f, at);
+        Ok(())
+    }
+
+    /// `VOLTage <value>` in the unit set: within the data sheet's range at the load set, and
+    /// with the offset within the output's limit.
+    fn set_amplitude(
+        &self,
+        args: &str,
+        s: &mut GeneratorState,
+        at: Duration,
+    ) -> Result<(), ScpiFault> {
+        let x = number(args)?;
+        let peak = if s.vrms {
+            x * std::f64::consts::SQRT_2
+        } else {
+            0.5 * x
+        };
+        let e = &self.emulation;
+        let (lo, hi) = e.amplitude_vpp(s.high_z());
+        let vpp = 2.0 * peak;
+        if vpp < lo * (1.0 - 1e-9)
+            || vpp > hi * (1.0 + 1e-9)
+            || peak + s.offset_v.abs() > e.offset_limit_v(s.high_z()) * (1.0 + 1e-9)
+        {
+            return Err(self.out_of_range());
+        }
+        s.volts_peak = peak;
+        // The voltage at the amplifier's high-impedance input.
+        let real = if s.high_z() { peak } else { 2.0 * peak };
+        s.accept("amplitude", real, at);
+        Ok(())
+    }
+
+    /// `OUTPut:LOAD` / `OUTPut:IMPedance`: the amplitude shown is rescaled so the output voltage
+    /// stays the same (as the 33500B guide says of a changed termination).
+    fn set_load(&self, args: &str, s: &mut GeneratorState) -> Result<(), ScpiFault> {
+        let load = match word(args).as_str() {
+            "INF" | "INFINITY" => f64::INFINITY,
+            "MAX" | "MAXIMUM" => 10_000.0,
+            "MIN" | "MINIMUM" => 1.0,
+            _ => {
+                let r = number(args)?;
+                if !(1.0..=10_000.0).contains(&r) {
+                    return Err(self.out_of_range());
+                }
+                r
+            }
+        };
+        let shown = |ohm: f64| if ohm.is_infinite() { 1.0 } else { 0.5 };
+        s.volts_peak *= shown(load) / shown(s.load_ohm);
+        s.load_ohm = load;
+        Ok(())
+    }
+
     /// IEEE 488.2 common commands.
-    fn common(&self, name: &str, query: bool) -> Result<Option<String>, (i32, String)> {
+    fn common(&self, name: &str, query: bool) -> Result<Option<String>, ScpiFault> {
         match (name, query) {
             ("IDN", true) => Ok(Some(self.setup.identity.to_idn())),
             ("OPC", true) => Ok(Some("1".into())),
             ("OPC", false) => Ok(None),
             ("RST", false) => {
-                let mut st = self.state.lock().unwrap_or_else(|p| p.into_inner());
-                let keep = (
-                    std::mem::take(&mut st.log),
-                    std::mem::take(&mut st.errors),
-                    st.lines,
-                    st.amplifier_tripped,
-                    st.gain_factor,
-                );
-                *st = GeneratorState::default();
-                (
-                    st.log,
-                    st.errors,
-                    st.lines,
-                    st.amplifier_tripped,
-                    st.gain_factor,
-                ) = keep;
+                let mut st = self.lock_state();
+                let kept = GeneratorState {
+                    log: std::mem::take(&mut st.log),
+                    errors: std::mem::take(&mut st.errors),
+                    lines: st.lines,
+                    amplifier_tripped: st.amplifier_tripped,
+                    gain_factor: st.gain_factor,
+                    ..GeneratorState::default()
+                };
+                *st = kept;
                 self.drive(&st);
                 Ok(None)
             }
             ("CLS", false) => {
-                self.state
-                    .lock()
-                    .unwrap_or_else(|p| p.into_inner())
-                    .errors
-                    .clear();
+                self.lock_state().errors.clear();
                 Ok(None)
             }
-            _ => Err((-113, "Undefined header".into())),
+            _ => Err(undefined()),
         }
     }
 
@@ -515,7 +784,7 @@ impl SimGenerator {
 
     /// The force the amplifier and shaker now deliver, for the simulated DAQ.
     fn drive(&self, st: &GeneratorState) {
-        let load_factor = if st.load_ohm.is_finite() { 2.0 } else { 1.0 };
+        let load_factor = if st.high_z() { 1.0 } else { 2.0 };
         let force = if st.amplifier_tripped {
             0.0
         } else {
@@ -537,6 +806,39 @@ impl SimGenerator {
         exc.freq_hz = st.frequency_hz;
         exc.force_n = force;
     }
+}
+
+/// The arbitrary sample rate, applied to the waveform in memory too.
+fn set_rate(s: &mut GeneratorState, rate: f64) {
+    s.sample_rate_hz = rate;
+    if let Some((_, a)) = &mut s.uploaded {
+        *a = Arc::new(ArbitraryDrive {
+            samples: a.samples.clone(),
+            sample_rate_hz: rate,
+        });
+    }
+}
+
+/// A block's 16-bit words: most-significant byte first when `big`, signed when `signed`.
+fn words(block: &[u8], big: bool, signed: bool) -> Result<Vec<i32>, ScpiFault> {
+    if !block.len().is_multiple_of(2) {
+        return Err((-161, "Invalid block data;odd byte count".into()));
+    }
+    Ok(block
+        .chunks_exact(2)
+        .map(|b| {
+            let raw = if big {
+                u16::from_be_bytes([b[0], b[1]])
+            } else {
+                u16::from_le_bytes([b[0], b[1]])
+            };
+            if signed {
+                i32::from(raw as i16)
+            } else {
+                i32::from(raw)
+            }
+        })
+        .collect())
 }
 
 /// The complete commands the host's next bytes finish (binary blocks whole); `None` when the
@@ -563,7 +865,7 @@ fn word(args: &str) -> String {
 }
 
 /// A numeric argument (`1.5`, `+1.5E+00`).
-fn number(args: &str) -> Result<f64, (i32, String)> {
+fn number(args: &str) -> Result<f64, ScpiFault> {
     let w = args.split_whitespace().next().unwrap_or("");
     if w.is_empty() {
         return Err((-109, "Missing parameter".into()));
@@ -574,95 +876,5 @@ fn number(args: &str) -> Result<f64, (i32, String)> {
         .ok_or((-104, "Data type error".into()))
 }
 
-/// Long form, short form of the mnemonics this generator knows; `None` = an optional node the
-/// manuals allow and that changes nothing (`SOURce`, `LEVel`, `IMMediate`, …).
-const MNEMONICS: [(&str, &str, Option<&str>); 27] = [
-    ("NEXT", "NEXT", None),
-    ("SOURCE", "SOUR", None),
-    ("LEVEL", "LEV", None),
-    ("IMMEDIATE", "IMM", None),
-    ("AMPLITUDE", "AMPL", None),
-    ("STATE", "STAT", None),
-    ("FIXED", "FIX", None),
-    ("SHAPE", "SHAP", None),
-    ("CW", "CW", None),
-    ("FUNCTION", "FUNC", Some("FUNC")),
-    ("FREQUENCY", "FREQ", Some("FREQ")),
-    ("VOLTAGE", "VOLT", Some("VOLT")),
-    ("UNIT", "UNIT", Some("UNIT")),
-    ("OFFSET", "OFFS", Some("OFFS")),
-    ("OUTPUT", "OUTP", Some("OUTP")),
-    ("LOAD", "LOAD", Some("LOAD")),
-    ("IMPEDANCE", "IMP", Some("IMP")),
-    ("SYSTEM", "SYST", Some("SYST")),
-    ("ERROR", "ERR", Some("ERR")),
-    ("DATA", "DATA", Some("DATA")),
-    ("ARBITRARY", "ARB", Some("ARB")),
-    ("DAC", "DAC", Some("DAC")),
-    ("VOLATILE", "VOL", Some("VOL")),
-    ("CLEAR", "CLE", Some("CLE")),
-    ("SRATE", "SRAT", Some("SRAT")),
-    ("FORMAT", "FORM", Some("FORM")),
-    ("BORDER", "BORD", Some("BORD")),
-];
-
-/// A header as its canonical short-form path and channel (`SOURce2:VOLTage:LEVel:IMMediate:
-/// AMPLitude` → `[VOLT]`, 2). Unknown mnemonics are `-113 Undefined header`.
-fn canonical(header: &str) -> Result<(Vec<&'static str>, u8), (i32, String)> {
-    let mut path = Vec::new();
-    let mut channel = 1u8;
-    for node in header.trim_start_matches(':').split(':') {
-        let digits = node.len() - node.trim_end_matches(|c: char| c.is_ascii_digit()).len();
-        let (name, suffix) = node.split_at(node.len() - digits);
-        let upper = name.to_ascii_uppercase();
-        let Some((long, _, canon)) = MNEMONICS
-            .iter()
-            .find(|(long, short, _)| upper == *long || upper == *short)
-        else {
-            return Err((-113, "Undefined header".into()));
-        };
-        if !suffix.is_empty() {
-            if !matches!(*long, "SOURCE" | "OUTPUT") {
-                return Err((-113, "Undefined header".into()));
-            }
-            channel = suffix
-                .parse()
-                .map_err(|_| (-114, "Header suffix out of range".to_string()))?;
-        }
-        if let Some(c) = canon {
-            path.push(*c);
-        }
-    }
-    Ok((path, channel))
-}
-
 #[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn headers_of_the_three_manuals_reduce_to_one_path() {
-        let c = |h: &str| canonical(h).unwrap();
-        assert_eq!(
-            c("SOURce1:VOLTage:LEVel:IMMediate:AMPLitude"),
-            (vec!["VOLT"], 1)
-        );
-        assert_eq!(c(":SOUR2:VOLT"), (vec!["VOLT"], 2));
-        assert_eq!(c("sour:volt:offs"), (vec!["VOLT", "OFFS"], 1));
-        assert_eq!(c("SOURce1:FUNCtion:SHAPe"), (vec!["FUNC"], 1));
-        assert_eq!(c("SOURce1:FREQuency:FIXed"), (vec!["FREQ"], 1));
-        assert_eq!(c("OUTPut2:STATe"), (vec!["OUTP"], 2));
-        assert_eq!(c("OUTP1:IMPedance"), (vec!["OUTP", "IMP"], 1));
-        assert_eq!(c("SYSTem:ERRor"), (vec!["SYST", "ERR"], 1));
-        assert_eq!(c("SYST:ERR:NEXT"), (vec!["SYST", "ERR"], 1));
-        assert!(canonical("SOUR1:FORCe").is_err());
-        assert!(
-            canonical("VOLT3").is_err(),
-            "a suffix only on SOURce/OUTPut"
-        );
-        assert!(
-            canonical("SOURc:VOLT").is_err(),
-            "neither long nor short form"
-        );
-    }
-}
+mod tests;

@@ -120,19 +120,28 @@ impl SimGeneratorSetup {
             .as_ref()
             .and_then(|t| t.amplifier_gain_n_per_v)
             .unwrap_or(g.amplifier.gain_n_per_v);
+        // The instrument the stand expects, when it is one the simulator emulates (a Keysight
+        // 33522B, a Rigol DG1062Z, a Tektronix AFG31022); the plain simulated generator else.
+        let emulated = generator::emulation::Emulation::for_identity(&g.identity);
+        let identity = if emulated.manufacturer == "IDENT-SIM" {
+            DeviceIdentity {
+                manufacturer: "IDENT-SIM".into(),
+                model: "SIGGEN-2".into(),
+                serial: "G0001".into(),
+                firmware: env!("CARGO_PKG_VERSION").into(),
+            }
+        } else {
+            emulated.identity(env!("CARGO_PKG_VERSION"))
+        };
         Some(SimGeneratorSetup {
             device: generator::SimGeneratorSetup {
-                identity: DeviceIdentity {
-                    manufacturer: "IDENT-SIM".into(),
-                    model: "SIGGEN-2".into(),
-                    serial: "G0001".into(),
-                    firmware: env!("CARGO_PKG_VERSION").into(),
-                },
+                identity,
                 channel: g.channel,
                 amplifier_gain_n_per_v: true_gain,
                 amplifier_trip_after_lines: stand.faults.amplifier_trip_after_lines,
                 amplifier_surge_after_lines: stand.faults.amplifier_surge_after_lines,
                 surge_factor: stand.faults.amplifier_surge_factor,
+                faults: generator::GeneratorFaults::default(),
             },
             tcp: matches!(g.port, crate::stand::GeneratorAddress::Sim { tcp: true }),
         })
@@ -960,6 +969,9 @@ impl SerialSimDaq {
     }
 }
 
+/// Analog inputs of the simulated serial DAQ (`IDENT-SIM,DAQ-8`), numbered 0 to 7.
+pub const SIM_DAQ_INPUTS: u16 = 8;
+
 fn configure(c: &DaqConfig, all: &[SimChannel]) -> Result<(StreamInfo, Vec<usize>), (i16, String)> {
     if !(1.0..=200_000.0).contains(&c.sample_rate_hz) {
         return Err((
@@ -974,6 +986,15 @@ fn configure(c: &DaqConfig, all: &[SimChannel]) -> Result<(StreamInfo, Vec<usize
         > frame::MAX_FRAME
     {
         return Err((-222, "block does not fit a frame".into()));
+    }
+    if let Some(ch) = c.channels.iter().find(|&&ch| ch >= SIM_DAQ_INPUTS) {
+        return Err((
+            -224,
+            format!(
+                "no input {ch}: this unit has {SIM_DAQ_INPUTS} inputs, 0 to {}",
+                SIM_DAQ_INPUTS - 1
+            ),
+        ));
     }
     let mut idx = Vec::new();
     for ch in &c.channels {

@@ -162,7 +162,7 @@ fn check_generator(
 }
 
 /// The built-in table a generator stand names, and which field named it.
-fn model_of(g: &GeneratorStand) -> Option<(ModelEntry, &'static str)> {
+pub(super) fn model_of(g: &GeneratorStand) -> Option<(ModelEntry, &'static str)> {
     if let Some(d) = &g.dialect {
         return dialect::by_name(d)
             .ok()

@@ -14,6 +14,7 @@ use rfe::units::Dim;
 use super::{baud, Ctx, PortSpec, ShakerPort, StandError};
 use crate::generator::dialect::{self, DialectOverrides};
 use crate::generator::exciter::{Amplifier, RAMP_TICK};
+use crate::generator::limits::{LimitError, Load};
 use crate::transport::SocketAddress;
 
 /// Largest generator amplitude a stand may allow (V peak): what function generators deliver into
@@ -173,6 +174,7 @@ pub(super) fn generator_section(
         amplifier,
         port,
     };
+    check_model_range(cx, rg, ra, &stand)?;
     let shaker = ShakerPort {
         port: match &stand.port {
             GeneratorAddress::Sim { .. } => PortSpec::Sim,
@@ -185,6 +187,51 @@ pub(super) fn generator_section(
         max_force_n: stand.amplifier.force_limit_n,
     };
     Ok((stand, shaker))
+}
+
+/// When the stand names its generator's model (`dialect`, or `identity` with manufacturer and
+/// model): the model's table has an amplitude range into a high impedance (the load the driver
+/// sets) and `voltage_limit` lies within it. A model chosen from `*IDN?` only is checked when it
+/// answers, before the output is switched on.
+fn check_model_range(
+    cx: &Ctx<'_>,
+    rg: &Spanned<RawGenerator>,
+    ra: &Spanned<RawAmplifier>,
+    g: &GeneratorStand,
+) -> Result<(), StandError> {
+    let Some((entry, from)) = super::broadband::model_of(g) else {
+        return Ok(());
+    };
+    let range = entry
+        .limits
+        .as_ref()
+        .ok_or(LimitError::NoRange {
+            field: "[model.limits]",
+            load: "or any other range",
+        })
+        .and_then(|l| Ok((l.amplitude_peak(Load::HighImpedance)?, l.source.clone())));
+    let ([_, hi], source) = range.map_err(|e| {
+        cx.at(
+            rg.span(),
+            format!(
+                "the generator's command table `{}` ({from}): {e}",
+                entry.name
+            ),
+        )
+    })?;
+    let limit = g.amplifier.voltage_limit_v;
+    if limit > hi + 1e-12 {
+        let span = ra
+            .get_ref()
+            .voltage_limit
+            .as_ref()
+            .map_or(ra.span(), |v| v.span());
+        return Err(cx.at(
+            span,
+            format!("amplifier.voltage_limit {limit} V is above what the {} ({from}) delivers into the amplifier's high impedance: {hi} V peak = {} Vpp ({source}); lower voltage_limit to at most {hi} V", entry.name, 2.0 * hi),
+        ));
+    }
+    Ok(())
 }
 
 fn address(cx: &Ctx<'_>, p: &Spanned<String>) -> Result<GeneratorAddress, StandError> {

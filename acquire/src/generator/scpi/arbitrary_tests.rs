@@ -88,7 +88,7 @@ async fn keysight_33512b_uploads_a_byte_swapped_block_and_selects_it() {
     script.push(cmd("*OPC?", &["1"]));
     script.push(cmd(e, &[ok]));
     script.extend(setting("SOURce1:FUNCtion:ARBitrary IDENT", e, ok));
-    script.extend(setting("SOURce1:FUNCtion ARBitrary", e, ok));
+    script.extend(setting("SOURce1:FUNCtion ARB", e, ok));
     script.extend(setting("SOURce1:FUNCtion:ARBitrary:SRATe 5120", e, ok));
     let (io, dev) = instrument(script.clone());
     let mut g = ScpiGenerator::new(io, opts(1));

@@ -46,6 +46,18 @@ fn setting(
     [(cmd, &[]), ("*OPC?", OK_K), (err_query, no_error)]
 }
 
+/// A setting, then its read-back: `query` answered by `answer`.
+fn read_back(
+    cmd: &'static str,
+    err_query: &'static str,
+    no_error: &'static [&'static str],
+    query: &'static str,
+    answer: &'static [&'static str],
+) -> [Exchange; 4] {
+    let [a, b, c] = setting(cmd, err_query, no_error);
+    [a, b, c, (query, answer)]
+}
+
 fn commands(script: &[Exchange]) -> Vec<String> {
     script.iter().map(|(c, _)| c.to_string()).collect()
 }
@@ -65,13 +77,35 @@ async fn keysight_33512b_sine_setup_drive_and_output() {
         "SOURce1:FUNCtion SINusoid",
         "SOURce1:VOLTage:UNIT VPP",
         "SOURce1:VOLTage:OFFSet 0",
-        "SOURce1:VOLTage 0.001",
-        "SOURce1:FREQuency 120.5",
-        "SOURce1:VOLTage 3",
-        "OUTPut1 ON",
     ] {
         script.extend(setting(c, e, NOERR_K));
     }
+    // The idle amplitude is the 33500B's smallest into a high impedance (2 mVpp; 1 mVpp is its
+    // smallest into 50 Ω and answers -222 after `OUTPut1:LOAD INFinity`). Every amplitude and
+    // frequency is read back in the instrument's own number format.
+    let v = "SOURce1:VOLTage?";
+    script.extend(read_back(
+        "SOURce1:VOLTage 0.002",
+        e,
+        NOERR_K,
+        v,
+        &["+2.00000000000000E-03"],
+    ));
+    script.extend(read_back(
+        "SOURce1:FREQuency 120.5",
+        e,
+        NOERR_K,
+        "SOURce1:FREQuency?",
+        &["+1.20500000000000E+02"],
+    ));
+    script.extend(read_back(
+        "SOURce1:VOLTage 3",
+        e,
+        NOERR_K,
+        v,
+        &["+3.00000000000000E+00"],
+    ));
+    script.extend(read_back("OUTPut1 ON", e, NOERR_K, "OUTPut1?", &["1"]));
     script.push(("OUTPut1?", &["1"]));
     let (io, dev) = instrument(script.clone());
     let mut g = ScpiGenerator::new(io, opts());
@@ -82,7 +116,7 @@ async fn keysight_33512b_sine_setup_drive_and_output() {
     );
     g.prepare_sine().await.unwrap();
     g.set_frequency(120.5).await.unwrap();
-    g.set_amplitude(1.5).await.unwrap();
+    assert_eq!(g.set_amplitude(1.5).await.unwrap(), 1.5);
     g.set_output(true).await.unwrap();
     assert!(g.output().await.unwrap());
     drop(g);
@@ -96,9 +130,15 @@ async fn rigol_dg1062z_channel_2_refuses_a_voltage_out_of_range() {
         "*IDN?",
         &["Rigol Technologies,DG1062Z,DG1ZA2012604198,00.01.14"],
     )];
-    script.extend(setting(":SOUR2:FREQ 80", e, NOERR));
+    script.extend(read_back(
+        ":SOUR2:FREQ 80",
+        e,
+        NOERR,
+        ":SOUR2:FREQ?",
+        &["8.000000E+01"],
+    ));
     script.extend([
-        (":SOUR2:VOLT 30", &[] as &[&str]),
+        (":SOUR2:VOLT 18", &[] as &[&str]),
         ("*OPC?", OK_K),
         (e, &["-222,\"Data out of range\""]),
         (e, NOERR),
@@ -114,7 +154,16 @@ async fn rigol_dg1062z_channel_2_refuses_a_voltage_out_of_range() {
     );
     g.identify().await.unwrap();
     g.set_frequency(80.0).await.unwrap();
+    // Beyond the data sheet's 20 Vpp into a high impedance: refused before anything is sent.
     let err = g.set_amplitude(15.0).await.unwrap_err();
+    let msg = err.to_string();
+    assert!(matches!(err, GeneratorError::Limits { .. }), "{msg}");
+    assert!(
+        msg.contains("Rigol DG800/DG1000Z") && msg.contains("0.002..20 Vpp into a high impedance"),
+        "{msg}"
+    );
+    // Within it, the instrument's own refusal (here an offset that leaves no room).
+    let err = g.set_amplitude(9.0).await.unwrap_err();
     let msg = err.to_string();
     assert!(
         matches!(err, GeneratorError::Instrument { code: -222, .. }),
@@ -124,7 +173,7 @@ async fn rigol_dg1062z_channel_2_refuses_a_voltage_out_of_range() {
         msg.contains("Rigol Technologies DG1062Z on mem:gen"),
         "{msg}"
     );
-    assert!(msg.contains("`:SOUR2:VOLT 30`"), "{msg}");
+    assert!(msg.contains("`:SOUR2:VOLT 18`"), "{msg}");
     assert!(msg.contains("Data out of range"), "{msg}");
     assert!(!g.output().await.unwrap(), "ON/OFF answers are understood");
     drop(g);
@@ -139,6 +188,10 @@ async fn tektronix_afg31022_in_vrms_with_two_queued_errors() {
         ("SOURce1:VOLTage:LEVel:IMMediate:AMPLitude 1.414214", &[]),
         ("*OPC?", OK_K),
         (e, NOERR),
+        (
+            "SOURce1:VOLTage:LEVel:IMMediate:AMPLitude?",
+            &["1.4142E+00"],
+        ),
         ("OUTPut1:STATe ON", &[]),
         ("*OPC?", OK_K),
         (e, &["-221,\"Settings conflict; amplitude\""]),
@@ -185,7 +238,13 @@ async fn an_unknown_model_is_refused_unless_the_stand_names_a_table() {
 
     // Named explicitly, the generic SCPI-99 table drives it.
     let mut script: Vec<Exchange> = vec![("*IDN?", idn)];
-    script.extend(setting("SOUR1:FREQ 50", "SYST:ERR?", NOERR));
+    script.extend(read_back(
+        "SOUR1:FREQ 50",
+        "SYST:ERR?",
+        NOERR,
+        "SOUR1:FREQ?",
+        &["50"],
+    ));
     let (io, dev) = instrument(script.clone());
     let mut g = ScpiGenerator::new(
         io,
@@ -290,4 +349,121 @@ async fn refuses_nonsense_values_and_settings_before_identification() {
         g.set_frequency(-1.0).await.unwrap_err(),
         GeneratorError::InvalidValue { .. }
     ));
+}
+
+/// The first connection answers `*IDN?` as a 33512B and drops at the next command: what a
+/// socket reset looks like to the host while a setting is on its way.
+fn dropping_connection() -> Box<dyn Transport> {
+    use tokio::io::{AsyncReadExt, AsyncWriteExt};
+    let (host, mut dev) = MemoryTransport::pair("gen", "gen-dev", 1 << 12);
+    tokio::spawn(async move {
+        let mut buf = vec![0u8; 256];
+        let mut seen = String::new();
+        loop {
+            let Ok(n) = dev.read(&mut buf).await else {
+                return;
+            };
+            if n == 0 {
+                return;
+            }
+            seen.push_str(&String::from_utf8_lossy(&buf[..n]));
+            while let Some(i) = seen.find('\n') {
+                let line: String = seen.drain(..=i).collect();
+                if line.trim() != "*IDN?" {
+                    return;
+                }
+                let idn = b"Keysight Technologies,33512B,MY1,1.0\r\n";
+                let _ = dev.write_all(idn).await;
+            }
+        }
+    });
+    Box::new(host)
+}
+
+/// A reconnect that hands over `next` once.
+fn reconnect_once(next: Box<dyn Transport>) -> Reconnect {
+    let mut spare = Some(next);
+    Box::new(move || {
+        let next = spare.take();
+        Box::pin(async move {
+            next.ok_or_else(|| TransportError::Socket {
+                port: "mem:gen".into(),
+                detail: "no more connections".into(),
+            })
+        })
+    })
+}
+
+#[tokio::test]
+async fn a_setting_lost_with_the_connection_is_sent_again_and_read_back() {
+    // The frequency setting is lost with the first connection; on the second, `*OPC?` and the
+    // error queue answer, then the setting in flight is sent again and read back.
+    let e = "SYSTem:ERRor?";
+    let mut script: Vec<Exchange> = vec![("*OPC?", OK_K), (e, NOERR_K)];
+    script.extend(read_back(
+        "SOURce1:FREQuency 120",
+        e,
+        NOERR_K,
+        "SOURce1:FREQuency?",
+        &["+1.20000000000000E+02"],
+    ));
+    let (io2, dev) = instrument(script.clone());
+    let mut g =
+        ScpiGenerator::new(dropping_connection(), opts()).with_reconnect(reconnect_once(io2));
+    g.identify().await.unwrap();
+    g.set_frequency(120.0).await.unwrap();
+    drop(g);
+    assert_eq!(dev.await.unwrap(), commands(&script));
+}
+
+#[tokio::test]
+async fn an_error_after_a_dropped_connection_says_the_connection_dropped() {
+    // On the second connection the setting sent again is refused: the error says the
+    // connection dropped while it was on its way, and what the instrument answered then.
+    let e = "SYSTem:ERRor?";
+    let script: Vec<Exchange> = vec![
+        ("*OPC?", OK_K),
+        (e, NOERR_K),
+        ("SOURce1:FREQuency 120", &[]),
+        ("*OPC?", OK_K),
+        (e, &["-221,\"Settings conflict\""]),
+        (e, NOERR_K),
+    ];
+    let (io2, _dev) = instrument(script);
+    let mut g =
+        ScpiGenerator::new(dropping_connection(), opts()).with_reconnect(reconnect_once(io2));
+    g.identify().await.unwrap();
+    let err = g.set_frequency(120.0).await.unwrap_err();
+    let msg = err.to_string();
+    assert!(
+        matches!(err, GeneratorError::AfterReconnect { .. }),
+        "{msg}"
+    );
+    assert!(
+        msg.contains("connection dropped while `SOURce1:FREQuency 120` was being sent"),
+        "{msg}"
+    );
+    assert!(msg.contains("-221,\"Settings conflict\""), "{msg}");
+}
+
+#[tokio::test]
+async fn a_setting_that_does_not_read_back_is_an_error() {
+    let e = "SYSTem:ERRor?";
+    let mut script: Vec<Exchange> = vec![("*IDN?", &["Keysight Technologies,33512B,MY1,1.0"])];
+    script.extend(read_back(
+        "SOURce1:FREQuency 120",
+        e,
+        NOERR_K,
+        "SOURce1:FREQuency?",
+        &["+1.00000000000000E+03"],
+    ));
+    let (io, _dev) = instrument(script);
+    let mut g = ScpiGenerator::new(io, opts());
+    g.identify().await.unwrap();
+    let err = g.set_frequency(120.0).await.unwrap_err();
+    assert!(matches!(err, GeneratorError::ReadBack { .. }), "{err}");
+    assert!(
+        err.to_string().contains("`SOURce1:FREQuency?` reads back"),
+        "{err}"
+    );
 }
