@@ -35,6 +35,7 @@ mod base;
 pub mod blind;
 pub mod effects;
 pub mod generate;
+pub mod machine;
 mod placement;
 pub mod problem;
 pub mod residuals;
