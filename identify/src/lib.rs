@@ -37,6 +37,7 @@ pub mod final_model;
 pub mod frf;
 pub mod identification;
 pub mod lines;
+pub mod lowrank;
 pub mod measured;
 pub mod model;
 pub mod modelfile;
