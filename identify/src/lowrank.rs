@@ -62,7 +62,9 @@ pub enum LowRankError {
     Solve(#[from] SolveError),
     /// The changed model has fewer DOFs than the base: a body was removed, which no update of
     /// the base's system describes.
-    #[error("the changed model has {changed} DOFs, fewer than the base's {base}; use a full solve")]
+    #[error(
+        "the changed model has {changed} DOFs, fewer than the base's {base}; use a full solve"
+    )]
     FewerDofs {
         /// DOFs of the base.
         base: usize,
@@ -203,11 +205,7 @@ impl Base {
         }
         let n = system.n;
         let outputs = system.output_rows.len();
-        let method = method.resolve(
-            n,
-            freqs_hz.len(),
-            Work::States { rhs: 1 + outputs },
-        );
+        let method = method.resolve(n, freqs_hz.len(), Work::States { rhs: 1 + outputs });
         let states = frf::states(model, freqs_hz, method)?;
         let receptance = match method {
             Method::Modal => Receptance::Modal(ModalSolver::new(&system)?),
@@ -321,8 +319,16 @@ impl Base {
         let mc = |i: usize, j: usize| mc[i * n1 + j];
         let kc = |i: usize, j: usize| C64::new(c.k[i * n1 + j], c.d[i * n1 + j]);
         let kb = |i: usize, j: usize| C64::new(b.k[i * n0 + j], b.d[i * n0 + j]);
-        let rows_b: Vec<Vec<f64>> = b.output_rows.iter().map(|r| dense_row(&r.taps, n0)).collect();
-        let rows_c: Vec<Vec<f64>> = c.output_rows.iter().map(|r| dense_row(&r.taps, n1)).collect();
+        let rows_b: Vec<Vec<f64>> = b
+            .output_rows
+            .iter()
+            .map(|r| dense_row(&r.taps, n0))
+            .collect();
+        let rows_c: Vec<Vec<f64>> = c
+            .output_rows
+            .iter()
+            .map(|r| dense_row(&r.taps, n1))
+            .collect();
         // Rounding of the assembly: a difference below it is no change.
         let tol_k = 1e-15 * c.k.iter().chain(&c.d).fold(0.0f64, |a, v| a.max(v.abs()));
         let tol_m = 1e-15 * c.mass.iter().fold(0.0f64, |a, v| a.max(v.abs()));
@@ -405,12 +411,9 @@ impl Base {
             for (o, y) in out.iter_mut().enumerate() {
                 let w = self.unit(k, o);
                 let w_s = DVector::from_fn(s, |a, _| w[u.support[a]]);
-                let w1 = line
-                    .t
-                    .solve(&w_s)
-                    .ok_or(LowRankError::Singular {
-                        freq_hz: self.states.freqs_hz[k],
-                    })?;
+                let w1 = line.t.solve(&w_s).ok_or(LowRankError::Singular {
+                    freq_hz: self.states.freqs_hz[k],
+                })?;
                 y[k] = -self.factor(k, o) * w1.dot(&dq);
             }
         }

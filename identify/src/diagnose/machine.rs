@@ -39,8 +39,8 @@ use super::blind::{self, BlindCase, BlindError};
 use super::effects::Effect;
 use crate::identification::variables::{self, VarsError};
 use crate::identification::Variables;
-use crate::model::{Body, Characteristic, Model, PointForce, Quantity, Sde, SdeKind, SdeLaw};
 use crate::model::Tangential;
+use crate::model::{Body, Characteristic, Model, PointForce, Quantity, Sde, SdeKind, SdeLaw};
 
 /// A generated machine: the truth and its identification variables (initial values = the
 /// truth's).
@@ -140,7 +140,14 @@ struct Joints {
 }
 
 impl Joints {
-    fn push(&mut self, kind: SdeKind, bodies: [Option<usize>; 2], point: Vector3<f64>, rotation: Matrix3<f64>, law: SdeLaw) -> usize {
+    fn push(
+        &mut self,
+        kind: SdeKind,
+        bodies: [Option<usize>; 2],
+        point: Vector3<f64>,
+        rotation: Matrix3<f64>,
+        law: SdeLaw,
+    ) -> usize {
         let id = self.sdes.len() + 1;
         self.sdes.push(Sde {
             name: id.to_string(),
@@ -170,7 +177,11 @@ impl Joints {
         let mut ids = Vec::new();
         for i in 0..count {
             // Spread along the interface: alternate sides of axis a2, walking along a1.
-            let s1 = if count == 1 { 0.0 } else { -1.0 + 2.0 * (i / 2) as f64 / ((count - 1) / 2).max(1) as f64 };
+            let s1 = if count == 1 {
+                0.0
+            } else {
+                -1.0 + 2.0 * (i / 2) as f64 / ((count - 1) / 2).max(1) as f64
+            };
             let s2 = if i % 2 == 0 { -1.0 } else { 1.0 };
             let mut p = at;
             p[a1] += 0.8 * s1 * half[a1];
@@ -319,7 +330,11 @@ pub fn machine(n: usize, seed: u64) -> Result<Machine, MachineError> {
         let h = bodies.len() - 1;
         joints.joint(
             (Some(below), h),
-            (Vector3::new(face, 0.0, z - 0.4), Vector3::new(0.0, 0.17, 0.3), 0),
+            (
+                Vector3::new(face, 0.0, z - 0.4),
+                Vector3::new(0.0, 0.17, 0.3),
+                0,
+            ),
             Some(2),
             &mut rng,
         );
@@ -417,7 +432,12 @@ fn variables_toml(j: &Joints) -> String {
     }
     for &id in &j.screws {
         if let SdeLaw::Axial { k, .. } = j.sdes[id - 1].law {
-            var(&format!("k {id}"), &id.to_string(), "k", format!("\"{} N/um\"", k / 1e6));
+            var(
+                &format!("k {id}"),
+                &id.to_string(),
+                "k",
+                format!("\"{} N/um\"", k / 1e6),
+            );
         }
     }
     var(
@@ -457,7 +477,9 @@ pub fn case(
     let (f_lo, f_hi) = band(&m.model)?;
     let freqs = crate::identification::synthetic::log_lines(f_lo, f_hi, lines);
     let x = m.vars.initial();
-    let labels: Vec<String> = (0..m.model.outputs.len()).map(|o| format!("#{o}")).collect();
+    let labels: Vec<String> = (0..m.model.outputs.len())
+        .map(|o| format!("#{o}"))
+        .collect();
     let names = [
         m.model.bodies[m.column].name.clone(),
         m.model.bodies[m.table].name.clone(),
@@ -501,7 +523,11 @@ mod tests {
         for n in [4, 7, 14, 28] {
             let m = machine(n, 1).unwrap();
             assert_eq!(m.model.bodies.len(), n);
-            assert!(m.model.sdes.len() >= 2 * (n - 1) + 4, "{n}: {} SDEs", m.model.sdes.len());
+            assert!(
+                m.model.sdes.len() >= 2 * (n - 1) + 4,
+                "{n}: {} SDEs",
+                m.model.sdes.len()
+            );
             assert!(m.vars.len() >= n, "{n}: {} variables", m.vars.len());
             assert!(m.model.bodies[m.column].name.starts_with("column"));
             assert_eq!(m.model.bodies[m.table].name, "table");

@@ -35,6 +35,7 @@ mod base;
 pub mod blind;
 pub mod effects;
 pub mod generate;
+mod lowrank;
 pub mod machine;
 mod placement;
 pub mod problem;

@@ -391,6 +391,7 @@ pub(super) fn screen_leading(setting: Setting, cur: &Current, ranking: &Ranking)
     let free = free_columns(&pc, &cur.u);
     let jfree = DMatrix::from_fn(cur.jac.nrows(), free.len(), |r, c| cur.jac[(r, free[c])]);
     let basis = score::orthonormal_columns(&jfree);
+    let shared = super::lowrank::Shared::new(&pc, &cur.u);
     let results = in_parallel(&leading, |&j| {
         let s = &ranking.scored[j];
         let cand = &ranking.candidates[s.candidate];
@@ -398,13 +399,13 @@ pub(super) fn screen_leading(setting: Setting, cur: &Current, ranking: &Ranking)
         let params = cand.params(f_hi);
         let starts = screen::size_starts(&params, &score_start(cand, s.step, f_hi));
         let resonator = matches!(cand, Effect::Resonator { .. });
-        screen::screen(&mut p, &cur.u, &basis, &starts, resonator).map(|(criterion, start)| {
-            Screened {
+        screen::screen(&mut p, shared.as_ref(), &cur.u, &basis, &starts, resonator).map(
+            |(criterion, start)| Screened {
                 index: j,
                 criterion,
                 start,
-            }
-        })
+            },
+        )
     });
     lowest_first(results)
 }
