@@ -6,7 +6,9 @@
 //! (and the diagnosis's split), the candidates ranked, the base fit's criterion against the fit
 //! started at the truth's values (what the model can reach), whether the injected spring was
 //! the first effect found, and at the end the growth exponent of each time against the number of
-//! bodies (least squares on log-log) and the peak memory.
+//! bodies (least squares on log-log) and the peak memory. Before each size's diagnosis, the cost
+//! of one screen evaluation (the model changed by one candidate) by a full solve and as a
+//! low-rank update ([`identify::lowrank`]), measured in the same run.
 //!
 //! `cargo run --release -p identify --example machine_scaling -- [BODIES…] [--limit SECONDS]
 //! [--seed SEED] [--signal CHI2]` (default bodies 4 7 14, limit 900 s per size, seed 1, signal
@@ -19,8 +21,11 @@
 use std::sync::mpsc;
 use std::time::{Duration, Instant};
 
-use identify::diagnose::{self, blind, machine};
+use identify::diagnose::effects::Realized;
+use identify::diagnose::{self, blind, generate, machine};
+use identify::frf;
 use identify::identification::{self as idn, data};
+use identify::lowrank;
 
 /// One size's figures.
 struct Row {
@@ -63,25 +68,37 @@ fn main() {
     for &n in &sizes {
         let m = machine::machine(n, seed).expect("machine");
         let case = machine::case(&m, 300, (signal, 0.01), 0.2, seed).expect("case");
+        screen_cost(&m, &case);
         let (tx, rx) = mpsc::channel();
         let (model, vars) = (m.model.clone(), m.vars.clone());
         std::thread::spawn(move || {
             let opts = diagnose::Options::default();
             let obs = data::validate(&case.data, &model, "generated").expect("data");
             let t0 = Instant::now();
-            let id = idn::identify(&model, &obs, &case.vars, &opts.identification, &mut |_, _| {})
-                .expect("identify");
+            let id = idn::identify(
+                &model,
+                &obs,
+                &case.vars,
+                &opts.identification,
+                &mut |_, _| {},
+            )
+            .expect("identify");
             let t1 = Instant::now();
             let d = diagnose::diagnose(&model, &obs, &case.vars, &id, &opts, &mut |_| {})
                 .expect("diagnose");
             let t2 = Instant::now();
             // What the model without the spring can reach: the fit started at the truth's values.
-            let at_truth =
-                idn::identify(&model, &obs, &vars, &opts.identification, &mut |_, _| {})
-                    .expect("fit from the truth");
+            let at_truth = idn::identify(&model, &obs, &vars, &opts.identification, &mut |_, _| {})
+                .expect("fit from the truth");
             let o = blind::judge(&case, &d, (t2 - t0).as_secs_f64(), (t2 - t1).as_secs_f64());
-            tx.send(((t1 - t0).as_secs_f64(), (t2 - t1).as_secs_f64(), d, o, at_truth.criterion))
-                .ok();
+            tx.send((
+                (t1 - t0).as_secs_f64(),
+                (t2 - t1).as_secs_f64(),
+                d,
+                o,
+                at_truth.criterion,
+            ))
+            .ok();
         });
         let Ok((ti, td, d, o, j_truth)) = rx.recv_timeout(Duration::from_secs_f64(limit)) else {
             println!(
@@ -125,6 +142,74 @@ fn main() {
         });
     }
     finish(&rows);
+}
+
+/// One screen evaluation — the model changed by one candidate, every output at every line — by a
+/// full solve (what the screen did before) and as a low-rank update of the current model's
+/// solves (what it does now), one candidate of each kind at a nonzero size, in the same run;
+/// and the shared solves' cost, made once per round.
+fn screen_cost(m: &machine::Machine, case: &blind::BlindCase) {
+    let (lo, hi) = machine::band(&m.model).expect("band");
+    let lines: Vec<f64> = case.data.characteristics[0].freqs_hz.clone();
+    let x = m.vars.initial();
+    let labels: Vec<String> = (0..3).map(|o| format!("#{o}")).collect();
+    let library = generate::candidates(&m.model, &m.vars, &x, &labels, lo, hi);
+    let mut changed = Vec::new();
+    let mut kinds: Vec<&str> = Vec::new();
+    for c in &library {
+        if kinds.contains(&c.kind()) || c.kind() == "sensor gain" {
+            continue;
+        }
+        kinds.push(c.kind());
+        let gamma: Vec<f64> = c
+            .params(hi)
+            .iter()
+            .enumerate()
+            .map(|(i, p)| {
+                if i == 0 {
+                    (p.nested + p.scale).min(p.upper)
+                } else {
+                    p.initial
+                }
+            })
+            .collect();
+        let mut r = Realized {
+            model: m.model.clone(),
+            vars: m.vars.clone(),
+            gains: vec![1.0; 3],
+        };
+        c.apply(&mut r, &gamma, hi).expect("apply");
+        changed.push(r.model);
+    }
+    let t0 = Instant::now();
+    for c in &changed {
+        frf::response(c, &lines, &[], frf::Method::Auto).expect("full solve");
+    }
+    let full = t0.elapsed().as_secs_f64() / changed.len() as f64;
+    let t1 = Instant::now();
+    let base = lowrank::Base::new(&m.model, &lines, frf::Method::Auto).expect("base solves");
+    let shared = t1.elapsed().as_secs_f64();
+    // The first evaluation of a candidate computes its support's receptance; the screen's
+    // further ones (a few dozen per candidate) read it again.
+    let pass = || {
+        let t = Instant::now();
+        for c in &changed {
+            let u = base.update(c).expect("update");
+            base.changed_response(&u).expect("low-rank response");
+        }
+        t.elapsed().as_secs_f64() / changed.len() as f64
+    };
+    let (first, again) = (pass(), pass());
+    println!(
+        "       screen evaluation ({} kinds): full solve {:.2} ms; low-rank first {:.2} ms (x{:.1}), again {:.2} ms (x{:.1}); shared solves {:.0} ms once per round",
+        changed.len(),
+        1e3 * full,
+        1e3 * first,
+        full / first,
+        1e3 * again,
+        full / again,
+        1e3 * shared
+    );
 }
 
 /// The growth exponents and the peak memory.

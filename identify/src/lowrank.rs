@@ -39,10 +39,16 @@
 //! Two paths give the base's receptance, as for the FRF itself ([`crate::frf`]):
 //! - **direct**: `A(ω)⁻¹` per line from one LU factorization (O(n³) per line, once for every
 //!   change; kept in memory, n² complex numbers per line), then `G` is read off;
-//! - **modal**: `G = X_S (Λ − ω²)⁻¹ Y_S` from the base's modes (O(|S|² n) per change and line).
+//! - **modal**: `G = X_S (Λ − ω²)⁻¹ Y_S` from the base's modes (O(|S|² n) per support and line).
+//!
+//! Either way `G` is kept per support ([`Base`]'s cache), so a change evaluated again — at another
+//! size, as a screen and a refit do — costs O(|S|³) per line.
 //!
 //! The base must be driven by its own excitation (no further references, no base motion): a base
 //! motion's load `M T u_b` changes with every mass change.
+
+use std::collections::HashMap;
+use std::sync::{Arc, Mutex};
 
 use faer::Mat;
 use nalgebra::{DMatrix, DVector};
@@ -108,7 +114,14 @@ pub struct Base {
     system: System,
     states: States,
     receptance: Receptance,
+    /// The receptance at every line on each support evaluated so far: a change evaluated at
+    /// many sizes (a screen, a refit's steps) reads it again at O(|S|²) per line, whatever the
+    /// path. At most [`CACHED_SUPPORTS`] supports are kept.
+    cache: Mutex<HashMap<Vec<usize>, Arc<Vec<DMatrix<C64>>>>>,
 }
+
+/// Supports whose receptances a [`Base`] keeps (a round screens a few dozen candidates).
+const CACHED_SUPPORTS: usize = 256;
 
 /// A change of the base model in bordered low-rank form (see the module docs), built by
 /// [`Base::update`] from the changed model.
@@ -215,6 +228,7 @@ impl Base {
             system,
             states,
             receptance,
+            cache: Mutex::new(HashMap::new()),
         })
     }
 
@@ -253,6 +267,24 @@ impl Base {
     fn unit(&self, k: usize, o: usize) -> &[C64] {
         let (n, outs) = (self.states.n, self.states.outputs);
         &self.states.unit[(k * outs + o) * n..(k * outs + o + 1) * n]
+    }
+
+    /// The base's receptance on `support` at every line, from the cache or computed and kept.
+    fn receptances(&self, support: &[usize]) -> Result<Arc<Vec<DMatrix<C64>>>, LowRankError> {
+        if let Some(g) = self.cache.lock().ok().and_then(|c| c.get(support).cloned()) {
+            return Ok(g);
+        }
+        let g = (0..self.lines())
+            .map(|k| self.receptance(k, support))
+            .collect::<Result<Vec<_>, _>>()?;
+        let g = Arc::new(g);
+        if let Ok(mut c) = self.cache.lock() {
+            if c.len() >= CACHED_SUPPORTS {
+                c.clear();
+            }
+            c.insert(support.to_vec(), Arc::clone(&g));
+        }
+        Ok(g)
     }
 
     /// The base's receptance `Eᵀ A(ω_k)⁻¹ E` on `support`.
@@ -366,8 +398,9 @@ impl Base {
     pub fn changed_response(&self, u: &Update) -> Result<Vec<Vec<C64>>, LowRankError> {
         let (lines, outputs) = (self.lines(), self.outputs());
         let mut out = vec![vec![C64::new(0.0, 0.0); lines]; outputs];
+        let g = self.receptances(&u.support)?;
         for k in 0..lines {
-            let line = self.line(k, u)?;
+            let line = self.line(k, u, &g[k])?;
             for (o, y) in out.iter_mut().enumerate() {
                 y[k] = self.factor(k, o) * line.reading(o);
             }
@@ -396,9 +429,10 @@ impl Base {
         if du.support.is_empty() {
             return Ok(out);
         }
+        let g = self.receptances(&u.support)?;
         for k in 0..lines {
             let omega = TWO_PI * self.states.freqs_hz[k];
-            let line = self.line(k, u)?;
+            let line = self.line(k, u, &g[k])?;
             let (d_small, _, _) = du.blocks(omega);
             let s = u.support.len();
             let mut d = DMatrix::<C64>::zeros(s, s);
@@ -421,12 +455,16 @@ impl Base {
     }
 
     /// The changed state at line `k`.
-    fn line<'u>(&'u self, k: usize, u: &'u Update) -> Result<Line<'u>, LowRankError> {
+    fn line<'u>(
+        &'u self,
+        k: usize,
+        u: &'u Update,
+        g: &DMatrix<C64>,
+    ) -> Result<Line<'u>, LowRankError> {
         let f = self.states.freqs_hz[k];
         let omega = TWO_PI * f;
         let singular = LowRankError::Singular { freq_hz: f };
         let s = u.support.len();
-        let g = self.receptance(k, &u.support)?;
         let (mut delta, a_sn, a_nn) = u.blocks(omega);
         let mut p = u.p_s.map(|v| C64::new(v, 0.0));
         let p_n = u.p_n.map(|v| C64::new(v, 0.0));
@@ -442,12 +480,12 @@ impl Base {
         }
         let q = self.states.load_at(k);
         let q_s = DVector::from_fn(s, |a, _| q[u.support[a]]);
-        let t = (DMatrix::<C64>::identity(s, s) + &g * &delta).lu();
+        let t = (DMatrix::<C64>::identity(s, s) + g * &delta).lu();
         // An empty support (no change, or new DOFs tied to the ground only): nothing to solve.
         let q_s1 = if s == 0 {
             q_s
         } else {
-            t.solve(&(q_s + &g * &p))
+            t.solve(&(q_s + g * &p))
                 .ok_or(LowRankError::Singular { freq_hz: f })?
         };
         let q_n1 = if u.new_dofs > 0 {
