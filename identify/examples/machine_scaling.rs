@@ -103,7 +103,7 @@ fn main() {
         let Ok((ti, td, d, o, j_truth)) = rx.recv_timeout(Duration::from_secs_f64(limit)) else {
             println!(
                 "{n:>6} {:>5} {:>5} {:>5}   no answer within {limit:.0} s",
-                6 * n,
+                m.model.dof_count(),
                 m.model.sdes.len(),
                 m.vars.len()
             );
@@ -112,8 +112,8 @@ fn main() {
         };
         println!(
             "{:>6} {:>5} {:>5} {:>5} {:>6} {:>10.1} {:>10.1} {:>10.1} {:>10.1} {:>9} {:>6}",
-            n,
-            6 * n,
+            m.model.bodies.len(),
+            m.model.dof_count(),
             m.model.sdes.len(),
             m.vars.len(),
             d.rounds.first().map_or(0, |r| r.candidates),

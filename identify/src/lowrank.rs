@@ -117,8 +117,11 @@ pub struct Base {
     /// The receptance at every line on each support evaluated so far: a change evaluated at
     /// many sizes (a screen, a refit's steps) reads it again at O(|S|²) per line, whatever the
     /// path. At most [`CACHED_SUPPORTS`] supports are kept.
-    cache: Mutex<HashMap<Vec<usize>, Arc<Vec<DMatrix<C64>>>>>,
+    cache: Mutex<HashMap<Vec<usize>, Receptances>>,
 }
+
+/// The receptance on one support at every line, shared between evaluations.
+type Receptances = Arc<Vec<DMatrix<C64>>>;
 
 /// Supports whose receptances a [`Base`] keeps (a round screens a few dozen candidates).
 const CACHED_SUPPORTS: usize = 256;
@@ -270,7 +273,7 @@ impl Base {
     }
 
     /// The base's receptance on `support` at every line, from the cache or computed and kept.
-    fn receptances(&self, support: &[usize]) -> Result<Arc<Vec<DMatrix<C64>>>, LowRankError> {
+    fn receptances(&self, support: &[usize]) -> Result<Receptances, LowRankError> {
         if let Some(g) = self.cache.lock().ok().and_then(|c| c.get(support).cloned()) {
             return Ok(g);
         }

@@ -13,8 +13,8 @@
 //! - the **table** chain on the first bed segment beside the column: one or more **saddles**
 //!   stacked along z, then the **table**.
 //!
-//! Four bodies are bed, column, table and head; each further body is, in turn, a saddle, the
-//! ram, a column segment, a bed segment, a saddle, a column segment, and so on. Every pair of
+//! Four bodies are bed, column, table and head; the fifth is a saddle, the sixth the ram, and
+//! each further body is, in turn, a column segment, a bed segment, a saddle, a column segment. Every pair of
 //! stacked bodies is joined by a joint of 2-6 contact SDEs (slideway law, kn/kt = 2.5, ψn 0.8,
 //! ψt 1.6) spread over the interface; the feed joints (bed–saddle, saddle–saddle, saddle–table,
 //! column–ram) carry a lead screw too (axial law along the feed). Body masses, sizes and joint
@@ -87,23 +87,22 @@ enum Role {
     Table,
 }
 
-/// The roles of an `n`-body machine: bed, column, table, head, then the further bodies in
-/// turn ([`EXTRA`]).
+/// The roles of an `n`-body machine: bed, column, table, head, then a saddle, the ram, and
+/// the further bodies in turn ([`EXTRA`]).
 fn roles(n: usize) -> Vec<Role> {
     let mut out = vec![Role::Bed, Role::Column, Role::Table, Role::Head];
-    out.extend((0..n.saturating_sub(4)).map(|i| EXTRA[i % EXTRA.len()]));
+    let first = [Role::Saddle, Role::Ram];
+    out.extend(
+        first
+            .into_iter()
+            .chain((0..).map(|i| EXTRA[i % EXTRA.len()]))
+            .take(n.saturating_sub(4)),
+    );
     out
 }
 
-/// The order in which a machine grows beyond four bodies.
-const EXTRA: [Role; 6] = [
-    Role::Saddle,
-    Role::Ram,
-    Role::Column,
-    Role::Bed,
-    Role::Saddle,
-    Role::Column,
-];
+/// The order in which a machine grows beyond six bodies (it has one ram).
+const EXTRA: [Role; 4] = [Role::Column, Role::Bed, Role::Saddle, Role::Column];
 
 /// A box-shaped body: centre, size (m) and mass (kg, steel at ~40 % fill for castings).
 fn body(name: String, centre: Vector3<f64>, size: Vector3<f64>, rng: &mut StdRng) -> Body {
