@@ -66,6 +66,7 @@ mod base;
 pub mod effects;
 pub mod final_model;
 pub mod generate;
+pub mod lowrank;
 mod placement;
 pub mod problem;
 pub mod residuals;

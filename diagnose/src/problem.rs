@@ -127,9 +127,14 @@ impl<'a> Problem<'a> {
         .map_err(|e| EvalError::Setup(Box::new(e)))
     }
 
+    /// The FRF path the identification's options choose.
+    pub fn frf_method(&self) -> rfe::frf::Method {
+        self.opts.frf_method
+    }
+
     /// Whitened residuals with the gains applied: `e' = (1 − G) z/σ + G e`, i.e. `(z − G q)/σ`
     /// (log-amplitude fit: `e − ln G / σ`).
-    fn gained(crit: &Criterion, e: &mut DVector<f64>, gains: &[f64]) {
+    pub(super) fn gained(crit: &Criterion, e: &mut DVector<f64>, gains: &[f64]) {
         if gains.iter().all(|g| *g == 1.0) {
             return;
         }

@@ -13,7 +13,7 @@
 //! The refits' starts and the equivalents ("≡") of the chosen one are also decided here.
 
 use super::*;
-use identify::stats::chi2_tail;
+use rfe::stats::chi2_tail;
 
 /// One round's candidates ranked by the score test at the current fit.
 pub(super) struct Ranking {
@@ -403,6 +403,9 @@ pub(super) fn screen_leading(setting: Setting, cur: &Current, ranking: &Ranking)
     let free = free_columns(&pc, &cur.u);
     let jfree = DMatrix::from_fn(cur.jac.nrows(), free.len(), |r, c| cur.jac[(r, free[c])]);
     let basis = score::orthonormal_columns(&jfree);
+    let shared = (6 * setting.model.bodies.len() > LOW_RANK_MIN_DOFS)
+        .then(|| super::lowrank::Shared::new(&pc, &cur.u))
+        .flatten();
     let results = in_parallel(&leading, |&j| {
         let s = &ranking.scored[j];
         let cand = &ranking.candidates[s.candidate];
@@ -410,13 +413,13 @@ pub(super) fn screen_leading(setting: Setting, cur: &Current, ranking: &Ranking)
         let params = cand.params(f_hi);
         let starts = screen::size_starts(&params, &score_start(cand, s.step, f_hi));
         let resonator = matches!(cand, Effect::Resonator { .. });
-        screen::screen(&mut p, &cur.u, &basis, &starts, resonator).map(|(criterion, start)| {
-            Screened {
+        screen::screen(&mut p, shared.as_ref(), &cur.u, &basis, &starts, resonator).map(
+            |(criterion, start)| Screened {
                 index: j,
                 criterion,
                 start,
-            }
-        })
+            },
+        )
     });
     lowest_first(results)
 }
@@ -441,6 +444,13 @@ pub(super) fn extended<'a>(setting: Setting<'a>, cur: &Current, cand: &Effect) -
 /// another's that fit part of it (an isolator's missing moment stiffness can score below dozens
 /// of resonators and springs that each mimic part of it, and still refit to the noise level).
 pub(super) const SCREENED_PER_KIND: usize = 2;
+
+/// The screen evaluates a candidate as a low-rank update of the current fit's solves only on
+/// models of more DOFs than this. Below it the full solve (a dense LU per line of a matrix this
+/// small) costs no more than reading the update's support off the base: one screen evaluation
+/// took 0.5-1.1× the full solve's time at 24-78 DOFs and 5.7-12× less at 150-216
+/// (`docs/diagnosis.md`, Scaling). The answers are the same either way (to 1e-9).
+const LOW_RANK_MIN_DOFS: usize = 100;
 
 /// The candidates screened (indices into `ranking.scored`, best score first): the first
 /// [`SCREENED`] plausible ones ([`Ranking::plausible`]), then those of each kind's first

@@ -12,6 +12,7 @@
 use nalgebra::{DMatrix, DVector};
 
 use super::effects::EffectParam;
+use super::lowrank::Shared;
 use super::problem::Problem;
 use identify::optimize::{self, Residuals};
 use identify::EvalError;
@@ -123,9 +124,12 @@ pub(super) fn tune_resonator(
 
 /// The extended problem seen through its new effect's parameters only: the variables and earlier
 /// effects held at the current fit `fixed`, the residuals projected off `basis` (orthonormal
-/// columns spanning the current fit's Jacobian), the Jacobian by forward differences.
+/// columns spanning the current fit's Jacobian), the Jacobian by forward differences. With
+/// `shared`, the current fit's solves, each evaluation is a low-rank update of them (its cost
+/// per line does not grow with the model); a candidate that is no such update is solved in full.
 struct Screened<'p, 'a> {
     problem: &'p mut Problem<'a>,
+    shared: Option<&'p Shared>,
     fixed: &'p DVector<f64>,
     basis: &'p DMatrix<f64>,
     scale: Vec<f64>,
@@ -145,7 +149,11 @@ impl Screened<'_, '_> {
                 }
             },
         );
-        let (e, _) = self.problem.eval(&u, false)?;
+        let fast = self.shared.and_then(|s| s.residuals(self.problem, &u));
+        let e = match fast {
+            Some(e) => e?,
+            None => self.problem.eval(&u, false)?.0,
+        };
         let proj = self.basis * (self.basis.transpose() * &e);
         Ok(e - proj)
     }
@@ -186,9 +194,10 @@ impl Residuals for Screened<'_, '_> {
 /// the residuals of the current fit `fixed` projected off `basis`, from the best of the starts
 /// `starts` (SI; a resonator also tuned, see [`tune_resonator`]). Returns the screened criterion
 /// `½‖(I − P) e‖²` and the parameters (SI) where it is least; `None` when no start can be
-/// evaluated.
+/// evaluated. `shared`: the current fit's solves for low-rank evaluations ([`Shared`]).
 pub(super) fn screen(
     problem: &mut Problem,
+    shared: Option<&Shared>,
     fixed: &DVector<f64>,
     basis: &DMatrix<f64>,
     starts: &[Vec<f64>],
@@ -203,6 +212,7 @@ pub(super) fn screen(
     let (glo, ghi) = (lo.rows(n, q).into_owned(), hi.rows(n, q).into_owned());
     let mut screened = Screened {
         problem,
+        shared,
         fixed,
         basis,
         scale,

@@ -464,11 +464,19 @@ impl Criterion {
         self.vars.apply(&mut self.model, x);
         let r = frf::response(&self.model, &self.freqs, &[], self.method)?;
         self.evaluations.model += 1;
+        Ok(self.residuals_of(x, |o, line| r.output(o)[line]))
+    }
+
+    /// Whitened residuals `e = (z − g q)/σ` of given model outputs `q(characteristic, line)`
+    /// (the working model's outputs, data order, at [`Criterion::lines`]) at values `x` (the
+    /// gains `g` are read from `x`): the residuals of a model solved elsewhere, e.g. by
+    /// [`crate::lowrank`].
+    pub fn residuals_of(&self, x: &[f64], q: impl Fn(usize, usize) -> C64) -> DVector<f64> {
         let m = self.residual_count();
         let mut e = DVector::zeros(m);
         let np = self.obs.len();
         for (i, o) in self.obs.iter().enumerate() {
-            let q = r.output(o.output)[o.line] * self.gain(o.output, x);
+            let q = q(o.output, o.line) * self.gain(o.output, x);
             match self.fit {
                 FitKind::Amplitude => e[i] = (o.z.re - q.norm()) / o.sigma,
                 FitKind::LogAmplitude => e[i] = log_residual(o, q),
@@ -479,7 +487,7 @@ impl Criterion {
                 }
             }
         }
-        Ok(e)
+        e
     }
 
     fn residuals_analytic(

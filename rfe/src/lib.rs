@@ -11,6 +11,8 @@
 //! - [`system`]: assembly of M, K, D and P;
 //! - [`frf`] (with the line kernels in [`lines`]): frequency response and analytic Jacobian,
 //!   direct and modal paths;
+//! - [`lowrank`]: a change of the model (a spring, a mass, a freed direction) as a low-rank
+//!   update of `K + jD − ω²M`, its response from the base's solves (Sherman-Morrison-Woodbury);
 //! - [`modes`]: natural frequencies, mode shapes (undamped and complex), loss factors;
 //! - [`sensitivity`]: band sensitivity MI (eq. 4.16) to pick decision variables;
 //! - [`measured`]: measured characteristics and the channels of vendor files, as processing
@@ -38,6 +40,7 @@ pub mod display;
 pub mod frf;
 pub mod frf_units;
 pub mod lines;
+pub mod lowrank;
 pub mod measured;
 pub mod model;
 pub mod modelfile;
