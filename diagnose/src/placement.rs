@@ -10,7 +10,7 @@ use super::round::{
     with_effect, Contender,
 };
 use super::*;
-use rfe::stats::chi2_tail;
+use identify::stats::chi2_tail;
 
 /// Places whose short refit ends below the effect's own place's are refitted in full, at most
 /// this many, lowest first (see [`relocate`]).

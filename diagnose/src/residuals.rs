@@ -2,7 +2,7 @@
 //! goodness-of-fit test of the criterion against its expectation under R, a runs test for
 //! structure along frequency, and where the misfit concentrates (near which modes).
 
-use rfe::stats::{chi2_tail, runs_test};
+use identify::stats::{chi2_tail, runs_test};
 use nalgebra::DVector;
 use serde::Serialize;
 

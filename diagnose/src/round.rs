@@ -13,7 +13,7 @@
 //! The refits' starts and the equivalents ("≡") of the chosen one are also decided here.
 
 use super::*;
-use rfe::stats::chi2_tail;
+use identify::stats::chi2_tail;
 
 /// One round's candidates ranked by the score test at the current fit.
 pub(super) struct Ranking {

@@ -19,7 +19,7 @@
 use super::effects::{
     body_index, point_row, resonator_coefficient, split_body, Effect, EffectError, RESONATOR_WIDTH,
 };
-use rfe::stats::chi2_tail;
+use identify::stats::chi2_tail;
 use identify::Criterion;
 use nalgebra::{DMatrix, DVector};
 use rfe::frf::{self, States};

@@ -39,7 +39,7 @@ pub fn misfit(id: &Identification) -> Option<Misfit> {
     if !(reduced.is_finite() && reduced > REDUCED_CHI2_THRESHOLD) {
         return None;
     }
-    let p = rfe::stats::chi2_tail(dof as f64, reduced * dof as f64);
+    let p = crate::stats::chi2_tail(dof as f64, reduced * dof as f64);
     if !(p < P_THRESHOLD) {
         return None;
     }
