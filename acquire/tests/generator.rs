@@ -12,8 +12,8 @@ use std::collections::BTreeSet;
 use std::path::Path;
 
 use acquire::generator::exciter::IDLE_V;
+use acquire::record::{DriveKind, DriveRecord, SweepEvent};
 use acquire::session;
-use acquire::session::records::{DriveKind, DriveRecord, SweepEvent};
 use acquire::sim::generator::GeneratorState;
 use acquire::sim::SimStand;
 use acquire::stand::{GeneratorAddress, Stand};

@@ -9,9 +9,10 @@ use std::time::Duration;
 use serde::{Deserialize, Serialize};
 use serde_spanned::Spanned;
 
+use identify::source::Quantity as Value;
 use identify::units::Dim;
 
-use super::{Ctx, StandError, Value};
+use super::context::{Ctx, StandError};
 use crate::canopen::eds::{EdsError, ObjectDictionary};
 use crate::canopen::sdo::Address;
 use crate::canopen::{CanOpenObjects, CanOpenSettings};

@@ -11,9 +11,10 @@ use serde_spanned::Spanned;
 use identify::source::Quantity as Value;
 use identify::units::Dim;
 
-use super::{baud, Ctx, PortSpec, ShakerPort, StandError};
+use super::context::{baud, Ctx, StandError};
+use super::ports::{PortSpec, ShakerPort};
+use crate::generator::amplifier::{Amplifier, RAMP_TICK};
 use crate::generator::dialect::{self, DialectOverrides};
-use crate::generator::exciter::{Amplifier, RAMP_TICK};
 use crate::transport::SocketAddress;
 
 /// Largest generator amplitude a stand may allow (V peak): what function generators deliver into
