@@ -31,6 +31,7 @@
 
 pub mod check;
 pub mod contract;
+pub mod csv_text;
 pub mod diagnose;
 pub mod display;
 pub mod final_model;
