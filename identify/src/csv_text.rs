@@ -66,29 +66,29 @@ pub struct CsvError {
 }
 
 /// The rows of a CSV text, header included, without comment lines (`#` first after any white
-/// space) and blank lines. Rows may differ in length: the caller checks them against its header.
+/// space) and blank lines. Each row is one line (a quoted field does not span lines, which keeps
+/// every row's line number exact). Rows may differ in length: the caller checks them against
+/// its header.
 pub fn rows(text: &str) -> Result<Vec<CsvRow>, CsvError> {
-    let mut reader = csv::ReaderBuilder::new()
-        .has_headers(false)
-        .flexible(true)
-        .comment(Some(b'#'))
-        .trim(csv::Trim::All)
-        .from_reader(text.as_bytes());
     let mut out = Vec::new();
-    for record in reader.records() {
-        let record = record.map_err(|e| CsvError {
-            line: e.position().map(|p| p.line() as usize).unwrap_or(1),
-            message: e.to_string(),
-        })?;
-        let line = record.position().map(|p| p.line() as usize).unwrap_or(1);
-        let first = record.get(0).unwrap_or("");
-        // A blank line is one empty cell; the reader takes `#` as a comment only in the first
-        // column, so an indented comment arrives as a row.
-        if (record.len() == 1 && first.is_empty()) || first.starts_with('#') {
+    for (i, line) in text.lines().enumerate() {
+        let trimmed = line.trim();
+        if trimmed.is_empty() || trimmed.starts_with('#') {
             continue;
         }
+        let mut reader = csv::ReaderBuilder::new()
+            .has_headers(false)
+            .flexible(true)
+            .trim(csv::Trim::All)
+            .buffer_capacity(line.len().max(64))
+            .from_reader(line.as_bytes());
+        let mut record = csv::StringRecord::new();
+        reader.read_record(&mut record).map_err(|e| CsvError {
+            line: i + 1,
+            message: e.to_string(),
+        })?;
         out.push(CsvRow {
-            line,
+            line: i + 1,
             cells: record.iter().map(str::to_string).collect(),
         });
     }
@@ -135,7 +135,7 @@ mod tests {
 
     #[test]
     fn comments_blank_lines_and_crlf_are_skipped_with_lines_kept() {
-        let text = "# unit = g/N\r\n\r\n  # indented note, with a comma\r\nbody , dof\r\n   \r\ntable, u1\r\n";
+        let text = "# unit = g/N\r\n\r\n  # a note, \"with an odd quote\r\nbody , dof\r\n   \r\ntable, u1\r\n";
         let rows = rows(text).unwrap();
         assert_eq!(rows.len(), 2);
         assert_eq!(
