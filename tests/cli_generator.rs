@@ -10,7 +10,7 @@ mod common;
 
 use std::path::PathBuf;
 
-use acquire::session::records::{DriveKind, DriveRecord};
+use acquire::record::{DriveKind, DriveRecord};
 use acquire::sweep::StepResult;
 use common::{ident, text};
 

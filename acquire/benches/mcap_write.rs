@@ -9,7 +9,7 @@
 use std::collections::BTreeMap;
 use std::time::Duration;
 
-use acquire::session::records::BlockRecord;
+use acquire::record::BlockRecord;
 use acquire::session::{Session, SessionOptions};
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
 

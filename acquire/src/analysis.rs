@@ -46,11 +46,12 @@ use process::selection::{to_measurement, CharacteristicSpec};
 use rfe::{MeasuredData, Quantity};
 use serde::Serialize;
 
-use crate::session::records::{
+use crate::record::TopicRecord;
+use crate::record::{
     BlockRecord, BroadbandRecord, DaqStreamRecord, FaultRecord, SessionStart, StandRecord,
     SweepEvent,
 };
-use crate::session::{self, ReadReport, SessionError, TopicRecord};
+use crate::session::{self, ReadReport, SessionError};
 use crate::stand::{BodyGeometry, Channel, ChannelKind, Geometry, Stand};
 use crate::sweep::estimate::StepEstimator;
 use crate::sweep::{Broadband, ChannelResult, StepResult};

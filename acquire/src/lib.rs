@@ -31,7 +31,9 @@ pub mod can;
 pub mod canopen;
 pub mod daq;
 pub mod device;
+pub mod faults;
 pub mod generator;
+pub mod record;
 pub mod replay;
 pub mod rig;
 pub mod session;
@@ -40,5 +42,6 @@ pub mod sim;
 pub mod stand;
 pub mod sweep;
 pub mod transport;
+pub mod wire;
 
 pub use device::DeviceIdentity;

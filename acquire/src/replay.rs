@@ -19,8 +19,8 @@ use std::sync::Arc;
 
 use crate::analysis::{characteristics, AnalysisOptions, SessionAnalysis};
 use crate::device::DeviceIdentity;
+use crate::record::{DeviceIdentityRecord, Role, StandRecord};
 use crate::session;
-use crate::session::records::{DeviceIdentityRecord, Role, StandRecord};
 use crate::sim::plant::{Interaction, Plant, PlantError, C64};
 use crate::sim::signal::{SimChannel, Source};
 use crate::sim::{SimIdentities, SimSetup};

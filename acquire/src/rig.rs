@@ -7,7 +7,7 @@ use std::sync::Arc;
 use crate::daq::{Daq, DaqError, DaqOptions, SerialDaq, StreamInfo};
 use crate::device::DeviceIdentity;
 use crate::generator::{GeneratorExciter, GeneratorOptions, ScpiGenerator};
-use crate::session::records::{DaqStreamRecord, DeviceIdentityRecord, Role, StandRecord};
+use crate::record::{DaqStreamRecord, DeviceIdentityRecord, Role, StandRecord};
 use crate::session::{SessionError, SessionHandle};
 use crate::shaker::{ScpiShaker, Shaker, ShakerError, ShakerOptions};
 use crate::stand::{GeneratorAddress, GeneratorStand, PortSpec, Stand};

@@ -17,8 +17,8 @@ use std::path::Path;
 
 use acquire::generator::dialect;
 use acquire::generator::limits::Load;
+use acquire::record::{DriveKind, DriveRecord, SweepEvent};
 use acquire::session;
-use acquire::session::records::{DriveKind, DriveRecord, SweepEvent};
 use acquire::sim::generator::{CommandMatch, GeneratorFaults, GeneratorState};
 use acquire::sim::{SimSetup, SimStand};
 use acquire::stand::{GeneratorAddress, Stand};

@@ -13,8 +13,8 @@ mod util;
 use std::path::Path;
 
 use acquire::generator::waveform;
+use acquire::record::{DriveKind, DriveRecord};
 use acquire::session;
-use acquire::session::records::{DriveKind, DriveRecord};
 use acquire::shaker::Waveform;
 use acquire::sim::generator::GeneratorState;
 use acquire::sim::{SimSetup, SimStand};

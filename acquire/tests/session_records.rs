@@ -11,8 +11,8 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 
 use acquire::analysis::{characteristics, AnalysisOptions};
-use acquire::session::records::{self, SessionStart, StandRecord};
-use acquire::session::schema::{Topic, ALL};
+use acquire::record::{self as records, SessionStart, StandRecord};
+use acquire::record::{Topic, ALL};
 use acquire::session::{self as session_file};
 use acquire::sweep::StepResult;
 

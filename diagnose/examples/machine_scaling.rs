@@ -8,7 +8,7 @@
 //! the first effect found, and at the end the growth exponent of each time against the number of
 //! bodies (least squares on log-log) and the peak memory. Before each size's diagnosis, the cost
 //! of one screen evaluation (the model changed by one candidate) by a full solve and as a
-//! low-rank update ([`identify::lowrank`]), measured in the same run.
+//! low-rank update ([`rfe::lowrank`]), measured in the same run.
 //!
 //! `cargo run --release -p identify --example machine_scaling -- [BODIES…] [--limit SECONDS]
 //! [--seed SEED] [--signal CHI2]` (default bodies 4 7 14, limit 900 s per size, seed 1, signal

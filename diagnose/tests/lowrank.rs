@@ -1,4 +1,4 @@
-//! The low-rank path (`identify::lowrank`) against full solves: every kind of candidate effect
+//! The low-rank path (`rfe::lowrank`) against full solves: every kind of candidate effect
 //! of the diagnosis, applied at a random size to a random generated machine, gives the changed
 //! model's outputs from the base's solves to 1e-9 relative on both the direct and the modal
 //! path; the derivative with respect to a spring's stiffness matches the full solve's analytic

@@ -470,7 +470,7 @@ impl Criterion {
     /// Whitened residuals `e = (z − g q)/σ` of given model outputs `q(characteristic, line)`
     /// (the working model's outputs, data order, at [`Criterion::lines`]) at values `x` (the
     /// gains `g` are read from `x`): the residuals of a model solved elsewhere, e.g. by
-    /// [`crate::lowrank`].
+    /// [`rfe::lowrank`].
     pub fn residuals_of(&self, x: &[f64], q: impl Fn(usize, usize) -> C64) -> DVector<f64> {
         let m = self.residual_count();
         let mut e = DVector::zeros(m);

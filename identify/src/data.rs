@@ -257,11 +257,8 @@ pub fn parse_csv(text: &str, origin: &str) -> Result<MeasuredData, DataError> {
 /// The CSV rows as [`MeasuredData`], and whether the header has a `quantity` column.
 fn parse_csv_rows(text: &str, origin: &str) -> Result<(MeasuredData, bool), DataError> {
     let err = CsvErr { origin };
-    let mut lines = text
-        .lines()
-        .enumerate()
-        .map(|(i, l)| (i + 1, l.trim()))
-        .filter(|(_, l)| !l.is_empty() && !l.starts_with('#'));
+    let rows_read = rfe::csv_text::rows(text).map_err(|e| err.at(e.line, e.message))?;
+    let mut lines = rows_read.iter().map(|r| (r.line, &r.cells));
     let Some((hline, header)) = lines.next() else {
         return Err(err.at(
             1,
@@ -272,8 +269,8 @@ fn parse_csv_rows(text: &str, origin: &str) -> Result<(MeasuredData, bool), Data
     // Characteristics in order of first appearance.
     let mut order: Vec<CsvKey> = Vec::new();
     let mut rows: Vec<Vec<CsvRow>> = Vec::new();
-    for (ln, l) in lines {
-        let cells: Vec<&str> = l.split(',').map(str::trim).collect();
+    for (ln, cells) in lines {
+        let cells: Vec<&str> = cells.iter().map(String::as_str).collect();
         if cells.len() != ncols {
             return Err(err.at(
                 ln,
@@ -335,14 +332,11 @@ struct CsvRow {
 /// The header's columns (name → index; known names, each once, the required ones present)
 /// and their count.
 fn csv_columns(
-    header: &str,
+    header: &[String],
     hline: usize,
     err: &CsvErr,
 ) -> Result<(BTreeMap<&'static str, usize>, usize), DataError> {
-    let names: Vec<String> = header
-        .split(',')
-        .map(|s| s.trim().to_ascii_lowercase())
-        .collect();
+    let names: Vec<String> = header.iter().map(|s| s.to_ascii_lowercase()).collect();
     let mut col: BTreeMap<&'static str, usize> = BTreeMap::new();
     for (i, n) in names.iter().enumerate() {
         let Some(known) = CSV_COLUMNS.iter().find(|c| **c == n.as_str()) else {
@@ -511,9 +505,8 @@ fn parse_dof(s: &str) -> Option<u8> {
 /// Writes the CSV form (every column of [`CSV_COLUMNS`]; empty cells where a value is absent).
 /// `parse_csv(&to_csv(d))` gives `d` back (up to the `source` text).
 pub fn to_csv(data: &MeasuredData) -> String {
-    let mut s = String::new();
-    s.push_str(&CSV_COLUMNS.join(","));
-    s.push('\n');
+    let mut s = rfe::csv_text::CsvText::new();
+    s.row(CSV_COLUMNS);
     let opt = |v: &Option<Vec<f64>>, k: usize| {
         v.as_ref()
             .map(|v| format!("{:?}", v[k]))
@@ -522,23 +515,22 @@ pub fn to_csv(data: &MeasuredData) -> String {
     for m in &data.characteristics {
         for k in 0..m.freqs_hz.len() {
             let dof = DOF_NAMES.get(m.dof as usize).copied().unwrap_or("?");
-            s.push_str(&format!(
-                "{},{},{},{:?},{:?},{},{},{},{},{},{}\n",
-                m.body,
-                dof,
-                Quantity::from(m.quantity).as_str(),
-                m.freqs_hz[k],
-                m.amplitude.get(k).copied().unwrap_or(f64::NAN),
+            s.row([
+                m.body.clone(),
+                dof.to_string(),
+                Quantity::from(m.quantity).as_str().to_string(),
+                format!("{:?}", m.freqs_hz[k]),
+                format!("{:?}", m.amplitude.get(k).copied().unwrap_or(f64::NAN)),
                 opt(&m.phase_rad, k),
                 opt(&m.variance, k),
                 opt(&m.coherence, k),
                 m.averages.map(|a| a.to_string()).unwrap_or_default(),
-                m.reference.as_deref().unwrap_or_default(),
-                if m.relative { "relative" } else { "" }
-            ));
+                m.reference.clone().unwrap_or_default(),
+                if m.relative { "relative" } else { "" }.to_string(),
+            ]);
         }
     }
-    s
+    s.finish()
 }
 
 /// One validated characteristic, ready for fitting.

@@ -322,31 +322,32 @@ pub fn json(id: &Identification) -> ReportJson {
 
 /// The table as CSV: `variable,sdes,parameter,unit,initial,identified,std_error,variability,at_bound`.
 pub fn csv(id: &Identification) -> String {
-    let mut s = String::from(
-        "variable,sdes,parameter,unit,initial,identified,std_error,variability,at_bound\n",
-    );
-    let q = |t: &str| {
-        if t.contains(',') || t.contains('"') {
-            format!("\"{}\"", t.replace('"', "\"\""))
-        } else {
-            t.to_string()
-        }
-    };
+    let mut s = rfe::csv_text::CsvText::new();
+    s.row([
+        "variable",
+        "sdes",
+        "parameter",
+        "unit",
+        "initial",
+        "identified",
+        "std_error",
+        "variability",
+        "at_bound",
+    ]);
     for r in rows(id) {
-        s.push_str(&format!(
-            "{},{},{},{},{:?},{:?},{},{},{}\n",
-            q(&r.variable),
-            q(&r.sdes),
-            q(&r.parameter),
-            q(&r.unit),
-            r.initial,
-            r.identified,
+        s.row([
+            r.variable,
+            r.sdes,
+            r.parameter,
+            r.unit,
+            format!("{:?}", r.initial),
+            format!("{:?}", r.identified),
             r.std_error.map(|v| format!("{v:?}")).unwrap_or_default(),
             r.variability.map(|v| format!("{v:?}")).unwrap_or_default(),
-            r.at_bound.unwrap_or_default()
-        ));
+            r.at_bound.unwrap_or_default(),
+        ]);
     }
-    s
+    s.finish()
 }
 
 /// Why the TOML write-back failed.

@@ -90,6 +90,27 @@ fn csv_and_toml_with_a_byte_order_mark_read_as_without() {
     assert!(e.starts_with("m.toml:3:8:"), "{e}");
 }
 
+#[test]
+fn csv_fields_may_be_quoted_and_write_back_quoted() {
+    // A reference whose name holds a comma, quoted as RFC 4180 has it, after a unit declaration.
+    let text = "# quantity = accelerance, unit = g/N\nbody,dof,freq_hz,amplitude,reference\n\"first\",u3,10,1e-3,\"drive, left\"\nfirst, u3 ,20,2e-3,\"drive, left\"\n";
+    let (d, declared) = data::parse_csv_declared(text, "q.csv").unwrap();
+    assert_eq!(
+        declared.map(|u| (u.unit.text, u.line)),
+        Some(("g/N".to_string(), 1))
+    );
+    assert_eq!(d.characteristics.len(), 1);
+    let m = &d.characteristics[0];
+    assert_eq!(m.reference.as_deref(), Some("drive, left"));
+    assert_eq!((m.body.as_str(), m.dof), ("first", 2));
+    assert_eq!(m.freqs_hz, vec![10.0, 20.0]);
+    let written = data::to_csv(&d);
+    assert!(written.contains(",\"drive, left\","), "{written}");
+    let mut back = data::parse_csv(&written, "q.csv").unwrap();
+    back.source = d.source.clone();
+    assert_eq!(back, d);
+}
+
 fn csv_err(text: &str) -> String {
     data::parse_csv(text, "bad.csv").unwrap_err().to_string()
 }

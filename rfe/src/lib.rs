@@ -20,6 +20,8 @@
 //! - [`modelfile`], [`contract`], [`units`], [`source`], [`check`]: model files (TOML with
 //!   units, resolved JSON) and their validation; [`write_back`]: values written back into a
 //!   model file, its comments and layout kept;
+//! - [`csv_text`]: the one CSV reader and writer (RFC 4180 through the `csv` crate, `#` comment
+//!   lines, line numbers for messages) every CSV file of the project goes through;
 //! - [`display`]: numbers for readers (significant digits, relative errors, p-values);
 //! - [`textbook`]: small models with closed-form answers.
 //!
@@ -36,6 +38,7 @@
 
 pub mod check;
 pub mod contract;
+pub mod csv_text;
 pub mod display;
 pub mod frf;
 pub mod frf_units;

@@ -5,6 +5,7 @@
 use std::path::PathBuf;
 use std::process::ExitCode;
 
+use rfe::csv_text::CsvText;
 use anyhow::Context;
 use history::judge::{judge_series, BaselineWindow, JudgeConfig};
 use history::store::Store;
@@ -156,26 +157,34 @@ pub fn run(a: HistoryArgs) -> anyhow::Result<ExitCode> {
         }
         Action::Csv { out } => {
             let runs = Store::open_read_only(db)?.runs()?;
-            let mut t =
-                String::from("run_id,time_utc,model_hash,outcome,variable,unit,value,std_error\n");
-            let q = |s: &str| format!("\"{}\"", s.replace('"', "\"\""));
+            let mut csv = CsvText::new();
+            csv.row([
+                "run_id",
+                "time_utc",
+                "model_hash",
+                "outcome",
+                "variable",
+                "unit",
+                "value",
+                "std_error",
+            ]);
             for r in &runs {
                 for p in &r.parameters {
-                    t.push_str(&format!(
-                        "{},{},{},{},{},{},{},{}\n",
-                        q(&r.run_id),
-                        q(&r.time_utc),
-                        q(&r.model_hash),
-                        q(&r.outcome),
-                        q(&p.variable),
-                        q(&p.unit),
-                        p.in_unit(),
+                    csv.row([
+                        r.run_id.clone(),
+                        r.time_utc.clone(),
+                        r.model_hash.clone(),
+                        r.outcome.clone(),
+                        p.variable.clone(),
+                        p.unit.clone(),
+                        p.in_unit().to_string(),
                         p.std_error
                             .map(|s| (s / p.unit_factor).to_string())
-                            .unwrap_or_default()
-                    ));
+                            .unwrap_or_default(),
+                    ]);
                 }
             }
+            let t = csv.finish();
             match out {
                 Some(o) => report::write_atomic(&o, t.as_bytes())?,
                 None => print!("{t}"),

@@ -10,10 +10,10 @@
 //! Exit status: 0 all recorded steps used; 1 some steps were dropped or the file was truncated
 //! (what was usable is written, and why the rest was not is printed); 2 failure.
 
-use std::fmt::Write as _;
 use std::path::PathBuf;
 use std::process::ExitCode;
 
+use rfe::csv_text::CsvText;
 use acquire::analysis::{characteristics, AnalysisOptions, SessionAnalysis};
 use anyhow::Context;
 
@@ -42,9 +42,17 @@ const DOF: [&str; 6] = ["u1", "u2", "u3", "r1", "r2", "r3"];
 
 /// The identification CSV (docs/identification.md) of the measured characteristics.
 pub fn measured_csv(a: &SessionAnalysis) -> String {
-    let mut s = String::from("# ");
-    s.push_str(&a.measured.source.replace('\n', " "));
-    s.push_str("\nbody,dof,quantity,freq_hz,amplitude,phase_rad,variance\n");
+    let mut s = CsvText::new();
+    s.comment(&a.measured.source);
+    s.row([
+        "body",
+        "dof",
+        "quantity",
+        "freq_hz",
+        "amplitude",
+        "phase_rad",
+        "variance",
+    ]);
     for m in &a.measured.characteristics {
         let q = serde_json::to_value(m.quantity)
             .ok()
@@ -53,44 +61,60 @@ pub fn measured_csv(a: &SessionAnalysis) -> String {
         for (k, f) in m.freqs_hz.iter().enumerate() {
             let ph = m.phase_rad.as_ref().map(|p| p[k]).unwrap_or(f64::NAN);
             let var = m.variance.as_ref().map(|v| v[k]).unwrap_or(f64::NAN);
-            let _ = writeln!(
-                s,
-                "{},{},{q},{f},{:e},{ph},{var:e}",
-                m.body,
-                DOF[m.dof.min(5) as usize],
-                m.amplitude[k]
-            );
+            s.row([
+                m.body.clone(),
+                DOF[m.dof.min(5) as usize].to_string(),
+                q.clone(),
+                f.to_string(),
+                format!("{:e}", m.amplitude[k]),
+                ph.to_string(),
+                format!("{var:e}"),
+            ]);
         }
     }
-    s
+    s.finish()
 }
 
 /// The per-step FRF table: one row per step and channel.
 pub fn steps_csv(a: &SessionAnalysis) -> String {
-    let mut s = String::from("step,frequency_hz,force_amplitude_n,channel,amplitude,phase_rad,frf_re,frf_im,noise_rms,frf_variance,fit_quality,faults,retries,matches_live\n");
+    let mut s = CsvText::new();
+    s.row([
+        "step",
+        "frequency_hz",
+        "force_amplitude_n",
+        "channel",
+        "amplitude",
+        "phase_rad",
+        "frf_re",
+        "frf_im",
+        "noise_rms",
+        "frf_variance",
+        "fit_quality",
+        "faults",
+        "retries",
+        "matches_live",
+    ]);
     for st in &a.steps {
         for c in &st.channels {
-            let _ = writeln!(
-                s,
-                "{},{},{},{},{:e},{},{:e},{:e},{:e},{:e},{},{},{},{}",
-                st.step,
-                st.frequency_hz,
-                st.force_amplitude_n,
-                c.name,
-                c.amplitude,
-                c.phase_rad,
-                c.frf_re,
-                c.frf_im,
-                c.noise_rms,
-                c.frf_variance,
-                c.fit_quality,
-                st.faults,
-                st.retries,
-                st.matches_live
-            );
+            s.row([
+                st.step.to_string(),
+                st.frequency_hz.to_string(),
+                st.force_amplitude_n.to_string(),
+                c.name.clone(),
+                format!("{:e}", c.amplitude),
+                c.phase_rad.to_string(),
+                format!("{:e}", c.frf_re),
+                format!("{:e}", c.frf_im),
+                format!("{:e}", c.noise_rms),
+                format!("{:e}", c.frf_variance),
+                c.fit_quality.to_string(),
+                st.faults.to_string(),
+                st.retries.to_string(),
+                st.matches_live.to_string(),
+            ]);
         }
     }
-    s
+    s.finish()
 }
 
 /// Runs `ident process`.

@@ -2,7 +2,8 @@
 //! classic (8-byte) or CAN FD (64-byte) frames carrying a 7-bit frame counter, reassembled with
 //! gap/duplicate/CRC detection, and decoded into commands, answers and sample blocks.
 
-use crate::can::{CanId, FrameKind, WireFrame};
+use super::frame::{CanId, FrameKind, WireFrame};
+use crate::wire::{FieldErrors, LeReader};
 
 /// Longest message body (bytes) a segment may carry: the 16-bit length field's range.
 pub const MAX_BODY: usize = u16::MAX as usize;
@@ -512,55 +513,27 @@ pub struct MessageError {
     pub detail: String,
 }
 
-struct Reader<'a> {
-    name: &'static str,
-    rest: &'a [u8],
-}
+/// The field errors of message `.0`, as [`MessageError`]s.
+struct MessageErrors(&'static str);
 
-impl<'a> Reader<'a> {
-    fn take(&mut self, n: usize, field: &str) -> Result<&'a [u8], MessageError> {
-        if self.rest.len() < n {
-            return Err(MessageError {
-                message: self.name.into(),
-                detail: format!(
-                    "ends before `{field}` ({} byte(s) left, {n} needed)",
-                    self.rest.len()
-                ),
-            });
+impl FieldErrors for MessageErrors {
+    type Error = MessageError;
+    fn ends_before(&self, field: &str, left: usize, needed: usize) -> MessageError {
+        MessageError {
+            message: self.0.into(),
+            detail: format!("ends before `{field}` ({left} byte(s) left, {needed} needed)"),
         }
-        let (a, b) = self.rest.split_at(n);
-        self.rest = b;
-        Ok(a)
     }
-    fn u8(&mut self, f: &str) -> Result<u8, MessageError> {
-        Ok(self.take(1, f)?[0])
+    fn trailing(&self, count: usize) -> MessageError {
+        MessageError {
+            message: self.0.into(),
+            detail: format!("{count} unexpected trailing byte(s)"),
+        }
     }
-    fn u16(&mut self, f: &str) -> Result<u16, MessageError> {
-        let b = self.take(2, f)?;
-        Ok(u16::from_le_bytes([b[0], b[1]]))
-    }
-    fn i16(&mut self, f: &str) -> Result<i16, MessageError> {
-        Ok(self.u16(f)? as i16)
-    }
-    fn u32(&mut self, f: &str) -> Result<u32, MessageError> {
-        let b = self.take(4, f)?;
-        Ok(u32::from_le_bytes([b[0], b[1], b[2], b[3]]))
-    }
-    fn text(&mut self) -> Result<String, MessageError> {
-        let b = std::mem::take(&mut self.rest);
-        String::from_utf8(b.to_vec()).map_err(|e| MessageError {
-            message: self.name.into(),
+    fn not_utf8(&self, e: std::string::FromUtf8Error) -> MessageError {
+        MessageError {
+            message: self.0.into(),
             detail: format!("text is not UTF-8: {e}"),
-        })
-    }
-    fn end(&self) -> Result<(), MessageError> {
-        if self.rest.is_empty() {
-            Ok(())
-        } else {
-            Err(MessageError {
-                message: self.name.into(),
-                detail: format!("{} unexpected trailing byte(s)", self.rest.len()),
-            })
         }
     }
 }
@@ -669,7 +642,7 @@ impl Message {
                 })
             }
         };
-        let mut r = Reader { name, rest };
+        let mut r = LeReader::new(rest, MessageErrors(name));
         let m = match t {
             kind::IDENTIFY => Message::Identify,
             kind::START => Message::Start,
@@ -789,7 +762,7 @@ fn encode_block(b: &WireBlock, out: &mut Vec<u8>) -> Result<(), EncodeError> {
     Ok(())
 }
 
-fn decode_block(r: &mut Reader<'_>) -> Result<WireBlock, MessageError> {
+fn decode_block(r: &mut LeReader<'_, MessageErrors>) -> Result<WireBlock, MessageError> {
     let seq = r.u32("seq")?;
     let code = r.u8("format")?;
     let format = SampleFormat::from_code(code).ok_or_else(|| MessageError {

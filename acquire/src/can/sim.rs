@@ -31,7 +31,7 @@ pub struct SimFaults {
     /// block back `delay_time`; after `daq_silent_after_blocks` (or `cable_pull_after_blocks`:
     /// on CAN the DAQ's frames simply stop) blocks it neither streams nor answers. The shaker
     /// fields do not apply here.
-    pub per_block: Option<crate::stand::Faults>,
+    pub per_block: Option<crate::faults::Faults>,
 }
 
 /// Told of each per-block fault injected: kind (`drop`, `corrupt`, `duplicate`, `delay`,
@@ -375,7 +375,7 @@ fn answer(
 /// The fault the next block gets (after `blocks` blocks); `Err` names why the DAQ goes silent
 /// for good (`cable_pull`, `daq_silent`).
 fn block_fault(
-    f: Option<&crate::stand::Faults>,
+    f: Option<&crate::faults::Faults>,
     blocks: u64,
     rng: &mut rand::rngs::StdRng,
 ) -> Result<BlockFault, &'static str> {
@@ -392,7 +392,7 @@ fn block_fault(
 }
 
 /// A random per-block fault, with the stand's probabilities.
-fn draw_block_fault(f: &crate::stand::Faults, rng: &mut rand::rngs::StdRng) -> BlockFault {
+fn draw_block_fault(f: &crate::faults::Faults, rng: &mut rand::rngs::StdRng) -> BlockFault {
     let u: f64 = rng.random();
     if u < f.drop {
         BlockFault::Drop

@@ -222,6 +222,21 @@ struct Layout {
     samples_per_block: usize,
 }
 
+/// The TPDO layout a configure request needs, before it is written to the node.
+#[derive(Debug)]
+struct PdoPlan {
+    /// Bytes of the sample counter at the start of every TPDO.
+    counter_bytes: usize,
+    /// Bytes of each channel value.
+    value_bytes: usize,
+    /// Per TPDO: the positions (in stream order) of the channels it carries.
+    pdos: Vec<Vec<usize>>,
+    /// SYNC period (µs).
+    period_us: u32,
+    /// The sample rate that period gives (Hz).
+    rate_hz: f64,
+}
+
 /// The sample being assembled from its TPDOs.
 #[derive(Debug)]
 struct Assembly {
@@ -440,6 +455,188 @@ impl CanOpenDaq {
 
     fn tpdo_cob(&self, n: usize) -> u32 {
         (TPDO_BASE as u32 + 0x100 * n as u32) + self.settings.node_id as u32
+    }
+
+    /// A configure request this node cannot take, as the error naming the port.
+    fn refused(&self, detail: String) -> DaqError {
+        DaqError::Announcement {
+            port: self.port.clone(),
+            detail,
+        }
+    }
+
+    /// Configure, step 1: the request names channels, a positive rate and a block size, and
+    /// only inputs the EDS declares.
+    fn check_request(&self, config: &DaqConfig) -> Result<(), DaqError> {
+        if config.channels.is_empty()
+            || config.samples_per_block == 0
+            || !(config.sample_rate_hz > 0.0)
+        {
+            return Err(self.refused(format!("request {config:?}: needs channels, a positive sample rate and ≥ 1 sample per block")));
+        }
+        if let Some(n) = self.input_count() {
+            if let Some(c) = config.channels.iter().find(|&&c| c >= n) {
+                return Err(self.refused(format!("device channel {c} does not exist: the EDS declares {n} inputs at 0x{:04X} (channels 0–{})", self.settings.objects.inputs, n.saturating_sub(1))));
+            }
+        }
+        Ok(())
+    }
+
+    /// Configure, step 2: the counter's and the inputs' widths (from the EDS), the channels
+    /// split over TPDOs after the counter, the SYNC period, and the bus load checked against
+    /// the bit rate.
+    fn plan_pdos(&self, config: &DaqConfig) -> Result<PdoPlan, DaqError> {
+        let objects = &self.settings.objects;
+        let counter_type = self
+            .type_of(objects.counter)?
+            .unwrap_or(DataType::Unsigned16);
+        let counter_bytes = match counter_type {
+            DataType::Unsigned8 | DataType::Unsigned16 | DataType::Unsigned32 => {
+                counter_type.size().unwrap_or(2)
+            }
+            t => {
+                return Err(self.refused(format!(
+                    "sample counter {} is {t:?}: it must be UNSIGNED8/16/32",
+                    objects.counter
+                )))
+            }
+        };
+        let first_sub = u8::try_from(config.channels[0] + 1).unwrap_or(u8::MAX);
+        let input_type = self
+            .type_of(Address::new(objects.inputs, first_sub))?
+            .unwrap_or(DataType::Integer16);
+        let value_bytes = match input_type {
+            DataType::Integer8 | DataType::Integer16 | DataType::Integer32 => {
+                input_type.size().unwrap_or(2)
+            }
+            t => {
+                return Err(self.refused(format!(
+                    "inputs 0x{:04X} are {t:?}: INTEGER8/16/32 are supported",
+                    objects.inputs
+                )))
+            }
+        };
+        let per_pdo = (8 - counter_bytes) / value_bytes;
+        let pdos: Vec<Vec<usize>> = (0..config.channels.len())
+            .collect::<Vec<_>>()
+            .chunks(per_pdo)
+            .map(<[usize]>::to_vec)
+            .collect();
+        if pdos.len() > objects.tpdos as usize {
+            return Err(self.refused(format!("{} channels need {} TPDOs ({per_pdo} channels each after the counter), the node has {}; stream fewer channels", config.channels.len(), pdos.len(), objects.tpdos)));
+        }
+        let period_us = (1e6 / config.sample_rate_hz).round().max(1.0) as u32;
+        let rate = 1e6 / period_us as f64;
+        // Bits per second on the bus: SYNC (47 bits + stuffing) and every TPDO (47 + 8·n data bits),
+        // with ~20 % bit stuffing. More than the bit rate cannot be delivered.
+        let bits_per_sample: f64 = 1.2
+            * (47.0
+                + pdos
+                    .iter()
+                    .map(|p| 47.0 + 8.0 * (counter_bytes + p.len() * value_bytes) as f64)
+                    .sum::<f64>());
+        if rate * bits_per_sample > self.settings.bit_rate as f64 {
+            return Err(self.refused(format!("{rate} Hz × {} TPDOs + SYNC needs about {:.0} bit/s, more than the bus's {} bit/s; lower the sample rate to at most {:.0} Hz or stream fewer channels", pdos.len(), rate * bits_per_sample, self.settings.bit_rate, self.settings.bit_rate as f64 / bits_per_sample)));
+        }
+        Ok(PdoPlan {
+            counter_bytes,
+            value_bytes,
+            pdos,
+            period_us,
+            rate_hz: rate,
+        })
+    }
+
+    /// Configure, step 3: in pre-operational, the SYNC period (and the node's sample rate), every
+    /// TPDO disabled and the used ones mapped (counter first, then their channels) and enabled
+    /// on SYNC, and the heartbeat period, all by SDO.
+    async fn write_pdo_mapping(
+        &mut self,
+        config: &DaqConfig,
+        plan: &PdoPlan,
+    ) -> Result<(), DaqError> {
+        let objects = self.settings.objects.clone();
+        self.nmt(NmtCommand::PreOperational).await?;
+        self.write(Address::new(0x1006, 0), &plan.period_us.to_le_bytes())
+            .await?;
+        if let Some(a) = objects.sample_rate {
+            self.write(a, &(plan.rate_hz.round() as u32).to_le_bytes())
+                .await?;
+        }
+        let counter_map = (objects.counter.index as u32) << 16
+            | (objects.counter.sub as u32) << 8
+            | (plan.counter_bytes as u32 * 8);
+        for n in 0..objects.tpdos as usize {
+            let comm = 0x1800 + n as u16;
+            let map = 0x1A00 + n as u16;
+            let cob_id = self.tpdo_cob(n);
+            self.write(Address::new(comm, 1), &(cob_id | 0x8000_0000).to_le_bytes())
+                .await?;
+            let Some(chans) = plan.pdos.get(n) else {
+                continue;
+            };
+            self.write(Address::new(map, 0), &[0]).await?;
+            self.write(Address::new(map, 1), &counter_map.to_le_bytes())
+                .await?;
+            for (j, &pos) in chans.iter().enumerate() {
+                let sub = config.channels[pos] + 1;
+                let Ok(sub) = u8::try_from(sub) else {
+                    return Err(self.refused(format!(
+                        "device channel {} is beyond sub-index 255",
+                        config.channels[pos]
+                    )));
+                };
+                let m = (objects.inputs as u32) << 16
+                    | (sub as u32) << 8
+                    | (plan.value_bytes as u32 * 8);
+                self.write(Address::new(map, 2 + j as u8), &m.to_le_bytes())
+                    .await?;
+            }
+            self.write(Address::new(map, 0), &[1 + chans.len() as u8])
+                .await?;
+            self.write(Address::new(comm, 2), &[1]).await?;
+            self.write(Address::new(comm, 1), &cob_id.to_le_bytes())
+                .await?;
+        }
+        self.write(
+            Address::new(0x1017, 0),
+            &self.settings.heartbeat_ms.to_le_bytes(),
+        )
+        .await
+    }
+
+    /// Configure, step 4: each channel's volts per count, read from the node's scaling object
+    /// (REAL32) when the stand names one, else the stand's value; each must be positive.
+    async fn read_scaling(&mut self, config: &DaqConfig) -> Result<Vec<ChannelInfo>, DaqError> {
+        let mut channels = Vec::with_capacity(config.channels.len());
+        for &c in &config.channels {
+            let volts_per_count = match self.settings.objects.scaling {
+                Some(idx) => {
+                    let v = self.read(Address::new(idx, (c + 1) as u8)).await?;
+                    match v.as_slice() {
+                        [a, b, cc, d] => f32::from_le_bytes([*a, *b, *cc, *d]) as f64,
+                        other => {
+                            return Err(self.refused(format!(
+                                "scaling 0x{idx:04X}:{:02X} answered {} bytes, REAL32 has 4",
+                                c + 1,
+                                other.len()
+                            )))
+                        }
+                    }
+                }
+                None => self.settings.volts_per_count,
+            };
+            if !(volts_per_count.is_finite() && volts_per_count > 0.0) {
+                return Err(self.refused(format!(
+                    "channel {c}: volts per count {volts_per_count} is not a positive number"
+                )));
+            }
+            channels.push(ChannelInfo {
+                device_channel: c,
+                volts_per_count,
+            });
+        }
+        Ok(channels)
     }
 
     /// Answers the stream's frames and the heartbeat check until an event is ready.
@@ -693,156 +890,21 @@ impl Daq for CanOpenDaq {
     }
 
     async fn configure(&mut self, config: &DaqConfig) -> Result<StreamInfo, DaqError> {
-        let port = self.port.clone();
-        let bad = move |detail: String| DaqError::Announcement {
-            port: port.clone(),
-            detail,
-        };
-        if config.channels.is_empty()
-            || config.samples_per_block == 0
-            || !(config.sample_rate_hz > 0.0)
-        {
-            return Err(bad(format!("request {config:?}: needs channels, a positive sample rate and ≥ 1 sample per block")));
-        }
-        if let Some(n) = self.input_count() {
-            if let Some(c) = config.channels.iter().find(|&&c| c >= n) {
-                return Err(bad(format!("device channel {c} does not exist: the EDS declares {n} inputs at 0x{:04X} (channels 0–{})", self.settings.objects.inputs, n.saturating_sub(1))));
-            }
-        }
-        let objects = self.settings.objects.clone();
-        let counter_type = self
-            .type_of(objects.counter)?
-            .unwrap_or(DataType::Unsigned16);
-        let counter_bytes = match counter_type {
-            DataType::Unsigned8 | DataType::Unsigned16 | DataType::Unsigned32 => {
-                counter_type.size().unwrap_or(2)
-            }
-            t => {
-                return Err(bad(format!(
-                    "sample counter {} is {t:?}: it must be UNSIGNED8/16/32",
-                    objects.counter
-                )))
-            }
-        };
-        let first_sub = u8::try_from(config.channels[0] + 1).unwrap_or(u8::MAX);
-        let input_type = self
-            .type_of(Address::new(objects.inputs, first_sub))?
-            .unwrap_or(DataType::Integer16);
-        let value_bytes = match input_type {
-            DataType::Integer8 | DataType::Integer16 | DataType::Integer32 => {
-                input_type.size().unwrap_or(2)
-            }
-            t => {
-                return Err(bad(format!(
-                    "inputs 0x{:04X} are {t:?}: INTEGER8/16/32 are supported",
-                    objects.inputs
-                )))
-            }
-        };
-        let per_pdo = (8 - counter_bytes) / value_bytes;
-        let pdos: Vec<Vec<usize>> = (0..config.channels.len())
-            .collect::<Vec<_>>()
-            .chunks(per_pdo)
-            .map(<[usize]>::to_vec)
-            .collect();
-        if pdos.len() > objects.tpdos as usize {
-            return Err(bad(format!("{} channels need {} TPDOs ({per_pdo} channels each after the counter), the node has {}; stream fewer channels", config.channels.len(), pdos.len(), objects.tpdos)));
-        }
-        let period_us = (1e6 / config.sample_rate_hz).round().max(1.0) as u32;
-        let rate = 1e6 / period_us as f64;
-        // Bits per second on the bus: SYNC (47 bits + stuffing) and every TPDO (47 + 8·n data bits),
-        // with ~20 % bit stuffing. More than the bit rate cannot be delivered.
-        let bits_per_sample: f64 = 1.2
-            * (47.0
-                + pdos
-                    .iter()
-                    .map(|p| 47.0 + 8.0 * (counter_bytes + p.len() * value_bytes) as f64)
-                    .sum::<f64>());
-        if rate * bits_per_sample > self.settings.bit_rate as f64 {
-            return Err(bad(format!("{rate} Hz × {} TPDOs + SYNC needs about {:.0} bit/s, more than the bus's {} bit/s; lower the sample rate to at most {:.0} Hz or stream fewer channels", pdos.len(), rate * bits_per_sample, self.settings.bit_rate, self.settings.bit_rate as f64 / bits_per_sample)));
-        }
-        self.nmt(NmtCommand::PreOperational).await?;
-        self.write(Address::new(0x1006, 0), &period_us.to_le_bytes())
-            .await?;
-        if let Some(a) = objects.sample_rate {
-            self.write(a, &(rate.round() as u32).to_le_bytes()).await?;
-        }
-        let counter_map = (objects.counter.index as u32) << 16
-            | (objects.counter.sub as u32) << 8
-            | (counter_bytes as u32 * 8);
-        for n in 0..objects.tpdos as usize {
-            let comm = 0x1800 + n as u16;
-            let map = 0x1A00 + n as u16;
-            let cob_id = self.tpdo_cob(n);
-            self.write(Address::new(comm, 1), &(cob_id | 0x8000_0000).to_le_bytes())
-                .await?;
-            let Some(chans) = pdos.get(n) else { continue };
-            self.write(Address::new(map, 0), &[0]).await?;
-            self.write(Address::new(map, 1), &counter_map.to_le_bytes())
-                .await?;
-            for (j, &pos) in chans.iter().enumerate() {
-                let sub = config.channels[pos] + 1;
-                let Ok(sub) = u8::try_from(sub) else {
-                    return Err(bad(format!(
-                        "device channel {} is beyond sub-index 255",
-                        config.channels[pos]
-                    )));
-                };
-                let m =
-                    (objects.inputs as u32) << 16 | (sub as u32) << 8 | (value_bytes as u32 * 8);
-                self.write(Address::new(map, 2 + j as u8), &m.to_le_bytes())
-                    .await?;
-            }
-            self.write(Address::new(map, 0), &[1 + chans.len() as u8])
-                .await?;
-            self.write(Address::new(comm, 2), &[1]).await?;
-            self.write(Address::new(comm, 1), &cob_id.to_le_bytes())
-                .await?;
-        }
-        self.write(
-            Address::new(0x1017, 0),
-            &self.settings.heartbeat_ms.to_le_bytes(),
-        )
-        .await?;
-        let mut channels = Vec::with_capacity(config.channels.len());
-        for &c in &config.channels {
-            let volts_per_count = match objects.scaling {
-                Some(idx) => {
-                    let v = self.read(Address::new(idx, (c + 1) as u8)).await?;
-                    match v.as_slice() {
-                        [a, b, cc, d] => f32::from_le_bytes([*a, *b, *cc, *d]) as f64,
-                        other => {
-                            return Err(bad(format!(
-                                "scaling 0x{idx:04X}:{:02X} answered {} bytes, REAL32 has 4",
-                                c + 1,
-                                other.len()
-                            )))
-                        }
-                    }
-                }
-                None => self.settings.volts_per_count,
-            };
-            if !(volts_per_count.is_finite() && volts_per_count > 0.0) {
-                return Err(bad(format!(
-                    "channel {c}: volts per count {volts_per_count} is not a positive number"
-                )));
-            }
-            channels.push(ChannelInfo {
-                device_channel: c,
-                volts_per_count,
-            });
-        }
-        self.sync_period = Duration::from_micros(period_us as u64);
+        self.check_request(config)?;
+        let plan = self.plan_pdos(config)?;
+        self.write_pdo_mapping(config, &plan).await?;
+        let channels = self.read_scaling(config).await?;
+        self.sync_period = Duration::from_micros(plan.period_us as u64);
         self.layout = Some(Layout {
-            counter_bytes,
-            counter_bits: counter_bytes as u32 * 8,
-            value_bytes,
-            pdos,
+            counter_bytes: plan.counter_bytes,
+            counter_bits: plan.counter_bytes as u32 * 8,
+            value_bytes: plan.value_bytes,
+            pdos: plan.pdos,
             scale: channels.iter().map(|c| c.volts_per_count).collect(),
             samples_per_block: config.samples_per_block as usize,
         });
         let info = StreamInfo {
-            sample_rate_hz: rate,
+            sample_rate_hz: plan.rate_hz,
             channels,
             samples_per_block: config.samples_per_block,
         };

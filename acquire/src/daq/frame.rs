@@ -6,6 +6,7 @@
 use crc::{Crc, CRC_32_ISO_HDLC};
 
 use super::{ChannelInfo, DaqConfig, StreamInfo};
+use crate::wire::{FieldErrors, LeReader};
 
 /// CRC-32 (ISO-HDLC, the zlib/Ethernet CRC) over type, sequence and payload.
 pub const FRAME_CRC: Crc<u32> = Crc::<u32>::new(&CRC_32_ISO_HDLC);
@@ -240,58 +241,27 @@ pub struct PayloadError {
     pub detail: String,
 }
 
-struct Cursor<'a> {
-    b: &'a [u8],
-    kind: u8,
-}
+/// The payload errors of frame type `.0`, as [`PayloadError`]s.
+struct PayloadErrors(u8);
 
-impl<'a> Cursor<'a> {
-    fn take(&mut self, n: usize, what: &str) -> Result<&'a [u8], PayloadError> {
-        if self.b.len() < n {
-            return Err(PayloadError {
-                kind: self.kind,
-                detail: format!("payload ends before {what}"),
-            });
+impl FieldErrors for PayloadErrors {
+    type Error = PayloadError;
+    fn ends_before(&self, field: &str, _left: usize, _needed: usize) -> PayloadError {
+        PayloadError {
+            kind: self.0,
+            detail: format!("payload ends before {field}"),
         }
-        let (h, t) = self.b.split_at(n);
-        self.b = t;
-        Ok(h)
     }
-    fn u8(&mut self, what: &str) -> Result<u8, PayloadError> {
-        Ok(self.take(1, what)?[0])
+    fn trailing(&self, count: usize) -> PayloadError {
+        PayloadError {
+            kind: self.0,
+            detail: format!("{count} unexpected trailing bytes"),
+        }
     }
-    fn u16(&mut self, what: &str) -> Result<u16, PayloadError> {
-        let s = self.take(2, what)?;
-        Ok(u16::from_le_bytes([s[0], s[1]]))
-    }
-    fn i16(&mut self, what: &str) -> Result<i16, PayloadError> {
-        Ok(self.u16(what)? as i16)
-    }
-    fn f32(&mut self, what: &str) -> Result<f32, PayloadError> {
-        let s = self.take(4, what)?;
-        Ok(f32::from_le_bytes([s[0], s[1], s[2], s[3]]))
-    }
-    fn f64(&mut self, what: &str) -> Result<f64, PayloadError> {
-        let s = self.take(8, what)?;
-        let mut a = [0u8; 8];
-        a.copy_from_slice(s);
-        Ok(f64::from_le_bytes(a))
-    }
-    fn text(&mut self) -> Result<String, PayloadError> {
-        let s = std::mem::take(&mut self.b);
-        String::from_utf8(s.to_vec()).map_err(|_| PayloadError {
-            kind: self.kind,
+    fn not_utf8(&self, _: std::string::FromUtf8Error) -> PayloadError {
+        PayloadError {
+            kind: self.0,
             detail: "text is not UTF-8".into(),
-        })
-    }
-    fn end(&self) -> Result<(), PayloadError> {
-        if self.b.is_empty() {
-            Ok(())
-        } else {
-            Err(PayloadError {
-                kind: self.kind,
-                detail: format!("{} unexpected trailing bytes", self.b.len()),
-            })
         }
     }
 }
@@ -360,10 +330,7 @@ impl Message {
 
     /// Parses a CRC-valid frame's payload.
     pub fn parse(frame: &Frame<'_>) -> Result<Message, PayloadError> {
-        let mut c = Cursor {
-            b: frame.payload,
-            kind: frame.kind,
-        };
+        let mut c = LeReader::new(frame.payload, PayloadErrors(frame.kind));
         let m = match frame.kind {
             kind::HELLO => Message::Hello,
             kind::START => Message::Start,
@@ -427,7 +394,7 @@ impl Message {
                     .chunks_exact(4)
                     .map(|s| i32::from_le_bytes([s[0], s[1], s[2], s[3]]))
                     .collect();
-                c.b = &[];
+                c.take_rest();
                 Message::Data(counts)
             }
             kind::STATUS => {

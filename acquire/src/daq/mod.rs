@@ -19,6 +19,8 @@ use async_trait::async_trait;
 use serde::{Deserialize, Serialize};
 
 use crate::device::DeviceIdentity;
+pub use crate::record::ChannelInfo;
+use crate::record::FaultRecord;
 
 /// A data-acquisition unit streaming simultaneously sampled channels (accelerometers and the
 /// force transducer).
@@ -76,15 +78,6 @@ pub struct DaqConfig {
     pub channels: Vec<u16>,
     /// Samples per channel in each block (≥ 1).
     pub samples_per_block: u16,
-}
-
-/// One channel as the device announces it.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
-pub struct ChannelInfo {
-    /// Device channel number (the stand file's `device_channel`).
-    pub device_channel: u16,
-    /// Volts per ADC count: a block's value is `count · volts_per_count` (V).
-    pub volts_per_count: f64,
 }
 
 /// The device's announcement of the stream it will send (answer to configure).
@@ -173,6 +166,19 @@ pub struct StreamFault {
     pub seq: Option<u64>,
     /// Human-readable detail (which bytes, expected vs got).
     pub detail: String,
+}
+
+// Defined here rather than with the record so that the records depend on nothing above them.
+impl FaultRecord {
+    /// The record of fault `f` on the DAQ at `port`.
+    pub fn of(port: &str, f: &StreamFault) -> FaultRecord {
+        FaultRecord {
+            port: port.to_string(),
+            kind: f.kind.as_str().to_string(),
+            seq: f.seq,
+            detail: f.detail.clone(),
+        }
+    }
 }
 
 /// Kinds of stream faults.

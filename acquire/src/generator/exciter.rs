@@ -8,44 +8,17 @@
 //! sample rate, its amplitude set from the gain estimate, checked on every period's measured force
 //! RMS and peak, and corrected during the settling periods (the transfer learned there).
 
-use std::time::Duration;
-
 use async_trait::async_trait;
 
+use super::amplifier::{Amplifier, RAMP_TICK};
 use super::limits::Load;
 use super::waveform::{self, DriveWaveform};
 use super::{Generator, GeneratorError};
 use crate::device::DeviceIdentity;
-use crate::session::records::{DriveKind, DriveRecord};
+use crate::record::{DriveKind, DriveRecord};
 use crate::session::SessionHandle;
 use crate::shaker::{ForceReading, PeriodForce, Shaker, ShakerError, ShakerStatus, Waveform};
 
-/// The power amplifier and shaker behind the generator (the stand file's `[amplifier]`), SI.
-#[derive(Debug, Clone, PartialEq, serde::Serialize)]
-pub struct Amplifier {
-    /// Estimated force amplitude per generator volt (N/V, peak per peak): amplifier gain times
-    /// the shaker's force constant. The loop learns the real transfer; this is the start.
-    pub gain_n_per_v: f64,
-    /// Largest generator amplitude ever sent (V peak).
-    pub voltage_limit_v: f64,
-    /// Measured force amplitude that stops the sweep (N peak).
-    pub force_limit_n: f64,
-    /// Fastest change of the generator amplitude while the output is on (V/s).
-    pub ramp_rate_v_per_s: f64,
-    /// Accepted relative deviation of the measured force from the target (e.g. 0.02).
-    pub tolerance: f64,
-}
-
-impl Amplifier {
-    /// Largest amplitude change per setting while the output is on (V): the ramp rate over
-    /// one [`RAMP_TICK`].
-    pub fn ramp_step_v(&self) -> f64 {
-        self.ramp_rate_v_per_s * RAMP_TICK.as_secs_f64()
-    }
-}
-
-/// Time between two amplitude settings of a ramp (stand time).
-pub const RAMP_TICK: Duration = Duration::from_millis(50);
 
 /// A measured force below this fraction of what the drive should give means the force signal is
 /// lost (amplifier tripped, shaker disconnected, force sensor cable).

@@ -4,6 +4,7 @@
 //! [`exciter::GeneratorExciter`], which makes generator + amplifier + shaker an exciter whose
 //! force loop is closed by the host on the DAQ's force channel (docs/scpi-generator.md).
 
+pub mod amplifier;
 pub mod arbitrary;
 pub mod dialect;
 pub mod exciter;
@@ -11,7 +12,8 @@ pub mod limits;
 pub mod scpi;
 pub mod waveform;
 
-pub use exciter::{Amplifier, GeneratorExciter};
+pub use amplifier::Amplifier;
+pub use exciter::GeneratorExciter;
 pub use scpi::{GeneratorOptions, ScpiGenerator};
 
 use std::time::Duration;

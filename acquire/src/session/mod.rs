@@ -8,9 +8,6 @@
 //! writer makes every later `SessionHandle::log` return an error, and bytes the
 //! [`ByteTap`] could not queue are counted and reported.
 
-pub mod records;
-pub mod schema;
-
 use std::collections::BTreeMap;
 use std::fs::File;
 use std::io::{BufReader, BufWriter, Read};
@@ -23,10 +20,8 @@ use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 use base64::Engine;
 use serde::Serialize;
 
-pub use records::TopicRecord;
-pub use schema::Topic;
-
-use crate::transport::{ByteTap, Direction};
+use crate::record::{self, Direction, Topic, TopicRecord};
+use crate::transport::ByteTap;
 
 /// Session-file errors. Each names the file.
 #[derive(Debug, thiserror::Error)]
@@ -166,6 +161,33 @@ pub fn now_ns() -> u64 {
         .unwrap_or(0)
 }
 
+/// The MCAP writer of a session file, for recording and for recovery alike: `path` created new
+/// (an existing file is never overwritten), zstd chunks of `opts.chunk_size` bytes at
+/// `opts.zstd_level`, no profile, `library` naming the writing software.
+fn create_writer(
+    path: &Path,
+    opts: &SessionOptions,
+    library: &str,
+) -> Result<mcap::Writer<BufWriter<File>>, SessionError> {
+    let werr = |detail: String| SessionError::Write {
+        path: path.display().to_string(),
+        detail,
+    };
+    let file = File::options()
+        .write(true)
+        .create_new(true)
+        .open(path)
+        .map_err(|e| werr(format!("cannot create: {e}")))?;
+    mcap::WriteOptions::new()
+        .compression(Some(mcap::Compression::Zstd))
+        .compression_level(opts.zstd_level)
+        .chunk_size(Some(opts.chunk_size))
+        .profile("")
+        .library(library)
+        .create(BufWriter::with_capacity(1 << 16, file))
+        .map_err(|e| werr(e.to_string()))
+}
+
 impl Session {
     /// Creates `path` (refusing to overwrite an existing file) and starts the writer thread.
     pub fn create(path: &Path, opts: SessionOptions) -> Result<Session, SessionError> {
@@ -174,21 +196,13 @@ impl Session {
             path: p.clone(),
             detail,
         };
-        let file = File::options()
-            .write(true)
-            .create_new(true)
-            .open(path)
-            .map_err(|e| werr(format!("cannot create: {e}")))?;
-        let mut writer = mcap::WriteOptions::new()
-            .compression(Some(mcap::Compression::Zstd))
-            .compression_level(opts.zstd_level)
-            .chunk_size(Some(opts.chunk_size))
-            .profile("")
-            .library(concat!("ident-acquire/", env!("CARGO_PKG_VERSION")))
-            .create(BufWriter::with_capacity(1 << 16, file))
-            .map_err(|e| werr(e.to_string()))?;
+        let mut writer = create_writer(
+            path,
+            &opts,
+            concat!("ident-acquire/", env!("CARGO_PKG_VERSION")),
+        )?;
         let mut ids = Vec::new();
-        for t in schema::ALL {
+        for t in record::ALL {
             let schema = serde_json::to_vec(&t.schema()).map_err(|e| werr(e.to_string()))?;
             let sid = writer
                 .add_schema(t.schema_name(), "jsonschema", &schema)
@@ -342,7 +356,7 @@ fn write_loop(
             last_flush = Instant::now();
         }
     }
-    let messages = schema::ALL
+    let messages = record::ALL
         .iter()
         .zip(counts)
         .map(|(t, c)| (t.name().to_string(), c))
@@ -439,7 +453,7 @@ impl SessionHandle {
 
 impl ByteTap for SessionHandle {
     fn bytes(&self, port: &str, direction: Direction, data: &[u8]) {
-        let rec = records::RawBytes {
+        let rec = record::RawBytes {
             port: port.to_string(),
             direction,
             data: base64::engine::general_purpose::STANDARD.encode(data),
@@ -626,17 +640,11 @@ pub fn recover(input: &Path, output: &Path) -> Result<RecoverReport, SessionErro
         path: o.clone(),
         detail,
     };
-    let file = File::options()
-        .write(true)
-        .create_new(true)
-        .open(output)
-        .map_err(|e| werr(format!("cannot create: {e}")))?;
-    let mut w = mcap::WriteOptions::new()
-        .compression(Some(mcap::Compression::Zstd))
-        .profile("")
-        .library(concat!("ident-acquire-recover/", env!("CARGO_PKG_VERSION")))
-        .create(BufWriter::new(file))
-        .map_err(|e| werr(e.to_string()))?;
+    let mut w = create_writer(
+        output,
+        &SessionOptions::default(),
+        concat!("ident-acquire-recover/", env!("CARGO_PKG_VERSION")),
+    )?;
     let n = msgs.len() as u64;
     for (channel, sequence, log_time, data) in msgs {
         let m = mcap::Message {

@@ -7,16 +7,16 @@ fn every_topic_round_trips_and_schemas_are_registered() {
     let path = dir.path().join("s.mcap");
     let s = Session::create(&path, SessionOptions::default()).unwrap();
     let h = s.handle();
-    for (i, t) in schema::ALL.iter().enumerate() {
+    for (i, t) in crate::record::ALL.iter().enumerate() {
         h.log(*t, &json!({"i": i, "topic": t.name()})).unwrap();
     }
     h.bytes("/dev/pts/9", Direction::Rx, &[0, 1, 2, 255]);
     let summary = s.finish().unwrap();
-    assert_eq!(summary.total(), schema::ALL.len() as u64 + 1);
+    assert_eq!(summary.total(), crate::record::ALL.len() as u64 + 1);
     let r = read(&path).unwrap();
     assert_eq!(r.truncated, None);
-    assert_eq!(r.records.len(), schema::ALL.len() + 1);
-    for (i, t) in schema::ALL.iter().enumerate() {
+    assert_eq!(r.records.len(), crate::record::ALL.len() + 1);
+    for (i, t) in crate::record::ALL.iter().enumerate() {
         assert_eq!(r.records[i].topic, t.name());
         assert_eq!(r.records[i].value["i"], json!(i));
     }
@@ -26,7 +26,7 @@ fn every_topic_round_trips_and_schemas_are_registered() {
     // Indexed read of the complete file: every channel has a jsonschema schema.
     let bytes = std::fs::read(&path).unwrap();
     let summary = mcap::Summary::read(&bytes).unwrap().unwrap();
-    assert_eq!(summary.channels.len(), schema::ALL.len());
+    assert_eq!(summary.channels.len(), crate::record::ALL.len());
     for c in summary.channels.values() {
         let sch = c.schema.as_ref().unwrap();
         assert_eq!(sch.encoding, "jsonschema");

@@ -12,6 +12,7 @@ use async_trait::async_trait;
 use serde::{Deserialize, Serialize};
 
 use crate::device::DeviceIdentity;
+pub use crate::record::Waveform;
 
 /// An exciter controller. Object safe; a sweep holds a `Box<dyn Shaker>`. Every method is bounded
 /// by the implementation's timeout and retries; errors reported by the device are returned as
@@ -82,41 +83,6 @@ pub struct ForceReading {
     pub commanded_n: f64,
     /// Force amplitude measured on the DAQ's force channel (N).
     pub measured_n: f64,
-}
-
-/// An excitation waveform. Frequencies in Hz, times in s.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
-#[serde(tag = "kind", rename_all = "snake_case")]
-pub enum Waveform {
-    /// A sine at the frequency set by [`Shaker::set_frequency`].
-    Sine,
-    /// Continuous random noise, flat between `f_lo_hz` and `f_hi_hz`.
-    Random {
-        /// Lower band edge (Hz).
-        f_lo_hz: f64,
-        /// Upper band edge (Hz).
-        f_hi_hz: f64,
-    },
-    /// Burst random: noise for `duty` (0-1) of each `period_s`, silence for the rest.
-    BurstRandom {
-        /// Lower band edge (Hz).
-        f_lo_hz: f64,
-        /// Upper band edge (Hz).
-        f_hi_hz: f64,
-        /// Fraction of the period with drive (0-1).
-        duty: f64,
-        /// Burst period (s).
-        period_s: f64,
-    },
-    /// A linear chirp from `f_lo_hz` to `f_hi_hz` over `period_s`, repeated.
-    Chirp {
-        /// Start frequency (Hz).
-        f_lo_hz: f64,
-        /// End frequency (Hz).
-        f_hi_hz: f64,
-        /// Sweep time (s).
-        period_s: f64,
-    },
 }
 
 /// The controller's status.

@@ -1,8 +1,11 @@
 //! The shaker controller's SCPI dialect (docs/shaker-scpi.md), I/O free: command parsing (used by
 //! the simulated controller and by any firmware test bench), canonical formatting (used by the
-//! host driver), answer parsing and line framing.
+//! host driver) and answer parsing. Its line framing is the transport's ([`LineBuffer`]), shared
+//! with every line-oriented instrument.
 
 use std::fmt;
+
+pub use crate::transport::{Line, LineBuffer, MAX_LINE};
 
 /// A waveform selector as sent with `SOURce:FUNCtion`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -469,74 +472,6 @@ pub fn parse_bool_answer(line: &str) -> Option<bool> {
         "1" | "ON" => Some(true),
         "0" | "OFF" => Some(false),
         _ => None,
-    }
-}
-
-/// Maximum line length (bytes, without terminator) accepted in either direction.
-pub const MAX_LINE: usize = 256;
-
-/// Splits a byte stream into lines at `\n` (a preceding `\r` is dropped). I/O free.
-#[derive(Debug, Default)]
-pub struct LineBuffer {
-    buf: Vec<u8>,
-    overflow: bool,
-}
-
-/// One framed line, or a line that was too long or not text.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub enum Line {
-    /// A complete line.
-    Text(String),
-    /// Bytes that are not a valid line (too long or not UTF-8), lossily decoded for messages.
-    Garbage(String),
-}
-
-impl LineBuffer {
-    /// An empty buffer.
-    pub fn new() -> Self {
-        Self::default()
-    }
-
-    /// Feeds bytes; calls `sink` for every complete line.
-    pub fn feed(&mut self, bytes: &[u8], mut sink: impl FnMut(Line)) {
-        for &b in bytes {
-            if b == b'\n' {
-                if self.buf.last() == Some(&b'\r') {
-                    self.buf.pop();
-                }
-                let line = if self.overflow {
-                    Line::Garbage(format!(
-                        "{}… (longer than {MAX_LINE} bytes)",
-                        String::from_utf8_lossy(&self.buf)
-                    ))
-                } else {
-                    match std::str::from_utf8(&self.buf) {
-                        Ok(s) if !s.chars().any(|c| c.is_control() && c != '\t') => {
-                            Line::Text(s.to_string())
-                        }
-                        _ => Line::Garbage(String::from_utf8_lossy(&self.buf).into_owned()),
-                    }
-                };
-                self.buf.clear();
-                self.overflow = false;
-                sink(line);
-            } else if self.buf.len() < MAX_LINE {
-                self.buf.push(b);
-            } else {
-                self.overflow = true;
-            }
-        }
-    }
-
-    /// Bytes of an unfinished line, lossily decoded.
-    pub fn pending(&self) -> String {
-        String::from_utf8_lossy(&self.buf).into_owned()
-    }
-
-    /// Discards an unfinished line.
-    pub fn clear(&mut self) {
-        self.buf.clear();
-        self.overflow = false;
     }
 }
 

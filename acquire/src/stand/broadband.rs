@@ -3,17 +3,30 @@
 //! on a generator stand — against the generator model's arbitrary-waveform upload and its limits
 //! (docs/scpi-generator.md).
 
-use serde::Deserialize;
+use serde::{Deserialize, Serialize};
 use serde_spanned::Spanned;
 
 use rfe::source::Quantity as Value;
 use rfe::units::Dim;
 
-use super::{Ctx, GeneratorStand, StandError};
+use super::context::{Ctx, StandError};
+use super::generator::GeneratorStand;
 use crate::device::DeviceIdentity;
 use crate::generator::dialect::{self, ModelEntry};
-use crate::shaker::Waveform;
-use crate::sweep::Broadband;
+use crate::record::Waveform;
+
+/// A broadband measurement.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Broadband {
+    /// Random, burst random or chirp (a sine is refused).
+    pub waveform: Waveform,
+    /// Force: RMS for random/burst, peak for chirp (N).
+    pub force_n: f64,
+    /// Periods averaged.
+    pub averages: u32,
+    /// Periods discarded first to let the structure settle.
+    pub settle_periods: u32,
+}
 
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]

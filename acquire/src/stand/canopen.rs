@@ -9,9 +9,10 @@ use std::time::Duration;
 use serde::{Deserialize, Serialize};
 use serde_spanned::Spanned;
 
+use rfe::source::Quantity as Value;
 use rfe::units::Dim;
 
-use super::{Ctx, StandError, Value};
+use super::context::{Ctx, StandError};
 use crate::canopen::eds::{EdsError, ObjectDictionary};
 use crate::canopen::sdo::Address;
 use crate::canopen::{CanOpenObjects, CanOpenSettings};

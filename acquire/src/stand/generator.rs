@@ -11,9 +11,10 @@ use serde_spanned::Spanned;
 use rfe::source::Quantity as Value;
 use rfe::units::Dim;
 
-use super::{baud, Ctx, PortSpec, ShakerPort, StandError};
+use super::context::{baud, Ctx, StandError};
+use super::ports::{PortSpec, ShakerPort};
+use crate::generator::amplifier::{Amplifier, RAMP_TICK};
 use crate::generator::dialect::{self, DialectOverrides};
-use crate::generator::exciter::{Amplifier, RAMP_TICK};
 use crate::generator::limits::{LimitError, Load};
 use crate::transport::SocketAddress;
 

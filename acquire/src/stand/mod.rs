@@ -9,7 +9,7 @@ use std::time::Duration;
 use serde::{Deserialize, Serialize};
 use serde_spanned::Spanned;
 
-use rfe::source::{Located, Quantity as Value, SourceText};
+use rfe::source::Quantity as Value;
 use rfe::units::Dim;
 
 /// The force and table-x channels of the stand files in this module's tests (a string
@@ -36,10 +36,18 @@ sensitivity = "100 mV/g"
 
 mod broadband;
 mod canopen;
+mod context;
 mod generator;
+mod ports;
 
+pub use crate::faults::Faults;
+pub use crate::record::{BodyGeometry, Channel, ChannelKind, Geometry, GeometryOutput};
+pub use broadband::Broadband;
 pub use canopen::CanOpenPort;
+pub use context::StandError;
+use context::{baud, Ctx};
 pub use generator::{GeneratorAddress, GeneratorStand, GENERATOR_MAX_VOLTS_PEAK};
+pub use ports::{DaqPort, PortSpec, ShakerPort};
 
 /// How far (m) outside its body's equivalent box a sensor may sit (mounting blocks, rounding).
 pub const SENSOR_MOUNT_TOLERANCE_M: f64 = 0.005;
@@ -75,162 +83,7 @@ pub struct Stand {
     /// The geometry read from `geometry_model` by [`Stand::load`] (recorded in every session).
     pub geometry: Option<Geometry>,
     /// `[broadband]`: the broadband measurement `ident sweep --broadband` runs.
-    pub broadband: Option<crate::sweep::Broadband>,
-}
-
-/// Mass properties of the bodies the accelerometers are on, and the nominal excitation: what
-/// processing needs to turn sensor FRFs into principal-axis characteristics. Truth independent.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
-pub struct Geometry {
-    /// The model file it was read from.
-    pub source: String,
-    /// Bodies that carry accelerometers, in first-use order.
-    pub bodies: Vec<BodyGeometry>,
-    /// Amplitude of the model's declared excitation force (N): characteristics are the response
-    /// to it (`rfe::MeasuredData` convention).
-    pub nominal_force_n: f64,
-    /// The model's declared output characteristics on these bodies (what identification uses).
-    #[serde(default)]
-    pub outputs: Vec<GeometryOutput>,
-}
-
-/// A characteristic the geometry model declares as an output.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
-pub struct GeometryOutput {
-    /// Body name.
-    pub body: String,
-    /// 0-2 translations, 3-5 rotations along the principal axes.
-    pub dof: u8,
-    /// `displacement`, `velocity` or `acceleration`.
-    pub quantity: String,
-}
-
-/// One body's mass properties (the `identify` model's body, SI).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
-pub struct BodyGeometry {
-    /// Body name.
-    pub name: String,
-    /// Mass (kg).
-    pub mass: f64,
-    /// Principal central moments of inertia (kg·m²).
-    pub inertia: [f64; 3],
-    /// Centre of mass, global frame (m).
-    pub position: [f64; 3],
-    /// `global_from_body`, row-major: its columns are the principal axes in the global frame.
-    pub rotation: [[f64; 3]; 3],
-}
-
-impl BodyGeometry {
-    /// From an `identify` body.
-    pub fn from_body(b: &rfe::Body) -> BodyGeometry {
-        let r = &b.rotation;
-        BodyGeometry {
-            name: b.name.clone(),
-            mass: b.mass,
-            inertia: b.inertia,
-            position: [b.position.x, b.position.y, b.position.z],
-            rotation: [
-                [r[(0, 0)], r[(0, 1)], r[(0, 2)]],
-                [r[(1, 0)], r[(1, 1)], r[(1, 2)]],
-                [r[(2, 0)], r[(2, 1)], r[(2, 2)]],
-            ],
-        }
-    }
-
-    /// As an `identify` body.
-    pub fn to_body(&self) -> rfe::Body {
-        let r = &self.rotation;
-        rfe::Body {
-            name: self.name.clone(),
-            mass: self.mass,
-            inertia: self.inertia,
-            position: nalgebra::Vector3::from(self.position),
-            rotation: nalgebra::Matrix3::new(
-                r[0][0], r[0][1], r[0][2], r[1][0], r[1][1], r[1][2], r[2][0], r[2][1], r[2][2],
-            ),
-        }
-    }
-
-    /// Half extents (m) along the principal axes of the homogeneous box with this mass and these
-    /// principal moments (`J1 = m(b² + c²)/12`, ...): where a sensor on the body can sit.
-    pub fn equivalent_box_half_extents(&self) -> [f64; 3] {
-        let [j1, j2, j3] = self.inertia;
-        let m = self.mass;
-        let half = |x: f64| 0.5 * (6.0 * x / m).max(0.0).sqrt();
-        [half(j2 + j3 - j1), half(j1 + j3 - j2), half(j1 + j2 - j3)]
-    }
-
-    /// Where a global point lies in body axes, relative to the centre of mass (m).
-    pub fn body_from_global(&self, x: [f64; 3]) -> [f64; 3] {
-        let d = [
-            x[0] - self.position[0],
-            x[1] - self.position[1],
-            x[2] - self.position[2],
-        ];
-        let r = &self.rotation;
-        // Rᵀ d: column k of R is principal axis k.
-        [0, 1, 2].map(|k| r[0][k] * d[0] + r[1][k] * d[1] + r[2][k] * d[2])
-    }
-}
-
-/// Where a device is.
-#[derive(Debug, Clone, PartialEq, Eq, Serialize)]
-#[serde(rename_all = "snake_case")]
-pub enum PortSpec {
-    /// `"sim"`: served by the simulated stand.
-    Sim,
-    /// A device path such as `/dev/ttyUSB0`.
-    Path(String),
-    /// `"can:IFACE"`: the DAQ on a SocketCAN interface (docs/daq-can.md).
-    Can(String),
-}
-
-/// Shaker-controller settings.
-#[derive(Debug, Clone, PartialEq, Serialize)]
-pub struct ShakerPort {
-    /// Port.
-    pub port: PortSpec,
-    /// Baud rate (bit/s).
-    pub baud: u32,
-    /// Expected identity `manufacturer,model` (empty: accept any).
-    pub identity: String,
-    /// Answer timeout.
-    pub timeout: Duration,
-    /// Retries after a timeout.
-    pub retries: u32,
-    /// Largest force the sweep may command (N).
-    pub max_force_n: f64,
-}
-
-/// DAQ settings.
-#[derive(Debug, Clone, PartialEq, Serialize)]
-pub struct DaqPort {
-    /// Port.
-    pub port: PortSpec,
-    /// Baud rate (bit/s).
-    pub baud: u32,
-    /// Expected identity `manufacturer,model` (empty: accept any).
-    pub identity: String,
-    /// Number of analog inputs the DAQ has (`daq.inputs`), when the stand file says; every
-    /// channel's `device_channel` is then below it.
-    pub inputs: Option<u16>,
-    /// Requested sample rate (Hz).
-    pub sample_rate_hz: f64,
-    /// Samples per channel per block.
-    pub samples_per_block: u16,
-    /// Command timeout.
-    pub timeout: Duration,
-    /// Retries after a timeout.
-    pub retries: u32,
-    /// The inputs' range (V, ±): a force sample at [`CLIP_FRACTION`] of it or beyond is a clipped
-    /// force signal, which stops a sweep (`daq.input_range`, default 10 V).
-    pub input_range_v: f64,
-    /// Identifiers and frames when the DAQ is on CAN (`[daq.can]`).
-    pub can: crate::can::CanDaqSettings,
-    /// The DAQ is a CANopen node (`[daq.canopen]`, docs/canopen.md) rather than the DAQ-over-CAN
-    /// protocol of docs/daq-can.md.
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub canopen: Option<CanOpenPort>,
+    pub broadband: Option<Broadband>,
 }
 
 /// The DAQ input range assumed when the stand file gives no `daq.input_range` (V, ±): what most
@@ -240,38 +93,6 @@ pub const DEFAULT_INPUT_RANGE_V: f64 = 10.0;
 /// A force sample at this fraction of `daq.input_range` or beyond counts as clipped (the ADC at
 /// its last codes).
 pub const CLIP_FRACTION: f64 = 0.999;
-
-/// What a channel measures.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, schemars::JsonSchema)]
-#[serde(rename_all = "snake_case")]
-pub enum ChannelKind {
-    /// The excitation force (N) at the exciter.
-    Force,
-    /// Acceleration (m/s²) along `direction` at `position` on `body`.
-    Acceleration,
-}
-
-/// One DAQ channel.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
-pub struct Channel {
-    /// Unique name.
-    pub name: String,
-    /// Channel number on the DAQ.
-    pub device_channel: u16,
-    /// What it measures.
-    pub kind: ChannelKind,
-    /// Sensitivity (V/N or V/(m/s²)): physical value = volts / sensitivity.
-    pub sensitivity: f64,
-    /// Body the sensor is on (acceleration channels).
-    pub body: Option<String>,
-    /// Sensor position, global frame (m).
-    pub position_m: [f64; 3],
-    /// Measuring direction, global frame, unit length.
-    pub direction: [f64; 3],
-    /// Line in the stand file, for later messages.
-    #[serde(default)]
-    pub line: usize,
-}
 
 /// The simulated stand's truth.
 #[derive(Debug, Clone, PartialEq, Serialize)]
@@ -315,58 +136,6 @@ pub enum TruthModel {
     /// An `identify` model file (resolved relative to the stand file).
     ModelFile(PathBuf),
 }
-
-/// Faults injected by the simulated stand. Probabilities per frame (0-1).
-#[derive(Debug, Clone, PartialEq, Serialize)]
-pub struct Faults {
-    /// Seed of the fault generator.
-    pub seed: u64,
-    /// DAQ frames dropped.
-    pub drop: f64,
-    /// DAQ frames with a corrupted byte.
-    pub corrupt: f64,
-    /// DAQ frames sent twice.
-    pub duplicate: f64,
-    /// DAQ frames delayed by `delay_time`.
-    pub delay: f64,
-    /// Delay applied to delayed frames.
-    pub delay_time: Duration,
-    /// The DAQ goes silent (no data, no answers) after this many blocks.
-    pub daq_silent_after_blocks: Option<u64>,
-    /// The shaker controller stops answering after this many command lines.
-    pub shaker_silent_after_commands: Option<u64>,
-    /// Both cables are pulled (ptys closed) after this many DAQ blocks.
-    pub cable_pull_after_blocks: Option<u64>,
-    /// The simulated power amplifier trips (no force, generator output still on) once the
-    /// generator has received this many frequency settings (sweep lines).
-    pub amplifier_trip_after_lines: Option<u64>,
-    /// The simulated amplifier's gain surges by `amplifier_surge_factor` after this many lines.
-    pub amplifier_surge_after_lines: Option<u64>,
-    /// Gain factor of a surge (default 2).
-    pub amplifier_surge_factor: f64,
-}
-
-impl Default for Faults {
-    fn default() -> Self {
-        Faults {
-            seed: 0,
-            drop: 0.0,
-            corrupt: 0.0,
-            duplicate: 0.0,
-            delay: 0.0,
-            delay_time: Duration::ZERO,
-            daq_silent_after_blocks: None,
-            shaker_silent_after_commands: None,
-            cable_pull_after_blocks: None,
-            amplifier_trip_after_lines: None,
-            amplifier_surge_after_lines: None,
-            amplifier_surge_factor: 2.0,
-        }
-    }
-}
-
-/// A stand-file error: where and what (file:line:column: message).
-pub type StandError = Located;
 
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -478,61 +247,6 @@ struct RawFaults {
     amplifier_trip_after_lines: Option<u64>,
     amplifier_surge_after_lines: Option<u64>,
     amplifier_surge_factor: Option<Spanned<f64>>,
-}
-
-/// Reads the stand file's text: locates errors and converts quantities.
-struct Ctx<'a> {
-    src: SourceText<'a>,
-}
-
-impl<'a> Ctx<'a> {
-    fn new(file: &'a str, text: &'a str) -> Ctx<'a> {
-        Ctx {
-            src: SourceText::new(file, text),
-        }
-    }
-
-    fn at(&self, span: Range<usize>, message: impl Into<String>) -> StandError {
-        self.src.at(span, message)
-    }
-
-    fn line_of(&self, span: Range<usize>) -> usize {
-        rfe::source::line_col(self.src.text, span.start).0
-    }
-
-    fn value(&self, v: &Spanned<Value>, dim: Dim, what: &str) -> Result<f64, StandError> {
-        self.src.quantity(v, dim, what)
-    }
-
-    fn positive(&self, v: &Spanned<Value>, dim: Dim, what: &str) -> Result<f64, StandError> {
-        self.src.positive(v, dim, what)
-    }
-
-    fn unit_vector(&self, v: &Spanned<Vec<f64>>, what: &str) -> Result<[f64; 3], StandError> {
-        let d = v.get_ref();
-        if d.len() != 3 || d.iter().any(|x| !x.is_finite()) {
-            return Err(self.at(v.span(), format!("{what} must be three numbers [x, y, z]")));
-        }
-        let n = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
-        if n < 1e-9 {
-            return Err(self.at(
-                v.span(),
-                format!("{what} has zero length; give the sensor's measuring axis, e.g. [1, 0, 0]"),
-            ));
-        }
-        Ok([d[0] / n, d[1] / n, d[2] / n])
-    }
-
-    fn probability(&self, v: &Option<Spanned<f64>>, what: &str) -> Result<f64, StandError> {
-        match v {
-            None => Ok(0.0),
-            Some(p) if (0.0..=1.0).contains(p.get_ref()) => Ok(*p.get_ref()),
-            Some(p) => Err(self.at(
-                p.span(),
-                format!("faults.{what} is a probability per frame and must be within 0..1"),
-            )),
-        }
-    }
 }
 
 fn port_spec(p: &str) -> PortSpec {
@@ -1084,23 +798,6 @@ fn faults(cx: &Ctx<'_>, f: &RawFaults) -> Result<Faults, StandError> {
             )),
         },
     })
-}
-
-/// A serial line's bit rate, `default` when absent; 0 is an error.
-fn baud(
-    cx: &Ctx<'_>,
-    v: &Option<Spanned<u32>>,
-    field: &str,
-    default: u32,
-) -> Result<u32, StandError> {
-    match v {
-        None => Ok(default),
-        Some(b) if *b.get_ref() == 0 => Err(cx.at(
-            b.span(),
-            format!("{field} = 0: give the serial line's bit rate, e.g. {default}"),
-        )),
-        Some(b) => Ok(*b.get_ref()),
-    }
 }
 
 /// A channel's sensitivity (V per N or per m/s²), in the unit its `kind` needs; a unit of the

@@ -6,7 +6,7 @@
 use process::sine::{SineConfig, SineFitter, Step};
 use process::ProcessError;
 
-use super::ChannelResult;
+use crate::record::ChannelResult;
 
 /// Collects one step's measurement window and fits it.
 #[derive(Debug)]

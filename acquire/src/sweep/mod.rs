@@ -11,6 +11,9 @@ mod progress;
 
 pub use progress::{IndicatifProgress, NoProgress, SweepProgress};
 
+pub use crate::record::{ChannelResult, StepResult};
+pub use crate::stand::Broadband;
+
 use std::collections::BTreeSet;
 use std::path::Path;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -20,10 +23,10 @@ use num_complex::Complex;
 use serde::{Deserialize, Serialize};
 
 use crate::daq::{DaqError, DaqEvent, SampleBlock};
-use crate::rig::Rig;
-use crate::session::records::{
+use crate::record::{
     self, BlockRecord, BroadbandChannel, BroadbandRecord, FaultRecord, SessionStart, SweepEvent,
 };
+use crate::rig::Rig;
 use crate::session::{self, SessionError, SessionHandle};
 use crate::shaker::{ForceReading, PeriodForce, ShakerError, Waveform};
 use estimate::StepEstimator;
@@ -287,65 +290,6 @@ impl StopSignal {
     }
 }
 
-/// One channel's result at a step.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
-pub struct ChannelResult {
-    /// Channel name.
-    pub name: String,
-    /// Peak amplitude (N or m/s²).
-    pub amplitude: f64,
-    /// Phase relative to the force channel (rad).
-    pub phase_rad: f64,
-    /// FRF real part (per N).
-    pub frf_re: f64,
-    /// FRF imaginary part (per N).
-    pub frf_im: f64,
-    /// Fraction of the window's power in the fitted sine, `(|X|²/2) / (|X|²/2 + noise²)` (0-1).
-    pub fit_quality: f64,
-    /// RMS of the fit residual (N or m/s²): the step's noise level on this channel.
-    #[serde(default)]
-    pub noise_rms: f64,
-    /// Variance of the FRF estimate, E|Ĥ−H|² ((m/s²/N)²; 0 for the force channel).
-    #[serde(default)]
-    pub frf_variance: f64,
-}
-
-/// The record of one completed step (topic `/sweep/step`).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
-#[schemars(title = "ident.SweepStep")]
-pub struct StepResult {
-    /// Step index in the plan.
-    pub step: usize,
-    /// Frequency (Hz).
-    pub frequency_hz: f64,
-    /// Drive amplitude commanded (N).
-    pub drive_n: f64,
-    /// Measured force amplitude (N).
-    pub force_amplitude_n: f64,
-    /// First sample of the measurement window.
-    pub first_sample: u64,
-    /// Samples in the window.
-    pub samples: u64,
-    /// Closed-loop iterations used.
-    pub iterations: u32,
-    /// Settings sent to a signal generator for this line (frequency, ramp increments, loop
-    /// corrections; generator stands only).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub generator_settings: Option<u32>,
-    /// Per channel.
-    pub channels: Vec<ChannelResult>,
-}
-
-impl StepResult {
-    /// The FRF of channel `name` (per N).
-    pub fn frf(&self, name: &str) -> Option<Complex<f64>> {
-        self.channels
-            .iter()
-            .find(|c| c.name == name)
-            .map(|c| Complex::new(c.frf_re, c.frf_im))
-    }
-}
-
 /// How a sweep ended.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct SweepOutcome {
@@ -514,7 +458,7 @@ pub fn log_session_start(
         detail: format!("the sweep plan cannot be recorded: {e}"),
     })?;
     s.record(&SessionStart {
-        version: records::VERSION,
+        version: record::VERSION,
         software: concat!("ident-acquire ", env!("CARGO_PKG_VERSION")).into(),
         started_unix_ns: session::now_ns(),
         stand_file: stand_file.into(),
@@ -938,19 +882,6 @@ async fn drain_faults(rig: &mut Rig, session: &SessionHandle) -> Result<(), Swee
         }
     }
     Ok(())
-}
-
-/// A broadband measurement.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct Broadband {
-    /// Random, burst random or chirp (a sine is refused).
-    pub waveform: Waveform,
-    /// Force: RMS for random/burst, peak for chirp (N).
-    pub force_n: f64,
-    /// Periods averaged.
-    pub averages: u32,
-    /// Periods discarded first to let the structure settle.
-    pub settle_periods: u32,
 }
 
 /// Result of a broadband run: H1 estimates over the band (per N) and their coherence.

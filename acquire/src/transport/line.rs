@@ -1,7 +1,8 @@
 //! A line-oriented conversation with an instrument over any [`Transport`]: commands out with a
 //! terminator, answer lines in before a deadline, late answers of a timed-out attempt drained.
 //! The SCPI shaker controller and the SCPI signal generator drivers both talk through it and name
-//! their device in the errors they make of [`LinkError`].
+//! their device in the errors they make of [`LinkError`]. The framing itself, [`LineBuffer`], is
+//! I/O free and also serves the simulated instruments.
 
 use std::collections::VecDeque;
 use std::time::Duration;
@@ -10,7 +11,6 @@ use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use tokio::time::Instant;
 
 use super::Transport;
-use crate::shaker::scpi::{Line, LineBuffer};
 
 /// How long [`LineLink::drain`] waits for more late bytes before it considers the line quiet.
 const QUIET: Duration = Duration::from_millis(5);
@@ -173,5 +173,73 @@ impl<T: Transport> LineLink<T> {
             }
         }
         Ok(())
+    }
+}
+
+/// Maximum line length (bytes, without terminator) accepted in either direction.
+pub const MAX_LINE: usize = 256;
+
+/// Splits a byte stream into lines at `\n` (a preceding `\r` is dropped). I/O free.
+#[derive(Debug, Default)]
+pub struct LineBuffer {
+    buf: Vec<u8>,
+    overflow: bool,
+}
+
+/// One framed line, or a line that was too long or not text.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Line {
+    /// A complete line.
+    Text(String),
+    /// Bytes that are not a valid line (too long or not UTF-8), lossily decoded for messages.
+    Garbage(String),
+}
+
+impl LineBuffer {
+    /// An empty buffer.
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// Feeds bytes; calls `sink` for every complete line.
+    pub fn feed(&mut self, bytes: &[u8], mut sink: impl FnMut(Line)) {
+        for &b in bytes {
+            if b == b'\n' {
+                if self.buf.last() == Some(&b'\r') {
+                    self.buf.pop();
+                }
+                let line = if self.overflow {
+                    Line::Garbage(format!(
+                        "{}… (longer than {MAX_LINE} bytes)",
+                        String::from_utf8_lossy(&self.buf)
+                    ))
+                } else {
+                    match std::str::from_utf8(&self.buf) {
+                        Ok(s) if !s.chars().any(|c| c.is_control() && c != '\t') => {
+                            Line::Text(s.to_string())
+                        }
+                        _ => Line::Garbage(String::from_utf8_lossy(&self.buf).into_owned()),
+                    }
+                };
+                self.buf.clear();
+                self.overflow = false;
+                sink(line);
+            } else if self.buf.len() < MAX_LINE {
+                self.buf.push(b);
+            } else {
+                self.overflow = true;
+            }
+        }
+    }
+
+    /// Bytes of an unfinished line, lossily decoded.
+    pub fn pending(&self) -> String {
+        String::from_utf8_lossy(&self.buf).into_owned()
+    }
+
+    /// Discards an unfinished line.
+    pub fn clear(&mut self) {
+        self.buf.clear();
+        self.overflow = false;
     }
 }

@@ -51,7 +51,7 @@ mod tap;
 mod tcp;
 mod usbtmc;
 
-pub use line::{Answer, LineLink, LinkError, LinkFailure};
+pub use line::{Answer, Line, LineBuffer, LineLink, LinkError, LinkFailure, MAX_LINE};
 pub use serial::{open_serial, pty_pair, PtyDevice, SerialSettings, SerialTransport};
 pub use tap::{ByteTap, Direction, Tapped};
 pub use tcp::{connect_tcp, SocketAddress, TcpTransport, SCPI_RAW_PORT};

@@ -4,20 +4,10 @@ use std::pin::Pin;
 use std::sync::Arc;
 use std::task::{Context, Poll};
 
-use serde::{Deserialize, Serialize};
 use tokio::io::{AsyncRead, AsyncWrite, ReadBuf};
 
 use super::Transport;
-
-/// Which way bytes travelled, seen from the host.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, schemars::JsonSchema)]
-#[serde(rename_all = "lowercase")]
-pub enum Direction {
-    /// Host to device.
-    Tx,
-    /// Device to host.
-    Rx,
-}
+pub use crate::record::Direction;
 
 /// Receives a copy of every byte a [`Tapped`] transport moves. Must not block and must not lose
 /// data (the session implementation queues to its writer thread).

@@ -1,8 +1,10 @@
-//! The session's topics (docs/mcap-session.md). Every channel carries `json` messages with a
-//! `jsonschema` schema generated from its record type, which Foxglove and the Python `mcap`
-//! reader decode.
+//! The session's topics (docs/mcap-session.md) and the trait that ties a record type to its topic.
+//! Every channel carries `json` messages with a `jsonschema` schema generated from its record
+//! type, which Foxglove and the Python `mcap` reader decode.
 
-use serde_json::Value;
+use schemars::JsonSchema;
+use serde::de::DeserializeOwned;
+use serde::Serialize;
 
 /// A session topic.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
@@ -85,23 +87,15 @@ impl Topic {
     pub fn index(&self) -> usize {
         ALL.iter().position(|t| t == self).unwrap_or(0)
     }
+}
 
-    /// The JSON Schema (draft 2020-12) of this topic's messages, generated from its record type
-    /// ([`super::records`]).
-    pub fn schema(&self) -> Value {
-        use super::records::*;
-        match self {
-            Topic::Session => schema_of::<SessionStart>(),
-            Topic::Stand => schema_of::<StandRecord>(),
-            Topic::Identity => schema_of::<DeviceIdentityRecord>(),
-            Topic::Raw => schema_of::<RawBytes>(),
-            Topic::DaqStream => schema_of::<DaqStreamRecord>(),
-            Topic::DaqBlock => schema_of::<BlockRecord>(),
-            Topic::DaqFault => schema_of::<FaultRecord>(),
-            Topic::SweepEvent => schema_of::<SweepEvent>(),
-            Topic::SweepStep => schema_of::<crate::sweep::StepResult>(),
-            Topic::SweepBroadband => schema_of::<BroadbandRecord>(),
-            Topic::Drive => schema_of::<DriveRecord>(),
-        }
-    }
+/// A record type and the topic it is written on.
+pub trait TopicRecord: Serialize + DeserializeOwned + JsonSchema {
+    /// Its topic.
+    const TOPIC: Topic;
+}
+
+/// The JSON Schema (draft 2020-12) of the record type `R`.
+pub fn schema_of<R: TopicRecord>() -> serde_json::Value {
+    serde_json::Value::from(schemars::schema_for!(R))
 }
