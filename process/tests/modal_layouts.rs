@@ -26,7 +26,9 @@ use std::path::Path;
 
 /// The FRFs of a UFF file in the repository's `data/` folder, with their lines.
 fn uff_set(rel: &str) -> (Vec<MeasuredFrf>, Vec<f64>) {
-    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../data").join(rel);
+    let path = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../data")
+        .join(rel);
     assert!(path.exists(), "real data missing: {}", path.display());
     let file = process::uff::read_file(&path).unwrap();
     let freqs = file.functions[0].x();
@@ -206,8 +208,18 @@ fn check_against_sdypy(
             mac_res,
             mac_shape
         );
-        assert!(df <= 0.005, "{what}: {} Hz vs sdypy {}", m.pole.freq_hz, f[k]);
-        assert!(dz <= 0.2, "{what}: ζ {} vs sdypy {}", m.pole.damping_ratio, z[k]);
+        assert!(
+            df <= 0.005,
+            "{what}: {} Hz vs sdypy {}",
+            m.pole.freq_hz,
+            f[k]
+        );
+        assert!(
+            dz <= 0.2,
+            "{what}: ζ {} vs sdypy {}",
+            m.pole.damping_ratio,
+            z[k]
+        );
         assert!(mac_res >= 0.95, "{what}: residue MAC {mac_res}");
         assert!(mac_shape >= 0.95, "{what}: shape MAC {mac_shape}");
     }
@@ -233,7 +245,14 @@ fn roving_hammer_one_response_five_references() {
     assert_eq!((data.outputs, data.references), (5, 1));
     assert_eq!(lay.points[4], Channel { node: 15, dir: 3 });
     let model = extract(&data, BEAM_BAND, 40, 10);
-    check_against_sdypy("roving hammer 1 × 5", &data, &model, BEAM_BAND, 40, &BEAM_MODES);
+    check_against_sdypy(
+        "roving hammer 1 × 5",
+        &data,
+        &model,
+        BEAM_BAND,
+        40,
+        &BEAM_MODES,
+    );
 }
 
 #[test]
@@ -244,7 +263,14 @@ fn roving_accelerometer_seven_responses_one_reference() {
     assert!(!lay.transposed && lay.reciprocal == 0);
     assert_eq!((data.outputs, data.references), (7, 1));
     let model = extract(&data, BEAM_BAND, 40, 10);
-    check_against_sdypy("roving accelerometer 7 × 1", &data, &model, BEAM_BAND, 40, &BEAM_MODES);
+    check_against_sdypy(
+        "roving accelerometer 7 × 1",
+        &data,
+        &model,
+        BEAM_BAND,
+        40,
+        &BEAM_MODES,
+    );
 }
 
 #[test]
@@ -255,7 +281,14 @@ fn multi_reference_seven_responses_six_references() {
     assert_eq!((data.outputs, data.references), (7, 6));
     // Orders × 6 references: 20 orders give 120 poles, more than the 1 × 5 set's 40.
     let model = extract(&data, BEAM_BAND, 20, 5);
-    check_against_sdypy("multi-reference 7 × 6", &data, &model, BEAM_BAND, 40, &BEAM_MODES);
+    check_against_sdypy(
+        "multi-reference 7 × 6",
+        &data,
+        &model,
+        BEAM_BAND,
+        40,
+        &BEAM_MODES,
+    );
 }
 
 const STOREY: &str = "dtop-three-storey/three-storey-hammer.uff";
@@ -273,14 +306,28 @@ fn roving_hammer_with_driving_point_on_the_three_storey_structure() {
     assert_eq!(lay.kind, LayoutKind::RovingHammer);
     assert_eq!(lay.driving_points, vec![Channel { node: 1, dir: 1 }]);
     let model = extract(&data, STOREY_BAND, 40, 8);
-    check_against_sdypy("three-storey roving hammer 1 × 3", &data, &model, STOREY_BAND, 40, &STOREY_MODES);
+    check_against_sdypy(
+        "three-storey roving hammer 1 × 3",
+        &data,
+        &model,
+        STOREY_BAND,
+        40,
+        &STOREY_MODES,
+    );
     for m in &model.modes {
-        if !STOREY_MODES.iter().any(|f| (m.pole.freq_hz - f).abs() < 0.2) {
+        if !STOREY_MODES
+            .iter()
+            .any(|f| (m.pole.freq_hz - f).abs() < 0.2)
+        {
             continue;
         }
         let psi = layout::mass_normalized(&m.residues, 1, 0, 0, m.pole.lambda);
         let sum: f64 = psi.iter().map(|v| v.norm_sqr()).sum();
-        eprintln!("{:.3} Hz: Σ|ψ|² = {sum:.4} 1/kg (1/5.3 kg = {:.4})", m.pole.freq_hz, 1.0 / 5.3);
+        eprintln!(
+            "{:.3} Hz: Σ|ψ|² = {sum:.4} 1/kg (1/5.3 kg = {:.4})",
+            m.pole.freq_hz,
+            1.0 / 5.3
+        );
         assert!((sum * 5.3 - 1.0).abs() < 0.25, "Σ|ψ|² = {sum} 1/kg");
     }
 }
@@ -296,7 +343,14 @@ fn mixed_set_completed_by_reciprocity() {
     assert_eq!(lay.kind, LayoutKind::Mixed, "{}", lay.describe());
     assert_eq!((data.outputs, data.references, lay.reciprocal), (3, 1, 1));
     let model = extract(&data, STOREY_BAND, 40, 8);
-    check_against_sdypy("three-storey mixed", &data, &model, STOREY_BAND, 40, &STOREY_MODES);
+    check_against_sdypy(
+        "three-storey mixed",
+        &data,
+        &model,
+        STOREY_BAND,
+        40,
+        &STOREY_MODES,
+    );
 
     let (full, _) = arrange(set, freqs, FrfKind::Accelerance).unwrap();
     let reference = extract(&full, STOREY_BAND, 40, 8);
@@ -310,7 +364,10 @@ fn mixed_set_completed_by_reciprocity() {
         };
         let (a, b) = (near(&model), near(&reference));
         let m = mac(&[a.shape.clone()], &[b.shape.clone()])[0][0];
-        eprintln!("{f} Hz: mixed {:.4} Hz, full {:.4} Hz, MAC {m:.4}", a.pole.freq_hz, b.pole.freq_hz);
+        eprintln!(
+            "{f} Hz: mixed {:.4} Hz, full {:.4} Hz, MAC {m:.4}",
+            a.pole.freq_hz, b.pole.freq_hz
+        );
         assert!((a.pole.freq_hz - b.pole.freq_hz).abs() < 0.005 * f);
         assert!(m >= 0.95, "MAC {m}");
     }
@@ -331,5 +388,8 @@ fn unusable_sets_name_what_is_missing() {
     let err = arrange(twice, freqs, FrfKind::Accelerance)
         .unwrap_err()
         .to_string();
-    assert!(err.contains("1:3") && err.contains("11:3") && err.contains("dataset"), "{err}");
+    assert!(
+        err.contains("1:3") && err.contains("11:3") && err.contains("dataset"),
+        "{err}"
+    );
 }

@@ -62,7 +62,11 @@ fn monte_carlo(outputs: usize, noise: f64, order: usize, target: f64, runs: u64)
         let pole = orders[order - 1]
             .poles
             .iter()
-            .min_by(|a, b| (a.freq_hz - target).abs().total_cmp(&(b.freq_hz - target).abs()))
+            .min_by(|a, b| {
+                (a.freq_hz - target)
+                    .abs()
+                    .total_cmp(&(b.freq_hz - target).abs())
+            })
             .unwrap();
         let std = pole.std.expect("a standard deviation");
         f.push(pole.freq_hz);
@@ -93,7 +97,10 @@ fn stated_standard_deviations_match_the_scatter() {
         }
     }
     for (rf, rz) in ratios {
-        assert!((1.0..=5.0).contains(&rf), "frequency: stated / scatter {rf}");
+        assert!(
+            (1.0..=5.0).contains(&rf),
+            "frequency: stated / scatter {rf}"
+        );
         assert!((1.0..=5.0).contains(&rz), "damping: stated / scatter {rz}");
     }
 }

@@ -124,7 +124,10 @@ mod tests {
             .map(|&v| C64::new(v, 0.0) * rot)
             .collect();
         let q = shape_quality(&real);
-        assert!((q.mpc - 1.0).abs() < 1e-12 && q.mpd_deg < 1e-6 && q.mcf < 1e-12, "{q:?}");
+        assert!(
+            (q.mpc - 1.0).abs() < 1e-12 && q.mpd_deg < 1e-6 && q.mcf < 1e-12,
+            "{q:?}"
+        );
         // Four components a quarter turn apart (a travelling wave).
         let wave: Vec<C64> = (0..4)
             .map(|k| C64::from_polar(1.0, k as f64 * std::f64::consts::FRAC_PI_2))
@@ -154,6 +157,9 @@ mod tests {
             .collect();
         let data = ModalData::new(freqs, 3, 2, h, FrfKind::Receptance).unwrap();
         let c = cmif(&data, 2);
-        assert!((c[0][0] - 15.0).abs() < 1e-12 && c[0][1].abs() < 1e-12, "{c:?}");
+        assert!(
+            (c[0][0] - 15.0).abs() < 1e-12 && c[0][1].abs() < 1e-12,
+            "{c:?}"
+        );
     }
 }

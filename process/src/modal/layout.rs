@@ -266,7 +266,10 @@ pub fn arrange(
 /// The fewest channels (greedy) such that every FRF has one of its two channels among them: the
 /// fixed side of an incomplete grid. Ties go to the file's references, so a set needs no
 /// reciprocity where it can do without.
-fn cover(cells: &BTreeMap<(Channel, Channel), MeasuredFrf>, references: &[Channel]) -> Vec<Channel> {
+fn cover(
+    cells: &BTreeMap<(Channel, Channel), MeasuredFrf>,
+    references: &[Channel],
+) -> Vec<Channel> {
     let mut left: BTreeSet<(Channel, Channel)> = cells.keys().copied().collect();
     let mut fixed = Vec::new();
     while !left.is_empty() {
@@ -391,7 +394,10 @@ mod tests {
         let err = arrange(set, freqs(), FrfKind::Accelerance)
             .unwrap_err()
             .to_string();
-        assert!(err.contains("H1,11") && err.contains("1:3") && err.contains("11:3"), "{err}");
+        assert!(
+            err.contains("H1,11") && err.contains("1:3") && err.contains("11:3"),
+            "{err}"
+        );
     }
 
     #[test]

@@ -288,7 +288,10 @@ pub fn lscf(data: &ModalData, settings: &LscfSettings) -> Result<Vec<OrderPoles>
             theta.view_mut((na, 0), (l, l)).fill_with_identity();
             let resid = theta.transpose() * &d * &theta;
             let sigma2: Vec<f64> = (0..l).map(|j| resid[(j, j)].max(0.0) / dof).collect();
-            Covariance { sigma2, daa_inv: inv }
+            Covariance {
+                sigma2,
+                daa_inv: inv,
+            }
         });
         out.push(OrderPoles {
             order: p,
