@@ -363,7 +363,10 @@ fn mixed_set_completed_by_reciprocity() {
                 .clone()
         };
         let (a, b) = (near(&model), near(&reference));
-        let m = mac(&[a.shape.clone()], &[b.shape.clone()])[0][0];
+        let m = mac(
+            std::slice::from_ref(&a.shape),
+            std::slice::from_ref(&b.shape),
+        )[0][0];
         eprintln!(
             "{f} Hz: mixed {:.4} Hz, full {:.4} Hz, MAC {m:.4}",
             a.pole.freq_hz, b.pole.freq_hz
