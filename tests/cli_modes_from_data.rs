@@ -150,3 +150,136 @@ fn unknown_kind_needs_the_flag() {
         String::from_utf8_lossy(&out.stderr)
     );
 }
+
+/// The FRFs of a repository data file whose (response node, reference node) pass `keep`, written
+/// to `out` (UFF58, binary).
+fn subset(rel: &str, out: &std::path::Path, keep: impl Fn(i64, i64) -> bool) {
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("data")
+        .join(rel);
+    let file = uff::read_file(&path).unwrap();
+    let functions: Vec<Function> = file
+        .functions
+        .into_iter()
+        .filter(|f| keep(f.response_node, f.reference_node))
+        .collect();
+    assert!(!functions.is_empty());
+    uff::write(out, &functions, Encoding::Binary).unwrap();
+}
+
+fn run_ident(args: &[&str]) -> (Output, String, String) {
+    let out = Command::new(env!("CARGO_BIN_EXE_ident"))
+        .args(args)
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout).to_string();
+    let stderr = String::from_utf8_lossy(&out.stderr).to_string();
+    (out, stdout, stderr)
+}
+
+/// Issue 42: real hammer-test FRFs with one accelerometer and the hammer roved over five points
+/// (one response node, five reference nodes) gave one mode; the polynomial now sits on the one
+/// response (FRFs transposed by reciprocity, said in the output and the JSON) and the beam's four
+/// clear bending modes come out, with their uncertainty and quality indicators.
+#[test]
+fn roving_hammer_file_gives_the_clear_modes() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("hammer.uff");
+    subset("sdypy-beam/beam-hammer.uff", &file, |r, q| {
+        r == 2 && q <= 15
+    });
+    let json = dir.path().join("modes.json");
+    let (out, stdout, stderr) = run_ident(&[
+        "modes-from-data",
+        file.to_str().unwrap(),
+        "--band",
+        "10:2000",
+        "--json",
+        json.to_str().unwrap(),
+    ]);
+    assert!(out.status.success(), "{stdout}\n{stderr}");
+    assert!(
+        stdout.contains("roving hammer") && stdout.contains("transposed by reciprocity"),
+        "{stdout}"
+    );
+    assert!(stdout.contains("5 × 1 accelerance FRFs"), "{stdout}");
+    let doc: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    assert_eq!(doc["layout"]["kind"], "roving hammer");
+    assert_eq!(doc["layout"]["transposed_by_reciprocity"], true);
+    assert_eq!(doc["layout"]["polynomial_side"], "responses");
+    assert_eq!(doc["responses"][0], "2:3");
+    assert_eq!(doc["shapes_over"].as_array().unwrap().len(), 5);
+    let modes = doc["modes"].as_array().unwrap();
+    for f in [177.0, 477.0, 933.0, 1535.0] {
+        let m = modes
+            .iter()
+            .find(|m| (m["freq_hz"].as_f64().unwrap() - f).abs() < 0.01 * f)
+            .unwrap_or_else(|| panic!("mode near {f} Hz missing:\n{stdout}"));
+        let sf = m["freq_std_hz"].as_f64().unwrap();
+        let sz = m["damping_std"].as_f64().unwrap();
+        assert!(sf > 0.0 && sf < 0.01 * f, "σf {sf}");
+        assert!(
+            sz > 0.0 && sz < m["damping_ratio"].as_f64().unwrap(),
+            "σζ {sz}"
+        );
+        let mpc = m["mpc"].as_f64().unwrap();
+        assert!((0.0..=1.0).contains(&mpc) && m["mpd_deg"].as_f64().unwrap() >= 0.0);
+        assert_eq!(m["shape"].as_array().unwrap().len(), 5);
+    }
+}
+
+/// A grid with a hole, and unit-modal-mass shapes without a driving point, are refused with what
+/// is missing; with a driving point (the three-storey structure's floor 1) the scaled shapes come.
+#[test]
+fn unusable_sets_are_refused_with_what_is_missing() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("holes.uff");
+    subset("sdypy-beam/beam-hammer.uff", &file, |r, q| {
+        r <= 2 && q <= 13 && !(r == 2 && q == 12)
+    });
+    let (out, _, stderr) = run_ident(&["modes-from-data", file.to_str().unwrap()]);
+    assert_eq!(out.status.code(), Some(2), "{stderr}");
+    assert!(
+        stderr.contains("2:3 ← 12:3") && stderr.contains("holes.uff"),
+        "{stderr}"
+    );
+
+    let file = dir.path().join("row.uff");
+    subset("sdypy-beam/beam-hammer.uff", &file, |r, q| {
+        r == 1 && q <= 13
+    });
+    let (out, _, stderr) = run_ident(&[
+        "modes-from-data",
+        file.to_str().unwrap(),
+        "--mass-normalize",
+    ]);
+    assert_eq!(out.status.code(), Some(2), "{stderr}");
+    assert!(
+        stderr.contains("driving point") && stderr.contains("1:3"),
+        "{stderr}"
+    );
+
+    let file = dir.path().join("storey.uff");
+    subset(
+        "dtop-three-storey/three-storey-hammer.uff",
+        &file,
+        |r, _| r == 1,
+    );
+    let json = dir.path().join("storey.json");
+    let (out, stdout, stderr) = run_ident(&[
+        "modes-from-data",
+        file.to_str().unwrap(),
+        "--band",
+        "2:40",
+        "--mass-normalize",
+        "--json",
+        json.to_str().unwrap(),
+    ]);
+    assert!(out.status.success(), "{stdout}\n{stderr}");
+    let doc: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    assert_eq!(doc["layout"]["driving_points"][0], "1:1");
+    let scaled = doc["modes"][0]["shape_unit_modal_mass"].as_array().unwrap();
+    assert_eq!(scaled.len(), 3);
+}

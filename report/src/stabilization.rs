@@ -1,7 +1,8 @@
 //! The stabilization diagram of a modal extraction as an SVG: one marker per pole at (frequency,
 //! model order), its symbol the stability class (`o` new, `f` frequency, `v` vector, `d` damping,
-//! `s` all stable), the selected poles as vertical lines and a mode indicator curve (the mean
-//! log-amplitude of the FRFs) behind, scaled to the order axis.
+//! `s` all stable), the selected poles as vertical lines and a mode indicator curve behind, its
+//! dB range in the band scaled to the order axis (`ident modes-from-data` draws the first
+//! singular value of the complex mode indicator function, whose peaks mark the modes).
 
 use plotters::prelude::*;
 
@@ -46,6 +47,7 @@ pub fn stabilization_svg(
     };
     let (db_lo, db_hi) = indicator
         .iter()
+        .filter(|x| x.0 >= lo && x.0 <= hi)
         .map(|x| x.1)
         .filter(|v| v.is_finite())
         .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| {

@@ -1,7 +1,8 @@
 //! `--start modal`: a start for the fit from the measured modes. The fitted characteristics'
 //! modes are extracted as `ident modes-from-data` does (pLSCF, stabilization, automatic selection,
 //! LSFD shapes), then `identification::prefit` pairs them with the model's modes and moves the
-//! stiffness variables to match their frequencies (and ψ to their loss factors).
+//! stiffness variables to match their frequencies (and ψ to their loss factors). A mode whose
+//! frequency standard deviation (from the LSCF covariance) exceeds 1 % of it is not matched.
 
 use anyhow::{bail, Context};
 use identify::{self as idn, prefit};
@@ -11,6 +12,11 @@ use rfe::model::Quantity;
 
 /// Highest LSCF order (as `ident modes-from-data`'s default).
 const MAX_ORDER: usize = 40;
+
+/// Measured modes whose frequency standard deviation exceeds this fraction of the frequency are
+/// not matched: the pre-fit moves stiffnesses to the measured frequencies, and a frequency known
+/// to a few percent only would move them by as much on no evidence.
+const MAX_REL_FREQ_STD: f64 = 0.01;
 
 /// The measured modes of `obs` from the characteristics of one reference (the model's
 /// excitation if measured, else the first reference the data hold), as outputs: a mode's shape
@@ -114,9 +120,26 @@ pub fn measured_modes(
             })
         })
         .collect();
-    Ok(fitted
+    // A mode whose frequency the data fix poorly (a wide band of plausible values, from the
+    // estimator's covariance) would pull the stiffnesses as hard as a sharp one: leave it out.
+    let sharp: Vec<&modal::Mode> = fitted
         .modes
         .iter()
+        .filter(|m| match m.pole.std {
+            Some(s) if s.freq_hz > MAX_REL_FREQ_STD * m.pole.freq_hz => {
+                eprintln!(
+                    "start: measured mode at {:.4} Hz ± {:.4} Hz left out of the modal pre-fit (σf/f above {} %)",
+                    m.pole.freq_hz,
+                    s.freq_hz,
+                    100.0 * MAX_REL_FREQ_STD
+                );
+                false
+            }
+            _ => true,
+        })
+        .collect();
+    Ok(sharp
+        .into_iter()
         .map(|m| prefit::MeasuredMode {
             freq_hz: m.pole.freq_hz,
             loss_factor: Some(2.0 * m.pole.damping_ratio),

@@ -1,13 +1,15 @@
 //! `ident modes-from-data FILE`: natural frequencies, damping and mode shapes extracted from
 //! measured FRFs (poly-reference LSCF, stabilization diagram, LSFD), before any model is written.
+//! The test layout is recognised from the file's channels (`process::modal::layout`): the side
+//! with fewer channels carries the polynomial, the shapes are given over the points.
 
-use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 use anyhow::{bail, Context};
 use process::modal::{
-    self, FrfKind, LscfSettings, ModalData, SelectionSettings, StabilityTolerances,
+    self, indicators, Channel, FrfKind, Layout, LscfSettings, MeasuredFrf, ModalData,
+    SelectionSettings, StabilityTolerances,
 };
 use process::uff::{function_type, Abscissa, Ordinate};
 use process::C64;
@@ -16,7 +18,8 @@ use process::C64;
 #[derive(clap::Args)]
 pub struct ModesFromDataArgs {
     /// Measured FRFs: a UFF file (datasets 58/58b, ASCII or binary), one FRF per
-    /// response node/direction × reference node/direction, on common lines.
+    /// response node/direction × reference node/direction, on common lines. Roving hammer,
+    /// roving accelerometer, multi-reference and mixed sets are recognised from the channels.
     pub file: PathBuf,
     /// Frequency band, `LO:HI` in Hz (either side may be empty: `20:`, `:400`).
     #[arg(long, value_parser = super::identify::parse_band)]
@@ -47,6 +50,14 @@ pub struct ModesFromDataArgs {
     /// Poles with a damping ratio above this are not selected.
     #[arg(long, default_value_t = 0.2)]
     pub max_damping: f64,
+    /// Selected poles whose shape has a modal phase collinearity below this (0..1) are left out
+    /// (spurious poles have scattered, complex shapes).
+    #[arg(long)]
+    pub min_mpc: Option<f64>,
+    /// Also give the shapes scaled to unit modal mass (needs a driving-point FRF at a fixed
+    /// channel).
+    #[arg(long)]
+    pub mass_normalize: bool,
     /// Write the stabilization diagram here (SVG).
     #[arg(long)]
     pub svg: Option<PathBuf>,
@@ -74,22 +85,14 @@ fn kind_name(k: FrfKind) -> &'static str {
     }
 }
 
-/// A channel: UFF node and direction.
-type Channel = (i64, i64);
-
-/// The FRF matrix of a UFF file, with its response and reference channels.
-fn load_uff(
-    path: &Path,
-    kind: Option<FrfKind>,
-) -> anyhow::Result<(ModalData, Vec<Channel>, Vec<Channel>)> {
+/// The FRFs of a UFF file arranged as points × fixed channels (see `process::modal::layout`).
+fn load_uff(path: &Path, kind: Option<FrfKind>) -> anyhow::Result<(ModalData, Layout)> {
     let file = process::uff::read_file(path)?;
     let origin = path.display().to_string();
     for s in &file.skipped {
         eprintln!("note: {origin}: {s}");
     }
-    let mut responses: Vec<Channel> = Vec::new();
-    let mut references: Vec<Channel> = Vec::new();
-    let mut frfs: BTreeMap<(Channel, Channel), (usize, Vec<C64>)> = BTreeMap::new();
+    let mut frfs: Vec<MeasuredFrf> = Vec::new();
     let mut freqs: Option<(usize, Vec<f64>)> = None;
     let mut file_kind: Option<(usize, FrfKind)> = None;
     for (i, f) in file.functions.iter().enumerate() {
@@ -140,17 +143,18 @@ fn load_uff(
                 _ => {}
             }
         }
-        let resp = (f.response_node, f.response_dir);
-        let refc = (f.reference_node, f.reference_dir);
-        if !responses.contains(&resp) {
-            responses.push(resp);
-        }
-        if !references.contains(&refc) {
-            references.push(refc);
-        }
-        if let Some((m, _)) = frfs.insert((resp, refc), (n, h.clone())) {
-            bail!("{origin}: datasets {m} and {n} both hold the FRF of response {}:{} to reference {}:{}", resp.0, resp.1, refc.0, refc.1);
-        }
+        frfs.push(MeasuredFrf {
+            response: Channel {
+                node: f.response_node,
+                dir: f.response_dir,
+            },
+            reference: Channel {
+                node: f.reference_node,
+                dir: f.reference_dir,
+            },
+            h: h.clone(),
+            source: format!("dataset {n}"),
+        });
     }
     let Some((_, freqs)) = freqs else {
         bail!("{origin}: no FRF (dataset 58, function type 4) in the file");
@@ -162,24 +166,12 @@ fn load_uff(
             "{origin}: the FRFs do not say whether they are receptance, mobility or accelerance (ordinate data type not 8/11/12): give --kind"
         ),
     };
-    let nl = freqs.len();
-    let mut h = Vec::with_capacity(responses.len() * references.len() * nl);
-    for r in &responses {
-        for q in &references {
-            let Some((_, v)) = frfs.get(&(*r, *q)) else {
-                bail!("{origin}: no FRF of response {}:{} to reference {}:{}: every response needs an FRF to every reference", r.0, r.1, q.0, q.1);
-            };
-            h.extend_from_slice(v);
-        }
-    }
-    let data = ModalData::new(freqs, responses.len(), references.len(), h, kind)
-        .with_context(|| origin.clone())?;
-    Ok((data, responses, references))
+    Ok(modal::arrange(frfs, freqs, kind).with_context(|| origin.clone())?)
 }
 
 /// Runs `ident modes-from-data`.
 pub fn run(a: ModesFromDataArgs) -> anyhow::Result<ExitCode> {
-    let (data, responses, references) = load_uff(&a.file, a.kind)?;
+    let (data, layout) = load_uff(&a.file, a.kind)?;
     let first = data.freqs_hz[0];
     let last = data.freqs_hz[data.lines() - 1];
     let band = match a.band {
@@ -193,6 +185,28 @@ pub fn run(a: ModesFromDataArgs) -> anyhow::Result<ExitCode> {
             band.1
         );
     }
+    if let Some(m) = a.min_mpc {
+        if !(0.0..=1.0).contains(&m) {
+            bail!("--min-mpc {m}: give a modal phase collinearity between 0 and 1");
+        }
+    }
+    // Unit-modal-mass shapes need a driving point at a fixed channel; refuse before the work.
+    let driving = if a.mass_normalize {
+        let Some(q) = layout.driving_points.first() else {
+            return Err(modal::ModalError::NoDrivingPoint {
+                fixed: layout
+                    .fixed
+                    .iter()
+                    .map(|c| c.to_string())
+                    .collect::<Vec<_>>()
+                    .join(", "),
+            })
+            .with_context(|| a.file.display().to_string());
+        };
+        Some(*q)
+    } else {
+        None
+    };
     let orders = modal::lscf(
         &data,
         &LscfSettings {
@@ -208,7 +222,7 @@ pub fn run(a: ModesFromDataArgs) -> anyhow::Result<ExitCode> {
             participation: a.tol_participation,
         },
     );
-    let poles = if a.freqs.is_empty() {
+    let mut poles = if a.freqs.is_empty() {
         modal::select_auto(
             &diagram,
             &SelectionSettings {
@@ -226,8 +240,77 @@ pub fn run(a: ModesFromDataArgs) -> anyhow::Result<ExitCode> {
             band.0, band.1
         );
     }
-    let model = modal::lsfd(&data, &poles, Some(band))?;
+    let mut model = modal::lsfd(&data, &poles, Some(band))?;
+    if let Some(min_mpc) = a.min_mpc {
+        // Poles whose shape is not collinear enough are left out, and the rest refitted.
+        let keep: Vec<bool> = model
+            .modes
+            .iter()
+            .map(|m| indicators::mpc(&m.shape) >= min_mpc)
+            .collect();
+        if keep.iter().any(|k| !k) {
+            for (m, _) in model.modes.iter().zip(&keep).filter(|(_, k)| !**k) {
+                eprintln!(
+                    "note: pole at {:.4} Hz left out: MPC {:.3} < --min-mpc {min_mpc}",
+                    m.pole.freq_hz,
+                    indicators::mpc(&m.shape)
+                );
+            }
+            poles = poles
+                .into_iter()
+                .zip(&keep)
+                .filter(|(_, k)| **k)
+                .map(|(p, _)| p)
+                .collect();
+            model = modal::lsfd(&data, &poles, Some(band))?;
+        }
+    }
+    let scaled: Vec<Option<Vec<C64>>> = model
+        .modes
+        .iter()
+        .map(|m| {
+            driving.and_then(|q| {
+                let fixed = layout.fixed.iter().position(|c| *c == q)?;
+                let point = layout.points.iter().position(|c| *c == q)?;
+                Some(modal::layout::mass_normalized(
+                    &m.residues,
+                    data.references,
+                    fixed,
+                    point,
+                    m.pole.lambda,
+                ))
+            })
+        })
+        .collect();
 
+    print_table(&data, &layout, band, a.max_order, &model);
+    if let Some(path) = &a.svg {
+        write_svg(path, &data, &diagram, band, &poles)?;
+    }
+    if let Some(path) = &a.json {
+        let doc = json_doc(&a, &data, &layout, band, &diagram, &model, &scaled);
+        std::fs::write(path, serde_json::to_string_pretty(&doc)?)
+            .with_context(|| format!("cannot write {}", path.display()))?;
+        eprintln!("poles and shapes: {}", path.display());
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+/// A standard deviation for the table, `-` when unknown.
+fn std_text(s: Option<f64>, decimals: usize) -> String {
+    s.map(|v| format!("{v:.decimals$}"))
+        .unwrap_or_else(|| "-".into())
+}
+
+/// The layout line, the summary line and one row per mode.
+fn print_table(
+    data: &ModalData,
+    layout: &Layout,
+    band: (f64, f64),
+    max_order: usize,
+    model: &modal::ModalModel,
+) {
+    println!("{}", layout.describe());
     println!(
         "{} × {} {} FRFs, {} lines in {:.6}..{:.6} Hz, orders 1..{}",
         data.outputs,
@@ -239,103 +322,162 @@ pub fn run(a: ModesFromDataArgs) -> anyhow::Result<ExitCode> {
             .count(),
         band.0,
         band.1,
-        a.max_order
+        max_order
     );
     println!(
-        "{:>4} {:>12} {:>10} {:>10} {:>11} {:>9}",
-        "mode", "f [Hz]", "ζ [-]", "η=2ζ [-]", "complexity", "rank-1"
+        "{:>4} {:>12} {:>9} {:>10} {:>9} {:>10} {:>6} {:>7} {:>6} {:>7}",
+        "mode",
+        "f [Hz]",
+        "σf [Hz]",
+        "ζ [-]",
+        "σζ [-]",
+        "η=2ζ [-]",
+        "MPC",
+        "MPD [°]",
+        "MCF",
+        "rank-1"
     );
     for (i, m) in model.modes.iter().enumerate() {
+        let q = indicators::shape_quality(&m.shape);
         println!(
-            "{:>4} {:>12.4} {:>10.5} {:>10.5} {:>11.3} {:>9.4}",
+            "{:>4} {:>12.4} {:>9} {:>10.5} {:>9} {:>10.5} {:>6.3} {:>7.2} {:>6.3} {:>7.4}",
             i + 1,
             m.pole.freq_hz,
+            std_text(m.pole.std.map(|s| s.freq_hz), 4),
             m.pole.damping_ratio,
+            std_text(m.pole.std.map(|s| s.damping_ratio), 5),
             2.0 * m.pole.damping_ratio,
-            m.complexity,
+            q.mpc,
+            q.mpd_deg,
+            q.mcf,
             m.rank_one
         );
     }
+}
 
-    if let Some(path) = &a.svg {
-        let points: Vec<report::stabilization::DiagramPole> = diagram
-            .orders
-            .iter()
-            .zip(&diagram.stability)
-            .flat_map(|(op, st)| {
-                op.poles
-                    .iter()
-                    .zip(st)
-                    .map(|(p, s)| report::stabilization::DiagramPole {
-                        order: op.order,
-                        freq_hz: p.freq_hz,
-                        symbol: s.symbol(),
-                    })
-            })
-            .collect();
-        let nfrf = (data.outputs * data.references) as f64;
-        let indicator: Vec<(f64, f64)> = (0..data.lines())
-            .map(|k| {
-                let mean = (0..data.outputs)
-                    .flat_map(|o| (0..data.references).map(move |r| (o, r)))
-                    .map(|(o, r)| data.frf(o, r)[k].norm())
-                    .sum::<f64>()
-                    / nfrf;
-                (data.freqs_hz[k], 20.0 * mean.log10())
-            })
-            .collect();
-        let selected: Vec<f64> = poles.iter().map(|p| p.freq_hz).collect();
-        let svg = report::stabilization::stabilization_svg(&points, band, &indicator, &selected)?;
-        std::fs::write(path, svg).with_context(|| format!("cannot write {}", path.display()))?;
-        eprintln!("stabilization diagram: {}", path.display());
-    }
-    if let Some(path) = &a.json {
-        let c = |v: &C64| serde_json::json!([v.re, v.im]);
-        let modes: Vec<serde_json::Value> = model
-            .modes
-            .iter()
-            .map(|m| {
-                serde_json::json!({
-                    "freq_hz": m.pole.freq_hz,
-                    "damping_ratio": m.pole.damping_ratio,
-                    "loss_factor": 2.0 * m.pole.damping_ratio,
-                    "pole_rad_s": c(&m.pole.lambda),
-                    "complexity": m.complexity,
-                    "rank_one": m.rank_one,
-                    "shape": m.shape.iter().map(c).collect::<Vec<_>>(),
-                    "participation": m.participation.iter().map(c).collect::<Vec<_>>(),
+/// The stabilization diagram over the first singular value of the complex mode indicator
+/// function (dB).
+fn write_svg(
+    path: &Path,
+    data: &ModalData,
+    diagram: &modal::StabilizationDiagram,
+    band: (f64, f64),
+    poles: &[modal::Pole],
+) -> anyhow::Result<()> {
+    let points: Vec<report::stabilization::DiagramPole> = diagram
+        .orders
+        .iter()
+        .zip(&diagram.stability)
+        .flat_map(|(op, st)| {
+            op.poles
+                .iter()
+                .zip(st)
+                .map(|(p, s)| report::stabilization::DiagramPole {
+                    order: op.order,
+                    freq_hz: p.freq_hz,
+                    symbol: s.symbol(),
                 })
+        })
+        .collect();
+    let indicator: Vec<(f64, f64)> = indicators::cmif(data, 1)
+        .iter()
+        .zip(&data.freqs_hz)
+        .map(|(sv, f)| (*f, 20.0 * sv.first().copied().unwrap_or(0.0).log10()))
+        .collect();
+    let selected: Vec<f64> = poles.iter().map(|p| p.freq_hz).collect();
+    let svg = report::stabilization::stabilization_svg(&points, band, &indicator, &selected)?;
+    std::fs::write(path, svg).with_context(|| format!("cannot write {}", path.display()))?;
+    eprintln!("stabilization diagram: {}", path.display());
+    Ok(())
+}
+
+/// The JSON document: layout, settings, modes with uncertainty and quality, the whole diagram.
+fn json_doc(
+    a: &ModesFromDataArgs,
+    data: &ModalData,
+    layout: &Layout,
+    band: (f64, f64),
+    diagram: &modal::StabilizationDiagram,
+    model: &modal::ModalModel,
+    scaled: &[Option<Vec<C64>>],
+) -> serde_json::Value {
+    let c = |v: &C64| serde_json::json!([v.re, v.im]);
+    let names = |v: &[Channel]| v.iter().map(|r| r.to_string()).collect::<Vec<_>>();
+    let modes: Vec<serde_json::Value> = model
+        .modes
+        .iter()
+        .zip(scaled)
+        .map(|(m, sc)| {
+            let q = indicators::shape_quality(&m.shape);
+            serde_json::json!({
+                "freq_hz": m.pole.freq_hz,
+                "freq_std_hz": m.pole.std.map(|s| s.freq_hz),
+                "damping_ratio": m.pole.damping_ratio,
+                "damping_std": m.pole.std.map(|s| s.damping_ratio),
+                "loss_factor": 2.0 * m.pole.damping_ratio,
+                "pole_rad_s": c(&m.pole.lambda),
+                "complexity": m.complexity,
+                "mpc": q.mpc,
+                "mpd_deg": q.mpd_deg,
+                "mcf": q.mcf,
+                "rank_one": m.rank_one,
+                "shape": m.shape.iter().map(c).collect::<Vec<_>>(),
+                "shape_unit_modal_mass": sc.as_ref().map(|v| v.iter().map(c).collect::<Vec<_>>()),
+                "participation": m.participation.iter().map(c).collect::<Vec<_>>(),
             })
-            .collect();
-        let diag: Vec<serde_json::Value> = diagram
-            .orders
-            .iter()
-            .zip(&diagram.stability)
-            .map(|(op, st)| {
-                serde_json::json!({
-                    "order": op.order,
-                    "poles": op.poles.iter().zip(st).map(|(p, s)| serde_json::json!({
-                        "freq_hz": p.freq_hz,
-                        "damping_ratio": p.damping_ratio,
-                        "stability": s.symbol().to_string(),
-                    })).collect::<Vec<_>>(),
-                })
+        })
+        .collect();
+    let diag: Vec<serde_json::Value> = diagram
+        .orders
+        .iter()
+        .zip(&diagram.stability)
+        .map(|(op, st)| {
+            serde_json::json!({
+                "order": op.order,
+                "poles": op.poles.iter().zip(st).map(|(p, s)| serde_json::json!({
+                    "freq_hz": p.freq_hz,
+                    "freq_std_hz": p.std.map(|s| s.freq_hz),
+                    "damping_ratio": p.damping_ratio,
+                    "damping_std": p.std.map(|s| s.damping_ratio),
+                    "stability": s.symbol().to_string(),
+                })).collect::<Vec<_>>(),
             })
-            .collect();
-        let doc = serde_json::json!({
-            "file": a.file.display().to_string(),
-            "kind": kind_name(data.kind),
-            "band_hz": [band.0, band.1],
-            "max_order": a.max_order,
-            "responses": responses.iter().map(|r| format!("{}:{}", r.0, r.1)).collect::<Vec<_>>(),
-            "references": references.iter().map(|r| format!("{}:{}", r.0, r.1)).collect::<Vec<_>>(),
-            "selection": if a.freqs.is_empty() { "automatic" } else { "user frequencies" },
-            "modes": modes,
-            "stabilization": diag,
-        });
-        std::fs::write(path, serde_json::to_string_pretty(&doc)?)
-            .with_context(|| format!("cannot write {}", path.display()))?;
-        eprintln!("poles and shapes: {}", path.display());
-    }
-    Ok(ExitCode::SUCCESS)
+        })
+        .collect();
+    let (responses, references) = if layout.transposed {
+        (&layout.fixed, &layout.points)
+    } else {
+        (&layout.points, &layout.fixed)
+    };
+    let t = diagram.tolerances;
+    serde_json::json!({
+        "file": a.file.display().to_string(),
+        "kind": kind_name(data.kind),
+        "band_hz": [band.0, band.1],
+        "max_order": a.max_order,
+        "layout": {
+            "kind": layout.kind.name(),
+            "points": names(&layout.points),
+            "fixed": names(&layout.fixed),
+            "polynomial_side": if layout.transposed { "responses" } else { "references" },
+            "transposed_by_reciprocity": layout.transposed,
+            "reciprocal_frfs": layout.reciprocal,
+            "driving_points": names(&layout.driving_points),
+            "summary": layout.describe(),
+        },
+        "responses": names(responses),
+        "references": names(references),
+        "shapes_over": names(&layout.points),
+        "criteria": {
+            "tol_freq": t.freq,
+            "tol_damping": t.damping,
+            "tol_participation": t.participation,
+            "min_orders": a.min_orders.unwrap_or((a.max_order / 4).max(3)),
+            "max_damping": a.max_damping,
+            "min_mpc": a.min_mpc,
+        },
+        "selection": if a.freqs.is_empty() { "automatic" } else { "user frequencies" },
+        "modes": modes,
+        "stabilization": diag,
+    })
 }

@@ -12,8 +12,21 @@
 //!
 //! The poles are the eigenvalues of the block companion matrix of `A`, `λ = ln(z) / Δt`; the
 //! participation vector of a pole is the left null vector of `A(z)` there.
+//!
+//! Uncertainty: each column `θ_j` of the denominator (its free part `α_j`) is the least-squares
+//! solution of the reduced normal equations `D θ_j = 0`, so, for an equation error that is white
+//! over lines and outputs, `cov(α_j) = σ̂_j² D_aa⁻¹` with `σ̂_j² = θ_jᵀ D θ_j / (2·lines·outputs −
+//! outputs·(p+1) − l·p)` (the residual per degree of freedom). A pole `z` of `A` moves by
+//! `δz = −wᵀ δA(z) v / (wᵀ A'(z) v)` (`w`, `v` the left and right null vectors of `A(z)`), which
+//! carries the covariance to `z`, then to `λ = ln z / Δt`, the frequency and the damping ratio
+//! (first order). This is the covariance of the linearised estimator with one pooled variance
+//! (Pintelon, Guillaume & Schoukens 2007 derive the full one): the equation error is the FRF
+//! noise weighted by `|A(z_k)|`, smallest near the resonances whose lines fix the poles, so the
+//! pooled variance overstates it there and the figures are conservative. Against Monte Carlo
+//! (`process/tests/modal_uncertainty.rs`) they are 2.6-4.4 times the scatter: an upper bound
+//! and a scale, not an exact standard deviation.
 
-use nalgebra::{DMatrix, DVector};
+use nalgebra::DMatrix;
 
 use super::{ModalData, ModalError, Result};
 use crate::C64;
@@ -39,6 +52,19 @@ pub struct Pole {
     pub damping_ratio: f64,
     /// Participation vector over the references (unit norm, largest component real positive).
     pub participation: Vec<C64>,
+    /// Standard deviations of frequency and damping from the estimator's covariance; `None`
+    /// where the least squares has no residual degree of freedom.
+    pub std: Option<PoleStd>,
+}
+
+/// Standard deviations of a pole's frequency and damping ratio (first-order propagation of the
+/// denominator's least-squares covariance).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PoleStd {
+    /// σ of the natural frequency (Hz).
+    pub freq_hz: f64,
+    /// σ of the damping ratio.
+    pub damping_ratio: f64,
 }
 
 impl Pole {
@@ -50,6 +76,7 @@ impl Pole {
             freq_hz: wn / (2.0 * std::f64::consts::PI),
             damping_ratio: if wn > 0.0 { -lambda.re / wn } else { 0.0 },
             participation,
+            std: None,
         }
     }
 }
@@ -244,23 +271,52 @@ pub fn lscf(data: &ModalData, settings: &LscfSettings) -> Result<Vec<OrderPoles>
         let d = t.view((0, 0), (na + l, na + l)) - g.view((0, 0), (na + l, na + l));
         let daa = d.view((0, 0), (na, na)).into_owned();
         let rhs = -d.view((0, na), (na, l)).into_owned();
-        let alpha = match daa.clone().cholesky() {
-            Some(c) => c.solve(&rhs),
-            None => daa
-                .lu()
-                .solve(&rhs)
-                .ok_or(ModalError::Singular { what: "pLSCF (D)" })?,
+        let (alpha, daa_inv) = match daa.clone().cholesky() {
+            Some(c) => (c.solve(&rhs), Some(c.inverse())),
+            None => {
+                let lu = daa.lu();
+                let alpha = lu
+                    .solve(&rhs)
+                    .ok_or(ModalError::Singular { what: "pLSCF (D)" })?;
+                (alpha, lu.try_inverse())
+            }
         };
+        let dof = (2 * nf * no) as f64 - (no * (p + 1)) as f64 - (l * p) as f64;
+        let cov = daa_inv.filter(|_| dof > 0.0).map(|inv| {
+            let mut theta = DMatrix::<f64>::zeros(na + l, l);
+            theta.view_mut((0, 0), (na, l)).copy_from(&alpha);
+            theta.view_mut((na, 0), (l, l)).fill_with_identity();
+            let resid = theta.transpose() * &d * &theta;
+            let sigma2: Vec<f64> = (0..l).map(|j| resid[(j, j)].max(0.0) / dof).collect();
+            Covariance {
+                sigma2,
+                daa_inv: inv,
+            }
+        });
         out.push(OrderPoles {
             order: p,
-            poles: poles_of(&alpha, l, p, dt),
+            poles: poles_of(&alpha, l, p, dt, cov.as_ref()),
         });
     }
     Ok(out)
 }
 
+/// The least-squares covariance of the denominator: `cov(α_j) = sigma2[j] · daa_inv`.
+struct Covariance {
+    /// Residual variance per column of the denominator.
+    sigma2: Vec<f64>,
+    /// Inverse of the free part of the reduced normal matrix.
+    daa_inv: DMatrix<f64>,
+}
+
 /// Poles (Im λ > 0) of `A(z) = Σ z^r α_r + z^p I`, `alpha` stacking `α_0..α_{p−1}` (`l·p × l`).
-fn poles_of(alpha: &DMatrix<f64>, l: usize, p: usize, dt: f64) -> Vec<Pole> {
+fn poles_of(
+    alpha: &DMatrix<f64>,
+    l: usize,
+    p: usize,
+    dt: f64,
+    cov: Option<&Covariance>,
+) -> Vec<Pole> {
     let n = l * p;
     let mut comp = DMatrix::<f64>::zeros(n, n);
     for i in 0..n.saturating_sub(l) {
@@ -282,20 +338,18 @@ fn poles_of(alpha: &DMatrix<f64>, l: usize, p: usize, dt: f64) -> Vec<Pole> {
         .filter(|lam| lam.im > 0.0)
         .map(|lam| {
             let z = (lam * dt).exp();
-            Pole::from_lambda(lam, participation(alpha, l, p, z))
+            let (w, v) = null_vectors(alpha, l, p, z);
+            let mut pole = Pole::from_lambda(lam, normalize(w.clone()));
+            pole.std = cov.and_then(|c| pole_std(alpha, l, p, dt, z, &w, &v, c));
+            pole
         })
         .collect();
     poles.sort_by(|a, b| a.freq_hz.total_cmp(&b.freq_hz));
     poles
 }
 
-/// Participation vector: left null vector of `A(z)` (`wᵀA(z) = 0`; near the pole
-/// `H ≈ B(z) v wᵀ / (z − z_r)`, so `w` is the reference side of the residue), unit norm, largest
-/// component real positive.
-fn participation(alpha: &DMatrix<f64>, l: usize, p: usize, z: C64) -> Vec<C64> {
-    if l == 1 {
-        return vec![C64::new(1.0, 0.0)];
-    }
+/// `A(z) = Σ_{r<p} z^r α_r + z^p I`.
+fn a_of(alpha: &DMatrix<f64>, l: usize, p: usize, z: C64) -> DMatrix<C64> {
     let mut a = DMatrix::<C64>::identity(l, l) * z.powu(p as u32);
     let mut zr = C64::new(1.0, 0.0);
     for r in 0..p {
@@ -306,26 +360,104 @@ fn participation(alpha: &DMatrix<f64>, l: usize, p: usize, z: C64) -> Vec<C64> {
         }
         zr *= z;
     }
-    let svd = a.transpose().svd(false, true);
-    let Some(vt) = svd.v_t else {
-        return vec![C64::new(0.0, 0.0); l];
+    a
+}
+
+/// Left and right null vectors `(w, v)` of `A(z)` at a pole (`wᵀA(z) = 0`, `A(z) v = 0`). Near
+/// the pole `H ≈ B(z) v wᵀ / (z − z_r)`, so `w` is the reference side of the residue: the
+/// participation vector.
+fn null_vectors(alpha: &DMatrix<f64>, l: usize, p: usize, z: C64) -> (Vec<C64>, Vec<C64>) {
+    if l == 1 {
+        return (vec![C64::new(1.0, 0.0)], vec![C64::new(1.0, 0.0)]);
+    }
+    let svd = a_of(alpha, l, p, z).svd(true, true);
+    let (Some(u), Some(vt)) = (svd.u, svd.v_t) else {
+        return (vec![C64::new(0.0, 0.0); l], vec![C64::new(0.0, 0.0); l]);
     };
-    let (kmin, _) =
-        svd.singular_values
-            .iter()
-            .enumerate()
-            .fold(
-                (0, f64::INFINITY),
-                |(bk, bv), (k, &v)| {
-                    if v < bv {
-                        (k, v)
-                    } else {
-                        (bk, bv)
-                    }
-                },
-            );
-    let v: DVector<C64> = vt.row(kmin).transpose().map(|c| c.conj());
-    normalize(v.iter().copied().collect())
+    let kmin = svd.singular_values.imin();
+    // A = U Σ Vᴴ: A v = 0 for v = conj(row k of Vᴴ); uᴴ A = 0, i.e. wᵀ A = 0 for w = conj(u_k).
+    let v = vt.row(kmin).iter().map(|c| c.conj()).collect();
+    let w = u.column(kmin).iter().map(|c| c.conj()).collect();
+    (w, v)
+}
+
+/// First-order standard deviations of a pole's frequency and damping from the covariance of the
+/// denominator (see the module's doc).
+#[allow(clippy::too_many_arguments)]
+fn pole_std(
+    alpha: &DMatrix<f64>,
+    l: usize,
+    p: usize,
+    dt: f64,
+    z: C64,
+    w: &[C64],
+    v: &[C64],
+    cov: &Covariance,
+) -> Option<PoleStd> {
+    // wᵀ A'(z) v with A'(z) = Σ r z^{r−1} α_r + p z^{p−1} I.
+    let mut da = DMatrix::<C64>::identity(l, l) * (z.powu(p as u32 - 1) * p as f64);
+    for r in 1..p {
+        let zr = z.powu(r as u32 - 1) * r as f64;
+        for i in 0..l {
+            for j in 0..l {
+                da[(i, j)] += zr * alpha[(r * l + i, j)];
+            }
+        }
+    }
+    let mut den = C64::new(0.0, 0.0);
+    for i in 0..l {
+        for j in 0..l {
+            den += w[i] * da[(i, j)] * v[j];
+        }
+    }
+    if den.norm() == 0.0 {
+        return None;
+    }
+    // Covariance of (Re z, Im z): Σ_j σ_j² g_jᵀ D_aa⁻¹ g_j, g_j[(r, i)] = −w_i v_j z^r / den.
+    let na = l * p;
+    let mut czz = [[0.0; 2]; 2];
+    for (j, s2) in cov.sigma2.iter().enumerate() {
+        let g: Vec<C64> = (0..na)
+            .map(|idx| {
+                let (r, i) = (idx / l, idx % l);
+                -w[i] * v[j] * z.powu(r as u32) / den
+            })
+            .collect();
+        let gr = DMatrix::from_fn(2, na, |c, idx| if c == 0 { g[idx].re } else { g[idx].im });
+        let c = &gr * &cov.daa_inv * gr.transpose() * *s2;
+        for a in 0..2 {
+            for b in 0..2 {
+                czz[a][b] += c[(a, b)];
+            }
+        }
+    }
+    // λ = ln z / Δt: dλ = c dz with c = 1 / (z Δt).
+    let c = C64::new(1.0, 0.0) / (z * dt);
+    let jac = [[c.re, -c.im], [c.im, c.re]];
+    let mut cll = [[0.0; 2]; 2];
+    for a in 0..2 {
+        for b in 0..2 {
+            for m in 0..2 {
+                for n in 0..2 {
+                    cll[a][b] += jac[a][m] * czz[m][n] * jac[b][n];
+                }
+            }
+        }
+    }
+    let lam = z.ln() / dt;
+    let (x, y, r) = (lam.re, lam.im, lam.norm());
+    let quad = |g: [f64; 2]| {
+        (g[0] * g[0] * cll[0][0] + 2.0 * g[0] * g[1] * cll[0][1] + g[1] * g[1] * cll[1][1])
+            .max(0.0)
+            .sqrt()
+    };
+    let two_pi = 2.0 * std::f64::consts::PI;
+    let sf = quad([x / (r * two_pi), y / (r * two_pi)]);
+    let sz = quad([-y * y / r.powi(3), x * y / r.powi(3)]);
+    (sf.is_finite() && sz.is_finite()).then_some(PoleStd {
+        freq_hz: sf,
+        damping_ratio: sz,
+    })
 }
 
 /// Unit norm, largest-magnitude component real positive.

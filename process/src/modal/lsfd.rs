@@ -3,8 +3,10 @@
 //! Model of every FRF `H_or(ω)`, with `s = iω` and `d` the derivative order of the FRF kind
 //! (0 receptance, 1 mobility, 2 accelerance):
 //! `H_or = s^d [ Σ_m ( A_orm / (s − λ_m) + conj(A_orm) / (s − conj λ_m) ) + LR_or / s² + UR_or ]`
-//! with complex residues `A` and real lower and upper residuals `LR`, `UR` (the modes below and
-//! above the band). The design matrix is the same for all FRFs: one SVD, all right-hand sides.
+//! with complex residues `A` and complex lower and upper residuals `LR`, `UR` (the modes below and
+//! above the band; complex, as sdypy-EMA's, because measured FRFs carry offsets in phase
+//! quadrature — force-window and leakage effects of hammer tests — which real residuals cannot
+//! take up, so they leak into the real parts of the weakest modes' residues). The design matrix is the same for all FRFs: one SVD, all right-hand sides.
 //! The residue matrix of each mode (outputs × references) is split into mode shape ×
 //! participation by its leading singular pair.
 
@@ -38,9 +40,9 @@ pub struct ModalModel {
     /// The modes, in the order of the poles given.
     pub modes: Vec<Mode>,
     /// Lower residuals `LR`, `[o * references + r]`.
-    pub lower: Vec<f64>,
+    pub lower: Vec<C64>,
     /// Upper residuals `UR`, `[o * references + r]`.
-    pub upper: Vec<f64>,
+    pub upper: Vec<C64>,
     /// Frequency band used (Hz).
     pub band_hz: (f64, f64),
 }
@@ -50,7 +52,7 @@ impl ModalModel {
     pub fn frf(&self, o: usize, r: usize, references: usize, d: i32, freq_hz: f64) -> C64 {
         let s = C64::new(0.0, 2.0 * std::f64::consts::PI * freq_hz);
         let i = o * references + r;
-        let mut h = C64::new(self.upper[i], 0.0) + self.lower[i] / (s * s);
+        let mut h = self.upper[i] + self.lower[i] / (s * s);
         for m in &self.modes {
             let a = m.residues[i];
             h += a / (s - m.pole.lambda) + a.conj() / (s - m.pole.lambda.conj());
@@ -65,7 +67,7 @@ pub fn lsfd(data: &ModalData, poles: &[Pole], band_hz: Option<(f64, f64)>) -> Re
     let first = first + data.freqs_hz[first..end].partition_point(|&f| f <= 0.0);
     let nf = end.saturating_sub(first);
     let nm = poles.len();
-    let ncol = 2 * nm + 2;
+    let ncol = 2 * nm + 4;
     if 2 * nf < ncol + 1 {
         return Err(ModalError::TooFewLines {
             lines: nf,
@@ -94,8 +96,11 @@ pub fn lsfd(data: &ModalData, poles: &[Pole], band_hz: Option<(f64, f64)>) -> Re
             put(2 * m, g1 + g2); // Re A
             put(2 * m + 1, C64::new(0.0, 1.0) * (g1 - g2)); // Im A
         }
+        let i = C64::new(0.0, 1.0);
         put(2 * nm, sd / (s * s));
-        put(2 * nm + 1, sd);
+        put(2 * nm + 1, i * sd / (s * s));
+        put(2 * nm + 2, sd);
+        put(2 * nm + 3, i * sd);
     }
     // Column scaling for conditioning.
     let norms: Vec<f64> = (0..ncol)
@@ -178,8 +183,12 @@ pub fn lsfd(data: &ModalData, poles: &[Pole], band_hz: Option<(f64, f64)>) -> Re
     }
     Ok(ModalModel {
         modes,
-        lower: (0..nfrf).map(|fr| coef(2 * nm, fr)).collect(),
-        upper: (0..nfrf).map(|fr| coef(2 * nm + 1, fr)).collect(),
+        lower: (0..nfrf)
+            .map(|fr| C64::new(coef(2 * nm, fr), coef(2 * nm + 1, fr)))
+            .collect(),
+        upper: (0..nfrf)
+            .map(|fr| C64::new(coef(2 * nm + 2, fr), coef(2 * nm + 3, fr)))
+            .collect(),
         band_hz: (data.freqs_hz[first], data.freqs_hz[end - 1]),
     })
 }

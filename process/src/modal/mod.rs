@@ -3,6 +3,9 @@
 //! A start from the measurement: natural frequencies, damping ratios, participation vectors and
 //! mode shapes of the structure, before any model is written.
 //!
+//! 0. [`layout`]: the test layout (roving hammer, roving accelerometer, multi-reference, mixed)
+//!    recognised from the FRFs' channels and arranged as points × fixed channels, the side with
+//!    fewer channels carrying the polynomial (transposed by reciprocity for a roving hammer).
 //! 1. [`lscf`](mod@lscf): the poly-reference least-squares complex frequency-domain estimator
 //!    (pLSCF, Guillaume, Verboven, Vanlanduit, Van der Auweraer & Peeters 2003; Peeters et al.
 //!    2004). A right matrix-fraction model `H(ω) = B(z) A(z)⁻¹`, `z = exp(iωΔt)`, with real matrix
@@ -16,7 +19,8 @@
 //! 3. [`lsfd()`]: residues by linear least squares in the frequency domain with lower and upper
 //!    residuals, the residue matrix of each mode split into mode shape × participation (rank 1).
 //! 4. [`mac`] and [`complexity`]: modal assurance criterion between shape sets and the modal
-//!    complexity factor of a shape.
+//!    complexity factor of a shape; [`indicators`]: MPC, MPD and MCF of a shape and the complex
+//!    mode indicator function of the FRF matrix.
 //!
 //! Units: SI inside (frequencies in Hz at the interface, poles in rad/s); the FRF's own unit is
 //! kept (residues carry it). Damping is the ratio of critical ζ; the loss factor is η = 2ζ.
@@ -43,11 +47,14 @@
 //! # Ok::<(), process::modal::ModalError>(())
 //! ```
 
+pub mod indicators;
+pub mod layout;
 pub mod lscf;
 pub mod lsfd;
 pub mod stabilization;
 
-pub use lscf::{lscf, LscfSettings, OrderPoles, Pole};
+pub use layout::{arrange, Channel, Layout, LayoutKind, MeasuredFrf};
+pub use lscf::{lscf, LscfSettings, OrderPoles, Pole, PoleStd};
 pub use lsfd::{lsfd, ModalModel, Mode};
 pub use stabilization::{
     select_auto, select_near, stabilize, SelectionSettings, Stability, StabilityTolerances,
@@ -112,6 +119,42 @@ pub enum ModalError {
     Singular {
         /// Which system.
         what: &'static str,
+    },
+    /// The same response-reference pair is measured twice.
+    #[error("{first} and {second} both hold the FRF of response {response} to reference {reference}: keep one (or average them before extraction)")]
+    DuplicateFrf {
+        /// Response channel (node:direction).
+        response: String,
+        /// Reference channel.
+        reference: String,
+        /// Where the first one came from.
+        first: String,
+        /// Where the second one came from.
+        second: String,
+    },
+    /// The FRFs do not fill the points × fixed-channels grid, even read by reciprocity.
+    #[error("{count} of the {points} points × {} fixed channels ({}) FRFs are missing, measured in neither direction (response ← reference): {}{}; measure them or leave the points or channels they belong to out of the file", fixed.len(), fixed.join(", "), missing.join(", "), if *count > missing.len() { ", …" } else { "" })]
+    MissingFrfs {
+        /// Number of points.
+        points: usize,
+        /// The fixed channels (node:direction).
+        fixed: Vec<String>,
+        /// Number of missing FRFs.
+        count: usize,
+        /// The first missing ones, `response ← reference` as the file would hold them.
+        missing: Vec<String>,
+    },
+    /// The set cannot be arranged for the estimator.
+    #[error("FRF set: {reason}")]
+    Layout {
+        /// What is wrong and how to fix it.
+        reason: String,
+    },
+    /// Scaling (unit modal mass) needs a driving-point FRF.
+    #[error("unit-modal-mass shapes need a driving point (an FRF whose response and reference are the same node and direction) at one of the fixed channels {fixed}; none is measured: measure one, or leave the shapes unscaled")]
+    NoDrivingPoint {
+        /// The fixed channels.
+        fixed: String,
     },
     /// No pole was found near a frequency the user asked for.
     #[error("no stable pole within {window_pct} % of {freq_hz} Hz in the stabilization diagram: check the frequency, widen the band or raise --max-order")]
