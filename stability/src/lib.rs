@@ -248,17 +248,29 @@ pub fn lobes(req: &Request) -> Result<Lobes, StabilityError> {
             },
         });
     }
+    // Each mode's share of Re G at the chatter frequency: Φ there is the sum of the modes'
+    // contributions and the tool's, and ∂G[Φ_m] sums to G (G is homogeneous of degree 1 in Φ).
     let shares = |p: &BoundaryPoint| -> (Vec<f64>, f64) {
-        let (l, b) = (p.line, p.branch);
         let f = p.chatter_hz;
-        let phi = &frf.phi[l];
-        let sign = br.sign[b][l];
-        let g = process.g(phi, sign);
-        let mode: Vec<f64> = (0..split.lambda.len())
-            .map(|m| process.dg(phi, &split.contribution(m, f), sign).re / g.re)
+        let sign = br.sign[p.branch][p.line];
+        let parts: Vec<oriented::Mat2> = (0..split.lambda.len())
+            .map(|m| split.contribution(m, f))
             .collect();
         let tool = oriented::tool_receptance(cut, &placement.directions, f);
-        (mode, process.dg(phi, &tool, sign).re / g.re)
+        let mut phi = tool;
+        for c in &parts {
+            for i in 0..2 {
+                for j in 0..2 {
+                    phi[i][j] += c[i][j];
+                }
+            }
+        }
+        let g = process.g(&phi, sign);
+        let mode: Vec<f64> = parts
+            .iter()
+            .map(|c| process.dg(&phi, c, sign).re / g.re)
+            .collect();
+        (mode, process.dg(&phi, &tool, sign).re / g.re)
     };
     let dominant_hz = points
         .iter()
