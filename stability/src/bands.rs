@@ -128,7 +128,9 @@ pub fn monte_carlo(
     let mut skipped = 0;
     let mut p = placement.clone();
     for _ in 0..s.samples {
-        let z: Vec<f64> = (0..x0.len()).map(|_| StandardNormal.sample(&mut rng)).collect();
+        let z: Vec<f64> = (0..x0.len())
+            .map(|_| StandardNormal.sample(&mut rng))
+            .collect();
         let x: Vec<f64> = (0..x0.len())
             .map(|i| x0[i] + (0..x0.len()).map(|k| l[(i, k)] * z[k]).sum::<f64>())
             .collect();

@@ -70,7 +70,11 @@ pub struct FromReport {
 }
 
 /// The covariance of `vars` (their `initial` values are the estimates) from a report's text.
-pub fn from_report(text: &str, file: &str, vars: &Variables) -> Result<FromReport, CovarianceError> {
+pub fn from_report(
+    text: &str,
+    file: &str,
+    vars: &Variables,
+) -> Result<FromReport, CovarianceError> {
     let r: Report = serde_json::from_str(text).map_err(|e| CovarianceError::Format {
         file: file.into(),
         message: e.to_string(),

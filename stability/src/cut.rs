@@ -344,17 +344,16 @@ pub fn parse(text: &str, file: &str) -> Result<Cut, CutError> {
             "leave it out (4000) or give at least 100",
         ));
     }
-    let band_hz = match raw.band_hz.as_deref() {
-        None => None,
-        Some(&[a, b]) if a > 0.0 && b > a && b.is_finite() => Some((a, b)),
-        Some(_) => {
-            return Err(f.err(
+    let band_hz =
+        match raw.band_hz.as_deref() {
+            None => None,
+            Some(&[a, b]) if a > 0.0 && b > a && b.is_finite() => Some((a, b)),
+            Some(_) => return Err(f.err(
                 "band_hz",
                 "not a band [lowest, highest] with 0 < lowest < highest",
                 "leave it out (the band follows the model's modes) or write band_hz = [20, 800]",
-            ))
-        }
-    };
+            )),
+        };
     let tool_raw = raw.tool.ok_or_else(|| {
         f.err(
             "tool",
@@ -437,7 +436,11 @@ impl Fields<'_> {
                 if n > 0.0 && n.is_finite() {
                     Ok(d / n)
                 } else {
-                    Err(self.err(field, "zero or not finite", "give a direction like [1, 0, 0]"))
+                    Err(self.err(
+                        field,
+                        "zero or not finite",
+                        "give a direction like [1, 0, 0]",
+                    ))
                 }
             }
             Some(_) => Err(self.err(
@@ -524,12 +527,15 @@ impl Fields<'_> {
                 "add [milling] with teeth, diameter, radial_depth, direction = \"up\"|\"down\", feed = [1, 0, 0]",
             )
         })?;
-        let teeth = m.teeth.filter(|&t| t >= 1).ok_or_else(|| {
-            self.err("milling.teeth", "missing or 0", "write teeth = 4")
-        })?;
+        let teeth = m
+            .teeth
+            .filter(|&t| t >= 1)
+            .ok_or_else(|| self.err("milling.teeth", "missing or 0", "write teeth = 4"))?;
         let diameter = match &m.diameter {
             Some(q) => self.quantity(q, Dim::LENGTH, "milling.diameter")?,
-            None => return Err(self.err("milling.diameter", "missing", "write diameter = \"20 mm\"")),
+            None => {
+                return Err(self.err("milling.diameter", "missing", "write diameter = \"20 mm\""))
+            }
         };
         let radial_depth = match &m.radial_depth {
             Some(q) => self.quantity(q, Dim::LENGTH, "milling.radial_depth")?,

@@ -308,9 +308,9 @@ pub fn lobes(req: &Request) -> Result<Lobes, StabilityError> {
         })
         .collect();
     limiting.sort_by(|a, b| b.share.total_cmp(&a.share));
-    let band = req.uncertainty.map(|u| {
-        bands::linear(&process, &frf, &br, periods, &points, u.covariance)
-    });
+    let band = req
+        .uncertainty
+        .map(|u| bands::linear(&process, &frf, &br, periods, &points, u.covariance));
     Ok(Lobes {
         points,
         minimum,

@@ -131,7 +131,8 @@ impl Process {
                 let (_, sq) = trace_root(&b);
                 let (a, bb, c, d) = (b[0][0], b[0][1], b[1][0], b[1][1]);
                 let dtr = db[0][0] + db[1][1];
-                let ddisc = (a - d) * (db[0][0] - db[1][1]) * 2.0 + (db[0][1] * c + bb * db[1][0]) * 4.0;
+                let ddisc =
+                    (a - d) * (db[0][0] - db[1][1]) * 2.0 + (db[0][1] * c + bb * db[1][0]) * 4.0;
                 let dl = dtr * 0.5
                     + if sq.norm() > 0.0 {
                         ddisc / (sq * 4.0) * sign
@@ -177,7 +178,9 @@ pub fn branches(process: &Process, frf: &OrientedFrf) -> Branches {
             continue;
         }
         let (p, m) = (process.g(phi, 1.0), process.g(phi, -1.0));
-        let swap = prev.is_some_and(|q| (p - q[0]).norm() + (m - q[1]).norm() > (m - q[0]).norm() + (p - q[1]).norm());
+        let swap = prev.is_some_and(|q| {
+            (p - q[0]).norm() + (m - q[1]).norm() > (m - q[0]).norm() + (p - q[1]).norm()
+        });
         let (s0, s1) = if swap { (-1.0, 1.0) } else { (1.0, -1.0) };
         let (g0, g1) = if swap { (m, p) } else { (p, m) };
         g[0].push(g0);
@@ -312,13 +315,12 @@ pub fn depth_gradient(
     frf.dphi
         .iter()
         .map(|d| {
-            let dg = [0, 1].map(|i| {
-                process.dg(&frf.phi[lines[i]], &d[lines[i]], br.sign[b][lines[i]])
-            });
+            let dg =
+                [0, 1].map(|i| process.dg(&frf.phi[lines[i]], &d[lines[i]], br.sign[b][lines[i]]));
             let da = [0, 1].map(|i| dg[i].re / (2.0 * g[i].re * g[i].re));
             let deps = [0, 1].map(|i| 2.0 * (dg[i] / g[i]).im);
-            let dn = [0, 1]
-                .map(|i| -n[i] * (deps[i] / (2.0 * PI)) / (eps[i] / (2.0 * PI) + k as f64));
+            let dn =
+                [0, 1].map(|i| -n[i] * (deps[i] / (2.0 * PI)) / (eps[i] / (2.0 * PI) + k as f64));
             let dt = (-dn[0] - t * (dn[1] - dn[0])) / (n[1] - n[0]);
             da[0] + dt * (a[1] - a[0]) + t * (da[1] - da[0])
         })

@@ -60,25 +60,32 @@ pub struct Placement {
 }
 
 /// Finds the body a contact names and checks that its point is on it.
-fn body_of(model: &Model, c: &Contact, role: &str, file: &str) -> Result<Option<usize>, StabilityError> {
+fn body_of(
+    model: &Model,
+    c: &Contact,
+    role: &str,
+    file: &str,
+) -> Result<Option<usize>, StabilityError> {
     if c.body == "ground" {
         return Ok(None);
     }
-    let b = model.body_index(&c.body).ok_or_else(|| StabilityError::Placement {
-        file: file.into(),
-        field: format!("{role}.body"),
-        message: format!(
-            "no body \"{}\" in model \"{}\"; its bodies are: {}, or \"ground\"",
-            c.body,
-            model.name,
-            model
-                .bodies
-                .iter()
-                .map(|b| format!("\"{}\"", b.name))
-                .collect::<Vec<_>>()
-                .join(", ")
-        ),
-    })?;
+    let b = model
+        .body_index(&c.body)
+        .ok_or_else(|| StabilityError::Placement {
+            file: file.into(),
+            field: format!("{role}.body"),
+            message: format!(
+                "no body \"{}\" in model \"{}\"; its bodies are: {}, or \"ground\"",
+                c.body,
+                model.name,
+                model
+                    .bodies
+                    .iter()
+                    .map(|b| format!("\"{}\"", b.name))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ),
+        })?;
     let body = &model.bodies[b];
     // Points the model itself already attaches to the body are on it.
     let used = model
@@ -123,7 +130,11 @@ fn body_of(model: &Model, c: &Contact, role: &str, file: &str) -> Result<Option<
 /// `a² = 6 (J2 + J3 − J1) / m` for the full side along axis 1, and so on.
 fn equivalent_half_sizes(m: f64, j: [f64; 3]) -> [f64; 3] {
     let side = |a: usize, b: usize, c: usize| (6.0 * (j[b] + j[c] - j[a]) / m).max(0.0).sqrt();
-    [0.5 * side(0, 1, 2), 0.5 * side(1, 0, 2), 0.5 * side(2, 0, 1)]
+    [
+        0.5 * side(0, 1, 2),
+        0.5 * side(1, 0, 2),
+        0.5 * side(2, 0, 1),
+    ]
 }
 
 /// Places the cut in the model: resolves the bodies, checks the points, builds the auxiliary
@@ -148,30 +159,37 @@ pub fn place(model: &Model, cut: &Cut) -> Result<Placement, StabilityError> {
         .map(|(j, d)| Reference {
             name: format!("cutting direction {}", j + 1),
             excitation: Excitation::Forces(
-                [(tool_body, &cut.tool, 1.0), (workpiece_body, &cut.workpiece, -1.0)]
-                    .iter()
-                    .filter_map(|(b, c, s)| {
-                        b.map(|b| PointForce {
-                            body: b,
-                            point: c.point,
-                            force: d * *s,
-                            moment: Vector3::zeros(),
-                        })
+                [
+                    (tool_body, &cut.tool, 1.0),
+                    (workpiece_body, &cut.workpiece, -1.0),
+                ]
+                .iter()
+                .filter_map(|(b, c, s)| {
+                    b.map(|b| PointForce {
+                        body: b,
+                        point: c.point,
+                        force: d * *s,
+                        moment: Vector3::zeros(),
                     })
-                    .collect(),
+                })
+                .collect(),
             ),
         })
         .collect();
     let mut taps = Vec::new();
-    for (b, c, sign) in [(tool_body, &cut.tool, 1.0), (workpiece_body, &cut.workpiece, -1.0)] {
+    for (b, c, sign) in [
+        (tool_body, &cut.tool, 1.0),
+        (workpiece_body, &cut.workpiece, -1.0),
+    ] {
         let Some(b) = b else { continue };
         for j in 0..2 {
             for (i, d) in directions.iter().enumerate() {
-                let at = PointOutput::new(c.point, *d).ok_or_else(|| StabilityError::Placement {
-                    file: cut.origin.clone(),
-                    field: "directions".into(),
-                    message: "a cutting direction is zero or not finite".into(),
-                })?;
+                let at =
+                    PointOutput::new(c.point, *d).ok_or_else(|| StabilityError::Placement {
+                        file: cut.origin.clone(),
+                        field: "directions".into(),
+                        message: "a cutting direction is zero or not finite".into(),
+                    })?;
                 let dof = at.nearest_axis(&model.bodies[b]).0;
                 taps.push((aux.outputs.len(), i, j, sign));
                 aux.outputs.push(Characteristic {

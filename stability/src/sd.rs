@@ -141,8 +141,8 @@ fn cutting_matrix(m: &Milling, kt: f64, kr: f64, rpm: f64, t: f64) -> [[f64; 2];
     let (st, ex) = m.immersion();
     let mut h = [[0.0; 2]; 2];
     for j in 0..m.teeth {
-        let phi = (2.0 * PI * rpm / 60.0 * t + 2.0 * PI * j as f64 / m.teeth as f64)
-            .rem_euclid(2.0 * PI);
+        let phi =
+            (2.0 * PI * rpm / 60.0 * t + 2.0 * PI * j as f64 / m.teeth as f64).rem_euclid(2.0 * PI);
         if phi > st && phi < ex {
             let a = tooth_matrix(phi, kr / kt);
             for r in 0..2 {

@@ -87,10 +87,7 @@ fn one_dof_benchmark_of_insperger_and_stepan() {
             .filter(|(s, _)| (**s - nk).abs() < 0.08 * nk)
             .map(|(s, d)| (*s, *d))
             .collect();
-        let best = near
-            .iter()
-            .min_by(|a, b| a.1.total_cmp(&b.1))
-            .unwrap();
+        let best = near.iter().min_by(|a, b| a.1.total_cmp(&b.1)).unwrap();
         assert!(
             (best.0 - nk).abs() < 0.01 * nk,
             "lobe {lobe}: ZOA bottom at {} rpm, closed form {nk:.0} rpm",
@@ -175,4 +172,43 @@ fn zoa_agrees_with_semi_discretization_where_it_holds_and_not_at_low_immersion()
         worst > 1.5,
         "5 % immersion: ZOA and SD should part somewhere (largest ratio {worst})"
     );
+}
+
+/// The modal model of an RFE model (undamped modes, ζ = η/2) has the oriented FRF of the
+/// hysteretic model at its resonances, where chatter is.
+#[test]
+fn the_modal_model_of_an_rfe_model_matches_its_frf_at_resonance() {
+    let root = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..");
+    let model = identify::modelfile::load(&root.join("configs/models/textbook-two-mass.toml"))
+        .unwrap()
+        .model;
+    let cut =
+        stability::cut::load(&root.join("configs/cuts/textbook-two-mass-turning.toml")).unwrap();
+    let placement = stability::oriented::place(&model, &cut).unwrap();
+    let modal = ModalModel::of_placement(&placement, 1.0e4).unwrap();
+    // The chain's two axial modes carry the z motion.
+    let axial: Vec<&ViscousMode> = modal
+        .modes
+        .iter()
+        .filter(|m| m.shape[0].abs() > 1e-6)
+        .collect();
+    assert_eq!(axial.len(), 2, "{:?}", modal.modes);
+    for m in axial {
+        let f = [m.freq_hz];
+        let ours = modal.frf(&f).phi[0][0][0];
+        let rfe = stability::oriented::oriented_frf(
+            &placement,
+            &cut,
+            &f,
+            None,
+            identify::frf::Method::Direct,
+        )
+        .unwrap()
+        .phi[0][0][0];
+        assert!(
+            (ours - rfe).norm() < 0.05 * rfe.norm(),
+            "{} Hz: modal {ours} vs RFE {rfe}",
+            m.freq_hz
+        );
+    }
 }

@@ -68,7 +68,10 @@ fn turning_lobes_match_the_one_dof_closed_form() {
     );
     let fc = ((k * (1.0 + eta)) / m).sqrt() / (2.0 * PI);
     let f = l.points[l.minimum].chatter_hz;
-    assert!((f - fc).abs() < 0.01 * fc, "chatter at the minimum {f} Hz vs {fc} Hz");
+    assert!(
+        (f - fc).abs() < 0.01 * fc,
+        "chatter at the minimum {f} Hz vs {fc} Hz"
+    );
     assert!(
         l.points.iter().all(|p| p.depth.is_finite()),
         "every speed has a lobe"
@@ -95,7 +98,10 @@ fn turning_lobes_match_the_one_dof_closed_form() {
         );
         checked += 1;
     }
-    assert!(checked >= 100, "only {checked} points near the lobe bottoms");
+    assert!(
+        checked >= 100,
+        "only {checked} points near the lobe bottoms"
+    );
     // The limiting mode is the body's translation along z, through the one spring.
     assert_eq!(l.limiting.len(), 1);
     assert!((l.limiting[0].share - 1.0).abs() < 1e-6);
@@ -199,7 +205,16 @@ fn linear_band_agrees_with_monte_carlo() {
     // 3 % and 4 % standard errors, correlation −0.6 (a typical pair of springs in series).
     let s = [0.03 * x0[0], 0.04 * x0[1]];
     let rho = -0.6;
-    let cov = DMatrix::from_row_slice(2, 2, &[s[0] * s[0], rho * s[0] * s[1], rho * s[0] * s[1], s[1] * s[1]]);
+    let cov = DMatrix::from_row_slice(
+        2,
+        2,
+        &[
+            s[0] * s[0],
+            rho * s[0] * s[1],
+            rho * s[0] * s[1],
+            s[1] * s[1],
+        ],
+    );
     let cut = turning_cut("second", [0.0, 0.0, 1.0], (100.0, 1500.0), 100);
     let l = stability::lobes(&Request {
         uncertainty: Some(Uncertainty {
@@ -255,16 +270,20 @@ fn the_band_shrinks_as_the_data_noise_shrinks() {
     let cut = turning_cut("second", [0.0, 0.0, 1.0], (100.0, 1500.0), 100);
     let width = |noise: f64| {
         let mut rng = StdRng::seed_from_u64(5);
-        let measured = synthetic::amplitude_data(
+        let measured =
+            synthetic::amplitude_data(&truth, &synthetic::log_lines(5.0, 60.0, 40), noise, || {
+                StandardNormal.sample(&mut rng)
+            })
+            .unwrap();
+        let obs = data::validate(&measured, &truth, "synthetic").unwrap();
+        let id = idn::identify(
             &truth,
-            &synthetic::log_lines(5.0, 60.0, 40),
-            noise,
-            || StandardNormal.sample(&mut rng),
+            &obs,
+            &vars,
+            &idn::Options::default(),
+            &mut |_, _| {},
         )
         .unwrap();
-        let obs = data::validate(&measured, &truth, "synthetic").unwrap();
-        let id = idn::identify(&truth, &obs, &vars, &idn::Options::default(), &mut |_, _| {})
-            .unwrap();
         assert!(id.stop.converged());
         let mut model = truth.clone();
         vars.apply(&mut model, &id.estimate);
