@@ -212,9 +212,10 @@ pub fn place(model: &Model, cut: &Cut) -> Result<Placement, StabilityError> {
     })
 }
 
-/// The tool's clamped modes in series at the tool point: `H_ij = Σ (e_i·d)(e_j·d) / (k (1 − r²
-/// + 2jζr))`, `r = ω/ω_n`, added to the machine's relative receptance (rigid coupling at the
-/// spindle nose, translations only: the rotation–moment receptances of the nose are left out).
+/// The tool's clamped modes in series at the tool point:
+/// `H_ij = Σ (e_i·d)(e_j·d) / (k (1 − r² + 2jζr))`, `r = ω/ω_n`, added to the machine's relative
+/// receptance (rigid coupling at the spindle nose, translations only: the rotation–moment
+/// receptances of the nose are left out).
 pub fn tool_receptance(cut: &Cut, directions: &[Vector3<f64>; 2], freq_hz: f64) -> Mat2 {
     let mut h = [[C64::new(0.0, 0.0); 2]; 2];
     for m in &cut.tool_modes {
