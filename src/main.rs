@@ -54,6 +54,8 @@ enum Command {
     Sweep(commands::sweep::SweepArgs),
     /// Measured characteristics of a session file (for `ident identify --data`).
     Process(commands::process::ProcessArgs),
+    /// Chatter stability lobes of a model for a cut, with confidence bands.
+    Stability(commands::stability::StabilityArgs),
 }
 
 fn main() -> ExitCode {
@@ -77,6 +79,7 @@ fn main() -> ExitCode {
         Command::Diagnose(a) => commands::diagnose::run(a),
         Command::Demo(a) => commands::demo::run(a),
         Command::Mcap(a) => commands::mcap::run(a),
+        Command::Stability(a) => commands::stability::run(a),
         Command::Replay(a) => commands::replay::run(a),
         Command::Nightly(a) => commands::nightly::run(a),
         Command::History(a) => commands::history::run(a),

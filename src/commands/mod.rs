@@ -17,6 +17,7 @@ pub mod prometheus;
 pub mod replay;
 pub mod sensitivity;
 pub mod sim;
+pub mod stability;
 pub mod sweep;
 
 use std::path::Path;
