@@ -79,15 +79,22 @@ fn targets() {
         scatter_crlb: (3.0, 10.0),
         correlated: true,
         change,
-        through_store: true,
+        through_store: std::env::var_os("IDENT_POWER_NO_STORE").is_none(),
     };
     let seeds = 1..21;
     println!("## Targets: 20 seeds × 90 nights, first 30 the baseline, 17 parameters, scatter 3-10× CRLB, correlated; import → history database → judge_series\n");
     let all = run(&setup(Change::None), &cfg, seeds.clone());
     let (fa, n) = fa_rate(&all);
+    let by: Vec<usize> = (0..4)
+        .map(|k| all.iter().map(|x| x.by_rule[k]).sum())
+        .collect();
     println!(
-        "stable: {fa} false alarms / {n} parameter-nights = {:.2} per 1000 (target ≤ 1)",
-        1000.0 * fa as f64 / n as f64
+        "stable: {fa} false alarms / {n} parameter-nights = {:.2} per 1000 (target ≤ 1); Shewhart {}, CUSUM {}, EWMA {}, T² {}",
+        1000.0 * fa as f64 / n as f64,
+        by[0],
+        by[1],
+        by[2],
+        by[3]
     );
     let o = run(
         &setup(Change::Step {

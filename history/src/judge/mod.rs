@@ -74,12 +74,12 @@ impl Default for JudgeConfig {
     fn default() -> Self {
         JudgeConfig {
             baseline: BaselineWindow::First(20),
-            shewhart_k: 4.0,
-            cusum_k: 1.0,
-            cusum_h: 3.5,
+            shewhart_k: 4.5,
+            cusum_k: 1.5,
+            cusum_h: 3.0,
             ewma_lambda: 0.1,
-            ewma_l: 3.3,
-            t2_alpha: 2e-3,
+            ewma_l: 3.8,
+            t2_alpha: 5e-4,
             covariate: None,
         }
     }

@@ -189,6 +189,8 @@ pub struct Outcome {
     pub delay: Option<usize>,
     /// Alarms on nights after an outlier night.
     pub alarms_after_outlier: usize,
+    /// False alarms per rule: Shewhart, CUSUM, EWMA, T².
+    pub by_rule: [usize; 4],
 }
 
 fn names(i: usize) -> String {
@@ -221,7 +223,16 @@ pub fn score(setup: &Setup, runs: &[RunRecord], cfg: &JudgeConfig) -> Outcome {
                 continue;
             }
             o.normal_parameter_nights += 1;
-            o.false_alarms += usize::from(j.alarms.iter().any(|a| a.subject == names(i)));
+            let fired = j.alarms.iter().find(|a| a.subject == names(i));
+            o.false_alarms += usize::from(fired.is_some());
+            if let Some(a) = fired {
+                let k = match a.rule {
+                    Rule::Shewhart => 0,
+                    Rule::Cusum => 1,
+                    _ => 2,
+                };
+                o.by_rule[k] += 1;
+            }
         }
         let caught = moved
             .iter()
@@ -235,6 +246,7 @@ pub fn score(setup: &Setup, runs: &[RunRecord], cfg: &JudgeConfig) -> Outcome {
             && (n < at || moved.is_empty() || matches!(setup.change, Change::Outlier { .. }))
         {
             o.false_alarms += 1;
+            o.by_rule[3] += 1;
         }
         if let Change::Outlier { .. } = setup.change {
             if n > at {
