@@ -187,6 +187,7 @@ fn synthetic_run(i: usize, k1: f64) -> history::record::RunRecord {
         characteristics: vec![],
         effects: vec![],
         covariates: vec![],
+        correlations: vec![],
     }
 }
 

@@ -37,6 +37,14 @@ pub enum HistoryError {
         /// SQLite's error.
         source: rusqlite::Error,
     },
+    /// The `[drift] baseline` run named is not among the earlier runs.
+    #[error("baseline run \"{name}\" is not among the {runs} earlier reports; set `baseline` to one of their folder names or \"first\"")]
+    NoSuchBaseline {
+        /// The name asked for.
+        name: String,
+        /// Earlier runs there are.
+        runs: usize,
+    },
     /// A report folder could not be imported.
     #[error("cannot import {path}: {detail}")]
     Import {

@@ -4,9 +4,12 @@
 //! stiffness and damping move from night to night (temperature, lubrication, re-clamping) by far
 //! more. This crate keeps every run in one SQLite file ([`store`]: WAL, one transaction per run,
 //! a schema version) and judges a new run against what normal looked like over a baseline window
-//! of earlier runs ([`judge`]: robust per-parameter scatter, Shewhart and EWMA charts, Hotelling T²
-//! with the baseline covariance, optional compensation of a covariate such as temperature, new
-//! effects). Values in SI inside; alarms speak the parameters' display units.
+//! of earlier runs ([`judge`]: robust per-parameter scatter; Shewhart, CUSUM and EWMA charts per
+//! parameter; Hotelling T² against the Cramér-Rao correlation structure; optional compensation
+//! of a covariate such as temperature; new effects; one false-alarm budget across the charts).
+//! Runs come from reports ([`import`], reading the report crate's own [`report::Report`] type:
+//! history depends on report, never the reverse). Values in SI inside; alarms speak the
+//! parameters' display units.
 //!
 //! ```
 //! use history::record::{ParameterRecord, RunRecord};
@@ -31,6 +34,7 @@
 //!     characteristics: vec![],
 //!     effects: vec![],
 //!     covariates: vec![],
+//!     correlations: vec![],
 //! }).unwrap();
 //! let runs = store.runs().unwrap();
 //! assert_eq!(runs[0].parameters[0].in_unit(), 0.05);

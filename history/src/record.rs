@@ -30,6 +30,21 @@ pub struct RunRecord {
     pub effects: Vec<String>,
     /// Covariates measured with the session (temperatures, ...).
     pub covariates: Vec<Covariate>,
+    /// Cramér-Rao correlations between the parameters (each pair once; empty when the report
+    /// had none): the multivariate chart's correlation structure.
+    #[serde(default)]
+    pub correlations: Vec<Correlation>,
+}
+
+/// The Cramér-Rao correlation of two parameters of one run.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Correlation {
+    /// First variable.
+    pub a: String,
+    /// Second variable.
+    pub b: String,
+    /// Correlation coefficient (−1..1).
+    pub value: f64,
 }
 
 /// One identified parameter.
@@ -78,6 +93,18 @@ impl RunRecord {
     /// The parameter named `variable`, if this run identified it.
     pub fn parameter(&self, variable: &str) -> Option<&ParameterRecord> {
         self.parameters.iter().find(|p| p.variable == variable)
+    }
+
+    /// The Cramér-Rao correlation of variables `a` and `b` (1 when `a == b`), if recorded.
+    pub fn correlation(&self, a: &str, b: &str) -> Option<f64> {
+        if a == b {
+            return Some(1.0);
+        }
+        self.correlations
+            .iter()
+            .find(|c| (c.a == a && c.b == b) || (c.a == b && c.b == a))
+            .map(|c| c.value)
+            .filter(|v| v.is_finite())
     }
 
     /// The covariate named `name`, if recorded.

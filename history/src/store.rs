@@ -9,10 +9,11 @@ use std::time::Duration;
 use rusqlite::{params, Connection, OpenFlags, OptionalExtension};
 
 use crate::error::HistoryError;
-use crate::record::{CharacteristicFit, Covariate, ParameterRecord, RunRecord};
+use crate::record::{CharacteristicFit, Correlation, Covariate, ParameterRecord, RunRecord};
 
-/// The schema this build writes and reads.
-pub const SCHEMA_VERSION: i64 = 1;
+/// The schema this build writes and reads (2: Cramér-Rao correlations per run; a version-1
+/// file is upgraded when opened for writing, and read as it is).
+pub const SCHEMA_VERSION: i64 = 2;
 
 /// How long a writer waits for another writer before [`HistoryError::Locked`].
 pub const BUSY_WAIT: Duration = Duration::from_secs(5);
@@ -55,6 +56,16 @@ CREATE TABLE covariates (
 CREATE INDEX runs_by_time ON runs(time_utc, id);
 ";
 
+/// Version 1 → 2: the Cramér-Rao correlations of each run.
+const SCHEMA_2: &str = "
+CREATE TABLE correlations (
+    run INTEGER NOT NULL REFERENCES runs(id),
+    a TEXT NOT NULL,
+    b TEXT NOT NULL,
+    value REAL NOT NULL
+);
+";
+
 /// An open history database.
 pub struct Store {
     conn: Connection,
@@ -95,6 +106,13 @@ impl Store {
         if store.version()? == 0 {
             let tx = store.conn.transaction().map_err(err)?;
             tx.execute_batch(SCHEMA).map_err(err)?;
+            tx.execute_batch(SCHEMA_2).map_err(err)?;
+            tx.pragma_update(None, "user_version", SCHEMA_VERSION)
+                .map_err(err)?;
+            tx.commit().map_err(err)?;
+        } else if store.version()? == 1 {
+            let tx = store.conn.transaction().map_err(err)?;
+            tx.execute_batch(SCHEMA_2).map_err(err)?;
             tx.pragma_update(None, "user_version", SCHEMA_VERSION)
                 .map_err(err)?;
             tx.commit().map_err(err)?;
@@ -238,6 +256,13 @@ impl Store {
             )
             .map_err(err)?;
         }
+        for c in run.correlations.iter().filter(|c| c.value.is_finite()) {
+            tx.execute(
+                "INSERT INTO correlations (run, a, b, value) VALUES (?1, ?2, ?3, ?4)",
+                params![id, c.a, c.b, c.value],
+            )
+            .map_err(err)?;
+        }
         tx.commit().map_err(err)
     }
 
@@ -267,6 +292,7 @@ impl Store {
                         characteristics: Vec::new(),
                         effects: Vec::new(),
                         covariates: Vec::new(),
+                        correlations: Vec::new(),
                     },
                 ))
             })
@@ -289,6 +315,16 @@ impl Store {
             .conn
             .prepare("SELECT name, unit, value FROM covariates WHERE run = ?1 ORDER BY rowid")
             .map_err(err)?;
+        // A version-1 file (read only, not upgraded) has no correlations.
+        let mut k = if self.version()? >= 2 {
+            Some(
+                self.conn
+                    .prepare("SELECT a, b, value FROM correlations WHERE run = ?1 ORDER BY rowid")
+                    .map_err(err)?,
+            )
+        } else {
+            None
+        };
         let mut out = Vec::with_capacity(heads.len());
         for (id, mut run) in heads {
             run.parameters = p
@@ -326,6 +362,18 @@ impl Store {
                 })
                 .and_then(|rows| rows.collect())
                 .map_err(err)?;
+            if let Some(k) = k.as_mut() {
+                run.correlations = k
+                    .query_map([id], |r| {
+                        Ok(Correlation {
+                            a: r.get(0)?,
+                            b: r.get(1)?,
+                            value: r.get(2)?,
+                        })
+                    })
+                    .and_then(|rows| rows.collect())
+                    .map_err(err)?;
+            }
             out.push(run);
         }
         Ok(out)

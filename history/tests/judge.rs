@@ -47,6 +47,7 @@ fn run(
                 }]
             })
             .unwrap_or_default(),
+        correlations: vec![],
     }
 }
 
@@ -108,9 +109,9 @@ fn runs_of_another_model_are_not_compared() {
         j.verdict
     );
     assert!(
-        j.notes
-            .iter()
-            .any(|n| n.contains("25 earlier run(s) of a different model")),
+        j.notes.iter().any(|n| n
+            .contains("25 earlier run(s) identified another model (identity A)")
+            && n.contains("(B)")),
         "{:?}",
         j.notes
     );
@@ -140,23 +141,29 @@ fn a_step_is_a_shewhart_alarm_with_its_size_and_start() {
         .filter(|r| r.abs() <= 5.0 * mad)
         .collect();
     let scatter = (kept.iter().map(|r| r * r).sum::<f64>() / (kept.len() - 1) as f64).sqrt();
-    for (k, x) in [(21, &j[21]), (22, &j[22])] {
-        let a = x.alarms.iter().find(|a| a.rule == Rule::Shewhart).unwrap();
-        assert_eq!(a.subject, "k1");
-        assert_eq!(a.since_run, "n021", "the excursion started at the step");
-        let v = runs[k].parameters[0].in_unit();
-        assert!((a.change.unwrap() - (v - centre)).abs() < 1e-9);
-        assert!((a.multiples.unwrap() - (v - centre) / scatter).abs() < 1e-9);
-        assert!(a.message.contains("N/um"), "{}", a.message);
-        assert!(!x.alarms.iter().any(|a| a.subject == "k2"));
-    }
+    let x = &j[21];
+    let a = x.alarms.iter().find(|a| a.rule == Rule::Shewhart).unwrap();
+    assert_eq!(a.subject, "k1");
+    assert_eq!(a.since_run, "n021", "the change started at the step");
+    let v = runs[21].parameters[0].in_unit();
+    assert!((a.change.unwrap() - (v - centre)).abs() < 1e-9);
+    assert!((a.multiples.unwrap() - (v - centre) / scatter).abs() < 1e-9);
+    assert!(a.message.contains("N/um"), "{}", a.message);
+    assert!(!x.alarms.iter().any(|a| a.subject == "k2"));
+    // The night after: no second alarm; the change is followed, confirmed, from its change point.
+    let x = &j[22];
+    assert!(!x.alarm(), "{:?}", x.alarms);
+    let c = x.changes.iter().find(|c| c.subject == "k1").unwrap();
+    assert_eq!(c.change_point_run, "n021");
+    assert_eq!(c.persists, Some(true));
+    assert!(c.message.contains("persists"), "{}", c.message);
 }
 
 #[test]
-fn a_slow_drift_fires_the_ewma_before_the_shewhart_rule() {
+fn a_slow_drift_is_caught_by_the_cusum_or_ewma_long_before_the_shewhart_limit() {
     let sigma = 0.5;
     let mut runs = normal_runs(20, 4, sigma);
-    // 0.4 σ per run, no noise: Shewhart needs |r| > 5.1, i.e. ~13 runs.
+    // 0.4 σ per run, no noise: Shewhart needs |r| > 4.6, i.e. ~12 runs.
     for t in 0..20 {
         runs.push(run(
             20 + t,
@@ -167,21 +174,121 @@ fn a_slow_drift_fires_the_ewma_before_the_shewhart_rule() {
         ));
     }
     let j = judge_series(&runs, &cfg(20));
-    let first = |rule| {
-        j.iter()
-            .position(|x| x.alarms.iter().any(|a| a.rule == rule && a.subject == "k1"))
-    };
-    let ewma = first(Rule::Ewma).unwrap();
-    let shewhart = first(Rule::Shewhart).unwrap();
-    assert!(ewma < shewhart, "EWMA at {ewma}, Shewhart at {shewhart}");
-    assert!(ewma - 20 <= 8, "EWMA took {} runs", ewma - 20);
-    let a = j[ewma]
-        .alarms
+    let first = j
         .iter()
-        .find(|a| a.rule == Rule::Ewma)
+        .position(|x| x.alarms.iter().any(|a| a.subject == "k1"))
         .unwrap();
+    assert!(first - 20 <= 10, "the drift took {} runs", first - 20);
+    let a = j[first].alarms.iter().find(|a| a.subject == "k1").unwrap();
+    assert!(matches!(a.rule, Rule::Cusum | Rule::Ewma), "{a:?}");
     assert!(a.change.unwrap() < 0.0 && a.multiples.unwrap() < 0.0);
-    assert!(a.since_run.as_str() <= j[ewma].run_id.as_str() && a.since_run.as_str() >= "n020");
+    assert!(a.since_run.as_str() <= j[first].run_id.as_str() && a.since_run.as_str() >= "n020");
+    // Raised once: the later nights follow the change instead of repeating the alarm.
+    assert!(j[first + 1..]
+        .iter()
+        .all(|x| !x.alarms.iter().any(|a| a.subject == "k1")));
+    assert!(j
+        .last()
+        .unwrap()
+        .changes
+        .iter()
+        .any(|c| c.subject == "k1" && c.persists == Some(true)));
+}
+
+#[test]
+fn one_outlier_night_is_one_alarm_and_the_normal_nights_after_raise_none() {
+    let sigma = 0.5;
+    let mut runs = normal_runs(60, 9, sigma);
+    // Night 30: a 20-sd outlier in k1; the nights after are normal again.
+    runs[30].parameters[0].estimate += 20.0 * sigma * 1e6;
+    let j = judge_series(&runs, &cfg(20));
+    let alarms: Vec<(usize, Rule)> = j
+        .iter()
+        .enumerate()
+        .flat_map(|(i, x)| {
+            x.alarms
+                .iter()
+                .filter(|a| a.subject == "k1")
+                .map(move |a| (i, a.rule))
+        })
+        .collect();
+    assert_eq!(alarms, vec![(30, Rule::Shewhart)]);
+    // The outlier never entered the CUSUM or EWMA, and the change closed as a bad night.
+    let k1 = |i: usize| {
+        j[i].parameters
+            .iter()
+            .find(|p| p.variable == "k1")
+            .unwrap()
+            .clone()
+    };
+    assert!(k1(30).held_out);
+    assert!(j[33].changes.iter().all(|c| c.subject != "k1"));
+    assert!(
+        j[30..34]
+            .iter()
+            .flat_map(|x| &x.notes)
+            .any(|n| n.contains("did not persist")),
+        "{:?}",
+        j[32].notes
+    );
+    assert!(k1(40).cusum.iter().all(|c| *c < 3.5));
+}
+
+#[test]
+fn a_value_that_is_not_a_number_is_not_judged_and_says_why() {
+    let mut runs = normal_runs(22, 10, 0.5);
+    runs[21].parameters[0].estimate = f64::NAN;
+    // A NaN inside the baseline is left out of it, not learnt from.
+    runs[5].parameters[1].estimate = f64::NAN;
+    let j = judge_series(&runs, &cfg(20));
+    let last = j.last().unwrap();
+    assert_eq!(last.verdict, Verdict::Judged);
+    let n = last.not_judged.iter().find(|n| n.variable == "k1").unwrap();
+    assert!(n.why.contains("NaN"), "{}", n.why);
+    let k2 = last.parameters.iter().find(|p| p.variable == "k2").unwrap();
+    assert!(k2.scatter.is_finite() && k2.centre.is_finite());
+    assert!(!last.alarm());
+}
+
+#[test]
+fn the_cramer_rao_correlation_makes_a_pair_moving_across_it_a_t2_alarm() {
+    // ρ = −0.78 between k1 and k2, as the fit's Cramér-Rao correlation says.
+    let rho: f64 = -0.78;
+    let mut rng = rand::rngs::StdRng::seed_from_u64(11);
+    let mut runs: Vec<RunRecord> = (0..30)
+        .map(|i| {
+            let u: f64 = StandardNormal.sample(&mut rng);
+            let e: f64 = StandardNormal.sample(&mut rng);
+            let v = rho * u + (1.0 - rho * rho).sqrt() * e;
+            run(i, "A", &[("k1", 100.0 + u), ("k2", 50.0 + v)], None, &[])
+        })
+        .collect();
+    for r in &mut runs {
+        r.correlations = vec![history::record::Correlation {
+            a: "k1".into(),
+            b: "k2".into(),
+            value: rho,
+        }];
+    }
+    // Each +1.5 sd: across the correlation, 4.5 sd in its direction of least scatter.
+    let mut across = run(30, "A", &[("k1", 101.5), ("k2", 51.5)], None, &[]);
+    across.correlations = runs[0].correlations.clone();
+    let j = judge_latest(&runs, &across, &cfg(30));
+    assert!(
+        j.alarms.iter().any(|a| a.rule == Rule::HotellingT2),
+        "{:?} {:?}",
+        j.t2,
+        j.notes
+    );
+    assert!(
+        j.notes.iter().any(|n| n.contains("Cramér-Rao")),
+        "{:?}",
+        j.notes
+    );
+    // The limit is the χ²(2) quantile at 1 − α, widened by 1 + 1/n.
+    let [_, limit] = j.t2.unwrap();
+    let q = -2.0 * JudgeConfig::default().t2_alpha.ln();
+    assert!((limit - q * (1.0 + 1.0 / 30.0)).abs() < 1e-6, "{limit}");
 }
 
 #[test]
@@ -324,9 +431,14 @@ fn a_rolling_window_follows_the_last_runs_and_a_failed_run_is_not_judged() {
     };
     let j = judge_series(&runs, &c);
     assert!(matches!(j[30].verdict, Verdict::NotJudged(ref w) if w.contains("failed")));
-    assert_eq!(
-        j[29].baseline_runs.first().map(String::as_str),
-        Some("n019")
-    );
-    assert_eq!(j[29].baseline_runs.len(), 10);
+    // The window: the 10 runs just before, leaving out those with an alarm or a confirmed change.
+    let flagged = |x: &history::judge::Judgement| {
+        x.alarm() || x.changes.iter().any(|c| c.persists == Some(true))
+    };
+    let want: Vec<String> = j[..29]
+        .iter()
+        .filter(|x| !flagged(x))
+        .map(|x| x.run_id.clone())
+        .collect();
+    assert_eq!(j[29].baseline_runs, want[want.len() - 10..].to_vec());
 }

@@ -46,6 +46,7 @@ fn run(i: usize) -> RunRecord {
             unit: "degC".into(),
             value: 20.0 + i as f64,
         }],
+        correlations: vec![],
     }
 }
 

@@ -5,20 +5,23 @@
 //! excitation; parameter values in each variable's display unit (`unit` field, e.g. `MPa/um`).
 //! Every number is finite; values that do not exist are `null`.
 
+use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
 /// Schema identifier written into every report.
 pub const SCHEMA: &str = "ident.report/1";
 
 /// A whole report.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct Report {
     /// Always [`SCHEMA`].
+    #[schemars(extend("const" = "ident.report/1"))]
     pub schema: String,
     /// Headline, e.g. `"FWD-32J nightly identification"`.
     pub title: String,
     /// When the report was made (UTC, ISO 8601 `YYYY-MM-DDTHH:MM:SSZ`).
+    #[schemars(regex(pattern = r"^[0-9]{4}-[0-9]{2}-[0-9]{2}T[0-9]{2}:[0-9]{2}:[0-9]{2}Z$"))]
     pub created_utc: String,
     /// Where the data and models came from.
     pub source: Source,
@@ -45,10 +48,11 @@ pub struct Report {
 }
 
 /// Provenance.
-#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct Source {
     /// `demo`, `replay`, `nightly`, `identify` or `diagnose`.
+    #[schemars(extend("enum" = ["demo", "replay", "nightly", "identify", "diagnose"]))]
     pub workflow: String,
     /// Session recording (MCAP) the measurement came from, if any.
     pub session: Option<String>,
@@ -65,7 +69,7 @@ pub struct Source {
 }
 
 /// Outcome of the run.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct Status {
     /// `ok`, `alarm` (a drift alarm) or `failure`.
@@ -75,7 +79,7 @@ pub struct Status {
 }
 
 /// Outcome of a run; nightly exits 0, 1, 2 for these.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
 #[serde(rename_all = "lowercase")]
 pub enum Outcome {
     /// Nothing to report.
@@ -98,7 +102,7 @@ impl Outcome {
 }
 
 /// One characteristic: measured points and model curves.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct CharacteristicReport {
     /// `"table u1 displacement"`.
@@ -128,7 +132,7 @@ pub struct CharacteristicReport {
 }
 
 /// The model's curve at one stage.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct StageCurve {
     /// `initial`, `identified` or `diagnosed`.
@@ -150,7 +154,7 @@ pub struct StageCurve {
 }
 
 /// A model curve on a dense frequency grid.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct DenseCurve {
     /// Frequencies (Hz), strictly increasing: [`crate::build::DENSE_LINES`] log-spaced lines
@@ -165,7 +169,7 @@ pub struct DenseCurve {
 }
 
 /// The natural frequencies of one stage's model inside the measured band.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct StageModes {
     /// `identified` or `diagnosed`.
@@ -177,7 +181,7 @@ pub struct StageModes {
 }
 
 /// One mode of a model (`rfe::modes::complex`).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct NaturalMode {
     /// 1-based number among all the model's modes, ascending in frequency (rigid-body modes
@@ -193,8 +197,51 @@ pub struct NaturalMode {
 /// writes as its table, so the two cannot drift apart.
 pub use identify::report::Row as Parameter;
 
+/// The JSON Schema of a [`Parameter`] row. The row type lives in `identify`, which does not
+/// depend on schemars; this shape is checked against it by a round-trip test
+/// (`parameter_schema_matches_the_row`), so a field added to the row fails the build's tests.
+#[derive(Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+#[schemars(title = "Parameter")]
+pub struct ParameterSchema {
+    /// Variable name.
+    pub variable: String,
+    /// SDE names (`"2-10, 13-17"`).
+    pub sdes: String,
+    /// Parameter name (`kn`, `psi_n`, ...).
+    pub parameter: String,
+    /// Display unit (`MPa/um`, `N/um`, `-`).
+    pub unit: String,
+    /// Initial value.
+    pub initial: f64,
+    /// Identified value.
+    pub identified: f64,
+    /// Standard error (Cramér-Rao), `null` when undetermined.
+    pub std_error: Option<f64>,
+    /// Standard error / |identified| (`null` when identified = 0 or undetermined).
+    pub variability: Option<f64>,
+    /// `"lower"` / `"upper"` when the estimate is at a bound.
+    #[schemars(extend("enum" = ["lower", "upper", null]))]
+    pub at_bound: Option<String>,
+}
+
+/// The JSON Schema of the report, generated from [`Report`] (docs/report.schema.json is this,
+/// pretty-printed; `IDENT_BLESS=1 cargo test -p report --test schema` rewrites it).
+pub fn json_schema() -> serde_json::Value {
+    let mut s = serde_json::Value::from(schemars::schema_for!(Report));
+    if let Some(o) = s.as_object_mut() {
+        o.insert("$id".into(), SCHEMA.into());
+        o.insert("title".into(), SCHEMA.into());
+        o.insert(
+            "description".into(),
+            "An ident identification report (docs/report-json.md), generated from report::document::Report. Frequencies in Hz, amplitudes in SI for the model's declared excitation, parameter values in each row's display unit.".into(),
+        );
+    }
+    s
+}
+
 /// The identification's outcome.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct IdentificationSummary {
     /// Minimizer.
@@ -216,6 +263,7 @@ pub struct IdentificationSummary {
     /// 2J / (m − n).
     pub reduced_chi2: f64,
     /// The table.
+    #[schemars(with = "Vec<ParameterSchema>")]
     pub parameters: Vec<Parameter>,
     /// Correlation matrix in table order (`null` where undetermined).
     pub correlation: Vec<Vec<Option<f64>>>,
@@ -224,7 +272,7 @@ pub struct IdentificationSummary {
 }
 
 /// A poorly identifiable direction.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct WeakDirection {
     /// `"0.71 kn_2 − 0.70 kn_3"`.
@@ -234,7 +282,7 @@ pub struct WeakDirection {
 }
 
 /// The diagnosis section: filled from `identify::diagnose` by [`crate::build::diagnosis`].
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct Diagnosis {
     /// Candidate effects ranked by their score statistic, strongest first.
@@ -253,6 +301,7 @@ pub struct Diagnosis {
     /// final (extended) fit with its Cramér-Rao error there, `initial` the superseded first fit's
     /// value. Empty when nothing was added: the identification's table is final.
     #[serde(default)]
+    #[schemars(with = "Vec<ParameterSchema>")]
     pub final_parameters: Vec<Parameter>,
     /// Whether the final model explains the data to the noise level.
     pub explained: bool,
@@ -263,7 +312,7 @@ pub struct Diagnosis {
 }
 
 /// A candidate effect or refit diagnosis could not evaluate.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct NotTried {
     /// What.
@@ -273,7 +322,7 @@ pub struct NotTried {
 }
 
 /// A candidate undeclared effect.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct Candidate {
     /// Diagnosis round (1-based): each round ranks the candidates at the current fit and adds at
@@ -305,7 +354,7 @@ pub struct Candidate {
 }
 
 /// How well a model fits the data.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct FitQuality {
     /// Criterion J.
@@ -323,7 +372,7 @@ pub struct FitQuality {
 }
 
 /// A label and a number.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct LabelledValue {
     /// Label.
@@ -334,7 +383,7 @@ pub struct LabelledValue {
 
 /// Relative band sensitivity MIr (dimensionless) of each characteristic to each identified
 /// parameter.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct SensitivityMap {
     /// Band (Hz): the measured lines from `band_hz[0]` to `band_hz[1]`.
@@ -348,7 +397,7 @@ pub struct SensitivityMap {
 }
 
 /// Parameter history across runs, compared with a baseline run.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct Drift {
     /// Alarm threshold in baseline standard errors.
@@ -362,7 +411,7 @@ pub struct Drift {
 }
 
 /// The history of one parameter.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct DriftSeries {
     /// Variable name.

@@ -53,6 +53,11 @@ use std::path::{Path, PathBuf};
 
 pub use document::{Diagnosis, Drift, Outcome, Report, SCHEMA};
 
+/// A drawing failed (plotters' SVG backend). Defined here, below the modules that draw
+/// ([`plot`], [`picture`]), so that the report's data ([`document`]) → picture and plot →
+/// document form no circle.
+pub type DrawError = plotters::drawing::DrawingAreaErrorKind<std::io::Error>;
+
 /// Why a report could not be made or written.
 #[derive(Debug, thiserror::Error)]
 #[non_exhaustive]
@@ -71,7 +76,7 @@ pub enum ReportError {
         /// Which chart.
         chart: String,
         /// Plotters' error.
-        source: plot::DrawError,
+        source: DrawError,
     },
     /// A file could not be written (disk full, permissions).
     #[error("cannot write {path}: {source} (nothing was replaced: free space or fix permissions and re-run)")]

@@ -15,9 +15,10 @@ use plotters::prelude::*;
 use plotters::style::text_anchor::{HPos, Pos, VPos};
 use rfe::model::{Body, SdeKind, DOF_NAMES};
 use rfe::{modes, Model};
+use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
-use crate::plot::DrawError;
+use crate::DrawError;
 use crate::ReportError;
 
 /// At most this many modes in the band are drawn (and stored); the rest are counted in
@@ -34,7 +35,7 @@ pub const MIN_SIDE_FRACTION: f64 = 0.05;
 pub const MIN_SIDE: f64 = 0.01;
 
 /// What the report needs to draw the model and its modes (SI units, global frame).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct ModelPicture {
     /// The drawn model's name (the final model: after diagnosis, with the accepted effects).
@@ -56,7 +57,7 @@ pub struct ModelPicture {
 }
 
 /// A body drawn as the uniform box with its mass and principal central inertias.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct BodyBox {
     /// Body name.
@@ -76,7 +77,7 @@ pub struct BodyBox {
 }
 
 /// An SDE's place and connections.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct SdeMark {
     /// SDE name.
@@ -94,7 +95,7 @@ pub struct SdeMark {
 }
 
 /// A harmonic point force of the excitation.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct Exciter {
     /// Index into `bodies`.
@@ -106,7 +107,7 @@ pub struct Exciter {
 }
 
 /// A measured characteristic: a DOF of a body's centre of mass.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct OutputMark {
     /// `"table u1 displacement"`.
@@ -120,7 +121,7 @@ pub struct OutputMark {
 }
 
 /// One mode of the model.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct ModeShape {
     /// Natural frequency (Hz).

@@ -36,7 +36,7 @@ const SERIES: [RGBColor; 10] = [
 const FONT: &str = "sans-serif";
 
 /// What drawing on the SVG canvas can fail with.
-pub type DrawError = DrawingAreaErrorKind<std::io::Error>;
+pub use crate::DrawError;
 
 fn err(chart: &str) -> impl Fn(DrawError) -> ReportError + '_ {
     move |source| ReportError::Plot {

@@ -7,7 +7,7 @@ use std::process::ExitCode;
 
 use rfe::csv_text::CsvText;
 use anyhow::Context;
-use history::judge::{judge_series, BaselineWindow, JudgeConfig};
+use history::judge::{judge_series, BaselineWindow, JudgeConfig, Judgement, Verdict};
 use history::store::Store;
 
 /// Arguments of `ident history`.
@@ -53,7 +53,8 @@ impl Judging {
 enum Action {
     /// One line per run: id, time, model hash, outcome, parameters, reduced χ², effects.
     List,
-    /// One parameter over the runs: value, standard error, normal, scatter, alarms.
+    /// One parameter over the runs: value, standard error, normal, scatter, every chart's
+    /// statistic and limit, alarms, the change followed, and why a run was not judged.
     Series {
         /// Variable name (as in the report's table).
         variable: String,
@@ -87,7 +88,7 @@ pub fn run(a: HistoryArgs) -> anyhow::Result<ExitCode> {
         Action::Import { reports } => {
             let mut store = Store::open(db)?;
             let s = history::import::import_reports(&mut store, &reports)?;
-            for m in &s.skipped {
+            for m in s.skipped.iter().chain(&s.warnings) {
                 eprintln!("warning: {m}");
             }
             println!(
@@ -125,34 +126,12 @@ pub fn run(a: HistoryArgs) -> anyhow::Result<ExitCode> {
                 db.display()
             );
             let js = judge_series(&runs, &judging.config()?);
-            println!("run\ttime_utc\tvalue\tstd_error\tunit\tnormal\tscatter\tdeviation_scatters\talarms");
+            println!("run\ttime_utc\tvalue\tstd_error\tunit\tnormal\tscatter\tdeviation_scatters\tshewhart_limit\tcusum_up\tcusum_down\tcusum_limit\tewma\tewma_limit\tt2\tt2_limit\talarms\tchange\tnot_judged");
             for (r, j) in runs.iter().zip(&js) {
                 let Some(p) = r.parameter(&variable) else {
                     continue;
                 };
-                let pj = j.parameters.iter().find(|q| q.variable == variable);
-                let alarms: Vec<&str> = j
-                    .alarms
-                    .iter()
-                    .filter(|x| x.subject == variable || x.subject == "parameter vector")
-                    .map(|x| x.rule.as_str())
-                    .collect();
-                let sig = |v: f64| rfe::display::sig(v, 5);
-                println!(
-                    "{}\t{}\t{}\t{}\t{}\t{}\t{}\t{}\t{}",
-                    r.run_id,
-                    r.time_utc,
-                    sig(p.in_unit()),
-                    p.std_error
-                        .map(|s| sig(s / p.unit_factor))
-                        .unwrap_or_default(),
-                    p.unit,
-                    pj.map(|q| sig(q.centre)).unwrap_or_default(),
-                    pj.map(|q| sig(q.scatter)).unwrap_or_default(),
-                    pj.map(|q| format!("{:+.2}", q.standardized))
-                        .unwrap_or_default(),
-                    alarms.join(",")
-                );
+                println!("{}", series_line(r, p, j, &variable));
             }
         }
         Action::Csv { out } => {
@@ -205,4 +184,75 @@ pub fn run(a: HistoryArgs) -> anyhow::Result<ExitCode> {
         }
     }
     Ok(ExitCode::SUCCESS)
+}
+
+/// One run of a parameter's series: its value, every chart's statistic beside its limit, the
+/// alarms and open change naming it, or why it was not judged.
+fn series_line(
+    r: &history::record::RunRecord,
+    p: &history::record::ParameterRecord,
+    j: &Judgement,
+    variable: &str,
+) -> String {
+    let sig = |v: f64| rfe::display::sig(v, 5);
+    let f2 = |v: f64| format!("{v:.2}");
+    let pj = j.parameters.iter().find(|q| q.variable == variable);
+    let alarms: Vec<&str> = j
+        .alarms
+        .iter()
+        .filter(|x| x.subject == variable || x.subject == history::judge::VECTOR)
+        .map(|x| x.rule.as_str())
+        .collect();
+    let change = j
+        .changes
+        .iter()
+        .find(|c| c.subject == variable)
+        .map(|c| {
+            format!(
+                "since {} ({}; level {:+.1}×)",
+                c.change_point_run,
+                match c.persists {
+                    Some(true) => "persists",
+                    Some(false) => "not confirmed",
+                    None => "new",
+                },
+                c.level
+            )
+        })
+        .unwrap_or_default();
+    let why = match &j.verdict {
+        Verdict::NotJudged(why) => why.clone(),
+        Verdict::Judged => j
+            .not_judged
+            .iter()
+            .find(|n| n.variable == variable)
+            .map(|n| n.why.clone())
+            .unwrap_or_default(),
+    };
+    let col =
+        |g: &dyn Fn(&history::judge::ParameterJudgement) -> String| pj.map(g).unwrap_or_default();
+    [
+        r.run_id.clone(),
+        r.time_utc.clone(),
+        sig(p.in_unit()),
+        p.std_error
+            .map(|s| sig(s / p.unit_factor))
+            .unwrap_or_default(),
+        p.unit.clone(),
+        col(&|q| sig(q.centre)),
+        col(&|q| sig(q.scatter)),
+        col(&|q| format!("{:+.2}", q.standardized)),
+        col(&|q| f2(q.shewhart_limit)),
+        col(&|q| f2(q.cusum[0])),
+        col(&|q| f2(q.cusum[1])),
+        col(&|q| f2(q.cusum_limit)),
+        col(&|q| format!("{:+.2}", q.ewma)),
+        col(&|q| f2(q.ewma_limit)),
+        j.t2.map(|[t, _]| format!("{t:.1}")).unwrap_or_default(),
+        j.t2.map(|[_, l]| format!("{l:.1}")).unwrap_or_default(),
+        alarms.join(","),
+        change,
+        why,
+    ]
+    .join("\t")
 }

@@ -261,11 +261,11 @@ impl Config {
         SteppedSine::log(s.from_hz, s.to_hz, s.points, s.force_n)
     }
 
-    fn baseline(&self) -> report::drift::Baseline {
+    fn baseline(&self) -> history::judge::crlb::Baseline {
         if self.drift.baseline == "first" {
-            report::drift::Baseline::First
+            history::judge::crlb::Baseline::First
         } else {
-            report::drift::Baseline::Folder(self.drift.baseline.clone())
+            history::judge::crlb::Baseline::Run(self.drift.baseline.clone())
         }
     }
 }
@@ -551,11 +551,6 @@ fn job(
         analysis.identification.criterion,
         analysis.identification.stop.describe()
     ));
-    // History: earlier runs' reports (this run's folder has none yet).
-    let (history, hist_msgs) = report::drift::read_history(&cfg.reports);
-    for m in &hist_msgs {
-        log.line(m);
-    }
     // The drift needs this run's table and time: build once without, compare, then write with it.
     let probe = report::build::build({
         let mut i =
@@ -563,8 +558,11 @@ fn job(
         i.sensitivity = false;
         i
     })?;
-    let mut drift = report::drift::compare(&history, &probe, &cfg.baseline(), cfg.drift.k_sigma)
-        .map_err(|e| anyhow::anyhow!("[drift] baseline: {e}"))?;
+    // History: earlier runs' reports (this run's folder has none yet), read as run records.
+    let (mut drift, hist_msgs) = crlb_drift(cfg, dir, &probe)?;
+    for m in &hist_msgs {
+        log.line(m);
+    }
     let mut messages: Vec<String> = notes.into_iter().chain(hist_msgs).collect();
     // The run history: this run as a record, judged against the baseline window.
     let mut recorded = None;
@@ -584,6 +582,19 @@ fn job(
                 log.line(&judgement.summary());
                 messages.push(judgement.summary());
                 messages.extend(judgement.alarms.iter().map(|a| a.message.clone()));
+                messages.extend(
+                    judgement
+                        .changes
+                        .iter()
+                        .filter(|c| c.alarm_run != judgement.run_id)
+                        .map(|c| format!("drift: {}", c.message)),
+                );
+                messages.extend(
+                    judgement
+                        .not_judged
+                        .iter()
+                        .map(|n| format!("drift: {} not judged: {}", n.variable, n.why)),
+                );
                 messages.extend(judgement.notes.iter().map(|n| format!("drift: {n}")));
                 recorded = Some((judgement, record, store));
             }
@@ -663,6 +674,35 @@ fn now_unix() -> i64 {
         .unwrap_or(0)
 }
 
+/// The report's drift section: this run against the earlier reports in `reports`, in
+/// Cramér-Rao errors of the difference (`history::judge::crlb`), with the messages of reports
+/// that could not be read.
+fn crlb_drift(
+    cfg: &Config,
+    dir: &Path,
+    probe: &report::Report,
+) -> anyhow::Result<(Option<report::Drift>, Vec<String>)> {
+    let (earlier, summary) = match history::import::runs_from_reports(&cfg.reports) {
+        Ok(x) => x,
+        Err(e) => return Ok((None, vec![format!("history: {e}")])),
+    };
+    let run_id = dir
+        .file_name()
+        .map(|f| f.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    let current = history::import::run_from_document(probe, &dir.join("report.json"), &run_id)?;
+    let earlier: Vec<_> = earlier.into_iter().filter(|r| r.run_id != run_id).collect();
+    let drift =
+        history::judge::crlb::compare(&earlier, &current, &cfg.baseline(), cfg.drift.k_sigma)
+            .map_err(|e| anyhow::anyhow!("[drift] baseline: {e}"))?;
+    let messages = summary
+        .skipped
+        .iter()
+        .map(|m| format!("history: {m} of the drift comparison"))
+        .collect();
+    Ok((drift, messages))
+}
+
 /// Opens the history, makes this run's record (named after its report folder) and judges it
 /// against the earlier runs. The record is appended by the caller once the report is written.
 fn judge_from_history(
@@ -686,11 +726,7 @@ fn judge_from_history(
         .file_name()
         .map(|f| f.to_string_lossy().into_owned())
         .unwrap_or_default();
-    let mut record = history::import::run_from_report_text(
-        &serde_json::to_string(probe)?,
-        &dir.join("report.json"),
-        &run_id,
-    )?;
+    let mut record = history::import::run_from_document(probe, &dir.join("report.json"), &run_id)?;
     let model = std::fs::read(&cfg.model)
         .with_context(|| format!("cannot read the model {}", cfg.model.display()))?;
     record.model_hash = history::record::model_hash(&model);

@@ -68,8 +68,13 @@ pub fn textfile(s: &RunStatus<'_>) -> String {
         );
         metric(
             "ident_nightly_drift_alarms",
-            "Drift alarms of the last run (all rules).",
+            "New drift alarms of the last run (all rules; a change is alarmed once).",
             &[(String::new(), j.alarms.len() as f64)],
+        );
+        metric(
+            "ident_nightly_drift_open_changes",
+            "Changes followed after an earlier alarm (parameters, the parameter vector, new effects).",
+            &[(String::new(), j.changes.len() as f64)],
         );
         if let Some([t2, limit]) = j.t2 {
             metric(

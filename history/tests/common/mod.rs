@@ -1,1 +1,2 @@
+pub mod drift_sim;
 pub mod nights;

@@ -155,6 +155,7 @@ pub fn simulate(sc: &Scenario, seed: u64) -> Vec<Night> {
                 unit: "degC".into(),
                 value: temp + 0.1 * normal(),
             }],
+            correlations: vec![],
         };
         out.push(Night { record, changed });
     }

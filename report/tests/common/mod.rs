@@ -191,25 +191,48 @@ pub fn full_report(f: &Fixture, shift: f64) -> Report {
             relative_std: Some(0.8),
         });
     }
-    let history: Vec<report::drift::Run> = (0..3)
-        .map(|k| {
-            let mut params = r.identification.parameters.clone();
-            // Earlier runs: this run's values moved back by `shift` standard errors of the difference.
-            if k == 0 {
-                let p = &mut params[0];
-                let s = p.std_error.unwrap();
-                p.identified -= shift * (2.0f64).sqrt() * s;
-            }
-            report::drift::Run {
-                created_utc: format!("2025-01-0{}T02:00:00Z", k + 1),
-                folder: format!("run{k}").into(),
-                parameters: params,
-            }
+    // The drift section as the history judges it (history::judge::crlb): three earlier runs,
+    // the first moved back by `shift` standard errors of the difference in its first parameter.
+    let runs: Vec<String> = (1..=3)
+        .map(|k| format!("2025-01-0{k}T02:00:00Z"))
+        .chain([r.created_utc.clone()])
+        .collect();
+    let parameters = r
+        .identification
+        .parameters
+        .iter()
+        .enumerate()
+        .map(|(i, p)| {
+            let s = p.std_error.unwrap();
+            let first = if i == 0 {
+                p.identified - shift * (2.0f64).sqrt() * s
+            } else {
+                p.identified
+            };
+            let mut series = report::document::DriftSeries {
+                variable: p.variable.clone(),
+                unit: p.unit.clone(),
+                values: vec![
+                    Some(first),
+                    Some(p.identified),
+                    Some(p.identified),
+                    Some(p.identified),
+                ],
+                std_errors: vec![Some(s); 4],
+                deviation_sigma: None,
+                alarm: false,
+            };
+            series.deviation_sigma = report::drift::deviation(&series, 0, 3);
+            series.alarm = series.deviation_sigma.is_some_and(|d| d.abs() > 3.0);
+            series
         })
         .collect();
-    let d = report::drift::compare(&history, &r, &report::drift::Baseline::First, 3.0)
-        .unwrap()
-        .unwrap();
+    let d = report::Drift {
+        k_sigma: 3.0,
+        runs,
+        baseline: 0,
+        parameters,
+    };
     report::drift::attach(&mut r, d);
     r
 }

@@ -1,0 +1,47 @@
+//! docs/report.schema.json is generated from the report type: this test fails when the file
+//! differs from `report::document::json_schema()`. Rewrite it with
+//! `IDENT_BLESS=1 cargo test -p report --test schema`.
+
+#![allow(clippy::unwrap_used)]
+
+use std::path::PathBuf;
+
+fn schema_file() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../docs/report.schema.json")
+}
+
+#[test]
+fn the_schema_file_is_the_generated_schema() {
+    let generated = serde_json::to_string_pretty(&report::document::json_schema()).unwrap() + "\n";
+    if std::env::var_os("IDENT_BLESS").is_some() {
+        std::fs::write(schema_file(), &generated).unwrap();
+    }
+    let on_disk = std::fs::read_to_string(schema_file()).unwrap();
+    assert!(
+        on_disk == generated,
+        "docs/report.schema.json differs from the schema generated from report::document::Report: run `IDENT_BLESS=1 cargo test -p report --test schema` and commit the file"
+    );
+}
+
+#[test]
+fn parameter_schema_matches_the_row() {
+    // The schema-only mirror of identify's table row must read every row and write it back
+    // unchanged (deny_unknown_fields both ways).
+    let row = report::document::Parameter {
+        variable: "kn 2".into(),
+        sdes: "2-10".into(),
+        parameter: "kn".into(),
+        unit: "MPa/um".into(),
+        initial: 0.05,
+        identified: 0.047,
+        std_error: Some(0.001),
+        variability: Some(0.02),
+        at_bound: Some("lower".into()),
+    };
+    let v = serde_json::to_value(&row).unwrap();
+    let mirror: report::document::ParameterSchema = serde_json::from_value(v.clone()).unwrap();
+    assert_eq!(serde_json::to_value(&mirror).unwrap(), v);
+    let back: report::document::Parameter =
+        serde_json::from_value(serde_json::to_value(&mirror).unwrap()).unwrap();
+    assert_eq!(back, row);
+}
