@@ -28,8 +28,8 @@ mod blind;
 mod machine;
 
 use diagnose::generate;
-use rfe::frf;
 use identify::{self as idn, data};
+use rfe::frf;
 use rfe::lowrank;
 
 /// One size's figures.

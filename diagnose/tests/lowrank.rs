@@ -17,15 +17,15 @@ use diagnose::lowrank::Shared;
 use diagnose::problem::Problem;
 use diagnose::{generate, Effect};
 use identify::optimize::Residuals as _;
+use identify::synthetic::log_lines;
 use identify::{data, Options};
 use nalgebra::DVector;
+use rand::rngs::StdRng;
+use rand::{Rng, SeedableRng};
 use rfe::frf::{self, Method};
-use identify::synthetic::log_lines;
 use rfe::lowrank::Base;
 use rfe::model::{ParamName, ParamRef};
 use rfe::C64;
-use rand::rngs::StdRng;
-use rand::{Rng, SeedableRng};
 
 /// Largest difference over the lines relative to the largest full-solve output, worst output.
 fn rel_error(a: &[Vec<C64>], full: &frf::Response) -> f64 {
@@ -198,49 +198,49 @@ fn no_change_is_an_empty_update() {
     assert!(rel_error(&base.changed_response(&u).unwrap(), &full) < 1e-12);
 }
 
-    /// The screen's low-rank residuals are the full solve's, for a candidate of each kind at a
-    /// nonzero size on top of the current fit.
-    #[test]
-    fn low_rank_residuals_are_the_full_solves() {
-        let m = machine::machine(5, 21).unwrap();
-        let case = machine::case(&m, 60, (500.0, 0.01), 0.1, 21).unwrap();
-        let obs = data::validate(&case.data, &m.model, "test").unwrap();
-        let opts = Options::default();
-        let (lo, hi) = machine::band(&m.model).unwrap();
-        let pc = Problem::new(&m.model, &case.vars, &obs, &opts, Vec::new(), hi);
-        let u = DVector::from_iterator(pc.nx(), case.vars.vars.iter().map(|v| v.initial / v.scale));
-        let shared = Shared::new(&pc, &u).unwrap();
-        let labels: Vec<String> = (0..3).map(|o| format!("#{o}")).collect();
-        let x = case.vars.initial();
-        let library = generate::candidates(&m.model, &case.vars, &x, &labels, lo, hi);
-        let mut kinds: Vec<&str> = Vec::new();
-        for cand in &library {
-            if kinds.contains(&cand.kind()) {
-                continue;
-            }
-            kinds.push(cand.kind());
-            let mut p = Problem::new(&m.model, &case.vars, &obs, &opts, vec![cand.clone()], hi);
-            let g: Vec<f64> = p
-                .params
-                .iter()
-                .enumerate()
-                .map(|(i, q)| {
-                    if i == 0 {
-                        (q.nested + q.scale).clamp(q.lower, q.upper) / q.scale
-                    } else {
-                        q.initial / q.scale
-                    }
-                })
-                .collect();
-            let uc = DVector::from_iterator(u.len() + g.len(), u.iter().copied().chain(g));
-            let fast = shared.residuals(&p, &uc).unwrap().unwrap();
-            let full = p.eval(&uc, false).unwrap().0;
-            let err = (&fast - &full).norm() / full.norm();
-            assert!(
-                err < 1e-9,
-                "{}: relative difference {err:.2e}",
-                cand.describe()
-            );
+/// The screen's low-rank residuals are the full solve's, for a candidate of each kind at a
+/// nonzero size on top of the current fit.
+#[test]
+fn low_rank_residuals_are_the_full_solves() {
+    let m = machine::machine(5, 21).unwrap();
+    let case = machine::case(&m, 60, (500.0, 0.01), 0.1, 21).unwrap();
+    let obs = data::validate(&case.data, &m.model, "test").unwrap();
+    let opts = Options::default();
+    let (lo, hi) = machine::band(&m.model).unwrap();
+    let pc = Problem::new(&m.model, &case.vars, &obs, &opts, Vec::new(), hi);
+    let u = DVector::from_iterator(pc.nx(), case.vars.vars.iter().map(|v| v.initial / v.scale));
+    let shared = Shared::new(&pc, &u).unwrap();
+    let labels: Vec<String> = (0..3).map(|o| format!("#{o}")).collect();
+    let x = case.vars.initial();
+    let library = generate::candidates(&m.model, &case.vars, &x, &labels, lo, hi);
+    let mut kinds: Vec<&str> = Vec::new();
+    for cand in &library {
+        if kinds.contains(&cand.kind()) {
+            continue;
         }
-        assert!(kinds.len() >= 7, "{kinds:?}");
+        kinds.push(cand.kind());
+        let mut p = Problem::new(&m.model, &case.vars, &obs, &opts, vec![cand.clone()], hi);
+        let g: Vec<f64> = p
+            .params
+            .iter()
+            .enumerate()
+            .map(|(i, q)| {
+                if i == 0 {
+                    (q.nested + q.scale).clamp(q.lower, q.upper) / q.scale
+                } else {
+                    q.initial / q.scale
+                }
+            })
+            .collect();
+        let uc = DVector::from_iterator(u.len() + g.len(), u.iter().copied().chain(g));
+        let fast = shared.residuals(&p, &uc).unwrap().unwrap();
+        let full = p.eval(&uc, false).unwrap().0;
+        let err = (&fast - &full).norm() / full.norm();
+        assert!(
+            err < 1e-9,
+            "{}: relative difference {err:.2e}",
+            cand.describe()
+        );
     }
+    assert!(kinds.len() >= 7, "{kinds:?}");
+}

@@ -9,7 +9,9 @@
 #[path = "../../identify/tests/common/mod.rs"]
 mod common;
 
-use identify::{self as idn, data, synthetic, variables, Criterion, FitKind, JacobianMode, NoiseChoice, Options};
+use identify::{
+    self as idn, data, synthetic, variables, Criterion, FitKind, JacobianMode, NoiseChoice, Options,
+};
 use rfe::frf::{response_params, Method};
 use rfe::model::{Characteristic, Model, Param, Quantity};
 use rfe::textbook;

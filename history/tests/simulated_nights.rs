@@ -2,14 +2,18 @@
 //! scatter (±1-2 % in every stiffness), a slow wear trend in joint 1 from night 40 (−0.1 % per
 //! night, inside the thermal band for 10 nights) and a −20 % step in joint 2 at night 65, identified with ident's fit and judged from the
 //! history (first 30 nights as baseline, temperature compensated). Asserts, per seed: the step
-//! flagged on its night, the trend within 10 nights of its start, and at most 1 false alarm per
-//! 1000 parameter-nights over all seeds; and that today's k_sigma rule raises far more.
+//! flagged on its night, the trend within 10 nights of its start, and a false-alarm count over all
+//! seeds that does not reject the design rate of 1 per 1000 parameter-nights (Poisson, at 1 %: a
+//! point estimate from ~1300 parameter-nights, about one expected alarm, cannot show the rate
+//! itself — `cargo run --release -p history --example power` measures it over 20 000); and that
+//! the k_sigma rule raises far more.
 
 #![allow(clippy::unwrap_used, clippy::expect_used, dead_code)]
 
 mod common;
 use common::nights::{self, Figures, Scenario};
 use history::judge::{BaselineWindow, JudgeConfig};
+use statrs::distribution::{DiscreteCDF, Poisson};
 
 /// The history's rules as a nightly would be configured: first 30 nights, temperature compensated.
 pub fn config() -> JudgeConfig {
@@ -58,7 +62,19 @@ fn step_on_its_night_trend_within_ten_nights_few_false_alarms() {
         old.normal_parameter_nights
     );
     assert!(total.normal_parameter_nights > 500);
-    assert!(rate <= 1e-3, "false alarm rate {rate}");
+    let expected = 1e-3 * total.normal_parameter_nights as f64;
+    let p = if total.false_alarms == 0 {
+        1.0
+    } else {
+        Poisson::new(expected)
+            .unwrap()
+            .sf(total.false_alarms as u64 - 1)
+    };
+    assert!(
+        p >= 0.01,
+        "false alarm rate {rate}: {} alarms where 1 per 1000 expects {expected:.2} (p = {p:.1e})",
+        total.false_alarms
+    );
     assert!(
         old_rate > 0.1,
         "the k_sigma rule should be swamped by normal thermal scatter: {old_rate}"

@@ -5,7 +5,10 @@
 // Test and benchmark helpers unwrap: a panic with its message is the failure report.
 #![allow(clippy::unwrap_used)]
 
-use identify::{self as idn, data, report, variables, AtBound, Criterion, FitKind, JacobianMode, NoiseChoice, NoiseSource, Optimizer, Options, Settings, StopReason};
+use identify::{
+    self as idn, data, report, variables, AtBound, Criterion, FitKind, JacobianMode, NoiseChoice,
+    NoiseSource, Optimizer, Options, Settings, StopReason,
+};
 use rand::rngs::StdRng;
 use rand::SeedableRng;
 use rand_distr::{Distribution, StandardNormal};

@@ -5,10 +5,10 @@
 use std::path::PathBuf;
 use std::process::ExitCode;
 
-use rfe::csv_text::CsvText;
 use anyhow::Context;
 use history::judge::{judge_series, BaselineWindow, JudgeConfig, Judgement, Verdict};
 use history::store::Store;
+use rfe::csv_text::CsvText;
 
 /// Arguments of `ident history`.
 #[derive(clap::Args)]

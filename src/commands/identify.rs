@@ -6,7 +6,10 @@ use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 use anyhow::Context;
-use identify::{self as idn, data, report, variables, FitKind, JacobianMode, NoiseChoice, Optimizer, Options, Settings};
+use identify::{
+    self as idn, data, report, variables, FitKind, JacobianMode, NoiseChoice, Optimizer, Options,
+    Settings,
+};
 
 use super::{emit, load_model, MethodArg};
 use crate::pipeline::{build_report, ReportContext};

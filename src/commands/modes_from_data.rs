@@ -166,7 +166,7 @@ fn load_uff(path: &Path, kind: Option<FrfKind>) -> anyhow::Result<(ModalData, La
             "{origin}: the FRFs do not say whether they are receptance, mobility or accelerance (ordinate data type not 8/11/12): give --kind"
         ),
     };
-    Ok(modal::arrange(frfs, freqs, kind).with_context(|| origin.clone())?)
+    modal::arrange(frfs, freqs, kind).with_context(|| origin.clone())
 }
 
 /// Runs `ident modes-from-data`.

@@ -13,9 +13,9 @@
 use std::path::PathBuf;
 use std::process::ExitCode;
 
-use rfe::csv_text::CsvText;
 use acquire::analysis::{characteristics, AnalysisOptions, SessionAnalysis};
 use anyhow::Context;
+use rfe::csv_text::CsvText;
 
 /// Arguments of `ident process`.
 #[derive(clap::Args)]

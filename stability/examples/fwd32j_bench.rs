@@ -28,11 +28,9 @@ fn main() {
     let cut_path = root.join("configs/cuts/fwd32j-face-milling.toml");
     let model = rfe::modelfile::load(&model_path).unwrap().model;
     let cut = stability::cut::load(&cut_path).unwrap();
-    let mut vars = identify::variables::load(
-        &root.join("configs/identification/fwd32j.toml"),
-        &model,
-    )
-    .unwrap();
+    let mut vars =
+        identify::variables::load(&root.join("configs/identification/fwd32j.toml"), &model)
+            .unwrap();
     // The variables at the model's values, with 5 % standard errors (the timing does not depend
     // on the values).
     for v in &mut vars.vars {

@@ -14,8 +14,8 @@ use rand::rngs::StdRng;
 use rand::SeedableRng;
 use rand_distr::{Distribution, StandardNormal};
 
-use rfe::frf::Method;
 use identify::variables::Variables;
+use rfe::frf::Method;
 
 use crate::cut::Cut;
 use crate::lobes::{self, BoundaryPoint, Branches, Process};

@@ -57,8 +57,8 @@ pub mod sd;
 
 use nalgebra::DMatrix;
 
-use rfe::frf::{Method, SolveError};
 use identify::variables::Variables;
+use rfe::frf::{Method, SolveError};
 use rfe::model::Model;
 
 use crate::bands::Band;

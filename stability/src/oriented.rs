@@ -11,9 +11,11 @@
 
 use nalgebra::Vector3;
 
-use rfe::frf::{self, Method, ModalSolver};
 use identify::variables::Variables;
-use rfe::model::{ Characteristic, Excitation, Model, Param, PointForce, PointOutput, Quantity, Reference, };
+use rfe::frf::{self, Method, ModalSolver};
+use rfe::model::{
+    Characteristic, Excitation, Model, Param, PointForce, PointOutput, Quantity, Reference,
+};
 use rfe::system::System;
 use rfe::C64;
 

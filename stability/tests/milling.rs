@@ -196,15 +196,10 @@ fn the_modal_model_of_an_rfe_model_matches_its_frf_at_resonance() {
     for m in axial {
         let f = [m.freq_hz];
         let ours = modal.frf(&f).phi[0][0][0];
-        let rfe = stability::oriented::oriented_frf(
-            &placement,
-            &cut,
-            &f,
-            None,
-            rfe::frf::Method::Direct,
-        )
-        .unwrap()
-        .phi[0][0][0];
+        let rfe =
+            stability::oriented::oriented_frf(&placement, &cut, &f, None, rfe::frf::Method::Direct)
+                .unwrap()
+                .phi[0][0][0];
         assert!(
             (ours - rfe).norm() < 0.05 * rfe.norm(),
             "{} Hz: modal {ours} vs RFE {rfe}",

@@ -9,12 +9,12 @@ use std::f64::consts::PI;
 use std::path::PathBuf;
 
 use identify::{self as idn, data, synthetic, variables};
-use rfe::model::Model;
-use rfe::{textbook, C64};
 use nalgebra::DMatrix;
 use rand::rngs::StdRng;
 use rand::SeedableRng;
 use rand_distr::{Distribution, StandardNormal};
+use rfe::model::Model;
+use rfe::{textbook, C64};
 use stability::cut::{self, Cut};
 use stability::{bands, lobes, oriented, Request, Uncertainty};
 
@@ -153,8 +153,7 @@ fn the_boundary_gradient_matches_finite_differences() {
         let mut p = placement.clone();
         vars.apply(&mut p.aux, x);
         let frf =
-            oriented::oriented_frf(&p, &cut, &freqs, Some(&vars), rfe::frf::Method::Auto)
-                .unwrap();
+            oriented::oriented_frf(&p, &cut, &freqs, Some(&vars), rfe::frf::Method::Auto).unwrap();
         let br = lobes::branches(&process, &frf);
         let pts = lobes::boundary(&br, 1, &speeds);
         (frf, br, pts)

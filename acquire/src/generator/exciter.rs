@@ -19,7 +19,6 @@ use crate::record::{DriveKind, DriveRecord};
 use crate::session::SessionHandle;
 use crate::shaker::{ForceReading, PeriodForce, Shaker, ShakerError, ShakerStatus, Waveform};
 
-
 /// A measured force below this fraction of what the drive should give means the force signal is
 /// lost (amplifier tripped, shaker disconnected, force sensor cable).
 pub const LOST_FORCE_FRACTION: f64 = 0.1;
