@@ -31,7 +31,7 @@ pub struct Inputs<'a> {
     pub identification: &'a Identification,
     /// The diagnosis section and the final (diagnosed and refitted) model.
     pub diagnosis: Option<(Diagnosis, &'a Model)>,
-    /// Parameter history, when there is one ([`crate::drift::compare`]).
+    /// Parameter history, when there is one (the comparison with earlier runs).
     pub drift: Option<Drift>,
     /// Compute the sensitivity map (one FRF solve with derivatives).
     pub sensitivity: bool,

@@ -8,7 +8,7 @@
 //!   milling (teeth, immersion, up/down, feed direction), spindle speeds, tool modes;
 //! - [`oriented`]: the oriented relative tool–workpiece receptance in the cutting plane by
 //!   `identify`'s FRF paths, its analytic Jacobian, its split into the model's modes;
-//! - [`lobes`]: turning (Tlusty/Tobias) and milling (zeroth-order approximation, Altintas and
+//! - [`lobes`](mod@lobes): turning (Tlusty/Tobias) and milling (zeroth-order approximation, Altintas and
 //!   Budak) lobes, the boundary, and its gradient with respect to the variables;
 //! - [`sd`]: semi-discretization (Insperger and Stépán), the milling reference at low immersion;
 //! - [`bands`]: 5–95 % bands, linear through the analytic sensitivities and by Monte Carlo.

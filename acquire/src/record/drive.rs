@@ -76,7 +76,7 @@ pub enum DriveKind {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(tag = "kind", rename_all = "snake_case")]
 pub enum Waveform {
-    /// A sine at the frequency set by [`Shaker::set_frequency`].
+    /// A sine at the frequency set by `Shaker::set_frequency`.
     Sine,
     /// Continuous random noise, flat between `f_lo_hz` and `f_hi_hz`.
     Random {

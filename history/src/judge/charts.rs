@@ -14,7 +14,7 @@
 //! A bad night does not poison the memory: a night beyond the Shewhart limit is an alarm of its
 //! own and does not enter the CUSUM and EWMA, and the CUSUM and EWMA inputs are clipped at
 //! ±[`CLIP`]. After an alarm the charts restart from zero and the parameter is followed as a
-//! [`Change`](super::Change): its change point (the night that maximizes the step
+//! [`Change`]: its change point (the night that maximizes the step
 //! likelihood ratio over the nights since the charts last restarted), its new level, and whether
 //! the nights after the alarm confirm it (a change persists) or are back to normal (an outlier
 //! night; the change closes and the charts resume).

@@ -5,7 +5,7 @@
 //! Per parameter the baseline gives a centre and a robust scatter ([`normal`]); a run's
 //! standardized residual `r = (x − centre) / scatter` feeds three charts ([`charts`]): Shewhart
 //! for large jumps, a CUSUM for steps, an EWMA for slow trends. The vector of residuals feeds
-//! Hotelling's T² against the Cramér-Rao correlation structure ([`multivariate`]). An effect
+//! Hotelling's T² against the Cramér-Rao correlation structure (`multivariate`). An effect
 //! diagnosis accepted that no baseline run needed is a **new effect** alarm.
 //!
 //! The charts share one false-alarm budget, the one the operator experiences: at most one false

@@ -4,7 +4,7 @@
 //! MAD screens outliers out of the baseline (beyond [`SCREEN_MADS`]); the scatter is the standard
 //! deviation of the rest (MAD alone is too noisy on a few tens of runs: 37 % efficiency). Values
 //! that are not finite never enter: a run whose value is NaN or infinite is left out of the
-//! baseline of that parameter and counted in [`Normal::left_out`].
+//! baseline of that parameter and counted in `Normal::left_out`.
 
 use crate::record::RunRecord;
 

@@ -12,7 +12,7 @@
 //!   `[Re φ, Im φ]`), averaged with weights `|φ_j|`; 0° for a real mode.
 //! - **MCF**, modal complexity factor (as sdypy-EMA computes it), `1 − ((S_xx − S_yy)² + 4S_xy²)
 //!   / (S_xx + S_yy)²` with uncentred sums about the origin; 0 for a real mode, 1 for a
-//!   travelling wave ([`complexity`](super::complexity)).
+//!   travelling wave ([`complexity`]).
 //!
 //! A spurious (numerical) pole usually has a scattered, complex shape: a low MPC, a large MPD.
 //!
