@@ -360,7 +360,7 @@ fn contenders_of(
         .filter(|(i, r)| {
             let params = members[*i].effect.params(f_hi);
             r.p_value < threshold
-                && unidentifiable(&params, &r.params, (f_hi, super::swap::SWAP_LEVEL)).is_none()
+                && unidentifiable(&params, &r.params, (f_hi, SWAP_LEVEL)).is_none()
                 && partial_fix(r, cur, sigma2).is_none()
         })
         .map(|(i, r)| Contender {
@@ -443,6 +443,15 @@ pub(super) fn extended<'a>(setting: Setting<'a>, cur: &Current, cand: &Effect) -
 /// under one body, count once). A large missing effect of one kind can score below tens of
 /// another's that fit part of it (an isolator's missing moment stiffness can score below dozens
 /// of resonators and springs that each mimic part of it, and still refit to the noise level).
+/// The significance level at which a swap's alternative (`swap.rs`)'s size must stand from its nested value (its
+/// 95 % interval excludes it). Not the round's (Bonferroni over a thousand candidates): the
+/// alternative replaces an effect already significant at that level, and what the swap decides
+/// is which of the two forms the data prefer. The Cramér-Rao interval of a stiffness is a poor
+/// guide to a large one: an SDE's missing moment stiffness can stand only about 4 standard
+/// errors from zero where its LR against the fit without it is above 100 (the likelihood is far
+/// from quadratic in a large stiffness).
+pub(super) const SWAP_LEVEL: f64 = 0.05;
+
 pub(super) const SCREENED_PER_KIND: usize = 2;
 
 /// The screen evaluates a candidate as a low-rank update of the current fit's solves only on
@@ -1021,7 +1030,7 @@ pub(super) fn equivalents(
 
 /// A member refit of a round that the round itself could have accepted: significant at its
 /// threshold, physical, not a partial fix, and its size identifiable at 95 % (the swap's level,
-/// [`super::swap::SWAP_LEVEL`], for the same reason: an effect ranked against one already
+/// [`SWAP_LEVEL`], for the same reason: an effect ranked against one already
 /// significant, and a very stiff spring's Cramér-Rao interval is wide although its LR is
 /// large, so the round's Bonferroni level would leave out true look-alikes). When its margin is
 /// within

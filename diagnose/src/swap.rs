@@ -7,7 +7,7 @@
 use super::placement::{place, put_back, refitted_without};
 use super::round::{
     add_new, critical, extended, fresh_start, in_parallel, margin, refit, short_refit, tied,
-    unidentifiable, with_effect,
+    unidentifiable, with_effect, SWAP_LEVEL,
 };
 use super::*;
 
@@ -30,15 +30,6 @@ pub(super) const SWAPS_REFITTED: usize = 3;
 /// refits to a criterion a few units above the answer's, is within the margin and is listed
 /// beside the spring.
 pub(super) const LOOK_ALIKE_WINDOW: f64 = 2.0 * EQUIVALENT_LR;
-
-/// The significance level at which an alternative's size must stand from its nested value (its
-/// 95 % interval excludes it). Not the round's (Bonferroni over a thousand candidates): the
-/// alternative replaces an effect already significant at that level, and what the swap decides
-/// is which of the two forms the data prefer. The Cramér-Rao interval of a stiffness is a poor
-/// guide to a large one: an SDE's missing moment stiffness can stand only about 4 standard
-/// errors from zero where its LR against the fit without it is above 100 (the likelihood is far
-/// from quadratic in a large stiffness).
-pub(super) const SWAP_LEVEL: f64 = 0.05;
 
 /// Each accepted effect not yet in `tried` (by description; each is then added to it) replaced,
 /// when the data prefer it, by an effect of another kind on the same bodies

@@ -47,8 +47,9 @@ use serde::Deserialize;
 use serde_spanned::Spanned;
 
 use super::data::DataError;
+use rfe::channel::{dir_text, ChannelName, MeasuredChannel};
 use rfe::frf_units::{self, FrfUnit};
-use rfe::measured::{dir_text, ChannelName, MeasuredChannel, MeasuredData, Measurement};
+use rfe::measured::{MeasuredData, Measurement};
 use rfe::model::{Excitation, Model, PointOutput, DOF_NAMES};
 use rfe::source::{Located, SourceText};
 use rfe::units::{parse_quantities, Dim};

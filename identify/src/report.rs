@@ -8,6 +8,7 @@ use toml_edit::{DocumentMut, Item};
 use super::uncertainty::AtBound;
 use super::variables::Tie;
 use super::Identification;
+use rfe::display::num;
 use rfe::model::ParamName;
 use rfe::write_back::{sde_table, write_back_bodies, write_params};
 
@@ -66,18 +67,6 @@ pub fn rows(id: &Identification) -> Vec<Row> {
             }
         })
         .collect()
-}
-
-/// A number for tables: five significant digits between 1e-3 and 1e5, else scientific.
-pub fn num(x: f64) -> String {
-    if x == 0.0 {
-        "0".into()
-    } else if x.abs() >= 1e-3 && x.abs() < 1e5 {
-        let digits = (4 - x.abs().log10().floor() as i32).max(0) as usize;
-        format!("{x:.digits$}")
-    } else {
-        format!("{x:.4e}")
-    }
 }
 
 /// The whole report as text: set-up, convergence, criterion before and after, the table, RMS

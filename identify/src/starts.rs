@@ -184,7 +184,7 @@ fn ambiguity(id: &Identification, optima: &[Optimum]) -> Option<String> {
             let v = &id.variables.vars[far];
             format!(
                 "J = {} ({} start(s)), where {} = {} against {} ({:.0} standard errors away)",
-                super::report::num(o.criterion),
+                rfe::display::num(o.criterion),
                 o.starts.len(),
                 v.name,
                 shown(v, o.estimate[far]),
@@ -197,7 +197,7 @@ fn ambiguity(id: &Identification, optima: &[Optimum]) -> Option<String> {
         format!(
             "the data do not decide between the best optimum (J = {}) and {} other(s) not significantly worse: {}; \
              the standard errors understate the uncertainty — add characteristics, group parameters or fix one of them",
-            super::report::num(best.criterion),
+            rfe::display::num(best.criterion),
             rivals.len(),
             rivals.join("; ")
         )
@@ -206,7 +206,7 @@ fn ambiguity(id: &Identification, optima: &[Optimum]) -> Option<String> {
 
 /// `x` (SI) in the variable's report unit, with the unit unless it is dimensionless.
 fn shown(v: &Variable, x: f64) -> String {
-    let n = super::report::num(x / v.unit.factor);
+    let n = rfe::display::num(x / v.unit.factor);
     if v.unit.symbol == "-" {
         n
     } else {
@@ -278,7 +278,7 @@ pub fn text(id: &Identification) -> String {
             s.push_str(&format!(
                 "  optimum {}: J = {}, reached by {} start(s){}\n",
                 k + 1,
-                super::report::num(o.criterion),
+                rfe::display::num(o.criterion),
                 o.starts.len(),
                 if k == 0 { " (best, reported)" } else { "" }
             ));

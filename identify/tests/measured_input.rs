@@ -6,9 +6,9 @@
 
 use identify::measurement_map;
 use identify::{self as idn, data, misfit, plausibility, report, variables, Options};
+use rfe::channel::{ChannelName, MeasuredChannel};
 use rfe::frf::{self, Method};
 use rfe::frf_units::FrfUnit;
-use rfe::measured::{ChannelName, MeasuredChannel};
 use rfe::measured::{MeasuredData, Measurement, QuantityName};
 use rfe::model::Model;
 use rfe::textbook;

@@ -15,8 +15,8 @@ use std::path::Path;
 
 use num_complex::Complex;
 
+use rfe::channel::{ChannelName, MeasuredChannel};
 use rfe::frf_units::FrfUnit;
-use rfe::measured::{ChannelName, MeasuredChannel};
 use rfe::model::Quantity;
 
 use crate::error::{ProcessError, Result};

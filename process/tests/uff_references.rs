@@ -103,7 +103,7 @@ fn uff_bytes(m: &Model) -> Vec<u8> {
     uff::to_bytes(&sets, uff::Encoding::Binary).unwrap()
 }
 
-fn channels(m: &Model) -> Vec<rfe::measured::MeasuredChannel> {
+fn channels(m: &Model) -> Vec<rfe::channel::MeasuredChannel> {
     let file = uff::parse_file(&uff_bytes(m), "mimo.uff").unwrap();
     uff::measured_channels(&file, "mimo.uff").unwrap().0
 }

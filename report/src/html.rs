@@ -3,7 +3,7 @@
 
 use std::fmt::Write;
 
-use identify::report::num;
+use rfe::display::num;
 
 use crate::document::*;
 use crate::{plot, ReportError};

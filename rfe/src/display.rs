@@ -69,6 +69,18 @@ fn trim(s: &str) -> String {
     s.trim_end_matches('0').trim_end_matches('.').to_string()
 }
 
+/// A number for tables: five significant digits between 1e-3 and 1e5, else scientific.
+pub fn num(x: f64) -> String {
+    if x == 0.0 {
+        "0".into()
+    } else if x.abs() >= 1e-3 && x.abs() < 1e5 {
+        let digits = (4 - x.abs().log10().floor() as i32).max(0) as usize;
+        format!("{x:.digits$}")
+    } else {
+        format!("{x:.4e}")
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

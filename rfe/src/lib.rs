@@ -15,8 +15,8 @@
 //!   update of `K + jD − ω²M`, its response from the base's solves (Sherman-Morrison-Woodbury);
 //! - [`modes`]: natural frequencies, mode shapes (undamped and complex), loss factors;
 //! - [`sensitivity`]: band sensitivity MI (eq. 4.16) to pick decision variables;
-//! - [`measured`]: measured characteristics and the channels of vendor files, as processing
-//!   produces them; [`frf_units`]: their units (receptance, mobility, accelerance);
+//! - [`measured`]: measured characteristics, as processing produces them; [`channel`]: a vendor
+//!   file's channels before they are mapped onto the model; [`frf_units`]: their units (receptance, mobility, accelerance);
 //! - [`modelfile`], [`contract`], [`units`], [`source`], [`check`]: model files (TOML with
 //!   units, resolved JSON) and their validation; [`write_back`]: values written back into a
 //!   model file, its comments and layout kept;
@@ -36,6 +36,7 @@
 //! assert!((static_compliance - expected).abs() < 1e-12 * expected);
 //! ```
 
+pub mod channel;
 pub mod check;
 pub mod contract;
 pub mod csv_text;

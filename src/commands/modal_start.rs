@@ -180,7 +180,7 @@ pub fn modal_start(
         eprintln!(
             "start: {} = {} {}",
             v.name,
-            idn::report::num(x / v.unit.factor),
+            rfe::display::num(x / v.unit.factor),
             v.unit.symbol
         );
     }
