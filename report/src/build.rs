@@ -430,7 +430,7 @@ pub fn sensitivity_map(
     })
 }
 
-/// The diagnosis section from `identify::diagnose`'s result: every round's ranked candidates
+/// The diagnosis section from `diagnose::diagnose`'s result: every round's ranked candidates
 /// (strongest first), the accepted ones with their principal parameter in report units, the fit
 /// before and after, and what was not tried. `base` names the identified model.
 pub fn diagnosis(d: &diagnose::Diagnosis, base: &str, id: &Identification) -> Diagnosis {

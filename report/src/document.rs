@@ -281,7 +281,7 @@ pub struct WeakDirection {
     pub relative_std: Option<f64>,
 }
 
-/// The diagnosis section: filled from `identify::diagnose` by [`crate::build::diagnosis`].
+/// The diagnosis section: filled from `diagnose::diagnose` by [`crate::build::diagnosis`].
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct Diagnosis {
