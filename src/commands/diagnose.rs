@@ -24,7 +24,7 @@ pub struct DiagnoseArgs {
     #[arg(long, default_value_t = 3)]
     pub max_effects: usize,
     /// Refit this many candidate families per round, the best screened first (and the score's
-    /// leading family when the screen left it out; when the misfit is large and their refits
+    /// two leading families when the screen left them out; when the misfit is large and their refits
     /// leave it above the noise level, also the family of each kind's best-scored candidate none
     /// of them holds, where its screen is significant, and then up to this many more whose short
     /// refits went below the best refit).
