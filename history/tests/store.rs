@@ -159,17 +159,29 @@ fn report_folders_import_once_with_units_in_si_and_bad_ones_are_listed() {
     let model = dir.path().join("model.toml");
     std::fs::write(&model, "model bytes").unwrap();
     let report = |t: &str, kn: f64| {
+        // A whole `ident.report/1` document: the import reads the report type itself.
         serde_json::json!({
-            "created_utc": t,
-            "source": {"session": "s.mcap", "stand": "FWD-32J", "model": model.display().to_string()},
+            "schema": "ident.report/1", "title": "night", "created_utc": t,
+            "source": {"workflow": "nightly", "session": "s.mcap", "stand": "FWD-32J",
+                       "model": model.display().to_string(), "variables": "v.toml",
+                       "measurement": "s.mcap", "software": "ident"},
             "status": {"outcome": "ok", "messages": []},
-            "identification": {"reduced_chi2": 1.1, "parameters": [
-                {"variable": "kn_table", "unit": "MPa/um", "identified": kn, "std_error": 0.001},
-                {"variable": "k_screw", "unit": "N/um", "identified": 300.0, "std_error": null}]},
-            "characteristics": [{"label": "table u1 displacement", "stages": [
-                {"stage": "identified", "rms_relative_error": 0.02}]}],
-            "diagnosis": null,
-            "some_future_field": 1
+            "identification": {"optimizer": "lm", "converged": true, "stop": "converged",
+                "iterations": 5, "observations": 100, "noise": "variance",
+                "criterion_initial": 2.0, "criterion": 1.0, "reduced_chi2": 1.1, "parameters": [
+                {"variable": "kn_table", "sdes": "2", "parameter": "kn", "unit": "MPa/um",
+                 "initial": 0.05, "identified": kn, "std_error": 0.001, "variability": 0.02,
+                 "at_bound": null},
+                {"variable": "k_screw", "sdes": "9", "parameter": "k", "unit": "N/um",
+                 "initial": 300.0, "identified": 300.0, "std_error": null, "variability": null,
+                 "at_bound": null}],
+                "correlation": [[1.0, 0.0], [0.0, 1.0]], "weak_directions": []},
+            "characteristics": [{"label": "table u1 displacement", "body": "table", "dof": 0,
+                "quantity": "displacement", "unit": "m", "freqs_hz": [10.0], "measured": [1e-6],
+                "sigma": [1e-8], "sigma_kind": "variance", "stages": [
+                {"stage": "identified", "amplitude": [1.02e-6], "standardized_residual": [-2.0],
+                 "rms_relative_error": 0.02}]}],
+            "diagnosis": null, "sensitivity": null, "drift": null
         })
     };
     for (f, t, kn) in [
