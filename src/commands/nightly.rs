@@ -552,10 +552,16 @@ fn job(
         analysis.identification.stop.describe()
     ));
     // The drift needs this run's table and time: build once without, compare, then write with it.
+    // With its diagnosis, so that this run is read at the same stage as the earlier reports (the
+    // final model's parameters when the diagnosis added an effect).
     let probe = report::build::build({
         let mut i =
             report::build::Inputs::new(&cfg.name, &analysis.observations, &analysis.identification);
         i.sensitivity = false;
+        i.diagnosis = analysis
+            .diagnosis
+            .as_ref()
+            .map(|(section, d)| (section.clone(), &d.model));
         i
     })?;
     // History: earlier runs' reports (this run's folder has none yet), read as run records.
