@@ -17,8 +17,7 @@ mod common;
 
 use common::*;
 use process::modal::{
-    arrange, layout, lscf, lsfd, mac, select_auto, stabilize, Channel, FrfKind, LayoutKind,
-    LscfSettings, MeasuredFrf, ModalData, ModalModel, SelectionSettings, StabilityTolerances,
+    arrange, layout, lsfd, mac, Channel, FrfKind, LayoutKind, MeasuredFrf, ModalData, ModalModel,
 };
 use process::uff::Ordinate;
 use process::C64;
@@ -65,33 +64,9 @@ fn pick(set: &[MeasuredFrf], keep: impl Fn(i64, i64) -> bool) -> Vec<MeasuredFrf
         .collect()
 }
 
-/// LSCF orders 1..=order, default stability tolerances, automatic selection, LSFD.
+/// The automatically picked poles' LSFD model.
 fn extract(data: &ModalData, band: (f64, f64), order: usize, min_orders: usize) -> ModalModel {
-    let orders = lscf(
-        data,
-        &LscfSettings {
-            max_order: order,
-            band_hz: Some(band),
-        },
-    )
-    .unwrap();
-    let diagram = stabilize(orders, StabilityTolerances::default());
-    let poles = select_auto(
-        &diagram,
-        &SelectionSettings {
-            band_hz: band,
-            min_orders,
-            max_damping: 0.2,
-        },
-    );
-    eprintln!(
-        "ident: {:?}",
-        poles
-            .iter()
-            .map(|p| (p.freq_hz, p.damping_ratio))
-            .collect::<Vec<_>>()
-    );
-    lsfd(data, &poles, Some(band)).unwrap()
+    lsfd(data, &auto_poles(data, band, order, min_orders), Some(band)).unwrap()
 }
 
 /// sdypy-EMA on `data` (every FRF a location, in `o · references + r` order): frequencies,

@@ -7,10 +7,7 @@
 mod common;
 
 use common::*;
-use process::modal::{
-    lscf, select_auto, stabilize, FrfKind, LscfSettings, ModalData, Pole, SelectionSettings,
-    StabilityTolerances,
-};
+use process::modal::{FrfKind, ModalData, Pole};
 use process::{estimate, spectra::Welch, Estimator, WelchConfig, C64};
 use std::f64::consts::PI;
 
@@ -49,36 +46,6 @@ fn sdypy(
     let n = approx.len();
     assert_eq!(r.len(), 2 * n + 1, "sdypy output size");
     (r[..n].to_vec(), r[n..2 * n].to_vec(), r[2 * n])
-}
-
-/// Our poles of `data` in `band` (LSCF up to `order`, stable over `min_orders`), printed as
-/// (frequency, damping ratio).
-fn ours(data: &ModalData, band: (f64, f64), order: usize, min_orders: usize) -> Vec<Pole> {
-    let orders = lscf(
-        data,
-        &LscfSettings {
-            max_order: order,
-            band_hz: Some(band),
-        },
-    )
-    .unwrap();
-    let diagram = stabilize(orders, StabilityTolerances::default());
-    let poles = select_auto(
-        &diagram,
-        &SelectionSettings {
-            band_hz: band,
-            min_orders,
-            max_damping: 0.2,
-        },
-    );
-    eprintln!(
-        "{:?}",
-        poles
-            .iter()
-            .map(|p| (p.freq_hz, p.damping_ratio))
-            .collect::<Vec<_>>()
-    );
-    poles
 }
 
 /// `tol(f, ζ)` gives the absolute (frequency, damping) tolerances of a pole.
@@ -141,7 +108,7 @@ fn synthetic_three_modes_agree_with_sdypy() {
     for (noise, tol_f, tol_z) in [(0.0, 1e-4, 1e-2), (0.005, 2e-3, 0.1)] {
         let data = synthetic(noise);
         let band = (20.0, 220.0);
-        let poles = ours(&data, band, 30, 8);
+        let poles = auto_poles(&data, band, 30, 8);
         assert_eq!(
             poles.len(),
             3,
@@ -193,7 +160,7 @@ fn impact_h1() -> ModalData {
 fn real_impact_data_agrees_with_sdypy() {
     let data = impact_h1();
     let band = (100.0, 2500.0);
-    let poles = ours(&data, band, 60, 15);
+    let poles = auto_poles(&data, band, 60, 15);
     assert!(!poles.is_empty());
     let approx: Vec<f64> = poles.iter().map(|p| p.freq_hz).collect();
     let (f, z, _) = sdypy(&data, band, 60, &approx);
@@ -233,7 +200,7 @@ fn three_storey() -> ModalData {
 fn three_storey_structure_agrees_with_sdypy() {
     let data = three_storey();
     let band = (2.0, 40.0);
-    let poles = ours(&data, band, 40, 8);
+    let poles = auto_poles(&data, band, 40, 8);
     let approx: Vec<f64> = poles.iter().map(|p| p.freq_hz).collect();
     // The three storey modes (6.5, 17.5, 26.5 Hz) must be found.
     for f in [6.5, 17.5, 26.5] {

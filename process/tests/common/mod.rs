@@ -78,3 +78,39 @@ pub fn resonator_frf(b: [f64; 3], a: [f64; 2], f_over_fs: f64) -> num_complex::C
     let z2 = z1 * z1;
     (b[0] + z1 * b[1] + z2 * b[2]) / (1.0 + z1 * a[0] + z2 * a[1])
 }
+
+/// Poles of `data` in `band` picked automatically from LSCF orders 1..=`order` (stable over
+/// `min_orders`, default tolerances, damping below 0.2), printed as (frequency, damping ratio).
+pub fn auto_poles(
+    data: &process::modal::ModalData,
+    band: (f64, f64),
+    order: usize,
+    min_orders: usize,
+) -> Vec<process::modal::Pole> {
+    use process::modal::{lscf, select_auto, stabilize, LscfSettings, SelectionSettings};
+    let orders = lscf(
+        data,
+        &LscfSettings {
+            max_order: order,
+            band_hz: Some(band),
+        },
+    )
+    .unwrap();
+    let diagram = stabilize(orders, process::modal::StabilityTolerances::default());
+    let poles = select_auto(
+        &diagram,
+        &SelectionSettings {
+            band_hz: band,
+            min_orders,
+            max_damping: 0.2,
+        },
+    );
+    eprintln!(
+        "ident: {:?}",
+        poles
+            .iter()
+            .map(|p| (p.freq_hz, p.damping_ratio))
+            .collect::<Vec<_>>()
+    );
+    poles
+}
