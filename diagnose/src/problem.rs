@@ -1,15 +1,16 @@
 //! The fit of a model extended by effects: the identification's variables plus every effect's
 //! parameters, as one least-squares problem for the identification's minimizers.
 //!
-//! The variables keep their analytic Jacobian (the identification criterion); an effect's
-//! parameters, which may change the model's structure (a new body, a split body), get
-//! forward-difference columns — a handful of extra solves per iteration.
+//! The variables keep their analytic Jacobian (the identification criterion); so do the effects'
+//! parameters that move only physical parameters of the model (most of them: a stiffness, a
+//! mass, a tuning), from the same solves. The others (a place, a gain, a change of the model's
+//! structure at its nested value) get forward-difference columns, one extra solve each.
 
 use nalgebra::{DMatrix, DVector};
 
 use super::effects::{Effect, EffectParam, Realized};
-use identify::{self, Criterion, EvalError, FitKind, JacobianMode, Observations, Variables};
-use rfe::model::Model;
+use identify::{self, Criterion, EvalError, FitKind, Observations, Variables};
+use rfe::model::{Model, Param};
 
 /// The extended fit problem. Optimizers see `u = value / scale`: the variables first, then
 /// each effect's parameters in order.
@@ -155,6 +156,14 @@ impl<'a> Problem<'a> {
     }
 
     /// Whitened residuals at `(x, γ)`, with the Jacobian in scaled `u` if asked.
+    ///
+    /// An effect parameter that moves only physical parameters of the realized model (an added
+    /// spring's stiffness and ψ, a point mass's or resonator's mass and tuning, a freed
+    /// direction's stiffness, a body's mass, a split body's joints, a split ψ) has its column
+    /// from the same solves as the variables': the chain `Σ (∂p/∂γ) ∂e/∂p` over the parameters
+    /// `p` it moves, `∂p/∂γ` by differencing the realized models (no solve). A parameter that
+    /// moves anything else — a place, a sensor gain, or the model's structure at its nested
+    /// value — gets a forward-difference column, one more evaluation.
     pub fn residuals(
         &mut self,
         x: &[f64],
@@ -163,32 +172,57 @@ impl<'a> Problem<'a> {
     ) -> Result<(DVector<f64>, Option<DMatrix<f64>>), EvalError> {
         let r = self.realize(gamma)?;
         let mut crit = self.criterion(&r)?;
-        let (mut e, jx) = crit.evaluate(x, jacobian.then_some(JacobianMode::Analytic))?;
+        if !jacobian {
+            let (mut e, _) = crit.evaluate(x, None)?;
+            self.evaluations += 1;
+            Self::gained(&crit, &mut e, &r.gains);
+            if e.iter().any(|v| !v.is_finite()) {
+                return Err(EvalError::NotFinite("extended model's response"));
+            }
+            return Ok((e, None));
+        }
+        let steps: Vec<f64> = (0..gamma.len()).map(|j| self.step(gamma, j)).collect();
+        let chains: Vec<Option<Vec<(Param, f64)>>> = (0..gamma.len())
+            .map(|j| self.chain(&r, x, gamma, (j, steps[j])))
+            .collect();
+        let further: Vec<Vec<(Param, f64)>> = chains.iter().flatten().cloned().collect();
+        let (mut e, jx) = crit.evaluate_with(x, &further)?;
         self.evaluations += 1;
         Self::gained(&crit, &mut e, &r.gains);
         if e.iter().any(|v| !v.is_finite()) {
             return Err(EvalError::NotFinite("extended model's response"));
         }
-        let Some(jx) = jx else { return Ok((e, None)) };
         let (m, nx) = (e.len(), x.len());
         let mut jac = DMatrix::zeros(m, nx + gamma.len());
         let points = crit.points();
         // A gain scales the response, so the amplitude residuals' derivatives; a log-amplitude
         // residual's derivative does not change with it.
         let log = crit.fit() == FitKind::LogAmplitude;
+        let gain_of = |i: usize| {
+            let o = points[i % points.len()].0;
+            if log {
+                1.0
+            } else {
+                r.gains[o]
+            }
+        };
         for c in 0..nx {
             for i in 0..m {
-                let o = points[i % points.len()].0;
-                let g = if log { 1.0 } else { r.gains[o] };
-                jac[(i, c)] = jx[(i, c)] * g * self.scale[c];
+                jac[(i, c)] = jx[(i, c)] * gain_of(i) * self.scale[c];
             }
         }
+        let mut analytic = nx;
         let mut g = gamma.to_vec();
         for j in 0..gamma.len() {
-            let p = &self.params[j];
-            let h = 1e-5 * gamma[j].abs().max(p.scale);
-            // Step inside the bounds.
-            let h = if gamma[j] + h > p.upper { -h } else { h };
+            let scale = self.scale[nx + j];
+            if chains[j].is_some() {
+                for i in 0..m {
+                    jac[(i, nx + j)] = jx[(i, analytic)] * gain_of(i) * scale;
+                }
+                analytic += 1;
+                continue;
+            }
+            let h = steps[j];
             g[j] = gamma[j] + h;
             let rh = self.realize(&g)?;
             let mut ch = self.criterion(&rh)?;
@@ -196,13 +230,76 @@ impl<'a> Problem<'a> {
             self.evaluations += 1;
             Self::gained(&ch, &mut eh, &rh.gains);
             g[j] = gamma[j];
-            let col = (eh - &e) / h * self.scale[nx + j];
+            let col = (eh - &e) / h * scale;
             jac.set_column(nx + j, &col);
         }
         if jac.iter().any(|v| !v.is_finite()) {
             return Err(EvalError::NotFinite("extended model's Jacobian"));
         }
         Ok((e, Some(jac)))
+    }
+
+    /// The difference step of effect parameter `j` at `gamma`: 1e-5 of its value or scale,
+    /// inside its upper bound.
+    fn step(&self, gamma: &[f64], j: usize) -> f64 {
+        let p = &self.params[j];
+        let h = 1e-5 * gamma[j].abs().max(p.scale);
+        if gamma[j] + h > p.upper {
+            -h
+        } else {
+            h
+        }
+    }
+
+    /// `∂p/∂γ_j` of every physical parameter `p` of the realized model `r` (at variables `x`)
+    /// that effect parameter `j` moves, when it moves nothing else (see [`Problem::residuals`]):
+    /// central differences of the realized models where the step fits inside the bounds (exact
+    /// for the parameters linear in γ, second order otherwise), else a one-sided one of step
+    /// `h`. `None` when the parameter moves a gain or anything but physical parameters.
+    fn chain(
+        &self,
+        r: &Realized,
+        x: &[f64],
+        gamma: &[f64],
+        (j, h): (usize, f64),
+    ) -> Option<Vec<(Param, f64)>> {
+        let at = |shift: f64| -> Option<(Model, Vec<f64>)> {
+            let mut g = gamma.to_vec();
+            g[j] += shift;
+            let rs = self.realize(&g).ok()?;
+            let mut m = rs.model;
+            rs.vars.apply(&mut m, x);
+            Some((m, rs.gains))
+        };
+        let mut here = r.model.clone();
+        r.vars.apply(&mut here, x);
+        let h = h.abs();
+        let p = &self.params[j];
+        let central = gamma[j] - h >= p.lower && gamma[j] + h <= p.upper;
+        let (ahead, behind, width) = if central {
+            (at(h)?, at(-h)?, 2.0 * h)
+        } else {
+            let h = self.step(gamma, j);
+            let (m, g) = at(h)?;
+            // One-sided: the change from here, over the signed step.
+            return (g == r.gains)
+                .then(|| here.param_changes(&m))
+                .flatten()
+                .map(|c| c.into_iter().map(|(p, d)| (p, d / h)).collect());
+        };
+        if ahead.1 != r.gains || behind.1 != r.gains {
+            return None;
+        }
+        let up = here.param_changes(&ahead.0)?;
+        let down = here.param_changes(&behind.0)?;
+        let mut chain: Vec<(Param, f64)> = up.iter().map(|&(p, d)| (p, d / width)).collect();
+        for (p, d) in down {
+            match chain.iter_mut().find(|(q, _)| *q == p) {
+                Some((_, c)) => *c -= d / width,
+                None => chain.push((p, -d / width)),
+            }
+        }
+        Some(chain)
     }
 }
 
@@ -216,7 +313,15 @@ impl identify::optimize::Residuals for Problem<'_> {
         self.residuals(&x, &g, jacobian)
     }
 
+    /// The Jacobian costs one evaluation when every effect parameter has its analytic column
+    /// (see [`Problem::residuals`]): then a trial point is evaluated with it, so that an
+    /// accepted step needs no second evaluation. A place or a gain differences the response.
     fn cheap_jacobian(&self) -> bool {
-        self.params.is_empty()
+        self.effects.iter().all(|e| {
+            !matches!(
+                e,
+                Effect::PlacedSpring { .. } | Effect::PlacedMass { .. } | Effect::Gain { .. }
+            )
+        })
     }
 }

@@ -494,15 +494,53 @@ impl Criterion {
         &mut self,
         x: &[f64],
     ) -> Result<(DVector<f64>, DMatrix<f64>), frf::SolveError> {
+        self.residuals_analytic_with(x, &[])
+    }
+
+    /// Whitened residuals at `x` (SI) with the analytic Jacobian of the variables and, after
+    /// their columns, one column per combination `further[j]` of the working model's physical
+    /// parameters: `Σ c · ∂e/∂p` over its `(p, c)` terms (per SI unit of each `p`). A change of
+    /// the model that moves only physical parameters (an added SDE's stiffness, a body's mass)
+    /// has its derivative here from the same solves as the variables' (the adjoint states each
+    /// line already has), instead of a further evaluation per parameter.
+    pub fn evaluate_with(
+        &mut self,
+        x: &[f64],
+        further: &[Vec<(Param, f64)>],
+    ) -> Result<(DVector<f64>, DMatrix<f64>), frf::SolveError> {
+        self.residuals_analytic_with(x, further)
+    }
+
+    fn residuals_analytic_with(
+        &mut self,
+        x: &[f64],
+        further: &[Vec<(Param, f64)>],
+    ) -> Result<(DVector<f64>, DMatrix<f64>), frf::SolveError> {
         self.vars.apply(&mut self.model, x);
-        let r = frf::response_params(&self.model, &self.freqs, &self.params, self.method)?;
+        let mut params = self.params.clone();
+        let mut terms = self.terms.clone();
+        for combination in further {
+            let mut t = Vec::with_capacity(combination.len());
+            for &(p, c) in combination {
+                let at = match params.iter().position(|q| *q == p) {
+                    Some(at) => at,
+                    None => {
+                        params.push(p);
+                        params.len() - 1
+                    }
+                };
+                t.push((at, c));
+            }
+            terms.push(t);
+        }
+        let r = frf::response_params(&self.model, &self.freqs, &params, self.method)?;
         self.evaluations.model += 1;
         self.evaluations.with_jacobian += 1;
         let m = self.residual_count();
         let n = self.vars.len();
         let np = self.obs.len();
         let mut e = DVector::zeros(m);
-        let mut jac = DMatrix::zeros(m, n);
+        let mut jac = DMatrix::zeros(m, terms.len());
         for (i, o) in self.obs.iter().enumerate() {
             let g = self.gain(o.output, x);
             let q0 = r.output(o.output)[o.line];
@@ -517,14 +555,14 @@ impl Criterion {
                     e[np + i] = d.im;
                 }
             }
-            for (v, terms) in self.terms.iter().enumerate() {
+            for (v, terms) in terms.iter().enumerate() {
                 let mut dq = C64::new(0.0, 0.0);
                 for &(p, ratio) in terms {
                     dq += r.derivative(p, o.output)[o.line] * ratio;
                 }
                 dq *= g;
                 if let Some((gv, ratio)) = self.gains[o.output] {
-                    if gv == v {
+                    if gv == v && v < n {
                         dq += q0 * ratio;
                     }
                 }

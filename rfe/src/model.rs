@@ -880,6 +880,42 @@ impl Model {
         }
     }
 
+    /// Every physical parameter of the model: each enabled SDE's law parameters, each body's
+    /// mass and principal inertias, each point mass's mass.
+    pub fn physical_params(&self) -> Vec<Param> {
+        let sdes = self.all_params().into_iter().map(Param::Sde);
+        let bodies = (0..self.bodies.len()).flat_map(|body| {
+            std::iter::once(Param::Mass { body })
+                .chain((0..3).map(move |axis| Param::Inertia { body, axis }))
+        });
+        let point_masses = (0..self.point_masses.len()).map(|index| Param::PointMass { index });
+        sdes.chain(bodies).chain(point_masses).collect()
+    }
+
+    /// How `other` differs from this model, `(p, other's value − this one's)` for each physical
+    /// parameter that differs, when the two differ in nothing else (the same bodies, SDEs, point
+    /// masses, geometry, laws and outputs); `None` otherwise. The dynamic stiffness is linear in
+    /// each physical parameter, so a change of the model that moves only these has its
+    /// derivative from the parameters' own ([`crate::frf::response_params`]).
+    pub fn param_changes(&self, other: &Model) -> Option<Vec<(Param, f64)>> {
+        if self.bodies.len() != other.bodies.len()
+            || self.sdes.len() != other.sdes.len()
+            || self.point_masses.len() != other.point_masses.len()
+        {
+            return None;
+        }
+        let mut same = other.clone();
+        let mut changes = Vec::new();
+        for p in self.physical_params() {
+            let (a, b) = (self.value(p)?, other.value(p)?);
+            if a != b {
+                changes.push((p, b - a));
+                same.set_value(p, a);
+            }
+        }
+        (same == *self).then_some(changes)
+    }
+
     /// Value of any parameter (SI); `None` if it does not exist, and for a gain (not part of the
     /// model).
     pub fn value(&self, p: Param) -> Option<f64> {
