@@ -199,6 +199,7 @@ fn synthetic_run(i: usize, k1: f64) -> history::record::RunRecord {
         effects: vec![],
         covariates: vec![],
         correlations: vec![],
+        quantities: vec![],
     }
 }
 
