@@ -21,7 +21,14 @@ fn the_nightly_records_judges_and_exports_the_stable_depth() {
         "prometheus = \"metrics/ident.prom\"\n[history]\ndatabase = \"history.sqlite\"\nbaseline_runs = 6\n[stability]\ncut = \"{}\"\nspeed_rpm = [300, 1800]\n",
         cut.display()
     );
-    let cfg = common::nightly_job(dir.path(), "nightly.toml", &live, "newest-session", &live, &extra);
+    let cfg = common::nightly_job(
+        dir.path(),
+        "nightly.toml",
+        &live,
+        "newest-session",
+        &live,
+        &extra,
+    );
     let cfg_s = cfg.to_str().unwrap();
     let db = dir.path().join("history.sqlite");
     let prom = dir.path().join("metrics/ident.prom");
@@ -35,7 +42,10 @@ fn the_nightly_records_judges_and_exports_the_stable_depth() {
     assert_eq!(s["speed_rpm"], serde_json::json!([300.0, 1800.0]));
     let depth_mm = s["minimum"]["depth_mm"].as_f64().unwrap();
     assert!(depth_mm > 0.0, "{s}");
-    assert!(s["minimum"]["band_mm"].is_array(), "the band from the final fit: {s}");
+    assert!(
+        s["minimum"]["band_mm"].is_array(),
+        "the band from the final fit: {s}"
+    );
     assert!(!s["limiting"].as_array().unwrap().is_empty());
     let html = std::fs::read_to_string(report_dir(&o).join("report.html")).unwrap();
     assert!(html.contains("id=\"stability\""));
@@ -48,8 +58,12 @@ fn the_nightly_records_judges_and_exports_the_stable_depth() {
     assert!((q.in_unit() - depth_mm).abs() < 1e-9 * depth_mm);
     assert!(q.std_error.is_some_and(|s| s > 0.0));
     let p = std::fs::read_to_string(&prom).unwrap();
-    let gauge = format!("ident_nightly_stable_depth_mm{{job_name=\"test job\",quantity=\"{name}\"}} ");
-    let line = p.lines().find(|l| l.starts_with(&gauge)).unwrap_or_else(|| panic!("{p}"));
+    let gauge =
+        format!("ident_nightly_stable_depth_mm{{job_name=\"test job\",quantity=\"{name}\"}} ");
+    let line = p
+        .lines()
+        .find(|l| l.starts_with(&gauge))
+        .unwrap_or_else(|| panic!("{p}"));
     let exported: f64 = line[gauge.len()..].parse().unwrap();
     assert!((exported - depth_mm).abs() < 1e-9 * depth_mm, "{line}");
     assert!(p.contains("ident_nightly_stable_depth_sigma_mm{"), "{p}");

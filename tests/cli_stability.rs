@@ -236,7 +236,9 @@ fn the_band_comes_from_the_report_of_an_identification() {
     let json: stability::section::Stability = serde_json::from_slice(&o.stdout).unwrap();
     let report: report::Report =
         serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
-    let section = report.stability.expect("the report has the stability section");
+    let section = report
+        .stability
+        .expect("the report has the stability section");
     let (a, b) = (&json.minimum, &section.minimum);
     assert!(
         (a.depth_mm - b.depth_mm).abs() < 1e-6 * a.depth_mm && a.speed_rpm == b.speed_rpm,
@@ -247,7 +249,10 @@ fn the_band_comes_from_the_report_of_an_identification() {
         (ja[0] - jb[0]).abs() < 1e-4 * a.depth_mm && (ja[1] - jb[1]).abs() < 1e-4 * a.depth_mm,
         "{ja:?} vs {jb:?}"
     );
-    assert!((a.depth_mm - depth[i]).abs() < 1e-6 * a.depth_mm, "the JSON is the CSV's minimum");
+    assert!(
+        (a.depth_mm - depth[i]).abs() < 1e-6 * a.depth_mm,
+        "the JSON is the CSV's minimum"
+    );
     assert_eq!(json.points.len(), depth.len());
     let html = std::fs::read_to_string(out.join("report.html")).unwrap();
     assert!(html.contains("id=\"stability\"") && html.contains("minimum critical depth"));

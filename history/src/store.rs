@@ -276,7 +276,14 @@ impl Store {
             tx.execute(
                 "INSERT INTO quantities (run, name, unit, unit_factor, value, std_error)
                  VALUES (?1, ?2, ?3, ?4, ?5, ?6)",
-                params![id, q.variable, q.unit, q.unit_factor, q.estimate, q.std_error],
+                params![
+                    id,
+                    q.variable,
+                    q.unit,
+                    q.unit_factor,
+                    q.estimate,
+                    q.std_error
+                ],
             )
             .map_err(err)?;
         }

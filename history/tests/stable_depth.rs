@@ -88,7 +88,10 @@ fn a_loosening_joint_raises_the_stable_depth_alarm() {
             .collect();
         println!("night {n}: {} {:?}", j.summary(), on_depth);
         if n < STEP_NIGHT {
-            assert!(on_depth.is_empty(), "night {n}: false depth alarm {on_depth:?}");
+            assert!(
+                on_depth.is_empty(),
+                "night {n}: false depth alarm {on_depth:?}"
+            );
         }
         // The depth is judged, but T² runs over the four parameters only (it is a function of
         // them).

@@ -216,12 +216,19 @@ fn the_stability_section_comes_right_after_the_final_model() {
     let r = full_report(&f, 1.0);
     let s = r.stability.as_ref().unwrap();
     let html = report::html::render(&r).unwrap();
-    let at = |needle: &str| html.find(needle).unwrap_or_else(|| panic!("{needle} missing"));
+    let at = |needle: &str| {
+        html.find(needle)
+            .unwrap_or_else(|| panic!("{needle} missing"))
+    };
     assert!(at("id=\"final\"") < at("id=\"stability\""));
     assert!(at("id=\"stability\"") < at("id=\"identification\""));
     // The minimum with its band, the lobes with the band shaded, the limiting modes' joints.
     let [lo, hi] = s.minimum.band_mm.unwrap();
-    assert!(lo < s.minimum.depth_mm && s.minimum.depth_mm < hi, "{:?}", s.minimum);
+    assert!(
+        lo < s.minimum.depth_mm && s.minimum.depth_mm < hi,
+        "{:?}",
+        s.minimum
+    );
     assert!(html.contains("minimum critical depth"));
     assert!(html.contains("5–95 % band (linear)"));
     assert!(!s.limiting.is_empty());
@@ -231,12 +238,18 @@ fn the_stability_section_comes_right_after_the_final_model() {
         }
     }
     // The covariance note (the second variable has no final-fit error in the fixture).
-    assert!(s.band_notes.iter().any(|n| n.contains("held at their estimates")));
+    assert!(s
+        .band_notes
+        .iter()
+        .any(|n| n.contains("held at their estimates")));
     // Without a diagnosis the identification's table is the final model: the section follows it.
     let mut plain = r.clone();
     plain.diagnosis = None;
     let html = report::html::render(&plain).unwrap();
-    let at = |needle: &str| html.find(needle).unwrap_or_else(|| panic!("{needle} missing"));
+    let at = |needle: &str| {
+        html.find(needle)
+            .unwrap_or_else(|| panic!("{needle} missing"))
+    };
     assert!(at("id=\"parameters\"") < at("id=\"stability\""));
 }
 

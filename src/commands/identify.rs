@@ -375,13 +375,7 @@ fn build(
         ..::report::document::Source::default()
     };
     let full = diagnosis.as_ref().map(|(_, d)| *d);
-    let mut r = build_report(
-        ctx,
-        source,
-        obs,
-        id,
-        diagnosis.map(|(s, d)| (s, &d.model)),
-    )?;
+    let mut r = build_report(ctx, source, obs, id, diagnosis.map(|(s, d)| (s, &d.model)))?;
     if let Some(cut) = &a.cut {
         r.stability = Some(super::stability::report_section(cut, id, full, &r, None)?);
     }

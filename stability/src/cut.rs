@@ -485,11 +485,7 @@ impl Fields<'_> {
         );
         match q {
             None => Err(self.err(field, "missing", fix)),
-            Some(Quantity::Number(x)) => Err(self.err(
-                field,
-                format!("{x} has no unit"),
-                fix,
-            )),
+            Some(Quantity::Number(x)) => Err(self.err(field, format!("{x} has no unit"), fix)),
             Some(Quantity::Text(t)) => match parse_pressure(t) {
                 Ok(v) => Ok(v),
                 Err(problem) => Err(self.err(field, problem, fix)),

@@ -135,7 +135,12 @@ fn shares(v: &[(String, f64)]) -> Vec<Share> {
 impl Stability {
     /// The section of `lobes` of `cut`, with the Monte Carlo band when computed and the notes on
     /// the covariance the linear band used.
-    pub fn new(cut: &Cut, lobes: &Lobes, monte_carlo: Option<&Band>, band_notes: &[String]) -> Self {
+    pub fn new(
+        cut: &Cut,
+        lobes: &Lobes,
+        monte_carlo: Option<&Band>,
+        band_notes: &[String],
+    ) -> Self {
         let m = &lobes.points[lobes.minimum];
         let points = lobes
             .points
@@ -166,10 +171,7 @@ impl Stability {
                 // `lobes()` refuses a range no lobe reaches, so the minimum is finite.
                 depth_mm: m.depth * 1e3,
                 band_mm: lobes.band.as_ref().and_then(|b| band_at(b, lobes.minimum)),
-                sigma_mm: lobes
-                    .band
-                    .as_ref()
-                    .and_then(|b| mm(b.sigma[lobes.minimum])),
+                sigma_mm: lobes.band.as_ref().and_then(|b| mm(b.sigma[lobes.minimum])),
                 chatter_hz: m.chatter_hz,
                 lobe: m.lobe,
             },
@@ -238,7 +240,11 @@ impl Stability {
             );
         }
         if self.tool_share.abs() >= 0.05 {
-            let _ = writeln!(s, "  tool modes: {:.0}% of the limit", 100.0 * self.tool_share);
+            let _ = writeln!(
+                s,
+                "  tool modes: {:.0}% of the limit",
+                100.0 * self.tool_share
+            );
         }
         s
     }

@@ -87,10 +87,7 @@ pub fn read(path: &std::path::Path, direction: Vector3<f64>) -> Result<ToolFrf, 
         ));
     }
     let Some(phase) = &c.phase_rad else {
-        return Err(format!(
-            "{}: real values without phase; {fix}",
-            c.item
-        ));
+        return Err(format!("{}: real values without phase; {fix}", c.item));
     };
     let mut freqs = Vec::with_capacity(c.freqs_hz.len());
     let mut h = Vec::with_capacity(c.freqs_hz.len());

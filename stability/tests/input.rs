@@ -85,8 +85,11 @@ fn cutting_coefficients_need_a_pressure_unit() {
         ("1.8e9 Pa", 1.8e9),
         ("1.8e9 N/m^2", 1.8e9),
     ] {
-        let c = cut::parse(&GOOD.replace("\"1800 MPa\"", &format!("\"{text}\"")), "cut.toml")
-            .unwrap();
+        let c = cut::parse(
+            &GOOD.replace("\"1800 MPa\"", &format!("\"{text}\"")),
+            "cut.toml",
+        )
+        .unwrap();
         assert!((c.kt - si).abs() < 1e-6 * si, "{text}: {}", c.kt);
     }
     // A bare number, a number without a unit, and a pressure per length are refused, naming

@@ -124,12 +124,24 @@ fn a_uff_that_is_not_the_tools_receptance_is_refused() {
     let dir = tempfile::tempdir().unwrap();
     let cut_file = dir.path().join("cut.toml");
     let model = rfe::textbook::single_body(100.0, 1.0e7, 0.2);
-    let frf = |name: &str| cut_text(&format!("[[tool.frf]]\nuff = \"{name}\"\ndirection = [1.0, 0.0, 0.0]"));
+    let frf = |name: &str| {
+        cut_text(&format!(
+            "[[tool.frf]]\nuff = \"{name}\"\ndirection = [1.0, 0.0, 0.0]"
+        ))
+    };
     let origin = cut_file.display().to_string();
 
     // A cross FRF: response at node 2, reference at node 1.
-    write_uff(&dir.path().join("cross.uff"), 400.0, ("m", "N"), (2, 1), false);
-    let e = stability::cut::parse(&frf("cross.uff"), &origin).unwrap_err().to_string();
+    write_uff(
+        &dir.path().join("cross.uff"),
+        400.0,
+        ("m", "N"),
+        (2, 1),
+        false,
+    );
+    let e = stability::cut::parse(&frf("cross.uff"), &origin)
+        .unwrap_err()
+        .to_string();
     assert!(
         e.starts_with(&format!("{origin}: tool.frf[0].uff: "))
             && e.contains("cross.uff")
@@ -139,11 +151,22 @@ fn a_uff_that_is_not_the_tools_receptance_is_refused() {
     );
 
     // A missing file names it.
-    let e = stability::cut::parse(&frf("nowhere.uff"), &origin).unwrap_err().to_string();
-    assert!(e.contains("tool.frf[0].uff") && e.contains("nowhere.uff"), "{e}");
+    let e = stability::cut::parse(&frf("nowhere.uff"), &origin)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("tool.frf[0].uff") && e.contains("nowhere.uff"),
+        "{e}"
+    );
 
     // A measurement that stops below the lobes' band.
-    write_uff(&dir.path().join("short.uff"), 150.0, ("m", "N"), (1, 1), false);
+    write_uff(
+        &dir.path().join("short.uff"),
+        150.0,
+        ("m", "N"),
+        (1, 1),
+        false,
+    );
     let cut = stability::cut::parse(&frf("short.uff"), &origin).unwrap();
     let e = stability::lobes(&stability::Request::new(&model, &cut))
         .unwrap_err()

@@ -364,10 +364,11 @@ fn say_what_moved(j: &mut Judgement, from: usize) {
         sig(q.value, 3),
         q.unit
     );
-    for a in j.alarms[from..].iter_mut().filter(|a| a.subject == q.variable) {
-        a.message = a
-            .message
-            .replacen(&format!("{} is", q.variable), &moved, 1);
+    for a in j.alarms[from..]
+        .iter_mut()
+        .filter(|a| a.subject == q.variable)
+    {
+        a.message = a.message.replacen(&format!("{} is", q.variable), &moved, 1);
     }
 }
 
