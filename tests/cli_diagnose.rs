@@ -140,8 +140,8 @@ fn diagnose_finds_the_missing_actuator_from_files() {
         .len();
     assert!(n > 0 && fc.len() == n);
     let at = |i: usize, j: usize| fc[i][j].as_f64();
-    for i in 0..n {
-        assert_eq!(fc[i].as_array().map_or(0, Vec::len), n);
+    for (i, row) in fc.iter().enumerate() {
+        assert_eq!(row.as_array().map_or(0, Vec::len), n);
         assert!(at(i, i).is_none_or(|v| (v - 1.0).abs() < 1e-9));
         for j in 0..n {
             if let (Some(a), Some(b)) = (at(i, j), at(j, i)) {
