@@ -4,7 +4,8 @@
 //! over its speed range (the `stability` crate, as `ident nightly` with `[stability]` does); the
 //! history stores it beside the parameters and judges it like them. Asserts: no depth alarm
 //! before the drop, the depth alarm within two nights of it, saying the depth fell, from and to
-//! what; the depth stays out of Hotelling's T²; and the store keeps the quantity.
+//! what; the depth stays out of Hotelling's T²; the trend page draws it; and the store keeps
+//! the quantity.
 
 #![allow(clippy::unwrap_used, clippy::expect_used, dead_code)]
 
@@ -119,6 +120,12 @@ fn a_loosening_joint_raises_the_stable_depth_alarm() {
         "{}",
         raised.1
     );
+
+    // The trend page draws the depth's series after the parameters' (five charts), with the
+    // alarm in the runs table.
+    let page = history::trend::page("nights", &runs, &js);
+    assert_eq!(page.matches("data-chart=\"trend\"").count(), 5);
+    assert!(page.contains(&report::html::escape(&raised.1)));
 
     // The store keeps the quantity and judges the same from what it reads back.
     let dir = tempfile::tempdir().unwrap();
