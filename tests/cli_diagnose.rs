@@ -53,6 +53,7 @@ fn diagnose_finds_the_missing_actuator_from_files() {
         .arg(dir.path().join("next.toml"))
         .arg("--out")
         .arg(dir.path().join("report"))
+        .args(["--cut", "configs/cuts/fwd32j-face-milling.toml"])
         .output()
         .expect("run ident");
     let stdout = String::from_utf8_lossy(&out.stdout);
@@ -128,7 +129,53 @@ fn diagnose_finds_the_missing_actuator_from_files() {
         .expect("natural_frequencies")
         .iter()
         .any(|m| m["stage"] == "diagnosed" && !m["modes"].as_array().expect("modes").is_empty()));
+    // The final fit's correlation: square over the final table, unit diagonal, symmetric, and
+    // not the first fit's (the actuator changed the fit).
+    let fc = r["diagnosis"]["final_correlation"]
+        .as_array()
+        .expect("final_correlation");
+    let n = r["diagnosis"]["final_parameters"]
+        .as_array()
+        .expect("final_parameters")
+        .len();
+    assert!(n > 0 && fc.len() == n);
+    let at = |i: usize, j: usize| fc[i][j].as_f64();
+    for (i, row) in fc.iter().enumerate() {
+        assert_eq!(row.as_array().map_or(0, Vec::len), n);
+        assert!(at(i, i).is_none_or(|v| (v - 1.0).abs() < 1e-9));
+        for j in 0..n {
+            if let (Some(a), Some(b)) = (at(i, j), at(j, i)) {
+                assert!((a - b).abs() < 1e-9 && a.abs() <= 1.0);
+            }
+        }
+    }
+    assert_ne!(
+        r["diagnosis"]["final_correlation"],
+        r["identification"]["correlation"]
+    );
+    // --cut: the stability section of the final model, its band from the final fit (the added
+    // spring's own variables held at their estimates, said in a note).
+    let st = &r["stability"];
+    assert!(
+        st["minimum"]["depth_mm"].as_f64().unwrap_or(0.0) > 0.0,
+        "{st}"
+    );
+    assert!(st["minimum"]["band_mm"].is_array(), "{st}");
+    let notes: Vec<&str> = st["band_notes"]
+        .as_array()
+        .expect("band_notes")
+        .iter()
+        .filter_map(|n| n.as_str())
+        .collect();
+    assert!(
+        notes
+            .iter()
+            .any(|n| n.contains("held at their estimates") && n.contains("diagnosed spring 1"))
+            && !notes.iter().any(|n| n.contains("first fit's")),
+        "{notes:?}"
+    );
     let html = std::fs::read_to_string(dir.path().join("report/report.html")).expect("report.html");
+    assert!(html.find("id=\"final\"") < html.find("id=\"stability\""));
     let (top, rest) = html
         .split_once("<details>")
         .expect("the long ranking is collapsed");

@@ -2,7 +2,11 @@
 //! baseline runs are said so, a step against the learned normal is an alarm (exit 1) with the
 //! rule and size, a corrupt history database is reported and left untouched while the run's
 //! report is still written, the Prometheus textfile follows each run, and an unfinished session
-//! (a nightly killed mid-sweep) is skipped and said so.
+//! (a nightly killed mid-sweep) is skipped and said so. With `[stability]` each night's report has
+//! the chatter-stability section, the minimum stable depth is recorded beside the parameters,
+//! exported to the textfile and judged: a night whose depth fell below the learned normal raises
+//! the alarm that says so ("… fell from … to … mm"). That a loosening joint lowers the depth
+//! enough to be alarmed is `history/tests/stable_depth.rs`; here the history is seeded.
 
 #![allow(clippy::unwrap_used)]
 
@@ -22,9 +26,15 @@ fn messages(r: &serde_json::Value) -> Vec<String> {
         .collect()
 }
 
+/// The stable depth of the job's cut (`[stability]` of [`write_job`]).
+const DEPTH: &str = "stable depth 300–1800 rpm (fwd32j-face-milling)";
+
 fn write_job(dir: &Path, live: &Path, database: &str) -> PathBuf {
     let extra = format!(
-        "prometheus = \"metrics/ident.prom\"\n[history]\ndatabase = \"{database}\"\nbaseline_runs = 6\n"
+        "prometheus = \"metrics/ident.prom\"\n[history]\ndatabase = \"{database}\"\nbaseline_runs = 6\n[stability]\ncut = \"{}\"\nspeed_rpm = [300, 1800]\n",
+        common::root()
+            .join("configs/cuts/fwd32j-face-milling.toml")
+            .display()
     );
     common::nightly_job(dir, "nightly.toml", live, "newest-session", live, &extra)
 }
@@ -69,8 +79,36 @@ fn nightly_records_every_run_and_judges_drift_from_the_history() {
     );
     assert!(!dir.path().join("metrics/ident.prom.partial").exists());
 
-    // Six earlier nights and the first one on which the first parameter was 20 % stiffer (normal
-    // scatter 0.3 %): tonight, the same measurement again, is a step down. The history is
+    // The stable depth: the report's section, the history's quantity, the textfile's gauge.
+    let s = &r["stability"];
+    assert_eq!(s["speed_rpm"], serde_json::json!([300.0, 1800.0]));
+    let depth_mm = s["minimum"]["depth_mm"].as_f64().unwrap();
+    assert!(depth_mm > 0.0, "{s}");
+    assert!(
+        s["minimum"]["band_mm"].is_array(),
+        "the band from the final fit: {s}"
+    );
+    assert!(!s["limiting"].as_array().unwrap().is_empty());
+    let html = std::fs::read_to_string(report_dir(&o).join("report.html")).unwrap();
+    assert!(html.contains("id=\"stability\""));
+    assert_eq!(first.quantities.len(), 1);
+    let q = &first.quantities[0];
+    assert_eq!((q.variable.as_str(), q.unit.as_str()), (DEPTH, "mm"));
+    assert!((q.in_unit() - depth_mm).abs() < 1e-9 * depth_mm);
+    assert!(q.std_error.is_some_and(|s| s > 0.0));
+    let gauge =
+        format!("ident_nightly_stable_depth_mm{{job_name=\"test job\",quantity=\"{DEPTH}\"}} ");
+    let line = p
+        .lines()
+        .find(|l| l.starts_with(&gauge))
+        .unwrap_or_else(|| panic!("{p}"));
+    let exported: f64 = line[gauge.len()..].parse().unwrap();
+    assert!((exported - depth_mm).abs() < 1e-9 * depth_mm, "{line}");
+    assert!(p.contains("ident_nightly_stable_depth_sigma_mm{"), "{p}");
+
+    // Six earlier nights and the first one on which the first parameter was 20 % stiffer and the
+    // stable depth 30 % deeper (normal scatter 0.3 %): tonight, the same measurement again, is a
+    // step down in both. The history is
     // written anew so that the first night is at the earlier level too: an alarm is raised once,
     // on the first night beyond the limits, and a first night already off would take it.
     {
@@ -78,6 +116,7 @@ fn nightly_records_every_run_and_judges_drift_from_the_history() {
         let mut s = Store::open(&db).unwrap();
         let mut stiffer = first.clone();
         stiffer.parameters[0].estimate *= 1.2;
+        stiffer.quantities[0].estimate *= 1.3;
         s.append(&stiffer).unwrap();
         for i in 0..6 {
             let mut run = first.clone();
@@ -87,6 +126,7 @@ fn nightly_records_every_run_and_judges_drift_from_the_history() {
                 let wobble = 1.0 + 0.003 * (((i * 7 + k * 3) % 5) as f64 - 2.0);
                 p.estimate *= wobble * if k == 0 { 1.2 } else { 1.0 };
             }
+            run.quantities[0].estimate *= 1.3 * (1.0 + 0.003 * ((i % 5) as f64 - 2.0));
             s.append(&run).unwrap();
         }
     }
@@ -116,6 +156,12 @@ fn nightly_records_every_run_and_judges_drift_from_the_history() {
     );
     let log = std::fs::read_to_string(dir.path().join("nightly.log")).unwrap();
     assert!(log.contains("ALARM: drift alarm (Shewhart)"), "{log}");
+    let fell = ms
+        .iter()
+        .find(|m| m.starts_with("drift alarm (") && m.contains(&format!("): {DEPTH} fell from ")))
+        .unwrap_or_else(|| panic!("{ms:?}"));
+    assert!(fell.contains(" mm, -"), "{fell}");
+    assert!(log.contains(&format!("ALARM: {fell}")), "{log}");
     let runs = Store::open_read_only(&db).unwrap().runs().unwrap();
     assert_eq!(runs.len(), 8);
     assert_eq!(runs.last().unwrap().outcome, "alarm");
@@ -128,6 +174,27 @@ fn nightly_records_every_run_and_judges_drift_from_the_history() {
         p.contains("ident_nightly_outcome{job_name=\"test job\",outcome=\"alarm\"} 1"),
         "{p}"
     );
+    assert!(
+        p.contains(&format!(
+            "ident_nightly_parameter_deviation_scatters{{job_name=\"test job\",variable=\"{DEPTH}\"}} -"
+        )),
+        "{p}"
+    );
+    // The depth's series and the CSV, from the history.
+    let o = ident(&[
+        "history",
+        db.to_str().unwrap(),
+        "series",
+        DEPTH,
+        "--baseline-runs",
+        "6",
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert_eq!(out.lines().count(), 1 + 8, "{out}");
+    assert!(out.lines().last().unwrap().contains("Shewhart"), "{out}");
+    let o = ident(&["history", db.to_str().unwrap(), "csv"]);
+    assert!(String::from_utf8_lossy(&o.stdout).contains(DEPTH));
 
     // `ident identify --record-history`: the same model hashes alike; two runs, two records.
     let c = live.join("configs");
@@ -199,6 +266,7 @@ fn synthetic_run(i: usize, k1: f64) -> history::record::RunRecord {
         effects: vec![],
         covariates: vec![],
         correlations: vec![],
+        quantities: vec![],
     }
 }
 

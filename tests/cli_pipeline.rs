@@ -380,6 +380,12 @@ fn nightly_config_errors_point_at_file_and_line() {
         t.contains("nightly.toml:2:") && t.contains("newest-session"),
         "{t}"
     );
+    std::fs::write(&cfg, "name = \"t\"\nmeasure = \"newest-session\"\nmodel = \"m.toml\"\nvariables = \"v.toml\"\nsessions = \"s\"\nreports = \"r\"\nlog = \"l\"\nlock = \"k\"\n[stability]\ncut = \"c.toml\"\nspeed_rpm = [2000, 200]\n").unwrap();
+    let t = text(&ident(&["nightly", cfg.to_str().unwrap()]));
+    assert!(
+        t.contains("nightly.toml:11:") && t.contains("[stability] speed_rpm"),
+        "{t}"
+    );
     // The shipped job file loads (its paths are checked when it runs).
     let shipped = Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/nightly.toml");
     let text = std::fs::read_to_string(&shipped).unwrap();

@@ -173,6 +173,8 @@ fn the_band_comes_from_the_report_of_an_identification() {
             p(&fin),
             "--write-vars",
             p(&fin_vars),
+            "--cut",
+            p(&root().join("configs/cuts/textbook-two-mass-turning.toml")),
         ],
         &[],
     ));
@@ -216,6 +218,44 @@ fn the_band_comes_from_the_report_of_an_identification() {
         w > 0.0 && (mw / w - 1.0).abs() < 0.2,
         "linear width {w} mm vs Monte Carlo {mw} mm"
     );
+
+    // `--json` is the report's section: `identify --cut` put the same lobes and band in the
+    // report as `ident stability` computes from the files the run wrote.
+    let o = ident(&[
+        "stability",
+        p(&fin),
+        "--cut",
+        p(&root().join("configs/cuts/textbook-two-mass-turning.toml")),
+        "--vars",
+        p(&fin_vars),
+        "--report",
+        p(&out.join("report.json")),
+        "--json",
+    ]);
+    assert_success(&o);
+    let json: stability::section::Stability = serde_json::from_slice(&o.stdout).unwrap();
+    let report: report::Report =
+        serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
+    let section = report
+        .stability
+        .expect("the report has the stability section");
+    let (a, b) = (&json.minimum, &section.minimum);
+    assert!(
+        (a.depth_mm - b.depth_mm).abs() < 1e-6 * a.depth_mm && a.speed_rpm == b.speed_rpm,
+        "{a:?} vs {b:?}"
+    );
+    let (ja, jb) = (a.band_mm.unwrap(), b.band_mm.unwrap());
+    assert!(
+        (ja[0] - jb[0]).abs() < 1e-4 * a.depth_mm && (ja[1] - jb[1]).abs() < 1e-4 * a.depth_mm,
+        "{ja:?} vs {jb:?}"
+    );
+    assert!(
+        (a.depth_mm - depth[i]).abs() < 1e-6 * a.depth_mm,
+        "the JSON is the CSV's minimum"
+    );
+    assert_eq!(json.points.len(), depth.len());
+    let html = std::fs::read_to_string(out.join("report.html")).unwrap();
+    assert!(html.contains("id=\"stability\"") && html.contains("minimum critical depth"));
 }
 
 #[test]

@@ -324,6 +324,9 @@ pub struct Diagnosis {
     /// Their Cramér-Rao standard errors at that fit (SI; NaN where undetermined); empty when no
     /// effect was accepted (the identification's errors stand).
     pub std_error: Vec<f64>,
+    /// The Cramér-Rao correlation of those variables at that fit (row-major, variables-file
+    /// order; NaN where undetermined); empty when no effect was accepted.
+    pub correlation: Vec<Vec<f64>>,
     /// The final model (effects added, estimates written in).
     #[serde(skip)]
     pub model: Model,
@@ -657,6 +660,7 @@ fn final_fit(
     // Effects refitted after their own round (a later effect, a removal) moved: report their
     // values and errors at the final fit, and the variables' errors there.
     let mut std_error = Vec::new();
+    let mut correlation = Vec::new();
     if !cur.effects.is_empty() {
         let crit_scale = residual_scale(
             &cur,
@@ -671,6 +675,7 @@ fn final_fit(
             a.params = params;
         }
         std_error = variable_errors(&pf, &cur, crit_scale);
+        correlation = variable_correlation(&pf, &cur);
     }
     let (x, gamma) = pf.split(&cur.u);
     let realized = pf.realize(&gamma)?;
@@ -686,6 +691,7 @@ fn final_fit(
         not_tried,
         estimate: x,
         std_error,
+        correlation,
         model: final_model,
         effects: cur.effects,
         timing: Timing::default(),
@@ -774,6 +780,34 @@ fn variable_errors(p: &Problem, cur: &Current, sigma2: f64) -> Vec<f64> {
         .map(|i| match &cov {
             Some(c) => (c[(i, i)] * sigma2).max(0.0).sqrt() * p.scale[i],
             None => f64::NAN,
+        })
+        .collect()
+}
+
+/// The Cramér-Rao correlation of the variables at `cur` (free of the noise scale and the
+/// variables' scaling), as [`Diagnosis::correlation`].
+fn variable_correlation(p: &Problem, cur: &Current) -> Vec<Vec<f64>> {
+    let info = cur.jac.tr_mul(&cur.jac);
+    let cov = info
+        .clone()
+        .try_inverse()
+        .or_else(|| info.pseudo_inverse(1e-12).ok());
+    let n = p.split(&cur.u).0.len();
+    (0..n)
+        .map(|i| {
+            (0..n)
+                .map(|j| match &cov {
+                    Some(c) => {
+                        let r = c[(i, j)] / (c[(i, i)] * c[(j, j)]).sqrt();
+                        if r.is_finite() {
+                            r.clamp(-1.0, 1.0)
+                        } else {
+                            f64::NAN
+                        }
+                    }
+                    None => f64::NAN,
+                })
+                .collect()
         })
         .collect()
 }

@@ -182,6 +182,7 @@ pub fn run_from_document(r: &Report, path: &Path, run_id: &str) -> Result<RunRec
     } else {
         correlations(&r.identification)
     };
+    let quantities = r.stability.iter().map(stable_depth).collect();
     let final_stage = if diag.is_some() {
         "diagnosed"
     } else {
@@ -226,7 +227,20 @@ pub fn run_from_document(r: &Report, path: &Path, run_id: &str) -> Result<RunRec
             .unwrap_or_default(),
         covariates: Vec::new(),
         correlations,
+        quantities,
     })
+}
+
+/// The judged quantity of a report's stability section: the minimum critical depth over the
+/// cut's speed range (mm), its σ from the linear band (`null` without one).
+pub fn stable_depth(s: &stability::section::Stability) -> ParameterRecord {
+    ParameterRecord {
+        variable: s.quantity_name(),
+        unit: "mm".into(),
+        unit_factor: 1e-3,
+        estimate: s.minimum.depth_mm * 1e-3,
+        std_error: s.minimum.sigma_mm.map(|v| v * 1e-3),
+    }
 }
 
 /// Each pair of the identification's correlation matrix once (finite values only).

@@ -35,6 +35,7 @@
 //!     effects: vec![],
 //!     covariates: vec![],
 //!     correlations: vec![],
+//!     quantities: vec![],
 //! }).unwrap();
 //! let runs = store.runs().unwrap();
 //! assert_eq!(runs[0].parameters[0].in_unit(), 0.05);

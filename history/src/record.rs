@@ -34,6 +34,12 @@ pub struct RunRecord {
     /// had none): the multivariate chart's correlation structure.
     #[serde(default)]
     pub correlations: Vec<Correlation>,
+    /// Quantities derived from the final model and judged like the parameters, but kept out of
+    /// the multivariate chart (they are functions of the parameters): the minimum critical depth
+    /// of a cut over its speed range (`stable depth 200–2000 rpm (cut)`, unit `mm`). Empty when
+    /// the run had no cut.
+    #[serde(default)]
+    pub quantities: Vec<ParameterRecord>,
 }
 
 /// The Cramér-Rao correlation of two parameters of one run.
@@ -90,9 +96,12 @@ pub struct Covariate {
 }
 
 impl RunRecord {
-    /// The parameter named `variable`, if this run identified it.
+    /// The parameter or derived quantity named `variable`, if this run has it.
     pub fn parameter(&self, variable: &str) -> Option<&ParameterRecord> {
-        self.parameters.iter().find(|p| p.variable == variable)
+        self.parameters
+            .iter()
+            .chain(&self.quantities)
+            .find(|p| p.variable == variable)
     }
 
     /// The Cramér-Rao correlation of variables `a` and `b` (1 when `a == b`), if recorded.

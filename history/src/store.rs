@@ -11,9 +11,10 @@ use rusqlite::{params, Connection, OpenFlags, OptionalExtension};
 use crate::error::HistoryError;
 use crate::record::{CharacteristicFit, Correlation, Covariate, ParameterRecord, RunRecord};
 
-/// The schema this build writes and reads (2: Cramér-Rao correlations per run; a version-1
-/// file is upgraded when opened for writing, and read as it is).
-pub const SCHEMA_VERSION: i64 = 2;
+/// The schema this build writes and reads (2: Cramér-Rao correlations per run; 3: derived
+/// quantities per run, the stable cutting depth). An older file is upgraded when opened for
+/// writing, and read as it is.
+pub const SCHEMA_VERSION: i64 = 3;
 
 /// How long a writer waits for another writer before [`HistoryError::Locked`].
 pub const BUSY_WAIT: Duration = Duration::from_secs(5);
@@ -66,6 +67,20 @@ CREATE TABLE correlations (
 );
 ";
 
+/// Version 2 → 3: quantities derived from the final model and judged like the parameters (the
+/// minimum critical depth of a cut), in the parameters' row shape.
+const SCHEMA_3: &str = "
+CREATE TABLE quantities (
+    run INTEGER NOT NULL REFERENCES runs(id),
+    name TEXT NOT NULL,
+    unit TEXT NOT NULL,
+    unit_factor REAL NOT NULL,
+    value REAL NOT NULL,
+    std_error REAL,
+    PRIMARY KEY (run, name)
+);
+";
+
 /// An open history database.
 pub struct Store {
     conn: Connection,
@@ -103,16 +118,17 @@ impl Store {
             .conn
             .pragma_update(None, "foreign_keys", true)
             .map_err(err)?;
-        if store.version()? == 0 {
+        let version = store.version()?;
+        if version < SCHEMA_VERSION {
+            // Each step from the file's version up, in one transaction.
             let tx = store.conn.transaction().map_err(err)?;
-            tx.execute_batch(SCHEMA).map_err(err)?;
-            tx.execute_batch(SCHEMA_2).map_err(err)?;
-            tx.pragma_update(None, "user_version", SCHEMA_VERSION)
-                .map_err(err)?;
-            tx.commit().map_err(err)?;
-        } else if store.version()? == 1 {
-            let tx = store.conn.transaction().map_err(err)?;
-            tx.execute_batch(SCHEMA_2).map_err(err)?;
+            if version == 0 {
+                tx.execute_batch(SCHEMA).map_err(err)?;
+            }
+            if version < 2 {
+                tx.execute_batch(SCHEMA_2).map_err(err)?;
+            }
+            tx.execute_batch(SCHEMA_3).map_err(err)?;
             tx.pragma_update(None, "user_version", SCHEMA_VERSION)
                 .map_err(err)?;
             tx.commit().map_err(err)?;
@@ -256,6 +272,21 @@ impl Store {
             )
             .map_err(err)?;
         }
+        for q in &run.quantities {
+            tx.execute(
+                "INSERT INTO quantities (run, name, unit, unit_factor, value, std_error)
+                 VALUES (?1, ?2, ?3, ?4, ?5, ?6)",
+                params![
+                    id,
+                    q.variable,
+                    q.unit,
+                    q.unit_factor,
+                    q.estimate,
+                    q.std_error
+                ],
+            )
+            .map_err(err)?;
+        }
         for c in run.correlations.iter().filter(|c| c.value.is_finite()) {
             tx.execute(
                 "INSERT INTO correlations (run, a, b, value) VALUES (?1, ?2, ?3, ?4)",
@@ -293,6 +324,7 @@ impl Store {
                         effects: Vec::new(),
                         covariates: Vec::new(),
                         correlations: Vec::new(),
+                        quantities: Vec::new(),
                     },
                 ))
             })
@@ -320,6 +352,16 @@ impl Store {
             Some(
                 self.conn
                     .prepare("SELECT a, b, value FROM correlations WHERE run = ?1 ORDER BY rowid")
+                    .map_err(err)?,
+            )
+        } else {
+            None
+        };
+        // A file older than version 3 (read only, not upgraded) has no quantities.
+        let mut q = if self.version()? >= 3 {
+            Some(
+                self.conn
+                    .prepare("SELECT name, unit, unit_factor, value, std_error FROM quantities WHERE run = ?1 ORDER BY rowid")
                     .map_err(err)?,
             )
         } else {
@@ -369,6 +411,20 @@ impl Store {
                             a: r.get(0)?,
                             b: r.get(1)?,
                             value: r.get(2)?,
+                        })
+                    })
+                    .and_then(|rows| rows.collect())
+                    .map_err(err)?;
+            }
+            if let Some(q) = q.as_mut() {
+                run.quantities = q
+                    .query_map([id], |r| {
+                        Ok(ParameterRecord {
+                            variable: r.get(0)?,
+                            unit: r.get(1)?,
+                            unit_factor: r.get(2)?,
+                            estimate: r.get(3)?,
+                            std_error: r.get(4)?,
                         })
                     })
                     .and_then(|rows| rows.collect())

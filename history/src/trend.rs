@@ -159,7 +159,8 @@ pub fn parameter_chart(
 pub fn page(title: &str, runs: &[RunRecord], judgements: &[Judgement]) -> String {
     let mut names: Vec<String> = Vec::new();
     for r in runs {
-        for p in &r.parameters {
+        // The parameters, then the quantities judged like them (the stable depth).
+        for p in r.parameters.iter().chain(&r.quantities) {
             if !names.contains(&p.variable) {
                 names.push(p.variable.clone());
             }

@@ -48,6 +48,7 @@ fn run(
             })
             .unwrap_or_default(),
         correlations: vec![],
+        quantities: vec![],
     }
 }
 

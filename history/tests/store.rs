@@ -47,6 +47,7 @@ fn run(i: usize) -> RunRecord {
             value: 20.0 + i as f64,
         }],
         correlations: vec![],
+        quantities: vec![],
     }
 }
 
@@ -86,6 +87,44 @@ fn readers_see_committed_runs_while_a_writer_holds_a_transaction() {
     // The writer's uncommitted run is lost when it dies; the committed one stays.
     drop(raw);
     assert_eq!(Store::open(&path).unwrap().runs().unwrap(), vec![run(0)]);
+}
+
+#[test]
+fn a_version_2_file_is_read_as_it_is_and_upgraded_for_writing() {
+    // A version-2 history: today's file without the quantities table.
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("h.sqlite");
+    Store::open(&path).unwrap().append(&run(0)).unwrap();
+    let c = rusqlite::Connection::open(&path).unwrap();
+    c.execute_batch("DROP TABLE quantities; PRAGMA user_version = 2;")
+        .unwrap();
+    drop(c);
+    assert_eq!(
+        Store::open_read_only(&path).unwrap().runs().unwrap(),
+        vec![run(0)],
+        "read as it is, without quantities"
+    );
+    let version = |p: &std::path::Path| -> i64 {
+        rusqlite::Connection::open(p)
+            .unwrap()
+            .pragma_query_value(None, "user_version", |r| r.get(0))
+            .unwrap()
+    };
+    assert_eq!(version(&path), 2, "reading does not upgrade");
+    let mut with_depth = run(1);
+    with_depth.quantities.push(ParameterRecord {
+        variable: "stable depth 200–2000 rpm (face-milling)".into(),
+        unit: "mm".into(),
+        unit_factor: 1e-3,
+        estimate: 2.1e-3,
+        std_error: Some(0.05e-3),
+    });
+    Store::open(&path).unwrap().append(&with_depth).unwrap();
+    assert_eq!(version(&path), SCHEMA_VERSION);
+    assert_eq!(
+        Store::open_read_only(&path).unwrap().runs().unwrap(),
+        vec![run(0), with_depth]
+    );
 }
 
 #[test]

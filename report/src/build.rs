@@ -541,6 +541,14 @@ pub fn diagnosis(d: &diagnose::Diagnosis, base: &str, id: &Identification) -> Di
         final_model,
         look_alikes,
         final_parameters: final_parameters(d, id),
+        final_correlation: if d.accepted.is_empty() {
+            Vec::new()
+        } else {
+            d.correlation
+                .iter()
+                .map(|row| row.iter().map(|&r| opt(r)).collect())
+                .collect()
+        },
         explained: d.after.explained,
         verdict: match &d.outside_library {
             Some(v) => format!("{} {v}", d.after.verdict),
@@ -673,6 +681,7 @@ pub fn build(inputs: Inputs<'_>) -> Result<Report, ReportError> {
         sensitivity,
         picture,
         drift: None,
+        stability: None,
         natural_frequencies: stages
             .iter()
             .zip(dense)

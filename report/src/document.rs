@@ -41,6 +41,12 @@ pub struct Report {
     pub picture: Option<crate::picture::ModelPicture>,
     /// Parameter history across runs (nightly).
     pub drift: Option<Drift>,
+    /// Chatter stability of the final model for a cut (`--cut`, or the nightly's
+    /// `[stability]`): the lobes with their 5–95 % band from the final fit's covariance, the
+    /// minimum critical depth over the speed range, the limiting modes with their bodies and
+    /// joints (`docs/stability.md`); `null` when no cut was given.
+    #[serde(default)]
+    pub stability: Option<stability::section::Stability>,
     /// Natural frequencies of the identified and the diagnosed model inside the measured band
     /// (marked on the amplitude charts).
     #[serde(default)]
@@ -303,6 +309,11 @@ pub struct Diagnosis {
     #[serde(default)]
     #[schemars(with = "Vec<ParameterSchema>")]
     pub final_parameters: Vec<Parameter>,
+    /// The Cramér-Rao correlation of `final_parameters` at the final fit, in their order (`null`
+    /// where undetermined); empty when nothing was added (the identification's `correlation`
+    /// is final) and in reports written before it existed.
+    #[serde(default)]
+    pub final_correlation: Vec<Vec<Option<f64>>>,
     /// Whether the final model explains the data to the noise level.
     pub explained: bool,
     /// The verdict on the final model in words.

@@ -74,10 +74,19 @@ pub fn render(r: &Report) -> Result<String, ReportError> {
     let mut h = String::new();
     header(&mut h, r);
     final_model(&mut h, r);
+    // The machining answer right after the final model: after the diagnosis's final table
+    // when there is one, else after the identification's table (then the final model).
+    let led = r.diagnosis.is_some();
+    if led {
+        stability(&mut h, r);
+    }
     identification_summary(&mut h, r);
     characteristics(&mut h, r)?;
     model_picture(&mut h, r)?;
     parameters(&mut h, r)?;
+    if !led {
+        stability(&mut h, r);
+    }
     diagnosis(&mut h, r);
     sensitivity(&mut h, r)?;
     drift(&mut h, r)?;
@@ -171,6 +180,80 @@ fn final_model(h: &mut String, r: &Report) {
             p.variability.map(rfe::display::relative).unwrap_or_else(|| "—".into()),
             rfe::display::sig(p.initial, 5),
             p.at_bound.as_deref().map(|b| format!("at {b} bound")).unwrap_or_default()
+        );
+    }
+    h.push_str("</table>\n");
+}
+
+/// The chatter stability of the final model for the report's cut: the minimum critical depth
+/// with its band, the lobes with their band as a chart, the modes, bodies and joints that set
+/// the limit.
+fn stability(h: &mut String, r: &Report) {
+    let e = escape;
+    let Some(s) = &r.stability else {
+        return;
+    };
+    let m = &s.minimum;
+    h.push_str("<h2 id=\"stability\">Chatter stability</h2>\n");
+    let _ = write!(
+        h,
+        "<p>{} ({}, {}, {:.0}–{:.0} rpm): <strong>minimum critical depth {} mm</strong> at {:.0} rpm",
+        e(s.note.as_deref().unwrap_or(&s.operation)),
+        e(&s.operation),
+        e(&s.cut),
+        s.speed_rpm[0],
+        s.speed_rpm[1],
+        rfe::display::sig(m.depth_mm, 4),
+        m.speed_rpm
+    );
+    if let Some([lo, hi]) = m.band_mm {
+        let _ = write!(
+            h,
+            " (5–95 %: {}–{} mm)",
+            rfe::display::sig(lo, 4),
+            rfe::display::sig(hi, 4)
+        );
+    }
+    let _ = writeln!(
+        h,
+        ", chatter at {:.1} Hz (lobe {}).</p>",
+        m.chatter_hz, m.lobe
+    );
+    if m.band_mm.is_none() {
+        h.push_str("<p class=\"note\">No band: the run's covariance was not available.</p>\n");
+    }
+    for n in &s.band_notes {
+        let _ = writeln!(h, "<p class=\"note\">Band: {}.</p>", e(n));
+    }
+    let _ = writeln!(
+        h,
+        "<figure>{}<figcaption>Critical axial depth against spindle speed; shaded: the 5–95 % band from the final fit's Cramér-Rao covariance (linear propagation); dot: the minimum.</figcaption></figure>",
+        s.svg()
+    );
+    h.push_str("<table><tr><th>mode (Hz)</th><th>η</th><th>share of the limit</th><th class=\"l\">bodies (kinetic energy)</th><th class=\"l\">joints (strain energy)</th></tr>\n");
+    let list = |v: &[::stability::section::Share]| -> String {
+        v.iter()
+            .take(4)
+            .map(|x| format!("{} {:.0} %", e(&x.name), 100.0 * x.share))
+            .collect::<Vec<_>>()
+            .join(", ")
+    };
+    for l in &s.limiting {
+        let _ = writeln!(
+            h,
+            "<tr><td>{:.1}</td><td>{:.3}</td><td>{:.0} %</td><td class=\"l\">{}</td><td class=\"l\">{}</td></tr>",
+            l.freq_hz,
+            l.loss_factor,
+            100.0 * l.share,
+            list(&l.bodies),
+            list(&l.joints)
+        );
+    }
+    if s.tool_share.abs() >= 0.05 {
+        let _ = writeln!(
+            h,
+            "<tr><td class=\"l\">tool</td><td></td><td>{:.0} %</td><td></td><td></td></tr>",
+            100.0 * s.tool_share
         );
     }
     h.push_str("</table>\n");

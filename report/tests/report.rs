@@ -176,12 +176,13 @@ fn html_is_self_contained_with_every_plot() {
     }
     let svgs = html.matches("<svg").count();
     // amplitude + phase (the fixture has phases) + residual per characteristic, parameters,
-    // sensitivity, drift, the model picture and one figure per mode in the band
+    // sensitivity, drift, the stability lobes, the model picture and one figure per mode in the
+    // band
     let shapes = r.picture.as_ref().map_or(0, |p| p.modes.len());
     assert!(shapes > 0);
     assert_eq!(
         svgs,
-        3 * r.characteristics.len() + 3 + 1 + shapes,
+        3 * r.characteristics.len() + 3 + 1 + 1 + shapes,
         "plots: {svgs}"
     );
     assert_eq!(
@@ -207,6 +208,49 @@ fn html_is_self_contained_with_every_plot() {
     for p in &r.identification.parameters {
         assert!(html.contains(&format!("<td class=\"l\">{}</td>", p.variable)));
     }
+}
+
+#[test]
+fn the_stability_section_comes_right_after_the_final_model() {
+    let f = fixture(5);
+    let r = full_report(&f, 1.0);
+    let s = r.stability.as_ref().unwrap();
+    let html = report::html::render(&r).unwrap();
+    let at = |needle: &str| {
+        html.find(needle)
+            .unwrap_or_else(|| panic!("{needle} missing"))
+    };
+    assert!(at("id=\"final\"") < at("id=\"stability\""));
+    assert!(at("id=\"stability\"") < at("id=\"identification\""));
+    // The minimum with its band, the lobes with the band shaded, the limiting modes' joints.
+    let [lo, hi] = s.minimum.band_mm.unwrap();
+    assert!(
+        lo < s.minimum.depth_mm && s.minimum.depth_mm < hi,
+        "{:?}",
+        s.minimum
+    );
+    assert!(html.contains("minimum critical depth"));
+    assert!(html.contains("5–95 % band (linear)"));
+    assert!(!s.limiting.is_empty());
+    for l in &s.limiting {
+        for j in &l.joints {
+            assert!(html.contains(&j.name), "joint {} named", j.name);
+        }
+    }
+    // The covariance note (the second variable has no final-fit error in the fixture).
+    assert!(s
+        .band_notes
+        .iter()
+        .any(|n| n.contains("held at their estimates")));
+    // Without a diagnosis the identification's table is the final model: the section follows it.
+    let mut plain = r.clone();
+    plain.diagnosis = None;
+    let html = report::html::render(&plain).unwrap();
+    let at = |needle: &str| {
+        html.find(needle)
+            .unwrap_or_else(|| panic!("{needle} missing"))
+    };
+    assert!(at("id=\"parameters\"") < at("id=\"stability\""));
 }
 
 #[test]

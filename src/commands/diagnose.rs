@@ -77,11 +77,11 @@ pub fn run(a: DiagnoseArgs) -> anyhow::Result<ExitCode> {
     if let Some(dir) = &a.identify.out {
         std::fs::create_dir_all(dir)
             .with_context(|| format!("cannot create the output directory {}", dir.display()))?;
-        let diagnosis = Some((section(), &d.model));
+        let diagnosis = Some((section(), &d));
         super::identify::write_report(dir, &a.identify, "diagnose", &obs, &id, diagnosis)?;
     }
     if let Some(db) = &a.identify.record_history {
-        let diagnosis = Some((section(), &d.model));
+        let diagnosis = Some((section(), &d));
         super::identify::record_history(db, &a.identify, "diagnose", &obs, &id, diagnosis)?;
     }
     if let Some(p) = &a.out_model {

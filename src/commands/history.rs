@@ -121,7 +121,7 @@ pub fn run(a: HistoryArgs) -> anyhow::Result<ExitCode> {
             let runs = Store::open_read_only(db)?.runs()?;
             anyhow::ensure!(
                 runs.iter().any(|r| r.parameter(&variable).is_some()),
-                "no run in {} has a parameter \"{variable}\"; `ident history {} list` and the reports name them",
+                "no run in {} has a parameter or quantity \"{variable}\"; `ident history {} list` and the reports name them (the stable depth: \"stable depth <from>–<to> rpm (<cut>)\")",
                 db.display(),
                 db.display()
             );
@@ -148,7 +148,7 @@ pub fn run(a: HistoryArgs) -> anyhow::Result<ExitCode> {
                 "std_error",
             ]);
             for r in &runs {
-                for p in &r.parameters {
+                for p in r.parameters.iter().chain(&r.quantities) {
                     csv.row([
                         r.run_id.clone(),
                         r.time_utc.clone(),

@@ -188,6 +188,11 @@ pub struct IdentifyArgs {
     /// springs' k and ψ), to be used with the `--write-model` file.
     #[arg(long)]
     pub write_vars: Option<PathBuf>,
+    /// A cutting file (docs/stability.md): the report (`--out`, `--record-history`) gets a
+    /// chatter-stability section for it — the final model's lobes with their 5–95 % band from the
+    /// final fit's covariance, the minimum critical depth and the modes and joints that set it.
+    #[arg(long)]
+    pub cut: Option<PathBuf>,
 }
 
 /// Writes `--write-model` and `--write-vars` for the final fit: the identification's, or the
@@ -346,13 +351,13 @@ fn start(
 }
 
 /// The report of an identification, and of its diagnosis when given, built as the workflows
-/// build theirs (`pipeline::build_report`).
+/// build theirs (`pipeline::build_report`), with the stability section for `--cut`.
 fn build(
     a: &IdentifyArgs,
     workflow: &str,
     obs: &idn::Observations,
     id: &idn::Identification,
-    diagnosis: Option<(::report::Diagnosis, &rfe::Model)>,
+    diagnosis: Option<(::report::Diagnosis, &::diagnose::Diagnosis)>,
 ) -> anyhow::Result<::report::Report> {
     let title = format!("ident {workflow}: {}", model_name(a));
     let ctx = ReportContext {
@@ -369,7 +374,12 @@ fn build(
         measurement: format!("data file {}", a.data.display()),
         ..::report::document::Source::default()
     };
-    build_report(ctx, source, obs, id, diagnosis)
+    let full = diagnosis.as_ref().map(|(_, d)| *d);
+    let mut r = build_report(ctx, source, obs, id, diagnosis.map(|(s, d)| (s, &d.model)))?;
+    if let Some(cut) = &a.cut {
+        r.stability = Some(super::stability::report_section(cut, id, full, &r, None)?);
+    }
+    Ok(r)
 }
 
 /// The model file's name without its extension (the whole path if it has none).
@@ -388,7 +398,7 @@ pub fn write_report(
     workflow: &str,
     obs: &idn::Observations,
     id: &idn::Identification,
-    diagnosis: Option<(::report::Diagnosis, &rfe::Model)>,
+    diagnosis: Option<(::report::Diagnosis, &::diagnose::Diagnosis)>,
 ) -> anyhow::Result<::report::Written> {
     let r = build(a, workflow, obs, id, diagnosis)?;
     let written = ::report::write(&r, dir)?;
@@ -404,7 +414,7 @@ pub fn record_history(
     workflow: &str,
     obs: &idn::Observations,
     id: &idn::Identification,
-    diagnosis: Option<(::report::Diagnosis, &rfe::Model)>,
+    diagnosis: Option<(::report::Diagnosis, &::diagnose::Diagnosis)>,
 ) -> anyhow::Result<()> {
     let r = build(a, workflow, obs, id, diagnosis)?;
     let run_id = format!("{workflow}-{}", r.created_utc.replace(':', ""));

@@ -63,6 +63,20 @@ pub struct Config {
     pub history: Option<HistoryConfig>,
     /// Prometheus textfile (node_exporter's textfile collector) with the last run's status.
     pub prometheus: Option<PathBuf>,
+    /// Chatter stability of each night's final model for a cut: a section in the report, and
+    /// the minimum critical depth over the speed range judged in the history.
+    pub stability: Option<StabilityConfig>,
+}
+
+/// `[stability]`: the cut whose minimum critical depth the nightly judges (`docs/stability.md`).
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct StabilityConfig {
+    /// The cutting file (relative to the job file's folder).
+    pub cut: PathBuf,
+    /// The spindle-speed range of interest (rpm), `[from, to]`; default: the cut file's
+    /// `speed_rpm`.
+    pub speed_rpm: Option<[f64; 2]>,
 }
 
 /// `[history]`: every run is appended to `database` and judged against a baseline window of
@@ -208,6 +222,7 @@ impl Config {
             c.stand.as_mut(),
             c.prometheus.as_mut(),
             c.history.as_mut().map(|h| &mut h.database),
+            c.stability.as_mut().map(|s| &mut s.cut),
         ]
         .into_iter()
         .flatten()
@@ -216,6 +231,14 @@ impl Config {
                 *p = dir.join(&*p);
             }
         }
+        anyhow::ensure!(
+            c.stability
+                .as_ref()
+                .and_then(|s| s.speed_rpm)
+                .is_none_or(|[a, b]| a > 0.0 && b > a && b.is_finite()),
+            "{}: [stability] speed_rpm must be [from, to] with 0 < from < to (rpm)",
+            at("speed_rpm")
+        );
         anyhow::ensure!(
             c.history.as_ref().is_none_or(|h| h.baseline_runs >= 3),
             "{}: [history] baseline_runs must be at least 3 (20 or more learns normal scatter well)",
@@ -554,7 +577,7 @@ fn job(
     // The drift needs this run's table and time: build once without, compare, then write with it.
     // With its diagnosis, so that this run is read at the same stage as the earlier reports (the
     // final model's parameters when the diagnosis added an effect).
-    let probe = report::build::build({
+    let mut probe = report::build::build({
         let mut i =
             report::build::Inputs::new(&cfg.name, &analysis.observations, &analysis.identification);
         i.sensitivity = false;
@@ -564,6 +587,32 @@ fn job(
             .map(|(section, d)| (section.clone(), &d.model));
         i
     })?;
+    // The stable depth: in the probe, so that the history records and judges it.
+    if let Some(s) = &cfg.stability {
+        let full = analysis.diagnosis.as_ref().map(|(_, d)| d);
+        match super::stability::report_section(
+            &s.cut,
+            &analysis.identification,
+            full,
+            &probe,
+            s.speed_rpm.map(|[a, b]| (a, b)),
+        ) {
+            Ok(section) => {
+                log.line(&format!(
+                    "stability: {} {:.4} mm at {:.0} rpm",
+                    section.quantity_name(),
+                    section.minimum.depth_mm,
+                    section.minimum.speed_rpm
+                ));
+                probe.stability = Some(section);
+            }
+            Err(e) => {
+                let m = format!("stability not computed: {e:#}");
+                log.line(&m);
+                notes.push(m);
+            }
+        }
+    }
     // History: earlier runs' reports (this run's folder has none yet), read as run records.
     let (mut drift, hist_msgs) = crlb_drift(cfg, dir, &probe)?;
     for m in &hist_msgs {
@@ -620,6 +669,10 @@ fn job(
         created_utc: probe.created_utc.clone(),
     };
     let (mut r, mut written) = pipeline::write_report(dir, ctx, &setup, &analysis)?;
+    if probe.stability.is_some() {
+        r.stability = probe.stability.clone();
+        written = report::write(&r, dir)?;
+    }
     if let Some((judgement, record, store)) = &mut recorded {
         if judgement.alarm() && r.status.outcome == report::Outcome::Ok {
             r.status.outcome = report::Outcome::Alarm;

@@ -95,7 +95,7 @@ pub fn textfile(s: &RunStatus<'_>) -> String {
             .collect();
         metric(
             "ident_nightly_parameter_deviation_scatters",
-            "Deviation of each parameter from normal in multiples of its normal run-to-run scatter.",
+            "Deviation of each parameter (and the stable depth) from normal in multiples of its normal run-to-run scatter.",
             &rows,
         );
     }
@@ -126,6 +126,24 @@ pub fn textfile(s: &RunStatus<'_>) -> String {
             "Identified value of each parameter in its display unit (label unit).",
             &rows,
         );
+        if !r.quantities.is_empty() {
+            let rows = |f: &dyn Fn(&history::record::ParameterRecord) -> Option<f64>| {
+                r.quantities
+                    .iter()
+                    .filter_map(|q| Some((format!(",quantity=\"{}\"", label(&q.variable)), f(q)?)))
+                    .collect::<Vec<_>>()
+            };
+            metric(
+                "ident_nightly_stable_depth_mm",
+                "Minimum critical (chatter-free) axial depth of cut of the final model over the cut's speed range (mm; label quantity names the range and the cut).",
+                &rows(&|q| Some(q.estimate / q.unit_factor)),
+            );
+            metric(
+                "ident_nightly_stable_depth_sigma_mm",
+                "Standard deviation of that depth from the final fit's Cramér-Rao covariance (mm).",
+                &rows(&|q| q.std_error.map(|s| s / q.unit_factor)),
+            );
+        }
     }
     t
 }

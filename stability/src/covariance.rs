@@ -5,10 +5,11 @@
 //! correlation matrix of the estimates. The relative error is unit-free, so it carries over to
 //! the final variables file however its units are written; a scale-tied variable starts again at
 //! the factor 1 there, and σ/|x| is then the σ of that factor. When the diagnosis added effects,
-//! the report's `diagnosis.final_parameters` give the errors of the final fit; the report stores
-//! only the first fit's correlation, which is then used for the final errors (the added effects'
-//! own variables are held at their estimates: the report has no errors for them). Both
-//! approximations are returned as notes for the reader.
+//! the report's `diagnosis.final_parameters` and `diagnosis.final_correlation` give the errors
+//! and the correlation of the final fit. A report written before the final correlation was
+//! stored has only the first fit's, which is then used with the final errors and said so in a
+//! note. The added effects' own variables are held at their estimates (the report has no errors
+//! for them), also said in a note.
 
 use nalgebra::DMatrix;
 use serde::Deserialize;
@@ -52,6 +53,8 @@ struct Ident {
 struct Diag {
     #[serde(default)]
     final_parameters: Vec<Row>,
+    #[serde(default)]
+    final_correlation: Vec<Vec<Option<f64>>>,
 }
 
 #[derive(Deserialize)]
@@ -80,14 +83,18 @@ pub fn from_report(
         message: e.to_string(),
     })?;
     let first = &r.identification.parameters;
-    let rows = match &r.diagnosis {
-        Some(d) if !d.final_parameters.is_empty() => &d.final_parameters,
-        _ => first,
-    };
     let mut notes = Vec::new();
-    if !std::ptr::eq(rows, first) {
-        notes.push("the errors are the final fit's; the correlation is the first fit's (the report stores no other)".to_string());
-    }
+    let (rows, corr) = match &r.diagnosis {
+        Some(d) if !d.final_parameters.is_empty() => {
+            if d.final_correlation.len() == d.final_parameters.len() {
+                (&d.final_parameters, &d.final_correlation)
+            } else {
+                notes.push("the errors are the final fit's; the correlation is the first fit's (this report does not store the final fit's)".to_string());
+                (&d.final_parameters, &r.identification.correlation)
+            }
+        }
+        _ => (first, &r.identification.correlation),
+    };
     let n = vars.len();
     let x = vars.initial();
     // Index in the report table and σ (SI) of each variable.
@@ -118,7 +125,6 @@ pub fn from_report(
             missing.join(", ")
         ));
     }
-    let corr = &r.identification.correlation;
     let matrix = DMatrix::from_fn(n, n, |i, j| match (found[i], found[j]) {
         (Some((a, sa)), Some((b, sb))) => {
             let rho = if i == j {

@@ -28,7 +28,7 @@ use nalgebra::Vector3;
 use serde::Deserialize;
 
 use rfe::source::{strip_bom, Quantity};
-use rfe::units::{parse_quantities, parse_quantity, Dim};
+use rfe::units::{parse_quantities, Dim};
 
 /// Spindle speeds on the lobe grid when the file does not say.
 pub const DEFAULT_SPEEDS: usize = 200;
@@ -146,6 +146,8 @@ pub struct ToolMode {
 pub struct Cut {
     /// File name, for messages.
     pub origin: String,
+    /// The file's free-text `note`, if any.
+    pub note: Option<String>,
     /// The operation.
     pub operation: Operation,
     /// The tool point (the spindle nose, or the tool tip on the spindle's body).
@@ -155,6 +157,9 @@ pub struct Cut {
     /// Tool modes added in series at the tool point (receptance coupling of a tool given as
     /// modal parameters); empty for none.
     pub tool_modes: Vec<ToolMode>,
+    /// Tool receptances read from UFF files (`[[tool.frf]]`), added in series at the tool point
+    /// like the modes; empty for none.
+    pub tool_frfs: Vec<crate::tool::ToolFrf>,
     /// Tangential cutting coefficient K_t (N/m²).
     pub kt: f64,
     /// Radial (normal) cutting coefficient K_r (N/m²), not the ratio.
@@ -211,6 +216,15 @@ struct RawContact {
     point: Option<RawPoint>,
     #[serde(default, rename = "mode")]
     modes: Vec<RawToolMode>,
+    #[serde(default, rename = "frf")]
+    frfs: Vec<RawToolFrf>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawToolFrf {
+    uff: Option<String>,
+    direction: Option<Vec<f64>>,
 }
 
 #[derive(Deserialize)]
@@ -250,7 +264,6 @@ struct RawTurning {
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
 struct RawCut {
-    #[allow(dead_code)]
     note: Option<String>,
     operation: Option<String>,
     speed_rpm: Option<Vec<f64>>,
@@ -367,6 +380,12 @@ pub fn parse(text: &str, file: &str) -> Result<Cut, CutError> {
         .enumerate()
         .map(|(i, m)| f.tool_mode(i, m))
         .collect::<Result<_, _>>()?;
+    let tool_frfs = tool_raw
+        .frfs
+        .iter()
+        .enumerate()
+        .map(|(i, t)| f.tool_frf(i, t))
+        .collect::<Result<_, _>>()?;
     let tool = f.contact(tool_raw, "tool")?;
     let workpiece = f.contact(
         raw.workpiece.ok_or_else(|| {
@@ -380,10 +399,12 @@ pub fn parse(text: &str, file: &str) -> Result<Cut, CutError> {
     )?;
     Ok(Cut {
         origin: file.into(),
+        note: raw.note,
         operation,
         tool,
         workpiece,
         tool_modes,
+        tool_frfs,
         kt,
         kr,
         speed_rpm,
@@ -391,6 +412,47 @@ pub fn parse(text: &str, file: &str) -> Result<Cut, CutError> {
         band_hz,
         lines,
     })
+}
+
+/// The pressure units of a cutting coefficient and their value in Pa (N/m²).
+pub const PRESSURE_UNITS: [(&str, f64); 9] = [
+    ("Pa", 1.0),
+    ("kPa", 1e3),
+    ("MPa", 1e6),
+    ("GPa", 1e9),
+    ("N/m^2", 1.0),
+    ("N/m²", 1.0),
+    ("N/mm^2", 1e6),
+    ("N/mm²", 1e6),
+    ("N/mm2", 1e6),
+];
+
+/// A pressure `"<number> <unit>"` with a unit of [`PRESSURE_UNITS`], to N/m²; the problem in
+/// words otherwise.
+pub fn parse_pressure(text: &str) -> Result<f64, String> {
+    let t = text.trim();
+    // The number is the longest prefix that reads as one (`1.8e3 MPa`, `800N/mm^2`).
+    let (x, unit) = t
+        .char_indices()
+        .map(|(i, _)| i)
+        .chain([t.len()])
+        .rev()
+        .find_map(|i| Some((t[..i].trim().parse::<f64>().ok()?, t[i..].trim())))
+        .ok_or_else(|| format!("\"{text}\" does not start with a number"))?;
+    if unit.is_empty() {
+        return Err(format!("\"{text}\" has no unit"));
+    }
+    let factor = PRESSURE_UNITS
+        .iter()
+        .find(|(u, _)| *u == unit)
+        .map(|(_, f)| *f)
+        .ok_or_else(|| format!("\"{unit}\" is not a pressure unit"))?;
+    let v = x * factor;
+    if v.is_finite() {
+        Ok(v)
+    } else {
+        Err(format!("\"{text}\" is not finite"))
+    }
 }
 
 struct Fields<'a> {
@@ -412,19 +474,22 @@ impl Fields<'_> {
             .map_err(|e| self.err(field, e.to_string(), format!("write {}", dim.describe())))
     }
 
-    /// A cutting coefficient (N/m²). The unit parser has no pressure dimension; a pressure per
-    /// metre is a contact stiffness, so `"796 MPa"` is read as `"796 MPa/m"`.
+    /// A cutting coefficient: a pressure with its unit written out (`"800 MPa"`,
+    /// `"800 N/mm^2"`), to N/m². A bare number is refused: handbooks give K_t and K_r in N/mm²
+    /// (= MPa) as often as in N/m², and a factor 10⁶ off would pass unnoticed.
     fn pressure(&self, q: Option<&Quantity>, field: &str, what: &str) -> Result<f64, CutError> {
+        let key = field.rsplit('.').next().unwrap_or(field);
         let fix = format!(
-            "write the {what} cutting coefficient as a pressure, e.g. {} = \"800 MPa\" or \"800 N/mm^2\"",
-            field.rsplit('.').next().unwrap_or(field)
+            "write the {what} cutting coefficient as a pressure with its unit, e.g. {key} = \"800 MPa\" or \"800 N/mm^2\" (units: {})",
+            PRESSURE_UNITS.iter().map(|(u, _)| *u).collect::<Vec<_>>().join(", ")
         );
         match q {
             None => Err(self.err(field, "missing", fix)),
-            Some(Quantity::Number(x)) if x.is_finite() => Ok(*x),
-            Some(Quantity::Text(t)) => parse_quantity(&format!("{t}/m"), Dim::CONTACT_STIFFNESS)
-                .map_err(|_| self.err(field, format!("\"{t}\" is not a pressure"), fix)),
-            Some(_) => Err(self.err(field, "not a finite number", fix)),
+            Some(Quantity::Number(x)) => Err(self.err(field, format!("{x} has no unit"), fix)),
+            Some(Quantity::Text(t)) => match parse_pressure(t) {
+                Ok(v) => Ok(v),
+                Err(problem) => Err(self.err(field, problem, fix)),
+            },
         }
     }
 
@@ -516,6 +581,31 @@ impl Fields<'_> {
             freq_hz,
             damping_ratio,
             stiffness,
+        })
+    }
+
+    /// A `[[tool.frf]]`: the UFF file (relative to the cutting file's folder) and the direction
+    /// it was measured in.
+    fn tool_frf(&self, i: usize, t: &RawToolFrf) -> Result<crate::tool::ToolFrf, CutError> {
+        let field = |k: &str| format!("tool.frf[{i}].{k}");
+        let direction = self.vector(t.direction.as_ref(), &field("direction"))?;
+        let Some(name) = &t.uff else {
+            return Err(self.err(
+                &field("uff"),
+                "missing",
+                "write uff = \"tool-x.uff\" (the tool tip's driving-point FRF, UFF58; relative to the cutting file)",
+            ));
+        };
+        let path = std::path::Path::new(self.file)
+            .parent()
+            .unwrap_or(std::path::Path::new(""))
+            .join(name);
+        crate::tool::read(&path, direction).map_err(|problem| {
+            self.err(
+                &field("uff"),
+                format!("{}: {problem}", path.display()),
+                "or give the tool by its modes ([[tool.mode]])",
+            )
         })
     }
 

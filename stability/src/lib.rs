@@ -11,7 +11,9 @@
 //! - [`lobes`](mod@lobes): turning (Tlusty/Tobias) and milling (zeroth-order approximation, Altintas and
 //!   Budak) lobes, the boundary, and its gradient with respect to the variables;
 //! - [`sd`]: semi-discretization (Insperger and Stépán), the milling reference at low immersion;
-//! - [`bands`]: 5–95 % bands, linear through the analytic sensitivities and by Monte Carlo.
+//! - [`bands`]: 5–95 % bands, linear through the analytic sensitivities and by Monte Carlo;
+//! - [`section`]: the lobes as data (`ident stability --json`, the report's stability section)
+//!   and their SVG chart.
 //!
 //! [`lobes()`] is the workflow: a model, a cut and optionally the covariance in, the boundary,
 //! its band and the modes (with their bodies and joints) that set the limit out.
@@ -54,6 +56,8 @@ pub mod cut;
 pub mod lobes;
 pub mod oriented;
 pub mod sd;
+pub mod section;
+pub mod tool;
 
 use nalgebra::DMatrix;
 
@@ -206,6 +210,19 @@ pub fn lobes(req: &Request) -> Result<Lobes, StabilityError> {
     let placement = oriented::place(req.model, cut)?;
     let split = oriented::modal_split(&placement)?;
     let freqs = frequency_grid(&split, cut);
+    let top = freqs.last().copied().unwrap_or(0.0);
+    if let Some(t) = cut.tool_frfs.iter().find(|t| t.highest_hz() < top) {
+        return Err(StabilityError::Placement {
+            file: cut.origin.clone(),
+            field: "tool.frf".into(),
+            message: format!(
+                "the tool FRF {} ends at {:.1} Hz but the lobes need the tool up to {top:.1} Hz; measure the tool over the machine's band, or set band_hz = [lo, hi] with hi ≤ {:.1}",
+                t.origin,
+                t.highest_hz(),
+                t.highest_hz()
+            ),
+        });
+    }
     if let Some(u) = req.uncertainty {
         let n = u.variables.len();
         if u.covariance.nrows() != n || u.covariance.ncols() != n {

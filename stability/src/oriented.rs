@@ -218,14 +218,23 @@ pub fn place(model: &Model, cut: &Cut) -> Result<Placement, StabilityError> {
 /// receptances of the nose are left out).
 pub fn tool_receptance(cut: &Cut, directions: &[Vector3<f64>; 2], freq_hz: f64) -> Mat2 {
     let mut h = [[C64::new(0.0, 0.0); 2]; 2];
-    for m in &cut.tool_modes {
-        let r = freq_hz / m.freq_hz;
-        let frf = C64::new(1.0 - r * r, 2.0 * m.damping_ratio * r).inv() / m.stiffness;
+    let mut add = |frf: C64, d: &Vector3<f64>| {
         for i in 0..2 {
             for j in 0..2 {
-                h[i][j] += frf * directions[i].dot(&m.direction) * directions[j].dot(&m.direction);
+                h[i][j] += frf * directions[i].dot(d) * directions[j].dot(d);
             }
         }
+    };
+    for m in &cut.tool_modes {
+        let r = freq_hz / m.freq_hz;
+        add(
+            C64::new(1.0 - r * r, 2.0 * m.damping_ratio * r).inv() / m.stiffness,
+            &m.direction,
+        );
+    }
+    // A measured tool receptance (UFF) along its direction, the same way.
+    for t in &cut.tool_frfs {
+        add(t.at(freq_hz), &t.direction);
     }
     h
 }

@@ -69,9 +69,45 @@ fn a_cutting_file_without_coefficients_names_the_field_and_the_fix() {
     let text = GOOD.replace("\"1800 MPa\"", "\"1800 kg\"");
     let m = cut::parse(&text, "cut.toml").unwrap_err().to_string();
     assert!(
-        m.contains("cutting.kt") && m.contains("not a pressure"),
+        m.contains("cutting.kt") && m.contains("\"kg\" is not a pressure unit"),
         "{m}"
     );
+}
+
+#[test]
+fn cutting_coefficients_need_a_pressure_unit() {
+    // N/mm² = MPa: the handbooks' unit and the SI one give the same coefficient.
+    for (text, si) in [
+        ("1800 MPa", 1.8e9),
+        ("1800 N/mm^2", 1.8e9),
+        ("1800N/mm²", 1.8e9),
+        ("1.8 GPa", 1.8e9),
+        ("1.8e9 Pa", 1.8e9),
+        ("1.8e9 N/m^2", 1.8e9),
+    ] {
+        let c = cut::parse(
+            &GOOD.replace("\"1800 MPa\"", &format!("\"{text}\"")),
+            "cut.toml",
+        )
+        .unwrap();
+        assert!((c.kt - si).abs() < 1e-6 * si, "{text}: {}", c.kt);
+    }
+    // A bare number, a number without a unit, and a pressure per length are refused, naming
+    // the field and the units it takes.
+    for (value, problem) in [
+        ("1800", "has no unit"),
+        ("\"1800\"", "has no unit"),
+        ("\"1800 MPa/m\"", "\"MPa/m\" is not a pressure unit"),
+        ("\"1800 psi\"", "\"psi\" is not a pressure unit"),
+        ("\"MPa\"", "does not start with a number"),
+    ] {
+        let text = GOOD.replace("kr = \"540 MPa\"", &format!("kr = {value}"));
+        let m = cut::parse(&text, "cut.toml").unwrap_err().to_string();
+        assert!(
+            m.starts_with("cut.toml: cutting.kr:") && m.contains(problem) && m.contains("N/mm^2"),
+            "{value}: {m}"
+        );
+    }
 }
 
 #[test]

@@ -340,9 +340,36 @@ fn judge_one(
     for p in &run.parameters {
         judge_parameter(p, &base, covariate, run, cfg, memory, &mut j);
     }
+    for q in &run.quantities {
+        let before = j.alarms.len();
+        judge_parameter(q, &base, covariate, run, cfg, memory, &mut j);
+        say_what_moved(&mut j, before);
+    }
     judge_vector(&base, run, cfg, memory, &mut j);
     judge_effects(&base, run, memory, &mut j);
     j
+}
+
+/// A derived quantity's alarm (the stable depth) says what an operator reads: "drift alarm
+/// (Shewhart): stable depth … fell from 2.1 to 1.6 mm, −0.5 mm from normal (…)".
+fn say_what_moved(j: &mut Judgement, from: usize) {
+    let Some(q) = j.parameters.last() else {
+        return;
+    };
+    let moved = format!(
+        "{} {} from {} to {} {},",
+        q.variable,
+        if q.value < q.centre { "fell" } else { "rose" },
+        sig(q.centre, 3),
+        sig(q.value, 3),
+        q.unit
+    );
+    for a in j.alarms[from..]
+        .iter_mut()
+        .filter(|a| a.subject == q.variable)
+    {
+        a.message = a.message.replacen(&format!("{} is", q.variable), &moved, 1);
+    }
 }
 
 /// The baseline runs for `run`: same model, not failed, inside the window. Runs flagged by an
@@ -663,11 +690,13 @@ fn judge_vector(
         .covariate
         .as_deref()
         .filter(|c| run.covariate(c).is_some());
-    // Tonight's judged parameters that follow no change: name, residual, baseline normal.
+    // Tonight's judged parameters that follow no change: name, residual, baseline normal. The
+    // derived quantities are functions of the parameters: they would count twice.
     let judged: Vec<(String, f64, Normal)> = j
         .parameters
         .iter()
         .filter(|p| p.changed_since.is_none())
+        .filter(|p| run.parameters.iter().any(|q| q.variable == p.variable))
         .filter_map(|p| {
             Some((
                 p.variable.clone(),

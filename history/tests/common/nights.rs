@@ -156,6 +156,7 @@ pub fn simulate(sc: &Scenario, seed: u64) -> Vec<Night> {
                 value: temp + 0.1 * normal(),
             }],
             correlations: vec![],
+            quantities: vec![],
         };
         out.push(Night { record, changed });
     }

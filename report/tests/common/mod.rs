@@ -152,7 +152,7 @@ pub fn diagnosis_section(f: &Fixture) -> Diagnosis {
         final_model: "two masses + spring k1-body–ground".into(),
         look_alikes: vec!["spring k1-body–ground ≡ spring k2-body–ground".into()],
         final_parameters: vec![Parameter {
-            variable: "k1".into(),
+            variable: f.id.variables.vars[0].name.clone(),
             sdes: "k1".into(),
             parameter: "k".into(),
             unit: "N/um".into(),
@@ -162,6 +162,7 @@ pub fn diagnosis_section(f: &Fixture) -> Diagnosis {
             variability: Some(0.019),
             at_bound: None,
         }],
+        final_correlation: vec![vec![Some(1.0)]],
         explained: true,
         verdict: "the model explains the data to the noise level".into(),
         not_tried: vec![NotTried {
@@ -184,6 +185,7 @@ pub fn full_report(f: &Fixture, shift: f64) -> Report {
     inputs.source.measurement = f.obs.origin.clone();
     inputs.diagnosis = Some((diagnosis_section(f), &f.id.model));
     let mut r = report::build::build(inputs).unwrap();
+    r.stability = Some(stability_section(f, &r));
     if r.identification.weak_directions.is_empty() {
         // Well-posed fixture: add one so that every field appears.
         r.identification.weak_directions.push(WeakDirection {
@@ -235,4 +237,27 @@ pub fn full_report(f: &Fixture, shift: f64) -> Report {
     };
     report::drift::attach(&mut r, d);
     r
+}
+
+/// The stability section of the fixture's final model for the two-mass turning cut
+/// (configs/cuts/textbook-two-mass-turning.toml), with its band from the report's covariance.
+pub fn stability_section(f: &Fixture, r: &Report) -> stability::section::Stability {
+    let file = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("../configs/cuts/textbook-two-mass-turning.toml");
+    let cut = stability::cut::load(&file).unwrap();
+    let mut vars = f.id.variables.clone();
+    for (v, x) in vars.vars.iter_mut().zip(&f.id.estimate) {
+        v.initial = *x;
+    }
+    let c = stability::covariance::from_report(&serde_json::to_string(r).unwrap(), "report", &vars)
+        .unwrap();
+    let req = stability::Request {
+        uncertainty: Some(stability::Uncertainty {
+            variables: &vars,
+            covariance: &c.matrix,
+        }),
+        ..stability::Request::new(&f.id.model, &cut)
+    };
+    let lobes = stability::lobes(&req).unwrap();
+    stability::section::Stability::new(&cut, &lobes, None, &c.notes)
 }
