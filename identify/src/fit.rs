@@ -265,6 +265,35 @@ pub fn identify(
     })
 }
 
+/// Iterations a hypercube start always gets before it may be stopped as hopeless.
+const HOPELESS_AFTER: usize = 5;
+/// A start whose criterion is this many times the best start's is far from the best optimum:
+/// were the best one at the noise level, it would miss the data by ten times the noise in
+/// every residual.
+const HOPELESS_RATIO: f64 = 100.0;
+/// A start still lowering its criterion by this fraction an iteration is still descending into
+/// its valley, wherever that leads, and goes on.
+const STILL_DESCENDING: f64 = 0.1;
+
+/// Why a multi-start's start is stopped at `p` (criterion `previous` one iteration before),
+/// with `best` the best criterion of the starts finished so far: after [`HOPELESS_AFTER`]
+/// iterations, its criterion is [`HOPELESS_RATIO`] times the best and falls by less than
+/// [`STILL_DESCENDING`] an iteration — a start settling in a valley far above the best optimum
+/// (multi-level single linkage stops such starts; a start of a resonant structure's fit from
+/// far away mostly ends in one).
+fn hopeless(p: &Progress, previous: f64, best: f64) -> Option<String> {
+    let slow = previous - p.criterion < STILL_DESCENDING * previous;
+    (p.iteration >= HOPELESS_AFTER && p.criterion > HOPELESS_RATIO * best && slow).then(|| {
+        format!(
+            "after {} iterations its criterion {:.4e} was {:.0}× the best start's and falling by less than {:.0} % an iteration",
+            p.iteration,
+            p.criterion,
+            p.criterion / best,
+            100.0 * STILL_DESCENDING
+        )
+    })
+}
+
 /// Minimizes from every start point (the initial values first); the best outcome and a summary
 /// of each start. The model must evaluate at the initial values; a later start that cannot is
 /// recorded as diverged.
@@ -291,14 +320,25 @@ fn best_of_starts(
             scale: scale.clone(),
             mode: opts.jacobian,
         };
-        let res = optimize::minimize(
+        // The written start and the extra (informed) starts run to their end; a hypercube
+        // start is stopped once it is heading for an optimum far above the best one found.
+        let informed = k < 1 + vars.extra_starts.len();
+        let best_j = best.as_ref().map(|(b, _)| b.criterion);
+        let mut previous = f64::INFINITY;
+        let mut watch = |p: &Progress| {
+            let why = best_j
+                .filter(|_| !informed)
+                .and_then(|j| hopeless(p, previous, j));
+            previous = p.criterion;
+            why
+        };
+        let res = optimize::minimize_watched(
             opts.optimizer,
             &mut obj,
-            &u0,
-            &lo,
-            &hi,
+            (&u0, &lo, &hi),
             &opts.settings,
             &mut |p| progress(k, p),
+            &mut watch,
         );
         match res {
             Ok(o) => {
@@ -358,4 +398,32 @@ pub fn uncertainty_at(
         false,
         opts.weak_threshold,
     ))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn at(iteration: usize, criterion: f64) -> Progress {
+        Progress {
+            iteration,
+            criterion,
+            step_norm: 0.0,
+            gradient_norm: 0.0,
+        }
+    }
+
+    /// A hypercube start is stopped only when it has had its first iterations, sits far above
+    /// the best start's criterion, and has stopped falling fast.
+    #[test]
+    fn a_start_is_hopeless_only_far_above_the_best_and_settling() {
+        let best = 1.0e3;
+        assert!(hopeless(&at(6, 1.0e7), 1.01e7, best).is_some());
+        // Too early.
+        assert!(hopeless(&at(HOPELESS_AFTER - 1, 1.0e7), 1.01e7, best).is_none());
+        // Still falling by half an iteration.
+        assert!(hopeless(&at(6, 1.0e7), 2.0e7, best).is_none());
+        // Within the ratio of the best.
+        assert!(hopeless(&at(6, 0.5 * HOPELESS_RATIO * best), 1.01e5, best).is_none());
+    }
 }

@@ -79,6 +79,9 @@ pub enum StopReason {
     IterationLimit,
     /// The model could not be evaluated (e.g. it became singular) or J is not finite.
     Diverged(String),
+    /// The caller stopped the run (a multi-start's start heading for an optimum far above the
+    /// best one found; see `identify::fit`): the point reached is kept, not converged.
+    Abandoned(String),
 }
 
 impl StopReason {
@@ -106,6 +109,7 @@ impl StopReason {
                 "NOT converged: iteration limit reached (the best point is kept; raise --max-iterations or start closer)".into()
             }
             StopReason::Diverged(m) => format!("NOT converged: diverged ({m}); the best point is kept"),
+            StopReason::Abandoned(m) => format!("NOT converged: stopped early ({m})"),
         }
     }
 }
@@ -236,6 +240,19 @@ pub fn minimize(
     settings: &Settings,
     progress: &mut dyn FnMut(&Progress),
 ) -> Result<Outcome, EvalError> {
+    minimize_watched(method, obj, (u0, lo, hi), settings, progress, &mut |_| None)
+}
+
+/// [`minimize`] with a watch: after every accepted step `watch` sees the progress and may stop
+/// the run with a reason ([`StopReason::Abandoned`], the point reached kept).
+pub fn minimize_watched(
+    method: Optimizer,
+    obj: &mut dyn Residuals,
+    (u0, lo, hi): (&DVector<f64>, &DVector<f64>, &DVector<f64>),
+    settings: &Settings,
+    progress: &mut dyn FnMut(&Progress),
+    watch: &mut dyn FnMut(&Progress) -> Option<String>,
+) -> Result<Outcome, EvalError> {
     let s0 = state(obj, clamp(u0, lo, hi))?;
     let mut run = Run {
         obj,
@@ -243,6 +260,7 @@ pub fn minimize(
         hi,
         set: settings,
         progress,
+        watch,
     };
     Ok(match method {
         Optimizer::LevenbergMarquardt => levenberg_marquardt(&mut run, s0),
@@ -258,6 +276,7 @@ struct Run<'a> {
     hi: &'a DVector<f64>,
     set: &'a Settings,
     progress: &'a mut dyn FnMut(&Progress),
+    watch: &'a mut dyn FnMut(&Progress) -> Option<String>,
 }
 
 fn outcome(s: &State, iterations: usize, stop: StopReason) -> Outcome {
@@ -278,12 +297,16 @@ fn after_step(
     test_tolerances: bool,
 ) -> Option<Outcome> {
     let free = free_set(&s.u, &s.g, run.lo, run.hi);
-    (run.progress)(&Progress {
+    let progress = Progress {
         iteration: it,
         criterion: s.cost,
         step_norm: sn,
         gradient_norm: projected_norm(&s.g, &free),
-    });
+    };
+    (run.progress)(&progress);
+    if let Some(why) = (run.watch)(&progress) {
+        return Some(outcome(s, it, StopReason::Abandoned(why)));
+    }
     if !test_tolerances {
         return None;
     }

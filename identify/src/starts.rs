@@ -119,15 +119,23 @@ fn distance_unit(id: &Identification, i: usize) -> f64 {
     }
 }
 
+/// Whether a start was stopped before its end as hopeless (its end is no optimum).
+fn stopped_early(s: &crate::StartSummary) -> bool {
+    matches!(s.stop, crate::StopReason::Abandoned(_))
+}
+
 /// Greedy clustering, best first: a start joins the first optimum whose estimate lies within
-/// [`SAME_OPTIMUM_STD_ERRORS`] standard errors in every variable.
+/// [`SAME_OPTIMUM_STD_ERRORS`] standard errors in every variable. Starts stopped early are left
+/// out: where they stopped is no optimum.
 fn cluster(id: &Identification) -> Vec<Optimum> {
     let units: Vec<f64> = (0..id.variables.len())
         .map(|i| distance_unit(id, i))
         .collect();
     let mut order: Vec<usize> = (0..id.starts.len())
         .filter(|&k| {
-            id.starts[k].criterion.is_finite() && id.starts[k].estimate.len() == units.len()
+            id.starts[k].criterion.is_finite()
+                && id.starts[k].estimate.len() == units.len()
+                && !stopped_early(&id.starts[k])
         })
         .collect();
     order.sort_by(|&a, &b| id.starts[a].criterion.total_cmp(&id.starts[b].criterion));
@@ -281,6 +289,12 @@ pub fn text(id: &Identification) -> String {
                 rfe::display::num(o.criterion),
                 o.starts.len(),
                 if k == 0 { " (best, reported)" } else { "" }
+            ));
+        }
+        let stopped = id.starts.iter().filter(|s| stopped_early(s)).count();
+        if stopped > 0 {
+            s.push_str(&format!(
+                "  {stopped} start(s) stopped early, heading for optima far above the best (criterion over 100× the best start's and settling)\n"
             ));
         }
     }
