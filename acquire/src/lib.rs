@@ -36,6 +36,7 @@ pub mod generator;
 pub mod record;
 pub mod replay;
 pub mod rig;
+pub mod scpi;
 pub mod session;
 pub mod shaker;
 pub mod sim;
