@@ -698,7 +698,7 @@ impl MeasurementMap {
                 e.output_name()
             ));
             frf_units::to_model_convention(&mut m, &unit, model, &mut notes)
-                .map_err(|message| bad(&c.item, message))?;
+                .map_err(|e| bad(&c.item, e.to_string()))?;
             characteristics.push(m);
         }
         let unused: Vec<String> = channels

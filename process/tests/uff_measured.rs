@@ -511,7 +511,7 @@ fn transmissibilities_in_g_per_g_or_any_like_ratio_are_read_exactly() {
     let bytes = uff::to_bytes(&[g], uff::Encoding::Binary).unwrap();
     let file = uff::parse_file(&bytes, "bad.uff").unwrap();
     let (channels, _) = uff::measured_channels(&file, "bad.uff").unwrap();
-    let e = channels[0].unit.as_ref().unwrap_err();
+    let e = channels[0].unit.as_ref().unwrap_err().to_string();
     assert!(
         e.contains("function type 5") && e.contains("accelerance"),
         "{e}"
