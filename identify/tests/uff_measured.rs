@@ -4,6 +4,9 @@
 //! three units; every form gives the same data and the same estimates.
 #![allow(clippy::unwrap_used, missing_docs)]
 
+// The Python runner and the signal helpers of process's cross-checks, shared (the scripts are
+// looked up in this crate's tests/python).
+#[path = "../../process/tests/common/mod.rs"]
 mod common;
 
 use identify::{self as idn, data, measurement_map, variables, Options};
