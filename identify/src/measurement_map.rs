@@ -253,87 +253,8 @@ pub fn parse(text: &str, origin: &str, model: &Model) -> Result<MeasurementMap, 
     let unit = raw.unit.as_ref().map(|u| unit_of(&src, u)).transpose()?;
     let mut references: Vec<MapReference> = Vec::new();
     for r in raw.reference.iter().flat_map(|r| &r.0) {
-        let node_dir = (
-            *r.node.get_ref(),
-            parse_dir(r.dir.get_ref()).ok_or_else(|| {
-                src.at(r.dir.span(), "reference.dir: use +X, -Y, Z, ... or ±1..6")
-            })?,
-        );
-        let line = src.at(r.node.span(), "").line;
-        if let Some(o) = references.iter().find(|o| o.node_dir == node_dir) {
-            return Err(src.at(
-                r.node.span(),
-                format!(
-                    "reference node {} {} is mapped twice (line {} too)",
-                    node_dir.0,
-                    dir_text(node_dir.1),
-                    o.line
-                ),
-            ));
-        }
-        let name = match &r.name {
-            None => None,
-            Some(n) if n.get_ref() == "excitation" => None,
-            Some(n) => {
-                if model.reference_index(n.get_ref()).is_none() {
-                    let known: Vec<&str> =
-                        model.references.iter().map(|x| x.name.as_str()).collect();
-                    return Err(src.at(
-                        n.span(),
-                        format!(
-                            "reference.name: the model has no [[reference]] \"{}\"; its references: excitation{}{}",
-                            n.get_ref(),
-                            if known.is_empty() { "" } else { ", " },
-                            known.join(", ")
-                        ),
-                    ));
-                }
-                Some(n.get_ref().clone())
-            }
-        };
-        if references.iter().any(|o| o.name == name) {
-            return Err(src.at(
-                r.name.as_ref().map(|n| n.span()).unwrap_or(r.node.span()),
-                format!(
-                    "reference.name: two file references map to the model's {}; name a different [[reference]] of the model for each",
-                    name.as_deref().unwrap_or("excitation")
-                ),
-            ));
-        }
-        let relative = match &r.motion {
-            None => false,
-            Some(m) => {
-                let base = name
-                    .as_deref()
-                    .and_then(|n| model.references.iter().find(|x| x.name == n))
-                    .is_some_and(|x| matches!(x.excitation, Excitation::BaseMotion { .. }));
-                if !base {
-                    return Err(src.at(
-                        m.span(),
-                        format!(
-                            "reference.motion: absolute or relative motion is an output under base motion, and the model's {} is not one; name a [[reference]] of the model with base_motion",
-                            name.as_deref().map(|n| format!("reference \"{n}\"")).unwrap_or("excitation".into())
-                        ),
-                    ));
-                }
-                match m.get_ref().as_str() {
-                    "absolute" => false,
-                    "relative" => true,
-                    other => {
-                        return Err(src.at(
-                            m.span(),
-                            format!("reference.motion: \"{other}\" is neither \"absolute\" (transmissibility) nor \"relative\" (response − base)"),
-                        ))
-                    }
-                }
-            }
-        };
-        references.push(MapReference {
-            line,
-            node_dir,
-            name,
-            relative,
-        });
+        let resolved = reference(&src, r, model, &references)?;
+        references.push(resolved);
     }
     if raw.channels.is_empty() {
         return Err(src.at(
@@ -341,9 +262,122 @@ pub fn parse(text: &str, origin: &str, model: &Model) -> Result<MeasurementMap, 
             "no [[channel]]: the map must say which measured channel is which body and direction",
         ));
     }
+    Ok(MeasurementMap {
+        file: origin.to_string(),
+        references,
+        unit,
+        entries: entries(&src, &raw.channels, model)?,
+    })
+}
+
+/// One `[[reference]]` of the map resolved against the model and the references before it
+/// (`earlier`): no file reference or model reference twice.
+fn reference(
+    src: &SourceText,
+    r: &RawReference,
+    model: &Model,
+    earlier: &[MapReference],
+) -> Result<MapReference, Located> {
+    let node_dir = (
+        *r.node.get_ref(),
+        parse_dir(r.dir.get_ref())
+            .ok_or_else(|| src.at(r.dir.span(), "reference.dir: use +X, -Y, Z, ... or ±1..6"))?,
+    );
+    let line = src.at(r.node.span(), "").line;
+    if let Some(o) = earlier.iter().find(|o| o.node_dir == node_dir) {
+        return Err(src.at(
+            r.node.span(),
+            format!(
+                "reference node {} {} is mapped twice (line {} too)",
+                node_dir.0,
+                dir_text(node_dir.1),
+                o.line
+            ),
+        ));
+    }
+    let name = match &r.name {
+        None => None,
+        Some(n) if n.get_ref() == "excitation" => None,
+        Some(n) => {
+            if model.reference_index(n.get_ref()).is_none() {
+                let known: Vec<&str> = model.references.iter().map(|x| x.name.as_str()).collect();
+                return Err(src.at(
+                    n.span(),
+                    format!(
+                        "reference.name: the model has no [[reference]] \"{}\"; its references: excitation{}{}",
+                        n.get_ref(),
+                        if known.is_empty() { "" } else { ", " },
+                        known.join(", ")
+                    ),
+                ));
+            }
+            Some(n.get_ref().clone())
+        }
+    };
+    if earlier.iter().any(|o| o.name == name) {
+        return Err(src.at(
+            r.name.as_ref().map(|n| n.span()).unwrap_or(r.node.span()),
+            format!(
+                "reference.name: two file references map to the model's {}; name a different [[reference]] of the model for each",
+                name.as_deref().unwrap_or("excitation")
+            ),
+        ));
+    }
+    let relative = relative_motion(src, r, model, name.as_deref())?;
+    Ok(MapReference {
+        line,
+        node_dir,
+        name,
+        relative,
+    })
+}
+
+/// Whether a reference's outputs are relative motions (`motion = "relative"`: response − base)
+/// or absolute ones; only a base-motion reference (`name`, `None` for the excitation) has either.
+fn relative_motion(
+    src: &SourceText,
+    r: &RawReference,
+    model: &Model,
+    name: Option<&str>,
+) -> Result<bool, Located> {
+    Ok(match &r.motion {
+        None => false,
+        Some(m) => {
+            let base = name
+                .and_then(|n| model.references.iter().find(|x| x.name == n))
+                .is_some_and(|x| matches!(x.excitation, Excitation::BaseMotion { .. }));
+            if !base {
+                return Err(src.at(
+                    m.span(),
+                    format!(
+                        "reference.motion: absolute or relative motion is an output under base motion, and the model's {} is not one; name a [[reference]] of the model with base_motion",
+                        name.map(|n| format!("reference \"{n}\"")).unwrap_or("excitation".into())
+                    ),
+                ));
+            }
+            match m.get_ref().as_str() {
+                "absolute" => false,
+                "relative" => true,
+                other => {
+                    return Err(src.at(
+                        m.span(),
+                        format!("reference.motion: \"{other}\" is neither \"absolute\" (transmissibility) nor \"relative\" (response − base)"),
+                    ))
+                }
+            }
+        }
+    })
+}
+
+/// The map's `[[channel]]`s resolved: no channel, and no body and DOF, mapped twice.
+fn entries(
+    src: &SourceText,
+    channels: &[RawChannel],
+    model: &Model,
+) -> Result<Vec<Entry>, Located> {
     let mut entries: Vec<Entry> = Vec::new();
-    for c in &raw.channels {
-        let e = entry(&src, c, model)?;
+    for c in channels {
+        let e = entry(src, c, model)?;
         if let Some(o) = entries.iter().find(|o| o.name == e.name) {
             return Err(src.at(
                 c.body.span(),
@@ -367,12 +401,7 @@ pub fn parse(text: &str, origin: &str, model: &Model) -> Result<MeasurementMap, 
         }
         entries.push(e);
     }
-    Ok(MeasurementMap {
-        file: origin.to_string(),
-        references,
-        unit,
-        entries,
-    })
+    Ok(entries)
 }
 
 /// A `unit = "..."` of the map, read as an FRF unit.

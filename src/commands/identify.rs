@@ -37,7 +37,7 @@ pub enum StartArg {
     /// The variables file's initial values (else the model's).
     Model,
     /// Moved from there by a modal pre-fit to the modes extracted from the data (frequencies
-    /// matched, ψ from the loss factors; `identification::prefit`).
+    /// matched, ψ from the loss factors; `identify::modal_start`).
     Modal,
 }
 
