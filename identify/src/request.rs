@@ -24,7 +24,7 @@ use crate::line_choice::{self, LineChoice, LineChoiceError};
 use crate::measurement_map::{self, MapError};
 use crate::modal_start::{self, ModalStartError};
 use crate::variables::{self, Variables, VarsError};
-use crate::{FitKind, Options};
+use crate::{FitKind, Identification, IdentifyError, Options, Progress};
 
 /// Where the measured data come from and which of their lines enter the fit.
 #[derive(Debug, Clone, Copy)]
@@ -83,6 +83,23 @@ pub struct Problem {
     pub variables: Variables,
     /// The fit options, with the fit kind chosen.
     pub options: Options,
+}
+
+impl Problem {
+    /// The identification of this problem ([`crate::identify()`]); `progress` gets every
+    /// iteration of every start.
+    pub fn identify(
+        &self,
+        progress: &mut dyn FnMut(usize, &Progress),
+    ) -> Result<Identification, IdentifyError> {
+        crate::identify(
+            &self.model,
+            &self.observations,
+            &self.variables,
+            &self.options,
+            progress,
+        )
+    }
 }
 
 /// What a preparation step did that the user should know.

@@ -114,14 +114,7 @@ fn a_uff_file_with_its_map_is_prepared_and_fits_the_truth() {
         assert!(c.freqs_hz[0] >= 15.0, "{}", c.label);
     }
     assert_eq!(p.options.fit, FitKind::Amplitude);
-    let id = identify::identify(
-        &p.model,
-        &p.observations,
-        &p.variables,
-        &p.options,
-        &mut |_, _| {},
-    )
-    .unwrap();
+    let id = p.identify(&mut |_, _| {}).unwrap();
     assert!(id.stop.converged(), "{}", id.stop.describe());
     let rows = identify::report::rows(&id);
     for (row, truth) in rows.iter().zip([20.0, 5.0]) {
