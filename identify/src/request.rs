@@ -13,6 +13,30 @@
 //!
 //! What was assumed, converted, dropped or warned about is handed to the caller as [`Note`]s,
 //! in the order it happened (so a caller can print them before a later step fails).
+//!
+//! ```no_run
+//! use identify::line_choice::LineChoice;
+//! use identify::request::{prepare, DataRequest, Request, Start};
+//! use std::path::Path;
+//! let lines = LineChoice { band_hz: (Some(20.0), None), ..LineChoice::default() };
+//! let req = Request {
+//!     model: Path::new("configs/models/textbook-two-mass.toml"),
+//!     data: DataRequest {
+//!         data: Path::new("run.unv"),
+//!         map: Some(Path::new("map.toml")),
+//!         lines: &lines,
+//!         points: Some(200),
+//!     },
+//!     vars: Path::new("configs/identification/textbook-two-mass.toml"),
+//!     start: Start::Auto,
+//!     fit: None,
+//!     options: identify::Options::default(),
+//! };
+//! let problem = prepare(&req, &mut |note| eprintln!("{note}"))?;
+//! let id = problem.identify(&mut |_, _| {})?;
+//! println!("{}", identify::report::text(&id));
+//! # Ok::<(), Box<dyn std::error::Error>>(())
+//! ```
 
 use std::fmt;
 use std::path::Path;
