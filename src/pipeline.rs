@@ -288,35 +288,7 @@ pub fn analyse(
     opts: &identify::Options,
 ) -> anyhow::Result<Analysis> {
     let a = characteristics(session, &AnalysisOptions::default())?;
-    let mut messages = Vec::new();
-    if let Some(t) = &a.truncated {
-        messages.push(format!(
-            "the session file is truncated ({t}); every complete step before the cut is used, {} step(s) are lost",
-            a.dropped.len()
-        ));
-    }
-    for d in &a.dropped {
-        messages.push(format!(
-            "step {} ({:.2} Hz) not used: {}",
-            d.step, d.frequency_hz, d.reason
-        ));
-    }
-    if !a.faults.is_empty() {
-        messages.push(format!(
-            "{} stream fault(s) recorded; the steps they hit were re-measured",
-            a.faults.len()
-        ));
-    }
-    let differ: Vec<usize> = a
-        .steps
-        .iter()
-        .filter(|s| !s.matches_live)
-        .map(|s| s.step)
-        .collect();
-    if !differ.is_empty() {
-        messages.push(format!("steps {differ:?}: the recomputation differs from the live estimate recorded in the session"));
-    }
-    messages.extend(a.notes.iter().cloned());
+    let mut messages = a.messages();
     let obs = data::validate(&a.measured, &setup.model, &session.display().to_string())?;
     let id = identify::identify(&setup.model, &obs, &setup.vars, opts, &mut |_, p| {
         tracing::info!(?p, "iteration")

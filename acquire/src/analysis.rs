@@ -930,6 +930,43 @@ impl SessionAnalysis {
         }
         out
     }
+
+    /// What the operator should know about the session, one sentence each: a truncated file and
+    /// the steps it lost, every dropped step with its reason, the stream faults, steps whose
+    /// recomputation differs from the live estimate, and the analysis's notes. The workflows put
+    /// these in their reports.
+    pub fn messages(&self) -> Vec<String> {
+        let mut messages = Vec::new();
+        if let Some(t) = &self.truncated {
+            messages.push(format!(
+                "the session file is truncated ({t}); every complete step before the cut is used, {} step(s) are lost",
+                self.dropped.len()
+            ));
+        }
+        for d in &self.dropped {
+            messages.push(format!(
+                "step {} ({:.2} Hz) not used: {}",
+                d.step, d.frequency_hz, d.reason
+            ));
+        }
+        if !self.faults.is_empty() {
+            messages.push(format!(
+                "{} stream fault(s) recorded; the steps they hit were re-measured",
+                self.faults.len()
+            ));
+        }
+        let differ: Vec<usize> = self
+            .steps
+            .iter()
+            .filter(|s| !s.matches_live)
+            .map(|s| s.step)
+            .collect();
+        if !differ.is_empty() {
+            messages.push(format!("steps {differ:?}: the recomputation differs from the live estimate recorded in the session"));
+        }
+        messages.extend(self.notes.iter().cloned());
+        messages
+    }
 }
 
 /// An FRF dataset at the (uneven) frequencies `freqs`, per newton of force.

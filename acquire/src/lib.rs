@@ -26,6 +26,10 @@
 //! assert_eq!(seen, vec![Ok((0x03, 7))]);
 //! ```
 
+// `expect` is linted here (not workspace-wide yet): nothing read from a file, a device or a
+// user may panic; tests may expect (clippy.toml).
+#![warn(clippy::expect_used)]
+
 pub mod analysis;
 pub mod can;
 pub mod canopen;
@@ -36,6 +40,7 @@ pub mod generator;
 pub mod record;
 pub mod replay;
 pub mod rig;
+pub mod scpi;
 pub mod session;
 pub mod shaker;
 pub mod sim;

@@ -6,9 +6,10 @@ use std::sync::Arc;
 
 use crate::daq::{Daq, DaqError, DaqOptions, SerialDaq, StreamInfo};
 use crate::device::DeviceIdentity;
-use crate::generator::{GeneratorExciter, GeneratorOptions, ScpiGenerator};
+use crate::generator::{GeneratorOptions, ScpiGenerator};
 use crate::record::{DaqStreamRecord, DeviceIdentityRecord, Role, StandRecord};
 use crate::session::{SessionError, SessionHandle};
+use crate::shaker::GeneratorExciter;
 use crate::shaker::{ScpiShaker, Shaker, ShakerError, ShakerOptions};
 use crate::stand::{GeneratorAddress, GeneratorStand, PortSpec, Stand};
 use crate::transport::{

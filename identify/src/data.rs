@@ -77,7 +77,7 @@ pub fn load_for_model(path: &Path, model: &Model) -> Result<MeasuredData, DataEr
                 notes.push(format!("unit {} declared in line {}", d.unit.text, d.line));
                 for m in &mut data.characteristics {
                     frf_units::to_model_convention(m, &d.unit, model, &mut notes)
-                        .map_err(|message| CsvErr { origin: &origin }.at(d.line, message))?;
+                        .map_err(|e| CsvErr { origin: &origin }.at(d.line, e.to_string()))?;
                 }
             }
             None => notes.push(
@@ -88,12 +88,10 @@ pub fn load_for_model(path: &Path, model: &Model) -> Result<MeasuredData, DataEr
         data
     };
     for (i, m) in data.characteristics.iter_mut().enumerate() {
-        frf_units::convert_quantity(m, model, &mut notes).map_err(|message| {
-            DataError::Invalid {
-                origin: origin.clone(),
-                item: format!("$.characteristics[{i}]"),
-                message,
-            }
+        frf_units::convert_quantity(m, model, &mut notes).map_err(|e| DataError::Invalid {
+            origin: origin.clone(),
+            item: format!("$.characteristics[{i}]"),
+            message: e.to_string(),
         })?;
     }
     data.source = std::iter::once(data.source.clone())

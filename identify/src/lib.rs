@@ -25,7 +25,12 @@
 //! - [`misfit`]: the headline verdict when the model does not explain the data; [`stats`]: the
 //!   χ² tail and runs test shared with the diagnosis;
 //! - [`measurement_map`]: a vendor file's channels onto the model's characteristics;
-//!   [`plausibility`]: the band and level of the data against the initial model.
+//!   [`plausibility`]: the band and level of the data against the initial model;
+//! - [`request`]: the identification problem as one call — model, data (ident JSON/CSV or UFF
+//!   with its map), line choice, decimation, variables and start in, the prepared
+//!   [`request::Problem`] out — used by the command line, the workflows and the tests;
+//!   [`modal_start`]: the start from the measured modes (`process::modal` extraction, then
+//!   [`prefit`]).
 //!
 //! ```
 //! use identify::{identify, variables, data::Observations, Options};
@@ -60,17 +65,23 @@
 //! assert!((id.estimate[1] / 5.0e6 - 1.0).abs() < 1e-6);
 //! ```
 
+// `expect` is linted here (not workspace-wide yet): nothing read from a file, a device or a
+// user may panic; tests may expect (clippy.toml).
+#![warn(clippy::expect_used)]
+
 pub mod criterion;
 pub mod data;
 pub mod fit;
 pub mod line_choice;
 pub mod measurement_map;
 pub mod misfit;
+pub mod modal_start;
 pub mod optimize;
 pub mod plausibility;
 pub mod prefit;
 pub mod problem;
 pub mod report;
+pub mod request;
 pub mod starts;
 pub mod stats;
 pub mod synthetic;

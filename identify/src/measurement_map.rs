@@ -50,7 +50,7 @@ use super::data::DataError;
 use rfe::channel::{dir_text, ChannelName, MeasuredChannel};
 use rfe::frf_units::{self, FrfUnit};
 use rfe::measured::{MeasuredData, Measurement};
-use rfe::model::{Excitation, Model, PointOutput, DOF_NAMES};
+use rfe::model::{Body, Excitation, Model, PointOutput, DOF_NAMES};
 use rfe::source::{Located, SourceText};
 use rfe::units::{parse_quantities, Dim};
 
@@ -253,87 +253,8 @@ pub fn parse(text: &str, origin: &str, model: &Model) -> Result<MeasurementMap, 
     let unit = raw.unit.as_ref().map(|u| unit_of(&src, u)).transpose()?;
     let mut references: Vec<MapReference> = Vec::new();
     for r in raw.reference.iter().flat_map(|r| &r.0) {
-        let node_dir = (
-            *r.node.get_ref(),
-            parse_dir(r.dir.get_ref()).ok_or_else(|| {
-                src.at(r.dir.span(), "reference.dir: use +X, -Y, Z, ... or ±1..6")
-            })?,
-        );
-        let line = src.at(r.node.span(), "").line;
-        if let Some(o) = references.iter().find(|o| o.node_dir == node_dir) {
-            return Err(src.at(
-                r.node.span(),
-                format!(
-                    "reference node {} {} is mapped twice (line {} too)",
-                    node_dir.0,
-                    dir_text(node_dir.1),
-                    o.line
-                ),
-            ));
-        }
-        let name = match &r.name {
-            None => None,
-            Some(n) if n.get_ref() == "excitation" => None,
-            Some(n) => {
-                if model.reference_index(n.get_ref()).is_none() {
-                    let known: Vec<&str> =
-                        model.references.iter().map(|x| x.name.as_str()).collect();
-                    return Err(src.at(
-                        n.span(),
-                        format!(
-                            "reference.name: the model has no [[reference]] \"{}\"; its references: excitation{}{}",
-                            n.get_ref(),
-                            if known.is_empty() { "" } else { ", " },
-                            known.join(", ")
-                        ),
-                    ));
-                }
-                Some(n.get_ref().clone())
-            }
-        };
-        if references.iter().any(|o| o.name == name) {
-            return Err(src.at(
-                r.name.as_ref().map(|n| n.span()).unwrap_or(r.node.span()),
-                format!(
-                    "reference.name: two file references map to the model's {}; name a different [[reference]] of the model for each",
-                    name.as_deref().unwrap_or("excitation")
-                ),
-            ));
-        }
-        let relative = match &r.motion {
-            None => false,
-            Some(m) => {
-                let base = name
-                    .as_deref()
-                    .and_then(|n| model.references.iter().find(|x| x.name == n))
-                    .is_some_and(|x| matches!(x.excitation, Excitation::BaseMotion { .. }));
-                if !base {
-                    return Err(src.at(
-                        m.span(),
-                        format!(
-                            "reference.motion: absolute or relative motion is an output under base motion, and the model's {} is not one; name a [[reference]] of the model with base_motion",
-                            name.as_deref().map(|n| format!("reference \"{n}\"")).unwrap_or("excitation".into())
-                        ),
-                    ));
-                }
-                match m.get_ref().as_str() {
-                    "absolute" => false,
-                    "relative" => true,
-                    other => {
-                        return Err(src.at(
-                            m.span(),
-                            format!("reference.motion: \"{other}\" is neither \"absolute\" (transmissibility) nor \"relative\" (response − base)"),
-                        ))
-                    }
-                }
-            }
-        };
-        references.push(MapReference {
-            line,
-            node_dir,
-            name,
-            relative,
-        });
+        let resolved = reference(&src, r, model, &references)?;
+        references.push(resolved);
     }
     if raw.channels.is_empty() {
         return Err(src.at(
@@ -341,9 +262,122 @@ pub fn parse(text: &str, origin: &str, model: &Model) -> Result<MeasurementMap, 
             "no [[channel]]: the map must say which measured channel is which body and direction",
         ));
     }
+    Ok(MeasurementMap {
+        file: origin.to_string(),
+        references,
+        unit,
+        entries: entries(&src, &raw.channels, model)?,
+    })
+}
+
+/// One `[[reference]]` of the map resolved against the model and the references before it
+/// (`earlier`): no file reference or model reference twice.
+fn reference(
+    src: &SourceText,
+    r: &RawReference,
+    model: &Model,
+    earlier: &[MapReference],
+) -> Result<MapReference, Located> {
+    let node_dir = (
+        *r.node.get_ref(),
+        parse_dir(r.dir.get_ref())
+            .ok_or_else(|| src.at(r.dir.span(), "reference.dir: use +X, -Y, Z, ... or ±1..6"))?,
+    );
+    let line = src.at(r.node.span(), "").line;
+    if let Some(o) = earlier.iter().find(|o| o.node_dir == node_dir) {
+        return Err(src.at(
+            r.node.span(),
+            format!(
+                "reference node {} {} is mapped twice (line {} too)",
+                node_dir.0,
+                dir_text(node_dir.1),
+                o.line
+            ),
+        ));
+    }
+    let name = match &r.name {
+        None => None,
+        Some(n) if n.get_ref() == "excitation" => None,
+        Some(n) => {
+            if model.reference_index(n.get_ref()).is_none() {
+                let known: Vec<&str> = model.references.iter().map(|x| x.name.as_str()).collect();
+                return Err(src.at(
+                    n.span(),
+                    format!(
+                        "reference.name: the model has no [[reference]] \"{}\"; its references: excitation{}{}",
+                        n.get_ref(),
+                        if known.is_empty() { "" } else { ", " },
+                        known.join(", ")
+                    ),
+                ));
+            }
+            Some(n.get_ref().clone())
+        }
+    };
+    if earlier.iter().any(|o| o.name == name) {
+        return Err(src.at(
+            r.name.as_ref().map(|n| n.span()).unwrap_or(r.node.span()),
+            format!(
+                "reference.name: two file references map to the model's {}; name a different [[reference]] of the model for each",
+                name.as_deref().unwrap_or("excitation")
+            ),
+        ));
+    }
+    let relative = relative_motion(src, r, model, name.as_deref())?;
+    Ok(MapReference {
+        line,
+        node_dir,
+        name,
+        relative,
+    })
+}
+
+/// Whether a reference's outputs are relative motions (`motion = "relative"`: response − base)
+/// or absolute ones; only a base-motion reference (`name`, `None` for the excitation) has either.
+fn relative_motion(
+    src: &SourceText,
+    r: &RawReference,
+    model: &Model,
+    name: Option<&str>,
+) -> Result<bool, Located> {
+    Ok(match &r.motion {
+        None => false,
+        Some(m) => {
+            let base = name
+                .and_then(|n| model.references.iter().find(|x| x.name == n))
+                .is_some_and(|x| matches!(x.excitation, Excitation::BaseMotion { .. }));
+            if !base {
+                return Err(src.at(
+                    m.span(),
+                    format!(
+                        "reference.motion: absolute or relative motion is an output under base motion, and the model's {} is not one; name a [[reference]] of the model with base_motion",
+                        name.map(|n| format!("reference \"{n}\"")).unwrap_or("excitation".into())
+                    ),
+                ));
+            }
+            match m.get_ref().as_str() {
+                "absolute" => false,
+                "relative" => true,
+                other => {
+                    return Err(src.at(
+                        m.span(),
+                        format!("reference.motion: \"{other}\" is neither \"absolute\" (transmissibility) nor \"relative\" (response − base)"),
+                    ))
+                }
+            }
+        }
+    })
+}
+
+/// The map's `[[channel]]`s resolved: no channel, and no body and DOF, mapped twice.
+fn entries(
+    src: &SourceText,
+    channels: &[RawChannel],
+    model: &Model,
+) -> Result<Vec<Entry>, Located> {
     let mut entries: Vec<Entry> = Vec::new();
-    for c in &raw.channels {
-        let e = entry(&src, c, model)?;
+    for c in channels {
+        let e = entry(src, c, model)?;
         if let Some(o) = entries.iter().find(|o| o.name == e.name) {
             return Err(src.at(
                 c.body.span(),
@@ -367,12 +401,7 @@ pub fn parse(text: &str, origin: &str, model: &Model) -> Result<MeasurementMap, 
         }
         entries.push(e);
     }
-    Ok(MeasurementMap {
-        file: origin.to_string(),
-        references,
-        unit,
-        entries,
-    })
+    Ok(entries)
 }
 
 /// A `unit = "..."` of the map, read as an FRF unit.
@@ -383,7 +412,31 @@ fn unit_of(src: &SourceText, u: &Sp<String>) -> Result<FrfUnit, Located> {
 /// One `[[channel]]` resolved: its name, body, DOF and sign.
 fn entry(src: &SourceText, c: &RawChannel, model: &Model) -> Result<Entry, Located> {
     let line = src.at(c.body.span(), "").line;
-    let name = match (&c.node, &c.dir, &c.sensor) {
+    let name = channel_name(src, c)?;
+    let body = body_of(src, c, model)?;
+    let b = &model.bodies[body];
+    let (dof, negative, at) = match (&c.dof, &c.direction) {
+        (Some(_), Some(d)) => {
+            return Err(src.at(d.span(), "give `dof` or `direction`, not both"));
+        }
+        (Some(d), None) => along_dof(src, c, d, &name, b)?,
+        (None, given) => along_direction(src, c, given.as_ref(), &name, b)?,
+    };
+    let unit = c.unit.as_ref().map(|u| unit_of(src, u)).transpose()?;
+    Ok(Entry {
+        line,
+        name,
+        body,
+        dof,
+        negative,
+        at,
+        unit,
+    })
+}
+
+/// The channel's name in the file: UFF node and direction, or a sensor name.
+fn channel_name(src: &SourceText, c: &RawChannel) -> Result<ChannelName, Located> {
+    Ok(match (&c.node, &c.dir, &c.sensor) {
         (Some(n), Some(d), None) => ChannelName::Node {
             node: *n.get_ref(),
             dir: parse_dir(d.get_ref()).ok_or_else(|| {
@@ -401,146 +454,157 @@ fn entry(src: &SourceText, c: &RawChannel, model: &Model) -> Result<Entry, Locat
             c.body.span(),
             "a channel is either `node` + `dir` (UFF) or `sensor` (a name), not both or neither",
         )),
-    };
+    })
+}
+
+/// The index of the model body the channel names.
+fn body_of(src: &SourceText, c: &RawChannel, model: &Model) -> Result<usize, Located> {
     let body_name = c.body.get_ref();
-    let Some(body) = model.body_index(body_name) else {
+    model.body_index(body_name).ok_or_else(|| {
         let known: Vec<&str> = model.bodies.iter().map(|b| b.name.as_str()).collect();
-        return Err(src.at(
+        src.at(
             c.body.span(),
             format!(
                 "body: the model has no body \"{body_name}\"; its bodies: {}",
                 known.join(", ")
             ),
-        ));
+        )
+    })
+}
+
+/// A channel declared as a principal-axis DOF (`dof = "-u2"`): the DOF and its sign; a UFF
+/// direction beside it must agree.
+fn along_dof(
+    src: &SourceText,
+    c: &RawChannel,
+    d: &Sp<String>,
+    name: &ChannelName,
+    b: &Body,
+) -> Result<(u8, bool, Option<PointOutput>), Located> {
+    let t = d.get_ref().trim();
+    let (neg, t) = match t.strip_prefix('-') {
+        Some(r) => (true, r),
+        None => (false, t.strip_prefix('+').unwrap_or(t)),
     };
-    let b = &model.bodies[body];
-    let (dof, negative, at) = match (&c.dof, &c.direction) {
-        (Some(_), Some(d)) => {
-            return Err(src.at(d.span(), "give `dof` or `direction`, not both"));
-        }
-        (Some(d), None) => {
-            let t = d.get_ref().trim();
-            let (neg, t) = match t.strip_prefix('-') {
-                Some(r) => (true, r),
-                None => (false, t.strip_prefix('+').unwrap_or(t)),
-            };
-            let k = DOF_NAMES[..3].iter().position(|n| *n == t).ok_or_else(|| {
-                src.at(
-                    d.span(),
-                    format!("dof: \"{t}\" is not u1, u2 or u3 (optionally with a sign: \"-u2\"); rotations are not mapped from sensors"),
-                )
-            })?;
-            if let Some(p) = &c.point {
+    let k = DOF_NAMES[..3].iter().position(|n| *n == t).ok_or_else(|| {
+        src.at(
+            d.span(),
+            format!("dof: \"{t}\" is not u1, u2 or u3 (optionally with a sign: \"-u2\"); rotations are not mapped from sensors"),
+        )
+    })?;
+    if let Some(p) = &c.point {
+        return Err(src.at(
+            p.span(),
+            "`point` goes with a direction (`direction = [x, y, z]` or the UFF `dir`), not with `dof`: a channel declared as a principal-axis DOF reads it at the centre of mass",
+        ));
+    }
+    // A UFF direction beside `dof` must agree with it: within 1° of that principal axis.
+    if let (Some(dspan), ChannelName::Node { dir, .. }) = (&c.dir, name) {
+        if (1..=3).contains(&dir.abs()) {
+            let mut g = Vector3::zeros();
+            g[(dir.unsigned_abs() - 1) as usize] = dir.signum() as f64;
+            let cos = g.dot(&b.rotation.column(k));
+            let angle = cos.abs().min(1.0).acos() * 180.0 / PI;
+            if angle > MAX_AXIS_ANGLE_DEG {
                 return Err(src.at(
-                    p.span(),
-                    "`point` goes with a direction (`direction = [x, y, z]` or the UFF `dir`), not with `dof`: a channel declared as a principal-axis DOF reads it at the centre of mass",
+                    dspan.span(),
+                    format!(
+                        "dir: {} is {angle:.2}° from {} of body \"{}\" (dof = \"{}\"); a channel declared as a principal-axis DOF must lie within {MAX_AXIS_ANGLE_DEG}° of it — drop `dof` to map it as a point output along its direction",
+                        dir_text(*dir), DOF_NAMES[k], b.name, d.get_ref()
+                    ),
                 ));
             }
-            // A UFF direction beside `dof` must agree with it: within 1° of that principal axis.
-            if let (Some(dspan), ChannelName::Node { dir, .. }) = (&c.dir, &name) {
-                if (1..=3).contains(&dir.abs()) {
-                    let mut g = Vector3::zeros();
-                    g[(dir.unsigned_abs() - 1) as usize] = dir.signum() as f64;
-                    let cos = g.dot(&b.rotation.column(k));
-                    let angle = cos.abs().min(1.0).acos() * 180.0 / PI;
-                    if angle > MAX_AXIS_ANGLE_DEG {
-                        return Err(src.at(
-                            dspan.span(),
-                            format!(
-                                "dir: {} is {angle:.2}° from {} of body \"{}\" (dof = \"{}\"); a channel declared as a principal-axis DOF must lie within {MAX_AXIS_ANGLE_DEG}° of it — drop `dof` to map it as a point output along its direction",
-                                dir_text(*dir), DOF_NAMES[k], b.name, d.get_ref()
-                            ),
-                        ));
-                    }
-                }
-            }
-            (k as u8, neg, None)
         }
-        (None, given) => {
-            let (d, span) = match (given, &name) {
-                (Some(v), _) => {
-                    let x = v.get_ref();
-                    if x.len() != 3 || !x.iter().all(|c| c.is_finite()) {
-                        return Err(src.at(
-                            v.span(),
-                            "direction: three finite numbers [x, y, z] (global axes)",
-                        ));
-                    }
-                    (Vector3::new(x[0], x[1], x[2]), v.span())
-                }
-                (None, ChannelName::Node { dir, .. }) if (1..=3).contains(&dir.abs()) => {
-                    let mut d = Vector3::zeros();
-                    d[(dir.unsigned_abs() - 1) as usize] = dir.signum() as f64;
-                    (d, c.dir.as_ref().map(|d| d.span()).unwrap_or(c.body.span()))
-                }
-                (None, ChannelName::Node { dir, .. }) => {
-                    return Err(src.at(
-                        c.dir.as_ref().map(|d| d.span()).unwrap_or(c.body.span()),
-                        format!(
-                            "dir: {} is a rotation; map translations (±X, ±Y, ±Z), or give `dof`",
-                            dir_text(*dir)
-                        ),
-                    ))
-                }
-                (None, ChannelName::Sensor(_)) => {
-                    return Err(src.at(
-                        c.body.span(),
-                        "a sensor needs `direction = [x, y, z]` (global) or `dof = \"u1\"`",
-                    ))
-                }
-            };
-            let n = d.norm();
-            if n == 0.0 {
-                return Err(src.at(span, "direction: the zero vector has no direction"));
+    }
+    Ok((k as u8, neg, None))
+}
+
+/// A channel along a direction (`direction = [x, y, z]`, or its UFF direction), optionally at a
+/// point: a principal-axis DOF when it lies along one through the centre of mass, else a point
+/// output.
+fn along_direction(
+    src: &SourceText,
+    c: &RawChannel,
+    given: Option<&Sp<Vec<f64>>>,
+    name: &ChannelName,
+    b: &Body,
+) -> Result<(u8, bool, Option<PointOutput>), Located> {
+    let (d, span) = match (given, name) {
+        (Some(v), _) => {
+            let x = v.get_ref();
+            if x.len() != 3 || !x.iter().all(|c| c.is_finite()) {
+                return Err(src.at(
+                    v.span(),
+                    "direction: three finite numbers [x, y, z] (global axes)",
+                ));
             }
-            let d = d / n;
-            let point = match &c.point {
-                None => None,
-                Some(p) => {
-                    let xs = match p.get_ref() {
-                        Point::Numbers(v) => v.clone(),
-                        Point::Text(t) => parse_quantities(t, Dim::LENGTH)
-                            .map_err(|e| src.at(p.span(), format!("point: {e}")))?,
-                    };
-                    if xs.len() != 3 || !xs.iter().all(|x| x.is_finite()) {
-                        return Err(src.at(
-                            p.span(),
-                            "point: three coordinates, e.g. \"0 0 450 mm\" or [0, 0, 0.45] (m)",
-                        ));
-                    }
-                    Some(Vector3::new(xs[0], xs[1], xs[2]))
-                }
-            };
-            // The sensor reads dᵀ(u + θ × (p − c)); where p lies on the line through the centre
-            // of mass along a principal axis it reads that DOF alone, and the channel keeps the
-            // principal-axis characteristic; anywhere else it is a point output.
-            let (k, cos) = (0..3)
-                .map(|k| (k, d.dot(&b.rotation.column(k))))
-                .max_by(|a, b| a.1.abs().total_cmp(&b.1.abs()))
-                .unwrap_or((0, 0.0));
-            let angle = cos.abs().min(1.0).acos() * 180.0 / PI;
-            let on_axis_line =
-                point.is_none_or(|p| (p - b.position).cross(&d).norm() <= MAX_LEVER_ARM_M);
-            if angle <= MAX_AXIS_ANGLE_DEG && on_axis_line {
-                (k as u8, cos < 0.0, None)
-            } else {
-                let p = point.unwrap_or(b.position);
-                let Some(at) = PointOutput::new(p, d) else {
-                    return Err(src.at(span, "direction: not a finite direction"));
-                };
-                (k as u8, false, Some(at))
-            }
+            (Vector3::new(x[0], x[1], x[2]), v.span())
+        }
+        (None, ChannelName::Node { dir, .. }) if (1..=3).contains(&dir.abs()) => {
+            let mut d = Vector3::zeros();
+            d[(dir.unsigned_abs() - 1) as usize] = dir.signum() as f64;
+            (d, c.dir.as_ref().map(|d| d.span()).unwrap_or(c.body.span()))
+        }
+        (None, ChannelName::Node { dir, .. }) => {
+            return Err(src.at(
+                c.dir.as_ref().map(|d| d.span()).unwrap_or(c.body.span()),
+                format!(
+                    "dir: {} is a rotation; map translations (±X, ±Y, ±Z), or give `dof`",
+                    dir_text(*dir)
+                ),
+            ))
+        }
+        (None, ChannelName::Sensor(_)) => {
+            return Err(src.at(
+                c.body.span(),
+                "a sensor needs `direction = [x, y, z]` (global) or `dof = \"u1\"`",
+            ))
         }
     };
-    let unit = c.unit.as_ref().map(|u| unit_of(src, u)).transpose()?;
-    Ok(Entry {
-        line,
-        name,
-        body,
-        dof,
-        negative,
-        at,
-        unit,
+    let n = d.norm();
+    if n == 0.0 {
+        return Err(src.at(span, "direction: the zero vector has no direction"));
+    }
+    let d = d / n;
+    let point = point_of(src, c)?;
+    // The sensor reads dᵀ(u + θ × (p − c)); where p lies on the line through the centre
+    // of mass along a principal axis it reads that DOF alone, and the channel keeps the
+    // principal-axis characteristic; anywhere else it is a point output.
+    let (k, cos) = (0..3)
+        .map(|k| (k, d.dot(&b.rotation.column(k))))
+        .max_by(|a, b| a.1.abs().total_cmp(&b.1.abs()))
+        .unwrap_or((0, 0.0));
+    let angle = cos.abs().min(1.0).acos() * 180.0 / PI;
+    let on_axis_line = point.is_none_or(|p| (p - b.position).cross(&d).norm() <= MAX_LEVER_ARM_M);
+    if angle <= MAX_AXIS_ANGLE_DEG && on_axis_line {
+        Ok((k as u8, cos < 0.0, None))
+    } else {
+        let p = point.unwrap_or(b.position);
+        let Some(at) = PointOutput::new(p, d) else {
+            return Err(src.at(span, "direction: not a finite direction"));
+        };
+        Ok((k as u8, false, Some(at)))
+    }
+}
+
+/// The channel's `point`, when given (m).
+fn point_of(src: &SourceText, c: &RawChannel) -> Result<Option<Vector3<f64>>, Located> {
+    Ok(match &c.point {
+        None => None,
+        Some(p) => {
+            let xs = match p.get_ref() {
+                Point::Numbers(v) => v.clone(),
+                Point::Text(t) => parse_quantities(t, Dim::LENGTH)
+                    .map_err(|e| src.at(p.span(), format!("point: {e}")))?,
+            };
+            if xs.len() != 3 || !xs.iter().all(|x| x.is_finite()) {
+                return Err(src.at(
+                    p.span(),
+                    "point: three coordinates, e.g. \"0 0 450 mm\" or [0, 0, 0.45] (m)",
+                ));
+            }
+            Some(Vector3::new(xs[0], xs[1], xs[2]))
+        }
     })
 }
 
@@ -563,6 +627,57 @@ impl MeasurementMap {
             })
         };
         let mut notes = vec![format!("channels mapped by {}", self.file)];
+        let targets = self.targets(channels, origin, &mut notes)?;
+        let of_any = |c: &MeasuredChannel| {
+            targets.is_empty()
+                || c.reference.is_none()
+                || targets.iter().any(|t| c.reference == Some(t.node_dir))
+        };
+        let mut characteristics = Vec::new();
+        let no_target = [None];
+        let each: Vec<Option<&MapReference>> = if targets.is_empty() {
+            no_target.to_vec()
+        } else {
+            targets.iter().map(Some).collect()
+        };
+        for (t, e) in each
+            .iter()
+            .flat_map(|t| self.entries.iter().map(move |e| (t, e)))
+        {
+            let c = self.channel_of(channels, e, t.map(|t| t.node_dir), origin, &bad)?;
+            let (unit, from) = self.unit_for(e, c, &bad)?;
+            check_lines(c, &bad)?;
+            let mut m = measurement(e, c, *t, &unit, model);
+            notes.push(format!(
+                "{} ({}) is {} {}{}, unit from {from}",
+                e.name,
+                c.item,
+                m.body,
+                if e.negative { "-" } else { "" },
+                e.output_name()
+            ));
+            frf_units::to_model_convention(&mut m, &unit, model, &mut notes)
+                .map_err(|e| bad(&c.item, e.to_string()))?;
+            characteristics.push(m);
+        }
+        notes.extend(self.unused(channels, of_any));
+        Ok(MeasuredData {
+            source: std::iter::once(origin.to_string())
+                .chain(notes)
+                .collect::<Vec<_>>()
+                .join("; "),
+            characteristics,
+        })
+    }
+
+    /// The references the map's channels are read for (the map's, else the file's one), each
+    /// checked against the file's and noted.
+    fn targets(
+        &self,
+        channels: &[MeasuredChannel],
+        origin: &str,
+        notes: &mut Vec<String>,
+    ) -> Result<Vec<MapReference>, MapError> {
         let targets: Vec<MapReference> = if self.references.is_empty() {
             match self.reference(channels, origin)? {
                 Some(node_dir) => vec![MapReference {
@@ -601,113 +716,87 @@ impl MeasurementMap {
                 if t.relative { " (relative motion)" } else { "" }
             ));
         }
-        let of_any = |c: &MeasuredChannel| {
-            targets.is_empty()
-                || c.reference.is_none()
-                || targets.iter().any(|t| c.reference == Some(t.node_dir))
+        Ok(targets)
+    }
+
+    /// The one channel of the file an entry names (for `reference`, when there is one).
+    fn channel_of<'c>(
+        &self,
+        channels: &'c [MeasuredChannel],
+        e: &Entry,
+        reference: Option<(i64, i64)>,
+        origin: &str,
+        bad: &dyn Fn(&str, String) -> MapError,
+    ) -> Result<&'c MeasuredChannel, MapError> {
+        let of_reference = |c: &&MeasuredChannel| {
+            reference.is_none() || c.reference.is_none() || c.reference == reference
         };
-        let mut characteristics = Vec::new();
-        let no_target = [None];
-        let each: Vec<Option<&MapReference>> = if targets.is_empty() {
-            no_target.to_vec()
-        } else {
-            targets.iter().map(Some).collect()
-        };
-        for (t, e) in each
+        let found: Vec<&MeasuredChannel> = channels
             .iter()
-            .flat_map(|t| self.entries.iter().map(move |e| (t, e)))
-        {
-            let reference = t.map(|t| t.node_dir);
-            let of_reference = |c: &&MeasuredChannel| {
-                reference.is_none() || c.reference.is_none() || c.reference == reference
-            };
-            let found: Vec<&MeasuredChannel> = channels
-                .iter()
-                .filter(of_reference)
-                .filter(|c| c.name == e.name)
-                .collect();
-            let c = match found.as_slice() {
-                [c] => *c,
-                [] => {
-                    let names: BTreeSet<String> = channels
-                        .iter()
-                        .filter(of_reference)
-                        .map(|c| c.name.to_string())
-                        .collect();
-                    return Err(MapError::Map(Located {
-                        file: self.file.clone(),
-                        line: e.line,
-                        column: 1,
-                        message: format!(
-                            "{} is not in {origin}{}; its channels: {}",
-                            e.name,
-                            reference
-                                .map(|(n, d)| format!(" for reference node {n} {}", dir_text(d)))
-                                .unwrap_or_default(),
-                            names.into_iter().collect::<Vec<_>>().join(", ")
-                        ),
-                    }));
-                }
-                [a, b, ..] => {
-                    return Err(bad(
-                        &b.item,
-                        format!("{} appears twice (also {}); keep one", e.name, a.item),
-                    ))
-                }
-            };
-            let (unit, from) = match (&e.unit, &self.unit, &c.unit) {
-                (Some(u), _, _) => (u.clone(), format!("{} line {}", self.file, e.line)),
-                (None, Some(u), _) => (u.clone(), format!("{} (top-level unit)", self.file)),
-                (None, None, Ok(u)) => (u.clone(), c.unit_source.clone()),
-                (None, None, Err(why)) => {
-                    return Err(bad(
-                        &c.item,
-                        format!("{why}; the file does not say what unit {} is in: give it in the map, e.g. unit = \"g/N\" (top level, or in this [[channel]])", e.name),
-                    ))
-                }
-            };
-            check_lines(c, &bad)?;
-            let body = &model.bodies[e.body].name;
-            let mut phase = c.phase_rad.clone();
-            if e.negative {
-                if let Some(p) = &mut phase {
-                    for x in p.iter_mut() {
-                        *x = (*x + 2.0 * PI).rem_euclid(2.0 * PI) - PI;
-                    }
-                }
+            .filter(of_reference)
+            .filter(|c| c.name == e.name)
+            .collect();
+        match found.as_slice() {
+            [c] => Ok(*c),
+            [] => {
+                let names: BTreeSet<String> = channels
+                    .iter()
+                    .filter(of_reference)
+                    .map(|c| c.name.to_string())
+                    .collect();
+                Err(MapError::Map(Located {
+                    file: self.file.clone(),
+                    line: e.line,
+                    column: 1,
+                    message: format!(
+                        "{} is not in {origin}{}; its channels: {}",
+                        e.name,
+                        reference
+                            .map(|(n, d)| format!(" for reference node {n} {}", dir_text(d)))
+                            .unwrap_or_default(),
+                        names.into_iter().collect::<Vec<_>>().join(", ")
+                    ),
+                }))
             }
-            let mut m = Measurement {
-                body: body.clone(),
-                dof: e.dof,
-                quantity: unit.quantity.into(),
-                freqs_hz: c.freqs_hz.clone(),
-                amplitude: c.amplitude.clone(),
-                phase_rad: phase,
-                variance: None,
-                coherence: c.coherence.clone(),
-                averages: None,
-                at: e.at,
-                reference: t.and_then(|t| t.name.clone()),
-                relative: t.is_some_and(|t| t.relative),
-            };
-            notes.push(format!(
-                "{} ({}) is {body} {}{}, unit from {from}",
-                e.name,
-                c.item,
-                if e.negative { "-" } else { "" },
-                e.output_name()
-            ));
-            frf_units::to_model_convention(&mut m, &unit, model, &mut notes)
-                .map_err(|message| bad(&c.item, message))?;
-            characteristics.push(m);
+            [a, b, ..] => Err(bad(
+                &b.item,
+                format!("{} appears twice (also {}); keep one", e.name, a.item),
+            )),
         }
+    }
+
+    /// The unit of a channel's values and where it came from: the entry's, the map's, or the
+    /// file's (else an error asking the map for one).
+    fn unit_for(
+        &self,
+        e: &Entry,
+        c: &MeasuredChannel,
+        bad: &dyn Fn(&str, String) -> MapError,
+    ) -> Result<(FrfUnit, String), MapError> {
+        match (&e.unit, &self.unit, &c.unit) {
+            (Some(u), _, _) => Ok((u.clone(), format!("{} line {}", self.file, e.line))),
+            (None, Some(u), _) => Ok((u.clone(), format!("{} (top-level unit)", self.file))),
+            (None, None, Ok(u)) => Ok((u.clone(), c.unit_source.clone())),
+            (None, None, Err(why)) => Err(bad(
+                &c.item,
+                format!("{why}; the file does not say what unit {} is in: give it in the map, e.g. unit = \"g/N\" (top level, or in this [[channel]])", e.name),
+            )),
+        }
+    }
+
+    /// The note on the channels left out: not in the map, or of another reference.
+    fn unused(
+        &self,
+        channels: &[MeasuredChannel],
+        of_any: impl Fn(&MeasuredChannel) -> bool,
+    ) -> Option<String> {
         let unused: Vec<String> = channels
             .iter()
             .filter(|c| !self.entries.iter().any(|e| e.name == c.name) || !of_any(c))
             .map(|c| format!("{} ({})", c.name, c.item))
             .collect();
-        if !unused.is_empty() {
-            notes.push(format!(
+        (!unused.is_empty()).then(|| {
+            format!(
                 "{} channel(s) not in the map or of another reference, not used: {}{}",
                 unused.len(),
                 unused
@@ -717,14 +806,7 @@ impl MeasurementMap {
                     .collect::<Vec<_>>()
                     .join(", "),
                 if unused.len() > 5 { ", ..." } else { "" }
-            ));
-        }
-        Ok(MeasuredData {
-            source: std::iter::once(origin.to_string())
-                .chain(notes)
-                .collect::<Vec<_>>()
-                .join("; "),
-            characteristics,
+            )
         })
     }
 
@@ -755,6 +837,39 @@ impl MeasurementMap {
             }));
         }
         Ok(refs.into_iter().next())
+    }
+}
+
+/// A channel as a measurement of the entry's body and DOF (for reference `t`), still in the
+/// channel's `unit`; a negative direction turns the phase by π.
+fn measurement(
+    e: &Entry,
+    c: &MeasuredChannel,
+    t: Option<&MapReference>,
+    unit: &FrfUnit,
+    model: &Model,
+) -> Measurement {
+    let mut phase = c.phase_rad.clone();
+    if e.negative {
+        if let Some(p) = &mut phase {
+            for x in p.iter_mut() {
+                *x = (*x + 2.0 * PI).rem_euclid(2.0 * PI) - PI;
+            }
+        }
+    }
+    Measurement {
+        body: model.bodies[e.body].name.clone(),
+        dof: e.dof,
+        quantity: unit.quantity.into(),
+        freqs_hz: c.freqs_hz.clone(),
+        amplitude: c.amplitude.clone(),
+        phase_rad: phase,
+        variance: None,
+        coherence: c.coherence.clone(),
+        averages: None,
+        at: e.at,
+        reference: t.and_then(|t| t.name.clone()),
+        relative: t.is_some_and(|t| t.relative),
     }
 }
 

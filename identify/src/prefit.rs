@@ -202,27 +202,13 @@ pub fn modal_prefit(
     vars: &Variables,
     measured: &[MeasuredMode],
 ) -> Result<Prefit, PrefitError> {
-    if measured.is_empty() {
-        return Err(PrefitError::NoModes);
-    }
-    for (i, m) in measured.iter().enumerate() {
-        if !(m.freq_hz.is_finite() && m.freq_hz > 0.0) {
-            return Err(PrefitError::BadFrequency(i, m.freq_hz));
-        }
-    }
-    let stiff: Vec<usize> = (0..vars.len())
-        .filter(|&i| !vars.vars[i].dissipation && vars.vars[i].initial > 0.0)
-        .collect();
-    if stiff.is_empty() {
-        return Err(PrefitError::NoStiffness);
-    }
-    let mut x = vars.initial();
-    let at = |x: &[f64]| {
-        let mut m = model.clone();
-        vars.apply(&mut m, x);
-        m
+    let fit = FrequencyMatch {
+        model,
+        vars,
+        stiff: stiffness_variables(vars, measured)?,
     };
-    let m0 = at(&x);
+    let mut x = vars.initial();
+    let m0 = fit.at(&x);
     let sys0 = System::assemble(&m0);
     let modes0 = elastic_modes(&m0, &sys0)?;
     let paired = pair_initial(&sys0, &modes0, measured)?;
@@ -250,96 +236,18 @@ pub fn modal_prefit(
             break;
         }
         iterations += 1;
-        // Sensitivities at x: ∂λ_r/∂x_i = φ_rᵀ (∂K/∂x_i) φ_r; K is linear in every stiffness
-        // parameter, so ∂K/∂x_i = (K(x + h e_i) − K(x)) / h exactly (up to round-off).
-        let sys = System::assemble(&at(&x));
-        let n = sys.n;
-        let quad = |k: &[f64], phi: &[f64]| -> f64 {
-            (0..n)
-                .map(|a| phi[a] * (0..n).map(|b| k[a * n + b] * phi[b]).sum::<f64>())
-                .sum()
-        };
-        let mut jac = nalgebra::DMatrix::<f64>::zeros(paired.len(), stiff.len());
-        for (c, &i) in stiff.iter().enumerate() {
-            let h = x[i].abs().max(vars.vars[i].scale.abs()) * 1e-3;
-            let mut xh = x.clone();
-            xh[i] += h;
-            let kh = System::assemble(&at(&xh)).k;
-            let dk: Vec<f64> = kh.iter().zip(&sys.k).map(|(a, b)| (a - b) / h).collect();
-            for (r, phi) in shapes.iter().enumerate() {
-                // ∂ ln λ / ∂ ln x
-                jac[(r, c)] = quad(&dk, phi) * x[i] / lam[r];
-            }
-        }
+        let jac = fit.log_sensitivities(&x, &shapes, &lam);
         let res = nalgebra::DVector::from_iterator(
             paired.len(),
             lam_meas.iter().zip(&lam).map(|(m, l)| (m / l).ln()),
         );
-        // Damped Gauss-Newton (Levenberg) in ln x, trying larger damping until the match improves.
-        let mut accepted = false;
-        for _ in 0..20 {
-            let a = jac.transpose() * &jac
-                + nalgebra::DMatrix::<f64>::identity(stiff.len(), stiff.len()) * mu;
-            let Some(step) = a.cholesky().map(|c| c.solve(&(jac.transpose() * &res))) else {
-                mu *= 10.0;
-                continue;
-            };
-            let big = step.amax();
-            let step = if big > MAX_LOG_STEP {
-                step * (MAX_LOG_STEP / big)
-            } else {
-                step
-            };
-            let mut xn = x.clone();
-            for (c, &i) in stiff.iter().enumerate() {
-                let v = &vars.vars[i];
-                xn[i] = (x[i] * step[c].exp()).clamp(v.lower.max(f64::MIN_POSITIVE), v.upper);
-            }
-            let mn = at(&xn);
-            let sn = System::assemble(&mn);
-            let modes = elastic_modes(&mn, &sn)?;
-            // Track each pair to the model mode most like its previous shape.
-            let mut taken = vec![false; modes.len()];
-            let mut next = Vec::with_capacity(shapes.len());
-            for s in &shapes {
-                let j = (0..modes.len())
-                    .filter(|&j| !taken[j])
-                    .max_by(|&a, &b| {
-                        mac_mass(s, &modes[a].1, &sn).total_cmp(&mac_mass(s, &modes[b].1, &sn))
-                    })
-                    .unwrap_or(0);
-                taken[j] = true;
-                next.push(j);
-            }
-            let lam_n: Vec<f64> = next.iter().map(|&j| modes[j].0).collect();
-            if rms(&lam_n) < cur {
-                x = xn;
-                lam = lam_n;
-                shapes = next.iter().map(|&j| modes[j].1.clone()).collect();
-                mu = (mu / 10.0).max(1e-9);
-                accepted = true;
-                break;
-            }
-            mu *= 10.0;
-        }
-        if !accepted {
-            break;
+        match fit.step(&x, &jac, &res, &shapes, &mut mu, &|l| rms(l) < cur)? {
+            Some(next) => (x, lam, shapes) = next,
+            None => break,
         }
     }
-    // ψ from the measured loss factors: a ψ shared by all elements gives every mode η = ψ/2π.
-    let etas: Vec<f64> = paired
-        .iter()
-        .filter_map(|&(r, _)| measured[r].loss_factor)
-        .collect();
-    if etas.len() == paired.len() {
-        let eta = etas.iter().sum::<f64>() / etas.len() as f64;
-        for (i, v) in vars.vars.iter().enumerate() {
-            if v.dissipation && eta.is_finite() && eta > 0.0 {
-                x[i] = (2.0 * std::f64::consts::PI * eta).clamp(v.lower, v.upper);
-            }
-        }
-    }
-    let sys = System::assemble(&at(&x));
+    psi_from_loss_factors(vars, measured, &paired, &mut x);
+    let sys = System::assemble(&fit.at(&x));
     let pairs = paired
         .iter()
         .enumerate()
@@ -360,6 +268,158 @@ pub fn modal_prefit(
         iterations,
         rms_log_freq: (rms_before, rms(&lam)),
     })
+}
+
+/// The stiffness variables the pre-fit moves, after checking the measured modes.
+fn stiffness_variables(
+    vars: &Variables,
+    measured: &[MeasuredMode],
+) -> Result<Vec<usize>, PrefitError> {
+    if measured.is_empty() {
+        return Err(PrefitError::NoModes);
+    }
+    for (i, m) in measured.iter().enumerate() {
+        if !(m.freq_hz.is_finite() && m.freq_hz > 0.0) {
+            return Err(PrefitError::BadFrequency(i, m.freq_hz));
+        }
+    }
+    let stiff: Vec<usize> = (0..vars.len())
+        .filter(|&i| !vars.vars[i].dissipation && vars.vars[i].initial > 0.0)
+        .collect();
+    if stiff.is_empty() {
+        return Err(PrefitError::NoStiffness);
+    }
+    Ok(stiff)
+}
+
+/// The frequency match of the pre-fit: the model's paired eigenvalues moved to the measured ones
+/// by the stiffness variables `stiff`, in ln x.
+struct FrequencyMatch<'a> {
+    model: &'a Model,
+    vars: &'a Variables,
+    stiff: Vec<usize>,
+}
+
+/// The variables, eigenvalues and shapes after an accepted step.
+type Accepted = (Vec<f64>, Vec<f64>, Vec<Vec<f64>>);
+
+impl FrequencyMatch<'_> {
+    /// The model at `x`.
+    fn at(&self, x: &[f64]) -> Model {
+        let mut m = self.model.clone();
+        self.vars.apply(&mut m, x);
+        m
+    }
+
+    /// `∂ ln λ_r / ∂ ln x_i` at `x` for the paired modes' `shapes` and eigenvalues `lam`.
+    fn log_sensitivities(
+        &self,
+        x: &[f64],
+        shapes: &[Vec<f64>],
+        lam: &[f64],
+    ) -> nalgebra::DMatrix<f64> {
+        // Sensitivities at x: ∂λ_r/∂x_i = φ_rᵀ (∂K/∂x_i) φ_r; K is linear in every stiffness
+        // parameter, so ∂K/∂x_i = (K(x + h e_i) − K(x)) / h exactly (up to round-off).
+        let sys = System::assemble(&self.at(x));
+        let n = sys.n;
+        let quad = |k: &[f64], phi: &[f64]| -> f64 {
+            (0..n)
+                .map(|a| phi[a] * (0..n).map(|b| k[a * n + b] * phi[b]).sum::<f64>())
+                .sum()
+        };
+        let mut jac = nalgebra::DMatrix::<f64>::zeros(shapes.len(), self.stiff.len());
+        for (c, &i) in self.stiff.iter().enumerate() {
+            let h = x[i].abs().max(self.vars.vars[i].scale.abs()) * 1e-3;
+            let mut xh = x.to_vec();
+            xh[i] += h;
+            let kh = System::assemble(&self.at(&xh)).k;
+            let dk: Vec<f64> = kh.iter().zip(&sys.k).map(|(a, b)| (a - b) / h).collect();
+            for (r, phi) in shapes.iter().enumerate() {
+                // ∂ ln λ / ∂ ln x
+                jac[(r, c)] = quad(&dk, phi) * x[i] / lam[r];
+            }
+        }
+        jac
+    }
+
+    /// One damped Gauss-Newton (Levenberg) step in ln x from `x`, trying larger damping `mu`
+    /// until the match `improves`: the new point with its eigenvalues and shapes (each pair
+    /// tracked to the model mode most like its previous shape), or `None` when no damping helps.
+    fn step(
+        &self,
+        x: &[f64],
+        jac: &nalgebra::DMatrix<f64>,
+        res: &nalgebra::DVector<f64>,
+        shapes: &[Vec<f64>],
+        mu: &mut f64,
+        improves: &dyn Fn(&[f64]) -> bool,
+    ) -> Result<Option<Accepted>, PrefitError> {
+        let ns = self.stiff.len();
+        for _ in 0..20 {
+            let a = jac.transpose() * jac + nalgebra::DMatrix::<f64>::identity(ns, ns) * *mu;
+            let Some(step) = a.cholesky().map(|c| c.solve(&(jac.transpose() * res))) else {
+                *mu *= 10.0;
+                continue;
+            };
+            let big = step.amax();
+            let step = if big > MAX_LOG_STEP {
+                step * (MAX_LOG_STEP / big)
+            } else {
+                step
+            };
+            let mut xn = x.to_vec();
+            for (c, &i) in self.stiff.iter().enumerate() {
+                let v = &self.vars.vars[i];
+                xn[i] = (x[i] * step[c].exp()).clamp(v.lower.max(f64::MIN_POSITIVE), v.upper);
+            }
+            let mn = self.at(&xn);
+            let sn = System::assemble(&mn);
+            let modes = elastic_modes(&mn, &sn)?;
+            // Track each pair to the model mode most like its previous shape.
+            let mut taken = vec![false; modes.len()];
+            let mut next = Vec::with_capacity(shapes.len());
+            for s in shapes {
+                let j = (0..modes.len())
+                    .filter(|&j| !taken[j])
+                    .max_by(|&a, &b| {
+                        mac_mass(s, &modes[a].1, &sn).total_cmp(&mac_mass(s, &modes[b].1, &sn))
+                    })
+                    .unwrap_or(0);
+                taken[j] = true;
+                next.push(j);
+            }
+            let lam_n: Vec<f64> = next.iter().map(|&j| modes[j].0).collect();
+            if improves(&lam_n) {
+                *mu = (*mu / 10.0).max(1e-9);
+                let shapes_n = next.iter().map(|&j| modes[j].1.clone()).collect();
+                return Ok(Some((xn, lam_n, shapes_n)));
+            }
+            *mu *= 10.0;
+        }
+        Ok(None)
+    }
+}
+
+/// ψ from the measured loss factors, when every paired mode has one: a ψ shared by all elements
+/// gives every mode η = ψ/2π.
+fn psi_from_loss_factors(
+    vars: &Variables,
+    measured: &[MeasuredMode],
+    paired: &[(usize, usize)],
+    x: &mut [f64],
+) {
+    let etas: Vec<f64> = paired
+        .iter()
+        .filter_map(|&(r, _)| measured[r].loss_factor)
+        .collect();
+    if etas.len() == paired.len() {
+        let eta = etas.iter().sum::<f64>() / etas.len() as f64;
+        for (i, v) in vars.vars.iter().enumerate() {
+            if v.dissipation && eta.is_finite() && eta > 0.0 {
+                x[i] = (2.0 * std::f64::consts::PI * eta).clamp(v.lower, v.upper);
+            }
+        }
+    }
 }
 
 /// `vars` with their initial values replaced by `start` (e.g. a pre-fit's). A scale that was the

@@ -2,6 +2,7 @@
 //! identified, standard error) as text, JSON and CSV, and the updated model written back into
 //! the original TOML text (comments and layout kept, via `toml_edit`).
 
+use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 use toml_edit::{DocumentMut, Item};
 
@@ -13,9 +14,11 @@ use rfe::model::ParamName;
 use rfe::write_back::{sde_table, write_back_bodies, write_params};
 
 /// One row of the table, in the variable's display unit. The same record is a row of
-/// report.json's parameter tables (`report::document::Parameter`).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+/// report.json's parameter tables (`report::document::Parameter`), whose JSON Schema is derived
+/// from it.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
+#[schemars(rename = "Parameter", title = "Parameter")]
 pub struct Row {
     /// Variable name.
     pub variable: String,
@@ -34,6 +37,7 @@ pub struct Row {
     /// Standard error / |identified| (`null` when identified = 0 or undetermined).
     pub variability: Option<f64>,
     /// `"lower"` / `"upper"` when the estimate is at a bound.
+    #[schemars(extend("enum" = ["lower", "upper", null]))]
     pub at_bound: Option<String>,
 }
 

@@ -461,36 +461,8 @@ fn variable(
     })?;
     let names = expand(list.get_ref()).map_err(|m| cx.at(list.span(), m))?;
     let pname = rv.parameter.get_ref().trim();
-    let kind = match on {
-        On::Sdes => match ParamName::parse(pname) {
-            Some(p) => Kind::Sde(p),
-            None => return Err(cx.at(rv.parameter.span(), format!(
-                "unknown parameter \"{pname}\"; parameters are kn, kt, psi_n, psi_t (slideway, rotary, isolator), k, psi (screw, spring), k1-k6, psi1-psi6 (general); masses and inertias go with `bodies`, gains with `characteristics`"
-            ))),
-        },
-        On::Bodies => body_kind(cx, rv, pname)?,
-        On::Characteristics if pname == "gain" => Kind::Gain,
-        On::Characteristics => return Err(cx.at(rv.parameter.span(), format!(
-            "unknown parameter \"{pname}\" of a characteristic; the one there is is parameter = \"gain\""
-        ))),
-        On::PointMasses if pname == "m" => Kind::PointMass,
-        On::PointMasses => return Err(cx.at(rv.parameter.span(), format!(
-            "unknown parameter \"{pname}\" of a point mass; the one there is is parameter = \"m\" (its mass, kg)"
-        ))),
-    };
-    let tie = match rv.tie.as_ref().map(|t| t.get_ref().as_str()) {
-        None if kind.several() => Tie::Scale,
-        Some("equal") if kind.several() => {
-            let span = rv.tie.as_ref().map(|t| t.span()).unwrap_or(0..0);
-            return Err(cx.at(span, format!("parameter \"{pname}\" sets several inertias of each body, so it is a factor on the model's values: use tie = \"scale\" (or leave tie out)")));
-        }
-        None | Some("equal") => Tie::Equal,
-        Some("scale") => Tie::Scale,
-        Some(other) => {
-            let span = rv.tie.as_ref().map(|t| t.span()).unwrap_or(0..0);
-            return Err(cx.at(span, format!("unknown tie \"{other}\"; use \"equal\" (one shared value, optionally with ratios) or \"scale\" (a factor on the model's values)")));
-        }
-    };
+    let kind = kind_of(cx, rv, on, pname)?;
+    let tie = tie_of(cx, rv, &kind, pname)?;
     let Targets {
         mut targets,
         dim,
@@ -512,28 +484,7 @@ fn variable(
         ));
     }
     let vdim = if tie == Tie::Scale { Dim::NONE } else { dim };
-    // Ratios.
-    match (&rv.ratios, tie) {
-        (Some(r), Tie::Scale) => return Err(cx.at(r.span(), "`ratios` go with tie = \"equal\"; with tie = \"scale\" the model's values are the ratios")),
-        (Some(r), Tie::Equal) => {
-            let rs = r.get_ref();
-            if rs.len() != targets.len() {
-                return Err(cx.at(r.span(), format!("{} ratios for {} SDEs; one ratio per SDE, in the order of `sdes`", rs.len(), targets.len())));
-            }
-            if let Some(bad) = rs.iter().find(|x| !(x.is_finite() && **x > 0.0)) {
-                return Err(cx.at(r.span(), format!("ratio {bad} must be a finite number > 0")));
-            }
-            for (t, &x) in targets.iter_mut().zip(rs) {
-                t.ratio = x;
-            }
-        }
-        (None, Tie::Scale) => {
-            for (t, &v) in targets.iter_mut().zip(&model_values) {
-                t.ratio = v;
-            }
-        }
-        (None, Tie::Equal) => {}
-    }
+    set_ratios(cx, rv, tie, &mut targets, &model_values)?;
     let unit = display_unit(cx, rv, vdim)?;
     let positive = !matches!(kind, Kind::Sde(_));
     let Values {
@@ -568,6 +519,77 @@ fn variable(
         unit,
         dissipation: matches!(kind, Kind::Sde(p) if p.is_dissipation()),
     })
+}
+
+/// What a variable's `parameter` sets on the elements it names (`on`).
+fn kind_of(cx: &Ctx, rv: &RawVariable, on: On, pname: &str) -> Result<Kind, VarsError> {
+    Ok(match on {
+        On::Sdes => match ParamName::parse(pname) {
+            Some(p) => Kind::Sde(p),
+            None => return Err(cx.at(rv.parameter.span(), format!(
+                "unknown parameter \"{pname}\"; parameters are kn, kt, psi_n, psi_t (slideway, rotary, isolator), k, psi (screw, spring), k1-k6, psi1-psi6 (general); masses and inertias go with `bodies`, gains with `characteristics`"
+            ))),
+        },
+        On::Bodies => body_kind(cx, rv, pname)?,
+        On::Characteristics if pname == "gain" => Kind::Gain,
+        On::Characteristics => return Err(cx.at(rv.parameter.span(), format!(
+            "unknown parameter \"{pname}\" of a characteristic; the one there is is parameter = \"gain\""
+        ))),
+        On::PointMasses if pname == "m" => Kind::PointMass,
+        On::PointMasses => return Err(cx.at(rv.parameter.span(), format!(
+            "unknown parameter \"{pname}\" of a point mass; the one there is is parameter = \"m\" (its mass, kg)"
+        ))),
+    })
+}
+
+/// The variable's tie: one shared value (`equal`, optionally with ratios) or a factor on the
+/// model's values (`scale`, the only one for a parameter that sets several values per element).
+fn tie_of(cx: &Ctx, rv: &RawVariable, kind: &Kind, pname: &str) -> Result<Tie, VarsError> {
+    Ok(match rv.tie.as_ref().map(|t| t.get_ref().as_str()) {
+        None if kind.several() => Tie::Scale,
+        Some("equal") if kind.several() => {
+            let span = rv.tie.as_ref().map(|t| t.span()).unwrap_or(0..0);
+            return Err(cx.at(span, format!("parameter \"{pname}\" sets several inertias of each body, so it is a factor on the model's values: use tie = \"scale\" (or leave tie out)")));
+        }
+        None | Some("equal") => Tie::Equal,
+        Some("scale") => Tie::Scale,
+        Some(other) => {
+            let span = rv.tie.as_ref().map(|t| t.span()).unwrap_or(0..0);
+            return Err(cx.at(span, format!("unknown tie \"{other}\"; use \"equal\" (one shared value, optionally with ratios) or \"scale\" (a factor on the model's values)")));
+        }
+    })
+}
+
+/// Each target's ratio: the given `ratios` (tie = "equal"), or the model's values (tie = "scale").
+fn set_ratios(
+    cx: &Ctx,
+    rv: &RawVariable,
+    tie: Tie,
+    targets: &mut [Target],
+    model_values: &[f64],
+) -> Result<(), VarsError> {
+    match (&rv.ratios, tie) {
+        (Some(r), Tie::Scale) => return Err(cx.at(r.span(), "`ratios` go with tie = \"equal\"; with tie = \"scale\" the model's values are the ratios")),
+        (Some(r), Tie::Equal) => {
+            let rs = r.get_ref();
+            if rs.len() != targets.len() {
+                return Err(cx.at(r.span(), format!("{} ratios for {} SDEs; one ratio per SDE, in the order of `sdes`", rs.len(), targets.len())));
+            }
+            if let Some(bad) = rs.iter().find(|x| !(x.is_finite() && **x > 0.0)) {
+                return Err(cx.at(r.span(), format!("ratio {bad} must be a finite number > 0")));
+            }
+            for (t, &x) in targets.iter_mut().zip(rs) {
+                t.ratio = x;
+            }
+        }
+        (None, Tie::Scale) => {
+            for (t, &v) in targets.iter_mut().zip(model_values) {
+                t.ratio = v;
+            }
+        }
+        (None, Tie::Equal) => {}
+    }
+    Ok(())
 }
 
 /// What a variable's parameter is, per element it names.

@@ -170,7 +170,7 @@ fn channel(node: i64, dir: i64, unit: &str) -> MeasuredChannel {
         name: ChannelName::Node { node, dir },
         item: format!("dataset {node} (line {})", 10 * node),
         reference: Some((9, 3)),
-        unit: FrfUnit::parse(unit),
+        unit: FrfUnit::parse(unit).map_err(|e| rfe::channel::NoUsableUnit(e.to_string())),
         unit_source: "records 9-10".into(),
         freqs_hz: vec![10.0, 20.0, 30.0],
         amplitude: vec![1.0, 2.0, 3.0],

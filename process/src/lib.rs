@@ -36,6 +36,10 @@
 //! # Ok::<(), process::ProcessError>(())
 //! ```
 
+// `expect` is linted here (not workspace-wide yet): nothing read from a file, a device or a
+// user may panic; tests may expect (clippy.toml).
+#![warn(clippy::expect_used)]
+
 pub mod calibration;
 pub mod error;
 pub mod estimate;

@@ -15,7 +15,7 @@ use std::path::Path;
 
 use num_complex::Complex;
 
-use rfe::channel::{ChannelName, MeasuredChannel};
+use rfe::channel::{ChannelName, MeasuredChannel, NoUsableUnit};
 use rfe::frf_units::FrfUnit;
 use rfe::model::Quantity;
 
@@ -1108,7 +1108,7 @@ pub fn measured_channels(
             },
             item: item.clone(),
             reference: Some((f.reference_node, f.reference_dir)),
-            unit: ordinate_unit(f),
+            unit: ordinate_unit(f).map_err(NoUsableUnit),
             unit_source: format!("{item} records 9-10: \"{num}\" per \"{den}\""),
             freqs_hz: freqs,
             amplitude,

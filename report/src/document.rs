@@ -203,34 +203,6 @@ pub struct NaturalMode {
 /// writes as its table, so the two cannot drift apart.
 pub use identify::report::Row as Parameter;
 
-/// The JSON Schema of a [`Parameter`] row. The row type lives in `identify`, which does not
-/// depend on schemars; this shape is checked against it by a round-trip test
-/// (`parameter_schema_matches_the_row`), so a field added to the row fails the build's tests.
-#[derive(Serialize, Deserialize, JsonSchema)]
-#[serde(deny_unknown_fields)]
-#[schemars(title = "Parameter")]
-pub struct ParameterSchema {
-    /// Variable name.
-    pub variable: String,
-    /// SDE names (`"2-10, 13-17"`).
-    pub sdes: String,
-    /// Parameter name (`kn`, `psi_n`, ...).
-    pub parameter: String,
-    /// Display unit (`MPa/um`, `N/um`, `-`).
-    pub unit: String,
-    /// Initial value.
-    pub initial: f64,
-    /// Identified value.
-    pub identified: f64,
-    /// Standard error (Cramér-Rao), `null` when undetermined.
-    pub std_error: Option<f64>,
-    /// Standard error / |identified| (`null` when identified = 0 or undetermined).
-    pub variability: Option<f64>,
-    /// `"lower"` / `"upper"` when the estimate is at a bound.
-    #[schemars(extend("enum" = ["lower", "upper", null]))]
-    pub at_bound: Option<String>,
-}
-
 /// The JSON Schema of the report, generated from [`Report`] (docs/report.schema.json is this,
 /// pretty-printed; `IDENT_BLESS=1 cargo test -p report --test schema` rewrites it).
 pub fn json_schema() -> serde_json::Value {
@@ -269,7 +241,6 @@ pub struct IdentificationSummary {
     /// 2J / (m − n).
     pub reduced_chi2: f64,
     /// The table.
-    #[schemars(with = "Vec<ParameterSchema>")]
     pub parameters: Vec<Parameter>,
     /// Correlation matrix in table order (`null` where undetermined).
     pub correlation: Vec<Vec<Option<f64>>>,
@@ -307,7 +278,6 @@ pub struct Diagnosis {
     /// final (extended) fit with its Cramér-Rao error there, `initial` the superseded first fit's
     /// value. Empty when nothing was added: the identification's table is final.
     #[serde(default)]
-    #[schemars(with = "Vec<ParameterSchema>")]
     pub final_parameters: Vec<Parameter>,
     /// The Cramér-Rao correlation of `final_parameters` at the final fit, in their order (`null`
     /// where undetermined); empty when nothing was added (the identification's `correlation`

@@ -36,6 +36,12 @@ pub fn dir_text(dir: i64) -> String {
     }
 }
 
+/// Why a file gives a channel no usable unit, in the file's own terms (records, fields): the
+/// measurement map then has to give one, and its message starts with this.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("{0}")]
+pub struct NoUsableUnit(pub String);
+
 /// One measured response of a file, before it is mapped onto the model.
 #[derive(Debug, Clone, PartialEq)]
 pub struct MeasuredChannel {
@@ -46,7 +52,7 @@ pub struct MeasuredChannel {
     /// The reference (excitation) node and direction, if the file says.
     pub reference: Option<(i64, i64)>,
     /// The unit of its values as the file gives it, or why the file gives none usable.
-    pub unit: Result<FrfUnit, String>,
+    pub unit: Result<FrfUnit, NoUsableUnit>,
     /// Where the unit came from, for notes: `records 9-10: "m/s^2" per "N"`.
     pub unit_source: String,
     /// Frequencies (Hz).

@@ -26,6 +26,92 @@ use crate::measured::Measurement;
 use crate::model::{Characteristic, Model, PointForce, Quantity};
 use crate::units::{parse_quantity, Dim};
 
+/// Why a text is not the unit of a measured response.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum FrfUnitError {
+    /// The unit field is empty.
+    #[error("no unit given")]
+    Empty,
+    /// The text is none of the accepted kinds (the message lists them).
+    #[error(
+        "\"{text}\" is not a receptance (m/N, mm/N, um/N), mobility (m/s/N, (mm/s)/N), \
+         accelerance ((m/s^2)/N, g/N) per N, kN or lbf, a displacement, velocity or \
+         acceleration, nor a transmissibility (m/m, g/g, (m/s^2)/(m/s^2), dimensionless){}",
+        unknown.as_ref().map(|u| format!(" (unknown unit \"{u}\")")).unwrap_or_default()
+    )]
+    NotAResponse {
+        /// The unit as written.
+        text: String,
+        /// The unit symbol the parser did not know, when that was the reason.
+        unknown: Option<String>,
+    },
+}
+
+/// Why a measurement cannot be brought to the model's convention; each names the measurement
+/// (`label`, e.g. `head u1`) and the fix.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum ConventionError {
+    /// A unit declared for a rotational DOF.
+    #[error(
+        "{label}: a unit ({unit}) is declared for a rotation; declared units are for \
+         translations u1-u3 (give rotations in SI: rad, rad/s, rad/s² to the model's excitation)"
+    )]
+    Rotation {
+        /// The measurement.
+        label: String,
+        /// The unit as written.
+        unit: String,
+    },
+    /// Per-force data against a base-motion reference.
+    #[error("{label}: the data are per unit force ({unit}), but reference \"{reference}\" is a base motion: give transmissibilities with a transmissibility unit (unit = \"g/g\", \"m/m\", \"(m/s^2)/(m/s^2)\")")]
+    ForceAgainstBaseMotion {
+        /// The measurement.
+        label: String,
+        /// The unit as written.
+        unit: String,
+        /// The reference named.
+        reference: String,
+    },
+    /// Per-force data, but no force to scale them to.
+    #[error(
+        "{label}: the data are per unit force ({unit}), but the model declares no excitation \
+         force to scale them to; add an [[excitation]] to the model"
+    )]
+    NoExcitationForce {
+        /// The measurement.
+        label: String,
+        /// The unit as written.
+        unit: String,
+    },
+    /// A transmissibility whose reference is not a base motion.
+    #[error("{label}: a transmissibility ({unit}) is the response per the base's motion, but its reference is {now}: name the model's base-motion [[reference]] for it ({fix})")]
+    TransmissibilityReference {
+        /// The measurement.
+        label: String,
+        /// The unit as written.
+        unit: String,
+        /// The reference it has now, for the message.
+        now: String,
+        /// The base-motion references to name, or how to add one.
+        fix: String,
+    },
+    /// A line at 0 Hz that would be divided by ω to reach the model's output quantity.
+    #[error(
+        "{label}: point {index} is at 0 Hz, where {have} cannot be converted to the model's {want} \
+         output; drop that line"
+    )]
+    ZeroFrequency {
+        /// The measurement.
+        label: String,
+        /// The line's index.
+        index: usize,
+        /// The measured quantity.
+        have: &'static str,
+        /// The model's output quantity.
+        want: &'static str,
+    },
+}
+
 /// The unit of measured values of a translational response.
 #[derive(Debug, Clone, PartialEq)]
 pub struct FrfUnit {
@@ -48,10 +134,10 @@ pub struct FrfUnit {
 impl FrfUnit {
     /// Reads a unit: an FRF (response per force) or a plain response; `Err` says what is
     /// accepted.
-    pub fn parse(text: &str) -> Result<FrfUnit, String> {
+    pub fn parse(text: &str) -> Result<FrfUnit, FrfUnitError> {
         let t = text.trim();
         if t.is_empty() {
-            return Err("no unit given".into());
+            return Err(FrfUnitError::Empty);
         }
         let kinds = [
             (Dim::RECEPTANCE, Quantity::Displacement, true),
@@ -85,17 +171,14 @@ impl FrfUnit {
                 to_si,
             });
         }
-        let why = match last {
-            Some(crate::units::UnitError::Unknown { unit, .. }) => {
-                format!(" (unknown unit \"{unit}\")")
-            }
-            _ => String::new(),
+        let unknown = match last {
+            Some(crate::units::UnitError::Unknown { unit, .. }) => Some(unit),
+            _ => None,
         };
-        Err(format!(
-            "\"{t}\" is not a receptance (m/N, mm/N, um/N), mobility (m/s/N, (mm/s)/N), \
-             accelerance ((m/s^2)/N, g/N) per N, kN or lbf, a displacement, velocity or \
-             acceleration, nor a transmissibility (m/m, g/g, (m/s^2)/(m/s^2), dimensionless){why}"
-        ))
+        Err(FrfUnitError::NotAResponse {
+            text: t.to_string(),
+            unknown,
+        })
     }
 
     /// The SI unit of this kind of value, for notes: `(m/s²)/N`.
@@ -184,14 +267,13 @@ pub fn to_model_convention(
     unit: &FrfUnit,
     model: &Model,
     notes: &mut Vec<String>,
-) -> Result<(), String> {
+) -> Result<(), ConventionError> {
     let label = m.label();
     if m.dof >= 3 {
-        return Err(format!(
-            "{label}: a unit ({}) is declared for a rotation; declared units are for \
-             translations u1-u3 (give rotations in SI: rad, rad/s, rad/s² to the model's excitation)",
-            unit.text
-        ));
+        return Err(ConventionError::Rotation {
+            label,
+            unit: unit.text.clone(),
+        });
     }
     if unit.per_base_motion {
         return transmissibility_to_model(m, unit, model, notes);
@@ -217,20 +299,20 @@ pub fn to_model_convention(
                     ..
                 }) => first_force_amplitude(f),
                 Some(_) => {
-                    return Err(format!(
-                        "{label}: the data are per unit force ({}), but reference \"{name}\" is a base motion: give transmissibilities with a transmissibility unit (unit = \"g/g\", \"m/m\", \"(m/s^2)/(m/s^2)\")",
-                        unit.text
-                    ))
+                    return Err(ConventionError::ForceAgainstBaseMotion {
+                        label,
+                        unit: unit.text.clone(),
+                        reference: name.to_string(),
+                    })
                 }
                 None => None,
             },
         };
         let Some(f) = of_reference else {
-            return Err(format!(
-                "{label}: the data are per unit force ({}), but the model declares no excitation \
-                 force to scale them to; add an [[excitation]] to the model",
-                unit.text
-            ));
+            return Err(ConventionError::NoExcitationForce {
+                label,
+                unit: unit.text.clone(),
+            });
         };
         factor *= f;
         how.push_str(&format!(
@@ -255,7 +337,7 @@ fn transmissibility_to_model(
     unit: &FrfUnit,
     model: &Model,
     notes: &mut Vec<String>,
-) -> Result<(), String> {
+) -> Result<(), ConventionError> {
     let label = m.label();
     let is_base = |r: &&crate::model::Reference| {
         matches!(r.excitation, crate::model::Excitation::BaseMotion { .. })
@@ -283,10 +365,12 @@ fn transmissibility_to_model(
         } else {
             format!("reference = \"{}\"", bases.join("\" or \""))
         };
-        return Err(format!(
-            "{label}: a transmissibility ({}) is the response per the base's motion, but its reference is {now}: name the model's base-motion [[reference]] for it ({fix})",
-            unit.text
-        ));
+        return Err(ConventionError::TransmissibilityReference {
+            label,
+            unit: unit.text.clone(),
+            now,
+            fix,
+        });
     };
     scale(m, unit.to_si);
     m.quantity = Quantity::Displacement.into();
@@ -320,7 +404,7 @@ pub fn convert_quantity(
     m: &mut Measurement,
     model: &Model,
     notes: &mut Vec<String>,
-) -> Result<(), String> {
+) -> Result<(), ConventionError> {
     let Some(body) = model.body_index(&m.body) else {
         return Ok(());
     };
@@ -352,12 +436,12 @@ pub fn convert_quantity(
     for (i, f) in m.freqs_hz.iter().enumerate() {
         let omega = 2.0 * PI * f;
         if k < 0 && omega == 0.0 {
-            return Err(format!(
-                "{label}: point {i} is at 0 Hz, where {} cannot be converted to the model's {} \
-                 output; drop that line",
-                have.as_str(),
-                want.as_str()
-            ));
+            return Err(ConventionError::ZeroFrequency {
+                label,
+                index: i,
+                have: have.as_str(),
+                want: want.as_str(),
+            });
         }
         let g = omega.powi(k);
         m.amplitude[i] *= g;
@@ -453,6 +537,9 @@ mod tests {
             );
             assert_eq!(u.kind(), "transmissibility");
         }
-        assert!(FrfUnit::parse("furlong/N").unwrap_err().contains("furlong"));
+        assert!(FrfUnit::parse("furlong/N")
+            .unwrap_err()
+            .to_string()
+            .contains("furlong"));
     }
 }

@@ -6,12 +6,12 @@ use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 use anyhow::Context;
+use identify::request::{self, DataRequest, Request, Start};
 use identify::{
-    self as idn, data, report, variables, FitKind, JacobianMode, NoiseChoice, Optimizer, Options,
-    Settings,
+    self as idn, report, FitKind, JacobianMode, NoiseChoice, Optimizer, Options, Settings,
 };
 
-use super::{emit, load_model, MethodArg};
+use super::{emit, MethodArg};
 use crate::pipeline::{build_report, ReportContext};
 
 /// `--method`.
@@ -37,7 +37,7 @@ pub enum StartArg {
     /// The variables file's initial values (else the model's).
     Model,
     /// Moved from there by a modal pre-fit to the modes extracted from the data (frequencies
-    /// matched, ψ from the loss factors; `identification::prefit`).
+    /// matched, ψ from the loss factors; `identify::modal_start`).
     Modal,
 }
 
@@ -255,20 +255,12 @@ fn line_choice(a: &IdentifyArgs) -> idn::line_choice::LineChoice {
     }
 }
 
-/// Runs the identification. Exit 0: converged; 1: iteration limit or divergence (the best point
-/// is still reported and written).
-/// Loads and checks the model, data and variables, and the options, of `a` (shared by
-/// `ident identify` and `ident diagnose`).
+/// Prepares the identification of `a` (`identify::request`: model, data, map, line choice,
+/// decimation, variables, start) with its options, saying on stderr what was assumed, converted,
+/// dropped or warned about (shared by `ident identify` and `ident diagnose`).
 pub fn setup(
     a: &IdentifyArgs,
 ) -> anyhow::Result<(rfe::Model, idn::Observations, idn::Variables, Options)> {
-    let model = load_model(&a.model)?;
-    let measured = super::measured::load(&a.data, a.map.as_deref(), &model)?;
-    let measured = super::measured::choose_lines(&measured, &line_choice(a), a.points, &a.data)?;
-    let model = data::with_measured_outputs(&model, &measured);
-    let obs = data::validate(&measured, &model, &a.data.display().to_string())?;
-    super::measured::check(&model, &obs)?;
-    let vars = variables::load(&a.vars, &model)?;
     anyhow::ensure!(
         a.relative_error.is_finite() && a.relative_error > 0.0,
         "--relative-error {} must be a number > 0 (e.g. 0.02 for 2 %)",
@@ -281,20 +273,42 @@ pub fn setup(
         "--weak-threshold {} must be a relative standard error > 0 (e.g. 0.5 for 50 %)",
         a.weak_threshold
     );
-    let noise = match a.noise {
-        NoiseArg::Auto => NoiseChoice::Auto,
-        NoiseArg::Variance => NoiseChoice::Variance,
-        NoiseArg::Coherence => NoiseChoice::Coherence,
-        NoiseArg::Relative => NoiseChoice::Relative(a.relative_error),
-    };
-    let opts = Options {
-        fit: match a.fit {
-            FitArg::Auto => FitKind::for_data(&obs, noise),
-            FitArg::Amplitude => FitKind::Amplitude,
-            FitArg::LogAmplitude => FitKind::LogAmplitude,
-            FitArg::Complex => FitKind::Complex,
+    let lines = line_choice(a);
+    let req = Request {
+        model: &a.model,
+        data: DataRequest {
+            data: &a.data,
+            map: a.map.as_deref(),
+            lines: &lines,
+            points: a.points,
         },
-        noise,
+        vars: &a.vars,
+        start: match a.start {
+            StartArg::Auto => Start::Auto,
+            StartArg::Model => Start::Variables,
+            StartArg::Modal => Start::Modal,
+        },
+        fit: match a.fit {
+            FitArg::Auto => None,
+            FitArg::Amplitude => Some(FitKind::Amplitude),
+            FitArg::LogAmplitude => Some(FitKind::LogAmplitude),
+            FitArg::Complex => Some(FitKind::Complex),
+        },
+        options: options(a),
+    };
+    let p = request::prepare(&req, &mut |note| eprintln!("{note}"))?;
+    Ok((p.model, p.observations, p.variables, p.options))
+}
+
+/// The fit options of `a` (the fit kind is chosen with the data, `identify::request`).
+fn options(a: &IdentifyArgs) -> Options {
+    Options {
+        noise: match a.noise {
+            NoiseArg::Auto => NoiseChoice::Auto,
+            NoiseArg::Variance => NoiseChoice::Variance,
+            NoiseArg::Coherence => NoiseChoice::Coherence,
+            NoiseArg::Relative => NoiseChoice::Relative(a.relative_error),
+        },
         optimizer: match a.method {
             OptimizerArg::Lm => Optimizer::LevenbergMarquardt,
             OptimizerArg::Gn => Optimizer::GaussNewton,
@@ -313,40 +327,7 @@ pub fn setup(
         starts: a.starts,
         seed: a.seed,
         weak_threshold: a.weak_threshold,
-    };
-    let vars = start(a.start, &model, &obs, vars, opts.fit)?;
-    Ok((model, obs, vars, opts))
-}
-
-/// The variables with the start `--start` asks for. `auto`, for data without variances or
-/// coherence (`fit` log-amplitude: vendor files, a first model): the modal pre-fit's start is
-/// added as a second start (the better fit is kept), or, when the data allow no modal
-/// extraction, the variables file's start alone, saying why.
-fn start(
-    how: StartArg,
-    model: &rfe::Model,
-    obs: &idn::Observations,
-    vars: idn::Variables,
-    fit: FitKind,
-) -> anyhow::Result<idn::Variables> {
-    match how {
-        StartArg::Model => Ok(vars),
-        StartArg::Modal => super::modal_start::modal_start(model, obs, &vars),
-        StartArg::Auto if fit != FitKind::LogAmplitude => Ok(vars),
-        StartArg::Auto => match super::modal_start::modal_start(model, obs, &vars) {
-            Ok(modal) => {
-                eprintln!("start: auto: from the variables file's values and from the modal pre-fit's; the better fit is kept (--start model or modal for one)");
-                let mut vars = vars;
-                vars.extra_starts.push(modal.initial());
-                Ok(vars)
-            }
-            Err(e) => {
-                eprintln!(
-                    "start: auto: no modal pre-fit ({e:#}); from the variables file's values"
-                );
-                Ok(vars)
-            }
-        },
+        ..Options::default()
     }
 }
 
@@ -440,6 +421,8 @@ pub fn record_history(
     Ok(())
 }
 
+/// Runs the identification. Exit 0: converged; 1: iteration limit or divergence (the best point
+/// is still reported and written).
 pub fn run(a: IdentifyArgs) -> anyhow::Result<ExitCode> {
     let (model, obs, vars, opts) = setup(&a)?;
     if let Some(path) = &a.export_problem {

@@ -6,8 +6,6 @@ pub mod frf;
 pub mod history;
 pub mod identify;
 pub mod mcap;
-pub mod measured;
-pub mod modal_start;
 pub mod model;
 pub mod modes;
 pub mod modes_from_data;

@@ -535,6 +535,10 @@ pub fn run(a: NightlyArgs) -> anyhow::Result<ExitCode> {
     Ok(ExitCode::from(code))
 }
 
+/// One nightly run, top to bottom: the session (the newest, or a new sweep), process → identify →
+/// diagnose, drift against the earlier reports, the run history's judgement, the report and
+/// status.json, the Prometheus textfile. Longer than a screen because every step adds to the same
+/// log and report messages; split, each step would take and return both.
 fn job(
     cfg: &Config,
     dir: &Path,

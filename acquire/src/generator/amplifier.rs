@@ -1,5 +1,5 @@
 //! The power amplifier and shaker behind a signal generator (the stand file's `[amplifier]`), as
-//! the stand file resolves it and the [`GeneratorExciter`](super::GeneratorExciter) drives it.
+//! the stand file resolves it and the [`GeneratorExciter`](crate::shaker::GeneratorExciter) drives it.
 
 use std::time::Duration;
 

@@ -1,19 +1,18 @@
 //! Function/arbitrary generators driving a power amplifier and an electrodynamic shaker: the
 //! SCPI-99 / IEEE 488.2 command set such generators share ([`scpi::ScpiGenerator`]) with
-//! per-model command tables ([`dialect`]), the narrow [`Generator`] trait a sweep drives, and
-//! [`exciter::GeneratorExciter`], which makes generator + amplifier + shaker an exciter whose
-//! force loop is closed by the host on the DAQ's force channel (docs/scpi-generator.md).
+//! per-model command tables ([`dialect`]), and the narrow [`Generator`] trait a sweep drives.
+//! The exciter made of generator + amplifier + shaker, whose force loop the host closes on the
+//! DAQ's force channel, is a shaker implementation: `shaker::GeneratorExciter`
+//! (docs/scpi-generator.md). Nothing here imports `shaker`.
 
 pub mod amplifier;
 pub mod arbitrary;
 pub mod dialect;
-pub mod exciter;
 pub mod limits;
 pub mod scpi;
 pub mod waveform;
 
 pub use amplifier::Amplifier;
-pub use exciter::GeneratorExciter;
 pub use scpi::{GeneratorOptions, ScpiGenerator};
 
 use std::time::Duration;

@@ -14,7 +14,7 @@ use super::dialect::{self, Dialect, DialectOverrides};
 use super::limits::{Load, ModelLimits};
 use super::{Generator, GeneratorError};
 use crate::device::DeviceIdentity;
-use crate::shaker::scpi::{also_queued, parse_bool_answer, parse_error_entry};
+use crate::scpi::{also_queued, parse_bool_answer, parse_error_entry};
 use crate::transport::{Answer, LineLink, Transport, TransportError};
 
 /// Opens the instrument's connection again after it dropped (a socket reset, a USB serial

@@ -7,7 +7,7 @@ use rand_distr::{Distribution, Uniform};
 use rustfft::num_complex::Complex;
 use rustfft::FftPlanner;
 
-use crate::shaker::Waveform;
+use crate::record::Waveform;
 
 /// The seed of the random phases when none is given: the waveform is the same on every run.
 pub const DEFAULT_SEED: u64 = 0x1de7_5eed;

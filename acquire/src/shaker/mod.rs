@@ -1,9 +1,13 @@
-//! The shaker-controller seam: what a sweep needs from any exciter controller (a SCPI instrument
-//! on a serial port, or the simulated one), its waveforms, status and errors.
+//! The shaker-controller seam: what a sweep needs from any exciter controller, its waveforms,
+//! status and errors, and its implementations: a SCPI shaker controller on a serial port
+//! ([`serial`], or the simulated one) and a signal generator driving a power amplifier
+//! ([`generator::GeneratorExciter`], on `crate::generator`'s drivers).
 
+pub mod generator;
 pub mod scpi;
 pub mod serial;
 
+pub use generator::GeneratorExciter;
 pub use serial::{ScpiShaker, ShakerOptions};
 
 use std::time::Duration;

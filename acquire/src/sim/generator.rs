@@ -16,8 +16,8 @@ use std::collections::VecDeque;
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
+use super::link::{lock, read_host, send_answer, InjectedFault, SharedRef};
 use super::signal::ArbitraryDrive;
-use super::{lock, send_answer, InjectedFault, SharedRef};
 use crate::device::DeviceIdentity;
 use crate::generator::arbitrary::{CommandFramer, FramedCommand};
 use crate::shaker::scpi::Function;
@@ -842,7 +842,7 @@ fn words(block: &[u8], big: bool, signed: bool) -> Result<Vec<i32>, ScpiFault> {
 }
 
 /// The complete commands the host's next bytes finish (binary blocks whole); `None` when the
-/// device stops serving this connection ([`super::read_host`]).
+/// device stops serving this connection ([`read_host`]).
 async fn read_commands<T: Transport>(
     io: &mut T,
     framer: &mut CommandFramer,
@@ -850,7 +850,7 @@ async fn read_commands<T: Transport>(
     shared: &SharedRef,
     pty: bool,
 ) -> Option<Vec<FramedCommand>> {
-    let n = super::read_host(io, buf, shared, pty).await?;
+    let n = read_host(io, buf, shared, pty).await?;
     let mut got = Vec::new();
     framer.feed(&buf[..n], |c| got.push(c));
     Some(got)

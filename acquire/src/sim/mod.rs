@@ -4,6 +4,7 @@
 //! logged so tests can check that the host detected each one.
 
 pub mod generator;
+mod link;
 pub mod plant;
 pub mod signal;
 
@@ -11,7 +12,6 @@ use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
 use rand::{Rng, SeedableRng};
-use serde::Serialize;
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use tokio::task::JoinHandle;
 
@@ -21,17 +21,10 @@ use crate::device::DeviceIdentity;
 use crate::shaker::scpi::{self, Command, Function, Line, LineBuffer, ScpiError};
 use crate::stand::{ChannelKind, Faults, PortSpec, Stand};
 use crate::transport::{pty_pair, Transport, TransportError};
+pub use link::InjectedFault;
+use link::{lock, read_host, send_answer, Shared, SharedRef};
 use plant::{Interaction, Plant, PlantError};
 use signal::{Excitation, SignalGenerator, SimChannel, Source, VOLTS_PER_COUNT};
-
-/// A fault the simulator injected.
-#[derive(Debug, Clone, PartialEq, Eq, Serialize)]
-pub struct InjectedFault {
-    /// `drop`, `corrupt`, `duplicate`, `delay`, `daq_silent`, `shaker_silent`, `cable_pull`.
-    pub kind: &'static str,
-    /// DAQ block number (or shaker command count).
-    pub seq: u64,
-}
 
 /// Why the simulated stand could not start.
 #[derive(Debug, thiserror::Error)]
@@ -192,19 +185,6 @@ impl SimSetup {
             generator: SimGeneratorSetup::from_stand(stand),
         })
     }
-}
-
-#[derive(Default)]
-struct Shared {
-    excitation: Excitation,
-    injected: Vec<InjectedFault>,
-    cable_pulled: bool,
-}
-
-type SharedRef = Arc<Mutex<Shared>>;
-
-fn lock(s: &SharedRef) -> std::sync::MutexGuard<'_, Shared> {
-    s.lock().unwrap_or_else(|p| p.into_inner())
 }
 
 /// A running simulated stand.
@@ -556,30 +536,6 @@ async fn serve_shaker<T: Transport>(
     }
 }
 
-/// Waits up to 20 ms for bytes from the host into `buf`: how many arrived (0: none yet). `None`
-/// when the device stops serving this connection: its cable is pulled, or the host left a
-/// connection that is not a pty (`pty == false`: a TCP client). On a pty, a port no host has open
-/// (reads fail with EIO) is waited out.
-async fn read_host<T: Transport>(
-    io: &mut T,
-    buf: &mut [u8],
-    shared: &SharedRef,
-    pty: bool,
-) -> Option<usize> {
-    if lock(shared).cable_pulled {
-        return None;
-    }
-    match tokio::time::timeout(Duration::from_millis(20), io.read(buf)).await {
-        Err(_) => Some(0),
-        Ok(Ok(0)) | Ok(Err(_)) if !pty => None,
-        Ok(Ok(0)) | Ok(Err(_)) => {
-            tokio::time::sleep(Duration::from_millis(10)).await;
-            Some(0)
-        }
-        Ok(Ok(n)) => Some(n),
-    }
-}
-
 /// The complete lines the host's next bytes finish ([`read_host`]; `None` as there).
 async fn read_lines<T: Transport>(
     io: &mut T,
@@ -592,15 +548,6 @@ async fn read_lines<T: Transport>(
     let mut got = Vec::new();
     lines.feed(&buf[..n], |l| got.push(l));
     Some(got)
-}
-
-/// Sends an answer line (when there is one); false when the host can no longer be written to.
-async fn send_answer<T: Transport>(io: &mut T, answer: Option<String>) -> bool {
-    let Some(mut a) = answer else {
-        return true;
-    };
-    a.push('\n');
-    io.write_all(a.as_bytes()).await.is_ok()
 }
 
 fn push_error(q: &mut std::collections::VecDeque<ScpiError>, e: ScpiError) {

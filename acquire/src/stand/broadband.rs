@@ -10,9 +10,7 @@ use rfe::source::Quantity as Value;
 use rfe::units::Dim;
 
 use super::context::{Ctx, StandError};
-use super::generator::GeneratorStand;
-use crate::device::DeviceIdentity;
-use crate::generator::dialect::{self, ModelEntry};
+use super::generator::{model_of, GeneratorStand};
 use crate::record::Waveform;
 
 /// A broadband measurement.
@@ -172,25 +170,4 @@ fn check_generator(
         ));
     }
     Ok(())
-}
-
-/// The built-in table a generator stand names, and which field named it.
-pub(super) fn model_of(g: &GeneratorStand) -> Option<(ModelEntry, &'static str)> {
-    if let Some(d) = &g.dialect {
-        return dialect::by_name(d)
-            .ok()
-            .flatten()
-            .map(|e| (e, "generator.dialect"));
-    }
-    let (manufacturer, model) = g.identity.split_once(',')?;
-    let id = DeviceIdentity {
-        manufacturer: manufacturer.trim().into(),
-        model: model.trim().into(),
-        serial: String::new(),
-        firmware: String::new(),
-    };
-    dialect::for_identity(&id)
-        .ok()
-        .flatten()
-        .map(|e| (e, "generator.identity"))
 }

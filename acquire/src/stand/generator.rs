@@ -13,8 +13,9 @@ use rfe::units::Dim;
 
 use super::context::{baud, Ctx, StandError};
 use super::ports::{PortSpec, ShakerPort};
+use crate::device::DeviceIdentity;
 use crate::generator::amplifier::{Amplifier, RAMP_TICK};
-use crate::generator::dialect::{self, DialectOverrides};
+use crate::generator::dialect::{self, DialectOverrides, ModelEntry};
 use crate::generator::limits::{LimitError, Load};
 use crate::transport::SocketAddress;
 
@@ -200,7 +201,7 @@ fn check_model_range(
     ra: &Spanned<RawAmplifier>,
     g: &GeneratorStand,
 ) -> Result<(), StandError> {
-    let Some((entry, from)) = super::broadband::model_of(g) else {
+    let Some((entry, from)) = model_of(g) else {
         return Ok(());
     };
     let range = entry
@@ -383,4 +384,25 @@ fn amplifier(cx: &Ctx<'_>, ra: &Spanned<RawAmplifier>) -> Result<Amplifier, Stan
         ramp_rate_v_per_s,
         tolerance,
     })
+}
+
+/// The built-in table a generator stand names, and which field named it.
+pub(super) fn model_of(g: &GeneratorStand) -> Option<(ModelEntry, &'static str)> {
+    if let Some(d) = &g.dialect {
+        return dialect::by_name(d)
+            .ok()
+            .flatten()
+            .map(|e| (e, "generator.dialect"));
+    }
+    let (manufacturer, model) = g.identity.split_once(',')?;
+    let id = DeviceIdentity {
+        manufacturer: manufacturer.trim().into(),
+        model: model.trim().into(),
+        serial: String::new(),
+        firmware: String::new(),
+    };
+    dialect::for_identity(&id)
+        .ok()
+        .flatten()
+        .map(|e| (e, "generator.identity"))
 }

@@ -19,7 +19,7 @@
 //! the nights after the alarm confirm it (a change persists) or are back to normal (an outlier
 //! night; the change closes and the charts resume).
 
-use super::{Change, Rule};
+use super::rule::{Change, Rule};
 
 /// CUSUM and EWMA inputs are clipped to ±this many scatters.
 pub const CLIP: f64 = 4.0;

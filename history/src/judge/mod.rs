@@ -25,6 +25,7 @@ pub mod charts;
 pub mod crlb;
 mod multivariate;
 pub mod normal;
+mod rule;
 
 use std::collections::HashMap;
 
@@ -36,6 +37,7 @@ use charts::{ChartState, Limits};
 use normal::{learn, Normal};
 
 pub use normal::{robust_scatter, MAD_TO_SIGMA, SCREEN_MADS};
+pub use rule::{Change, Rule, VECTOR};
 
 /// Which earlier runs define normal.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -85,38 +87,6 @@ impl Default for JudgeConfig {
     }
 }
 
-/// A control-chart rule.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum Rule {
-    /// Individuals chart: one run beyond `k` scatters.
-    Shewhart,
-    /// Cumulative sum beyond its limit: a step.
-    Cusum,
-    /// Exponentially weighted moving average beyond its limit: a trend.
-    Ewma,
-    /// Hotelling T² of the parameter vector beyond its limit.
-    HotellingT2,
-    /// An effect no baseline run needed.
-    NewEffect,
-}
-
-impl Rule {
-    /// Name for readers.
-    pub fn as_str(self) -> &'static str {
-        match self {
-            Rule::Shewhart => "Shewhart",
-            Rule::Cusum => "CUSUM",
-            Rule::Ewma => "EWMA",
-            Rule::HotellingT2 => "Hotelling T²",
-            Rule::NewEffect => "new effect",
-        }
-    }
-}
-
-/// The subject of the multivariate chart's alarms and changes.
-pub const VECTOR: &str = "parameter vector";
-
 /// One alarm: raised the night a chart first crosses its limit, once per change.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Alarm {
@@ -135,30 +105,6 @@ pub struct Alarm {
     pub multiples: Option<f64>,
     /// One sentence for the report.
     pub message: String,
-}
-
-/// A change followed after its alarm.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct Change {
-    /// The rule that raised it.
-    pub rule: Rule,
-    /// The parameter, or [`VECTOR`].
-    pub subject: String,
-    /// The run of the alarm.
-    pub alarm_run: String,
-    /// The change-point estimate: the first run of the new level.
-    pub change_point_run: String,
-    /// The level since the change point in multiples of normal scatter (T²: mean T² / limit).
-    pub level: f64,
-    /// Nights judged after the alarm night.
-    pub nights_after: usize,
-    /// Whether the nights after the alarm confirm the change (`None` before the first).
-    pub persists: Option<bool>,
-    /// One sentence for the report.
-    pub message: String,
-    /// Sum of the residuals after the alarm (signed, scatters), for `persists`.
-    #[serde(skip)]
-    sum_after: f64,
 }
 
 /// One parameter of the judged run: every chart's statistic beside its limit.

@@ -110,7 +110,9 @@ pub(crate) fn band_lines(data: &ModalData, band: Option<(f64, f64)>) -> Result<(
     Ok((first, end))
 }
 
-/// Runs pLSCF for orders `1..=settings.max_order`.
+/// Runs pLSCF for orders `1..=settings.max_order`: the band's lines, the FRFs scaled to unit RMS,
+/// the Toeplitz moments of the normal equations, their reduction to `Q_o` and `T`, then the
+/// denominator and poles order by order.
 pub fn lscf(data: &ModalData, settings: &LscfSettings) -> Result<Vec<OrderPoles>> {
     let nmax = settings.max_order;
     if nmax == 0 || nmax > 500 {
@@ -120,34 +122,64 @@ pub fn lscf(data: &ModalData, settings: &LscfSettings) -> Result<Vec<OrderPoles>
             reason: "give an order between 1 and 500".into(),
         });
     }
-    let (first, end) = band_lines(data, settings.band_hz)?;
-    let nf = end.saturating_sub(first);
-    let l = data.references;
-    let no = data.outputs;
-    let lo_hz = data.freqs_hz.get(first).copied().unwrap_or(f64::NAN);
-    let hi_hz = if end > 0 {
-        data.freqs_hz[end - 1]
-    } else {
-        f64::NAN
-    };
-    // Unknowns: (nmax + 1)·l denominator and (nmax + 1)·l numerator coefficients per output; the
-    // real equations are 2·nf per output.
-    if nf < 2 || 2 * nf < (nmax + 1) * (l + 1) || !(hi_hz > 0.0) {
-        return Err(ModalError::TooFewLines {
-            lines: nf,
-            lo_hz,
-            hi_hz,
-            order: nmax,
-            references: l,
-        });
-    }
-    let dt = 1.0 / (2.0 * hi_hz);
-    let n1 = nmax + 1;
+    let band = Band::of(data, settings.band_hz, nmax)?;
+    let scale = unit_rms_scale(data, &band)?;
+    let m = Moments::of(data, &band, nmax, scale);
+    let (q, t) = reduce(&m, data.outputs, data.references, nmax)?;
+    orders(&q, &t, data.outputs, data.references, nmax, &band)
+}
 
-    // Scale the FRFs to unit RMS (poles do not depend on it; it keeps T and S of order 1).
+/// The lines of the band a pLSCF of order `nmax` fits, and its time step.
+struct Band {
+    /// First line.
+    first: usize,
+    /// One past the last line.
+    end: usize,
+    /// Lines.
+    nf: usize,
+    /// `Δt = 1 / (2 f_hi)`.
+    dt: f64,
+}
+
+impl Band {
+    /// The band's lines; too few for the unknowns of order `nmax` is an error.
+    fn of(data: &ModalData, band_hz: Option<(f64, f64)>, nmax: usize) -> Result<Band> {
+        let (first, end) = band_lines(data, band_hz)?;
+        let nf = end.saturating_sub(first);
+        let l = data.references;
+        let lo_hz = data.freqs_hz.get(first).copied().unwrap_or(f64::NAN);
+        let hi_hz = if end > 0 {
+            data.freqs_hz[end - 1]
+        } else {
+            f64::NAN
+        };
+        // Unknowns: (nmax + 1)·l denominator and (nmax + 1)·l numerator coefficients per output;
+        // the real equations are 2·nf per output.
+        if nf < 2 || 2 * nf < (nmax + 1) * (l + 1) || !(hi_hz > 0.0) {
+            return Err(ModalError::TooFewLines {
+                lines: nf,
+                lo_hz,
+                hi_hz,
+                order: nmax,
+                references: l,
+            });
+        }
+        Ok(Band {
+            first,
+            end,
+            nf,
+            dt: 1.0 / (2.0 * hi_hz),
+        })
+    }
+}
+
+/// The factor that scales the FRFs to unit RMS over the band (poles do not depend on it; it keeps
+/// T and S of order 1).
+fn unit_rms_scale(data: &ModalData, band: &Band) -> Result<f64> {
+    let (no, l, nf) = (data.outputs, data.references, band.nf);
     let ms: f64 = (0..no * l)
         .map(|fr| {
-            data.h[fr * data.lines() + first..fr * data.lines() + end]
+            data.h[fr * data.lines() + band.first..fr * data.lines() + band.end]
                 .iter()
                 .map(|v| v.norm_sqr())
                 .sum::<f64>()
@@ -159,78 +191,110 @@ pub fn lscf(data: &ModalData, settings: &LscfSettings) -> Result<Vec<OrderPoles>
             what: "pLSCF (FRFs are zero in the band)",
         });
     }
-    let scale = 1.0 / ms.sqrt();
+    Ok(1.0 / ms.sqrt())
+}
 
-    // Powers z_k^m, m = 0..=nmax, for the lines of the band: pow[m * nf + k].
-    let mut pow = vec![C64::new(0.0, 0.0); n1 * nf];
-    for k in 0..nf {
-        let z = C64::from_polar(
-            1.0,
-            2.0 * std::f64::consts::PI * data.freqs_hz[first + k] * dt,
-        );
-        let mut p = C64::new(1.0, 0.0);
-        for m in 0..n1 {
-            pow[m * nf + k] = p;
-            p *= z;
-        }
-    }
-    // Moments Re Σ_k c_k z_k^m for m = −nmax..=nmax, stored at index m + nmax.
-    let moments = |c: &[C64], out: &mut [f64]| {
-        for m in 0..n1 {
-            let pm = &pow[m * nf..(m + 1) * nf];
-            let (mut pos, mut neg) = (0.0, 0.0);
-            for (ck, zk) in c.iter().zip(pm) {
-                // Re(c z) and Re(c z̄)
-                let a = ck.re * zk.re;
-                let b = ck.im * zk.im;
-                pos += a - b;
-                neg += a + b;
+/// The moments `Re Σ_k c_k z_k^m`, `m = −nmax..=nmax` (index `m + nmax`), of the normal
+/// equations' Toeplitz blocks.
+struct Moments {
+    /// `r(m) = Re Σ z^m`.
+    r: Vec<f64>,
+    /// `s_{o,b}(m) = −Re Σ H_ob z^m`, at `(o·l + b)·nm + m + nmax`.
+    s: Vec<f64>,
+    /// `t_{ab}(m) = Re Σ_o Σ_k conj(H_oa) H_ob z^m`, at `(a·l + b)·nm + m + nmax`.
+    t: Vec<f64>,
+}
+
+impl Moments {
+    fn of(data: &ModalData, band: &Band, nmax: usize, scale: f64) -> Moments {
+        let (first, end, nf) = (band.first, band.end, band.nf);
+        let (no, l) = (data.outputs, data.references);
+        let n1 = nmax + 1;
+        // Powers z_k^m, m = 0..=nmax, for the lines of the band: pow[m * nf + k].
+        let mut pow = vec![C64::new(0.0, 0.0); n1 * nf];
+        for k in 0..nf {
+            let z = C64::from_polar(
+                1.0,
+                2.0 * std::f64::consts::PI * data.freqs_hz[first + k] * band.dt,
+            );
+            let mut p = C64::new(1.0, 0.0);
+            for m in 0..n1 {
+                pow[m * nf + k] = p;
+                p *= z;
             }
-            out[nmax + m] = pos;
-            out[nmax - m] = neg;
         }
-    };
-    let nm = 2 * nmax + 1;
-    let ones = vec![C64::new(1.0, 0.0); nf];
-    let mut r_mom = vec![0.0; nm];
-    moments(&ones, &mut r_mom);
-    // s_{o,b}(m) = −Re Σ H_ob z^m ; t_{ab}(m) = Re Σ_o Σ_k conj(H_oa) H_ob z^m.
-    let mut s_mom = vec![0.0; no * l * nm];
-    let mut t_mom = vec![0.0; l * l * nm];
-    let mut buf = vec![C64::new(0.0, 0.0); nf];
-    let mut tmp = vec![0.0; nm];
-    for o in 0..no {
-        for b in 0..l {
-            let hb = &data.frf(o, b)[first..end];
-            for (x, v) in buf.iter_mut().zip(hb) {
-                *x = -v * scale;
+        // Moments Re Σ_k c_k z_k^m for m = −nmax..=nmax, stored at index m + nmax.
+        let moments = |c: &[C64], out: &mut [f64]| {
+            for m in 0..n1 {
+                let pm = &pow[m * nf..(m + 1) * nf];
+                let (mut pos, mut neg) = (0.0, 0.0);
+                for (ck, zk) in c.iter().zip(pm) {
+                    // Re(c z) and Re(c z̄)
+                    let a = ck.re * zk.re;
+                    let b = ck.im * zk.im;
+                    pos += a - b;
+                    neg += a + b;
+                }
+                out[nmax + m] = pos;
+                out[nmax - m] = neg;
             }
-            moments(&buf, &mut s_mom[(o * l + b) * nm..(o * l + b + 1) * nm]);
-        }
-    }
-    let mut prod = vec![C64::new(0.0, 0.0); nf];
-    for a in 0..l {
-        for b in a..l {
-            prod.iter_mut().for_each(|x| *x = C64::new(0.0, 0.0));
-            for o in 0..no {
-                let ha = &data.frf(o, a)[first..end];
+        };
+        let nm = 2 * nmax + 1;
+        let ones = vec![C64::new(1.0, 0.0); nf];
+        let mut r_mom = vec![0.0; nm];
+        moments(&ones, &mut r_mom);
+        let mut s_mom = vec![0.0; no * l * nm];
+        let mut t_mom = vec![0.0; l * l * nm];
+        let mut buf = vec![C64::new(0.0, 0.0); nf];
+        let mut tmp = vec![0.0; nm];
+        for o in 0..no {
+            for b in 0..l {
                 let hb = &data.frf(o, b)[first..end];
-                for ((x, va), vb) in prod.iter_mut().zip(ha).zip(hb) {
-                    *x += va.conj() * vb * (scale * scale);
+                for (x, v) in buf.iter_mut().zip(hb) {
+                    *x = -v * scale;
+                }
+                moments(&buf, &mut s_mom[(o * l + b) * nm..(o * l + b + 1) * nm]);
+            }
+        }
+        let mut prod = vec![C64::new(0.0, 0.0); nf];
+        for a in 0..l {
+            for b in a..l {
+                prod.iter_mut().for_each(|x| *x = C64::new(0.0, 0.0));
+                for o in 0..no {
+                    let ha = &data.frf(o, a)[first..end];
+                    let hb = &data.frf(o, b)[first..end];
+                    for ((x, va), vb) in prod.iter_mut().zip(ha).zip(hb) {
+                        *x += va.conj() * vb * (scale * scale);
+                    }
+                }
+                moments(&prod, &mut tmp);
+                for m in 0..nm {
+                    t_mom[(a * l + b) * nm + m] = tmp[m];
+                    // t_ba(m) = t_ab(−m)
+                    t_mom[(b * l + a) * nm + m] = tmp[nm - 1 - m];
                 }
             }
-            moments(&prod, &mut tmp);
-            for m in 0..nm {
-                t_mom[(a * l + b) * nm + m] = tmp[m];
-                // t_ba(m) = t_ab(−m)
-                t_mom[(b * l + a) * nm + m] = tmp[nm - 1 - m];
-            }
+        }
+        Moments {
+            r: r_mom,
+            s: s_mom,
+            t: t_mom,
         }
     }
+}
 
+/// The reduced normal equations: `Q_o = L⁻¹ S_o` per output (`R = L Lᵀ`) and `T`.
+fn reduce(
+    m: &Moments,
+    no: usize,
+    l: usize,
+    nmax: usize,
+) -> Result<(Vec<DMatrix<f64>>, DMatrix<f64>)> {
+    let n1 = nmax + 1;
+    let nm = 2 * nmax + 1;
     // R (n1 × n1): R_ij = r(j − i); its Cholesky factor.
     let r = DMatrix::from_fn(n1, n1, |i, j| {
-        r_mom[(nmax as isize + j as isize - i as isize) as usize]
+        m.r[(nmax as isize + j as isize - i as isize) as usize]
     });
     let chol = nalgebra::Cholesky::new(r).ok_or(ModalError::Singular {
         what: "pLSCF (R is not positive definite: too few distinct lines)",
@@ -242,7 +306,7 @@ pub fn lscf(data: &ModalData, settings: &LscfSettings) -> Result<Vec<OrderPoles>
     for o in 0..no {
         let s = DMatrix::from_fn(n1, nc, |i, c| {
             let (j, b) = (c / l, c % l);
-            s_mom[(o * l + b) * nm + (nmax as isize + j as isize - i as isize) as usize]
+            m.s[(o * l + b) * nm + (nmax as isize + j as isize - i as isize) as usize]
         });
         let qo = lmat
             .solve_lower_triangular(&s)
@@ -253,14 +317,28 @@ pub fn lscf(data: &ModalData, settings: &LscfSettings) -> Result<Vec<OrderPoles>
     let t = DMatrix::from_fn(nc, nc, |ri, ci| {
         let (i, a) = (ri / l, ri % l);
         let (j, b) = (ci / l, ci % l);
-        t_mom[(a * l + b) * nm + (nmax as isize + j as isize - i as isize) as usize]
+        m.t[(a * l + b) * nm + (nmax as isize + j as isize - i as isize) as usize]
     });
+    Ok((q, t))
+}
 
+/// The denominator and poles of every order `1..=nmax`, each order's `Σ_o S_oᵀ R⁻¹ S_o` the
+/// previous one's plus one row of every `Q_o`.
+fn orders(
+    q: &[DMatrix<f64>],
+    t: &DMatrix<f64>,
+    no: usize,
+    l: usize,
+    nmax: usize,
+    band: &Band,
+) -> Result<Vec<OrderPoles>> {
+    let nc = l * (nmax + 1);
+    let nf = band.nf;
     let mut g = DMatrix::<f64>::zeros(nc, nc);
     let mut out = Vec::with_capacity(nmax);
     for p in 0..=nmax {
         // Add row p of every Q_o (only the columns of order ≤ nmax are ever used).
-        for qo in &q {
+        for qo in q {
             let row = qo.row(p);
             g.ger(1.0, &row.transpose(), &row.transpose(), 1.0);
         }
@@ -295,7 +373,7 @@ pub fn lscf(data: &ModalData, settings: &LscfSettings) -> Result<Vec<OrderPoles>
         });
         out.push(OrderPoles {
             order: p,
-            poles: poles_of(&alpha, l, p, dt, cov.as_ref()),
+            poles: poles_of(&alpha, l, p, band.dt, cov.as_ref()),
         });
     }
     Ok(out)

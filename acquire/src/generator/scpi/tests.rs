@@ -3,8 +3,8 @@
 
 use super::scripted;
 use super::*;
-use crate::shaker::scpi::{Line, LineBuffer};
 use crate::transport::MemoryTransport;
+use crate::transport::{Line, LineBuffer};
 use tokio::task::JoinHandle;
 
 /// One exchange: the line the host must send, and the lines the instrument answers.

@@ -7,7 +7,7 @@
 
 use super::*;
 use crate::generator::{Generator, GeneratorOptions, ScpiGenerator};
-use crate::sim::Shared;
+use crate::sim::link::Shared;
 use crate::transport::MemoryTransport;
 
 fn generator(e: &Emulation) -> SimGenerator {

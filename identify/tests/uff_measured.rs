@@ -4,6 +4,9 @@
 //! three units; every form gives the same data and the same estimates.
 #![allow(clippy::unwrap_used, missing_docs)]
 
+// The Python runner and the signal helpers of process's cross-checks, shared (the scripts are
+// looked up in this crate's tests/python).
+#[path = "../../process/tests/common/mod.rs"]
 mod common;
 
 use identify::{self as idn, data, measurement_map, variables, Options};
@@ -511,7 +514,7 @@ fn transmissibilities_in_g_per_g_or_any_like_ratio_are_read_exactly() {
     let bytes = uff::to_bytes(&[g], uff::Encoding::Binary).unwrap();
     let file = uff::parse_file(&bytes, "bad.uff").unwrap();
     let (channels, _) = uff::measured_channels(&file, "bad.uff").unwrap();
-    let e = channels[0].unit.as_ref().unwrap_err();
+    let e = channels[0].unit.as_ref().unwrap_err().to_string();
     assert!(
         e.contains("function type 5") && e.contains("accelerance"),
         "{e}"

@@ -10,14 +10,14 @@
 
 use async_trait::async_trait;
 
-use super::amplifier::{Amplifier, RAMP_TICK};
-use super::limits::Load;
-use super::waveform::{self, DriveWaveform};
-use super::{Generator, GeneratorError};
+use super::{ForceReading, PeriodForce, Shaker, ShakerError, ShakerStatus, Waveform};
 use crate::device::DeviceIdentity;
+use crate::generator::amplifier::{Amplifier, RAMP_TICK};
+use crate::generator::limits::{LimitError, Load};
+use crate::generator::waveform::{self, DriveWaveform};
+use crate::generator::{Generator, GeneratorError};
 use crate::record::{DriveKind, DriveRecord};
 use crate::session::SessionHandle;
-use crate::shaker::{ForceReading, PeriodForce, Shaker, ShakerError, ShakerStatus, Waveform};
 
 /// A measured force below this fraction of what the drive should give means the force signal is
 /// lost (amplifier tripped, shaker disconnected, force sensor cable).
@@ -223,7 +223,7 @@ impl GeneratorExciter {
             return Err(GeneratorError::Limits {
                 instrument: self.port.clone(),
                 model,
-                source: Box::new(super::limits::LimitError::NoRange {
+                source: Box::new(LimitError::NoRange {
                     field: "amplitude_high_z_vpp",
                     load: "into a high impedance",
                 }),
