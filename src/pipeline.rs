@@ -170,6 +170,10 @@ fn recorded<T>(
         let outcome = async {
             sweep::log_session_start(&h, &stand.file, plan, opts.resume, &opts.done)?;
             let mut rig = Rig::connect(&bound, Some(&h)).await?;
+            if let Some(s) = &sim {
+                // Settling counts from the stream the simulator has produced.
+                rig = s.clock_rig(rig);
+            }
             Ok::<_, anyhow::Error>(measure(&mut rig, &h, &stop).await?)
         }
         .await

@@ -1016,3 +1016,129 @@ fn window_force_peak_volts(rs: &[acquire::session::Record], s: &sweep::StepResul
     }
     peak
 }
+
+/// The simulator's end of a link, starved of CPU: every write first waits `pause`, as a
+/// simulator thread that runs a fraction of the time on a busy machine.
+struct Starved<T> {
+    inner: T,
+    pause: std::time::Duration,
+    sleep: Option<std::pin::Pin<Box<tokio::time::Sleep>>>,
+}
+
+impl<T: acquire::transport::Transport> acquire::transport::Transport for Starved<T> {
+    fn port(&self) -> &str {
+        self.inner.port()
+    }
+}
+
+impl<T: tokio::io::AsyncRead + Unpin> tokio::io::AsyncRead for Starved<T> {
+    fn poll_read(
+        mut self: std::pin::Pin<&mut Self>,
+        cx: &mut std::task::Context<'_>,
+        buf: &mut tokio::io::ReadBuf<'_>,
+    ) -> std::task::Poll<std::io::Result<()>> {
+        std::pin::Pin::new(&mut self.inner).poll_read(cx, buf)
+    }
+}
+
+impl<T: tokio::io::AsyncWrite + Unpin> tokio::io::AsyncWrite for Starved<T> {
+    fn poll_write(
+        mut self: std::pin::Pin<&mut Self>,
+        cx: &mut std::task::Context<'_>,
+        buf: &[u8],
+    ) -> std::task::Poll<std::io::Result<usize>> {
+        let pause = self.pause;
+        let sleep = self
+            .sleep
+            .get_or_insert_with(|| Box::pin(tokio::time::sleep(pause)));
+        if std::future::Future::poll(sleep.as_mut(), cx).is_pending() {
+            return std::task::Poll::Pending;
+        }
+        self.sleep = None;
+        std::pin::Pin::new(&mut self.inner).poll_write(cx, buf)
+    }
+    fn poll_flush(
+        mut self: std::pin::Pin<&mut Self>,
+        cx: &mut std::task::Context<'_>,
+    ) -> std::task::Poll<std::io::Result<()>> {
+        std::pin::Pin::new(&mut self.inner).poll_flush(cx)
+    }
+    fn poll_shutdown(
+        mut self: std::pin::Pin<&mut Self>,
+        cx: &mut std::task::Context<'_>,
+    ) -> std::task::Poll<std::io::Result<()>> {
+        std::pin::Pin::new(&mut self.inner).poll_shutdown(cx)
+    }
+}
+
+/// The simulated stand on a busy machine: its DAQ, starved, streams at an eighth of its speed
+/// (10 ms per block where 10× real time needs 1.25 ms). Settling reckoned from wall-clock time
+/// waited for up to 2 s of wall-clock stream per drive change (20 s of simulated stream here,
+/// minutes of starved stream per line) and the devices' timeouts ran out. With the simulator's
+/// own clock (the samples it has produced) every line is measured at its drive, and the stream
+/// read is what the windows need: settling, windows and at most a link's worth per window.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_starved_simulator_is_measured_by_its_own_clock() {
+    use acquire::transport::MemoryTransport;
+    bounded(60, async {
+        let stand = sim_stand(10.0);
+        let link = 1 << 16;
+        let (s_host, s_dev) = MemoryTransport::pair("shaker", "shaker-sim", link);
+        let (d_host, d_dev) = MemoryTransport::pair("daq", "daq-sim", link);
+        let starved = Starved {
+            inner: d_dev,
+            pause: std::time::Duration::from_millis(10),
+            sleep: None,
+        };
+        let sim = SimStand::serve(
+            SimSetup::from_stand(&stand).unwrap(),
+            s_dev,
+            starved,
+            "mem:shaker".into(),
+            "mem:daq".into(),
+        );
+        let (_d, path) = temp_file("starved.mcap");
+        let session = Session::create(&path, SessionOptions::default()).unwrap();
+        let h = session.handle();
+        let plan = quick_plan(3);
+        sweep::log_session_start(&h, &stand.file, &plan, None, &BTreeSet::new()).unwrap();
+        let shaker: Box<dyn Shaker> = Box::new(ScpiShaker::new(s_host, ShakerOptions::default()));
+        let daq: Box<dyn Daq> = Box::new(SerialDaq::new(d_host, DaqOptions::default()));
+        let rig = Rig::from_devices(&stand, shaker, daq, Some(&h))
+            .await
+            .unwrap();
+        let mut rig = sim.clock_rig(rig);
+        assert_eq!(rig.daq.sample_clock(), Some(0), "nothing streamed yet");
+        let o = sweep::stepped_sine(
+            &mut rig,
+            &plan,
+            &h,
+            &NoProgress,
+            &StopSignal::new(),
+            &BTreeSet::new(),
+        )
+        .await
+        .unwrap_or_else(|e| panic!("{e}"));
+        drop(rig);
+        session.finish().unwrap();
+        assert_eq!(o.steps.len(), 3);
+        assert_eq!(o.faults, 0);
+        assert_lines_at_their_drive(&stand, &plan, &path);
+        let fs = stand.daq.sample_rate_hz;
+        let frame = 4 * stand.channels.len() as u64 * stand.daq.samples_per_block as u64;
+        let link_samples = (link as u64 / frame + 1) * stand.daq.samples_per_block as u64;
+        let settle = (plan.settle_s * fs).ceil() as u64;
+        let needed: u64 = o
+            .steps
+            .iter()
+            .map(|s| 2 * (s.iterations as u64 + 1) * (settle + s.samples + link_samples))
+            .sum();
+        let last = o.steps.last().unwrap();
+        let read = last.first_sample + last.samples;
+        assert!(
+            read <= needed,
+            "the sweep read {read} samples where its windows need at most {needed}: it waited for stream the simulator had not produced"
+        );
+    })
+    .await
+}

@@ -45,4 +45,3 @@ fn the_stability_schema_file_is_the_generated_schema() {
         "the report schema holds the stability section's definitions"
     );
 }
-

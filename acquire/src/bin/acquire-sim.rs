@@ -117,7 +117,7 @@ async fn run() -> Result<(), Box<dyn std::error::Error>> {
     };
     let result = async {
         sweep::log_session_start(&h, &stand.file, &plan, None, &BTreeSet::new())?;
-        let mut rig = Rig::connect(&bound, Some(&h)).await?;
+        let mut rig = sim.clock_rig(Rig::connect(&bound, Some(&h)).await?);
         loop {
             let o = sweep::stepped_sine(&mut rig, &plan, &h, &NoProgress, &stop, &BTreeSet::new())
                 .await?;

@@ -50,8 +50,10 @@ pub trait Daq: Send {
     async fn stop(&mut self) -> Result<(), DaqError>;
 
     /// The index of the next sample the device will take, where the host paces the sampling (a
-    /// CANopen master producing SYNC): every sample from it on is taken after now. `None` where
-    /// the device's own clock paces it; the sweep then reckons from wall-clock time since START.
+    /// CANopen master producing SYNC) or reads the device's own count (the simulated DAQ in the
+    /// same process, [`crate::sim::clock`]): every sample from it on is taken after now. `None`
+    /// where the device's own clock paces it unseen; the sweep then reckons from wall-clock time
+    /// since START.
     fn sample_clock(&self) -> Option<u64> {
         None
     }

@@ -58,6 +58,8 @@ struct StreamState {
     expected: u64,
     /// Bytes that did not decode as frames since the last command was sent.
     undecodable: usize,
+    /// Frames decoded since the last command was sent.
+    decoded: usize,
 }
 
 impl<T: Transport> SerialDaq<T> {
@@ -87,11 +89,14 @@ impl<T: Transport> SerialDaq<T> {
     async fn fill(&mut self, deadline: Instant, what: &str) -> Result<(), DaqError> {
         let n = match tokio::time::timeout_at(deadline, self.io.read(&mut self.rx)).await {
             Err(_) => {
-                let junk = self.state.undecodable + self.dec.pending();
-                let extra = if junk > 0 {
-                    format!(" (received {junk} bytes that are not DAQ frames: wrong device or baud rate?)")
-                } else {
-                    String::new()
+                // Bytes that never decoded point at the wrong device or baud rate; a frame
+                // begun but not finished is a device (or a simulator) that stopped mid-frame.
+                let junk = self.state.undecodable;
+                let cut = self.dec.pending();
+                let extra = match (junk, cut) {
+                    (0, 0) => String::new(),
+                    (0, cut) if self.state.decoded > 0 => format!(" (the last frame stopped after {cut} bytes: the device stopped sending mid-frame; a simulated stand whose host is too busy does that)"),
+                    (junk, cut) => format!(" (received {} bytes that are not DAQ frames: wrong device or baud rate?)", junk + cut),
                 };
                 return Err(DaqError::Timeout {
                     port: self.port.clone(),
@@ -111,16 +116,19 @@ impl<T: Transport> SerialDaq<T> {
         let state = &mut self.state;
         self.dec.feed(&self.rx[..n], |f| match f {
             Err(e) => state.frame_error(e),
-            Ok(f) => match Message::parse(&f) {
-                Err(e) => state.fault(FaultKind::Framing, None, e.to_string()),
-                Ok(Message::Data(counts)) => state.data(f.seq, counts),
-                Ok(Message::Status { code, message }) => state.fault(
-                    FaultKind::Device,
-                    None,
-                    format!("device status {code}: {message}"),
-                ),
-                Ok(m) => state.replies.push_back((f.seq, m)),
-            },
+            Ok(f) => {
+                state.decoded += 1;
+                match Message::parse(&f) {
+                    Err(e) => state.fault(FaultKind::Framing, None, e.to_string()),
+                    Ok(Message::Data(counts)) => state.data(f.seq, counts),
+                    Ok(Message::Status { code, message }) => state.fault(
+                        FaultKind::Device,
+                        None,
+                        format!("device status {code}: {message}"),
+                    ),
+                    Ok(m) => state.replies.push_back((f.seq, m)),
+                }
+            }
         });
         Ok(())
     }
@@ -134,6 +142,7 @@ impl<T: Transport> SerialDaq<T> {
             self.tx.clear();
             msg.encode(id, &mut self.s1, &mut self.s2, &mut self.tx);
             self.state.undecodable = 0;
+            self.state.decoded = 0;
             self.io
                 .write_all(&self.tx)
                 .await

@@ -157,9 +157,46 @@ pub struct ModelEntry {
     pub arbitrary: Option<super::arbitrary::ArbitraryDialect>,
 }
 
+/// A generator family the driver refuses, and why (`[[unsupported]]` in the built-in table).
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Unsupported {
+    /// `*IDN?` manufacturers (compared case-insensitively).
+    pub manufacturers: Vec<String>,
+    /// Prefixes of the `*IDN?` model (case-insensitive).
+    pub model_prefixes: Vec<String>,
+    /// Why the driver does not drive it, and what to use instead.
+    pub why: String,
+}
+
 #[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
 struct Table {
     model: Vec<ModelEntry>,
+    #[serde(default)]
+    unsupported: Vec<Unsupported>,
+}
+
+/// True when `id` is of `manufacturers` and its model starts with one of `prefixes`.
+fn matches(id: &DeviceIdentity, manufacturers: &[String], prefixes: &[String]) -> bool {
+    manufacturers
+        .iter()
+        .any(|x| x.eq_ignore_ascii_case(id.manufacturer.trim()))
+        && prefixes.iter().any(|p| {
+            id.model
+                .trim()
+                .to_ascii_uppercase()
+                .starts_with(&p.to_ascii_uppercase())
+        })
+}
+
+/// The built-in table's refusal of `id`, if the driver does not drive its family.
+pub fn unsupported(id: &DeviceIdentity) -> Result<Option<Unsupported>, TableError> {
+    Ok(toml::from_str::<Table>(MODELS_TOML)
+        .map_err(|e| TableError(e.to_string()))?
+        .unsupported
+        .into_iter()
+        .find(|u| matches(id, &u.manufacturers, &u.model_prefixes)))
 }
 
 /// The built-in table could not be read (a defect of this build, reported rather than panicking).
@@ -183,17 +220,9 @@ pub fn by_name(name: &str) -> Result<Option<ModelEntry>, TableError> {
 
 /// The built-in entry for an instrument's identity, if its manufacturer and model are known.
 pub fn for_identity(id: &DeviceIdentity) -> Result<Option<ModelEntry>, TableError> {
-    Ok(builtin()?.into_iter().find(|m| {
-        m.manufacturers
-            .iter()
-            .any(|x| x.eq_ignore_ascii_case(id.manufacturer.trim()))
-            && m.model_prefixes.iter().any(|p| {
-                id.model
-                    .trim()
-                    .to_ascii_uppercase()
-                    .starts_with(&p.to_ascii_uppercase())
-            })
-    }))
+    Ok(builtin()?
+        .into_iter()
+        .find(|m| matches(id, &m.manufacturers, &m.model_prefixes)))
 }
 
 /// Names of the built-in entries, for messages.

@@ -134,6 +134,17 @@ pub enum GeneratorError {
         /// Further queued errors, if any.
         more: String,
     },
+    /// The instrument is of a family the driver does not drive (the built-in table's
+    /// `[[unsupported]]`).
+    #[error("signal generator on {port}: `*IDN?` says `{idn}`: {why}")]
+    Unsupported {
+        /// Port.
+        port: String,
+        /// The identity received.
+        idn: String,
+        /// Why, and what to use instead.
+        why: String,
+    },
     /// The instrument's model has no command table.
     #[error("signal generator on {port}: `*IDN?` says `{idn}`, a model with no built-in command table (known: {known}); set `dialect = \"generic\"` in [generator] for plain SCPI-99 commands, or name a table and override commands in [generator.commands] (docs/scpi-generator.md)")]
     UnknownModel {

@@ -390,6 +390,13 @@ impl ScpiGenerator {
     /// with the stand's overrides; its name and arbitrary-waveform upload.
     fn choose_dialect(&self, id: &DeviceIdentity) -> Result<ChosenTable, GeneratorError> {
         let known = || dialect::known_names().join(", ");
+        if let Some(u) = dialect::unsupported(id)? {
+            return Err(GeneratorError::Unsupported {
+                port: self.port.clone(),
+                idn: id.to_idn(),
+                why: u.why,
+            });
+        }
         let base = match &self.opts.dialect {
             Some(name) => {
                 dialect::by_name(name)?.ok_or_else(|| GeneratorError::UnknownDialect {

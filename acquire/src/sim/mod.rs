@@ -3,6 +3,7 @@
 //! [`Plant`], with sensor noise and configurable faults. Every injected fault is
 //! logged so tests can check that the host detected each one.
 
+pub mod clock;
 pub mod generator;
 mod link;
 pub mod plant;
@@ -21,6 +22,7 @@ use crate::device::DeviceIdentity;
 use crate::shaker::scpi::{self, Command, Function, Line, LineBuffer, ScpiError};
 use crate::stand::{ChannelKind, Faults, PortSpec, Stand};
 use crate::transport::{pty_pair, Transport, TransportError};
+use clock::{SimClock, SimClockedDaq};
 pub use link::InjectedFault;
 use link::{lock, read_host, send_answer, Shared, SharedRef};
 use plant::{Interaction, Plant, PlantError};
@@ -196,6 +198,8 @@ pub struct SimStand {
     shared: SharedRef,
     tasks: Vec<JoinHandle<()>>,
     generator: Option<generator::SimGenerator>,
+    /// The serial DAQ's sample clock (`None` for a DAQ on CAN).
+    clock: Option<SimClock>,
 }
 
 impl SimStand {
@@ -219,13 +223,16 @@ impl SimStand {
             let daq = pty_pair("daq")?;
             let daq_port = daq.path.clone();
             let s2 = shared.clone();
-            let t2 = tokio::spawn(async move { serve_daq(daq.device, s2, setup).await });
+            let clock = SimClock::default();
+            let c2 = clock.clone();
+            let t2 = tokio::spawn(async move { serve_daq(daq.device, s2, setup, c2).await });
             return Ok(SimStand {
                 shaker_port: port,
                 daq_port,
                 shared,
                 tasks: vec![task, t2],
                 generator: Some(gen),
+                clock: Some(clock),
             });
         }
         let shaker = pty_pair("shaker")?;
@@ -258,13 +265,40 @@ impl SimStand {
         let t1 = tokio::spawn(async move {
             serve_shaker(shaker_io, s1, ids.shaker, faults, max_force, interaction).await
         });
-        let t2 = tokio::spawn(async move { serve_daq(daq_io, s2, setup).await });
+        let clock = SimClock::default();
+        let c2 = clock.clone();
+        let t2 = tokio::spawn(async move { serve_daq(daq_io, s2, setup, c2).await });
         SimStand {
             shaker_port,
             daq_port,
             shared,
             tasks: vec![t1, t2],
             generator: None,
+            clock: Some(clock),
+        }
+    }
+
+    /// The simulated serial DAQ's sample clock: the samples it has produced since START
+    /// ([`clock`]); `None` for a DAQ served on CAN.
+    pub fn clock(&self) -> Option<SimClock> {
+        self.clock.clone()
+    }
+
+    /// `daq` (a host's driver connected to this simulator's DAQ) with the simulator's sample
+    /// clock, so that a sweep in the same process counts settling from the stream the simulator
+    /// has produced rather than from wall-clock time ([`clock`]). A DAQ on CAN is returned as it is.
+    pub fn clocked(&self, daq: Box<dyn crate::daq::Daq>) -> Box<dyn crate::daq::Daq> {
+        match &self.clock {
+            Some(c) => Box::new(SimClockedDaq::new(daq, c.clone())),
+            None => daq,
+        }
+    }
+
+    /// `rig` (connected to this simulator's ports) with its DAQ [`SimStand::clocked`].
+    pub fn clock_rig(&self, rig: crate::rig::Rig) -> crate::rig::Rig {
+        crate::rig::Rig {
+            daq: self.clocked(rig.daq),
+            ..rig
         }
     }
 
@@ -414,6 +448,7 @@ impl SimStand {
             shared,
             tasks: vec![t1, t2, keep],
             generator,
+            clock: None,
         })
     }
 
@@ -647,8 +682,14 @@ fn apply(
     })
 }
 
-async fn serve_daq<T: Transport>(mut io: T, shared: SharedRef, setup: SimSetup) {
-    let mut daq = SerialSimDaq::new(setup);
+/// How far the simulated DAQ may fall behind its schedule (wall-clock time at the stand's speed)
+/// and still catch up; beyond it the schedule restarts from now and the simulated time has run
+/// slower ([`clock`]). Catching up seconds of stream at once would flood the link and starve the
+/// host's other devices of the very CPU the simulator lacked.
+const MAX_BACKLOG: Duration = Duration::from_millis(200);
+
+async fn serve_daq<T: Transport>(mut io: T, shared: SharedRef, setup: SimSetup, clock: SimClock) {
+    let mut daq = SerialSimDaq::new(setup, clock);
     let mut dec = FrameDecoder::new();
     let mut rx = vec![0u8; 4096];
     let mut tx = Vec::with_capacity(8192);
@@ -683,13 +724,16 @@ async fn serve_daq<T: Transport>(mut io: T, shared: SharedRef, setup: SimSetup) 
                     let reply = daq.answer(m);
                     if started && daq.streaming {
                         next_tick = tokio::time::Instant::now();
+                        daq.clock.restart();
                     }
                     reply.encode(id, &mut daq.p1, &mut daq.p2, &mut tx);
                 }
             }
             None => {
                 // Time for the next block.
-                next_tick += daq.block_period();
+                let now = tokio::time::Instant::now();
+                next_tick = (next_tick + daq.block_period())
+                    .max(now.checked_sub(MAX_BACKLOG).unwrap_or(now));
                 match daq.next_block(&shared, &mut tx) {
                     Flow::Quit => return,
                     Flow::Continue => continue,
@@ -734,10 +778,12 @@ struct SerialSimDaq {
     /// Frame encoding buffers.
     p1: Vec<u8>,
     p2: Vec<u8>,
+    /// Samples produced since START.
+    clock: SimClock,
 }
 
 impl SerialSimDaq {
-    fn new(setup: SimSetup) -> SerialSimDaq {
+    fn new(setup: SimSetup, clock: SimClock) -> SerialSimDaq {
         let gen = SignalGenerator::new(
             setup.sample_rate_hz,
             setup.plant.clone(),
@@ -758,6 +804,7 @@ impl SerialSimDaq {
             p1: Vec::new(),
             p2: Vec::new(),
             setup,
+            clock,
         }
     }
 
@@ -834,7 +881,13 @@ impl SerialSimDaq {
         let Some((info, _)) = &self.stream else {
             return Flow::Continue;
         };
-        let exc = lock(shared).excitation.clone();
+        // The block's samples are taken now: counted under the lock a drive change takes, so a
+        // change is either in this block or after it on the clock.
+        let exc = {
+            let sh = lock(shared);
+            self.clock.advance(info.samples_per_block as u64);
+            sh.excitation.clone()
+        };
         self.counts.clear();
         if self
             .gen

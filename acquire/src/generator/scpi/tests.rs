@@ -219,6 +219,31 @@ async fn tektronix_afg31022_in_vrms_with_two_queued_errors() {
     assert_eq!(dev.await.unwrap(), commands(&script));
 }
 
+/// A Siglent SDG is refused after `*IDN?`, before any setting, even when the stand names a
+/// table: its command set and its list answers are not what the driver reads back.
+#[tokio::test]
+async fn a_siglent_sdg_is_refused_naming_the_model_and_what_to_use() {
+    for named in [None, Some("generic".to_string())] {
+        let idn: &[&str] = &["Siglent Technologies,SDG2042X,SDG2XCAD2R3456,2.01.01.35R3"];
+        let (io, dev) = instrument(vec![("*IDN?", idn)]);
+        let mut g = ScpiGenerator::new(
+            io,
+            GeneratorOptions {
+                dialect: named.clone(),
+                ..opts()
+            },
+        );
+        let err = g.identify().await.unwrap_err();
+        let msg = err.to_string();
+        assert!(matches!(err, GeneratorError::Unsupported { .. }), "{msg}");
+        assert!(msg.contains("SDG2042X"), "{msg}");
+        assert!(msg.contains("C1:BSWV"), "{msg}");
+        assert!(msg.contains("Keysight 33500B/33600A"), "{msg}");
+        drop(g);
+        assert_eq!(dev.await.unwrap(), vec!["*IDN?".to_string()], "{named:?}");
+    }
+}
+
 #[tokio::test]
 async fn an_unknown_model_is_refused_unless_the_stand_names_a_table() {
     let idn: &[&str] = &["ACME Instruments,FG-9000,0001,1.0"];
