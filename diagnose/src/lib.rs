@@ -62,6 +62,9 @@
 //! # }
 //! ```
 
+// No panic on anything from a file, a device or a user (tests may: allow-expect-in-tests).
+#![warn(clippy::expect_used)]
+
 mod base;
 pub mod effects;
 pub mod final_model;

@@ -41,6 +41,9 @@
 //! assert_eq!(runs[0].parameters[0].in_unit(), 0.05);
 //! ```
 
+// No panic on anything from a file, a device or a user (tests may: allow-expect-in-tests).
+#![warn(clippy::expect_used)]
+
 pub mod error;
 pub mod import;
 pub mod judge;

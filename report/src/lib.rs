@@ -41,6 +41,9 @@
 //! assert!(html.contains("<svg") && !html.contains("http://www.w3.org/1999/xlink\" href"));
 //! ```
 
+// No panic on anything from a file, a device or a user (tests may: allow-expect-in-tests).
+#![warn(clippy::expect_used)]
+
 pub mod build;
 pub mod document;
 pub mod drift;
