@@ -48,7 +48,6 @@
 
 // No panic on anything from a file, a device or a user (tests may: allow-expect-in-tests).
 #![warn(clippy::expect_used)]
-
 // The 2×2 matrix formulas (oriented FRF, directional matrices, eigenvalue derivatives) read as
 // written on paper with explicit indices.
 #![allow(clippy::needless_range_loop)]
