@@ -2,14 +2,8 @@
 //! converges, and a multi-start fit when it does not or explains nothing, so that every candidate
 //! is judged against a converged fit refitted with the same effort.
 
+use super::tuning::{BASE_CONTINUATIONS, BASE_STARTS};
 use super::*;
-
-/// Continuations of the base fit from its own best point before extra starts are tried.
-pub(super) const BASE_CONTINUATIONS: usize = 3;
-
-/// Starts of the multi-start base fit (the identification's starting point and points spread
-/// over the bounds) when the continued fit does not converge or does not explain the data.
-pub(super) const BASE_STARTS: usize = 4;
 
 /// How the base fit the diagnosis starts from was reached: the identification's estimate
 /// continued until converged and, when it did not converge or does not explain the data, the

@@ -49,6 +49,8 @@
 //!    remaining misfit. [`final_model`] writes the diagnosed model.
 //!
 //! This file holds the records (options, refits, rounds, the diagnosis) and the loop itself;
+//! `tuning.rs` the numbers every stage uses (candidates looked at, iterations, levels), each with
+//! its reason;
 //! `text.rs` writes the report in the paper's units. `docs/diagnosis.md` gives the statistics,
 //! the options, the JSON and the measured performance.
 //!
@@ -78,6 +80,7 @@ pub mod score;
 mod screen;
 mod swap;
 mod text;
+mod tuning;
 
 use nalgebra::{DMatrix, DVector};
 use serde::Serialize;
@@ -244,9 +247,6 @@ pub struct Ranked {
     #[serde(skip)]
     pub family: Vec<Effect>,
 }
-
-/// Candidates whose projected directions agree to this |cos| form one family in the ranking.
-const EQUIVALENT_COS: f64 = 0.99;
 
 /// One round: rank, refit the best, accept one or stop.
 #[derive(Debug, Clone, PartialEq, Serialize)]

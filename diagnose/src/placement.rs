@@ -9,20 +9,11 @@ use super::round::{
     excess_removed, extended, in_parallel, look_alikes, refit, short_refit, unidentifiable,
     with_effect, Contender,
 };
+use super::tuning::{
+    RELOCATIONS_REFITTED, RELOCATION_ITERATIONS, RELOCATION_MIN_SHARE, SPRING_RELOCATION_ITERATIONS,
+};
 use super::*;
 use identify::stats::chi2_tail;
-
-/// Places whose short refit ends below the effect's own place's are refitted in full, at most
-/// this many, lowest first (see [`relocate`]).
-pub(super) const RELOCATIONS_REFITTED: usize = 3;
-/// Iterations of a relocation's short refit at each place, for a point mass or resonator.
-pub(super) const RELOCATION_ITERATIONS: usize = 10;
-/// Iterations of a relocation's short refit at each place, for a spring: a spring moved to
-/// another pair of bodies is a new load path, and the model's variables take longer to follow
-/// it than a mass moved to another point: measured on the blind suite, after 10 iterations a
-/// spring's true place can rank below several wrong ones (so the few refitted in full miss it),
-/// after 30 it ranks first.
-pub(super) const SPRING_RELOCATION_ITERATIONS: usize = 30;
 
 /// The steps after a round accepts the refit `chosen` (with its fit `next`) on the fit `cur`
 /// with the effects `accepted` so far: a point mass or resonator moved to the body where it fits
@@ -160,9 +151,6 @@ fn relocate(
     let lr = (fixed.e.norm_squared() - next.e.norm_squared()) / sigma2;
     (lr > EQUIVALENT_LR).then_some((r, next))
 }
-
-/// Least share of the misfit above the noise level that an effect must remove to be moved.
-pub(super) const RELOCATION_MIN_SHARE: f64 = 0.5;
 
 /// Whether the effect `fixed` adds to `base` removes less than [`RELOCATION_MIN_SHARE`] of
 /// `base`'s misfit above the noise level (`J − σ̂²(m − p)/2`): a partial fix, whose best place

@@ -12,6 +12,11 @@
 //! but above the noise level, the damping splits get the short refits ([`Short::DampingSplits`]).
 //! The refits' starts and the equivalents ("≡") of the chosen one are also decided here.
 
+use super::tuning::{
+    EQUIVALENT_COS, FRESH_SIZES_PER_DECADE, FRESH_SIZE_DECADES, LARGE_MISFIT, LOW_RANK_MIN_DOFS,
+    MEMBERS_REFITTED, MIN_EXCESS_SHARE, PULLED_PER_KIND, SCORE_FAMILIES_REFITTED, SCREENED,
+    SCREENED_PER_KIND, SHORT_REFITS_PER_KIND, SHORT_REFIT_ITERATIONS, SWAP_LEVEL,
+};
 use super::*;
 use identify::stats::chi2_tail;
 
@@ -385,9 +390,6 @@ pub(super) struct Screened {
     pub(super) start: Vec<f64>,
 }
 
-/// Candidates passing the score's gate that are screened by a finite step, best score first.
-pub(super) const SCREENED: usize = 30;
-
 /// The finite-step screen (see [`screen`]) of the leading candidates: up to [`SCREENED`] of
 /// those whose score makes them plausible ([`Ranking::plausible`]: the gate saves the work
 /// when there is nothing to find). `(index into ranking.scored, screened criterion J, the
@@ -438,29 +440,6 @@ pub(super) fn extended<'a>(setting: Setting<'a>, cur: &Current, cand: &Effect) -
     setting.problem(effects)
 }
 
-/// Of each kind of effect, the best-scored candidates screened besides the leading
-/// [`SCREENED`] (candidates with equal scores, e.g. the moment stiffnesses of the isolators
-/// under one body, count once). A large missing effect of one kind can score below tens of
-/// another's that fit part of it (an isolator's missing moment stiffness can score below dozens
-/// of resonators and springs that each mimic part of it, and still refit to the noise level).
-/// The significance level at which a swap's alternative (`swap.rs`)'s size must stand from its nested value (its
-/// 95 % interval excludes it). Not the round's (Bonferroni over a thousand candidates): the
-/// alternative replaces an effect already significant at that level, and what the swap decides
-/// is which of the two forms the data prefer. The Cramér-Rao interval of a stiffness is a poor
-/// guide to a large one: an SDE's missing moment stiffness can stand only about 4 standard
-/// errors from zero where its LR against the fit without it is above 100 (the likelihood is far
-/// from quadratic in a large stiffness).
-pub(super) const SWAP_LEVEL: f64 = 0.05;
-
-pub(super) const SCREENED_PER_KIND: usize = 2;
-
-/// The screen evaluates a candidate as a low-rank update of the current fit's solves only on
-/// models of more DOFs than this. Below it the full solve (a dense LU per line of a matrix this
-/// small) costs no more than reading the update's support off the base: one screen evaluation
-/// took 0.5-1.1× the full solve's time at 24-78 DOFs and 5.7-12× less at 150-216
-/// (`docs/diagnosis.md`, Scaling). The answers are the same either way (to 1e-9).
-const LOW_RANK_MIN_DOFS: usize = 100;
-
 /// The candidates screened (indices into `ranking.scored`, best score first): the first
 /// [`SCREENED`] plausible ones ([`Ranking::plausible`]), then those of each kind's first
 /// `per_kind` distinct plausible scores that are not among them.
@@ -505,11 +484,6 @@ pub(super) struct Member<'r> {
 /// A family member's refit: its index among the family's members, and the refit with its fit.
 pub(super) type MemberRefit = (usize, Result<(Refit, Current), RefitError>);
 
-/// The distinct (not mirror-image) members of a family that are refitted. The score test cannot
-/// tell a family's members apart, but a finite effect can: the true placement of a large spring
-/// ends at the noise level while its look-alikes end hundreds of times above it.
-pub(super) const MEMBERS_REFITTED: usize = 4;
-
 /// Two screened candidates are mirror images: their screened criteria and parameters agree to
 /// 1e-7. (Their score statistics are no guide: springs along z anywhere on a body that only
 /// translates have the same slope at zero and very different finite effects.)
@@ -545,9 +519,6 @@ pub(super) fn refit_jobs<'r>(
     }
     jobs
 }
-
-/// The score's leading families refitted whatever their screens (see [`refit_jobs`]).
-pub(super) const SCORE_FAMILIES_REFITTED: usize = 2;
 
 /// The refits of the kinds the leading families' `jobs` leave out, for when the misfit was large
 /// and their refits leave it above the noise level: of each such kind, the family of its
@@ -590,13 +561,6 @@ pub(super) fn kind_jobs<'r>(
     more
 }
 
-/// Candidates of each kind given a short refit (see [`short_refits`]): as many distinct scores.
-pub(super) const SHORT_REFITS_PER_KIND: usize = 12;
-
-/// Candidates of each kind given a short refit although their score rules them out (see
-/// [`pulled_against`]).
-pub(super) const PULLED_PER_KIND: usize = 3;
-
 /// Each kind's `per_kind` candidates (the strongest pull first, [`score::Scored::pull`]) that a
 /// one-sided score test rules out — its score would take a stiffness or a mass below its nested
 /// value — though the data pull on them as hard as on a plausible one: a large effect can lower
@@ -623,9 +587,6 @@ pub(super) fn pulled_against(ranking: &Ranking, per_kind: usize) -> Vec<usize> {
     }
     taken
 }
-
-/// Iterations of a short refit.
-pub(super) const SHORT_REFIT_ITERATIONS: usize = 40;
 
 /// The candidates a round's short refits take (see [`short_refits`]).
 #[derive(Clone, Copy, PartialEq, Eq, Debug)]
@@ -1079,9 +1040,6 @@ pub(super) fn add_new(list: &mut Vec<Effect>, effects: impl IntoIterator<Item = 
     }
 }
 
-/// A misfit above this reduced χ² is large: refits then explore their starts.
-pub(super) const LARGE_MISFIT: f64 = 2.0;
-
 /// A refit's start for `cand`'s parameters: the first (its size) at the score's Gauss-Newton
 /// `step` from its nested value, the others at their initial values.
 pub(super) fn score_start(cand: &Effect, step: f64, f_hi: f64) -> Vec<f64> {
@@ -1091,9 +1049,6 @@ pub(super) fn score_start(cand: &Effect, step: f64, f_hi: f64) -> Vec<f64> {
         .map(|(j, np)| if j == 0 { np.nested + step } else { np.initial })
         .collect()
 }
-
-/// Least share of the misfit above the noise level an effect must explain to be added.
-pub(super) const MIN_EXCESS_SHARE: f64 = 0.1;
 
 /// Why a significant refit is only a partial fix, or `None`: an effect that removes less than
 /// [`MIN_EXCESS_SHARE`] of the misfit above the noise level (`2J/σ² − m`) is significant because
@@ -1222,7 +1177,7 @@ pub(super) fn families(ranked: &[score::Scored], n: usize) -> Vec<Vec<usize>> {
 
 /// Refits the current effects plus `cand` with every parameter free, from `start` (the new
 /// parameters' values) or, with `explore` (the score step's values), from the best of the starts
-/// around it (see [`screen::REFIT_START_FRACTIONS`], [`screen::REFIT_SIZE_DECADES`]; a
+/// around it (see `tuning::REFIT_START_FRACTIONS` and `tuning::REFIT_SIZE_DECADES`; a
 /// resonator's tuning frequency also on a grid across its range, refined around the best), from
 /// the score step and from a [`fresh_start`] too; the lowest end wins.
 pub(super) fn refit(
@@ -1406,15 +1361,6 @@ pub(super) fn from_initial(u: &DVector<f64>, vars: &Variables, scale: &[f64]) ->
     }
     fresh
 }
-
-/// Steps per decade of the size grid of [`fresh_start`].
-pub(super) const FRESH_SIZES_PER_DECADE: i32 = 4;
-/// Decades of an effect's scale the size grid of [`fresh_start`] spans on either side of its
-/// nested value: wider than the refit's starts ([`screen::REFIT_SIZE_DECADES`]), as the grid
-/// costs one evaluation a size and a scale is only a guess (a flexibility's is the stiffest
-/// joint's compliance, about 1e-13 m/N on FWD-32J, and a missing flexibility of a column or an
-/// overarm lies near 1e-9 m/N, four decades above it).
-pub(super) const FRESH_SIZE_DECADES: std::ops::RangeInclusive<i32> = -2..=6;
 
 /// The start of problem `p` (extended by a new effect with parameters `params`, the last of
 /// `u`) outside the valley where a large missing effect has bent the fit's own parameters: the

@@ -19,6 +19,7 @@
 use super::effects::{
     body_index, point_row, resonator_coefficient, split_body, Effect, EffectError, RESONATOR_WIDTH,
 };
+use super::tuning::TUNING_STEPS_PER_WIDTH;
 use identify::stats::chi2_tail;
 use identify::Criterion;
 use nalgebra::{DMatrix, DVector};
@@ -191,9 +192,6 @@ struct Action<'a> {
     gains: &'a [f64],
     lines: &'a [f64],
 }
-
-/// Tuning frequencies tried per resonance width (`ψ/2π` in log-frequency) in a resonator's cell.
-const TUNING_STEPS_PER_WIDTH: f64 = 2.0;
 
 /// A resonator's score test maximised over its tuning frequency within `[lo, hi]` (Hz), its
 /// p-value multiplied by the number of independent frequencies searched (Bonferroni).

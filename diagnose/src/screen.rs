@@ -14,24 +14,12 @@ use nalgebra::{DMatrix, DVector};
 use super::effects::EffectParam;
 use super::lowrank::Shared;
 use super::problem::Problem;
+use super::tuning::{
+    REFIT_SIZE_DECADES, REFIT_SIZE_FACTORS, REFIT_START_FRACTIONS, RESONATOR_GRID,
+    SCREEN_ITERATIONS,
+};
 use identify::optimize::{self, Residuals};
 use identify::EvalError;
-
-/// A refit starts where the new parameters are this fraction of the way from their nested values
-/// to the given start, whichever fits best.
-pub(super) const REFIT_START_FRACTIONS: [f64; 4] = [1.0, 0.3, 0.1, 0.03];
-/// And where the effect's size is its nested value ± its scale times ten to these powers.
-pub(super) const REFIT_SIZE_DECADES: [i32; 6] = [-2, -1, 0, 1, 2, 3];
-/// And, where the nested value is itself a size (a split joint group's ψ, a body's mass), at
-/// these multiples of it: ψ divides the resonance peaks, and a joint's own ψ can be a fraction
-/// or a multiple of its group's, far from any step of the group's size (a split ψ at a quarter
-/// of its group's, refitted from the additive steps, stops half-way and is not added; these
-/// starts reach it, and a split ψ five times its group's).
-pub(super) const REFIT_SIZE_FACTORS: [f64; 7] = [0.03, 0.1, 0.2, 0.3, 0.5, 2.0, 3.0];
-/// Tuning frequencies of a resonator's starting grid across its range.
-const RESONATOR_GRID: usize = 24;
-/// Iterations of the screen's minimization over a candidate's own parameters.
-const SCREEN_ITERATIONS: usize = 5;
 
 /// Starting values (SI) of a new effect's parameters: `start`, and with `explore` also the way
 /// there from the nested values ([`REFIT_START_FRACTIONS`]), the size over decades of its scale

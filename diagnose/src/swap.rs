@@ -7,29 +7,10 @@
 use super::placement::{place, put_back, refitted_without};
 use super::round::{
     add_new, critical, extended, fresh_start, in_parallel, margin, refit, short_refit, tied,
-    unidentifiable, with_effect, SWAP_LEVEL,
+    unidentifiable, with_effect,
 };
+use super::tuning::{LOOK_ALIKE_WINDOW, SWAPS_REFITTED, SWAP_ITERATIONS, SWAP_LEVEL};
 use super::*;
-
-/// Iterations of an alternative's short refit. It starts from the model's variables at their
-/// initial values (see [`fresh_start`]): the fit without the accepted effect has bent them to
-/// mimic it. Measured on the blind suite where an SDE's missing stiffness was taken for a spring:
-/// after 10 iterations the true alternative is not always among the first few, after 20 it is
-/// first and at its full refit's criterion; from the fit without the effect instead, even 40
-/// iterations do not always find it.
-pub(super) const SWAP_ITERATIONS: usize = 20;
-
-/// Alternatives whose short refit ends below the accepted fit, or less than
-/// [`LOOK_ALIKE_WINDOW`] above it, are refitted in full, at most this many, lowest first.
-pub(super) const SWAPS_REFITTED: usize = 3;
-
-/// How far above the accepted fit (in likelihood ratio) an alternative's short refit may end and
-/// still be refitted in full: a short refit stops before its end, and the full one may end where
-/// the data cannot tell it from the accepted effect: an SDE's missing stiffness accepted as a
-/// spring between the same two bodies at the noise level, whose own form (one parameter fewer)
-/// refits to a criterion a few units above the answer's, is within the margin and is listed
-/// beside the spring.
-pub(super) const LOOK_ALIKE_WINDOW: f64 = 2.0 * EQUIVALENT_LR;
 
 /// Each accepted effect not yet in `tried` (by description; each is then added to it) replaced,
 /// when the data prefer it, by an effect of another kind on the same bodies

@@ -1,0 +1,150 @@
+//! The diagnosis's tuning in one place: how many candidates each stage looks at, how many
+//! iterations its fits get, and the levels its decisions use, each with the reason for its value
+//! (the statistics, or what was measured on the blind suite). The stages are those of the crate's
+//! module doc; `docs/diagnosis.md` gives their statistics and measured performance.
+
+use crate::EQUIVALENT_LR;
+
+// The base fit the diagnosis starts from (`base.rs`).
+
+/// Continuations of the base fit from its own best point before extra starts are tried.
+pub(crate) const BASE_CONTINUATIONS: usize = 3;
+
+/// Starts of the multi-start base fit (the identification's starting point and points spread
+/// over the bounds) when the continued fit does not converge or does not explain the data.
+pub(crate) const BASE_STARTS: usize = 4;
+
+// Ranking (`round.rs`, `score.rs`).
+
+/// Candidates whose projected directions agree to this |cos| form one family in the ranking.
+pub(crate) const EQUIVALENT_COS: f64 = 0.99;
+
+/// Tuning frequencies tried per resonance width (`ψ/2π` in log-frequency) in a resonator's cell.
+pub(crate) const TUNING_STEPS_PER_WIDTH: f64 = 2.0;
+
+// The screen (`screen.rs`, `round::screen_leading`).
+
+/// Candidates passing the score's gate that are screened by a finite step, best score first.
+pub(crate) const SCREENED: usize = 30;
+
+pub(crate) const SCREENED_PER_KIND: usize = 2;
+
+/// The screen evaluates a candidate as a low-rank update of the current fit's solves only on
+/// models of more DOFs than this. Below it the full solve (a dense LU per line of a matrix this
+/// small) costs no more than reading the update's support off the base: one screen evaluation
+/// took 0.5-1.1× the full solve's time at 24-78 DOFs and 5.7-12× less at 150-216
+/// (`docs/diagnosis.md`, Scaling). The answers are the same either way (to 1e-9).
+pub(crate) const LOW_RANK_MIN_DOFS: usize = 100;
+
+/// Iterations of the screen's minimization over a candidate's own parameters.
+pub(crate) const SCREEN_ITERATIONS: usize = 5;
+
+/// Tuning frequencies of a resonator's starting grid across its range.
+pub(crate) const RESONATOR_GRID: usize = 24;
+
+/// A refit starts where the new parameters are this fraction of the way from their nested values
+/// to the given start, whichever fits best.
+pub(crate) const REFIT_START_FRACTIONS: [f64; 4] = [1.0, 0.3, 0.1, 0.03];
+
+/// And where the effect's size is its nested value ± its scale times ten to these powers.
+pub(crate) const REFIT_SIZE_DECADES: [i32; 6] = [-2, -1, 0, 1, 2, 3];
+
+/// And, where the nested value is itself a size (a split joint group's ψ, a body's mass), at
+/// these multiples of it: ψ divides the resonance peaks, and a joint's own ψ can be a fraction
+/// or a multiple of its group's, far from any step of the group's size (a split ψ at a quarter
+/// of its group's, refitted from the additive steps, stops half-way and is not added; these
+/// starts reach it, and a split ψ five times its group's).
+pub(crate) const REFIT_SIZE_FACTORS: [f64; 7] = [0.03, 0.1, 0.2, 0.3, 0.5, 2.0, 3.0];
+
+// Refits of the leading families and their escalation (`round::refit_leading`).
+
+/// The distinct (not mirror-image) members of a family that are refitted. The score test cannot
+/// tell a family's members apart, but a finite effect can: the true placement of a large spring
+/// ends at the noise level while its look-alikes end hundreds of times above it.
+pub(crate) const MEMBERS_REFITTED: usize = 4;
+
+/// The score's leading families refitted whatever their screens (see [`refit_jobs`]).
+pub(crate) const SCORE_FAMILIES_REFITTED: usize = 2;
+
+/// A misfit above this reduced χ² is large: refits then explore their starts.
+pub(crate) const LARGE_MISFIT: f64 = 2.0;
+
+/// Candidates of each kind given a short refit (see [`short_refits`]): as many distinct scores.
+pub(crate) const SHORT_REFITS_PER_KIND: usize = 12;
+
+/// Candidates of each kind given a short refit although their score rules them out (see
+/// [`pulled_against`]).
+pub(crate) const PULLED_PER_KIND: usize = 3;
+
+/// Iterations of a short refit.
+pub(crate) const SHORT_REFIT_ITERATIONS: usize = 40;
+
+/// Steps per decade of the size grid of [`fresh_start`].
+pub(crate) const FRESH_SIZES_PER_DECADE: i32 = 4;
+
+/// Decades of an effect's scale the size grid of [`fresh_start`] spans on either side of its
+/// nested value: wider than the refit's starts ([`screen::REFIT_SIZE_DECADES`]), as the grid
+/// costs one evaluation a size and a scale is only a guess (a flexibility's is the stiffest
+/// joint's compliance, about 1e-13 m/N on FWD-32J, and a missing flexibility of a column or an
+/// overarm lies near 1e-9 m/N, four decades above it).
+pub(crate) const FRESH_SIZE_DECADES: std::ops::RangeInclusive<i32> = -2..=6;
+
+// Acceptance (`round.rs`).
+
+/// Least share of the misfit above the noise level an effect must explain to be added.
+pub(crate) const MIN_EXCESS_SHARE: f64 = 0.1;
+
+/// Of each kind of effect, the best-scored candidates screened besides the leading
+/// [`SCREENED`] (candidates with equal scores, e.g. the moment stiffnesses of the isolators
+/// under one body, count once). A large missing effect of one kind can score below tens of
+/// another's that fit part of it (an isolator's missing moment stiffness can score below dozens
+/// of resonators and springs that each mimic part of it, and still refit to the noise level).
+/// The significance level at which a swap's alternative (`swap.rs`)'s size must stand from its nested value (its
+/// 95 % interval excludes it). Not the round's (Bonferroni over a thousand candidates): the
+/// alternative replaces an effect already significant at that level, and what the swap decides
+/// is which of the two forms the data prefer. The Cramér-Rao interval of a stiffness is a poor
+/// guide to a large one: an SDE's missing moment stiffness can stand only about 4 standard
+/// errors from zero where its LR against the fit without it is above 100 (the likelihood is far
+/// from quadratic in a large stiffness).
+pub(crate) const SWAP_LEVEL: f64 = 0.05;
+
+// After acceptance: placement, relocation (`placement.rs`).
+
+/// Places whose short refit ends below the effect's own place's are refitted in full, at most
+/// this many, lowest first (see [`relocate`]).
+pub(crate) const RELOCATIONS_REFITTED: usize = 3;
+
+/// Iterations of a relocation's short refit at each place, for a point mass or resonator.
+pub(crate) const RELOCATION_ITERATIONS: usize = 10;
+
+/// Iterations of a relocation's short refit at each place, for a spring: a spring moved to
+/// another pair of bodies is a new load path, and the model's variables take longer to follow
+/// it than a mass moved to another point: measured on the blind suite, after 10 iterations a
+/// spring's true place can rank below several wrong ones (so the few refitted in full miss it),
+/// after 30 it ranks first.
+pub(crate) const SPRING_RELOCATION_ITERATIONS: usize = 30;
+
+/// Least share of the misfit above the noise level that an effect must remove to be moved.
+pub(crate) const RELOCATION_MIN_SHARE: f64 = 0.5;
+
+// Swaps (`swap.rs`).
+
+/// Iterations of an alternative's short refit. It starts from the model's variables at their
+/// initial values (see [`fresh_start`]): the fit without the accepted effect has bent them to
+/// mimic it. Measured on the blind suite where an SDE's missing stiffness was taken for a spring:
+/// after 10 iterations the true alternative is not always among the first few, after 20 it is
+/// first and at its full refit's criterion; from the fit without the effect instead, even 40
+/// iterations do not always find it.
+pub(crate) const SWAP_ITERATIONS: usize = 20;
+
+/// Alternatives whose short refit ends below the accepted fit, or less than
+/// [`LOOK_ALIKE_WINDOW`] above it, are refitted in full, at most this many, lowest first.
+pub(crate) const SWAPS_REFITTED: usize = 3;
+
+/// How far above the accepted fit (in likelihood ratio) an alternative's short refit may end and
+/// still be refitted in full: a short refit stops before its end, and the full one may end where
+/// the data cannot tell it from the accepted effect: an SDE's missing stiffness accepted as a
+/// spring between the same two bodies at the noise level, whose own form (one parameter fewer)
+/// refits to a criterion a few units above the answer's, is within the margin and is listed
+/// beside the spring.
+pub(crate) const LOOK_ALIKE_WINDOW: f64 = 2.0 * EQUIVALENT_LR;
