@@ -27,6 +27,9 @@ pub(crate) const TUNING_STEPS_PER_WIDTH: f64 = 2.0;
 /// Candidates passing the score's gate that are screened by a finite step, best score first.
 pub(crate) const SCREENED: usize = 30;
 
+/// Of every kind, its best-scored candidates screened besides the [`SCREENED`] leaders: the score
+/// is a slope at the nested value and can rank a kind's large effect below another kind's
+/// small ones; each kind gets a finite-step look.
 pub(crate) const SCREENED_PER_KIND: usize = 2;
 
 /// The screen evaluates a candidate as a low-rank update of the current fit's solves only on
