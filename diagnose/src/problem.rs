@@ -172,26 +172,29 @@ impl<'a> Problem<'a> {
     ) -> Result<(DVector<f64>, Option<DMatrix<f64>>), EvalError> {
         let r = self.realize(gamma)?;
         let mut crit = self.criterion(&r)?;
-        if !jacobian {
-            let (mut e, _) = crit.evaluate(x, None)?;
-            self.evaluations += 1;
-            Self::gained(&crit, &mut e, &r.gains);
-            if e.iter().any(|v| !v.is_finite()) {
-                return Err(EvalError::NotFinite("extended model's response"));
-            }
-            return Ok((e, None));
-        }
-        let steps: Vec<f64> = (0..gamma.len()).map(|j| self.step(gamma, j)).collect();
-        let chains: Vec<Option<Vec<(Param, f64)>>> = (0..gamma.len())
-            .map(|j| self.chain(&r, x, gamma, (j, steps[j])))
-            .collect();
+        // The chains of the effect parameters that move physical parameters only.
+        let chains: Vec<Option<Vec<(Param, f64)>>> = if jacobian {
+            let mut here = r.model.clone();
+            r.vars.apply(&mut here, x);
+            (0..gamma.len())
+                .map(|j| self.chain((&here, &r.gains), x, gamma, j))
+                .collect()
+        } else {
+            Vec::new()
+        };
         let further: Vec<Vec<(Param, f64)>> = chains.iter().flatten().cloned().collect();
-        let (mut e, jx) = crit.evaluate_with(x, &further)?;
+        let (mut e, jx) = if jacobian {
+            let (e, jx) = crit.evaluate_with(x, &further)?;
+            (e, Some(jx))
+        } else {
+            (crit.evaluate(x, None)?.0, None)
+        };
         self.evaluations += 1;
         Self::gained(&crit, &mut e, &r.gains);
         if e.iter().any(|v| !v.is_finite()) {
             return Err(EvalError::NotFinite("extended model's response"));
         }
+        let Some(jx) = jx else { return Ok((e, None)) };
         let (m, nx) = (e.len(), x.len());
         let mut jac = DMatrix::zeros(m, nx + gamma.len());
         let points = crit.points();
@@ -222,7 +225,7 @@ impl<'a> Problem<'a> {
                 analytic += 1;
                 continue;
             }
-            let h = steps[j];
+            let h = self.step(gamma, j);
             g[j] = gamma[j] + h;
             let rh = self.realize(&g)?;
             let mut ch = self.criterion(&rh)?;
@@ -251,47 +254,41 @@ impl<'a> Problem<'a> {
         }
     }
 
-    /// `∂p/∂γ_j` of every physical parameter `p` of the realized model `r` (at variables `x`)
-    /// that effect parameter `j` moves, when it moves nothing else (see [`Problem::residuals`]):
-    /// central differences of the realized models where the step fits inside the bounds (exact
-    /// for the parameters linear in γ, second order otherwise), else a one-sided one of step
-    /// `h`. `None` when the parameter moves a gain or anything but physical parameters.
+    /// `∂p/∂γ_j` of every physical parameter `p` of `here` (the realized model at variables `x`,
+    /// with sensor gains `gains`) that effect parameter `j` moves, when it moves nothing else
+    /// (see [`Problem::residuals`]): central differences of the realized models where the step
+    /// fits inside the bounds (exact for the parameters linear in γ, second order otherwise),
+    /// else a one-sided one. `None` when the parameter moves a gain or anything but physical
+    /// parameters.
     fn chain(
         &self,
-        r: &Realized,
+        (here, gains): (&Model, &[f64]),
         x: &[f64],
         gamma: &[f64],
-        (j, h): (usize, f64),
+        j: usize,
     ) -> Option<Vec<(Param, f64)>> {
-        let at = |shift: f64| -> Option<(Model, Vec<f64>)> {
+        // The change of the physical parameters from `here` for γ_j moved by `shift`.
+        let changes = |shift: f64| -> Option<Vec<(Param, f64)>> {
             let mut g = gamma.to_vec();
             g[j] += shift;
             let rs = self.realize(&g).ok()?;
+            if rs.gains != gains {
+                return None;
+            }
             let mut m = rs.model;
             rs.vars.apply(&mut m, x);
-            Some((m, rs.gains))
+            here.param_changes(&m)
         };
-        let mut here = r.model.clone();
-        r.vars.apply(&mut here, x);
-        let h = h.abs();
+        let h = self.step(gamma, j);
         let p = &self.params[j];
-        let central = gamma[j] - h >= p.lower && gamma[j] + h <= p.upper;
-        let (ahead, behind, width) = if central {
-            (at(h)?, at(-h)?, 2.0 * h)
-        } else {
-            let h = self.step(gamma, j);
-            let (m, g) = at(h)?;
-            // One-sided: the change from here, over the signed step.
-            return (g == r.gains)
-                .then(|| here.param_changes(&m))
-                .flatten()
-                .map(|c| c.into_iter().map(|(p, d)| (p, d / h)).collect());
-        };
-        if ahead.1 != r.gains || behind.1 != r.gains {
-            return None;
+        let central = gamma[j] - h.abs() >= p.lower && gamma[j] + h.abs() <= p.upper;
+        if !central {
+            // One-sided: the change over the signed step.
+            return Some(changes(h)?.into_iter().map(|(p, d)| (p, d / h)).collect());
         }
-        let up = here.param_changes(&ahead.0)?;
-        let down = here.param_changes(&behind.0)?;
+        let (h, width) = (h.abs(), 2.0 * h.abs());
+        let up = changes(h)?;
+        let down = changes(-h)?;
         let mut chain: Vec<(Param, f64)> = up.iter().map(|&(p, d)| (p, d / width)).collect();
         for (p, d) in down {
             match chain.iter_mut().find(|(q, _)| *q == p) {

@@ -10,6 +10,8 @@
 //! The model's output `q_o` of a characteristic with a sensor-gain variable is `g·q_o`, so its
 //! derivatives are `g ∂q_o/∂p` for the model's parameters and `q_o` (the output / g) for `g`.
 
+use std::borrow::Cow;
+
 use nalgebra::{DMatrix, DVector};
 
 use super::data::Observations;
@@ -494,7 +496,7 @@ impl Criterion {
         &mut self,
         x: &[f64],
     ) -> Result<(DVector<f64>, DMatrix<f64>), frf::SolveError> {
-        self.residuals_analytic_with(x, &[])
+        self.evaluate_with(x, &[])
     }
 
     /// Whitened residuals at `x` (SI) with the analytic Jacobian of the variables and, after
@@ -508,30 +510,24 @@ impl Criterion {
         x: &[f64],
         further: &[Vec<(Param, f64)>],
     ) -> Result<(DVector<f64>, DMatrix<f64>), frf::SolveError> {
-        self.residuals_analytic_with(x, further)
-    }
-
-    fn residuals_analytic_with(
-        &mut self,
-        x: &[f64],
-        further: &[Vec<(Param, f64)>],
-    ) -> Result<(DVector<f64>, DMatrix<f64>), frf::SolveError> {
         self.vars.apply(&mut self.model, x);
-        let mut params = self.params.clone();
-        let mut terms = self.terms.clone();
+        // The variables' parameters and terms, extended by the further columns' (borrowed as
+        // they are when there are none: the identification's own evaluations).
+        let mut params = Cow::Borrowed(self.params.as_slice());
+        let mut terms = Cow::Borrowed(self.terms.as_slice());
         for combination in further {
             let mut t = Vec::with_capacity(combination.len());
             for &(p, c) in combination {
                 let at = match params.iter().position(|q| *q == p) {
                     Some(at) => at,
                     None => {
-                        params.push(p);
+                        params.to_mut().push(p);
                         params.len() - 1
                     }
                 };
                 t.push((at, c));
             }
-            terms.push(t);
+            terms.to_mut().push(t);
         }
         let r = frf::response_params(&self.model, &self.freqs, &params, self.method)?;
         self.evaluations.model += 1;
