@@ -10,9 +10,10 @@
 //! of one screen evaluation (the model changed by one candidate) by a full solve and as a
 //! low-rank update ([`rfe::lowrank`]), measured in the same run.
 //!
-//! `cargo run --release -p identify --example machine_scaling -- [BODIES…] [--limit SECONDS]
-//! [--seed SEED] [--signal CHI2]` (default bodies 4 7 14, limit 900 s per size, seed 1, signal
-//! 3000). A size that has no answer within the limit ends the run (the process exits: a
+//! `cargo run --release -p diagnose --example machine_scaling -- [BODIES…] [--limit SECONDS]
+//! [--seed SEED] [--signal CHI2] [--progress]` (default bodies 4 7 14, limit 900 s per size, seed
+//! 1, signal 3000; `--progress` prints the diagnosis's progress lines with the seconds since its
+//! start). A size that has no answer within the limit ends the run (the process exits: a
 //! diagnosis cannot be interrupted) after printing what was measured.
 
 // An example unwraps: a panic with its message is the failure report.
@@ -43,12 +44,14 @@ fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let mut sizes: Vec<usize> = Vec::new();
     let (mut limit, mut seed, mut signal) = (900.0, 1u64, 3000.0);
+    let mut progress = false;
     let mut it = args.iter();
     while let Some(a) = it.next() {
         match a.as_str() {
             "--limit" => limit = it.next().and_then(|v| v.parse().ok()).expect("--limit S"),
             "--seed" => seed = it.next().and_then(|v| v.parse().ok()).expect("--seed N"),
             "--signal" => signal = it.next().and_then(|v| v.parse().ok()).expect("--signal X"),
+            "--progress" => progress = true,
             n => sizes.push(n.parse().expect("a number of bodies")),
         }
     }
@@ -74,6 +77,7 @@ fn main() {
         let m = machine::machine(n, seed).expect("machine");
         let case = machine::case(&m, 300, (signal, 0.01), 0.2, seed).expect("case");
         screen_cost(&m, &case);
+        jacobian_cost(&m, &case);
         let (tx, rx) = mpsc::channel();
         let (model, vars) = (m.model.clone(), m.vars.clone());
         std::thread::spawn(move || {
@@ -89,7 +93,12 @@ fn main() {
             )
             .expect("identify");
             let t1 = Instant::now();
-            let d = diagnose::diagnose(&model, &obs, &case.vars, &id, &opts, &mut |_| {})
+            let mut show = |line: &str| {
+                if progress {
+                    eprintln!("{:8.1} s  {line}", t1.elapsed().as_secs_f64());
+                }
+            };
+            let d = diagnose::diagnose(&model, &obs, &case.vars, &id, &opts, &mut show)
                 .expect("diagnose");
             let t2 = Instant::now();
             // What the model without the spring can reach: the fit started at the truth's values.
@@ -214,6 +223,39 @@ fn screen_cost(m: &machine::Machine, case: &blind::BlindCase) {
         1e3 * again,
         full / again,
         1e3 * shared
+    );
+}
+
+/// One evaluation of the outputs and the variables' Jacobian (every SDE parameter the variables
+/// set) by each path, and the path [`frf::Method::Auto`] picks, in the same run.
+fn jacobian_cost(m: &machine::Machine, case: &blind::BlindCase) {
+    let lines: Vec<f64> = case.data.characteristics[0].freqs_hz.clone();
+    let params = m.vars.model_params();
+    // The least of three runs: the machine may be shared.
+    let time = |method: frf::Method| {
+        (0..3)
+            .map(|_| {
+                let t = Instant::now();
+                frf::response_params(&m.model, &lines, &params, method).expect("response");
+                t.elapsed().as_secs_f64()
+            })
+            .fold(f64::INFINITY, f64::min)
+    };
+    let (direct, modal) = (time(frf::Method::Direct), time(frf::Method::Modal));
+    let auto = frf::Method::Auto.resolve(
+        m.model.dof_count(),
+        lines.len(),
+        frf::Work::Outputs {
+            params: params.len(),
+            columns: 1 + m.model.outputs.len(),
+        },
+    );
+    println!(
+        "       Jacobian evaluation ({} parameters, {} lines): direct {:.1} ms, modal {:.1} ms; auto takes {auto:?}",
+        params.len(),
+        lines.len(),
+        1e3 * direct,
+        1e3 * modal
     );
 }
 

@@ -94,7 +94,7 @@ pub use text::{final_text, gain_text, text};
 use base::base_fit;
 pub use base::BaseFit;
 use placement::after_acceptance;
-use round::{rank, refit_leading, screen_leading, Refitted};
+use round::{rank, refit_leading, screen_leading, Leading, Refitted};
 use swap::swap_accepted;
 
 use identify::optimize::{self, Residuals as _};
@@ -566,7 +566,10 @@ pub fn diagnose(
         } = refit_leading(
             setting,
             &cur,
-            (&ranking, &screened),
+            Leading {
+                ranking: &ranking,
+                screened: &screened,
+            },
             &mut not_tried,
             progress,
         );

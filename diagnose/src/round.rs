@@ -171,60 +171,54 @@ pub(super) struct Refitted {
     pub(super) contenders: Vec<Contender>,
 }
 
+/// What a round refits: the ranking and the leading candidates' screens.
+#[derive(Clone, Copy)]
+pub(super) struct Leading<'a> {
+    pub(super) ranking: &'a Ranking,
+    pub(super) screened: &'a [Screened],
+}
+
+/// The families refitted and their members' refits (`outcomes[f]` for `jobs[f]`).
+struct Escalation<'r> {
+    jobs: Vec<Job<'r>>,
+    outcomes: Vec<Vec<MemberRefit>>,
+}
+
 /// Refits the leading families (up to `opts.refit`) whose score makes them plausible: every
 /// refit, the most significant one that passes the round's threshold with its fit, and the
 /// others it could have accepted.
 pub(super) fn refit_leading(
     setting: Setting,
     cur: &Current,
-    (ranking, screened): (&Ranking, &[Screened]),
+    leading: Leading,
     not_tried: &mut Vec<NotTried>,
     progress: &mut dyn FnMut(&str),
 ) -> Refitted {
-    let Setting { opts, f_hi, .. } = setting;
-    let Ranking {
-        threshold, sigma2, ..
-    } = ranking;
-    let mut refits: Vec<Refit> = Vec::new();
-    let mut best: Option<(usize, Current)> = None;
-    let mut not_identifiable = Vec::new();
-    let mut contenders = Vec::new();
-    // The families of the best screened candidates are refitted, in parallel; when the misfit
-    // is large and their best refit leaves it above the noise level (χ² at the diagnosis's
-    // level), so are the families of the kinds they leave out (see [`kind_jobs`]), and if that
-    // still leaves it there, those whose short refits went lower (see [`short_refits`]). When
-    // the misfit is small but above the noise level, the joint-damping splits get short refits
-    // (see [`Short::DampingSplits`]).
+    let sigma2 = leading.ranking.sigma2;
     let m = cur.e.len();
     let large = cur.e.norm_squared() / sigma2 > LARGE_MISFIT * m as f64;
+    let escalation = escalate(setting, cur, leading, large, progress);
+    judge_families(setting, cur, leading, escalation, not_tried, progress)
+}
+
+/// The refits of the leading families, escalated while the fit stays above the noise level (χ²
+/// at the diagnosis's level): when the misfit is `large` and their best refit leaves it there,
+/// the families of the kinds they leave out are refitted too (see [`kind_jobs`]), and if that
+/// still leaves it there, those whose short refits went lower (see [`short_refits`]). When the
+/// misfit is small but above the noise level, the joint-damping splits get short refits (see
+/// [`Short::DampingSplits`]).
+fn escalate<'r>(
+    setting: Setting,
+    cur: &Current,
+    leading: Leading<'r>,
+    large: bool,
+    progress: &mut dyn FnMut(&str),
+) -> Escalation<'r> {
+    let Setting { opts, f_hi, .. } = setting;
+    let Leading { ranking, screened } = leading;
     let base_j = 0.5 * cur.e.norm_squared();
     let mut jobs = refit_jobs(ranking, screened, opts.refit, f_hi);
-    let run = |jobs: &[Job]| -> Vec<Vec<MemberRefit>> {
-        let distinct: Vec<(usize, usize)> = jobs
-            .iter()
-            .enumerate()
-            .flat_map(|(f, job)| {
-                job.members
-                    .iter()
-                    .enumerate()
-                    .filter(|(_, m)| m.mirror_of.is_none())
-                    .map(move |(i, _)| (f, i))
-            })
-            .collect();
-        let results = in_parallel(&distinct, |&(f, i)| {
-            refit_member(
-                setting,
-                cur,
-                (&jobs[f].members[i], large && i == 0),
-                *sigma2,
-            )
-        });
-        let mut outcomes: Vec<Vec<MemberRefit>> = jobs.iter().map(|_| Vec::new()).collect();
-        for ((f, i), r) in distinct.into_iter().zip(results) {
-            outcomes[f].push((i, r));
-        }
-        outcomes
-    };
+    let run = |jobs: &[Job]| run_jobs(setting, cur, jobs, large, ranking.sigma2);
     report_jobs(&jobs, screened, ranking, base_j, progress);
     let mut outcomes = run(&jobs);
     let least = |outcomes: &[Vec<MemberRefit>]| {
@@ -240,8 +234,8 @@ pub(super) fn refit_leading(
     // test too lenient by p + 1 degrees of freedom: a refit at a reduced χ² near 1.5 can pass
     // for the noise level, the escalation below is skipped and a partial fix stands in for the
     // missing effect.
-    let dof = m.saturating_sub(cur.u.len() + 1).max(1) as f64;
-    let above_noise = |j: f64| chi2_tail(dof, 2.0 * j / sigma2) < opts.alpha;
+    let dof = cur.e.len().saturating_sub(cur.u.len() + 1).max(1) as f64;
+    let above_noise = |j: f64| chi2_tail(dof, 2.0 * j / ranking.sigma2) < opts.alpha;
     if large && above_noise(least(&outcomes)) {
         let more = kind_jobs(ranking, screened, &jobs, base_j, f_hi);
         if !more.is_empty() {
@@ -280,8 +274,58 @@ pub(super) fn refit_leading(
             jobs.extend(more);
         }
     }
-    // A family's best refit stands for it, with the members the data cannot tell from it as
-    // its equivalents.
+    Escalation { jobs, outcomes }
+}
+
+/// Refits every member of `jobs` that is not a mirror image of another, in parallel; a large
+/// misfit lets each family's first member explore further starts (see [`refit_member`]).
+fn run_jobs(
+    setting: Setting,
+    cur: &Current,
+    jobs: &[Job],
+    large: bool,
+    sigma2: f64,
+) -> Vec<Vec<MemberRefit>> {
+    let distinct: Vec<(usize, usize)> = jobs
+        .iter()
+        .enumerate()
+        .flat_map(|(f, job)| {
+            job.members
+                .iter()
+                .enumerate()
+                .filter(|(_, m)| m.mirror_of.is_none())
+                .map(move |(i, _)| (f, i))
+        })
+        .collect();
+    let results = in_parallel(&distinct, |&(f, i)| {
+        refit_member(setting, cur, (&jobs[f].members[i], large && i == 0), sigma2)
+    });
+    let mut outcomes: Vec<Vec<MemberRefit>> = jobs.iter().map(|_| Vec::new()).collect();
+    for ((f, i), r) in distinct.into_iter().zip(results) {
+        outcomes[f].push((i, r));
+    }
+    outcomes
+}
+
+/// Each family's best refit stands for it, with the members the data cannot tell from it as
+/// its equivalents; the most significant one that passes the round's threshold and is
+/// identifiable and more than a partial fix is the round's best.
+fn judge_families(
+    setting: Setting,
+    cur: &Current,
+    Leading { ranking, .. }: Leading,
+    Escalation { jobs, mut outcomes }: Escalation,
+    not_tried: &mut Vec<NotTried>,
+    progress: &mut dyn FnMut(&str),
+) -> Refitted {
+    let f_hi = setting.f_hi;
+    let Ranking {
+        threshold, sigma2, ..
+    } = ranking;
+    let mut refits: Vec<Refit> = Vec::new();
+    let mut best: Option<(usize, Current)> = None;
+    let mut not_identifiable = Vec::new();
+    let mut contenders = Vec::new();
     for (f, Job { family, members }) in jobs.iter().enumerate() {
         let mut outcomes = std::mem::take(&mut outcomes[f]);
         contenders.extend(contenders_of(

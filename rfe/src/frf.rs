@@ -47,6 +47,9 @@ pub enum Work {
     Outputs {
         /// Jacobian columns (SDE parameters, not decision variables).
         params: usize,
+        /// Load columns solved per line when there are Jacobian columns: the load and one unit
+        /// load per output.
+        columns: usize,
     },
     /// Full DOF solutions for `rhs` right-hand sides ([`states`]).
     States {
@@ -62,14 +65,20 @@ impl Method {
     /// `fwd32j_direct_vs_modal_by_lines`). Estimated seconds:
     /// - direct: `lines · 2.4e-10 n^2.7` (one batched `L Δ Lᵀ` per line; the adjoint Jacobian
     ///   adds little);
-    /// - modal: `1.5e-8 n^2.7` for the eigen-decomposition, plus per line
-    ///   `n (1.43e-8 + 3.6e-9 P)` for outputs and `P` parameters (each parameter's modal sum),
-    ///   or `9.6e-10 n² rhs` for full solutions.
+    /// - modal: `1.5e-8 n^2.7` for the eigen-decomposition, plus per line `1.43e-8 n` for the
+    ///   outputs and, for `P` parameters, the cheaper of `3.6e-9 n P` (the deformations of the
+    ///   SDEs that carry them from their rows of the mode shapes) and `9.6e-10 n² c + 1.5e-8 P`
+    ///   (from the full states of the `c` load columns, then each SDE's taps);
+    ///   `9.6e-10 n² rhs` for full solutions.
     ///
-    /// Only the ratio matters. Near the break-even the two are within about 1.3× of each other,
+    /// Only the ratio matters. Near the break-even the two are within about 1.4× of each other,
     /// so the model need not be exact. On FWD-32J (42 DOFs) the identification's 74 parameters
     /// keep the direct path cheaper at any number of lines; a plain FRF goes modal above about
-    /// 70 lines.
+    /// 70 lines. On the generated machines of `diagnose`'s `machine_scaling` example (300 lines,
+    /// every SDE parameter the variables set, least of three runs on a loaded machine): 14
+    /// bodies (84 DOFs, 161 parameters) direct 10.4 ms, modal 14.8 ms (the model: 11.3 and
+    /// 11.6); 28 bodies (168 DOFs, 316) direct 66 ms, modal 39 ms (74 and 50); 42 bodies (252
+    /// DOFs, 501) direct 238 ms, modal 70 ms (223 and 123).
     pub fn resolve(self, n: usize, lines: usize, work: Work) -> Method {
         if self != Method::Auto {
             return self;
@@ -78,7 +87,16 @@ impl Method {
         let cube = nf.powf(2.7);
         let direct = lf * 2.4e-10 * cube;
         let per_line = match work {
-            Work::Outputs { params } => nf * (1.43e-8 + 3.6e-9 * params as f64),
+            Work::Outputs { params, columns } => {
+                let sde_rows = 3.6e-9 * nf * params as f64;
+                let states = 9.6e-10 * nf * nf * columns as f64 + 1.5e-8 * params as f64;
+                nf * 1.43e-8
+                    + if params == 0 {
+                        0.0
+                    } else {
+                        sde_rows.min(states)
+                    }
+            }
             Work::States { rhs } => 9.6e-10 * nf * nf * rhs as f64,
         };
         let modal = 1.5e-8 * cube + lf * per_line;
@@ -262,6 +280,7 @@ pub fn response_params(
         freqs_hz.len(),
         Work::Outputs {
             params: params.len(),
+            columns: system.columns(),
         },
     ) {
         Method::Modal => {
@@ -802,8 +821,13 @@ impl ModalSolver {
         bodies.sort_unstable();
         bodies.dedup();
         let body_row0 = 6 * used.len();
-        let mut e = Mat::<C64>::zeros(body_row0 + 6 * bodies.len(), n);
-        for (u, &blk) in used.iter().enumerate() {
+        let rows = body_row0 + 6 * bodies.len();
+        // While E has fewer rows than the model has DOFs, the deformations come from `E · rhs`
+        // (rows × n per load column and line); else from the full states `X · rhs` (n × n), each
+        // SDE's deformation then read from its few taps.
+        let via_states = rows > n;
+        let mut e = Mat::<C64>::zeros(if via_states { 0 } else { rows }, n);
+        for (u, &blk) in used.iter().enumerate().filter(|_| !via_states) {
             let b = &s.sdes[blk];
             for m in 0..n {
                 let d = b.deformation(|i| self.x[(i, m)]);
@@ -812,7 +836,7 @@ impl ModalSolver {
                 }
             }
         }
-        for (u, &b) in bodies.iter().enumerate() {
+        for (u, &b) in bodies.iter().enumerate().filter(|_| !via_states) {
             for r in 0..6 {
                 for m in 0..n {
                     e[(body_row0 + 6 * u + r, m)] = self.x[(6 * b + r, m)];
@@ -820,7 +844,8 @@ impl ModalSolver {
             }
         }
         let mut rhs = Mat::<C64>::zeros(n, cols);
-        let mut deform = Mat::<C64>::zeros(e.nrows(), cols);
+        let mut deform = Mat::<C64>::zeros(rows, cols);
+        let mut states = Mat::<C64>::zeros(if via_states { n } else { 0 }, cols);
         let mut dq = vec![vec![[C64::new(0.0, 0.0); 6]; s.sdes.len()]; cols];
         let mut dw = vec![vec![[C64::new(0.0, 0.0); 6]; s.sdes.len()]; outputs];
         let mut fac = vec![C64::new(0.0, 0.0); outputs];
@@ -851,14 +876,26 @@ impl ModalSolver {
             if columns.is_empty() {
                 continue;
             }
-            faer::linalg::matmul::matmul(
-                deform.as_mut(),
-                faer::Accum::Replace,
-                e.as_ref(),
-                rhs.as_ref(),
-                C64::new(1.0, 0.0),
-                Par::Seq,
-            );
+            if via_states {
+                faer::linalg::matmul::matmul(
+                    states.as_mut(),
+                    faer::Accum::Replace,
+                    self.x.as_ref(),
+                    rhs.as_ref(),
+                    C64::new(1.0, 0.0),
+                    Par::Seq,
+                );
+                deformations_from_states(s, &states, &used, &bodies, &mut deform);
+            } else {
+                faer::linalg::matmul::matmul(
+                    deform.as_mut(),
+                    faer::Accum::Replace,
+                    e.as_ref(),
+                    rhs.as_ref(),
+                    C64::new(1.0, 0.0),
+                    Par::Seq,
+                );
+            }
             for (u, &blk) in used.iter().enumerate() {
                 for &c in &load_cols {
                     dq[c][blk] = std::array::from_fn(|r| deform[(6 * u + r, c)]);
@@ -889,13 +926,38 @@ impl ModalSolver {
     }
 }
 
+/// The rows of `deform` that `E · rhs` would give, from the full states `q` (n × columns): the
+/// deformation of each SDE in `used` (6 rows each), then the 6 DOFs of each body in `bodies`.
+fn deformations_from_states(
+    s: &System,
+    q: &Mat<C64>,
+    used: &[usize],
+    bodies: &[usize],
+    deform: &mut Mat<C64>,
+) {
+    let body_row0 = 6 * used.len();
+    for c in 0..q.ncols() {
+        for (u, &blk) in used.iter().enumerate() {
+            let d = s.sdes[blk].deformation(|i| q[(i, c)]);
+            for (r, v) in d.into_iter().enumerate() {
+                deform[(6 * u + r, c)] = v;
+            }
+        }
+        for (u, &b) in bodies.iter().enumerate() {
+            for r in 0..6 {
+                deform[(body_row0 + 6 * u + r, c)] = q[(6 * b + r, c)];
+            }
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
 
     #[test]
     fn auto_takes_the_path_the_measurements_found_cheaper() {
-        let outputs = |params| Work::Outputs { params };
+        let outputs = |params| Work::Outputs { params, columns: 4 };
         // FWD-32J (42 DOFs): the identification's 74 parameters keep the direct path cheaper
         // even at 600 lines (measured 0.67× the modal time); a plain FRF goes modal past ~70.
         assert_eq!(Method::Auto.resolve(42, 600, outputs(74)), Method::Direct);
@@ -913,6 +975,10 @@ mod tests {
             Method::Auto.resolve(240, 400, Work::States { rhs: 4 }),
             Method::Modal
         );
+        // Many parameters on a large model: the full states make the modal path cheaper
+        // (measured 0.59× the direct time at 168 DOFs, 316 parameters, 300 lines).
+        assert_eq!(Method::Auto.resolve(168, 300, outputs(316)), Method::Modal);
+        assert_eq!(Method::Auto.resolve(252, 300, outputs(501)), Method::Modal);
         // An explicit choice stands.
         assert_eq!(Method::Modal.resolve(42, 1, outputs(74)), Method::Modal);
         assert_eq!(
