@@ -22,7 +22,9 @@ use anyhow::Context;
 use serde::Deserialize;
 use serde_json::json;
 
-use crate::pipeline::{self, ReportContext, Setup};
+use pipeline::{ReportContext, Setup};
+
+use super::note;
 
 /// Arguments of `ident nightly`.
 #[derive(clap::Args)]
@@ -546,7 +548,7 @@ fn job(
     session: &mut Option<PathBuf>,
     mut notes: Vec<String>,
 ) -> anyhow::Result<u8> {
-    let setup = Setup::load(&cfg.model, &cfg.variables)?;
+    let setup = Setup::load(&cfg.model, &cfg.variables, &mut note)?;
     let mut stand_name = None;
     let path = match cfg.measure {
         Measure::NewestSession => {
@@ -582,8 +584,11 @@ fn job(
     // With its diagnosis, so that this run is read at the same stage as the earlier reports (the
     // final model's parameters when the diagnosis added an effect).
     let mut probe = report::build::build({
-        let mut i =
-            report::build::Inputs::new(&cfg.name, &analysis.observations, &analysis.identification);
+        let mut i = report::build::Inputs::new(
+            &cfg.name,
+            &analysis.problem.observations,
+            &analysis.identification,
+        );
         i.sensitivity = false;
         i.diagnosis = analysis
             .diagnosis
@@ -829,14 +834,21 @@ fn sweep_session(
             .unwrap_or_default()
     ));
     log.line(&format!("sweep of {} into {}", stand.name, p.display()));
-    let swept = pipeline::sweep(&stand, &cfg.plan(), &p, &Default::default(), &NoProgress)?;
+    let swept = pipeline::sweep(
+        &stand,
+        &cfg.plan(),
+        &p,
+        &Default::default(),
+        &NoProgress,
+        &mut note,
+    )?;
     *session = Some(p.clone());
     if let Some(e) = &swept.finish_error {
         log.line(&format!("the session file could not be completed: {e}; its flushed part is readable (ident mcap recover)"));
     }
     let o = swept
         .outcome
-        .map_err(|e| anyhow::anyhow!("the sweep failed: {e}"))?;
+        .map_err(|e| anyhow::anyhow!("the sweep failed: {:#}", anyhow::Error::from(e)))?;
     anyhow::ensure!(
         swept.finish_error.is_none(),
         "the session file {} could not be completed (disk full?)",
