@@ -10,7 +10,8 @@ use acquire::analysis::{characteristics, AnalysisOptions, SessionAnalysis};
 use identify::request::Problem;
 use identify::{data, report as table, Identification};
 
-use crate::{PipelineError, Setup};
+use crate::error::PipelineError;
+use crate::setup::Setup;
 
 /// How the workflows identify: the library's defaults with four starts. From Table 1's initial
 /// values alone, the 19-variable fit of the demo's model (which lacks the actuator) lands in a poor

@@ -8,7 +8,9 @@ use std::path::{Path, PathBuf};
 use identify::{report as table, Identification, Observations};
 use rfe::Model;
 
-use crate::{Analysis, PipelineError, Setup};
+use crate::analysis::Analysis;
+use crate::error::PipelineError;
+use crate::setup::Setup;
 
 /// Provenance and context of a report.
 pub struct ReportContext<'a> {

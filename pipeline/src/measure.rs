@@ -16,7 +16,8 @@ use acquire::sweep::{
     SweepProgress,
 };
 
-use crate::{Note, PipelineError};
+use crate::error::PipelineError;
+use crate::note::Note;
 
 /// Why a measurement failed once its session file existed (the file is still completed).
 #[derive(Debug, thiserror::Error)]

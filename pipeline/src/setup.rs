@@ -6,7 +6,8 @@ use std::path::Path;
 use identify::{variables, Variables};
 use rfe::Model;
 
-use crate::{Note, PipelineError};
+use crate::error::PipelineError;
+use crate::note::Note;
 
 /// The identification set-up: the model to identify (never the truth) and its decision variables.
 #[derive(Debug, Clone)]
