@@ -425,8 +425,8 @@ pub fn run(a: IdentifyArgs) -> anyhow::Result<ExitCode> {
     let obs = &problem.observations;
     if let Some(path) = &a.export_problem {
         let p = &problem;
-        let problem = idn::problem::to_json(&p.model, obs, &p.variables, &p.options)?;
-        emit(Some(path), &(serde_json::to_string(&problem)? + "\n"))?;
+        let exported = idn::problem::to_json(&p.model, obs, &p.variables, &p.options)?;
+        emit(Some(path), &(serde_json::to_string(&exported)? + "\n"))?;
         return Ok(ExitCode::SUCCESS);
     }
     let plain = a.progress;
