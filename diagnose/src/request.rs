@@ -142,10 +142,9 @@ initial = 0.4
         });
         let mut rng = StdRng::seed_from_u64(7);
         let lines = synthetic::log_lines(10.0, 60.0, 40);
-        let measured = synthetic::amplitude_data(&truth, &lines, 0.01, || {
-            StandardNormal.sample(&mut rng)
-        })
-        .unwrap();
+        let measured =
+            synthetic::amplitude_data(&truth, &lines, 0.01, || StandardNormal.sample(&mut rng))
+                .unwrap();
         Problem {
             variables: variables::parse(VARS, "vars.toml", &model).unwrap(),
             observations: data::validate(&measured, &model, "synthetic").unwrap(),

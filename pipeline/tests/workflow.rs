@@ -39,7 +39,11 @@ fn a_setup_reads_model_and_variables_and_names_a_bad_variables_file() {
 
     let dir = tempfile::tempdir().unwrap();
     let bad = dir.path().join("vars.toml");
-    std::fs::write(&bad, "[[variable]]\nsdes = \"no-such-sde\"\nparameter = \"k\"\n").unwrap();
+    std::fs::write(
+        &bad,
+        "[[variable]]\nsdes = \"no-such-sde\"\nparameter = \"k\"\n",
+    )
+    .unwrap();
     let e = Setup::load(&model, &bad, &mut |_| {}).unwrap_err();
     assert!(matches!(e, PipelineError::Variables(_)), "{e:?}");
     assert!(e.to_string().contains("vars.toml"), "{e}");
