@@ -35,6 +35,22 @@ pub enum PipelineError {
         /// Why.
         source: acquire::session::SessionError,
     },
+    /// The session folder cannot be read.
+    #[error("cannot read the session folder {}", path.display())]
+    SessionFolder {
+        /// The folder.
+        path: PathBuf,
+        /// Why.
+        source: std::io::Error,
+    },
+    /// No finished session in the session folder.
+    #[error("no {}*.mcap session in {}; record one with `ident sweep` or set measure = \"sweep\"", if *unfinished { "finished " } else { "" }, dir.display())]
+    NoSession {
+        /// The session folder.
+        dir: PathBuf,
+        /// Whether it holds `*.mcap` files (none of them finished and readable).
+        unfinished: bool,
+    },
     /// The session file could not be processed into characteristics.
     #[error(transparent)]
     Analysis(#[from] acquire::analysis::AnalysisError),

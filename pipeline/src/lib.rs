@@ -10,6 +10,7 @@
 //! - [`analysis`]: everything after the measurement, read from the session file alone
 //!   ([`analyse`]: `acquire::analysis` → `identify::request::Problem` → `diagnose::request`), so
 //!   a replay of a recording recomputes the live run's results bit for bit.
+//! - [`sessions`]: the newest finished session in a folder (for a workflow that does not measure).
 //! - [`folder`]: the report of a run ([`build_report`]) and its dated report folder
 //!   ([`write_report`]: HTML, JSON, the identification's table and models, the final model).
 //!
@@ -36,6 +37,7 @@ mod error;
 pub mod folder;
 pub mod measure;
 mod note;
+pub mod sessions;
 mod setup;
 
 pub use analysis::{analyse, identification_options, summary_text, Analysis};

@@ -22,6 +22,13 @@ pub enum Note {
         /// The DAQ's port.
         daq_port: String,
     },
+    /// A session file left out of the newest-session search.
+    SkippedSession {
+        /// The session file.
+        path: PathBuf,
+        /// Why it could not be read; `None`: its writer did not finish it.
+        unreadable: Option<String>,
+    },
 }
 
 impl fmt::Display for Note {
@@ -38,6 +45,18 @@ impl fmt::Display for Note {
                 f,
                 "simulated stand at {speed}× real time: {exciter} {exciter_port}, daq {daq_port}"
             ),
+            Note::SkippedSession {
+                path,
+                unreadable: None,
+            } => write!(
+                f,
+                "skipped the unfinished session {} (its writer did not finish it: a sweep killed mid-way, or one still running); `ident mcap recover` makes a readable copy, which `ident process` reports as truncated",
+                path.display()
+            ),
+            Note::SkippedSession {
+                path,
+                unreadable: Some(e),
+            } => write!(f, "skipped the session {}: cannot read it: {e}", path.display()),
         }
     }
 }

@@ -2,7 +2,8 @@
 //! is `tests/cli_pipeline.rs`): a set-up reads the model and variables and names a bad file; a
 //! measurement whose devices cannot be reached still leaves a completed session file, the failure
 //! in its result; one that cannot start (a CAN interface for a stand without simulated ports)
-//! creates no file; run folders are made unique.
+//! creates no file; run folders are made unique; the newest-session search skips a newer
+//! unfinished session with a note.
 
 // Test helpers unwrap: a panic with its message is the failure report.
 #![allow(clippy::unwrap_used)]
@@ -105,4 +106,58 @@ fn run_folders_are_made_unique() {
     assert!(a.is_dir() && b.is_dir());
     let name = a.file_name().unwrap().to_string_lossy().into_owned();
     assert!(name.starts_with("demo-") && name.ends_with('Z'), "{name}");
+}
+
+#[test]
+fn the_newest_finished_session_is_taken_and_a_newer_unfinished_one_skipped() {
+    let dir = tempfile::tempdir().unwrap();
+    let e = pipeline::sessions::newest_finished(dir.path(), &mut |_| {}).unwrap_err();
+    assert!(
+        matches!(
+            e,
+            PipelineError::NoSession {
+                unfinished: false,
+                ..
+            }
+        ),
+        "{e:?}"
+    );
+    assert!(e.to_string().starts_with("no *.mcap session in "), "{e}");
+
+    let done = dir.path().join("a.mcap");
+    let file = acquire::session::Session::create(&done, Default::default()).unwrap();
+    file.finish().unwrap();
+    assert!(pipeline::sessions::finished(&done).unwrap());
+    // A killed writer's file: the start of a finished one, without its end.
+    let bytes = std::fs::read(&done).unwrap();
+    let cut = dir.path().join("b.mcap");
+    std::fs::write(&cut, &bytes[..bytes.len() - 4]).unwrap();
+    let later =
+        std::fs::metadata(&done).unwrap().modified().unwrap() + std::time::Duration::from_secs(60);
+    std::fs::File::options()
+        .write(true)
+        .open(&cut)
+        .unwrap()
+        .set_modified(later)
+        .unwrap();
+    assert!(!pipeline::sessions::finished(&cut).unwrap());
+
+    let mut notes = Vec::new();
+    let found = pipeline::sessions::newest_finished(dir.path(), &mut |n| notes.push(n)).unwrap();
+    assert_eq!(found, done);
+    assert_eq!(
+        notes,
+        vec![Note::SkippedSession {
+            path: cut.clone(),
+            unreadable: None
+        }]
+    );
+    assert!(notes[0].to_string().contains("ident mcap recover"));
+
+    std::fs::remove_file(&done).unwrap();
+    let e = pipeline::sessions::newest_finished(dir.path(), &mut |_| {}).unwrap_err();
+    assert!(
+        e.to_string().starts_with("no finished *.mcap session in "),
+        "{e}"
+    );
 }
