@@ -6,7 +6,6 @@ use std::process::ExitCode;
 use clap::{Parser, Subcommand};
 
 mod commands;
-mod pipeline;
 
 #[derive(Parser)]
 #[command(

@@ -74,6 +74,7 @@ pub mod generate;
 pub mod lowrank;
 mod placement;
 pub mod problem;
+pub mod request;
 pub mod residuals;
 mod round;
 pub mod score;

@@ -25,7 +25,9 @@ use acquire::stand::Stand;
 use acquire::sweep::{IndicatifProgress, NoProgress, SteppedSine, SweepProgress};
 use anyhow::Context;
 
-use crate::pipeline::{self, ReportContext, Setup};
+use pipeline::{ReportContext, Setup};
+
+use super::note;
 
 /// The built-in configs, at their paths relative to `configs/` (the stand file refers to the
 /// models by relative path).
@@ -119,6 +121,7 @@ pub fn run(a: DemoArgs) -> anyhow::Result<ExitCode> {
     let setup = Setup::load(
         &configs.join("models/fwd32j-no-actuator.toml"),
         &configs.join("identification/fwd32j-no-actuator.toml"),
+        &mut note,
     )?;
     let plan = plan(a.points);
     introduce(&setup, a.points, speed, a.generator);
@@ -134,10 +137,12 @@ pub fn run(a: DemoArgs) -> anyhow::Result<ExitCode> {
         &dir.join("session.mcap"),
         &Default::default(),
         progress.as_ref(),
+        &mut note,
     )?;
     let outcome = swept.outcome.map_err(|e| {
         anyhow::anyhow!(
-            "the sweep failed: {e} (session kept: {})",
+            "the sweep failed: {:#} (session kept: {})",
+            anyhow::Error::from(e),
             swept.session.display()
         )
     })?;

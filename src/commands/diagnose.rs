@@ -48,22 +48,22 @@ pub fn run(a: DiagnoseArgs) -> anyhow::Result<ExitCode> {
         a.alpha
     );
     anyhow::ensure!(a.refit > 0, "--refit must be at least 1");
-    let (model, obs, vars, opts) = setup(&a.identify)?;
-    let id = idn::identify(&model, &obs, &vars, &opts, &mut |_, p| {
+    let problem = setup(&a.identify)?;
+    let obs = &problem.observations;
+    let id = problem.identify(&mut |_, p| {
         tracing::info!(iteration = p.iteration, criterion = p.criterion, "identify");
     })?;
     println!("{}", idn::report::text(&id));
-    let dopts = diagnose::Options {
+    let request = diagnose::request::Request {
         alpha: a.alpha,
         max_effects: a.max_effects,
         refit: a.refit,
-        identification: opts,
+        ..diagnose::request::Request::new(&problem, &id)
     };
     let started = std::time::Instant::now();
-    let d = diagnose::diagnose(&model, &obs, &vars, &id, &dopts, &mut |line| {
-        tracing::info!("diagnose: {line}")
-    })
-    .context("diagnosis")?;
+    let d = request
+        .diagnose(&mut |line| tracing::info!("diagnose: {line}"))
+        .context("diagnosis")?;
     print!("{}", diagnose::text(&d));
     println!(
         "diagnosed in {:.2} s ({})",
@@ -78,11 +78,11 @@ pub fn run(a: DiagnoseArgs) -> anyhow::Result<ExitCode> {
         std::fs::create_dir_all(dir)
             .with_context(|| format!("cannot create the output directory {}", dir.display()))?;
         let diagnosis = Some((section(), &d));
-        super::identify::write_report(dir, &a.identify, "diagnose", &obs, &id, diagnosis)?;
+        super::identify::write_report(dir, &a.identify, "diagnose", obs, &id, diagnosis)?;
     }
     if let Some(db) = &a.identify.record_history {
         let diagnosis = Some((section(), &d));
-        super::identify::record_history(db, &a.identify, "diagnose", &obs, &id, diagnosis)?;
+        super::identify::record_history(db, &a.identify, "diagnose", obs, &id, diagnosis)?;
     }
     if let Some(p) = &a.out_model {
         emit(

@@ -12,7 +12,7 @@ use identify::{
 };
 
 use super::{emit, MethodArg};
-use crate::pipeline::{build_report, ReportContext};
+use pipeline::{build_report, ReportContext};
 
 /// `--method`.
 #[derive(clap::ValueEnum, Clone, Copy, Debug, Default)]
@@ -258,9 +258,7 @@ fn line_choice(a: &IdentifyArgs) -> idn::line_choice::LineChoice {
 /// Prepares the identification of `a` (`identify::request`: model, data, map, line choice,
 /// decimation, variables, start) with its options, saying on stderr what was assumed, converted,
 /// dropped or warned about (shared by `ident identify` and `ident diagnose`).
-pub fn setup(
-    a: &IdentifyArgs,
-) -> anyhow::Result<(rfe::Model, idn::Observations, idn::Variables, Options)> {
+pub fn setup(a: &IdentifyArgs) -> anyhow::Result<request::Problem> {
     anyhow::ensure!(
         a.relative_error.is_finite() && a.relative_error > 0.0,
         "--relative-error {} must be a number > 0 (e.g. 0.02 for 2 %)",
@@ -296,8 +294,7 @@ pub fn setup(
         },
         options: options(a),
     };
-    let p = request::prepare(&req, &mut |note| eprintln!("{note}"))?;
-    Ok((p.model, p.observations, p.variables, p.options))
+    Ok(request::prepare(&req, &mut |note| eprintln!("{note}"))?)
 }
 
 /// The fit options of `a` (the fit kind is chosen with the data, `identify::request`).
@@ -424,16 +421,18 @@ pub fn record_history(
 /// Runs the identification. Exit 0: converged; 1: iteration limit or divergence (the best point
 /// is still reported and written).
 pub fn run(a: IdentifyArgs) -> anyhow::Result<ExitCode> {
-    let (model, obs, vars, opts) = setup(&a)?;
+    let problem = setup(&a)?;
+    let obs = &problem.observations;
     if let Some(path) = &a.export_problem {
-        let problem = idn::problem::to_json(&model, &obs, &vars, &opts)?;
-        emit(Some(path), &(serde_json::to_string(&problem)? + "\n"))?;
+        let p = &problem;
+        let exported = idn::problem::to_json(&p.model, obs, &p.variables, &p.options)?;
+        emit(Some(path), &(serde_json::to_string(&exported)? + "\n"))?;
         return Ok(ExitCode::SUCCESS);
     }
     let plain = a.progress;
     let multi = a.starts > 1;
     let started = std::time::Instant::now();
-    let id = idn::identify(&model, &obs, &vars, &opts, &mut |start, p| {
+    let id = problem.identify(&mut |start, p| {
         tracing::info!(
             start,
             iteration = p.iteration,
@@ -483,10 +482,10 @@ pub fn run(a: IdentifyArgs) -> anyhow::Result<ExitCode> {
             let updated = report::update_toml(&original, &a.model.display().to_string(), &id)?;
             emit(Some(&dir.join("model.toml")), &updated)?;
         }
-        write_report(dir, &a, "identify", &obs, &id, None)?;
+        write_report(dir, &a, "identify", obs, &id, None)?;
     }
     if let Some(db) = &a.record_history {
-        record_history(db, &a, "identify", &obs, &id, None)?;
+        record_history(db, &a, "identify", obs, &id, None)?;
     }
     write_final(&a, &id, None)?;
     if id.stop.converged() {

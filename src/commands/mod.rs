@@ -31,6 +31,11 @@ pub fn load_model(path: &Path) -> anyhow::Result<::rfe::Model> {
     Ok(loaded.model)
 }
 
+/// Prints a workflow step's note on stderr, as it happens (`pipeline::Note`).
+pub fn note(n: pipeline::Note) {
+    eprintln!("{n}");
+}
+
 /// Frequency lines from `--hz` or `--from/--to/--points [--log]`.
 #[derive(clap::Args, Debug, Clone)]
 pub struct Lines {

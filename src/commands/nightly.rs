@@ -22,7 +22,9 @@ use anyhow::Context;
 use serde::Deserialize;
 use serde_json::json;
 
-use crate::pipeline::{self, ReportContext, Setup};
+use pipeline::{ReportContext, Setup};
+
+use super::note;
 
 /// Arguments of `ident nightly`.
 #[derive(clap::Args)]
@@ -406,59 +408,6 @@ impl Log {
     }
 }
 
-/// The magic that ends every finished MCAP file (MCAP specification); a session whose writer was
-/// killed (`kill -9`, power loss) ends without it.
-const MCAP_MAGIC: &[u8; 8] = b"\x89MCAP0\r\n";
-
-/// Whether a session file was finished by its writer (ends with the MCAP magic).
-fn session_finished(path: &Path) -> std::io::Result<bool> {
-    let mut f = File::open(path)?;
-    let len = f.metadata()?.len();
-    if len < 16 {
-        return Ok(false);
-    }
-    f.seek(SeekFrom::Start(len - 8))?;
-    let mut tail = [0u8; 8];
-    f.read_exact(&mut tail)?;
-    Ok(&tail == MCAP_MAGIC)
-}
-
-/// The newest finished `*.mcap` in `dir` by modification time. Newer unfinished sessions (a sweep
-/// killed mid-way, or one still being written) are skipped, each with a note saying so and how to
-/// recover it: a partial session is never identified as if complete.
-fn newest_session(dir: &Path, notes: &mut Vec<String>) -> anyhow::Result<PathBuf> {
-    let entries = std::fs::read_dir(dir)
-        .with_context(|| format!("cannot read the session folder {}", dir.display()))?;
-    let mut all: Vec<(std::time::SystemTime, PathBuf)> = entries
-        .flatten()
-        .map(|e| e.path())
-        .filter(|p| p.extension().is_some_and(|x| x == "mcap"))
-        .map(|p| {
-            let t = std::fs::metadata(&p)
-                .and_then(|m| m.modified())
-                .unwrap_or(std::time::UNIX_EPOCH);
-            (t, p)
-        })
-        .collect();
-    all.sort();
-    let any = !all.is_empty();
-    while let Some((_, p)) = all.pop() {
-        match session_finished(&p) {
-            Ok(true) => return Ok(p),
-            Ok(false) => notes.push(format!(
-                "skipped the unfinished session {} (its writer did not finish it: a sweep killed mid-way, or one still running); `ident mcap recover` makes a readable copy, which `ident process` reports as truncated",
-                p.display()
-            )),
-            Err(e) => notes.push(format!("skipped the session {}: cannot read it: {e}", p.display())),
-        }
-    }
-    anyhow::bail!(
-        "no {}*.mcap session in {}; record one with `ident sweep` or set measure = \"sweep\"",
-        if any { "finished " } else { "" },
-        dir.display()
-    )
-}
-
 /// Runs the job.
 pub fn run(a: NightlyArgs) -> anyhow::Result<ExitCode> {
     let cfg = Config::load(&a.config)?;
@@ -546,12 +495,14 @@ fn job(
     session: &mut Option<PathBuf>,
     mut notes: Vec<String>,
 ) -> anyhow::Result<u8> {
-    let setup = Setup::load(&cfg.model, &cfg.variables)?;
+    let setup = Setup::load(&cfg.model, &cfg.variables, &mut note)?;
     let mut stand_name = None;
     let path = match cfg.measure {
         Measure::NewestSession => {
             let mut skipped = Vec::new();
-            let found = newest_session(&cfg.sessions, &mut skipped);
+            let found = pipeline::sessions::newest_finished(&cfg.sessions, &mut |n| {
+                skipped.push(n.to_string())
+            });
             for m in &skipped {
                 log.line(m);
             }
@@ -582,8 +533,11 @@ fn job(
     // With its diagnosis, so that this run is read at the same stage as the earlier reports (the
     // final model's parameters when the diagnosis added an effect).
     let mut probe = report::build::build({
-        let mut i =
-            report::build::Inputs::new(&cfg.name, &analysis.observations, &analysis.identification);
+        let mut i = report::build::Inputs::new(
+            &cfg.name,
+            &analysis.problem.observations,
+            &analysis.identification,
+        );
         i.sensitivity = false;
         i.diagnosis = analysis
             .diagnosis
@@ -829,14 +783,21 @@ fn sweep_session(
             .unwrap_or_default()
     ));
     log.line(&format!("sweep of {} into {}", stand.name, p.display()));
-    let swept = pipeline::sweep(&stand, &cfg.plan(), &p, &Default::default(), &NoProgress)?;
+    let swept = pipeline::sweep(
+        &stand,
+        &cfg.plan(),
+        &p,
+        &Default::default(),
+        &NoProgress,
+        &mut note,
+    )?;
     *session = Some(p.clone());
     if let Some(e) = &swept.finish_error {
         log.line(&format!("the session file could not be completed: {e}; its flushed part is readable (ident mcap recover)"));
     }
     let o = swept
         .outcome
-        .map_err(|e| anyhow::anyhow!("the sweep failed: {e}"))?;
+        .map_err(|e| anyhow::anyhow!("the sweep failed: {:#}", anyhow::Error::from(e)))?;
     anyhow::ensure!(
         swept.finish_error.is_none(),
         "the session file {} could not be completed (disk full?)",

@@ -1,5 +1,5 @@
 //! `ident replay SESSION.mcap`: re-run processing, identification and diagnosis from a recording,
-//! with the same code the live run used ([`crate::pipeline::analyse`]); the results are
+//! with the same code the live run used ([`pipeline::analyse`]); the results are
 //! bit-identical to the live run's (tests/cli_pipeline.rs checks it). A truncated recording is
 //! read up to the cut and the report says which steps are lost.
 //!
@@ -11,7 +11,9 @@
 use std::path::PathBuf;
 use std::process::ExitCode;
 
-use crate::pipeline::{self, ReportContext, Setup};
+use pipeline::{ReportContext, Setup};
+
+use super::note;
 
 /// Arguments of `ident replay`.
 #[derive(clap::Args)]
@@ -47,7 +49,7 @@ pub fn run(a: ReplayArgs) -> anyhow::Result<ExitCode> {
     if a.serve {
         return serve(&a);
     }
-    let setup = Setup::load(&a.model, &a.vars)?;
+    let setup = Setup::load(&a.model, &a.vars, &mut note)?;
     let analysis = pipeline::analyse(&a.session, &setup, &pipeline::identification_options())?;
     println!(
         "ident replay: {} ({} steps used, {} dropped)",
@@ -86,7 +88,7 @@ fn serve(a: &ReplayArgs) -> anyhow::Result<ExitCode> {
         served.plant.frequencies()[0],
         served.plant.frequencies()[lines - 1],
     );
-    let rt = crate::pipeline::runtime()?;
+    let rt = pipeline::runtime()?;
     rt.block_on(async {
         let sim = acquire::sim::SimStand::start_with(served.setup)?;
         let hint = format!(

@@ -41,7 +41,7 @@ pub fn run(a: SimArgs) -> anyhow::Result<ExitCode> {
         truth.speed = s;
     }
     let speed = truth.speed;
-    let rt = crate::pipeline::runtime()?;
+    let rt = pipeline::runtime()?;
     rt.block_on(async {
         let sim = match &a.can {
             Some(iface) => SimStand::start_can(&stand, iface)?,

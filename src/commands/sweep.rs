@@ -20,7 +20,7 @@ use acquire::stand::Stand;
 use acquire::sweep::{self, IndicatifProgress, SteppedSine};
 use anyhow::Context;
 
-use crate::pipeline;
+use super::note;
 
 /// Arguments of `ident sweep`.
 #[derive(clap::Args)]
@@ -112,7 +112,14 @@ pub fn run(a: SweepArgs) -> anyhow::Result<ExitCode> {
         ctrl_c: true,
     };
     let started = Instant::now();
-    let swept = pipeline::sweep(&stand, &plan, &path, &opts, &IndicatifProgress::new())?;
+    let swept = pipeline::sweep(
+        &stand,
+        &plan,
+        &path,
+        &opts,
+        &IndicatifProgress::new(),
+        &mut note,
+    )?;
     let elapsed = started.elapsed().as_secs_f64();
     let o = completed(&path, swept.finish_error, swept.outcome)?;
     let measured = o.steps.len() + o.skipped.len();
@@ -157,8 +164,8 @@ pub fn run(a: SweepArgs) -> anyhow::Result<ExitCode> {
 /// says where it is).
 fn completed<T>(
     path: &Path,
-    finish_error: Option<String>,
-    outcome: Result<T, String>,
+    finish_error: Option<acquire::session::SessionError>,
+    outcome: Result<T, pipeline::MeasureError>,
 ) -> anyhow::Result<T> {
     if let Some(e) = finish_error {
         anyhow::bail!(
@@ -171,7 +178,7 @@ fn completed<T>(
             "session (complete, records the failure): {}",
             path.display()
         );
-        anyhow::anyhow!(e)
+        anyhow::Error::from(e)
     })
 }
 
@@ -192,7 +199,14 @@ fn broadband(a: &SweepArgs, stand: &Stand) -> anyhow::Result<ExitCode> {
         ..Default::default()
     };
     let started = Instant::now();
-    let swept = pipeline::broadband_sweep(stand, &plan, &path, &opts, &IndicatifProgress::new())?;
+    let swept = pipeline::broadband_sweep(
+        stand,
+        &plan,
+        &path,
+        &opts,
+        &IndicatifProgress::new(),
+        &mut note,
+    )?;
     let elapsed = started.elapsed().as_secs_f64();
     let r = completed(&path, swept.finish_error, swept.outcome)?;
     let force = stand
