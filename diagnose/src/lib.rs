@@ -94,7 +94,7 @@ pub use text::{final_text, gain_text, text};
 
 use base::base_fit;
 pub use base::BaseFit;
-use placement::after_acceptance;
+use placement::{after_acceptance, Chosen};
 use round::{rank, refit_leading, screen_leading, Leading, Refitted};
 use swap::swap_accepted;
 
@@ -498,6 +498,21 @@ struct Current {
     jac: DMatrix<f64>,
 }
 
+/// The diagnosis so far: the current fit and the refits of the effects accepted into it, in the
+/// order of `cur.effects`.
+struct Diagnosed {
+    cur: Current,
+    accepted: Vec<Refit>,
+}
+
+/// What the rounds leave besides the fit: the residual analysis before them, each round, and
+/// what could not be tried.
+struct Record {
+    before: ResidualAnalysis,
+    rounds: Vec<Round>,
+    not_tried: Vec<NotTried>,
+}
+
 /// Diagnoses the identification `id` of `vars` on `model` from `obs`. `progress` gets one line
 /// per step (ranking, each refit, each decision).
 pub fn diagnose(
@@ -530,13 +545,16 @@ pub fn diagnose(
         f_hi,
     };
     let mut p0 = setting.problem(Vec::new());
-    let (mut cur, base) = base_fit((model, vars, obs), &mut p0, id, opts, progress)?;
+    let (cur, base) = base_fit((model, vars, obs), &mut p0, id, opts, progress)?;
     timing.base_fit = clock.elapsed().as_secs_f64();
     let before = analysis(&p0, &cur, opts)?;
     progress(&format!("before: {}", before.verdict));
 
     let mut rounds = Vec::new();
-    let mut accepted = Vec::new();
+    let mut so_far = Diagnosed {
+        cur,
+        accepted: Vec::new(),
+    };
     let mut not_tried = untestable();
     // Rounds left: each may accept one effect; a round that replaces one instead gives its
     // round back (an effect is tried for a swap once, so this ends).
@@ -545,8 +563,15 @@ pub fn diagnose(
     while rounds_left > 0 {
         rounds_left -= 1;
         let t = std::time::Instant::now();
-        let pc = setting.problem(cur.effects.clone());
-        let ranking = rank(&pc, &cur, &labels, (f_lo, f_hi), opts.alpha, &mut not_tried)?;
+        let pc = setting.problem(so_far.cur.effects.clone());
+        let ranking = rank(
+            &pc,
+            &so_far.cur,
+            &labels,
+            (f_lo, f_hi),
+            opts.alpha,
+            &mut not_tried,
+        )?;
         progress(&format!(
             "ranked {} candidates; best: {}",
             ranking.scored.len(),
@@ -556,7 +581,7 @@ pub fn diagnose(
                 .map(|s| ranking.candidates[s.candidate].describe())
                 .unwrap_or_default()
         ));
-        let screened = screen_leading(setting, &cur, &ranking);
+        let screened = screen_leading(setting, &so_far.cur, &ranking);
         timing.ranking += t.elapsed().as_secs_f64();
         let t = std::time::Instant::now();
         let Refitted {
@@ -566,7 +591,7 @@ pub fn diagnose(
             contenders,
         } = refit_leading(
             setting,
-            &cur,
+            &so_far.cur,
             Leading {
                 ranking: &ranking,
                 screened: &screened,
@@ -592,8 +617,9 @@ pub fn diagnose(
             let swapped = swap_accepted(
                 setting,
                 ranking.level(),
-                (&mut cur, &mut accepted),
-                (&mut round, &mut swap_tried),
+                &mut so_far,
+                &mut round,
+                &mut swap_tried,
                 progress,
             );
             timing.swaps += t.elapsed().as_secs_f64();
@@ -607,12 +633,15 @@ pub fn diagnose(
         };
         progress(&format!("accepted: {}", refits[i].effect));
         let level = ranking.level();
-        let chosen = (refits[i].clone(), next);
         after_acceptance(
             setting,
             level,
-            (chosen, &contenders),
-            (&mut cur, &mut accepted),
+            Chosen {
+                refit: refits[i].clone(),
+                next,
+                contenders: &contenders,
+            },
+            &mut so_far,
             &mut round,
             progress,
         );
@@ -620,8 +649,12 @@ pub fn diagnose(
     }
     let mut d = final_fit(
         setting,
-        cur,
-        (before, rounds, accepted, not_tried),
+        so_far,
+        Record {
+            before,
+            rounds,
+            not_tried,
+        },
         progress,
     )?;
     timing.other = clock.elapsed().as_secs_f64()
@@ -634,17 +667,16 @@ pub fn diagnose(
     Ok(d)
 }
 
-/// The diagnosis at the final fit `cur`: the residual analysis after, the accepted effects'
-/// values and errors there (a later effect or a removal moved them), the final model.
+/// The diagnosis at the final fit: the residual analysis after, the accepted effects' values
+/// and errors there (a later effect or a removal moved them), the final model.
 fn final_fit(
     setting: Setting,
-    cur: Current,
-    (before, rounds, mut accepted, not_tried): (
-        ResidualAnalysis,
-        Vec<Round>,
-        Vec<Refit>,
-        Vec<NotTried>,
-    ),
+    Diagnosed { cur, mut accepted }: Diagnosed,
+    Record {
+        before,
+        rounds,
+        not_tried,
+    }: Record,
     progress: &mut dyn FnMut(&str),
 ) -> Result<Diagnosis, DiagnoseError> {
     let Setting { opts, f_hi, .. } = setting;

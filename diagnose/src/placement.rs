@@ -15,6 +15,21 @@ use super::tuning::{
 use super::*;
 use identify::stats::chi2_tail;
 
+/// A fit without an effect (`base`) and with it (`fixed`, the effect last in its effects).
+#[derive(Clone, Copy)]
+pub(super) struct EffectFits<'a> {
+    pub(super) base: &'a Current,
+    pub(super) fixed: &'a Current,
+}
+
+/// The refit a round accepted, the fit with its effect, and every member refit the round could
+/// have accepted (for the effect's look-alikes).
+pub(super) struct Chosen<'a> {
+    pub(super) refit: Refit,
+    pub(super) next: Current,
+    pub(super) contenders: &'a [Contender],
+}
+
 /// The steps after a round accepts the refit `chosen` (with its fit `next`) on the fit `cur`
 /// with the effects `accepted` so far: a point mass or resonator moved to the body where it fits
 /// best ([`relocate`]) and the effect's place refined ([`place`]), then added to `accepted` and
@@ -25,11 +40,16 @@ use identify::stats::chi2_tail;
 pub(super) fn after_acceptance(
     setting: Setting,
     level: Level,
-    ((mut chosen, mut next), contenders): ((Refit, Current), &[Contender]),
-    (cur, accepted): (&mut Current, &mut Vec<Refit>),
+    Chosen {
+        refit: mut chosen,
+        mut next,
+        contenders,
+    }: Chosen,
+    so_far: &mut Diagnosed,
     round: &mut Round,
     progress: &mut dyn FnMut(&str),
 ) {
+    let cur = &so_far.cur;
     let own = next.effects.last().cloned();
     // A spring is not moved here: see `relocate_earlier`.
     let places = own
@@ -37,7 +57,15 @@ pub(super) fn after_acceptance(
         .map_or_else(Vec::new, |e| points(setting.model, e));
     // The family members the data cannot tell from the effect stand for its own place.
     let mut equivalent = std::mem::take(&mut chosen.equivalent);
-    if let Some((moved, better)) = relocate(setting, level, (cur, &next), &places) {
+    if let Some((moved, better)) = relocate(
+        setting,
+        level,
+        EffectFits {
+            base: cur,
+            fixed: &next,
+        },
+        &places,
+    ) {
         progress(&format!(
             "moved: {} → {} (J {:.1} → {:.1})",
             chosen.effect, moved.effect, chosen.criterion_after, moved.criterion_after
@@ -46,7 +74,15 @@ pub(super) fn after_acceptance(
         (chosen, next) = (moved, better);
         equivalent.clear();
     }
-    if let Some((placed, better)) = place(setting, level, (cur, &next), &chosen) {
+    if let Some((placed, better)) = place(
+        setting,
+        level,
+        EffectFits {
+            base: cur,
+            fixed: &next,
+        },
+        &chosen,
+    ) {
         let params: Vec<String> = placed.params.iter().map(ParamEstimate::describe).collect();
         progress(&format!("placed: {}", params.join(", ")));
         round.placed = Some(placed.clone());
@@ -57,10 +93,10 @@ pub(super) fn after_acceptance(
         equivalent.extend(more);
     }
     chosen.equivalent = equivalent;
-    accepted.push(chosen);
-    *cur = next;
-    remove_unneeded(setting, level, (cur, accepted), round, progress);
-    relocate_earlier(setting, level, (cur, accepted), round, progress);
+    so_far.accepted.push(chosen);
+    so_far.cur = next;
+    remove_unneeded(setting, level, so_far, round, progress);
+    relocate_earlier(setting, level, so_far, round, progress);
 }
 
 /// Backward elimination after an acceptance: drops, one at a time, every earlier effect the
@@ -68,7 +104,7 @@ pub(super) fn after_acceptance(
 fn remove_unneeded(
     setting: Setting,
     level: Level,
-    (cur, accepted): (&mut Current, &mut Vec<Refit>),
+    Diagnosed { cur, accepted }: &mut Diagnosed,
     round: &mut Round,
     progress: &mut dyn FnMut(&str),
 ) {
@@ -101,7 +137,7 @@ fn remove_unneeded(
 fn relocate(
     setting: Setting,
     Level { sigma2, threshold }: Level,
-    (base, fixed): (&Current, &Current),
+    EffectFits { base, fixed }: EffectFits,
     places: &[(Effect, bool)],
 ) -> Option<(Refit, Current)> {
     let f_hi = setting.f_hi;
@@ -335,7 +371,7 @@ fn lines_of_action(model: &Model, effect: &Effect) -> Vec<(Effect, bool)> {
 fn relocate_earlier(
     setting: Setting,
     level: Level,
-    (cur, accepted): (&mut Current, &mut [Refit]),
+    Diagnosed { cur, accepted }: &mut Diagnosed,
     round: &mut Round,
     progress: &mut dyn FnMut(&str),
 ) {
@@ -356,10 +392,26 @@ fn relocate_earlier(
         };
         let last: Vec<usize> = (0..n).filter(|&j| j != k).chain([k]).collect();
         let fixed = reordered(cur, &last, f_hi);
-        let Some((mut moved, mut next)) = relocate(setting, level, (&base, &fixed), &places) else {
+        let Some((mut moved, mut next)) = relocate(
+            setting,
+            level,
+            EffectFits {
+                base: &base,
+                fixed: &fixed,
+            },
+            &places,
+        ) else {
             continue;
         };
-        if let Some(placed) = place(setting, level, (&base, &next), &moved) {
+        if let Some(placed) = place(
+            setting,
+            level,
+            EffectFits {
+                base: &base,
+                fixed: &next,
+            },
+            &moved,
+        ) {
             (moved, next) = placed;
         }
         progress(&format!(
@@ -384,7 +436,7 @@ fn relocate_earlier(
 pub(super) fn place(
     setting: Setting,
     Level { sigma2, threshold }: Level,
-    (base, fixed): (&Current, &Current),
+    EffectFits { base, fixed }: EffectFits,
     accepted: &Refit,
 ) -> Option<(Refit, Current)> {
     let Setting { model, f_hi, .. } = setting;

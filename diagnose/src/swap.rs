@@ -4,7 +4,7 @@
 //! another kind (a spring between the two bodies an SDE joins for that SDE's missing stiffness)
 //! can only be put right by a swap.
 
-use super::placement::{place, put_back, refitted_without};
+use super::placement::{place, put_back, refitted_without, EffectFits};
 use super::round::{
     add_new, critical, extended, fresh_start, in_parallel, margin, refit, short_refit, tied,
     unidentifiable, with_effect,
@@ -30,8 +30,9 @@ use super::*;
 pub(super) fn swap_accepted(
     setting: Setting,
     level: Level,
-    (cur, accepted): (&mut Current, &mut [Refit]),
-    (round, tried): (&mut Round, &mut Vec<String>),
+    Diagnosed { cur, accepted }: &mut Diagnosed,
+    round: &mut Round,
+    tried: &mut Vec<String>,
     progress: &mut dyn FnMut(&str),
 ) -> bool {
     let f_hi = setting.f_hi;
@@ -50,12 +51,29 @@ pub(super) fn swap_accepted(
         let Some(base) = refitted_without(setting, cur, k) else {
             continue;
         };
-        let (swap, alike) = best_alternative(setting, level, (&base, cur, k), &alternatives);
+        let (swap, alike) = best_alternative(
+            setting,
+            level,
+            EffectFits {
+                base: &base,
+                fixed: cur,
+            },
+            k,
+            &alternatives,
+        );
         let Some((mut by, mut next)) = swap else {
             add_new(&mut earlier.equivalent, alike);
             continue;
         };
-        if let Some(placed) = place(setting, level, (&base, &next), &by) {
+        if let Some(placed) = place(
+            setting,
+            level,
+            EffectFits {
+                base: &base,
+                fixed: &next,
+            },
+            &by,
+        ) {
             (by, next) = placed;
         }
         progress(&format!(
@@ -86,7 +104,8 @@ pub(super) fn swap_accepted(
 fn best_alternative(
     setting: Setting,
     Level { sigma2, threshold }: Level,
-    (base, fixed, k): (&Current, &Current, usize),
+    EffectFits { base, fixed }: EffectFits,
+    k: usize,
     alternatives: &[Effect],
 ) -> (Option<(Refit, Current)>, Vec<Effect>) {
     let Setting { vars, f_hi, .. } = setting;
