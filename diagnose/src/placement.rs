@@ -159,7 +159,7 @@ fn relocate(
         let mut p = extended(setting, base, cand);
         let params = cand.params(f_hi);
         let u0 = with_effect(&base.u, &params, &values_of(cand));
-        short_refit(setting, &mut p, [u0], (params.len(), max_iterations)).map(|(j, _)| j)
+        short_refit(setting, &mut p, [u0], params.len(), max_iterations).map(|(j, _)| j)
     });
     let own_j = places
         .iter()
@@ -175,9 +175,9 @@ fn relocate(
     better.truncate(RELOCATIONS_REFITTED);
     let (r, next) = in_parallel(&better, |(_, cand)| {
         let start = values_of(cand);
-        let (r, next) = refit(setting, base, cand, (&start, Some(&start)), sigma2).ok()?;
+        let (r, next) = refit(setting, base, cand, &start, Some(&start), sigma2).ok()?;
         let params = cand.params(f_hi);
-        unidentifiable(&params, &r.params, (f_hi, threshold))
+        unidentifiable(&params, &r.params, f_hi, threshold)
             .is_none()
             .then_some((r, next))
     })
@@ -512,7 +512,7 @@ pub(super) fn place(
     // The starting places are refitted in parallel.
     let (r, next) = in_parallel(&offsets, |o| {
         let st: Vec<f64> = start.iter().chain(o).copied().collect();
-        refit(setting, base, &cand, (&st, None), sigma2).ok()
+        refit(setting, base, &cand, &st, None, sigma2).ok()
     })
     .into_iter()
     .flatten()
@@ -521,7 +521,7 @@ pub(super) fn place(
     let p = chi2_tail(dof, lr);
     // A place at the edge of its reach, or a size the data cannot tell from zero, is not a
     // placement: the candidate's stays.
-    (p < threshold && unidentifiable(&cand_params, &r.params, (f_hi, threshold)).is_none())
+    (p < threshold && unidentifiable(&cand_params, &r.params, f_hi, threshold).is_none())
         .then_some((r, next))
 }
 

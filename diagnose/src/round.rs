@@ -298,7 +298,7 @@ fn run_jobs(
         })
         .collect();
     let results = in_parallel(&distinct, |&(f, i)| {
-        refit_member(setting, cur, (&jobs[f].members[i], large && i == 0), sigma2)
+        refit_member(setting, cur, &jobs[f].members[i], large && i == 0, sigma2)
     });
     let mut outcomes: Vec<Vec<MemberRefit>> = jobs.iter().map(|_| Vec::new()).collect();
     for ((f, i), r) in distinct.into_iter().zip(results) {
@@ -334,7 +334,7 @@ fn judge_families(
             cur,
             (f_hi, ranking.level()),
         ));
-        let Some(b) = best_member(members, &outcomes, (f_hi, *threshold)) else {
+        let Some(b) = best_member(members, &outcomes, f_hi, *threshold) else {
             if let Some((_, Err(reason))) = outcomes.first() {
                 not_tried.push(NotTried {
                     effect: format!("refit of {}", members[0].effect.describe()),
@@ -361,7 +361,7 @@ fn judge_families(
         let better = best
             .as_ref()
             .is_none_or(|(b, _)| margin(&r, *threshold) > margin(&refits[*b], *threshold));
-        let why = unidentifiable(&cand.params(f_hi), &r.params, (f_hi, *threshold))
+        let why = unidentifiable(&cand.params(f_hi), &r.params, f_hi, *threshold)
             .or_else(|| partial_fix(&r, cur, *sigma2));
         if r.p_value < *threshold {
             match why {
@@ -409,7 +409,7 @@ fn contenders_of(
         .filter(|(i, r)| {
             let params = members[*i].effect.params(f_hi);
             r.p_value < threshold
-                && unidentifiable(&params, &r.params, (f_hi, SWAP_LEVEL)).is_none()
+                && unidentifiable(&params, &r.params, f_hi, SWAP_LEVEL).is_none()
                 && partial_fix(r, cur, sigma2).is_none()
         })
         .map(|(i, r)| Contender {
@@ -737,7 +737,8 @@ pub(super) fn short_refits(
             setting,
             &mut p,
             starts,
-            (params.len(), SHORT_REFIT_ITERATIONS),
+            params.len(),
+            SHORT_REFIT_ITERATIONS,
         )?;
         Some(Screened {
             index: j,
@@ -947,11 +948,12 @@ pub(super) fn in_parallel<J: Sync, R: Send>(jobs: &[J], f: impl Fn(&J) -> R + Sy
 pub(super) fn refit_member(
     setting: Setting,
     cur: &Current,
-    (member, explore): (&Member, bool),
+    member: &Member,
+    explore: bool,
     sigma2: f64,
 ) -> Result<(Refit, Current), RefitError> {
     let step = explore.then_some(member.score_step.as_slice());
-    refit(setting, cur, member.effect, (&member.start, step), sigma2)
+    refit(setting, cur, member.effect, &member.start, step, sigma2)
 }
 
 /// The family's refit that stands for it: the one whose likelihood ratio stands furthest above
@@ -963,7 +965,8 @@ pub(super) fn refit_member(
 pub(super) fn best_member(
     members: &[Member],
     outcomes: &[MemberRefit],
-    (f_hi, threshold): (f64, f64),
+    f_hi: f64,
+    threshold: f64,
 ) -> Option<usize> {
     let ok = || {
         outcomes
@@ -974,12 +977,7 @@ pub(super) fn best_member(
     let m = |(_, r): (usize, &Refit)| margin(r, threshold);
     let (_, highest) = ok().max_by(|a, b| m(a.1).total_cmp(&m(b.1)))?;
     let unphysical = |(i, r): (usize, &Refit)| {
-        unidentifiable(
-            &members[i].effect.params(f_hi),
-            &r.params,
-            (f_hi, threshold),
-        )
-        .is_some()
+        unidentifiable(&members[i].effect.params(f_hi), &r.params, f_hi, threshold).is_some()
     };
     ok().filter(|(_, x)| indistinguishable(x.1, highest.1, threshold))
         .min_by(|a, b| {
@@ -1129,7 +1127,8 @@ pub(super) fn excess_removed((before, after): (f64, f64), dof: f64, sigma2: f64)
 pub(super) fn unidentifiable(
     params: &[EffectParam],
     est: &[ParamEstimate],
-    (f_hi, threshold): (f64, f64),
+    f_hi: f64,
+    threshold: f64,
 ) -> Option<String> {
     let z_min = size_z(threshold);
     for (j, (np, pe)) in params.iter().zip(est).enumerate() {
@@ -1228,7 +1227,8 @@ pub(super) fn refit(
     setting: Setting,
     cur: &Current,
     cand: &Effect,
-    (start, explore): (&[f64], Option<&[f64]>),
+    start: &[f64],
+    explore: Option<&[f64]>,
     sigma2: f64,
 ) -> Result<(Refit, Current), RefitError> {
     let Setting {
@@ -1360,7 +1360,8 @@ pub(super) fn short_refit(
     setting: Setting,
     p: &mut Problem,
     starts: impl IntoIterator<Item = DVector<f64>>,
-    (q, max_iterations): (usize, usize),
+    q: usize,
+    max_iterations: usize,
 ) -> Option<(f64, Vec<f64>)> {
     let fit = &setting.opts.identification;
     let settings = optimize::Settings {
@@ -1730,13 +1731,13 @@ mod tests {
                 estimate("f", "Hz", f, 0.2 * f),
             ]
         };
-        let why = unidentifiable(&params, &at(450.0), (400.0, 1e-5))
+        let why = unidentifiable(&params, &at(450.0), 400.0, 1e-5)
             .expect("a resonance above the band is not identified");
         assert!(
             why.contains("above the band") && why.contains("400 Hz"),
             "{why}"
         );
-        assert_eq!(unidentifiable(&params, &at(350.0), (400.0, 1e-5)), None);
+        assert_eq!(unidentifiable(&params, &at(350.0), 400.0, 1e-5), None);
     }
 
     /// The share of the misfit above the noise level an effect removes: 100 lines at σ̂² = 1

@@ -119,7 +119,7 @@ fn best_alternative(
             &params,
             vars,
         );
-        short_refit(setting, &mut p, [u], (params.len(), SWAP_ITERATIONS))
+        short_refit(setting, &mut p, [u], params.len(), SWAP_ITERATIONS)
     });
     let fixed_j = 0.5 * fixed.e.norm_squared();
     let window = fixed_j + 0.5 * LOOK_ALIKE_WINDOW * sigma2;
@@ -132,9 +132,9 @@ fn best_alternative(
     better.sort_by(|a, b| a.0.total_cmp(&b.0));
     better.truncate(SWAPS_REFITTED);
     let refitted: Vec<(Refit, Current, &Effect)> = in_parallel(&better, |(_, start, cand)| {
-        let (r, next) = refit(setting, base, cand, (start, Some(start)), sigma2).ok()?;
+        let (r, next) = refit(setting, base, cand, start, Some(start), sigma2).ok()?;
         let params = cand.params(f_hi);
-        unidentifiable(&params, &r.params, (f_hi, SWAP_LEVEL))
+        unidentifiable(&params, &r.params, f_hi, SWAP_LEVEL)
             .is_none()
             .then_some((r, next, *cand))
     })
