@@ -196,7 +196,10 @@ pub(super) fn refit_leading(
     // the misfit is small but above the noise level, the joint-damping splits get short refits
     // (see [`Short::DampingSplits`]).
     let m = cur.e.len();
-    let large = cur.e.norm_squared() / sigma2 > LARGE_MISFIT * m as f64;
+    // "Large" and "above the noise" are judged against R's level when it is known, against the
+    // data's own when R is known only up to scale (`noise.rs`: σ̂² would make every reduced χ² 1).
+    let gate = noise::gate_level(setting.data_noise, *sigma2);
+    let large = cur.e.norm_squared() / gate > LARGE_MISFIT * m as f64;
     let base_j = 0.5 * cur.e.norm_squared();
     let mut jobs = refit_jobs(ranking, screened, opts.refit, f_hi);
     let run = |jobs: &[Job]| -> Vec<Vec<MemberRefit>> {
@@ -241,7 +244,7 @@ pub(super) fn refit_leading(
     // for the noise level, the escalation below is skipped and a partial fix stands in for the
     // missing effect.
     let dof = m.saturating_sub(cur.u.len() + 1).max(1) as f64;
-    let above_noise = |j: f64| chi2_tail(dof, 2.0 * j / sigma2) < opts.alpha;
+    let above_noise = |j: f64| chi2_tail(dof, 2.0 * j / gate) < opts.alpha;
     if large && above_noise(least(&outcomes)) {
         let more = kind_jobs(ranking, screened, &jobs, base_j, f_hi);
         if !more.is_empty() {
