@@ -84,12 +84,12 @@ pub(crate) const NOISE_MIN_PSEUDO_RESIDUALS: usize = 20;
 /// structure's fit: the sensors' and the force gauge's masses, modes outside the model and
 /// nonlinearity keep a model of the right form tens of times above it, and judged against the
 /// noise alone every misfit counts as large and every round runs the batches meant for a large
-/// missing effect (the three-storey example's diagnosis, same answer, took 3× the CPU time).
-/// Measured on that set (`docs/real-structure.md`, §8): noise 1.2 % (0.11 dB) in log-amplitude;
+/// missing effect (on the three-storey example: 3× the CPU time for the same answer).
+/// Measured on that set (`docs/real-structure.md`, §8): noise 1.25 % (0.11 dB) in log-amplitude;
 /// the right form's fit 28× it (3.09 dB, reduced χ² 0.4 against this floor: not large, not
-/// above it); a storey held 10× too stiff 93× (10.1 dB, reduced χ² 4.3: large). 45 lies midway
-/// (geometrically) between where the first would count as above the floor and the second would
-/// stop counting as large.
+/// above it); a storey held 10× too stiff 93× (10.1 dB, reduced χ² 4.3: large). The first would
+/// count as above the floor below a factor of 28, the second would stop counting as large above
+/// 66; 45 lies near their geometric middle (43). Calibrated on that one real set.
 pub(crate) const REAL_FLOOR_OVER_NOISE: f64 = 45.0;
 
 /// Candidates of each kind given a short refit (see [`short_refits`]): as many distinct scores.
