@@ -443,7 +443,11 @@ fn on_real_data_a_storey_held_ten_times_too_stiff_is_the_first_effect_found() {
     let storey2 =
         "point = \"0 0 290.95 mm\"\naxes = [[1, 0, 0], [0, 1, 0], [0, 0, 1]]\nk = [\"52.5 kN/m\"";
     let held = storey2.replace("52.5 kN/m", "525 kN/m");
-    let (d, out) = diagnose_variant((storey2, &held), Some("k storey 2"), &["--max-effects", "1"]);
+    let (d, out) = diagnose_variant(
+        (storey2, &held),
+        Some("k storey 2"),
+        &["--max-effects", "1"],
+    );
     let (effect, ..) = first_added(&d);
     assert!(
         effect.starts_with("SDE storey 2: along axis 1 held at")

@@ -101,8 +101,9 @@ fn pseudo_residuals(f: &[f64], y: &[f64], sigma: &[f64]) -> Vec<f64> {
             let a = (f[i + 1] - f[i]) / span;
             let b = 1.0 - a;
             let d = a * y[i - 1] + b * y[i + 1] - y[i];
-            let s = (a * a * sigma[i - 1].powi(2) + b * b * sigma[i + 1].powi(2) + sigma[i].powi(2))
-                .sqrt();
+            let s =
+                (a * a * sigma[i - 1].powi(2) + b * b * sigma[i + 1].powi(2) + sigma[i].powi(2))
+                    .sqrt();
             let e = d / s;
             e.is_finite().then_some(e)
         })
