@@ -187,6 +187,55 @@ mod tests {
         assert!(ms > 50.0, "{ms}");
     }
 
+    /// The criterion of FWD-32J's log-amplitude data with multiplicative noise `rel`
+    /// (`|z| = |q|(1 + rel·n)`) at 400 lines over 20-400 Hz, under the noise model `noise`.
+    fn fwd32j_criterion(rel: f64, noise: identify::NoiseChoice) -> Criterion {
+        let model = crate::test_support::fwd32j();
+        let lines = identify::synthetic::log_lines(20.0, 400.0, 400);
+        let mut n = normals(lines.len() * model.outputs.len(), 5).into_iter();
+        let mut d =
+            identify::synthetic::amplitude_data(&model, &lines, rel, || n.next().unwrap_or(0.0))
+                .unwrap();
+        if !matches!(noise, identify::NoiseChoice::Variance) {
+            for c in &mut d.characteristics {
+                c.variance = None;
+            }
+        }
+        let obs = identify::data::validate(&d, &model, "synthetic").unwrap();
+        let vars = identify::Variables {
+            origin: "none".into(),
+            vars: Vec::new(),
+            extra_starts: Vec::new(),
+        };
+        Criterion::new(
+            &model,
+            &obs,
+            &vars,
+            FitKind::LogAmplitude,
+            noise,
+            rfe::frf::Method::Auto,
+        )
+        .unwrap()
+    }
+
+    #[test]
+    fn a_machine_s_curves_give_their_noise_in_the_criterion_s_units() {
+        // 2 % noise on the amplitudes, R assumed at 1 %: the unknown scale is 2² = 4, though the
+        // curves hold FWD-32J's resonances.
+        let crit = fwd32j_criterion(0.02, identify::NoiseChoice::Relative(0.01));
+        let level = data_level(&crit).unwrap();
+        eprintln!("FWD-32J, 2 % noise at R's 1 %: level {level:.3} (4 expected)");
+        assert!((level / 4.0 - 1.0).abs() < 0.15, "{level}");
+        // With R known there is no level to estimate: the gates keep σ̂² = 1.
+        let known = fwd32j_criterion(0.02, identify::NoiseChoice::Variance);
+        assert_eq!(data_level(&known), None);
+        assert_eq!(gate_level(None, 1.0), 1.0);
+        assert_eq!(
+            gate_level(Some(level), 1.0),
+            REAL_FLOOR_OVER_NOISE.powi(2) * level
+        );
+    }
+
     #[test]
     fn too_few_lines_give_no_level() {
         let mut eps = vec![1.0; NOISE_MIN_PSEUDO_RESIDUALS - 1];
