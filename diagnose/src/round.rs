@@ -196,8 +196,9 @@ pub(super) fn refit_leading(
     // the misfit is small but above the noise level, the joint-damping splits get short refits
     // (see [`Short::DampingSplits`]).
     let m = cur.e.len();
-    // "Large" and "above the noise" are judged against R's level when it is known, against the
-    // data's own when R is known only up to scale (`noise.rs`: σ̂² would make every reduced χ² 1).
+    // "Large" and "above the noise" are judged against R's level when it is known; when R is
+    // known only up to scale (σ̂² would make every reduced χ² 1), against the data's own noise
+    // level times the floor a real structure's model leaves above it (`noise.rs`).
     let gate = noise::gate_level(setting.data_noise, *sigma2);
     let large = cur.e.norm_squared() / gate > LARGE_MISFIT * m as f64;
     let base_j = 0.5 * cur.e.norm_squared();
