@@ -31,7 +31,7 @@
 //! between adjacent lines (overlapping windows, leakage) makes neighbours alike and the level
 //! low; a low level only makes a misfit count as large sooner (the diagnosis explores more, it
 //! does not miss an effect). Data with no scatter at all (noiseless simulated curves) have no
-//! level: the gate then falls back to the fit's σ̂², as before.
+//! level: the gates then use the fit's σ̂².
 
 use identify::{Criterion, FitKind};
 
