@@ -303,11 +303,12 @@ fn all_three_hammer_positions_are_fitted_together_and_the_modal_start_uses_one_r
 }
 
 /// `ident diagnose` on the example's data with a variant of the example's model and variables
-/// (`edit` changes the model's text, `drop_var` removes a variable); the diagnosis's JSON and
-/// the run's output.
+/// (`edit` changes the model's text, `drop_var` removes a variable) and `extra` flags; the
+/// diagnosis's JSON and the run's output.
 fn diagnose_variant(
     edit: (&str, &str),
     drop_var: Option<&str>,
+    extra: &[&str],
 ) -> (serde_json::Value, std::process::Output) {
     let dir = tempfile::tempdir().unwrap();
     let ex = root().join("examples/real-three-storey");
@@ -338,7 +339,7 @@ fn diagnose_variant(
         &model_file,
         (&data, &ex.join("map.toml")),
         &vars_file,
-        &["--band", "3:40", "--json", p(&json_file)],
+        &[&["--band", "3:40", "--json", p(&json_file)][..], extra].concat(),
     );
     // Exit 1: the diagnosis ends with the model not explaining the data to its noise level
     // (the example's model form lacks effects of its own, docs/real-structure.md §8).
@@ -358,6 +359,26 @@ fn first_added(d: &serde_json::Value) -> (&str, f64, f64, &serde_json::Value) {
     )
 }
 
+/// The refit of the first round that accepted an effect: its effect, RMS dB before and after, and
+/// its first parameter as estimated when it was added (the accepted list gives each effect's
+/// estimate at the final fit, which moves with the effects added after it).
+fn first_refit(d: &serde_json::Value) -> (&str, f64, f64, &serde_json::Value) {
+    let round = d["rounds"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|r| r["accepted"].is_u64())
+        .unwrap();
+    let r = &round["refits"][round["accepted"].as_u64().unwrap() as usize];
+    let db = |k: &str| r[k].as_f64().unwrap();
+    (
+        r["effect"].as_str().unwrap(),
+        db("rms_db_before"),
+        db("rms_db_after"),
+        &r["params"][0],
+    )
+}
+
 #[test]
 fn on_real_data_a_storey_held_too_stiff_is_freed_to_the_independent_fit_s_stiffness() {
     // The model form a user gets wrong: storey 2's sway held (no variable) at 3x the legs'
@@ -367,15 +388,17 @@ fn on_real_data_a_storey_held_too_stiff_is_freed_to_the_independent_fit_s_stiffn
     let storey2 =
         "point = \"0 0 290.95 mm\"\naxes = [[1, 0, 0], [0, 1, 0], [0, 0, 1]]\nk = [\"52.5 kN/m\"";
     let held = storey2.replace("52.5 kN/m", "157.5 kN/m");
-    let (d, out) = diagnose_variant((storey2, &held), Some("k storey 2"));
-    let (effect, before, after, c) = first_added(&d);
+    let (d, out) = diagnose_variant((storey2, &held), Some("k storey 2"), &[]);
+    let (effect, ..) = first_added(&d);
     assert!(
         effect.starts_with("SDE storey 2: along axis 1 held at")
             && effect.ends_with("made compliant"),
         "first added: {effect}\n{}",
         text(&out)
     );
-    // The compliance in series with the held 157.5 kN/m.
+    let (refitted, before, after, c) = first_refit(&d);
+    assert_eq!(refitted, effect);
+    // The compliance in series with the held 157.5 kN/m, when it was added.
     let k = 1.0 / (1.0 / 157.5e3 + c["value"].as_f64().unwrap());
     let dir = tempfile::tempdir().unwrap();
     let reference = reference_fit(&dir.path().join("reference.json"));
@@ -396,7 +419,7 @@ fn on_real_data_a_floor_mass_written_30_percent_low_is_the_first_effect_found() 
     // mass absorbs what the model form lacks: §8 of docs/real-structure.md), with its gain in dB.
     let floor2 = "name = \"floor 2\"\nmass = \"5.201 kg\"";
     let light = floor2.replace("5.201", "3.64");
-    let (d, out) = diagnose_variant((floor2, &light), None);
+    let (d, out) = diagnose_variant((floor2, &light), None, &[]);
     let (effect, before, after, m) = first_added(&d);
     assert!(
         effect.starts_with("floor 2's mass off"),
@@ -407,4 +430,45 @@ fn on_real_data_a_floor_mass_written_30_percent_low_is_the_first_effect_found() 
     eprintln!("floor 2: {m:.3} kg (source 5.201 kg); RMS {before:.2} → {after:.2} dB");
     assert!((m / 5.201 - 1.0).abs() < 0.1, "{m} kg");
     assert!(before - after > 0.5, "{before} → {after} dB");
+}
+
+#[test]
+fn on_real_data_a_storey_held_ten_times_too_stiff_is_the_first_effect_found() {
+    // Storey 2's sway held (no variable) at 10x the legs' arithmetic, 525 kN/m: the base fit lies
+    // 10 dB off with the third storey mode outside the band, far above the floor the data's own
+    // noise level sets for a misfit to count as large (the relative-error default: R known only
+    // up to scale), so the batches for a large missing effect run and find the held direction
+    // first, at the right form's stiffness and RMS error (the independent scipy fit's). One
+    // effect: the first is what is checked.
+    let storey2 =
+        "point = \"0 0 290.95 mm\"\naxes = [[1, 0, 0], [0, 1, 0], [0, 0, 1]]\nk = [\"52.5 kN/m\"";
+    let held = storey2.replace("52.5 kN/m", "525 kN/m");
+    let (d, out) = diagnose_variant(
+        (storey2, &held),
+        Some("k storey 2"),
+        &["--max-effects", "1"],
+    );
+    let (effect, ..) = first_added(&d);
+    assert!(
+        effect.starts_with("SDE storey 2: along axis 1 held at")
+            && effect.ends_with("made compliant"),
+        "first added: {effect}\n{}",
+        text(&out)
+    );
+    let (refitted, before, after, c) = first_refit(&d);
+    assert_eq!(refitted, effect);
+    let dir = tempfile::tempdir().unwrap();
+    let reference = reference_fit(&dir.path().join("reference.json"));
+    let right_form_db = reference["rms_db_overall"].as_f64().unwrap();
+    // The compliance in series with the held 525 kN/m, when it was added: the right form's
+    // stiffness.
+    let k = 1.0 / (1.0 / 525e3 + c["value"].as_f64().unwrap());
+    let k_ref = reference["estimates"]["k storey 2"].as_f64().unwrap();
+    eprintln!("storey 2 held 10x: freed to {k:.0} N/m (scipy, right form: {k_ref:.0} N/m); RMS {before:.2} → {after:.2} dB (right form {right_form_db:.2} dB)");
+    assert!((k / k_ref - 1.0).abs() < 0.05, "{k} vs {k_ref} N/m");
+    assert!(before > 9.0, "the held storey's fit: {before} dB");
+    assert!(
+        after < 1.05 * right_form_db,
+        "{before} → {after} dB vs {right_form_db}"
+    );
 }

@@ -72,6 +72,7 @@ pub mod effects;
 pub mod final_model;
 pub mod generate;
 pub mod lowrank;
+mod noise;
 mod placement;
 pub mod problem;
 pub mod request;
@@ -466,6 +467,9 @@ struct Setting<'a> {
     obs: &'a Observations,
     opts: &'a Options,
     f_hi: f64,
+    /// The noise level the data imply (`noise.rs`) when R is known only up to scale: what a
+    /// misfit is judged "large" and "above the noise" against.
+    data_noise: Option<f64>,
 }
 
 impl<'a> Setting<'a> {
@@ -537,18 +541,23 @@ pub fn diagnose(
         unit: "s",
         ..Timing::default()
     };
-    let setting = Setting {
+    let mut setting = Setting {
         model,
         vars,
         obs,
         opts,
         f_hi,
+        data_noise: None,
     };
     let mut p0 = setting.problem(Vec::new());
+    setting.data_noise = noise::data_level(&p0.criterion(&p0.realize(&[])?)?);
     let (cur, base) = base_fit((model, vars, obs), &mut p0, id, opts, progress)?;
     timing.base_fit = clock.elapsed().as_secs_f64();
     let before = analysis(&p0, &cur, opts)?;
     progress(&format!("before: {}", before.verdict));
+    if let Some(s2) = setting.data_noise {
+        progress(&format!("noise level the data imply (R known up to scale): {:.2}× the assumed relative error in RMS", s2.sqrt()));
+    }
 
     let mut rounds = Vec::new();
     let mut so_far = Diagnosed {

@@ -194,15 +194,12 @@ pub(super) fn refit_leading(
     not_tried: &mut Vec<NotTried>,
     progress: &mut dyn FnMut(&str),
 ) -> Refitted {
-    let sigma2 = leading.ranking.sigma2;
-    let m = cur.e.len();
-    let large = cur.e.norm_squared() / sigma2 > LARGE_MISFIT * m as f64;
-    let escalation = escalate(setting, cur, leading, large, progress);
+    let escalation = escalate(setting, cur, leading, progress);
     judge_families(setting, cur, leading, escalation, not_tried, progress)
 }
 
 /// The refits of the leading families, escalated while the fit stays above the noise level (χ²
-/// at the diagnosis's level): when the misfit is `large` and their best refit leaves it there,
+/// at the diagnosis's level): when the misfit is large and their best refit leaves it there,
 /// the families of the kinds they leave out are refitted too (see [`kind_jobs`]), and if that
 /// still leaves it there, those whose short refits went lower (see [`short_refits`]). When the
 /// misfit is small but above the noise level, the joint-damping splits get short refits (see
@@ -211,11 +208,16 @@ fn escalate<'r>(
     setting: Setting,
     cur: &Current,
     leading: Leading<'r>,
-    large: bool,
     progress: &mut dyn FnMut(&str),
 ) -> Escalation<'r> {
     let Setting { opts, f_hi, .. } = setting;
     let Leading { ranking, screened } = leading;
+    let m = cur.e.len();
+    // "Large" and "above the noise" are judged against R's level when it is known; when R is
+    // known only up to scale (σ̂² would make every reduced χ² 1), against the data's own noise
+    // level times the floor a real structure's model leaves above it (`noise.rs`).
+    let gate = noise::gate_level(setting.data_noise, ranking.sigma2);
+    let large = cur.e.norm_squared() / gate > LARGE_MISFIT * m as f64;
     let base_j = 0.5 * cur.e.norm_squared();
     let mut jobs = refit_jobs(ranking, screened, opts.refit, f_hi);
     let run = |jobs: &[Job]| run_jobs(setting, cur, jobs, large, ranking.sigma2);
@@ -234,8 +236,8 @@ fn escalate<'r>(
     // test too lenient by p + 1 degrees of freedom: a refit at a reduced χ² near 1.5 can pass
     // for the noise level, the escalation below is skipped and a partial fix stands in for the
     // missing effect.
-    let dof = cur.e.len().saturating_sub(cur.u.len() + 1).max(1) as f64;
-    let above_noise = |j: f64| chi2_tail(dof, 2.0 * j / ranking.sigma2) < opts.alpha;
+    let dof = m.saturating_sub(cur.u.len() + 1).max(1) as f64;
+    let above_noise = |j: f64| chi2_tail(dof, 2.0 * j / gate) < opts.alpha;
     if large && above_noise(least(&outcomes)) {
         let more = kind_jobs(ranking, screened, &jobs, base_j, f_hi);
         if !more.is_empty() {
