@@ -34,7 +34,9 @@ pub struct BaseFit {
 /// converges; when it does not, or the fit does not explain the data (a local minimum explains
 /// nothing either), the best of a [`BASE_STARTS`]-start fit is taken too.
 pub(super) fn base_fit(
-    (model, vars, obs): (&Model, &Variables, &Observations),
+    model: &Model,
+    vars: &Variables,
+    obs: &Observations,
     p0: &mut Problem,
     id: &Identification,
     opts: &Options,

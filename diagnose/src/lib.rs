@@ -551,7 +551,7 @@ pub fn diagnose(
     };
     let mut p0 = setting.problem(Vec::new());
     setting.data_noise = noise::data_level(&p0.criterion(&p0.realize(&[])?)?);
-    let (cur, base) = base_fit((model, vars, obs), &mut p0, id, opts, progress)?;
+    let (cur, base) = base_fit(model, vars, obs, &mut p0, id, opts, progress)?;
     timing.base_fit = clock.elapsed().as_secs_f64();
     let before = analysis(&p0, &cur, opts)?;
     progress(&format!("before: {}", before.verdict));

@@ -89,7 +89,7 @@ pub(super) fn after_acceptance(
         (chosen, next) = (placed, better);
     }
     if let Some(own) = &own {
-        let more = look_alikes(contenders, (&chosen, own), &equivalent, level.threshold);
+        let more = look_alikes(contenders, &chosen, own, &equivalent, level.threshold);
         equivalent.extend(more);
     }
     chosen.equivalent = equivalent;

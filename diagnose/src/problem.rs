@@ -177,7 +177,7 @@ impl<'a> Problem<'a> {
             let mut here = r.model.clone();
             r.vars.apply(&mut here, x);
             (0..gamma.len())
-                .map(|j| self.chain((&here, &r.gains), x, gamma, j))
+                .map(|j| self.chain(&here, &r.gains, x, gamma, j))
                 .collect()
         } else {
             Vec::new()
@@ -262,7 +262,8 @@ impl<'a> Problem<'a> {
     /// parameters.
     fn chain(
         &self,
-        (here, gains): (&Model, &[f64]),
+        here: &Model,
+        gains: &[f64],
         x: &[f64],
         gamma: &[f64],
         j: usize,

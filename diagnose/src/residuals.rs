@@ -158,7 +158,7 @@ fn characteristic_residuals(
         let (_, line, _) = points[i];
         let z = measured[i];
         c.freqs_hz.push(freqs[line]);
-        let q = modelled(crit.fit(), (&points, &measured), e, i);
+        let q = modelled(crit.fit(), &points, &measured, e, i);
         let amp = if complex {
             let d = C64::new(e[i], e[np + i]);
             let unit = if z.norm() > 0.0 {
@@ -197,7 +197,8 @@ fn characteristic_residuals(
 /// the log-amplitude fit `|z| e^{−σe}`; amplitude fits give the amplitude).
 fn modelled(
     fit: FitKind,
-    (points, measured): (&[(usize, usize, f64)], &[C64]),
+    points: &[(usize, usize, f64)],
+    measured: &[C64],
     e: &DVector<f64>,
     i: usize,
 ) -> C64 {
@@ -217,7 +218,7 @@ pub fn rms_db(crit: &Criterion, e: &DVector<f64>) -> f64 {
     let (points, z) = (crit.points(), crit.measured());
     let (mut sum, mut n) = (0.0, 0usize);
     for (i, zi) in z.iter().enumerate() {
-        let q = modelled(crit.fit(), (&points, &z), e, i).norm();
+        let q = modelled(crit.fit(), &points, &z, e, i).norm();
         if zi.norm() > 0.0 && q > 0.0 {
             sum += (20.0 * (q / zi.norm()).log10()).powi(2);
             n += 1;

@@ -259,14 +259,8 @@ fn escalate<'r>(
         None
     };
     if let Some(short) = short {
-        let refined = short_refits(setting, cur, ranking, (screened, &jobs), short);
-        let more = refined_jobs(
-            ranking,
-            (screened, &refined),
-            &jobs,
-            (opts.refit, least),
-            f_hi,
-        );
+        let refined = short_refits(setting, cur, ranking, screened, &jobs, short);
+        let more = refined_jobs(ranking, screened, &refined, &jobs, opts.refit, least, f_hi);
         if !more.is_empty() {
             progress(&format!(
                 "the best refit still leaves J {least:.1}: refitting {} families whose short refits went lower",
@@ -349,7 +343,7 @@ fn judge_families(
             continue;
         };
         let cand = members[i].effect;
-        r.equivalent = equivalents(members, (i, &r), &outcomes, *threshold);
+        r.equivalent = equivalents(members, i, &r, &outcomes, *threshold);
         r.family = family_of(ranking, *family, members[0].effect);
         progress(&format!(
             "refit {}: ΔJ = {:.1}, LR = {:.1}, p = {:.2e}",
@@ -684,7 +678,8 @@ pub(super) fn short_refits(
     setting: Setting,
     cur: &Current,
     ranking: &Ranking,
-    (screened, jobs): (&[Screened], &[Job]),
+    screened: &[Screened],
+    jobs: &[Job],
     short: Short,
 ) -> Vec<Screened> {
     let Setting { vars, f_hi, .. } = setting;
@@ -757,9 +752,11 @@ pub(super) fn short_refits(
 /// `screened`).
 pub(super) fn refined_jobs<'r>(
     ranking: &'r Ranking,
-    (screened, refined): (&[Screened], &[Screened]),
+    screened: &[Screened],
+    refined: &[Screened],
     jobs: &[Job],
-    (n, least): (usize, f64),
+    n: usize,
+    least: f64,
     f_hi: f64,
 ) -> Vec<Job<'r>> {
     let below = refined.iter().filter(|s| s.criterion < least);
@@ -1011,7 +1008,8 @@ pub(super) fn indistinguishable(r: &Refit, best: &Refit, threshold: f64) -> bool
 /// the best.
 pub(super) fn equivalents(
     members: &[Member],
-    (best, refit): (usize, &Refit),
+    best: usize,
+    refit: &Refit,
     others: &[MemberRefit],
     threshold: f64,
 ) -> Vec<Effect> {
@@ -1054,7 +1052,8 @@ pub(super) struct Contender {
 /// and those in `listed`, in the order given.
 pub(super) fn look_alikes(
     contenders: &[Contender],
-    (chosen, own): (&Refit, &Effect),
+    chosen: &Refit,
+    own: &Effect,
     listed: &[Effect],
     threshold: f64,
 ) -> Vec<Effect> {
@@ -1528,7 +1527,7 @@ mod tests {
             contender(vec![resonator("column")], m + 3.85),
         ];
         let listed = [resonator("table")];
-        let alike = look_alikes(&contenders, (&chosen, &own), &listed, threshold);
+        let alike = look_alikes(&contenders, &chosen, &own, &listed, threshold);
         assert_eq!(
             alike,
             vec![
@@ -1700,7 +1699,7 @@ mod tests {
             })
             .collect();
         let families = |least: f64, n: usize| -> Vec<Option<usize>> {
-            refined_jobs(&ranking, (&screened, &refined), &leading, (n, least), 400.0)
+            refined_jobs(&ranking, &screened, &refined, &leading, n, least, 400.0)
                 .iter()
                 .map(|job| job.family)
                 .collect()
@@ -1709,7 +1708,7 @@ mod tests {
         assert_eq!(families(40.0, 1), [Some(3)]);
         assert!(families(10.0, 5).is_empty());
         // The job starts where the short refit ended.
-        let jobs = refined_jobs(&ranking, (&screened, &refined), &leading, (5, 40.0), 400.0);
+        let jobs = refined_jobs(&ranking, &screened, &refined, &leading, 5, 40.0, 400.0);
         assert_eq!(jobs[0].members[0].start, [2.0, 200.0]);
     }
 
