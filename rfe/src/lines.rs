@@ -71,6 +71,16 @@ impl Derivatives {
         }
     }
 
+    /// True when these buffers are sized for `params` parameters of `system` (and can be used
+    /// again for it: every entry a batch reads is written first).
+    pub fn fits(&self, system: &System, params: usize) -> bool {
+        let outputs = system.output_rows.len();
+        self.outputs == outputs
+            && self.re.len() == params * outputs
+            && self.def_re.len() == system.columns()
+            && self.prod_re.len() == system.sdes.len() * outputs
+    }
+
     /// The sum for parameter `p`, output `o` in lane `l`.
     #[inline]
     pub fn at(&self, p: usize, o: usize, l: usize) -> C64 {
@@ -299,6 +309,17 @@ impl Batch {
             x_im: vec![ZERO; cols * n],
             accurate: [false; LANES],
         }
+    }
+
+    /// True when these buffers are sized for `system` (its DOFs and right-hand sides).
+    pub fn fits(&self, system: &System) -> bool {
+        self.n == system.n && self.cols == system.columns()
+    }
+
+    /// Makes a batch sized for `system` ([`Batch::fits`]) ready for it: its pattern. Every
+    /// buffer entry a factorisation or solve reads it writes first, so nothing else is reset.
+    pub fn prepare(&mut self, system: &System) {
+        self.pattern = Pattern::of(system);
     }
 
     /// Factors `A(ω)` and solves for every right-hand side at `freqs_hz` (at most [`LANES`]; unused
