@@ -381,13 +381,18 @@ impl Batch {
         }
     }
 
-    /// Lower triangle of `A(ω)` per lane; returns `max |a_ij|` per lane (max of |re|, |im|).
+    /// Lower triangle of `A(ω)` per lane, in the blocks of the [`Pattern`] (the only ones the
+    /// factorisation reads; the others are zero in `A`); returns `max |a_ij|` per lane (max of
+    /// |re|, |im|).
     #[inline(always)]
     fn fill(&mut self, s: &System, w2: &Lane) -> Lane {
-        let n = self.n;
+        let (n, size) = (self.n, self.size);
+        let blocks = n / size;
         let mut amax = ZERO;
         for i in 0..n {
-            for j in 0..=i {
+            let ib = i / size;
+            let kept = (0..=ib).filter(|&jb| self.pattern.common[ib * blocks + jb].is_some());
+            for j in kept.flat_map(|jb| jb * size..((jb + 1) * size).min(i + 1)) {
                 let (k, d) = (s.k[i * n + j], s.d[i * n + j]);
                 let (re, im) = (&mut self.re[i * n + j], &mut self.im[i * n + j]);
                 for l in 0..LANES {
@@ -531,8 +536,14 @@ impl Batch {
                 &mut self.x_re[c * n..(c + 1) * n],
                 &mut self.x_im[c * n..(c + 1) * n],
             );
-            // L y = b, row by row.
-            for i in 1..n {
+            // L y = b, row by row, from b's first nonzero (y is zero before it; a unit load's
+            // right-hand side has one nonzero).
+            let first = xr
+                .iter()
+                .zip(xi.iter())
+                .position(|(r, i)| r.iter().chain(i).any(|v| *v != 0.0))
+                .unwrap_or(n);
+            for i in first.max(1)..n {
                 let (ib, i0) = (i / size, i / size * size);
                 let (mut ar, mut ai) = (xr[i], xi[i]);
                 let (row_re, row_im) = (&self.re[i * n..i * n + i], &self.im[i * n..i * n + i]);
@@ -540,7 +551,11 @@ impl Batch {
                 dot_sub(
                     &mut ar,
                     &mut ai,
-                    pattern.row[ib].iter().copied().chain([(i0, i)]),
+                    pattern.row[ib]
+                        .iter()
+                        .copied()
+                        .chain([(i0, i)])
+                        .map(|(lo, hi)| (lo.max(first), hi)),
                     0,
                     |k| (&row_re[k], &row_im[k]),
                     |k| (&yr[k], &yi[k]),
