@@ -210,7 +210,11 @@ impl Pattern {
     /// blocks is treated as one dense block.
     fn of(s: &System) -> Pattern {
         let n = s.n;
-        let (size, blocks) = if n % 6 == 0 { (6, n / 6) } else { (n, 1) };
+        let (size, blocks) = if n.is_multiple_of(6) {
+            (6, n / 6)
+        } else {
+            (n, 1)
+        };
         let mut nz = vec![false; blocks * blocks];
         for i in 0..n {
             for j in 0..n {
@@ -297,7 +301,7 @@ impl Batch {
         Batch {
             n,
             cols,
-            size: if n % 6 == 0 { 6 } else { n.max(1) },
+            size: if n.is_multiple_of(6) { 6 } else { n.max(1) },
             pattern: Pattern::of(system),
             re: vec![ZERO; n * n],
             im: vec![ZERO; n * n],
@@ -706,6 +710,35 @@ mod tests {
             worst < 1e-10,
             "largest difference from the pivoted LU: {worst:e} of the largest entry"
         );
+    }
+
+    #[test]
+    fn the_pattern_of_fwd32j_is_its_ring_of_bodies_with_the_fill() {
+        // Column–overarm–spindle head–table–upper saddle–lower saddle–knee–column: a ring of
+        // seven bodies; eliminating in file order fills four more block pairs.
+        let s = fwd32j();
+        let p = Pattern::of(&s);
+        let blocks = s.n / 6;
+        assert_eq!(blocks, 7);
+        let kept = |i: usize, j: usize| p.common[i * blocks + j].is_some();
+        let lower: usize = (0..blocks)
+            .map(|i| (0..=i).filter(|&j| kept(i, j)).count())
+            .sum();
+        assert_eq!(lower, 18, "{:?}", p.row);
+        // Every nonzero entry of K and D lies in a kept block.
+        for i in 0..s.n {
+            for j in 0..=i {
+                if s.k[i * s.n + j] != 0.0 || s.d[i * s.n + j] != 0.0 {
+                    assert!(kept(i / 6, j / 6), "A({i}, {j}) outside the pattern");
+                }
+            }
+        }
+        // The column lists are the row lists transposed.
+        for (j, col) in p.column.iter().enumerate() {
+            for &(lo, _) in col {
+                assert!(p.row[lo / 6].contains(&(6 * j, 6 * j + 6)));
+            }
+        }
     }
 
     #[test]

@@ -310,10 +310,10 @@ impl SdeBlock {
             let side = usize::from(self.bodies[0] != Some(dof / 6));
             side * 6 + dof % 6
         };
-        for row in 0..6 {
+        for (row, (k_row, d_row)) in self.k.iter().zip(dd).enumerate() {
             let taps = &self.taps[self.tap_rows[row]..self.tap_rows[row + 1]];
             for &(_, da, va) in taps {
-                let (ka, dka) = (va * self.k[row], va * dd[row]);
+                let (ka, dka) = (va * k_row, va * d_row);
                 let a = local(da);
                 for &(_, db, vb) in taps {
                     let b = local(db);
