@@ -18,7 +18,7 @@
 //! - [`report`]: the Table-1-like table (text, JSON, CSV) and the updated model (TOML, JSON);
 //! - [`problem`]: the fit problem as JSON for external tools (the Python baseline);
 //! - [`prefit`]: a start from the measured modes (pairing by MAC or frequency, natural
-//!   frequencies matched with analytic eigen-sensitivities);
+//!   frequencies matched with analytic eigen-sensitivities, weighted by their uncertainty);
 //! - [`starts`]: multi-start (Latin hypercube in log-parameter space), distinct optima, warnings
 //!   about ambiguous optima and degenerate corners;
 //! - [`synthetic`]: synthetic measured data from a model (tests, benchmarks);

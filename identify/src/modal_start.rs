@@ -1,8 +1,9 @@
 //! A start for the fit from the measured modes (`--start modal`): the fitted characteristics'
 //! modes are extracted as `ident modes-from-data` does (`process::modal`: pLSCF, stabilization,
 //! automatic selection, LSFD shapes), then [`crate::prefit`] pairs them with the model's modes and
-//! moves the stiffness variables to match their frequencies (and ψ to their loss factors). A mode
-//! whose frequency standard deviation (from the LSCF covariance) exceeds 1 % of it is not matched.
+//! moves the stiffness variables to match their frequencies (and ψ to their loss factors), each
+//! weighted by its standard deviations from the LSCF covariance. A mode whose frequency standard
+//! deviation exceeds 1 % of it is not matched at all.
 
 use process::modal::{self, FrfKind, LscfSettings, ModalData, SelectionSettings};
 use process::C64;
@@ -17,8 +18,11 @@ use crate::variables::Variables;
 const MAX_ORDER: usize = 40;
 
 /// Measured modes whose frequency standard deviation exceeds this fraction of the frequency are
-/// not matched: the pre-fit moves stiffnesses to the measured frequencies, and a frequency known
-/// to a few percent only would move them by as much on no evidence.
+/// not matched. The pre-fit weights each mode by its σf, but weights only decide a compromise:
+/// with as many stiffness variables as paired modes every paired frequency is matched exactly
+/// whatever its weight, and a frequency known to a few percent only would move the stiffnesses by
+/// as much on no evidence. Below 1 % a mode's σf is within the model-form error the weights
+/// already allow for ([`prefit::MODEL_FORM_LOG_FREQ_STD`]).
 const MAX_REL_FREQ_STD: f64 = 0.01;
 
 /// Why no modal start could be made; each names the characteristic or band and what to do.
@@ -124,7 +128,10 @@ pub fn measured_modes(
     Ok(sharp
         .map(|m| MeasuredMode {
             freq_hz: m.pole.freq_hz,
+            freq_std_hz: m.pole.std.map(|s| s.freq_hz),
             loss_factor: Some(2.0 * m.pole.damping_ratio),
+            // η = 2ζ, so σ_η = 2σ_ζ.
+            loss_factor_std: m.pole.std.map(|s| 2.0 * s.damping_ratio),
             shape: rows
                 .as_ref()
                 .map(|rows| rows.iter().map(|&r| m.shape[r]).collect()),
@@ -225,13 +232,30 @@ pub fn modal_start(
         100.0 * (pre.rms_log_freq.1.exp() - 1.0)
     ));
     for p in &pre.pairs {
+        let m = &modes[p.measured];
         note(format!(
-            "measured {:.4} Hz (η {:.4}) <- model {:.4} Hz -> {:.4} Hz{}",
+            "measured {:.4} Hz (η {:.4}) <- model {:.4} Hz -> {:.4} Hz{}; σ(ln f) {:.4} (measured {}), weight {:.3}{}",
             p.measured_hz,
-            modes[p.measured].loss_factor.unwrap_or(f64::NAN),
+            m.loss_factor.unwrap_or(f64::NAN),
             p.model_hz_before,
             p.model_hz_after,
-            p.mac.map(|m| format!(", MAC {m:.3}")).unwrap_or_default()
+            p.mac.map(|m| format!(", MAC {m:.3}")).unwrap_or_default(),
+            p.sigma_log_freq,
+            m.freq_std_hz
+                .map(|s| format!("{:.6}", s / m.freq_hz))
+                .unwrap_or_else(|| "not known".into()),
+            p.weight,
+            match (m.loss_factor_std, p.loss_factor_weight) {
+                (Some(s), Some(w)) => format!("; σ(η) {s:.5}, η weight {w:.3}"),
+                (None, Some(w)) => format!("; η weight {w:.3}"),
+                _ => String::new(),
+            }
+        ));
+    }
+    if let Some(eta) = pre.loss_factor {
+        note(format!(
+            "ψ from the loss factors' weighted mean η {:.5} ± {:.5} (spread between modes {:.5})",
+            eta.value, eta.std_error, eta.between_modes_std
         ));
     }
     for (v, x) in vars.vars.iter().zip(&pre.start) {

@@ -21,7 +21,7 @@ use faer::dyn_stack::{MemBuffer, MemStack, StackReq};
 use faer::linalg::lu::partial_pivoting::{factor, solve};
 use faer::{Mat, Par};
 
-use crate::lines::{Batch, Derivatives, LANES};
+use crate::lines::{Batch, LANES};
 use crate::model::{Model, Param, ParamRef, Quantity};
 use crate::system::{MassScaling, ParamBlock, System};
 use crate::C64;
@@ -637,7 +637,7 @@ impl DirectSolver {
     ) -> Result<(), SolveError> {
         let n = s.n;
         let cols = s.columns();
-        let mut batch = Batch::new(s);
+        let mut batch = scratch::batch(s);
         let mut sol = vec![C64::new(0.0, 0.0); cols * n];
         for (b, chunk) in freqs_hz.chunks(LANES).enumerate() {
             batch.factor_and_solve(s, chunk);
@@ -654,6 +654,7 @@ impl DirectSolver {
             }
             each(b * LANES, &batch)?;
         }
+        scratch::keep_batch(batch);
         Ok(())
     }
 
@@ -686,7 +687,7 @@ impl DirectSolver {
         let lines = out.freqs_hz.len();
         let outputs = quantities.len();
         let used = distinct_blocks(blocks);
-        let mut derivatives = Derivatives::new(s, blocks.len());
+        let mut derivatives = scratch::derivatives(s, blocks.len());
         let Response {
             freqs_hz: freqs,
             values,
@@ -726,7 +727,55 @@ impl DirectSolver {
                 }
             }
             Ok(())
-        })
+        })?;
+        scratch::keep_derivatives(derivatives);
+        Ok(())
+    }
+}
+
+/// The direct path's large buffers, kept per thread between solves: a fit solves the same
+/// system size a hundred times and more, and fresh buffers each time (a third of a megabyte on
+/// FWD-32J) cost the allocator's page faults and zeroing, about a tenth of an evaluation. A
+/// buffer is taken out while a solve uses it (a solve inside another gets its own) and put back
+/// after; one of another size is replaced.
+mod scratch {
+    use std::cell::RefCell;
+
+    use crate::lines::{Batch, Derivatives};
+    use crate::system::System;
+
+    thread_local! {
+        static BATCH: RefCell<Option<Batch>> = const { RefCell::new(None) };
+        static DERIVATIVES: RefCell<Option<Derivatives>> = const { RefCell::new(None) };
+    }
+
+    /// A batch for `s`: the kept one when it fits, else a new one.
+    pub(super) fn batch(s: &System) -> Batch {
+        match BATCH.with(|b| b.borrow_mut().take()) {
+            Some(mut batch) if batch.fits(s) => {
+                batch.prepare(s);
+                batch
+            }
+            _ => Batch::new(s),
+        }
+    }
+
+    /// Keeps `batch` for the next solve on this thread.
+    pub(super) fn keep_batch(batch: Batch) {
+        BATCH.with(|b| *b.borrow_mut() = Some(batch));
+    }
+
+    /// Derivative buffers for `params` parameters of `s`: the kept ones when they fit, else new.
+    pub(super) fn derivatives(s: &System, params: usize) -> Derivatives {
+        match DERIVATIVES.with(|d| d.borrow_mut().take()) {
+            Some(d) if d.fits(s, params) => d,
+            _ => Derivatives::new(s, params),
+        }
+    }
+
+    /// Keeps `d` for the next solve on this thread.
+    pub(super) fn keep_derivatives(d: Derivatives) {
+        DERIVATIVES.with(|k| *k.borrow_mut() = Some(d));
     }
 }
 

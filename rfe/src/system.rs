@@ -297,6 +297,45 @@ impl SdeBlock {
         d
     }
 
+    /// Adds `Tᵀ diag(k) T` to `k` and `Tᵀ diag(ψ k / 2π) T` to `d` (n×n, row-major): per pair of
+    /// the SDE's bodies, `s_a s_b G_aᵀ diag(k) G_b`, summed over the deformation rows from
+    /// the nonzero entries of G only (the taps; SDE axes mostly align with body axes), each
+    /// block's sum formed before it is added.
+    fn add_stiffness(&self, n: usize, k: &mut [f64], d: &mut [f64]) {
+        let dd: [f64; 6] =
+            std::array::from_fn(|i| self.psi[i] / (2.0 * std::f64::consts::PI) * self.k[i]);
+        // Local sums over the two sides' 12 DOFs: side · 6 + DOF of the body.
+        let (mut kl, mut dl) = ([[0.0f64; 12]; 12], [[0.0f64; 12]; 12]);
+        let local = |dof: usize| -> usize {
+            let side = usize::from(self.bodies[0] != Some(dof / 6));
+            side * 6 + dof % 6
+        };
+        for (row, (k_row, d_row)) in self.k.iter().zip(dd).enumerate() {
+            let taps = &self.taps[self.tap_rows[row]..self.tap_rows[row + 1]];
+            for &(_, da, va) in taps {
+                let (ka, dka) = (va * k_row, va * d_row);
+                let a = local(da);
+                for &(_, db, vb) in taps {
+                    let b = local(db);
+                    kl[a][b] += ka * vb;
+                    dl[a][b] += dka * vb;
+                }
+            }
+        }
+        for (sa, ba) in self.bodies.iter().enumerate() {
+            let Some(ba) = *ba else { continue };
+            for (sb, bb) in self.bodies.iter().enumerate() {
+                let Some(bb) = *bb else { continue };
+                for i in 0..6 {
+                    for j in 0..6 {
+                        k[(6 * ba + i) * n + 6 * bb + j] += kl[6 * sa + i][6 * sb + j];
+                        d[(6 * ba + i) * n + 6 * bb + j] += dl[6 * sa + i][6 * sb + j];
+                    }
+                }
+            }
+        }
+    }
+
     fn taps(bodies: &[Option<usize>; 2], g: &[Matrix6<f64>; 2]) -> Vec<(usize, usize, f64)> {
         let mut taps = Vec::new();
         for row in 0..6 {
@@ -393,26 +432,7 @@ impl System {
                 k: sde.law.stiffness(),
                 psi: sde.law.dissipation(),
             };
-            let kd = Vector6::from(block.k);
-            let dd = Vector6::from(std::array::from_fn::<f64, 6, _>(|i| {
-                block.psi[i] / (2.0 * std::f64::consts::PI) * block.k[i]
-            }));
-            for (sa, sign_a) in [(0usize, -1.0), (1, 1.0)] {
-                let Some(ba) = block.bodies[sa] else { continue };
-                for (sb, sign_b) in [(0usize, -1.0), (1, 1.0)] {
-                    let Some(bb) = block.bodies[sb] else { continue };
-                    let ga = &block.g[sa];
-                    let gb = &block.g[sb];
-                    let kab = ga.transpose() * Matrix6::from_diagonal(&kd) * gb * (sign_a * sign_b);
-                    let dab = ga.transpose() * Matrix6::from_diagonal(&dd) * gb * (sign_a * sign_b);
-                    for i in 0..6 {
-                        for j in 0..6 {
-                            k[(6 * ba + i) * n + 6 * bb + j] += kab[(i, j)];
-                            d[(6 * ba + i) * n + 6 * bb + j] += dab[(i, j)];
-                        }
-                    }
-                }
-            }
+            block.add_stiffness(n, &mut k, &mut d);
             sdes.push(block);
         }
         let mut load = vec![0.0; n];
@@ -542,5 +562,54 @@ impl System {
                 Some(ParamBlock { block, coeff })
             })
             .collect()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// `K` and `D` as the sum over the SDEs of `s_a s_b G_aᵀ diag(k) G_b` for every pair of
+    /// their bodies, by whole 6×6 matrix products (the paper's eq. 3.6 as written).
+    fn by_matrix_products(model: &Model) -> (Vec<f64>, Vec<f64>) {
+        let s = System::assemble(model);
+        let n = s.n;
+        let (mut k, mut d) = (vec![0.0; n * n], vec![0.0; n * n]);
+        for b in &s.sdes {
+            let kd = Vector6::from(b.k);
+            let dd = Vector6::from_fn(|i, _| b.psi[i] / (2.0 * std::f64::consts::PI) * b.k[i]);
+            for (sa, sign_a) in [(0usize, -1.0), (1, 1.0)] {
+                let Some(ba) = b.bodies[sa] else { continue };
+                for (sb, sign_b) in [(0usize, -1.0), (1, 1.0)] {
+                    let Some(bb) = b.bodies[sb] else { continue };
+                    let sign = sign_a * sign_b;
+                    let kab = b.g[sa].transpose() * Matrix6::from_diagonal(&kd) * b.g[sb] * sign;
+                    let dab = b.g[sa].transpose() * Matrix6::from_diagonal(&dd) * b.g[sb] * sign;
+                    for i in 0..6 {
+                        for j in 0..6 {
+                            k[(6 * ba + i) * n + 6 * bb + j] += kab[(i, j)];
+                            d[(6 * ba + i) * n + 6 * bb + j] += dab[(i, j)];
+                        }
+                    }
+                }
+            }
+        }
+        (k, d)
+    }
+
+    #[test]
+    fn stiffness_from_the_taps_equals_the_matrix_products() {
+        let model = crate::modelfile::fwd32j();
+        let s = System::assemble(&model);
+        let (k, d) = by_matrix_products(&model);
+        let scale = k.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+        let worst = |a: &[f64], b: &[f64]| {
+            a.iter()
+                .zip(b)
+                .map(|(x, y)| (x - y).abs())
+                .fold(0.0f64, f64::max)
+        };
+        assert!(worst(&s.k, &k) <= 1e-14 * scale);
+        assert!(worst(&s.d, &d) <= 1e-14 * scale);
     }
 }
