@@ -242,8 +242,10 @@ fn jacobian_cost(m: &machine::Machine, case: &blind::BlindCase) {
             .fold(f64::INFINITY, f64::min)
     };
     let (direct, modal) = (time(frf::Method::Direct), time(frf::Method::Modal));
-    let auto = frf::Method::Auto.resolve(
-        m.model.dof_count(),
+    let system = rfe::system::System::assemble(&m.model);
+    let share = rfe::lines::fill_share(&system);
+    let auto = frf::Method::Auto.resolve_for(
+        &system,
         lines.len(),
         frf::Work::Outputs {
             params: params.len(),
@@ -251,7 +253,7 @@ fn jacobian_cost(m: &machine::Machine, case: &blind::BlindCase) {
         },
     );
     println!(
-        "       Jacobian evaluation ({} parameters, {} lines): direct {:.1} ms, modal {:.1} ms; auto takes {auto:?}",
+        "       Jacobian evaluation ({} parameters, {} lines): direct {:.1} ms (fill share {share:.3}), modal {:.1} ms; auto takes {auto:?}",
         params.len(),
         lines.len(),
         1e3 * direct,

@@ -240,6 +240,7 @@ fn escalate<'r>(
     let above_noise = |j: f64| chi2_tail(dof, 2.0 * j / gate) < opts.alpha;
     if large && above_noise(least(&outcomes)) {
         let more = kind_jobs(ranking, screened, &jobs, base_j, f_hi);
+        let more = going_lower(setting, cur, more, least(&outcomes));
         if !more.is_empty() {
             progress(&format!(
                 "the best refit leaves J {:.1}, above the noise level: refitting the best of {} kinds the leading families leave out",
@@ -599,6 +600,43 @@ pub(super) fn kind_jobs<'r>(
         }
     }
     more
+}
+
+/// The `jobs` whose leading member's short refit (from its screen's start and from the
+/// variables' initial values, [`SHORT_REFIT_ITERATIONS`] at most) goes below `least`, the best
+/// refit so far: a kind job only matters if it explains more than the leading families, and a
+/// short refit that cannot get below them tells that at a fraction of a full refit's cost (its
+/// several starts, each to convergence), which on large models is most of a round.
+fn going_lower<'r>(
+    setting: Setting,
+    cur: &Current,
+    jobs: Vec<Job<'r>>,
+    least: f64,
+) -> Vec<Job<'r>> {
+    let Setting { vars, f_hi, .. } = setting;
+    let ends = in_parallel(&jobs, |job| {
+        let leader = job.members.first()?;
+        let mut p = extended(setting, cur, leader.effect);
+        let params = leader.effect.params(f_hi);
+        let starts = screen::effect_starts(&params, &leader.start, true);
+        let starts = starts.iter().map(|x| with_effect(&cur.u, &params, x));
+        let (_, u0) = lowest_start(&mut p, starts)?;
+        let fresh = fresh_start(&mut p, &u0, &params, vars);
+        let starts = [u0, fresh];
+        short_refit(
+            setting,
+            &mut p,
+            starts,
+            params.len(),
+            SHORT_REFIT_ITERATIONS,
+        )
+        .map(|(criterion, _)| criterion)
+    });
+    jobs.into_iter()
+        .zip(ends)
+        .filter(|(_, end)| end.is_some_and(|j| j < least))
+        .map(|(job, _)| job)
+        .collect()
 }
 
 /// Each kind's `per_kind` candidates (the strongest pull first, [`score::Scored::pull`]) that a

@@ -74,18 +74,34 @@ impl Method {
     /// Only the ratio matters. Near the break-even the two are within about 1.4× of each other,
     /// so the model need not be exact. On FWD-32J (42 DOFs) the identification's 74 parameters
     /// keep the direct path cheaper at any number of lines; a plain FRF goes modal above about
-    /// 70 lines. On the generated machines of `diagnose`'s `machine_scaling` example (300 lines,
-    /// every SDE parameter the variables set, least of three runs on a loaded machine): 14
-    /// bodies (84 DOFs, 161 parameters) direct 10.4 ms, modal 14.8 ms (the model: 11.3 and
-    /// 11.6); 28 bodies (168 DOFs, 316) direct 66 ms, modal 39 ms (74 and 50); 42 bodies (252
-    /// DOFs, 501) direct 238 ms, modal 70 ms (223 and 123).
+    /// 70 lines. This is the cost of a dense factorisation; [`Method::resolve_for`] weighs the
+    /// system's sparsity.
     pub fn resolve(self, n: usize, lines: usize, work: Work) -> Method {
+        self.choose(n, lines, work, 1.0)
+    }
+
+    /// [`Method::resolve`] for `system`, the direct path's cost scaled by the share of a dense
+    /// factorisation its sparsity keeps ([`crate::lines::fill_share`]: bodies in a chain keep
+    /// few of the dense block products, so the direct path's cost grows far slower than n³).
+    /// Measured on the generated machines of `diagnose`'s `machine_scaling` example (300 lines,
+    /// every SDE parameter the variables set, quiet machine), direct and modal: 14 bodies (84
+    /// DOFs, 161 parameters) 2.9 and 15.7 ms; 28 bodies (168, 316) 6.2 and 44.9 ms; 42 bodies
+    /// (252, 501) 10.9 and 70.5 ms.
+    pub fn resolve_for(self, system: &System, lines: usize, work: Work) -> Method {
+        if self != Method::Auto {
+            return self;
+        }
+        self.choose(system.n, lines, work, crate::lines::fill_share(system))
+    }
+
+    /// The cheaper path by the cost model, the direct path's cost times `direct_share`.
+    fn choose(self, n: usize, lines: usize, work: Work, direct_share: f64) -> Method {
         if self != Method::Auto {
             return self;
         }
         let (nf, lf) = (n as f64, lines as f64);
         let cube = nf.powf(2.7);
-        let direct = lf * 2.4e-10 * cube;
+        let direct = lf * 2.4e-10 * cube * direct_share;
         let per_line = match work {
             Work::Outputs { params, columns } => {
                 let sde_rows = 3.6e-9 * nf * params as f64;
@@ -275,8 +291,8 @@ pub fn response_params(
         values: vec![C64::new(0.0, 0.0); quantities.len() * freqs_hz.len()],
         jacobian: vec![C64::new(0.0, 0.0); params.len() * quantities.len() * freqs_hz.len()],
     };
-    match method.resolve(
-        system.n,
+    match method.resolve_for(
+        &system,
         freqs_hz.len(),
         Work::Outputs {
             params: params.len(),
@@ -427,8 +443,8 @@ pub fn states(model: &Model, freqs_hz: &[f64], method: Method) -> Result<States,
             .collect(),
     };
     let quantities: Vec<Quantity> = model.outputs.iter().map(|c| c.quantity).collect();
-    match method.resolve(
-        n,
+    match method.resolve_for(
+        &system,
         lines,
         Work::States {
             rhs: refs + outputs,
@@ -1024,10 +1040,19 @@ mod tests {
             Method::Auto.resolve(240, 400, Work::States { rhs: 4 }),
             Method::Modal
         );
-        // Many parameters on a large model: the full states make the modal path cheaper
-        // (measured 0.59× the direct time at 168 DOFs, 316 parameters, 300 lines).
+        // Many parameters on a large dense model: the full states keep the modal path cheaper.
         assert_eq!(Method::Auto.resolve(168, 300, outputs(316)), Method::Modal);
         assert_eq!(Method::Auto.resolve(252, 300, outputs(501)), Method::Modal);
+        // A chain of bodies keeps few of a dense factorisation's block products: the direct
+        // path stays cheaper (measured 6.2 against 44.9 ms at 168 DOFs, 316 parameters, 300
+        // lines on a generated machine).
+        let chain = System::assemble(&crate::textbook::chain(28));
+        let share = crate::lines::fill_share(&chain);
+        assert!(share < 0.1, "a chain's fill share {share}");
+        assert_eq!(
+            Method::Auto.resolve_for(&chain, 300, outputs(316)),
+            Method::Direct
+        );
         // An explicit choice stands.
         assert_eq!(Method::Modal.resolve(42, 1, outputs(74)), Method::Modal);
         assert_eq!(

@@ -268,6 +268,21 @@ impl Pattern {
     }
 }
 
+/// The share of a dense `L Δ Lᵀ`'s block products that `s`'s pattern keeps: the sum over the
+/// nonzero blocks `L(I, J)` of the blocks `K < J` both rows share, against the same sum with every
+/// block nonzero (1 for one dense block). What the direct path's cost model scales by.
+pub fn fill_share(s: &System) -> f64 {
+    let p = Pattern::of(s);
+    let blocks = p.row.len();
+    let kept: usize = p.common.iter().flatten().map(Vec::len).sum();
+    let dense: usize = (0..blocks).map(|j| (blocks - j) * j).sum();
+    if dense == 0 {
+        1.0
+    } else {
+        kept as f64 / dense as f64
+    }
+}
+
 /// Factors and solves a batch of up to [`LANES`] lines of one system.
 pub struct Batch {
     n: usize,
