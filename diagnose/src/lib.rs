@@ -23,8 +23,11 @@
 //!    screen puts first and the score's two leading families are refitted with every variable
 //!    and the effect's parameters free (each kind and site in a family gets its own refit).
 //!    When the misfit is large (reduced χ² > 2) and the best refit still leaves it above the
-//!    noise level, it escalates: (a) **kind jobs**, the best screened family of each kind the
-//!    leading families leave out, where its screen alone is significant; (b) if still above,
+//!    noise level, it escalates (both judged against R's level, or, with R known only up to
+//!    scale, against the noise level the data imply times a real model's floor, `noise.rs`):
+//!    (a) **kind jobs**, the best screened family of each kind the leading families leave out,
+//!    where its screen alone is significant, refitted in full where its leader's short refit
+//!    goes below the best refit so far; (b) if still above,
 //!    **short refits** (40 iterations, also from the variables' initial values) of each kind's
 //!    plausible candidates, the strongest pulls the one-sided score rules out, and every
 //!    candidate of the kinds without a point, the families whose short refit ends below the best
