@@ -21,7 +21,7 @@
 //! be nonzero (a symbolic elimination over the bodies) and the factorisation and the solves
 //! visit only those: on FWD-32J (seven bodies joined in a ring) a third of a dense
 //! factorisation's work. Every product left out is an exact zero, and the ones kept are summed
-//! into the same partial sums in the same order as a dense sweep would ([`dot_sub`]), so the
+//! into the same partial sums in the same order as a dense sweep would (`dot_sub`), so the
 //! results are the dense ones bit for bit.
 //!
 //! Invariants: buffers are sized once per system size ([`Batch::new`]); `Batch::factor` and
