@@ -99,7 +99,7 @@ pub use text::{final_text, gain_text, text};
 use base::base_fit;
 pub use base::BaseFit;
 use placement::{after_acceptance, Chosen};
-use round::{rank, refit_leading, screen_leading, Leading, Refitted};
+use round::{rank, refit_leading, screen_leading, Leading, Ranking, Refitted, Screened};
 use swap::swap_accepted;
 
 use identify::optimize::{self, Residuals as _};
@@ -575,25 +575,14 @@ pub fn diagnose(
     while rounds_left > 0 {
         rounds_left -= 1;
         let t = std::time::Instant::now();
-        let pc = setting.problem(so_far.cur.effects.clone());
-        let ranking = rank(
-            &pc,
+        let (ranking, screened) = rank_and_screen(
+            setting,
             &so_far.cur,
             &labels,
-            (f_lo, f_hi),
-            opts.alpha,
+            f_lo,
             &mut not_tried,
+            progress,
         )?;
-        progress(&format!(
-            "ranked {} candidates; best: {}",
-            ranking.scored.len(),
-            ranking
-                .scored
-                .first()
-                .map(|s| ranking.candidates[s.candidate].describe())
-                .unwrap_or_default()
-        ));
-        let screened = screen_leading(setting, &so_far.cur, &ranking);
         timing.ranking += t.elapsed().as_secs_f64();
         let t = std::time::Instant::now();
         let Refitted {
@@ -677,6 +666,32 @@ pub fn diagnose(
     d.timing = timing;
     d.base = base;
     Ok(d)
+}
+
+/// A round's ranking of every candidate at the current fit `cur` and its screen of the leading
+/// ones; `labels` name the characteristics, the band starts at `f_lo`.
+fn rank_and_screen(
+    setting: Setting,
+    cur: &Current,
+    labels: &[String],
+    f_lo: f64,
+    not_tried: &mut Vec<NotTried>,
+    progress: &mut dyn FnMut(&str),
+) -> Result<(Ranking, Vec<Screened>), DiagnoseError> {
+    let pc = setting.problem(cur.effects.clone());
+    let band = (f_lo, setting.f_hi);
+    let ranking = rank(&pc, cur, labels, band, setting.opts.alpha, not_tried)?;
+    progress(&format!(
+        "ranked {} candidates; best: {}",
+        ranking.scored.len(),
+        ranking
+            .scored
+            .first()
+            .map(|s| ranking.candidates[s.candidate].describe())
+            .unwrap_or_default()
+    ));
+    let screened = screen_leading(setting, cur, &ranking);
+    Ok((ranking, screened))
 }
 
 /// The diagnosis at the final fit: the residual analysis after, the accepted effects' values
