@@ -613,22 +613,15 @@ fn going_lower<'r>(
     jobs: Vec<Job<'r>>,
     least: f64,
 ) -> Vec<Job<'r>> {
-    let Setting { vars, f_hi, .. } = setting;
     let ends = in_parallel(&jobs, |job| {
         let leader = job.members.first()?;
-        let mut p = extended(setting, cur, leader.effect);
-        let params = leader.effect.params(f_hi);
-        let starts = screen::effect_starts(&params, &leader.start, true);
-        let starts = starts.iter().map(|x| with_effect(&cur.u, &params, x));
-        let (_, u0) = lowest_start(&mut p, starts)?;
-        let fresh = fresh_start(&mut p, &u0, &params, vars);
-        let starts = [u0, fresh];
-        short_refit(
+        short_refit_of(
             setting,
-            &mut p,
-            starts,
-            params.len(),
-            SHORT_REFIT_ITERATIONS,
+            cur,
+            leader.effect,
+            leader.start.clone(),
+            None,
+            true,
         )
         .map(|(criterion, _)| criterion)
     });
@@ -720,7 +713,7 @@ pub(super) fn short_refits(
     jobs: &[Job],
     short: Short,
 ) -> Vec<Screened> {
-    let Setting { vars, f_hi, .. } = setting;
+    let f_hi = setting.f_hi;
     let effect = |j: usize| &ranking.candidates[ranking.scored[j].candidate];
     let refitted = |j: usize| {
         jobs.iter()
@@ -749,7 +742,6 @@ pub(super) fn short_refits(
     let todo: Vec<usize> = todo.into_iter().filter(|&j| !refitted(j)).collect();
     let ends = in_parallel(&todo, |&j| {
         let cand = effect(j);
-        let mut p = extended(setting, cur, cand);
         let params = cand.params(f_hi);
         let step = score_start(cand, ranking.scored[j].step, f_hi);
         // A score ruling the effect out steps below its nested value: start from the sizes
@@ -760,20 +752,14 @@ pub(super) fn short_refits(
             None if ruled_out => params.iter().map(|np| np.initial).collect(),
             None => step.clone(),
         };
-        let mut starts = screen::effect_starts(&params, &given, true);
-        if !ruled_out {
-            starts.push(step);
-        }
-        let starts = starts.iter().map(|x| with_effect(&cur.u, &params, x));
-        let (_, u0) = lowest_start(&mut p, starts)?;
-        let fresh = (short == Short::Leading).then(|| fresh_start(&mut p, &u0, &params, vars));
-        let starts = std::iter::once(u0).chain(fresh);
-        let (criterion, start) = short_refit(
+        let fresh = short == Short::Leading;
+        let (criterion, start) = short_refit_of(
             setting,
-            &mut p,
-            starts,
-            params.len(),
-            SHORT_REFIT_ITERATIONS,
+            cur,
+            cand,
+            given,
+            (!ruled_out).then_some(step),
+            fresh,
         )?;
         Some(Screened {
             index: j,
@@ -782,6 +768,35 @@ pub(super) fn short_refits(
         })
     });
     lowest_first(ends)
+}
+
+/// A short refit ([`SHORT_REFIT_ITERATIONS`] at most) of `cand` added to the fit `cur`: from the
+/// best-fitting of its parameters' starts around `given` (and at `extra`), and, when `fresh`,
+/// also from the variables' initial values. Its criterion and the effect's parameters where it
+/// ended.
+fn short_refit_of(
+    setting: Setting,
+    cur: &Current,
+    cand: &Effect,
+    given: Vec<f64>,
+    extra: Option<Vec<f64>>,
+    fresh: bool,
+) -> Option<(f64, Vec<f64>)> {
+    let mut p = extended(setting, cur, cand);
+    let params = cand.params(setting.f_hi);
+    let mut starts = screen::effect_starts(&params, &given, true);
+    starts.extend(extra);
+    let starts = starts.iter().map(|x| with_effect(&cur.u, &params, x));
+    let (_, u0) = lowest_start(&mut p, starts)?;
+    let fresh = fresh.then(|| fresh_start(&mut p, &u0, &params, setting.vars));
+    let starts = std::iter::once(u0).chain(fresh);
+    short_refit(
+        setting,
+        &mut p,
+        starts,
+        params.len(),
+        SHORT_REFIT_ITERATIONS,
+    )
 }
 
 /// The refit jobs of the short refits `refined` that went below `least` (the best refit so
