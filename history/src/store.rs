@@ -370,15 +370,7 @@ impl Store {
         let mut out = Vec::with_capacity(heads.len());
         for (id, mut run) in heads {
             run.parameters = p
-                .query_map([id], |r| {
-                    Ok(ParameterRecord {
-                        variable: r.get(0)?,
-                        unit: r.get(1)?,
-                        unit_factor: r.get(2)?,
-                        estimate: r.get(3)?,
-                        std_error: r.get(4)?,
-                    })
-                })
+                .query_map([id], parameter_record)
                 .and_then(|rows| rows.collect())
                 .map_err(err)?;
             run.characteristics = c
@@ -418,15 +410,7 @@ impl Store {
             }
             if let Some(q) = q.as_mut() {
                 run.quantities = q
-                    .query_map([id], |r| {
-                        Ok(ParameterRecord {
-                            variable: r.get(0)?,
-                            unit: r.get(1)?,
-                            unit_factor: r.get(2)?,
-                            estimate: r.get(3)?,
-                            std_error: r.get(4)?,
-                        })
-                    })
+                    .query_map([id], parameter_record)
                     .and_then(|rows| rows.collect())
                     .map_err(err)?;
             }
@@ -434,4 +418,16 @@ impl Store {
         }
         Ok(out)
     }
+}
+
+/// A `parameters` or `quantities` row (variable or name, unit, unit factor, value, standard
+/// error) as the record both tables store.
+fn parameter_record(r: &rusqlite::Row) -> rusqlite::Result<ParameterRecord> {
+    Ok(ParameterRecord {
+        variable: r.get(0)?,
+        unit: r.get(1)?,
+        unit_factor: r.get(2)?,
+        estimate: r.get(3)?,
+        std_error: r.get(4)?,
+    })
 }
