@@ -473,6 +473,8 @@ struct Setting<'a> {
     /// The noise level the data imply (`noise.rs`) when R is known only up to scale: what a
     /// misfit is judged "large" and "above the noise" against.
     data_noise: Option<f64>,
+    /// The round's held solves (see [`lowrank::Solves`]).
+    solves: &'a lowrank::Solves,
 }
 
 impl<'a> Setting<'a> {
@@ -544,6 +546,7 @@ pub fn diagnose(
         unit: "s",
         ..Timing::default()
     };
+    let solves = lowrank::Solves::default();
     let mut setting = Setting {
         model,
         vars,
@@ -551,6 +554,7 @@ pub fn diagnose(
         opts,
         f_hi,
         data_noise: None,
+        solves: &solves,
     };
     let mut p0 = setting.problem(Vec::new());
     setting.data_noise = noise::data_level(&p0.criterion(&p0.realize(&[])?)?);
@@ -690,6 +694,10 @@ fn rank_and_screen(
             .map(|s| ranking.candidates[s.candidate].describe())
             .unwrap_or_default()
     ));
+    // The round's evaluations that change one candidate start from the current fit or, for a
+    // fresh start, from the same with the variables at their initial values.
+    let fresh = round::from_initial(&cur.u, setting.vars, &pc.scale);
+    setting.solves.hold(&pc, &[cur.u.clone(), fresh]);
     let screened = screen_leading(setting, cur, &ranking);
     Ok((ranking, screened))
 }

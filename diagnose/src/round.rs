@@ -12,10 +12,11 @@
 //! but above the noise level, the damping splits get the short refits ([`Short::DampingSplits`]).
 //! The refits' starts and the equivalents ("≡") of the chosen one are also decided here.
 
+use super::lowrank::Solves;
 use super::tuning::{
-    EQUIVALENT_COS, FRESH_SIZES_PER_DECADE, FRESH_SIZE_DECADES, LARGE_MISFIT, LOW_RANK_MIN_DOFS,
-    MEMBERS_REFITTED, MIN_EXCESS_SHARE, PULLED_PER_KIND, SCORE_FAMILIES_REFITTED, SCREENED,
-    SCREENED_PER_KIND, SHORT_REFITS_PER_KIND, SHORT_REFIT_ITERATIONS, SWAP_LEVEL,
+    EQUIVALENT_COS, FRESH_SIZES_PER_DECADE, FRESH_SIZE_DECADES, LARGE_MISFIT, MEMBERS_REFITTED,
+    MIN_EXCESS_SHARE, PULLED_PER_KIND, SCORE_FAMILIES_REFITTED, SCREENED, SCREENED_PER_KIND,
+    SHORT_REFITS_PER_KIND, SHORT_REFIT_ITERATIONS, SWAP_LEVEL,
 };
 use super::*;
 use identify::stats::chi2_tail;
@@ -446,9 +447,7 @@ pub(super) fn screen_leading(setting: Setting, cur: &Current, ranking: &Ranking)
     let free = free_columns(&pc, &cur.u);
     let jfree = DMatrix::from_fn(cur.jac.nrows(), free.len(), |r, c| cur.jac[(r, free[c])]);
     let basis = score::orthonormal_columns(&jfree);
-    let shared = (6 * setting.model.bodies.len() > LOW_RANK_MIN_DOFS)
-        .then(|| super::lowrank::Shared::new(&pc, &cur.u))
-        .flatten();
+    let shared = setting.solves.at(&pc, &cur.u);
     let results = in_parallel(&leading, |&j| {
         let s = &ranking.scored[j];
         let cand = &ranking.candidates[s.candidate];
@@ -456,13 +455,19 @@ pub(super) fn screen_leading(setting: Setting, cur: &Current, ranking: &Ranking)
         let params = cand.params(f_hi);
         let starts = screen::size_starts(&params, &score_start(cand, s.step, f_hi));
         let resonator = matches!(cand, Effect::Resonator { .. });
-        screen::screen(&mut p, shared.as_ref(), &cur.u, &basis, &starts, resonator).map(
-            |(criterion, start)| Screened {
-                index: j,
-                criterion,
-                start,
-            },
+        screen::screen(
+            &mut p,
+            shared.as_deref(),
+            &cur.u,
+            &basis,
+            &starts,
+            resonator,
         )
+        .map(|(criterion, start)| Screened {
+            index: j,
+            criterion,
+            start,
+        })
     });
     lowest_first(results)
 }
@@ -787,8 +792,8 @@ fn short_refit_of(
     let mut starts = screen::effect_starts(&params, &given, true);
     starts.extend(extra);
     let starts = starts.iter().map(|x| with_effect(&cur.u, &params, x));
-    let (_, u0) = lowest_start(&mut p, starts)?;
-    let fresh = fresh.then(|| fresh_start(&mut p, &u0, &params, setting.vars));
+    let (_, u0) = lowest_start(&mut p, setting.solves, starts)?;
+    let fresh = fresh.then(|| fresh_start(&mut p, setting.solves, &u0, &params, setting.vars));
     let starts = std::iter::once(u0).chain(fresh);
     short_refit(
         setting,
@@ -1317,7 +1322,9 @@ pub(super) fn refit(
         .map(|st| start_at(st))
         .collect();
     let given = starts.first().cloned();
-    let (Some((j_start, mut u0)), Some(given)) = (lowest_start(&mut p, starts), given) else {
+    let (Some((j_start, mut u0)), Some(given)) =
+        (lowest_start(&mut p, setting.solves, starts), given)
+    else {
         return Err(RefitError::TooFewObservations {
             observations: m,
             parameters: p.scale.len(),
@@ -1331,7 +1338,7 @@ pub(super) fn refit(
         screen::tune_resonator(&mut objective, &mut u0, j_start, (&lo, &hi));
     }
     let settings = opts.identification.settings;
-    let fresh = explore.then(|| fresh_start(&mut p, &u0, &new_params, vars));
+    let fresh = explore.then(|| fresh_start(&mut p, setting.solves, &u0, &new_params, vars));
     let mut minimize_from = |u: &DVector<f64>| {
         optimize::minimize(
             opts.identification.optimizer,
@@ -1435,19 +1442,17 @@ pub(super) fn short_refit(
 
 /// The start of `starts` where the criterion is lowest (the first of equals), and that criterion;
 /// a start that cannot be evaluated counts as infinitely bad (so that, when none can be, the
-/// minimizer started from the first reports why). `None` when there is no start.
+/// minimizer started from the first reports why). `None` when there is no start. A start that
+/// changes only the new effect's parameters of a fit `solves` holds is evaluated as an update of
+/// its solves.
 pub(super) fn lowest_start(
     p: &mut Problem,
+    solves: &Solves,
     starts: impl IntoIterator<Item = DVector<f64>>,
 ) -> Option<(f64, DVector<f64>)> {
     starts
         .into_iter()
-        .map(|u| {
-            let j = p
-                .eval(&u, false)
-                .map_or(f64::INFINITY, |(e, _)| e.norm_squared());
-            (j, u)
-        })
+        .map(|u| (solves.sum_of_squares(p, &u), u))
         .min_by(|a, b| a.0.total_cmp(&b.0))
 }
 
@@ -1473,6 +1478,7 @@ pub(super) fn from_initial(u: &DVector<f64>, vars: &Variables, scale: &[f64]) ->
 /// start from, while from the nominal variables they reach the noise level.
 pub(super) fn fresh_start(
     p: &mut Problem,
+    solves: &Solves,
     u: &DVector<f64>,
     params: &[EffectParam],
     vars: &Variables,
@@ -1495,7 +1501,7 @@ pub(super) fn fresh_start(
         v[at] = x / np.scale;
         v
     });
-    lowest_start(p, std::iter::once(fresh.clone()).chain(grid)).map_or(fresh, |(_, v)| v)
+    lowest_start(p, solves, std::iter::once(fresh.clone()).chain(grid)).map_or(fresh, |(_, v)| v)
 }
 
 /// The fit's scaled variables `u` followed by a new effect's parameters at `x` (SI, clamped to

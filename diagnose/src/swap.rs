@@ -115,6 +115,7 @@ fn best_alternative(
         let initial: Vec<f64> = params.iter().map(|np| np.initial).collect();
         let u = fresh_start(
             &mut p,
+            setting.solves,
             &with_effect(&base.u, &params, &initial),
             &params,
             vars,

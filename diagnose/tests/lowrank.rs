@@ -13,7 +13,7 @@ mod blind;
 mod machine;
 
 use diagnose::effects::Realized;
-use diagnose::lowrank::Shared;
+use diagnose::lowrank::{Shared, Solves};
 use diagnose::problem::Problem;
 use diagnose::{generate, Effect};
 use identify::optimize::Residuals as _;
@@ -243,4 +243,63 @@ fn low_rank_residuals_are_the_full_solves() {
         );
     }
     assert!(kinds.len() >= 7, "{kinds:?}");
+}
+
+/// The round's held solves evaluate a point that changes one candidate's parameters of a held
+/// fit (the current fit, the fresh start) as that fit's update, to 1e-9 of the full solve; any
+/// other point — a variable moved, other earlier effects — is solved in full, bit for bit; on a
+/// model too small for the update to pay, nothing is held.
+#[test]
+fn held_solves_take_only_the_points_they_hold() {
+    let m = machine::machine(17, 21).unwrap();
+    assert!(6 * m.model.bodies.len() > 100);
+    let case = machine::case(&m, 40, (500.0, 0.01), 0.1, 21).unwrap();
+    let obs = data::validate(&case.data, &m.model, "test").unwrap();
+    let opts = Options::default();
+    let (lo, hi) = machine::band(&m.model).unwrap();
+    let pc = Problem::new(&m.model, &case.vars, &obs, &opts, Vec::new(), hi);
+    let u = DVector::from_iterator(pc.nx(), case.vars.vars.iter().map(|v| v.initial / v.scale));
+    let mut fresh = u.clone();
+    fresh[0] *= 1.1;
+    let solves = Solves::default();
+    solves.hold(&pc, &[u.clone(), fresh.clone()]);
+    assert!(solves.at(&pc, &u).is_some() && solves.at(&pc, &fresh).is_some());
+    let labels: Vec<String> = (0..3).map(|o| format!("#{o}")).collect();
+    let library = generate::candidates(&m.model, &case.vars, &case.vars.initial(), &labels, lo, hi);
+    let spring = library
+        .iter()
+        .find(|c| matches!(c, Effect::Spring { .. }))
+        .unwrap();
+    let mut p = Problem::new(&m.model, &case.vars, &obs, &opts, vec![spring.clone()], hi);
+    let g: Vec<f64> = p
+        .params
+        .iter()
+        .map(|q| (q.nested + q.scale) / q.scale)
+        .collect();
+    let at = |prefix: &DVector<f64>| {
+        DVector::from_iterator(
+            prefix.len() + g.len(),
+            prefix.iter().copied().chain(g.clone()),
+        )
+    };
+    let full = |p: &mut Problem, u: &DVector<f64>| p.eval(u, false).unwrap().0.norm_squared();
+    for prefix in [&u, &fresh] {
+        let uc = at(prefix);
+        let (fast, exact) = (solves.sum_of_squares(&mut p, &uc), full(&mut p, &uc));
+        assert!(
+            (fast - exact).abs() <= 1e-9 * exact,
+            "{fast} against {exact}"
+        );
+    }
+    let mut moved = u.clone();
+    moved[1] *= 0.9;
+    let uc = at(&moved);
+    assert_eq!(solves.sum_of_squares(&mut p, &uc), full(&mut p, &uc));
+    let small = machine::machine(5, 21).unwrap();
+    let case = machine::case(&small, 40, (500.0, 0.01), 0.1, 21).unwrap();
+    let obs = data::validate(&case.data, &small.model, "test").unwrap();
+    let pc = Problem::new(&small.model, &case.vars, &obs, &opts, Vec::new(), hi);
+    let u = DVector::from_iterator(pc.nx(), case.vars.vars.iter().map(|v| v.initial / v.scale));
+    solves.hold(&pc, std::slice::from_ref(&u));
+    assert!(solves.at(&pc, &u).is_none());
 }
