@@ -201,6 +201,9 @@ struct Pattern {
     /// Per block column `J`: the DOF segments `[6I, 6I + 6)` of the blocks `I > J` where `L` can
     /// be nonzero, ascending.
     column: Vec<Vec<(usize, usize)>>,
+    /// The blocks of `A` it was built from ([`Pattern::blocks_of`]): a system with the same
+    /// ones has the same pattern.
+    of_a: Vec<bool>,
 }
 
 impl Pattern {
@@ -209,17 +212,19 @@ impl Pattern {
     /// blocks after it that `K` is joined to). A system whose size is not a whole number of
     /// blocks is treated as one dense block.
     fn of(s: &System) -> Pattern {
+        Pattern::from_blocks(s.n, Pattern::blocks_of(s))
+    }
+
+    /// The nonzero blocks of `A` (K, D and M's couplings, and the diagonal), `I * blocks + J`.
+    fn blocks_of(s: &System) -> Vec<bool> {
         let n = s.n;
-        let (size, blocks) = if n.is_multiple_of(6) {
-            (6, n / 6)
-        } else {
-            (n, 1)
-        };
+        let (size, blocks) = Pattern::tiling(n);
         let mut nz = vec![false; blocks * blocks];
         for i in 0..n {
+            let row = i / size * blocks;
             for j in 0..n {
                 if s.k[i * n + j] != 0.0 || s.d[i * n + j] != 0.0 {
-                    nz[(i / size) * blocks + j / size] = true;
+                    nz[row + j / size] = true;
                 }
             }
         }
@@ -229,6 +234,24 @@ impl Pattern {
         for b in 0..blocks {
             nz[b * blocks + b] = true;
         }
+        nz
+    }
+
+    /// `(block size, blocks)` of an `n`-DOF system: 6-DOF blocks, or one dense block when `n`
+    /// is not a whole number of them.
+    fn tiling(n: usize) -> (usize, usize) {
+        if n.is_multiple_of(6) {
+            (6, n / 6)
+        } else {
+            (n, 1)
+        }
+    }
+
+    /// The pattern of `L` from the nonzero blocks `of_a` of `A`: the fill of eliminating the
+    /// blocks in order.
+    fn from_blocks(n: usize, of_a: Vec<bool>) -> Pattern {
+        let (size, blocks) = Pattern::tiling(n);
+        let mut nz = of_a.clone();
         for k in 0..blocks {
             let joined: Vec<usize> = (k + 1..blocks).filter(|&i| nz[i * blocks + k]).collect();
             for &i in &joined {
@@ -264,6 +287,7 @@ impl Pattern {
             row,
             common,
             column,
+            of_a,
         }
     }
 }
@@ -338,7 +362,12 @@ impl Batch {
     /// Makes a batch sized for `system` ([`Batch::fits`]) ready for it: its pattern. Every
     /// buffer entry a factorisation or solve reads it writes first, so nothing else is reset.
     pub fn prepare(&mut self, system: &System) {
-        self.pattern = Pattern::of(system);
+        // A fit solves the same structure with new values a hundred times: the symbolic
+        // elimination is redone only when the blocks of A differ.
+        let of_a = Pattern::blocks_of(system);
+        if of_a != self.pattern.of_a {
+            self.pattern = Pattern::from_blocks(system.n, of_a);
+        }
     }
 
     /// Factors `A(ω)` and solves for every right-hand side at `freqs_hz` (at most [`LANES`]; unused
@@ -494,24 +523,30 @@ impl Batch {
                 }
             }
         }
+        // |δ_k| once per pivot (in `v_re`, free now), not once per row that reads it.
+        for k in 0..n {
+            let (dr, di) = (&self.re[k * n + k], &self.im[k * n + k]);
+            let dabs = &mut self.v_re[k];
+            for l in 0..LANES {
+                dabs[l] = (dr[l] * dr[l] + di[l] * di[l]).sqrt();
+            }
+        }
         // Growth bound, row by row: Σ_k |l_ik|² |δ_k| with l_ii = 1, where l_ik can be nonzero.
         for i in 0..n {
             let (ib, i0) = (i / size, i / size * size);
             let mut acc = ZERO;
-            for (lo, hi) in pattern.row[ib].iter().copied().chain([(i0, i + 1)]) {
+            for (lo, hi) in pattern.row[ib].iter().copied().chain([(i0, i)]) {
                 for k in lo..hi {
-                    let (dr, di) = (&self.re[k * n + k], &self.im[k * n + k]);
                     let (lr, li) = (&self.re[i * n + k], &self.im[i * n + k]);
+                    let dabs = &self.v_re[k];
                     for l in 0..LANES {
-                        let dabs = (dr[l] * dr[l] + di[l] * di[l]).sqrt();
-                        let l2 = if k == i {
-                            1.0
-                        } else {
-                            lr[l] * lr[l] + li[l] * li[l]
-                        };
-                        acc[l] += l2 * dabs;
+                        acc[l] += (lr[l] * lr[l] + li[l] * li[l]) * dabs[l];
                     }
                 }
+            }
+            let dabs = &self.v_re[i];
+            for l in 0..LANES {
+                acc[l] += dabs[l];
             }
             for l in 0..LANES {
                 // NaN-propagating max: a NaN pivot must fail the growth test.
