@@ -103,42 +103,37 @@ impl pulp::WithSimd for DerivativeWork<'_> {
     #[inline(always)]
     fn with_simd<S: pulp::Simd>(self, _simd: S) {
         let (b, d) = (self.batch, self.out);
-        let (n, outputs) = (b.n, d.outputs);
+        let outputs = d.outputs;
         for &blk in self.used {
-            for c in 0..b.cols {
-                // Local sums: the compiler then knows they alias nothing and vectorises the taps.
-                let (mut ar, mut ai) = ([ZERO; 6], [ZERO; 6]);
-                let (xr, xi) = (&b.x_re[c * n..(c + 1) * n], &b.x_im[c * n..(c + 1) * n]);
-                let sde = &self.s.sdes[blk];
-                for row in 0..6 {
-                    let (mut sr, mut si) = (ZERO, ZERO);
-                    for &(_, dof, v) in &sde.taps[sde.tap_rows[row]..sde.tap_rows[row + 1]] {
-                        let (r, i) = (&xr[dof], &xi[dof]);
-                        for l in 0..LANES {
-                            sr[l] = v.mul_add(r[l], sr[l]);
-                            si[l] = v.mul_add(i[l], si[l]);
-                        }
-                    }
-                    ar[row] = sr;
-                    ai[row] = si;
-                }
-                d.def_re[c] = ar;
-                d.def_im[c] = ai;
+            let sde = &self.s.sdes[blk];
+            // Two right-hand sides at a time: their sums are independent, so the fused
+            // multiply-adds of one tap need not wait for the previous tap's (each sum still
+            // takes its taps in order).
+            let mut c = 0;
+            while c + 1 < b.cols {
+                let [(r0, i0), (r1, i1)] = deformations::<2>(b, sde, c);
+                (d.def_re[c], d.def_im[c]) = (r0, i0);
+                (d.def_re[c + 1], d.def_im[c + 1]) = (r1, i1);
+                c += 2;
+            }
+            if c < b.cols {
+                let [(r0, i0)] = deformations::<1>(b, sde, c);
+                (d.def_re[c], d.def_im[c]) = (r0, i0);
             }
             for o in 0..outputs {
                 let col = self.s.output_rows[o].column;
                 let (qr, qi) = (&d.def_re[col], &d.def_im[col]);
                 let (wr, wi) = (&d.def_re[o + 1], &d.def_im[o + 1]);
-                let (pr, pi) = (
-                    &mut d.prod_re[blk * outputs + o],
-                    &mut d.prod_im[blk * outputs + o],
-                );
+                // Formed in locals and stored whole (see `Batch::factor`).
+                let (mut pr, mut pi) = ([ZERO; 6], [ZERO; 6]);
                 for i in 0..6 {
                     for l in 0..LANES {
                         pr[i][l] = wr[i][l] * qr[i][l] - wi[i][l] * qi[i][l];
                         pi[i][l] = wr[i][l] * qi[i][l] + wi[i][l] * qr[i][l];
                     }
                 }
+                d.prod_re[blk * outputs + o] = pr;
+                d.prod_im[blk * outputs + o] = pi;
             }
         }
         for (p, pb) in self.blocks.iter().enumerate() {
@@ -163,6 +158,37 @@ impl pulp::WithSimd for DerivativeWork<'_> {
             }
         }
     }
+}
+
+/// The deformation `T x` of SDE `sde` under the solutions of right-hand sides `c..c + C` in
+/// every lane, `(re, im)` per right-hand side: row by row, each row's taps in order.
+#[inline(always)]
+fn deformations<const C: usize>(
+    b: &Batch,
+    sde: &crate::system::SdeBlock,
+    c: usize,
+) -> [([Lane; 6], [Lane; 6]); C] {
+    let n = b.n;
+    // Local sums: the compiler then knows they alias nothing and vectorises the taps.
+    let mut out = [([ZERO; 6], [ZERO; 6]); C];
+    for row in 0..6 {
+        let mut sum = [(ZERO, ZERO); C];
+        for &(_, dof, v) in &sde.taps[sde.tap_rows[row]..sde.tap_rows[row + 1]] {
+            for (m, (sr, si)) in sum.iter_mut().enumerate() {
+                let at = (c + m) * n + dof;
+                let (r, i) = (&b.x_re[at], &b.x_im[at]);
+                for l in 0..LANES {
+                    sr[l] = v.mul_add(r[l], sr[l]);
+                    si[l] = v.mul_add(i[l], si[l]);
+                }
+            }
+        }
+        for (m, (sr, si)) in sum.into_iter().enumerate() {
+            out[m].0[row] = sr;
+            out[m].1[row] = si;
+        }
+    }
+    out
 }
 
 /// One batch's work, run by `pulp` inside a function compiled for the machine's SIMD level (the
@@ -476,11 +502,16 @@ impl Batch {
                 for k in lo..hi {
                     let (lr, li) = (&self.re[j * n + k], &self.im[j * n + k]);
                     let (dr, di) = (&self.re[k * n + k], &self.im[k * n + k]);
-                    let (vr, vi) = (&mut self.v_re[k], &mut self.v_im[k]);
+                    // Formed in locals and stored whole: the compiler cannot tell that `v`
+                    // and `L` do not overlap, and would not vectorise a store into one between
+                    // loads from the other.
+                    let (mut vr, mut vi) = (ZERO, ZERO);
                     for l in 0..LANES {
                         vr[l] = lr[l] * dr[l] - li[l] * di[l];
                         vi[l] = lr[l] * di[l] + li[l] * dr[l];
                     }
+                    self.v_re[k] = vr;
+                    self.v_im[k] = vi;
                 }
             }
             // δ_j and the rest of column j: a_ij − Σ_k l_ik v_k for i ≥ j, in the blocks where
@@ -514,11 +545,13 @@ impl Batch {
                         self.im[j * n + j] = ai;
                     } else {
                         let (inr, ini) = (&self.inv_re[j], &self.inv_im[j]);
-                        let (dst_re, dst_im) = (&mut self.re[i * n + j], &mut self.im[i * n + j]);
+                        let (mut lr, mut li) = (ZERO, ZERO);
                         for l in 0..LANES {
-                            dst_re[l] = ar[l] * inr[l] - ai[l] * ini[l];
-                            dst_im[l] = ar[l] * ini[l] + ai[l] * inr[l];
+                            lr[l] = ar[l] * inr[l] - ai[l] * ini[l];
+                            li[l] = ar[l] * ini[l] + ai[l] * inr[l];
                         }
+                        self.re[i * n + j] = lr;
+                        self.im[i * n + j] = li;
                     }
                 }
             }
@@ -526,10 +559,11 @@ impl Batch {
         // |δ_k| once per pivot (in `v_re`, free now), not once per row that reads it.
         for k in 0..n {
             let (dr, di) = (&self.re[k * n + k], &self.im[k * n + k]);
-            let dabs = &mut self.v_re[k];
+            let mut dabs = ZERO;
             for l in 0..LANES {
                 dabs[l] = (dr[l] * dr[l] + di[l] * di[l]).sqrt();
             }
+            self.v_re[k] = dabs;
         }
         // Growth bound, row by row: Σ_k |l_ik|² |δ_k| with l_ii = 1, where l_ik can be nonzero.
         for i in 0..n {
