@@ -111,14 +111,11 @@ impl pulp::WithSimd for DerivativeWork<'_> {
             // takes its taps in order).
             let mut c = 0;
             while c + 1 < b.cols {
-                let [(r0, i0), (r1, i1)] = deformations::<2>(b, sde, c);
-                (d.def_re[c], d.def_im[c]) = (r0, i0);
-                (d.def_re[c + 1], d.def_im[c + 1]) = (r1, i1);
+                deformations::<2>(b, sde, c, &mut d.def_re, &mut d.def_im);
                 c += 2;
             }
             if c < b.cols {
-                let [(r0, i0)] = deformations::<1>(b, sde, c);
-                (d.def_re[c], d.def_im[c]) = (r0, i0);
+                deformations::<1>(b, sde, c, &mut d.def_re, &mut d.def_im);
             }
             for o in 0..outputs {
                 let col = self.s.output_rows[o].column;
@@ -161,17 +158,18 @@ impl pulp::WithSimd for DerivativeWork<'_> {
 }
 
 /// The deformation `T x` of SDE `sde` under the solutions of right-hand sides `c..c + C` in
-/// every lane, `(re, im)` per right-hand side: row by row, each row's taps in order.
+/// every lane, into `def_re[c + m]`, `def_im[c + m]`: row by row, each row's taps in order.
 #[inline(always)]
 fn deformations<const C: usize>(
     b: &Batch,
     sde: &crate::system::SdeBlock,
     c: usize,
-) -> [([Lane; 6], [Lane; 6]); C] {
+    def_re: &mut [[Lane; 6]],
+    def_im: &mut [[Lane; 6]],
+) {
     let n = b.n;
-    // Local sums: the compiler then knows they alias nothing and vectorises the taps.
-    let mut out = [([ZERO; 6], [ZERO; 6]); C];
     for row in 0..6 {
+        // Local sums: the compiler then knows they alias nothing and vectorises the taps.
         let mut sum = [(ZERO, ZERO); C];
         for &(_, dof, v) in &sde.taps[sde.tap_rows[row]..sde.tap_rows[row + 1]] {
             for (m, (sr, si)) in sum.iter_mut().enumerate() {
@@ -184,11 +182,10 @@ fn deformations<const C: usize>(
             }
         }
         for (m, (sr, si)) in sum.into_iter().enumerate() {
-            out[m].0[row] = sr;
-            out[m].1[row] = si;
+            def_re[c + m][row] = sr;
+            def_im[c + m][row] = si;
         }
     }
-    out
 }
 
 /// One batch's work, run by `pulp` inside a function compiled for the machine's SIMD level (the
