@@ -750,11 +750,14 @@ impl DirectSolver {
             jacobian,
             ..
         } = out;
+        // Per output and lane: the factor of the output's quantity at that line.
+        let mut factors = vec![C64::new(0.0, 0.0); outputs * LANES];
         self.solve_batches(s, freqs, |first, batch| {
             if !blocks.is_empty() {
                 batch.derivatives(s, blocks, &used, &mut derivatives);
             }
-            for (l, k) in (first..lines.min(first + LANES)).enumerate() {
+            let batch_lines = first..lines.min(first + LANES);
+            for (l, k) in batch_lines.clone().enumerate() {
                 let f = freqs[k];
                 let omega = TWO_PI * f;
                 for (o, q) in quantities.iter().enumerate() {
@@ -768,9 +771,7 @@ impl DirectSolver {
                         return Err(SolveError::Singular { freq_hz: f });
                     }
                     values[o * lines + k] = v;
-                    for (p, &col) in columns.sde_cols.iter().enumerate() {
-                        jacobian[(col * outputs + o) * lines + k] = -derivatives.at(p, o, l) * fac;
-                    }
+                    factors[o * LANES + l] = fac;
                     for ic in columns.inertia {
                         jacobian[(ic.col * outputs + o) * lines + k] = ic.derivative(
                             omega,
@@ -779,6 +780,17 @@ impl DirectSolver {
                             |i| batch.x(l, row.column, i),
                             |i| batch.x(l, o + 1, i),
                         );
+                    }
+                }
+            }
+            // The SDE columns a parameter and output at a time: the batch's lines are
+            // consecutive there.
+            for (p, &col) in columns.sde_cols.iter().enumerate() {
+                for o in 0..outputs {
+                    let base = (col * outputs + o) * lines;
+                    let dst = &mut jacobian[base + batch_lines.start..base + batch_lines.end];
+                    for (l, j) in dst.iter_mut().enumerate() {
+                        *j = -derivatives.at(p, o, l) * factors[o * LANES + l];
                     }
                 }
             }

@@ -311,14 +311,24 @@ impl SdeBlock {
             side * 6 + dof % 6
         };
         for (row, (k_row, d_row)) in self.k.iter().zip(dd).enumerate() {
+            // A direction with neither stiffness nor damping adds only zeros.
+            if *k_row == 0.0 && d_row == 0.0 {
+                continue;
+            }
             let taps = &self.taps[self.tap_rows[row]..self.tap_rows[row + 1]];
-            for &(_, da, va) in taps {
+            // A row has at most 6 taps per side; their local DOFs found once.
+            debug_assert!(taps.len() <= 12);
+            let mut at = [(0usize, 0.0f64); 12];
+            for (slot, &(_, dof, v)) in at.iter_mut().zip(taps) {
+                *slot = (local(dof), v);
+            }
+            let at = &at[..taps.len().min(12)];
+            for &(a, va) in at {
                 let (ka, dka) = (va * k_row, va * d_row);
-                let a = local(da);
-                for &(_, db, vb) in taps {
-                    let b = local(db);
-                    kl[a][b] += ka * vb;
-                    dl[a][b] += dka * vb;
+                let (kr, dr) = (&mut kl[a], &mut dl[a]);
+                for &(b, vb) in at {
+                    kr[b] += ka * vb;
+                    dr[b] += dka * vb;
                 }
             }
         }
@@ -327,9 +337,12 @@ impl SdeBlock {
             for (sb, bb) in self.bodies.iter().enumerate() {
                 let Some(bb) = *bb else { continue };
                 for i in 0..6 {
+                    let at = (6 * ba + i) * n + 6 * bb;
+                    let (kg, dg) = (&mut k[at..at + 6], &mut d[at..at + 6]);
+                    let (ks, ds) = (&kl[6 * sa + i][6 * sb..6 * sb + 6], &dl[6 * sa + i][6 * sb..6 * sb + 6]);
                     for j in 0..6 {
-                        k[(6 * ba + i) * n + 6 * bb + j] += kl[6 * sa + i][6 * sb + j];
-                        d[(6 * ba + i) * n + 6 * bb + j] += dl[6 * sa + i][6 * sb + j];
+                        kg[j] += ks[j];
+                        dg[j] += ds[j];
                     }
                 }
             }
