@@ -616,10 +616,11 @@ impl Criterion {
         let np = self.obs.len();
         let mut e = DVector::zeros(m);
         let mut jac = DMatrix::zeros(m, columns);
-        // ∂q/∂p of output `o` at line `k` is `r.jacobian[p * stride + o * lines + k]`, read
-        // directly in the loop below (a slice per parameter and point was a tenth of the time).
+        // ∂q/∂p of output `o` at line `k` is `r.jacobian[p * stride + o * lines + k]`.
         let lines = r.freqs_hz.len();
         let stride = r.outputs * lines;
+        // Per point: where its response is, its gain, the response, with the gain and |q|.
+        let mut points = Vec::with_capacity(np);
         for (i, o) in self.obs.iter().enumerate() {
             let g = self.gain(o.output, x);
             let at = o.output * lines + o.line;
@@ -635,12 +636,23 @@ impl Criterion {
                     e[np + i] = d.im;
                 }
             }
-            for (v, terms) in self.terms.iter().chain(&further_terms).enumerate() {
-                let mut dq = C64::new(0.0, 0.0);
-                for &(p, ratio) in terms {
-                    dq += r.jacobian[p * stride + at] * ratio;
+            points.push((at, g, q0, q, qa));
+        }
+        // A column at a time: ∂q/∂x of every point, summed over the column's terms in order
+        // (a parameter's derivatives are read along its row of the response's Jacobian).
+        let mut dqs = vec![C64::new(0.0, 0.0); np];
+        for (v, terms) in self.terms.iter().chain(&further_terms).enumerate() {
+            dqs.fill(C64::new(0.0, 0.0));
+            for &(p, ratio) in terms {
+                let row = &r.jacobian[p * stride..(p + 1) * stride];
+                for (dq, point) in dqs.iter_mut().zip(&points) {
+                    *dq += row[point.0] * ratio;
                 }
-                dq *= g;
+            }
+            for (i, (o, (&(_, g, q0, q, qa), &dq))) in
+                self.obs.iter().zip(points.iter().zip(&dqs)).enumerate()
+            {
+                let mut dq = dq * g;
                 if let Some((gv, ratio)) = self.gains[o.output] {
                     if gv == v && v < n {
                         dq += q0 * ratio;

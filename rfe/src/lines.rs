@@ -243,11 +243,18 @@ impl Pattern {
         let n = s.n;
         let (size, blocks) = Pattern::tiling(n);
         let mut nz = vec![false; blocks * blocks];
-        for i in 0..n {
-            let row = i / size * blocks;
-            for j in 0..n {
-                if s.k[i * n + j] != 0.0 || s.d[i * n + j] != 0.0 {
-                    nz[row + j / size] = true;
+        // Whether block (bi, bj) of K or D holds a nonzero, looking no further than the first.
+        let any = |bi: usize, bj: usize| {
+            (bi * size..(bi + 1) * size).any(|i| {
+                let row = i * n + bj * size..i * n + (bj + 1) * size;
+                s.k[row.clone()].iter().chain(&s.d[row]).any(|v| *v != 0.0)
+            })
+        };
+        for bi in 0..blocks {
+            for bj in 0..bi {
+                if any(bi, bj) || any(bj, bi) {
+                    nz[bi * blocks + bj] = true;
+                    nz[bj * blocks + bi] = true;
                 }
             }
         }
