@@ -213,7 +213,7 @@ impl pulp::WithSimd for Work<'_> {
 }
 
 /// The blocks of `L` (6×6, one per pair of bodies) that can be nonzero, as DOF segments.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, PartialEq)]
 struct Pattern {
     /// Per block row `I`: the DOF segments `[6K, 6K + 6)` of the blocks `K < I` where `L` can
     /// be nonzero, ascending.
@@ -326,7 +326,26 @@ impl Pattern {
 /// nonzero blocks `L(I, J)` of the blocks `K < J` both rows share, against the same sum with every
 /// block nonzero (1 for one dense block). What the direct path's cost model scales by.
 pub fn fill_share(s: &System) -> f64 {
-    let p = Pattern::of(s);
+    // A fit asks this of the same structure at every evaluation: the last answer is kept per
+    // thread with the blocks of A it was found for.
+    thread_local! {
+        static LAST: std::cell::RefCell<(Vec<bool>, f64)> =
+            const { std::cell::RefCell::new((Vec::new(), 1.0)) };
+    }
+    let of_a = Pattern::blocks_of(s);
+    if let Some(share) = LAST.with(|l| {
+        let l = l.borrow();
+        (!l.0.is_empty() && l.0 == of_a).then_some(l.1)
+    }) {
+        return share;
+    }
+    let share = share_of(&Pattern::from_blocks(s.n, of_a.clone()));
+    LAST.with(|l| *l.borrow_mut() = (of_a, share));
+    share
+}
+
+/// [`fill_share`] of a pattern.
+fn share_of(p: &Pattern) -> f64 {
     let blocks = p.row.len();
     let kept: usize = p.common.iter().flatten().map(Vec::len).sum();
     let dense: usize = (0..blocks).map(|j| (blocks - j) * j).sum();
@@ -798,6 +817,40 @@ mod tests {
             worst < 1e-10,
             "largest difference from the pivoted LU: {worst:e} of the largest entry"
         );
+    }
+
+    /// A batch kept between solves takes the pattern of the system it is prepared for (found
+    /// again only when the blocks of A differ), and solves as a new batch does, bit for bit; the
+    /// kept fill share is the one found afresh.
+    #[test]
+    fn a_kept_batch_takes_the_pattern_of_each_system_it_is_prepared_for() {
+        let s = fwd32j();
+        // The ring cut open: no coupling left between the first two bodies.
+        let mut cut = s.clone();
+        let n = s.n;
+        for i in 0..6 {
+            for j in 6..12 {
+                for at in [i * n + j, j * n + i] {
+                    cut.k[at] = 0.0;
+                    cut.d[at] = 0.0;
+                }
+            }
+        }
+        assert_ne!(Pattern::blocks_of(&s), Pattern::blocks_of(&cut));
+        let freqs = [20.0, 55.0, 130.0];
+        let mut batch = Batch::new(&s);
+        for system in [&cut, &s, &s, &cut] {
+            batch.prepare(system);
+            assert_eq!(batch.pattern, Pattern::of(system));
+            batch.factor_and_solve(system, &freqs);
+            let mut new = Batch::new(system);
+            new.factor_and_solve(system, &freqs);
+            assert_eq!((&batch.x_re, &batch.x_im), (&new.x_re, &new.x_im));
+        }
+        for system in [&s, &cut, &s] {
+            assert_eq!(fill_share(system), share_of(&Pattern::of(system)));
+        }
+        assert!(share_of(&Pattern::of(&cut)) < share_of(&Pattern::of(&s)));
     }
 
     #[test]
