@@ -96,7 +96,9 @@ fn responses(model: &Model, obs: &Observations) -> Vec<Option<Vec<rfe::C64>>> {
         let mut all = model.clone();
         all.outputs = chars.iter().map(|c| c.characteristic).collect();
         if let Ok(r) = response(&all, &chars[0].freqs_hz, &[], Method::Auto) {
-            return (0..chars.len()).map(|o| Some(r.output(o).to_vec())).collect();
+            return (0..chars.len())
+                .map(|o| Some(r.output(o).to_vec()))
+                .collect();
         }
     }
     chars

@@ -107,9 +107,8 @@ fn the_criterion_jacobian_matches_finite_differences() {
 fn a_kept_criterion_evaluates_as_a_fresh_one() {
     let (m, obs, vars) = setup(0.02, 1);
     for fit in [FitKind::Amplitude, FitKind::Complex] {
-        let fresh = || {
-            Criterion::new(&m, &obs, &vars, fit, NoiseChoice::Variance, Method::Auto).unwrap()
-        };
+        let fresh =
+            || Criterion::new(&m, &obs, &vars, fit, NoiseChoice::Variance, Method::Auto).unwrap();
         let mut kept = fresh();
         let x0 = vars.initial();
         let x1: Vec<f64> = x0.iter().map(|v| v * 1.3).collect();

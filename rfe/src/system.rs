@@ -339,7 +339,10 @@ impl SdeBlock {
                 for i in 0..6 {
                     let at = (6 * ba + i) * n + 6 * bb;
                     let (kg, dg) = (&mut k[at..at + 6], &mut d[at..at + 6]);
-                    let (ks, ds) = (&kl[6 * sa + i][6 * sb..6 * sb + 6], &dl[6 * sa + i][6 * sb..6 * sb + 6]);
+                    let (ks, ds) = (
+                        &kl[6 * sa + i][6 * sb..6 * sb + 6],
+                        &dl[6 * sa + i][6 * sb..6 * sb + 6],
+                    );
                     for j in 0..6 {
                         kg[j] += ks[j];
                         dg[j] += ds[j];
