@@ -410,6 +410,50 @@ fn progress_is_logged_with_verbose_or_ident_log() {
     assert_eq!(count(&quiet), 0);
 }
 
+/// `--timing` prints one line on stderr whose steps add up to no more than the run, with the
+/// fit's iterations and evaluations as the report has them; without it, no such line.
+#[test]
+fn timing_prints_the_steps_with_the_fit_alone() {
+    let c = Case::two_mass(2);
+    let o = c.identify("data.json", &["--format", "json", "--timing"], &[]);
+    assert_eq!(o.status.code(), Some(0));
+    let report: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let err = utf8(&o.stderr);
+    let line = err
+        .lines()
+        .find(|l| l.starts_with("timing: "))
+        .unwrap_or_else(|| panic!("no timing line in {err}"));
+    let ms = |step: &str| -> f64 {
+        let at = line
+            .find(step)
+            .unwrap_or_else(|| panic!("{step} in {line}"))
+            + step.len();
+        line[at..]
+            .split(" ms")
+            .next()
+            .unwrap()
+            .trim()
+            .parse()
+            .unwrap()
+    };
+    let (setup, fit, around, output, run) = (
+        ms("set-up "),
+        ms(", fit "),
+        ms("around it "),
+        ms("output "),
+        ms("run "),
+    );
+    assert!(fit >= 0.0 && setup > 0.0, "{line}");
+    // Each figure is rounded to 0.01 ms; the run also holds what lies between the steps.
+    assert!(setup + fit + around + output <= run + 0.03, "{line}");
+    assert!(line.contains(&format!(
+        "({} iterations, {} model evaluations in all)",
+        report["iterations"], report["model_evaluations"]
+    )));
+    let quiet = c.identify("data.json", &["--format", "json"], &[]);
+    assert!(!utf8(&quiet.stderr).contains("timing: "));
+}
+
 #[test]
 fn the_weak_direction_threshold_is_a_flag() {
     let c = Case::two_mass(2);

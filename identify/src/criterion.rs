@@ -10,15 +10,14 @@
 //! The model's output `q_o` of a characteristic with a sensor-gain variable is `g·q_o`, so its
 //! derivatives are `g ∂q_o/∂p` for the model's parameters and `q_o` (the output / g) for `g`.
 
-use std::borrow::Cow;
-
 use nalgebra::{DMatrix, DVector};
 
 use super::data::Observations;
 use super::variables::Variables;
 use super::IdentifyError;
-use rfe::frf::{self, Method};
+use rfe::frf::{self, Method, Response};
 use rfe::model::{Model, Param, DOF_NAMES};
+use rfe::system::System;
 use rfe::C64;
 
 /// What is fitted.
@@ -140,6 +139,14 @@ pub struct Evaluations {
 /// The criterion for one model, data set and variable set.
 pub struct Criterion {
     model: Model,
+    /// The working model's assembled system, kept between evaluations.
+    system: System,
+    /// True when every variable sets an SDE law's value: the kept system then only needs its
+    /// laws re-read ([`System::update_laws`]); otherwise (masses, inertias) it is assembled again
+    /// at each evaluation.
+    laws_only: bool,
+    /// The last solve's response, its buffers reused by the next.
+    response: Response,
     freqs: Vec<f64>,
     obs: Vec<Obs>,
     fit: FitKind,
@@ -358,7 +365,17 @@ impl Criterion {
                     .collect()
             })
             .collect();
+        let laws_only = params.iter().all(|p| matches!(p, Param::Sde(_)));
         let c = Criterion {
+            system: System::assemble(&work),
+            laws_only,
+            response: Response {
+                freqs_hz: Vec::new(),
+                outputs: 0,
+                params: Vec::new(),
+                values: Vec::new(),
+                jacobian: Vec::new(),
+            },
             model: work,
             freqs,
             obs,
@@ -417,14 +434,44 @@ impl Criterion {
 
     /// Model responses `q` at every observation for values `x` (with the sensor gains).
     pub fn predicted(&mut self, x: &[f64]) -> Result<Vec<C64>, frf::SolveError> {
-        self.vars.apply(&mut self.model, x);
-        let r = frf::response(&self.model, &self.freqs, &[], self.method)?;
-        self.evaluations.model += 1;
-        Ok(self
-            .obs
+        self.solve(x, None)?;
+        Ok(self.predicted_of_response(x))
+    }
+
+    /// Model responses `q` at every observation (with the sensor gains at `x`) from the last
+    /// solve.
+    fn predicted_of_response(&self, x: &[f64]) -> Vec<C64> {
+        let r = &self.response;
+        self.obs
             .iter()
             .map(|o| r.output(o.output)[o.line] * self.gain(o.output, x))
-            .collect())
+            .collect()
+    }
+
+    /// Applies `x` (SI) to the working model and solves it into `self.response`, with the
+    /// Jacobian of `params` when given (none: a plain response, for which [`Method::Auto`] may
+    /// choose another path). The kept system is updated, or assembled again when variables
+    /// move masses.
+    fn solve(&mut self, x: &[f64], params: Option<&[Param]>) -> Result<(), frf::SolveError> {
+        self.vars.apply(&mut self.model, x);
+        if self.laws_only {
+            self.system.update_laws(&self.model);
+        } else {
+            self.system = System::assemble(&self.model);
+        }
+        frf::response_params_into(
+            &self.system,
+            &self.model,
+            &self.freqs,
+            params.unwrap_or(&[]),
+            self.method,
+            &mut self.response,
+        )?;
+        self.evaluations.model += 1;
+        if params.is_some() {
+            self.evaluations.with_jacobian += 1;
+        }
+        Ok(())
     }
 
     /// Measured values at every observation (amplitude fit: the amplitude as a real number).
@@ -463,10 +510,39 @@ impl Criterion {
     }
 
     fn residuals_only(&mut self, x: &[f64]) -> Result<DVector<f64>, frf::SolveError> {
-        self.vars.apply(&mut self.model, x);
-        let r = frf::response(&self.model, &self.freqs, &[], self.method)?;
-        self.evaluations.model += 1;
+        self.solve(x, None)?;
+        let r = &self.response;
         Ok(self.residuals_of(x, |o, line| r.output(o)[line]))
+    }
+
+    /// Whitened residuals at `x` (SI) with their analytic Jacobian and the model responses `q`
+    /// at every observation ([`Criterion::predicted`]), all from one solve.
+    #[allow(clippy::type_complexity)]
+    pub fn evaluate_predicted(
+        &mut self,
+        x: &[f64],
+    ) -> Result<(DVector<f64>, DMatrix<f64>, Vec<C64>), frf::SolveError> {
+        let (e, j) = self.evaluate_with(x, &[])?;
+        Ok((e, j, self.predicted_of_response(x)))
+    }
+
+    /// Whitened residuals of model responses `q` at every observation ([`Criterion::predicted`],
+    /// gains included): those [`Criterion::evaluate`] gives at the `x` they were predicted at.
+    pub fn residuals_of_predicted(&self, q: &[C64]) -> DVector<f64> {
+        let np = self.obs.len();
+        let mut e = DVector::zeros(self.residual_count());
+        for (i, (o, &q)) in self.obs.iter().zip(q).enumerate() {
+            match self.fit {
+                FitKind::Amplitude => e[i] = (o.z.re - q.norm()) / o.sigma,
+                FitKind::LogAmplitude => e[i] = log_residual(o, q),
+                FitKind::Complex => {
+                    let d = (o.z - q) / o.sigma;
+                    e[i] = d.re;
+                    e[np + i] = d.im;
+                }
+            }
+        }
+        e
     }
 
     /// Whitened residuals `e = (z − g q)/σ` of given model outputs `q(characteristic, line)`
@@ -510,37 +586,41 @@ impl Criterion {
         x: &[f64],
         further: &[Vec<(Param, f64)>],
     ) -> Result<(DVector<f64>, DMatrix<f64>), frf::SolveError> {
-        self.vars.apply(&mut self.model, x);
-        // The variables' parameters and terms, extended by the further columns' (borrowed as
-        // they are when there are none: the identification's own evaluations).
-        let mut params = Cow::Borrowed(self.params.as_slice());
-        let mut terms = Cow::Borrowed(self.terms.as_slice());
+        // The variables' parameters, extended by the further columns' (taken out of `self` for
+        // the solve and put back), and the further columns' terms.
+        let mut params = std::mem::take(&mut self.params);
+        let own = params.len();
+        let mut further_terms = Vec::with_capacity(further.len());
         for combination in further {
             let mut t = Vec::with_capacity(combination.len());
             for &(p, c) in combination {
                 let at = match params.iter().position(|q| *q == p) {
                     Some(at) => at,
                     None => {
-                        params.to_mut().push(p);
+                        params.push(p);
                         params.len() - 1
                     }
                 };
                 t.push((at, c));
             }
-            terms.to_mut().push(t);
+            further_terms.push(t);
         }
-        let r = frf::response_params(&self.model, &self.freqs, &params, self.method)?;
-        self.evaluations.model += 1;
-        self.evaluations.with_jacobian += 1;
+        let solved = self.solve(x, Some(&params));
+        params.truncate(own);
+        self.params = params;
+        solved?;
+        let columns = self.terms.len() + further_terms.len();
+        let r = &self.response;
         let m = self.residual_count();
         let n = self.vars.len();
         let np = self.obs.len();
         let mut e = DVector::zeros(m);
-        let mut jac = DMatrix::zeros(m, terms.len());
-        // ∂q/∂p of output `o` at line `k` is `r.jacobian[p * stride + o * lines + k]`, read
-        // directly in the loop below (a slice per parameter and point was a tenth of the time).
+        let mut jac = DMatrix::zeros(m, columns);
+        // ∂q/∂p of output `o` at line `k` is `r.jacobian[p * stride + o * lines + k]`.
         let lines = r.freqs_hz.len();
         let stride = r.outputs * lines;
+        // Per point: where its response is, its gain, the response, with the gain and |q|.
+        let mut points = Vec::with_capacity(np);
         for (i, o) in self.obs.iter().enumerate() {
             let g = self.gain(o.output, x);
             let at = o.output * lines + o.line;
@@ -556,12 +636,23 @@ impl Criterion {
                     e[np + i] = d.im;
                 }
             }
-            for (v, terms) in terms.iter().enumerate() {
-                let mut dq = C64::new(0.0, 0.0);
-                for &(p, ratio) in terms {
-                    dq += r.jacobian[p * stride + at] * ratio;
+            points.push((at, g, q0, q, qa));
+        }
+        // A column at a time: ∂q/∂x of every point, summed over the column's terms in order
+        // (a parameter's derivatives are read along its row of the response's Jacobian).
+        let mut dqs = vec![C64::new(0.0, 0.0); np];
+        for (v, terms) in self.terms.iter().chain(&further_terms).enumerate() {
+            dqs.fill(C64::new(0.0, 0.0));
+            for &(p, ratio) in terms {
+                let row = &r.jacobian[p * stride..(p + 1) * stride];
+                for (dq, point) in dqs.iter_mut().zip(&points) {
+                    *dq += row[point.0] * ratio;
                 }
-                dq *= g;
+            }
+            for (i, (o, (&(_, g, q0, q, qa), &dq))) in
+                self.obs.iter().zip(points.iter().zip(&dqs)).enumerate()
+            {
+                let mut dq = dq * g;
                 if let Some((gv, ratio)) = self.gains[o.output] {
                     if gv == v && v < n {
                         dq += q0 * ratio;
@@ -644,8 +735,13 @@ impl Criterion {
     /// dominated by the anti-resonance lines, where |z| is small.
     pub fn rms_db_error(&mut self, x: &[f64]) -> Result<Vec<(String, f64)>, frf::SolveError> {
         let q = self.predicted(x)?;
-        Ok(self
-            .groups
+        Ok(self.rms_db_error_of(&q))
+    }
+
+    /// [`Criterion::rms_db_error`] of model responses `q` at every observation
+    /// ([`Criterion::predicted`]).
+    pub fn rms_db_error_of(&self, q: &[C64]) -> Vec<(String, f64)> {
+        self.groups
             .iter()
             .map(|(label, range)| {
                 let db: Vec<f64> = range
@@ -661,15 +757,20 @@ impl Criterion {
                     if db.is_empty() { f64::NAN } else { ms.sqrt() },
                 )
             })
-            .collect())
+            .collect()
     }
 
     /// RMS relative amplitude error `sqrt(mean(((|q| − |z|)/|z|)²))` per characteristic at `x`
     /// (points with |z| = 0 are skipped).
     pub fn rms_relative_error(&mut self, x: &[f64]) -> Result<Vec<(String, f64)>, frf::SolveError> {
         let q = self.predicted(x)?;
-        Ok(self
-            .groups
+        Ok(self.rms_relative_error_of(&q))
+    }
+
+    /// [`Criterion::rms_relative_error`] of model responses `q` at every observation
+    /// ([`Criterion::predicted`]).
+    pub fn rms_relative_error_of(&self, q: &[C64]) -> Vec<(String, f64)> {
+        self.groups
             .iter()
             .map(|(label, range)| {
                 let mut s = 0.0;
@@ -690,6 +791,6 @@ impl Criterion {
                     },
                 )
             })
-            .collect())
+            .collect()
     }
 }

@@ -159,6 +159,9 @@ pub struct Identification {
     pub starts: Vec<StartSummary>,
     /// The model with the estimates written in.
     pub model: Model,
+    /// Wall time of the minimisation from every start (s): the fit alone, without the
+    /// criterion's set-up, the solves at the start and at the estimate and the Cramér-Rao bound.
+    pub fit_seconds: f64,
 }
 
 /// The residuals in scaled variables `u = x / scale` for the minimizers.
@@ -206,23 +209,22 @@ pub fn identify(
     let mut crit = Criterion::new(model, data, vars, opts.fit, opts.noise, opts.frf_method)?;
     let x0 = vars.initial();
     let scale: Vec<f64> = vars.vars.iter().map(|v| v.scale).collect();
-    let (e0, _) = crit
-        .evaluate(&x0, None)
+    // One solve at the start gives its criterion and both error measures; one at the estimate
+    // its criterion, the Jacobian of the Cramér-Rao bound and the error measures.
+    let q0 = crit
+        .predicted(&x0)
         .map_err(|e| IdentifyError::Initial(e.into()))?;
-    let criterion_initial = 0.5 * e0.norm_squared();
-    let rms_initial = crit
-        .rms_relative_error(&x0)
-        .map_err(|e| IdentifyError::Initial(e.into()))?;
-    let db_initial = crit
-        .rms_db_error(&x0)
-        .map_err(|e| IdentifyError::Initial(e.into()))?;
+    let criterion_initial = 0.5 * crit.residuals_of_predicted(&q0).norm_squared();
+    let rms_initial = crit.rms_relative_error_of(&q0);
+    let db_initial = crit.rms_db_error_of(&q0);
+    let started = std::time::Instant::now();
     let (out, starts) = best_of_starts(&mut crit, vars, opts, progress)?;
+    let fit_seconds = started.elapsed().as_secs_f64();
     let estimate: Vec<f64> = out.u.iter().zip(&scale).map(|(u, s)| u * s).collect();
-    let (e, jac) = crit
-        .evaluate(&estimate, Some(JacobianMode::Analytic))
+    let (e, jac, q) = crit
+        .evaluate_predicted(&estimate)
         .map_err(|e| IdentifyError::Estimate(e.into()))?;
     let criterion = 0.5 * e.norm_squared();
-    let jac = jac.unwrap_or_else(|| DMatrix::zeros(e.len(), estimate.len()));
     let unc = uncertainty::uncertainty(
         vars,
         &estimate,
@@ -231,12 +233,9 @@ pub fn identify(
         crit.noise.scale_unknown(),
         opts.weak_threshold,
     );
-    let rms = crit
-        .rms_relative_error(&estimate)
-        .map_err(|e| IdentifyError::Estimate(e.into()))?;
+    let rms = crit.rms_relative_error_of(&q);
     let rms_db = crit
-        .rms_db_error(&estimate)
-        .map_err(|e| IdentifyError::Estimate(e.into()))?
+        .rms_db_error_of(&q)
         .into_iter()
         .zip(db_initial)
         .map(|((label, b), (_, a))| (label, a, b))
@@ -262,6 +261,7 @@ pub fn identify(
         rms_db,
         starts,
         model: updated,
+        fit_seconds,
     })
 }
 

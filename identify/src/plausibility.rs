@@ -8,10 +8,13 @@
 //! resonances blur the band's level but not the asymptotes. Nothing is ever rescaled: the user
 //! fixes the unit.
 
+use nalgebra::DMatrix;
+
 use super::data::{DataError, Observations};
 use rfe::display::sig;
-use rfe::frf::{response, Method};
+use rfe::frf::{response, Method, Response};
 use rfe::model::Model;
+use rfe::system::{MassScaling, System};
 use rfe::units::STANDARD_GRAVITY;
 
 /// A band further than this factor below the first (above the last) natural frequency is an
@@ -23,7 +26,20 @@ const LEVEL_TOLERANCE_DECADES: f64 = 0.12;
 /// The band check: an error when every measured line lies more than [`BAND_FACTOR`] below the
 /// model's first natural frequency or above its last (rigid-body modes aside).
 pub fn check_band(model: &Model, obs: &Observations) -> Result<(), DataError> {
-    let Some((first, last)) = resonance_range(model) else {
+    band_within(resonance_range(model), obs)
+}
+
+/// Both checks with the model's resonance range found once: the band's error, else every
+/// characteristic's level ([`check_band`], [`check_level`]).
+pub fn check(model: &Model, obs: &Observations) -> Result<Vec<Level>, DataError> {
+    let range = resonance_range(model);
+    band_within(range, obs)?;
+    Ok(levels_within(model, range, obs))
+}
+
+/// [`check_band`] against the resonance range `range` (none: nothing to check).
+fn band_within(range: Option<(f64, f64)>, obs: &Observations) -> Result<(), DataError> {
+    let Some((first, last)) = range else {
         return Ok(());
     };
     let lines = obs
@@ -67,6 +83,38 @@ pub struct Level {
 
 /// The level check of every characteristic (empty when the model cannot be evaluated).
 pub fn check_level(model: &Model, obs: &Observations) -> Vec<Level> {
+    levels_within(model, resonance_range(model), obs)
+}
+
+/// The model's response to every characteristic, each at its own lines (`None` where the model
+/// cannot be evaluated): one solve for all when they share their lines, as measured
+/// characteristics mostly do, else one each.
+fn responses(model: &Model, obs: &Observations) -> Vec<Option<Vec<rfe::C64>>> {
+    let chars = &obs.characteristics;
+    let shared = chars.windows(2).all(|w| w[0].freqs_hz == w[1].freqs_hz);
+    if shared && chars.len() > 1 {
+        let mut all = model.clone();
+        all.outputs = chars.iter().map(|c| c.characteristic).collect();
+        if let Ok(r) = response(&all, &chars[0].freqs_hz, &[], Method::Auto) {
+            return (0..chars.len())
+                .map(|o| Some(r.output(o).to_vec()))
+                .collect();
+        }
+    }
+    chars
+        .iter()
+        .map(|c| {
+            let mut single = model.clone();
+            single.outputs = vec![c.characteristic];
+            response(&single, &c.freqs_hz, &[], Method::Auto)
+                .ok()
+                .map(|r: Response| r.values)
+        })
+        .collect()
+}
+
+/// [`check_level`] with the model's resonance range `range` (`None`: unknown).
+fn levels_within(model: &Model, range: Option<(f64, f64)>, obs: &Observations) -> Vec<Level> {
     let suspects: [(f64, &str); 6] = [
         (
             STANDARD_GRAVITY,
@@ -84,16 +132,13 @@ pub fn check_level(model: &Model, obs: &Observations) -> Vec<Level> {
     // The model's resonance range: lines well above it follow the mass line, lines well below
     // the static compliance; both are far less sensitive to misplaced resonances than the
     // level across the band, and the mass line depends only on masses, which the drawings give.
-    let (first, last) = resonance_range(model).unwrap_or((f64::NAN, f64::NAN));
+    let (first, last) = range.unwrap_or((f64::NAN, f64::NAN));
     let mut out = Vec::new();
-    for c in &obs.characteristics {
-        let mut single = model.clone();
-        single.outputs = vec![c.characteristic];
-        let Ok(r) = response(&single, &c.freqs_hz, &[], Method::Auto) else {
+    for (c, q) in obs.characteristics.iter().zip(responses(model, obs)) {
+        let Some(q) = q else {
             continue;
         };
-        let ratios: Vec<(f64, f64)> = r
-            .output(0)
+        let ratios: Vec<(f64, f64)> = q
             .iter()
             .zip(&c.amplitude)
             .zip(&c.freqs_hz)
@@ -162,12 +207,21 @@ pub fn check_level(model: &Model, obs: &Observations) -> Vec<Level> {
     out
 }
 
-/// The model's lowest and highest natural frequency (Hz), rigid-body modes aside.
+/// The model's lowest and highest natural frequency (Hz), rigid-body modes aside: from the
+/// eigenvalues `ω²` of `M^-½ K M^-½`, those of [`rfe::modes::undamped`] without its shapes
+/// (only the frequencies are needed here).
 fn resonance_range(model: &Model) -> Option<(f64, f64)> {
-    let modes = rfe::modes::undamped(model).ok()?;
-    let f = modes
+    let s = System::assemble(model);
+    let n = s.n;
+    let scale = MassScaling::new(&s)?;
+    let a = DMatrix::from_fn(n, n, |i, j| scale.congruence(i, j, |k, l| s.k[k * n + l]));
+    if !a.iter().all(|v| v.is_finite()) {
+        return None;
+    }
+    let omega2 = a.symmetric_eigenvalues();
+    let f = omega2
         .iter()
-        .map(|m| m.freq_hz)
+        .map(|w2| w2.max(0.0).sqrt() / (2.0 * std::f64::consts::PI))
         .filter(|f| f.is_finite() && *f > 0.0);
     let first = f.clone().reduce(f64::min)?;
     Some((first, f.reduce(f64::max)?))

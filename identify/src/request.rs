@@ -245,8 +245,7 @@ pub fn observations(
     let measured = choose_lines(&measured, req.lines, req.points, req.data, note)?;
     let model = data::with_measured_outputs(model, &measured);
     let obs = data::validate(&measured, &model, &req.data.display().to_string())?;
-    crate::plausibility::check_band(&model, &obs)?;
-    for level in crate::plausibility::check_level(&model, &obs) {
+    for level in crate::plausibility::check(&model, &obs)? {
         if let Some(w) = level.warning {
             note(Note::Warning(w));
         }

@@ -244,6 +244,29 @@ pub fn response_params(
     method: Method,
 ) -> Result<Response, SolveError> {
     let system = System::assemble(model);
+    let mut out = Response {
+        freqs_hz: Vec::new(),
+        outputs: 0,
+        params: Vec::new(),
+        values: Vec::new(),
+        jacobian: Vec::new(),
+    };
+    response_params_into(&system, model, freqs_hz, params, method, &mut out)?;
+    Ok(out)
+}
+
+/// [`response_params`] of `model` through `system`, its assembled system (which the caller may
+/// keep between solves of one model with new values: [`System::update_laws`]), written into
+/// `out`, whose buffers are reused (a fit's hundred evaluations of one size then allocate
+/// nothing there).
+pub fn response_params_into(
+    system: &System,
+    model: &Model,
+    freqs_hz: &[f64],
+    params: &[Param],
+    method: Method,
+    out: &mut Response,
+) -> Result<(), SolveError> {
     let mut sde_params = Vec::new();
     let mut sde_cols = Vec::new();
     let mut inertia = Vec::new();
@@ -284,27 +307,29 @@ pub fn response_params(
         }
     }
     let quantities: Vec<Quantity> = model.outputs.iter().map(|c| c.quantity).collect();
-    let mut out = Response {
-        freqs_hz: freqs_hz.to_vec(),
-        outputs: quantities.len(),
-        params: params.to_vec(),
-        values: vec![C64::new(0.0, 0.0); quantities.len() * freqs_hz.len()],
-        jacobian: vec![C64::new(0.0, 0.0); params.len() * quantities.len() * freqs_hz.len()],
-    };
+    let zero = C64::new(0.0, 0.0);
+    out.freqs_hz.clear();
+    out.freqs_hz.extend_from_slice(freqs_hz);
+    out.outputs = quantities.len();
+    out.params.clear();
+    out.params.extend_from_slice(params);
+    out.values.clear();
+    out.values.resize(quantities.len() * freqs_hz.len(), zero);
+    out.jacobian.clear();
+    out.jacobian
+        .resize(params.len() * quantities.len() * freqs_hz.len(), zero);
     match method.resolve_for(
-        &system,
+        system,
         freqs_hz.len(),
         Work::Outputs {
             params: params.len(),
             columns: system.columns(),
         },
     ) {
-        Method::Modal => {
-            ModalSolver::new(&system)?.fill(&system, &columns, &quantities, &mut out)?
-        }
-        _ => DirectSolver::new(&system).fill(&system, &columns, &quantities, &mut out)?,
+        Method::Modal => ModalSolver::new(system)?.fill(system, &columns, &quantities, out)?,
+        _ => DirectSolver::new().fill(system, &columns, &quantities, out)?,
     }
-    Ok(out)
+    Ok(())
 }
 
 /// The Jacobian's columns by kind: SDE parameters (`blocks[i]` is column `sde_cols[i]`) and
@@ -330,7 +355,7 @@ pub fn dof_response(model: &Model, freqs_hz: &[f64]) -> Result<Vec<Vec<C64>>, So
     }
     let n = system.n;
     let mut out = Vec::with_capacity(freqs_hz.len());
-    DirectSolver::new(&system).solve_lines(&system, freqs_hz, |k, sol| {
+    DirectSolver::new().solve_lines(&system, freqs_hz, |k, sol| {
         let q = sol[..n].to_vec();
         if q.iter().any(|v| !v.is_finite()) {
             return Err(SolveError::Singular {
@@ -498,7 +523,7 @@ pub fn states(model: &Model, freqs_hz: &[f64], method: Method) -> Result<States,
             }
         }
         _ => {
-            DirectSolver::new(&system).solve_lines(&system, freqs_hz, |k, sol| {
+            DirectSolver::new().solve_lines(&system, freqs_hz, |k, sol| {
                 for r in 0..refs {
                     let c = column(r);
                     st.load[(k * refs + r) * n..(k * refs + r + 1) * n]
@@ -563,9 +588,15 @@ fn distinct_blocks(blocks: &[ParamBlock]) -> Vec<usize> {
     used
 }
 
-/// Per-frequency pivoted LU, with buffers sized once: the fallback of the batched `L Δ Lᵀ`
-/// ([`DirectSolver::solve_batches`]).
+/// The direct path: the batched `L Δ Lᵀ` ([`crate::lines`]), with a per-frequency pivoted LU
+/// for the lines it cannot trust, made when the first such line comes (most solves have none,
+/// and its buffers and workspace query cost more than a small model's whole solve).
 struct DirectSolver {
+    lu: Option<PivotedLu>,
+}
+
+/// Per-frequency pivoted LU, with buffers sized once.
+struct PivotedLu {
     a: Mat<C64>,
     rhs: Mat<C64>,
     perm: Vec<usize>,
@@ -573,15 +604,15 @@ struct DirectSolver {
     mem: MemBuffer,
 }
 
-impl DirectSolver {
-    fn new(system: &System) -> DirectSolver {
+impl PivotedLu {
+    fn new(system: &System) -> PivotedLu {
         let n = system.n;
         let cols = system.columns();
         let req = StackReq::any_of(&[
             factor::lu_in_place_scratch::<usize, C64>(n, n, Par::Seq, Default::default()),
             solve::solve_in_place_scratch::<usize, C64>(n, cols, Par::Seq),
         ]);
-        DirectSolver {
+        PivotedLu {
             a: Mat::zeros(n, n),
             rhs: Mat::zeros(n, cols),
             perm: vec![0; n],
@@ -640,6 +671,12 @@ impl DirectSolver {
         }
         Ok(())
     }
+}
+
+impl DirectSolver {
+    fn new() -> DirectSolver {
+        DirectSolver { lu: None }
+    }
 
     /// Solves every line for the load and each output's unit load, a batch of up to
     /// [`LANES`] lines at a time through the batched `L Δ Lᵀ` ([`crate::lines`]), and hands
@@ -654,15 +691,18 @@ impl DirectSolver {
         let n = s.n;
         let cols = s.columns();
         let mut batch = scratch::batch(s);
-        let mut sol = vec![C64::new(0.0, 0.0); cols * n];
+        // A line's pivoted solution, sized when the first such line comes.
+        let mut sol = Vec::new();
         for (b, chunk) in freqs_hz.chunks(LANES).enumerate() {
             batch.factor_and_solve(s, chunk);
             for (l, &f) in chunk.iter().enumerate() {
                 if !batch.accurate(l) {
-                    self.factor(s, f)?;
+                    let lu = self.lu.get_or_insert_with(|| PivotedLu::new(s));
+                    lu.factor(s, f)?;
+                    sol.resize(cols * n, C64::new(0.0, 0.0));
                     for (c, col) in sol.chunks_exact_mut(n).enumerate() {
                         for (i, v) in col.iter_mut().enumerate() {
-                            *v = self.rhs[(i, c)];
+                            *v = lu.rhs[(i, c)];
                         }
                     }
                     batch.set_solution(l, &sol);
@@ -710,11 +750,14 @@ impl DirectSolver {
             jacobian,
             ..
         } = out;
+        // Per output and lane: the factor of the output's quantity at that line.
+        let mut factors = vec![C64::new(0.0, 0.0); outputs * LANES];
         self.solve_batches(s, freqs, |first, batch| {
             if !blocks.is_empty() {
                 batch.derivatives(s, blocks, &used, &mut derivatives);
             }
-            for (l, k) in (first..lines.min(first + LANES)).enumerate() {
+            let batch_lines = first..lines.min(first + LANES);
+            for (l, k) in batch_lines.clone().enumerate() {
                 let f = freqs[k];
                 let omega = TWO_PI * f;
                 for (o, q) in quantities.iter().enumerate() {
@@ -728,9 +771,7 @@ impl DirectSolver {
                         return Err(SolveError::Singular { freq_hz: f });
                     }
                     values[o * lines + k] = v;
-                    for (p, &col) in columns.sde_cols.iter().enumerate() {
-                        jacobian[(col * outputs + o) * lines + k] = -derivatives.at(p, o, l) * fac;
-                    }
+                    factors[o * LANES + l] = fac;
                     for ic in columns.inertia {
                         jacobian[(ic.col * outputs + o) * lines + k] = ic.derivative(
                             omega,
@@ -739,6 +780,17 @@ impl DirectSolver {
                             |i| batch.x(l, row.column, i),
                             |i| batch.x(l, o + 1, i),
                         );
+                    }
+                }
+            }
+            // The SDE columns a parameter and output at a time: the batch's lines are
+            // consecutive there.
+            for (p, &col) in columns.sde_cols.iter().enumerate() {
+                for o in 0..outputs {
+                    let base = (col * outputs + o) * lines;
+                    let dst = &mut jacobian[base + batch_lines.start..base + batch_lines.end];
+                    for (l, j) in dst.iter_mut().enumerate() {
+                        *j = -derivatives.at(p, o, l) * factors[o * LANES + l];
                     }
                 }
             }
@@ -1071,7 +1123,8 @@ mod tests {
         s.k[1] = 1.0e5;
         s.k[s.n] = 1.0e5;
         s.d.iter_mut().for_each(|d| *d = 0.0);
-        let mut solver = DirectSolver::new(&s);
+        let mut solver = DirectSolver::new();
+        let mut lu = PivotedLu::new(&s);
         let mut got = Vec::new();
         solver
             .solve_lines(&s, &[5.0, 10.0], |_, sol| {
@@ -1080,16 +1133,16 @@ mod tests {
             })
             .expect("a regular matrix solves");
         for (k, f) in [5.0, 10.0].into_iter().enumerate() {
-            solver.factor(&s, f).expect("pivoted LU");
+            lu.factor(&s, f).expect("pivoted LU");
             let n = s.n;
             let cols = s.columns();
             let scale = (0..cols)
                 .flat_map(|c| (0..n).map(move |i| (i, c)))
-                .map(|ic| solver.rhs[ic].norm())
+                .map(|ic| lu.rhs[ic].norm())
                 .fold(0.0, f64::max);
             for c in 0..cols {
                 for i in 0..n {
-                    let d = (got[k][c * n + i] - solver.rhs[(i, c)]).norm();
+                    let d = (got[k][c * n + i] - lu.rhs[(i, c)]).norm();
                     assert!(
                         d <= 1e-12 * scale,
                         "line {f} Hz, column {c}, DOF {i}: differs by {d:e}"

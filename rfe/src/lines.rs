@@ -103,42 +103,34 @@ impl pulp::WithSimd for DerivativeWork<'_> {
     #[inline(always)]
     fn with_simd<S: pulp::Simd>(self, _simd: S) {
         let (b, d) = (self.batch, self.out);
-        let (n, outputs) = (b.n, d.outputs);
+        let outputs = d.outputs;
         for &blk in self.used {
-            for c in 0..b.cols {
-                // Local sums: the compiler then knows they alias nothing and vectorises the taps.
-                let (mut ar, mut ai) = ([ZERO; 6], [ZERO; 6]);
-                let (xr, xi) = (&b.x_re[c * n..(c + 1) * n], &b.x_im[c * n..(c + 1) * n]);
-                let sde = &self.s.sdes[blk];
-                for row in 0..6 {
-                    let (mut sr, mut si) = (ZERO, ZERO);
-                    for &(_, dof, v) in &sde.taps[sde.tap_rows[row]..sde.tap_rows[row + 1]] {
-                        let (r, i) = (&xr[dof], &xi[dof]);
-                        for l in 0..LANES {
-                            sr[l] = v.mul_add(r[l], sr[l]);
-                            si[l] = v.mul_add(i[l], si[l]);
-                        }
-                    }
-                    ar[row] = sr;
-                    ai[row] = si;
-                }
-                d.def_re[c] = ar;
-                d.def_im[c] = ai;
+            let sde = &self.s.sdes[blk];
+            // Two right-hand sides at a time: their sums are independent, so the fused
+            // multiply-adds of one tap need not wait for the previous tap's (each sum still
+            // takes its taps in order).
+            let mut c = 0;
+            while c + 1 < b.cols {
+                deformations::<2>(b, sde, c, &mut d.def_re, &mut d.def_im);
+                c += 2;
+            }
+            if c < b.cols {
+                deformations::<1>(b, sde, c, &mut d.def_re, &mut d.def_im);
             }
             for o in 0..outputs {
                 let col = self.s.output_rows[o].column;
                 let (qr, qi) = (&d.def_re[col], &d.def_im[col]);
                 let (wr, wi) = (&d.def_re[o + 1], &d.def_im[o + 1]);
-                let (pr, pi) = (
-                    &mut d.prod_re[blk * outputs + o],
-                    &mut d.prod_im[blk * outputs + o],
-                );
+                // Formed in locals and stored whole (see `Batch::factor`).
+                let (mut pr, mut pi) = ([ZERO; 6], [ZERO; 6]);
                 for i in 0..6 {
                     for l in 0..LANES {
                         pr[i][l] = wr[i][l] * qr[i][l] - wi[i][l] * qi[i][l];
                         pi[i][l] = wr[i][l] * qi[i][l] + wi[i][l] * qr[i][l];
                     }
                 }
+                d.prod_re[blk * outputs + o] = pr;
+                d.prod_im[blk * outputs + o] = pi;
             }
         }
         for (p, pb) in self.blocks.iter().enumerate() {
@@ -161,6 +153,37 @@ impl pulp::WithSimd for DerivativeWork<'_> {
                 d.re[p * outputs + o] = ar;
                 d.im[p * outputs + o] = ai;
             }
+        }
+    }
+}
+
+/// The deformation `T x` of SDE `sde` under the solutions of right-hand sides `c..c + C` in
+/// every lane, into `def_re[c + m]`, `def_im[c + m]`: row by row, each row's taps in order.
+#[inline(always)]
+fn deformations<const C: usize>(
+    b: &Batch,
+    sde: &crate::system::SdeBlock,
+    c: usize,
+    def_re: &mut [[Lane; 6]],
+    def_im: &mut [[Lane; 6]],
+) {
+    let n = b.n;
+    for row in 0..6 {
+        // Local sums: the compiler then knows they alias nothing and vectorises the taps.
+        let mut sum = [(ZERO, ZERO); C];
+        for &(_, dof, v) in &sde.taps[sde.tap_rows[row]..sde.tap_rows[row + 1]] {
+            for (m, (sr, si)) in sum.iter_mut().enumerate() {
+                let at = (c + m) * n + dof;
+                let (r, i) = (&b.x_re[at], &b.x_im[at]);
+                for l in 0..LANES {
+                    sr[l] = v.mul_add(r[l], sr[l]);
+                    si[l] = v.mul_add(i[l], si[l]);
+                }
+            }
+        }
+        for (m, (sr, si)) in sum.into_iter().enumerate() {
+            def_re[c + m][row] = sr;
+            def_im[c + m][row] = si;
         }
     }
 }
@@ -190,7 +213,7 @@ impl pulp::WithSimd for Work<'_> {
 }
 
 /// The blocks of `L` (6×6, one per pair of bodies) that can be nonzero, as DOF segments.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, PartialEq)]
 struct Pattern {
     /// Per block row `I`: the DOF segments `[6K, 6K + 6)` of the blocks `K < I` where `L` can
     /// be nonzero, ascending.
@@ -201,6 +224,9 @@ struct Pattern {
     /// Per block column `J`: the DOF segments `[6I, 6I + 6)` of the blocks `I > J` where `L` can
     /// be nonzero, ascending.
     column: Vec<Vec<(usize, usize)>>,
+    /// The blocks of `A` it was built from ([`Pattern::blocks_of`]): a system with the same
+    /// ones has the same pattern.
+    of_a: Vec<bool>,
 }
 
 impl Pattern {
@@ -209,17 +235,26 @@ impl Pattern {
     /// blocks after it that `K` is joined to). A system whose size is not a whole number of
     /// blocks is treated as one dense block.
     fn of(s: &System) -> Pattern {
+        Pattern::from_blocks(s.n, Pattern::blocks_of(s))
+    }
+
+    /// The nonzero blocks of `A` (K, D and M's couplings, and the diagonal), `I * blocks + J`.
+    fn blocks_of(s: &System) -> Vec<bool> {
         let n = s.n;
-        let (size, blocks) = if n.is_multiple_of(6) {
-            (6, n / 6)
-        } else {
-            (n, 1)
-        };
+        let (size, blocks) = Pattern::tiling(n);
         let mut nz = vec![false; blocks * blocks];
-        for i in 0..n {
-            for j in 0..n {
-                if s.k[i * n + j] != 0.0 || s.d[i * n + j] != 0.0 {
-                    nz[(i / size) * blocks + j / size] = true;
+        // Whether block (bi, bj) of K or D holds a nonzero, looking no further than the first.
+        let any = |bi: usize, bj: usize| {
+            (bi * size..(bi + 1) * size).any(|i| {
+                let row = i * n + bj * size..i * n + (bj + 1) * size;
+                s.k[row.clone()].iter().chain(&s.d[row]).any(|v| *v != 0.0)
+            })
+        };
+        for bi in 0..blocks {
+            for bj in 0..bi {
+                if any(bi, bj) || any(bj, bi) {
+                    nz[bi * blocks + bj] = true;
+                    nz[bj * blocks + bi] = true;
                 }
             }
         }
@@ -229,6 +264,24 @@ impl Pattern {
         for b in 0..blocks {
             nz[b * blocks + b] = true;
         }
+        nz
+    }
+
+    /// `(block size, blocks)` of an `n`-DOF system: 6-DOF blocks, or one dense block when `n`
+    /// is not a whole number of them.
+    fn tiling(n: usize) -> (usize, usize) {
+        if n.is_multiple_of(6) {
+            (6, n / 6)
+        } else {
+            (n, 1)
+        }
+    }
+
+    /// The pattern of `L` from the nonzero blocks `of_a` of `A`: the fill of eliminating the
+    /// blocks in order.
+    fn from_blocks(n: usize, of_a: Vec<bool>) -> Pattern {
+        let (size, blocks) = Pattern::tiling(n);
+        let mut nz = of_a.clone();
         for k in 0..blocks {
             let joined: Vec<usize> = (k + 1..blocks).filter(|&i| nz[i * blocks + k]).collect();
             for &i in &joined {
@@ -264,6 +317,7 @@ impl Pattern {
             row,
             common,
             column,
+            of_a,
         }
     }
 }
@@ -272,7 +326,26 @@ impl Pattern {
 /// nonzero blocks `L(I, J)` of the blocks `K < J` both rows share, against the same sum with every
 /// block nonzero (1 for one dense block). What the direct path's cost model scales by.
 pub fn fill_share(s: &System) -> f64 {
-    let p = Pattern::of(s);
+    // A fit asks this of the same structure at every evaluation: the last answer is kept per
+    // thread with the blocks of A it was found for.
+    thread_local! {
+        static LAST: std::cell::RefCell<(Vec<bool>, f64)> =
+            const { std::cell::RefCell::new((Vec::new(), 1.0)) };
+    }
+    let of_a = Pattern::blocks_of(s);
+    if let Some(share) = LAST.with(|l| {
+        let l = l.borrow();
+        (!l.0.is_empty() && l.0 == of_a).then_some(l.1)
+    }) {
+        return share;
+    }
+    let share = share_of(&Pattern::from_blocks(s.n, of_a.clone()));
+    LAST.with(|l| *l.borrow_mut() = (of_a, share));
+    share
+}
+
+/// [`fill_share`] of a pattern.
+fn share_of(p: &Pattern) -> f64 {
     let blocks = p.row.len();
     let kept: usize = p.common.iter().flatten().map(Vec::len).sum();
     let dense: usize = (0..blocks).map(|j| (blocks - j) * j).sum();
@@ -338,7 +411,12 @@ impl Batch {
     /// Makes a batch sized for `system` ([`Batch::fits`]) ready for it: its pattern. Every
     /// buffer entry a factorisation or solve reads it writes first, so nothing else is reset.
     pub fn prepare(&mut self, system: &System) {
-        self.pattern = Pattern::of(system);
+        // A fit solves the same structure with new values a hundred times: the symbolic
+        // elimination is redone only when the blocks of A differ.
+        let of_a = Pattern::blocks_of(system);
+        if of_a != self.pattern.of_a {
+            self.pattern = Pattern::from_blocks(system.n, of_a);
+        }
     }
 
     /// Factors `A(ω)` and solves for every right-hand side at `freqs_hz` (at most [`LANES`]; unused
@@ -447,11 +525,16 @@ impl Batch {
                 for k in lo..hi {
                     let (lr, li) = (&self.re[j * n + k], &self.im[j * n + k]);
                     let (dr, di) = (&self.re[k * n + k], &self.im[k * n + k]);
-                    let (vr, vi) = (&mut self.v_re[k], &mut self.v_im[k]);
+                    // Formed in locals and stored whole: the compiler cannot tell that `v`
+                    // and `L` do not overlap, and would not vectorise a store into one between
+                    // loads from the other.
+                    let (mut vr, mut vi) = (ZERO, ZERO);
                     for l in 0..LANES {
                         vr[l] = lr[l] * dr[l] - li[l] * di[l];
                         vi[l] = lr[l] * di[l] + li[l] * dr[l];
                     }
+                    self.v_re[k] = vr;
+                    self.v_im[k] = vi;
                 }
             }
             // δ_j and the rest of column j: a_ij − Σ_k l_ik v_k for i ≥ j, in the blocks where
@@ -485,33 +568,42 @@ impl Batch {
                         self.im[j * n + j] = ai;
                     } else {
                         let (inr, ini) = (&self.inv_re[j], &self.inv_im[j]);
-                        let (dst_re, dst_im) = (&mut self.re[i * n + j], &mut self.im[i * n + j]);
+                        let (mut lr, mut li) = (ZERO, ZERO);
                         for l in 0..LANES {
-                            dst_re[l] = ar[l] * inr[l] - ai[l] * ini[l];
-                            dst_im[l] = ar[l] * ini[l] + ai[l] * inr[l];
+                            lr[l] = ar[l] * inr[l] - ai[l] * ini[l];
+                            li[l] = ar[l] * ini[l] + ai[l] * inr[l];
                         }
+                        self.re[i * n + j] = lr;
+                        self.im[i * n + j] = li;
                     }
                 }
             }
+        }
+        // |δ_k| once per pivot (in `v_re`, free now), not once per row that reads it.
+        for k in 0..n {
+            let (dr, di) = (&self.re[k * n + k], &self.im[k * n + k]);
+            let mut dabs = ZERO;
+            for l in 0..LANES {
+                dabs[l] = (dr[l] * dr[l] + di[l] * di[l]).sqrt();
+            }
+            self.v_re[k] = dabs;
         }
         // Growth bound, row by row: Σ_k |l_ik|² |δ_k| with l_ii = 1, where l_ik can be nonzero.
         for i in 0..n {
             let (ib, i0) = (i / size, i / size * size);
             let mut acc = ZERO;
-            for (lo, hi) in pattern.row[ib].iter().copied().chain([(i0, i + 1)]) {
+            for (lo, hi) in pattern.row[ib].iter().copied().chain([(i0, i)]) {
                 for k in lo..hi {
-                    let (dr, di) = (&self.re[k * n + k], &self.im[k * n + k]);
                     let (lr, li) = (&self.re[i * n + k], &self.im[i * n + k]);
+                    let dabs = &self.v_re[k];
                     for l in 0..LANES {
-                        let dabs = (dr[l] * dr[l] + di[l] * di[l]).sqrt();
-                        let l2 = if k == i {
-                            1.0
-                        } else {
-                            lr[l] * lr[l] + li[l] * li[l]
-                        };
-                        acc[l] += l2 * dabs;
+                        acc[l] += (lr[l] * lr[l] + li[l] * li[l]) * dabs[l];
                     }
                 }
+            }
+            let dabs = &self.v_re[i];
+            for l in 0..LANES {
+                acc[l] += dabs[l];
             }
             for l in 0..LANES {
                 // NaN-propagating max: a NaN pivot must fail the growth test.
@@ -725,6 +817,40 @@ mod tests {
             worst < 1e-10,
             "largest difference from the pivoted LU: {worst:e} of the largest entry"
         );
+    }
+
+    /// A batch kept between solves takes the pattern of the system it is prepared for (found
+    /// again only when the blocks of A differ), and solves as a new batch does, bit for bit; the
+    /// kept fill share is the one found afresh.
+    #[test]
+    fn a_kept_batch_takes_the_pattern_of_each_system_it_is_prepared_for() {
+        let s = fwd32j();
+        // The ring cut open: no coupling left between the first two bodies.
+        let mut cut = s.clone();
+        let n = s.n;
+        for i in 0..6 {
+            for j in 6..12 {
+                for at in [i * n + j, j * n + i] {
+                    cut.k[at] = 0.0;
+                    cut.d[at] = 0.0;
+                }
+            }
+        }
+        assert_ne!(Pattern::blocks_of(&s), Pattern::blocks_of(&cut));
+        let freqs = [20.0, 55.0, 130.0];
+        let mut batch = Batch::new(&s);
+        for system in [&cut, &s, &s, &cut] {
+            batch.prepare(system);
+            assert_eq!(batch.pattern, Pattern::of(system));
+            batch.factor_and_solve(system, &freqs);
+            let mut new = Batch::new(system);
+            new.factor_and_solve(system, &freqs);
+            assert_eq!((&batch.x_re, &batch.x_im), (&new.x_re, &new.x_im));
+        }
+        for system in [&s, &cut, &s] {
+            assert_eq!(fill_share(system), share_of(&Pattern::of(system)));
+        }
+        assert!(share_of(&Pattern::of(&cut)) < share_of(&Pattern::of(&s)));
     }
 
     #[test]

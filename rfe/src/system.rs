@@ -311,14 +311,24 @@ impl SdeBlock {
             side * 6 + dof % 6
         };
         for (row, (k_row, d_row)) in self.k.iter().zip(dd).enumerate() {
+            // A direction with neither stiffness nor damping adds only zeros.
+            if *k_row == 0.0 && d_row == 0.0 {
+                continue;
+            }
             let taps = &self.taps[self.tap_rows[row]..self.tap_rows[row + 1]];
-            for &(_, da, va) in taps {
+            // A row has at most 6 taps per side; their local DOFs found once.
+            debug_assert!(taps.len() <= 12);
+            let mut at = [(0usize, 0.0f64); 12];
+            for (slot, &(_, dof, v)) in at.iter_mut().zip(taps) {
+                *slot = (local(dof), v);
+            }
+            let at = &at[..taps.len().min(12)];
+            for &(a, va) in at {
                 let (ka, dka) = (va * k_row, va * d_row);
-                let a = local(da);
-                for &(_, db, vb) in taps {
-                    let b = local(db);
-                    kl[a][b] += ka * vb;
-                    dl[a][b] += dka * vb;
+                let (kr, dr) = (&mut kl[a], &mut dl[a]);
+                for &(b, vb) in at {
+                    kr[b] += ka * vb;
+                    dr[b] += dka * vb;
                 }
             }
         }
@@ -327,9 +337,15 @@ impl SdeBlock {
             for (sb, bb) in self.bodies.iter().enumerate() {
                 let Some(bb) = *bb else { continue };
                 for i in 0..6 {
+                    let at = (6 * ba + i) * n + 6 * bb;
+                    let (kg, dg) = (&mut k[at..at + 6], &mut d[at..at + 6]);
+                    let (ks, ds) = (
+                        &kl[6 * sa + i][6 * sb..6 * sb + 6],
+                        &dl[6 * sa + i][6 * sb..6 * sb + 6],
+                    );
                     for j in 0..6 {
-                        k[(6 * ba + i) * n + 6 * bb + j] += kl[6 * sa + i][6 * sb + j];
-                        d[(6 * ba + i) * n + 6 * bb + j] += dl[6 * sa + i][6 * sb + j];
+                        kg[j] += ks[j];
+                        dg[j] += ds[j];
                     }
                 }
             }
@@ -496,6 +512,23 @@ impl System {
         }
     }
 
+    /// Re-reads every SDE's stiffnesses and dissipations from `model` and sums K and D again,
+    /// in the order and from the same taps as [`System::assemble`] (so bit for bit its result).
+    /// For `model` the one this system was assembled from with new SDE law values (what a fit's
+    /// stiffness and damping variables change): the geometry, the SDEs' bodies and which are
+    /// enabled, the masses, loads and outputs are kept as they were.
+    pub fn update_laws(&mut self, model: &Model) {
+        let n = self.n;
+        self.k.fill(0.0);
+        self.d.fill(0.0);
+        for block in &mut self.sdes {
+            let law = &model.sdes[block.sde].law;
+            block.k = law.stiffness();
+            block.psi = law.dissipation();
+            block.add_stiffness(n, &mut self.k, &mut self.d);
+        }
+    }
+
     /// `aᵀ M b` (M with its couplings).
     pub fn mass_inner(&self, a: &[f64], b: &[f64]) -> f64 {
         let diag: f64 = a
@@ -595,6 +628,33 @@ mod tests {
             }
         }
         (k, d)
+    }
+
+    /// A system kept between a fit's evaluations and updated with new law values is the one
+    /// assembled afresh, bit for bit.
+    #[test]
+    fn updated_laws_equal_a_fresh_assembly() {
+        let mut model = crate::modelfile::fwd32j();
+        let mut s = System::assemble(&model);
+        let mut moved = 0;
+        for sde in 0..model.sdes.len() {
+            for (i, name) in model.sdes[sde].law.params().into_iter().enumerate() {
+                let p = ParamRef { sde, name };
+                let v = model.param(p).expect("a law parameter has a value");
+                let factor = 1.0 + 0.1 * ((sde + i) % 7) as f64 - 0.3;
+                assert!(model.set_param(p, v * factor));
+                moved += 1;
+            }
+        }
+        assert!(moved > 20);
+        s.update_laws(&model);
+        let fresh = System::assemble(&model);
+        assert_eq!(s.k, fresh.k);
+        assert_eq!(s.d, fresh.d);
+        for (a, b) in s.sdes.iter().zip(&fresh.sdes) {
+            assert_eq!((a.k, a.psi), (b.k, b.psi));
+        }
+        assert_ne!(s.k, System::assemble(&crate::modelfile::fwd32j()).k);
     }
 
     #[test]

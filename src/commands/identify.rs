@@ -172,6 +172,12 @@ pub struct IdentifyArgs {
     /// `IDENT_LOG=info`).
     #[arg(long)]
     pub progress: bool,
+    /// Print on stderr the wall time of each step: set-up (reading and preparing the files),
+    /// the fit alone (the minimisation from every start, what an optimizer's own timing covers),
+    /// the identification around it (the solves at the start and the estimate, Cramér-Rao) and
+    /// the output.
+    #[arg(long)]
+    pub timing: bool,
     /// Write the fit problem (resolved model at the initial values, observations with σ,
     /// variables as linear maps onto SDE stiffness and ψ) as JSON to this file and exit without
     /// fitting: for external tools such as bench/python/ident_baseline.py.
@@ -421,6 +427,7 @@ pub fn record_history(
 /// Runs the identification. Exit 0: converged; 1: iteration limit or divergence (the best point
 /// is still reported and written).
 pub fn run(a: IdentifyArgs) -> anyhow::Result<ExitCode> {
+    let begun = std::time::Instant::now();
     let problem = setup(&a)?;
     let obs = &problem.observations;
     if let Some(path) = &a.export_problem {
@@ -453,27 +460,32 @@ pub fn run(a: IdentifyArgs) -> anyhow::Result<ExitCode> {
             );
         }
     })?;
+    let identified = started.elapsed().as_secs_f64();
     tracing::info!(
-        seconds = started.elapsed().as_secs_f64(),
+        seconds = identified,
         iterations = id.iterations,
         model_evaluations = id.evaluations.model,
         "identify: {}",
         id.stop.describe()
     );
-    let text = report::text(&id);
-    let json = serde_json::to_string_pretty(&report::json(&id))? + "\n";
-    let csv = report::csv(&id);
+    let output = std::time::Instant::now();
+    // Each form is made when it is written: on stdout in the chosen format, all three with --out.
+    let text = || report::text(&id);
+    let json = || -> anyhow::Result<String> {
+        Ok(serde_json::to_string_pretty(&report::json(&id))? + "\n")
+    };
+    let csv = || report::csv(&id);
     match a.format {
-        FormatArg::Text => emit(None, &text)?,
-        FormatArg::Json => emit(None, &json)?,
-        FormatArg::Csv => emit(None, &csv)?,
+        FormatArg::Text => emit(None, &text())?,
+        FormatArg::Json => emit(None, &json()?)?,
+        FormatArg::Csv => emit(None, &csv())?,
     }
     if let Some(dir) = &a.out {
         std::fs::create_dir_all(dir)
             .with_context(|| format!("cannot create the output directory {}", dir.display()))?;
-        emit(Some(&dir.join("report.txt")), &text)?;
-        emit(Some(&dir.join("table.json")), &json)?;
-        emit(Some(&dir.join("table.csv")), &csv)?;
+        emit(Some(&dir.join("report.txt")), &text())?;
+        emit(Some(&dir.join("table.json")), &json()?)?;
+        emit(Some(&dir.join("table.csv")), &csv())?;
         let resolved = serde_json::to_string_pretty(&rfe::contract::to_json(&id.model))? + "\n";
         emit(Some(&dir.join("model.json")), &resolved)?;
         let original = std::fs::read_to_string(&a.model)
@@ -488,6 +500,19 @@ pub fn run(a: IdentifyArgs) -> anyhow::Result<ExitCode> {
         record_history(db, &a, "identify", obs, &id, None)?;
     }
     write_final(&a, &id, None)?;
+    if a.timing {
+        let ms = |s: f64| 1e3 * s;
+        eprintln!(
+            "timing: set-up {:.2} ms, fit {:.2} ms ({} iterations, {} model evaluations in all), identification around it {:.2} ms, output {:.2} ms, run {:.2} ms",
+            ms(started.duration_since(begun).as_secs_f64()),
+            ms(id.fit_seconds),
+            id.iterations,
+            id.evaluations.model,
+            ms(identified - id.fit_seconds),
+            ms(output.elapsed().as_secs_f64()),
+            ms(begun.elapsed().as_secs_f64()),
+        );
+    }
     if id.stop.converged() {
         Ok(ExitCode::SUCCESS)
     } else {
