@@ -86,8 +86,9 @@ impl Shared {
 
 /// The solves a round holds for the evaluations that change one candidate only: the current
 /// fit's and the same with the variables at their initial values (a refit's fresh start), made
-/// once per round where the model is large enough for the update to pay (below
-/// [`LOW_RANK_MIN_DOFS`] a full solve costs no more than the update's Schur complement).
+/// once per round where the model is large enough for the update to pay (at or below
+/// `LOW_RANK_MIN_DOFS`, 100 DOFs, a full solve costs no more than the update's Schur
+/// complement).
 #[derive(Default)]
 pub struct Solves {
     held: Mutex<Vec<Arc<Shared>>>,
