@@ -529,20 +529,25 @@ impl Criterion {
     /// Whitened residuals of model responses `q` at every observation ([`Criterion::predicted`],
     /// gains included): those [`Criterion::evaluate`] gives at the `x` they were predicted at.
     pub fn residuals_of_predicted(&self, q: &[C64]) -> DVector<f64> {
-        let np = self.obs.len();
         let mut e = DVector::zeros(self.residual_count());
         for (i, (o, &q)) in self.obs.iter().zip(q).enumerate() {
-            match self.fit {
-                FitKind::Amplitude => e[i] = (o.z.re - q.norm()) / o.sigma,
-                FitKind::LogAmplitude => e[i] = log_residual(o, q),
-                FitKind::Complex => {
-                    let d = (o.z - q) / o.sigma;
-                    e[i] = d.re;
-                    e[np + i] = d.im;
-                }
-            }
+            self.write_residual(&mut e, i, o, q);
         }
         e
+    }
+
+    /// Writes observation `i`'s whitened residual of the model output `q` (gains applied) into
+    /// `e`: its one entry, or its real part at `i` and its imaginary part `obs.len()` further.
+    fn write_residual(&self, e: &mut DVector<f64>, i: usize, o: &Obs, q: C64) {
+        match self.fit {
+            FitKind::Amplitude => e[i] = (o.z.re - q.norm()) / o.sigma,
+            FitKind::LogAmplitude => e[i] = log_residual(o, q),
+            FitKind::Complex => {
+                let d = (o.z - q) / o.sigma;
+                e[i] = d.re;
+                e[self.obs.len() + i] = d.im;
+            }
+        }
     }
 
     /// Whitened residuals `e = (z − g q)/σ` of given model outputs `q(characteristic, line)`
@@ -550,20 +555,10 @@ impl Criterion {
     /// gains `g` are read from `x`): the residuals of a model solved elsewhere, e.g. by
     /// [`rfe::lowrank`].
     pub fn residuals_of(&self, x: &[f64], q: impl Fn(usize, usize) -> C64) -> DVector<f64> {
-        let m = self.residual_count();
-        let mut e = DVector::zeros(m);
-        let np = self.obs.len();
+        let mut e = DVector::zeros(self.residual_count());
         for (i, o) in self.obs.iter().enumerate() {
             let q = q(o.output, o.line) * self.gain(o.output, x);
-            match self.fit {
-                FitKind::Amplitude => e[i] = (o.z.re - q.norm()) / o.sigma,
-                FitKind::LogAmplitude => e[i] = log_residual(o, q),
-                FitKind::Complex => {
-                    let d = (o.z - q) / o.sigma;
-                    e[i] = d.re;
-                    e[np + i] = d.im;
-                }
-            }
+            self.write_residual(&mut e, i, o, q);
         }
         e
     }
@@ -626,17 +621,8 @@ impl Criterion {
             let at = o.output * lines + o.line;
             let q0 = r.values[at];
             let q = q0 * g;
-            let qa = q.norm();
-            match self.fit {
-                FitKind::Amplitude => e[i] = (o.z.re - qa) / o.sigma,
-                FitKind::LogAmplitude => e[i] = log_residual(o, q),
-                FitKind::Complex => {
-                    let d = (o.z - q) / o.sigma;
-                    e[i] = d.re;
-                    e[np + i] = d.im;
-                }
-            }
-            points.push((at, g, q0, q, qa));
+            self.write_residual(&mut e, i, o, q);
+            points.push((at, g, q0, q, q.norm()));
         }
         // A column at a time: ∂q/∂x of every point, summed over the column's terms in order
         // (a parameter's derivatives are read along its row of the response's Jacobian).
