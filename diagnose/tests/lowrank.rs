@@ -161,8 +161,9 @@ fn a_spring_is_rank_one_on_two_bodies_and_its_derivative_matches_the_full_solve(
         let base = Base::new(&m.model, &freqs, method).unwrap();
         let k = spring.params(hi)[0].scale;
         let u = base.update(&with(k)).unwrap();
-        // Two bodies' DOFs at most: rank 1 within them.
+        // Two bodies' DOFs at most: rank 1 within them, and applied in that rank.
         assert!(u.support.len() <= 12 && u.new_dofs == 0, "{:?}", u.support);
+        assert_eq!(u.rank(), 1, "a spring's update has rank 1");
         // ΔA is linear in k: ∂ΔA/∂k is the update divided by k.
         let du = u.scaled(1.0 / k).unwrap();
         let d = base.derivative(&u, &du).unwrap();

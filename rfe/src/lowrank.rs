@@ -25,9 +25,12 @@
 //!
 //! and an output whose row changes (an output on a split body reads its third) adds the change of
 //! its row on S and its row on N. The update's rank is at most |S| (a spring: rank 1 within its
-//! two bodies' 12 DOFs; a point mass, a resonator, an SDE direction, a body's mass: rank ≤ 6); it
-//! is applied on its support block as a whole, `|S|³` operations per line whatever the rank,
-//! which costs a constant factor, not growth with the model. A split body is no low-rank change
+//! two bodies' 12 DOFs; a point mass, a resonator, an SDE direction, a body's mass: rank ≤ 6).
+//! Where the columns of its blocks span fewer than |S| dimensions, it is applied in their
+//! orthonormal basis `Q` (`Δ = Q C Qᵀ`, C r × r): `q'_S = b − G Q (I + C Qᵀ G Q)⁻¹ C Qᵀ b` with
+//! `b = q_S + G p̃`, |S|² r operations per line instead of the |S|³ of `I + G Δ`; a change of
+//! full rank on its support (a body's mass) is applied as a whole. Either way the cost per line
+//! is a constant factor, not growth with the model. A split body is no low-rank change
 //! of the same system — it adds 12 DOFs and moves the joints of the body to its thirds — but in
 //! this bordered form it is one like the others: its support is the body and the bodies its
 //! joints reach, its new DOFs the two end thirds.
@@ -42,7 +45,7 @@
 //! - **modal**: `G = X_S (Λ − ω²)⁻¹ Y_S` from the base's modes (O(|S|² n) per support and line).
 //!
 //! Either way `G` is kept per support ([`Base`]'s cache), so a change evaluated again — at another
-//! size, as a screen and a refit do — costs O(|S|³) per line.
+//! size, as a screen and a refit do — costs O(|S|² r) per line.
 //!
 //! The base must be driven by its own excitation (no further references, no base motion): a base
 //! motion's load `M T u_b` changes with every mass change.
@@ -151,6 +154,99 @@ pub struct Update {
     /// Change of each output row on S (outputs × S) and each row on N (outputs × N).
     r_s: DMatrix<f64>,
     r_n: DMatrix<f64>,
+    /// The change in the basis of its own columns, where that basis is smaller than S.
+    reduced: Option<Reduced>,
+}
+
+/// An update in the basis of the columns it can have: `Q` (S × r, orthonormal, real) spans
+/// the columns of `ΔK`, `ΔD`, `ΔM` on S×S and of `K`, `D`, `M` on S×N, so that
+/// `Δ(ω) = Q (Qᵀ Δ(ω) Q) Qᵀ` at every ω, Schur complement included (all of them are symmetric,
+/// and the Schur complement's columns are those of `A_SN`). A spring's `r` is 1 within its two
+/// bodies' 12 DOFs.
+#[derive(Debug, Clone)]
+struct Reduced {
+    /// `Q` as complex numbers.
+    q: DMatrix<C64>,
+    /// `Qᵀ (ΔK + jΔD) Q` and `Qᵀ ΔM Q` (r × r).
+    k_rr: DMatrix<C64>,
+    m_rr: DMatrix<f64>,
+    /// `Qᵀ (K + jD)_SN` and `Qᵀ M_SN` (r × N).
+    k_rn: DMatrix<C64>,
+    m_rn: DMatrix<f64>,
+}
+
+/// A column of the (scaled) blocks whose part outside the basis so far is below this is in it:
+/// the blocks' own rounding, relative to their largest entry.
+const REDUCED_RANK_TOLERANCE: f64 = 1e-11;
+
+impl Reduced {
+    /// The reduced form of the blocks of an update on S, or `None` where their columns span S
+    /// (nothing to gain). The basis is built column by column (Gram-Schmidt, orthogonalised
+    /// twice), |S| r operations a column, and given up once it reaches |S|. Each block is
+    /// scaled to its largest entry, so that a mass change is not lost beside a stiffness change
+    /// eight decades larger.
+    fn of(
+        k_ss: &DMatrix<C64>,
+        m_ss: &DMatrix<f64>,
+        k_sn: &DMatrix<C64>,
+        m_sn: &DMatrix<f64>,
+    ) -> Option<Reduced> {
+        let s = k_ss.nrows();
+        if s == 0 {
+            return None;
+        }
+        let blocks: [DMatrix<f64>; 6] = [
+            k_ss.map(|v| v.re),
+            k_ss.map(|v| v.im),
+            m_ss.clone(),
+            k_sn.map(|v| v.re),
+            k_sn.map(|v| v.im),
+            m_sn.clone(),
+        ];
+        let mut basis: Vec<DVector<f64>> = Vec::new();
+        for block in &blocks {
+            let max = block.amax();
+            if max == 0.0 {
+                continue;
+            }
+            for column in block.column_iter() {
+                let mut v: DVector<f64> = column / max;
+                for _ in 0..2 {
+                    for b in &basis {
+                        let along = b.dot(&v);
+                        v.axpy(-along, b, 1.0);
+                    }
+                }
+                let norm = v.norm();
+                if norm > REDUCED_RANK_TOLERANCE {
+                    basis.push(v / norm);
+                    if 2 * basis.len() > s {
+                        return None;
+                    }
+                }
+            }
+        }
+        let q = DMatrix::from_columns(&basis);
+        let qt = q.transpose();
+        let qc = q.map(|v| C64::new(v, 0.0));
+        let qct = qc.transpose();
+        Some(Reduced {
+            k_rr: &qct * k_ss * &qc,
+            m_rr: &qt * m_ss * &q,
+            k_rn: &qct * k_sn,
+            m_rn: &qt * m_sn,
+            q: qc,
+        })
+    }
+
+    /// The reduced form of `factor` times a change without new DOFs.
+    fn scaled(&self, factor: f64) -> Reduced {
+        Reduced {
+            k_rr: self.k_rr.map(|v| v * factor),
+            m_rr: self.m_rr.map(|v| v * factor),
+            ..self.clone()
+        }
+    }
 }
 
 impl Update {
@@ -164,6 +260,7 @@ impl Update {
         linear.then(|| Update {
             k_ss: self.k_ss.map(|v| v * factor),
             m_ss: self.m_ss.map(|v| v * factor),
+            reduced: self.reduced.as_ref().map(|r| r.scaled(factor)),
             ..self.clone()
         })
     }
@@ -171,6 +268,14 @@ impl Update {
     /// `|S|`, the size of the block the update is applied on.
     pub fn rank_bound(&self) -> usize {
         self.support.len()
+    }
+
+    /// The rank the update is applied in: that of its blocks' columns where smaller than
+    /// `|S|` (see [`Base::changed_response`]), else `|S|`.
+    pub fn rank(&self) -> usize {
+        self.reduced
+            .as_ref()
+            .map_or(self.support.len(), |r| r.q.ncols())
     }
 
     /// `(ΔA_SS, A_SN, A_NN)` at `omega`.
@@ -381,11 +486,16 @@ impl Base {
         let s = support.len();
         let m = n1 - n0;
         let sup = |a: usize| support[a];
+        let k_ss = DMatrix::from_fn(s, s, |a, bb| kc(sup(a), sup(bb)) - kb(sup(a), sup(bb)));
+        let m_ss = DMatrix::from_fn(s, s, |a, bb| mc(sup(a), sup(bb)) - mb(sup(a), sup(bb)));
+        let k_sn = DMatrix::from_fn(s, m, |a, j| kc(sup(a), n0 + j));
+        let m_sn = DMatrix::from_fn(s, m, |a, j| mc(sup(a), n0 + j));
         Ok(Update {
-            k_ss: DMatrix::from_fn(s, s, |a, bb| kc(sup(a), sup(bb)) - kb(sup(a), sup(bb))),
-            m_ss: DMatrix::from_fn(s, s, |a, bb| mc(sup(a), sup(bb)) - mb(sup(a), sup(bb))),
-            k_sn: DMatrix::from_fn(s, m, |a, j| kc(sup(a), n0 + j)),
-            m_sn: DMatrix::from_fn(s, m, |a, j| mc(sup(a), n0 + j)),
+            reduced: Reduced::of(&k_ss, &m_ss, &k_sn, &m_sn),
+            k_ss,
+            m_ss,
+            k_sn,
+            m_sn,
             k_nn: DMatrix::from_fn(m, m, |i, j| kc(n0 + i, n0 + j)),
             m_nn: DMatrix::from_fn(m, m, |i, j| mc(n0 + i, n0 + j)),
             p_s: DVector::from_fn(s, |a, _| c.load[sup(a)] - b.load[sup(a)]),
@@ -403,7 +513,10 @@ impl Base {
         let mut out = vec![vec![C64::new(0.0, 0.0); lines]; outputs];
         let g = self.receptances(&u.support)?;
         for k in 0..lines {
-            let line = self.line(k, u, &g[k])?;
+            let line = match &u.reduced {
+                Some(reduced) => self.line_reduced(k, u, reduced, &g[k])?,
+                None => self.line(k, u, &g[k])?,
+            };
             for (o, y) in out.iter_mut().enumerate() {
                 y[k] = self.factor(k, o) * line.reading(o);
             }
@@ -448,9 +561,13 @@ impl Base {
             for (o, y) in out.iter_mut().enumerate() {
                 let w = self.unit(k, o);
                 let w_s = DVector::from_fn(s, |a, _| w[u.support[a]]);
-                let w1 = line.t.solve(&w_s).ok_or(LowRankError::Singular {
-                    freq_hz: self.states.freqs_hz[k],
-                })?;
+                let w1 =
+                    line.t
+                        .as_ref()
+                        .and_then(|t| t.solve(&w_s))
+                        .ok_or(LowRankError::Singular {
+                            freq_hz: self.states.freqs_hz[k],
+                        })?;
                 y[k] = -self.factor(k, o) * w1.dot(&dq);
             }
         }
@@ -506,7 +623,69 @@ impl Base {
             q_s: q_s1,
             q_n: q_n1,
             rhs,
-            t,
+            t: Some(t),
+        })
+    }
+
+    /// The changed state at line `k` as [`Base::line`] gives it, in the update's reduced basis
+    /// `Q` (`r` columns): with `Δ = Q C Qᵀ`, Woodbury's identity
+    /// `(I + G Q C Qᵀ)⁻¹ = I − G Q (I + C Qᵀ G Q)⁻¹ C Qᵀ` needs an r × r factorisation and
+    /// `G Q` (|S|² r) instead of `I + G Δ`'s |S|³ product and factorisation.
+    fn line_reduced<'u>(
+        &'u self,
+        k: usize,
+        u: &'u Update,
+        reduced: &Reduced,
+        g: &DMatrix<C64>,
+    ) -> Result<Line<'u>, LowRankError> {
+        let f = self.states.freqs_hz[k];
+        let w2 = (TWO_PI * f).powi(2);
+        let singular = || LowRankError::Singular { freq_hz: f };
+        let with_mass = |k: &DMatrix<C64>, m: &DMatrix<f64>| {
+            DMatrix::from_fn(k.nrows(), k.ncols(), |i, j| k[(i, j)] - m[(i, j)] * w2)
+        };
+        let q = &reduced.q;
+        let mut c = with_mass(&reduced.k_rr, &reduced.m_rr);
+        let mut p = u.p_s.map(|v| C64::new(v, 0.0));
+        let p_n = u.p_n.map(|v| C64::new(v, 0.0));
+        let a_sn = with_mass(&u.k_sn, &u.m_sn);
+        let nn_lu = with_mass(&u.k_nn, &u.m_nn).lu();
+        if u.new_dofs > 0 {
+            // The Schur complement of the new DOFs, in the reduced basis.
+            let a_rn = with_mass(&reduced.k_rn, &reduced.m_rn);
+            let x = nn_lu.solve(&a_rn.transpose()).ok_or_else(singular)?;
+            c -= &a_rn * x;
+            let y = nn_lu.solve(&p_n).ok_or_else(singular)?;
+            p -= &a_sn * y;
+        }
+        let load = self.states.load_at(k);
+        let q_s = DVector::from_fn(u.support.len(), |a, _| load[u.support[a]]);
+        let gq = g * q;
+        let h = q.transpose() * &gq;
+        let t = (DMatrix::<C64>::identity(c.nrows(), c.nrows()) + &c * h).lu();
+        let b = if p.iter().all(|v| *v == C64::new(0.0, 0.0)) {
+            q_s
+        } else {
+            q_s + g * &p
+        };
+        let z = t.solve(&(&c * (q.transpose() * &b))).ok_or_else(singular)?;
+        let q_s1 = b - &gq * z;
+        let q_n1 = if u.new_dofs > 0 {
+            nn_lu
+                .solve(&(p_n - a_sn.transpose() * &q_s1))
+                .ok_or_else(singular)?
+        } else {
+            DVector::zeros(0)
+        };
+        let rhs = &p - q * (&c * (q.transpose() * &q_s1));
+        Ok(Line {
+            base: self,
+            k,
+            u,
+            q_s: q_s1,
+            q_n: q_n1,
+            rhs,
+            t: None,
         })
     }
 }
@@ -521,8 +700,8 @@ struct Line<'a> {
     q_n: DVector<C64>,
     /// `p̃ − Δ q'_S`.
     rhs: DVector<C64>,
-    /// LU of `I + G Δ`.
-    t: nalgebra::LU<C64, nalgebra::Dyn, nalgebra::Dyn>,
+    /// LU of `I + G Δ` (made by [`Base::line`], for the derivative's adjoint solve).
+    t: Option<nalgebra::LU<C64, nalgebra::Dyn, nalgebra::Dyn>>,
 }
 
 impl Line<'_> {
