@@ -105,16 +105,25 @@ fn main() {
             let at_truth = idn::identify(&model, &obs, &vars, &opts.identification, &mut |_, _| {})
                 .expect("fit from the truth");
             let o = blind::judge(&case, &d, (t2 - t0).as_secs_f64(), (t2 - t1).as_secs_f64());
+            // A miss is judged as the blind suite judges one: against the truth's own form refitted.
+            let verdict = (!o.right_first).then(|| {
+                let starts = [d.estimate.clone(), case.vars.initial()];
+                let j = blind::truth_form(&model, &case, &starts, &opts).expect("truth's form");
+                blind::miss(d.after.criterion, j, d.after.observations)
+            });
+            let injected: Vec<String> = case.injected.iter().map(|i| i.effect.describe()).collect();
             tx.send((
                 (t1 - t0).as_secs_f64(),
                 (t2 - t1).as_secs_f64(),
                 d,
-                o,
+                (o, verdict, injected),
                 at_truth.criterion,
             ))
             .ok();
         });
-        let Ok((ti, td, d, o, j_truth)) = rx.recv_timeout(Duration::from_secs_f64(limit)) else {
+        let Ok((ti, td, d, (o, verdict, injected), j_truth)) =
+            rx.recv_timeout(Duration::from_secs_f64(limit))
+        else {
             println!(
                 "{n:>6} {:>5} {:>5} {:>5}   no answer within {limit:.0} s",
                 m.model.dof_count(),
@@ -145,10 +154,23 @@ fn main() {
             }
         );
         println!(
-            "       {}; added [{}]",
+            "       {}; injected [{}]; added [{}]",
             diagnose::timing_text(&d),
+            injected.join("; "),
             o.added.join("; ")
         );
+        if let Some(verdict) = verdict {
+            println!(
+                "       not found: {}",
+                match verdict {
+                    blind::Miss::CannotTell =>
+                        "the data cannot tell the answer from the truth's own form (within an LR of 3.84)",
+                    blind::Miss::Missed => "the truth's own form fits better: the search missed it",
+                    blind::Miss::Undecided =>
+                        "the truth's own refit is off the noise level too (undecided)",
+                }
+            );
+        }
         rows.push(Row {
             bodies: n,
             identify_s: ti,

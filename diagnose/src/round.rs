@@ -14,9 +14,10 @@
 
 use super::lowrank::Solves;
 use super::tuning::{
-    EQUIVALENT_COS, FRESH_SIZES_PER_DECADE, FRESH_SIZE_DECADES, LARGE_MISFIT, MEMBERS_REFITTED,
-    MIN_EXCESS_SHARE, PULLED_PER_KIND, SCORE_FAMILIES_REFITTED, SCREENED, SCREENED_PER_KIND,
-    SHORT_REFITS_PER_KIND, SHORT_REFIT_ITERATIONS, SWAP_LEVEL,
+    EQUIVALENT_COS, FRESH_REFIT_RUNGS, FRESH_SIZES_PER_DECADE, FRESH_SIZE_DECADES, LARGE_MISFIT,
+    MEMBERS_REFITTED, MIN_EXCESS_SHARE, PULLED_PER_KIND, SCORE_FAMILIES_REFITTED, SCREENED,
+    SCREENED_PER_KIND, SHORT_REFITS_PER_KIND, SHORT_REFIT_ITERATIONS, SHORT_REFIT_KEPT,
+    SHORT_REFIT_MIN_KEPT, SHORT_REFIT_RUNGS, SWAP_LEVEL,
 };
 use super::*;
 use identify::stats::chi2_tail;
@@ -703,8 +704,9 @@ pub(super) fn unplaced(effect: &Effect) -> bool {
 /// the candidates `short` names that no refit job holds, each one's parameters and the fit's
 /// variables fitted together for at most [`SHORT_REFIT_ITERATIONS`] iterations from the best of
 /// the exploring starts (see [`screen::effect_starts`]), at the current fit and (for
-/// [`Short::Leading`]) with the variables at their initial values ([`from_initial`]). The lower
-/// criterion reached and the effect's parameters there, lowest first.
+/// [`Short::Leading`]) with the variables at their initial values ([`from_initial`]), the runs
+/// from each kind of start thinned by successive halving where there are many ([`halve`]). The
+/// lower criterion reached and the effect's parameters there, lowest first.
 ///
 /// The screen moves the fit's variables to first order only, and a large effect can need them to
 /// move far: an actuator's missing lateral stiffness (5.3 N/µm on FWD-32J, scored 238th) screens
@@ -745,7 +747,8 @@ pub(super) fn short_refits(
             .collect(),
     };
     let todo: Vec<usize> = todo.into_iter().filter(|&j| !refitted(j)).collect();
-    let ends = in_parallel(&todo, |&j| {
+    let fresh = short == Short::Leading;
+    let arms = in_parallel(&todo, |&j| {
         let cand = effect(j);
         let params = cand.params(f_hi);
         let step = score_start(cand, ranking.scored[j].step, f_hi);
@@ -757,22 +760,184 @@ pub(super) fn short_refits(
             None if ruled_out => params.iter().map(|np| np.initial).collect(),
             None => step.clone(),
         };
-        let fresh = short == Short::Leading;
-        let (criterion, start) = short_refit_of(
-            setting,
-            cur,
-            cand,
-            given,
-            (!ruled_out).then_some(step),
-            fresh,
-        )?;
+        let extra = (!ruled_out).then_some(step);
+        short_refit_starts(setting, cur, cand, given, extra, fresh)
+            .into_iter()
+            .map(move |u| Arm::at(j, u))
+    });
+    // The runs from the current fit and from the variables' initial values are ranked apart:
+    // the latter start far above (the variables' own misfit) and take more iterations before
+    // their order tells anything.
+    let (from_fit, from_initial): (Vec<_>, Vec<_>) = arms
+        .into_iter()
+        .flat_map(|starts| starts.enumerate())
+        .partition(|(k, _)| *k == 0);
+    let arms: Vec<Arm> = [
+        (from_fit, SHORT_REFIT_RUNGS),
+        (from_initial, FRESH_REFIT_RUNGS),
+    ]
+    .into_iter()
+    .flat_map(|(arms, rungs)| {
+        let arms = arms.into_iter().map(|(_, arm)| arm).collect();
+        halve(setting, cur, ranking, arms, &rungs)
+    })
+    .collect();
+    let ends = todo.iter().map(|&j| {
+        let arm = arms
+            .iter()
+            .filter(|a| a.index == j && a.criterion.is_finite())
+            .min_by(|a, b| a.criterion.total_cmp(&b.criterion))?;
+        let q = effect(j).params(f_hi).len();
+        let (_, gamma) = extended(setting, cur, effect(j)).split(&arm.u);
         Some(Screened {
             index: j,
-            criterion,
-            start,
+            criterion: arm.criterion,
+            start: gamma[gamma.len() - q..].to_vec(),
         })
     });
-    lowest_first(ends)
+    lowest_first(ends.collect())
+}
+
+/// One start of a candidate's short refit, run a rung at a time (see [`halve`]).
+struct Arm {
+    /// Index into the ranking's scored candidates.
+    index: usize,
+    /// The point reached (scaled: the fit's variables, then the effect's parameters).
+    u: DVector<f64>,
+    /// J at `u` (infinite until the first rung has evaluated it).
+    criterion: f64,
+    /// Levenberg-Marquardt iterations run so far.
+    iterations: usize,
+    /// The run converged, or cannot go on: it takes no more iterations.
+    ended: bool,
+}
+
+impl Arm {
+    /// Candidate `index`'s run from the start `u`, not yet evaluated.
+    fn at(index: usize, u: DVector<f64>) -> Arm {
+        Arm {
+            index,
+            u,
+            criterion: f64::INFINITY,
+            iterations: 0,
+            ended: false,
+        }
+    }
+}
+
+/// Runs the short refits' `arms` by successive halving: while more than
+/// [`SHORT_REFIT_MIN_KEPT`] are running, each runs on to the next rung's iterations (`rungs`,
+/// in all) and only the lowest [`SHORT_REFIT_KEPT`] share of them (at least the minimum) goes
+/// on; the rest then run to the last rung, [`SHORT_REFIT_ITERATIONS`]. An arm left behind keeps
+/// the criterion it reached.
+///
+/// Where a large model makes hundreds of candidates (every SDE direction, body and joint group
+/// is one), most explain nothing, and their criteria after a few iterations already put the
+/// ones that end lowest among the lowest. Where they are fewer, the order after a few
+/// iterations is a poor guide: near the noise level the candidates end within a few units of J
+/// of each other along long curved paths (on FWD-32J the one that ended lowest of about 140
+/// was 70th after 4 iterations), so every arm runs to the end in one run, as without halving.
+fn halve(
+    setting: Setting,
+    cur: &Current,
+    ranking: &Ranking,
+    mut arms: Vec<Arm>,
+    rungs: &[usize],
+) -> Vec<Arm> {
+    let run_to = |arms: &mut [Arm], running: &[usize], upto: usize| {
+        let advanced = in_parallel(running, |&a| {
+            let arm = &arms[a];
+            let effect = &ranking.candidates[ranking.scored[arm.index].candidate];
+            advance(setting, cur, effect, arm, upto)
+        });
+        for (&a, next) in running.iter().zip(advanced) {
+            arms[a] = next;
+        }
+    };
+    let mut running: Vec<usize> = (0..arms.len()).collect();
+    let (&last, early) = rungs.split_last().unwrap_or((&SHORT_REFIT_ITERATIONS, &[]));
+    for &upto in early {
+        if running.len() <= SHORT_REFIT_MIN_KEPT {
+            break;
+        }
+        run_to(&mut arms, &running, upto);
+        let reached = running
+            .iter()
+            .filter(|&&a| !arms[a].ended)
+            .map(|&a| (a, arms[a].criterion));
+        running = going_on(reached.collect());
+    }
+    run_to(&mut arms, &running, last);
+    arms
+}
+
+/// Of the arms still running (`(arm, criterion reached)`), those that go on to the next rung:
+/// the lowest [`SHORT_REFIT_KEPT`] share, at least [`SHORT_REFIT_MIN_KEPT`], lowest first.
+fn going_on(mut reached: Vec<(usize, f64)>) -> Vec<usize> {
+    reached.sort_by(|a, b| a.1.total_cmp(&b.1));
+    let kept = (reached.len() as f64 * SHORT_REFIT_KEPT).ceil() as usize;
+    reached.truncate(kept.max(SHORT_REFIT_MIN_KEPT));
+    reached.into_iter().map(|(a, _)| a).collect()
+}
+
+/// `arm` run on to `upto` iterations in all (the effect's problem built afresh, the
+/// Levenberg-Marquardt damping started anew); an arm that cannot be evaluated ends where it
+/// was, with an infinite criterion if it never was.
+fn advance(setting: Setting, cur: &Current, effect: &Effect, arm: &Arm, upto: usize) -> Arm {
+    let mut p = extended(setting, cur, effect);
+    let fit = &setting.opts.identification;
+    let settings = optimize::Settings {
+        max_iterations: upto.saturating_sub(arm.iterations),
+        ..fit.settings
+    };
+    let (lo, hi) = p.bounds();
+    match optimize::minimize(
+        fit.optimizer,
+        &mut p,
+        &arm.u,
+        &lo,
+        &hi,
+        &settings,
+        &mut |_| {},
+    ) {
+        Ok(out) => Arm {
+            index: arm.index,
+            ended: out.stop != optimize::StopReason::IterationLimit,
+            iterations: arm.iterations + out.iterations,
+            criterion: out.criterion,
+            u: out.u,
+        },
+        Err(_) => Arm {
+            index: arm.index,
+            u: arm.u.clone(),
+            criterion: arm.criterion,
+            iterations: arm.iterations,
+            ended: true,
+        },
+    }
+}
+
+/// The starts of `cand`'s short refit added to the fit `cur`: the best-fitting of its
+/// parameters' starts around `given` (and at `extra`), and, when `fresh`, the one with the
+/// variables at their initial values ([`fresh_start`]).
+fn short_refit_starts(
+    setting: Setting,
+    cur: &Current,
+    cand: &Effect,
+    given: Vec<f64>,
+    extra: Option<Vec<f64>>,
+    fresh: bool,
+) -> Vec<DVector<f64>> {
+    let mut p = extended(setting, cur, cand);
+    let params = cand.params(setting.f_hi);
+    let mut starts = screen::effect_starts(&params, &given, true);
+    starts.extend(extra);
+    let starts = starts.iter().map(|x| with_effect(&cur.u, &params, x));
+    let Some((_, u0)) = lowest_start(&mut p, setting.solves, starts) else {
+        return Vec::new();
+    };
+    let fresh = fresh.then(|| fresh_start(&mut p, setting.solves, &u0, &params, setting.vars));
+    std::iter::once(u0).chain(fresh).collect()
 }
 
 /// A short refit ([`SHORT_REFIT_ITERATIONS`] at most) of `cand` added to the fit `cur`: from the
@@ -787,21 +952,10 @@ fn short_refit_of(
     extra: Option<Vec<f64>>,
     fresh: bool,
 ) -> Option<(f64, Vec<f64>)> {
+    let starts = short_refit_starts(setting, cur, cand, given, extra, fresh);
     let mut p = extended(setting, cur, cand);
-    let params = cand.params(setting.f_hi);
-    let mut starts = screen::effect_starts(&params, &given, true);
-    starts.extend(extra);
-    let starts = starts.iter().map(|x| with_effect(&cur.u, &params, x));
-    let (_, u0) = lowest_start(&mut p, setting.solves, starts)?;
-    let fresh = fresh.then(|| fresh_start(&mut p, setting.solves, &u0, &params, setting.vars));
-    let starts = std::iter::once(u0).chain(fresh);
-    short_refit(
-        setting,
-        &mut p,
-        starts,
-        params.len(),
-        SHORT_REFIT_ITERATIONS,
-    )
+    let q = cand.params(setting.f_hi).len();
+    short_refit(setting, &mut p, starts, q, SHORT_REFIT_ITERATIONS)
 }
 
 /// The refit jobs of the short refits `refined` that went below `least` (the best refit so
@@ -1736,6 +1890,29 @@ mod tests {
     /// The short refits that went below the best refit so far lead refits of their families,
     /// lowest first, up to `n`, and none of a family a job already holds; those that did not go
     /// below it lead none.
+    #[test]
+    fn the_halving_keeps_the_lowest_share_and_never_fewer_than_the_minimum() {
+        let reached = |n: usize| -> Vec<(usize, f64)> {
+            (0..n).map(|a| (a, ((a * 7919) % n) as f64)).collect()
+        };
+        let lowest = |n: usize, k: usize| -> Vec<usize> {
+            let mut by_j = reached(n);
+            by_j.sort_by(|a, b| a.1.total_cmp(&b.1));
+            by_j.into_iter().take(k).map(|(a, _)| a).collect()
+        };
+        // Fewer than the minimum: all go on, lowest first.
+        let few = SHORT_REFIT_MIN_KEPT - 10;
+        assert_eq!(going_on(reached(few)), lowest(few, few));
+        // A share below the minimum: the minimum goes on.
+        let some = 2 * SHORT_REFIT_MIN_KEPT;
+        assert_eq!(going_on(reached(some)), lowest(some, SHORT_REFIT_MIN_KEPT));
+        // Many: the lowest share.
+        let many = 10 * SHORT_REFIT_MIN_KEPT + 1;
+        let share = (many as f64 * SHORT_REFIT_KEPT).ceil() as usize;
+        assert!(share > SHORT_REFIT_MIN_KEPT);
+        assert_eq!(going_on(reached(many)), lowest(many, share));
+    }
+
     #[test]
     fn a_short_refit_below_the_best_refit_leads_its_family_s_refit() {
         let candidates = vec![

@@ -102,6 +102,27 @@ pub(crate) const PULLED_PER_KIND: usize = 3;
 /// Iterations of a short refit.
 pub(crate) const SHORT_REFIT_ITERATIONS: usize = 40;
 
+/// The iterations (in all) after which a round's short refits from the current fit are ranked
+/// and only the lowest share runs on (successive halving, `round::halve`); the last is
+/// [`SHORT_REFIT_ITERATIONS`]. Of a 28-body machine's 700 candidates, the eight that ended lowest
+/// after 40 iterations were all within the lowest 31 after 4.
+pub(crate) const SHORT_REFIT_RUNGS: [usize; 3] = [4, 12, SHORT_REFIT_ITERATIONS];
+
+/// The rungs of the short refits from the variables' initial values: these start at the
+/// variables' own misfit, far above, and their order after 4 iterations tells nothing (the two
+/// that ended lowest of 704 ranked 593rd and 644th there); after 8 they were within the lowest 8.
+pub(crate) const FRESH_REFIT_RUNGS: [usize; 3] = [8, 20, SHORT_REFIT_ITERATIONS];
+
+/// The share of the short refits still running that goes on to the next rung.
+pub(crate) const SHORT_REFIT_KEPT: f64 = 1.0 / 4.0;
+
+/// Short refits (of each start) that all run to the end, whatever their order on the way: the
+/// halving only thins beyond them. Near the noise level the order after a few iterations is a
+/// poor guide (on FWD-32J's blind cases, with 130-145 candidates, the one that ended lowest was
+/// 70th after 4 iterations, and a cut at 48 lost the lowest end in three of seven stages); the
+/// hundreds of a large model are mostly hopeless and thin safely.
+pub(crate) const SHORT_REFIT_MIN_KEPT: usize = 160;
+
 /// Steps per decade of the size grid of [`fresh_start`].
 pub(crate) const FRESH_SIZES_PER_DECADE: i32 = 4;
 
