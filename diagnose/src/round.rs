@@ -1493,7 +1493,25 @@ pub(super) fn refit(
     }
     let settings = opts.identification.settings;
     let fresh = explore.then(|| fresh_start(&mut p, setting.solves, &u0, &new_params, vars));
-    let mut minimize_from = |u: &DVector<f64>| {
+    let mut starts = vec![u0.clone()];
+    if given != u0 {
+        starts.push(given);
+    }
+    // The score step is a start of its own: the screen's best size, where the fit's variables
+    // moved to first order only, can lie in another valley than the effect's refit (a large
+    // moment stiffness refitted from the screen's size can stop at the misfit it started from,
+    // and from its score step reach the noise level).
+    if let Some(step) = step {
+        starts.push(start_at(step));
+    }
+    // A large missing effect bends the fit's own parameters to mimic it, and the refit can stay
+    // in that valley: the variables' initial values are a start outside it.
+    starts.extend(fresh);
+    // The starts are minimized in parallel (a round refits a handful of members, the first of
+    // each family from up to four starts: run one after the other they leave a core idle);
+    // the first start's end stands unless another ends strictly lower.
+    let ends = in_parallel(&starts, |u| {
+        let mut p = extended(setting, cur, cand);
         optimize::minimize(
             opts.identification.optimizer,
             &mut p,
@@ -1503,27 +1521,19 @@ pub(super) fn refit(
             &settings,
             &mut |_| {},
         )
+    });
+    let mut ends = ends.into_iter();
+    // `starts` begins with `u0`: the first end is its.
+    let Some(first) = ends.next() else {
+        return Err(RefitError::TooFewObservations {
+            observations: m,
+            parameters: p.scale.len(),
+        });
     };
-    let mut out = minimize_from(&u0)?;
-    let mut others = Vec::new();
-    if given != u0 {
-        others.push(given);
-    }
-    // The score step is a start of its own: the screen's best size, where the fit's variables
-    // moved to first order only, can lie in another valley than the effect's refit (a large
-    // moment stiffness refitted from the screen's size can stop at the misfit it started from,
-    // and from its score step reach the noise level).
-    if let Some(step) = step {
-        others.push(start_at(step));
-    }
-    // A large missing effect bends the fit's own parameters to mimic it, and the refit can stay
-    // in that valley: the variables' initial values are a start outside it.
-    others.extend(fresh);
-    for u in others {
-        if let Ok(other) = minimize_from(&u) {
-            if other.criterion < out.criterion {
-                out = other;
-            }
+    let mut out = first?;
+    for other in ends.flatten() {
+        if other.criterion < out.criterion {
+            out = other;
         }
     }
     let (e, jac) = p.eval(&out.u, true)?;
