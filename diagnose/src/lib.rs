@@ -76,6 +76,7 @@ pub mod final_model;
 pub mod generate;
 pub mod lowrank;
 mod noise;
+mod pairs;
 mod placement;
 pub mod problem;
 pub mod request;
@@ -283,6 +284,11 @@ pub struct Round {
     /// parameter or a confidence interval that includes the nested value ("indicated but not
     /// identifiable").
     pub not_identifiable: Vec<NotTried>,
+    /// Pairs of the leading refits refitted jointly, where the best single refit left the misfit
+    /// above the noise level (`effect` names both, `dof` counts both effects' parameters; the
+    /// likelihood ratio is against the fit the round started from). A pair without the best
+    /// single that the data prefer puts its stronger member in that single's place.
+    pub pairs: Vec<Refit>,
 }
 
 /// An accepted effect replaced by one of another kind on the same bodies.
@@ -500,6 +506,7 @@ struct Level {
 }
 
 /// The state of the extended fit after a round.
+#[derive(Clone)]
 struct Current {
     effects: Vec<Effect>,
     u: DVector<f64>,
@@ -589,12 +596,7 @@ pub fn diagnose(
         )?;
         timing.ranking += t.elapsed().as_secs_f64();
         let t = std::time::Instant::now();
-        let Refitted {
-            refits,
-            best,
-            not_identifiable,
-            contenders,
-        } = refit_leading(
+        let refitted = refit_leading(
             setting,
             &so_far.cur,
             Leading {
@@ -604,6 +606,19 @@ pub fn diagnose(
             &mut not_tried,
             progress,
         );
+        // A pair without the best single that explains the data better puts its stronger
+        // member in the single's place (`pairs.rs`).
+        let judged = pairs::judge_pairs(setting, &so_far.cur, ranking.level(), &refitted, progress);
+        let Refitted {
+            refits,
+            mut best,
+            not_identifiable,
+            contenders,
+            fits,
+        } = refitted;
+        if let Some(first) = judged.first {
+            best = Some((first, fits[first].clone()));
+        }
         timing.refits += t.elapsed().as_secs_f64();
         let mut round = Round {
             candidates: ranking.scored.len(),
@@ -616,6 +631,7 @@ pub fn diagnose(
             replaced: Vec::new(),
             placed: None,
             not_identifiable,
+            pairs: judged.pairs,
         };
         let Some((i, next)) = best else {
             let t = std::time::Instant::now();
