@@ -41,25 +41,28 @@
 //! it (the FWD-32J demo's).
 
 use super::round::{
-    critical, in_parallel, lowest_start, margin, partial_fix, unidentifiable, Refitted,
+    in_parallel, margin, partial_fix, rank, refit, score_start, unidentifiable, Refitted,
 };
-use super::tuning::{PAIR_CONTENDERS, PAIR_LEVEL};
+use super::tuning::{PAIR_FIRSTS, PAIR_LEVEL, PAIR_PARTNERS};
 use super::*;
 use identify::stats::chi2_tail;
 
 /// What the pair judgement decided in a round.
 pub(super) struct Judged {
-    /// The pairs refitted, as refits (both effects named, both effects' parameters).
+    /// Each first effect's best pair, as refits (both effects named, both effects' parameters,
+    /// the likelihood ratio against the fit the round started from).
     pub(super) pairs: Vec<Refit>,
     /// The round's refit to accept instead of its best single (index into its refits), when
-    /// a pair without that single wins.
+    /// another first effect's pair explains the data better.
     pub(super) first: Option<usize>,
 }
 
-/// One refitted pair: the round's refits `members` (indices), its refit and fit.
+/// One first effect's best pair: the round's refit `first` (index), the pair as a refit, and
+/// the partner's own refit from the first's fit.
 struct Pair {
-    members: (usize, usize),
+    first: usize,
     refit: Refit,
+    partner: Refit,
 }
 
 /// Judges the round's leading refits (`refitted`, from the fit `cur` at the round's `level`)
@@ -85,47 +88,40 @@ pub(super) fn judge_pairs(
     if !above_noise(setting, level, best_fit) {
         return judged;
     }
-    let members = leading(refits, level.threshold);
-    if members.len() < 2 {
+    let firsts = leading(refits, best, level.threshold);
+    if firsts.len() < 2 {
         return judged;
     }
-    let couples: Vec<(usize, usize)> = members
-        .iter()
-        .enumerate()
-        .flat_map(|(k, &a)| members[k + 1..].iter().map(move |&b| (a, b)))
-        .collect();
     progress(&format!(
-        "the best refit leaves J {:.1}, above the noise level: refitting {} pairs of the {} leading refits jointly",
+        "the best refit leaves J {:.1}, above the noise level: judging the {} leading refits by their best next effect",
         refits[best].criterion_after,
-        couples.len(),
-        members.len()
+        firsts.len()
     ));
-    let ends = in_parallel(&couples, |&(a, b)| {
-        refit_pair(setting, cur, (&fits[a], &fits[b]), level.sigma2)
-    });
     let mut pairs: Vec<Pair> = Vec::new();
-    for (&(a, b), end) in couples.iter().zip(ends) {
-        match end {
-            Ok(refit) => {
+    for &first in &firsts {
+        match best_partner(setting, cur, &fits[first], level.sigma2) {
+            Ok(Some((refit, partner))) => {
                 progress(&format!(
                     "pair {}: J {:.1} → {:.1}, LR = {:.1} ({} dof)",
                     refit.effect, refit.criterion_before, refit.criterion_after, refit.lr, refit.dof
                 ));
                 pairs.push(Pair {
-                    members: (a, b),
+                    first,
                     refit,
+                    partner,
                 });
             }
+            Ok(None) => {}
             Err(e) => progress(&format!(
-                "pair {} + {}: not refitted ({e})",
-                refits[a].effect, refits[b].effect
+                "pairs of {}: not refitted ({e})",
+                refits[first].effect
             )),
         }
     }
     judged.first = choose(setting, cur, level, refitted, &pairs, best);
     if let Some(first) = judged.first {
         progress(&format!(
-            "pair judgement: adding {} first in place of {} (the pair without it explains the data better)",
+            "pair judgement: adding {} first in place of {} (with its best next effect it explains the data better)",
             refits[first].effect, refits[best].effect
         ));
     }
@@ -143,16 +139,17 @@ fn above_noise(setting: Setting, level: Level, fit: &Current) -> bool {
     chi2_tail(dof, fit.e.norm_squared() / gate) < setting.opts.alpha
 }
 
-/// The round's significant refits (indices into `refits`) with the largest margins over their
-/// critical values at `threshold`, at most [`PAIR_CONTENDERS`], each effect once.
-fn leading(refits: &[Refit], threshold: f64) -> Vec<usize> {
+/// The round's best refit `best`, then its other significant refits with the largest margins
+/// over their critical values at `threshold`: at most [`PAIR_FIRSTS`] (indices into `refits`),
+/// each effect once.
+fn leading(refits: &[Refit], best: usize, threshold: f64) -> Vec<usize> {
     let mut order: Vec<usize> = (0..refits.len())
-        .filter(|&i| refits[i].p_value < threshold)
+        .filter(|&i| i != best && refits[i].p_value < threshold)
         .collect();
     order.sort_by(|&a, &b| margin(&refits[b], threshold).total_cmp(&margin(&refits[a], threshold)));
-    let mut out: Vec<usize> = Vec::new();
+    let mut out: Vec<usize> = vec![best];
     for i in order {
-        if out.len() < PAIR_CONTENDERS && !out.iter().any(|&j| refits[j].effect == refits[i].effect)
+        if out.len() < PAIR_FIRSTS && !out.iter().any(|&j| refits[j].effect == refits[i].effect)
         {
             out.push(i);
         }
@@ -160,8 +157,87 @@ fn leading(refits: &[Refit], threshold: f64) -> Vec<usize> {
     out
 }
 
-/// The pair's stronger member to accept in place of the round's best single `best`, when the
-/// best pair does not hold it and passes the tests of the module doc; `None` otherwise.
+/// The best next effect with the single refit's fit `fit` in: every candidate ranked by its
+/// score there (as a round does), the [`PAIR_PARTNERS`] leading families' first members refitted
+/// from `fit` with every parameter free; the lowest end as the pair (a refit against `cur`, the
+/// fit the round started from, on both effects' parameters) and the partner's own refit.
+/// `None` when no partner could be refitted.
+fn best_partner(
+    setting: Setting,
+    cur: &Current,
+    fit: &Current,
+    sigma2: f64,
+) -> Result<Option<(Refit, Refit)>, DiagnoseError> {
+    let Setting {
+        obs, opts, f_hi, ..
+    } = setting;
+    let labels: Vec<String> = obs
+        .characteristics
+        .iter()
+        .map(|c| c.label.clone())
+        .collect();
+    let band = (obs.band_hz().0, f_hi);
+    let pc = setting.problem(fit.effects.clone());
+    let ranking = rank(&pc, fit, &labels, band, opts.alpha, &mut Vec::new())?;
+    let partners: Vec<&Effect> = ranking
+        .families
+        .iter()
+        .take(PAIR_PARTNERS)
+        .map(|f| &ranking.candidates[ranking.scored[f[0]].candidate])
+        .collect();
+    let steps: Vec<Vec<f64>> = ranking
+        .families
+        .iter()
+        .take(PAIR_PARTNERS)
+        .map(|f| {
+            let s = &ranking.scored[f[0]];
+            score_start(&ranking.candidates[s.candidate], s.step, f_hi)
+        })
+        .collect();
+    let jobs: Vec<usize> = (0..partners.len()).collect();
+    let ends = in_parallel(&jobs, |&k| {
+        refit(setting, fit, partners[k], &steps[k], Some(&steps[k]), sigma2)
+    });
+    let Some((partner, next)) = ends
+        .into_iter()
+        .filter_map(Result::ok)
+        .min_by(|a, b| a.0.criterion_after.total_cmp(&b.0.criterion_after))
+    else {
+        return Ok(None);
+    };
+    let mut pair = partner.clone();
+    let described: Vec<String> = next
+        .effects
+        .iter()
+        .skip(cur.effects.len())
+        .map(Effect::describe)
+        .collect();
+    pair.effect = described.join(" + ");
+    pair.kind = "pair".into();
+    pair.criterion_before = 0.5 * cur.e.norm_squared();
+    pair.lr = (2.0 * (pair.criterion_before - pair.criterion_after) / sigma2).max(0.0);
+    pair.params = estimates(&pc_of(setting, &next), &next, f_hi, sigma2)
+        .into_iter()
+        .skip(cur.effects.len())
+        .flatten()
+        .collect();
+    pair.dof = pair.params.len();
+    pair.p_value = chi2_tail(pair.dof as f64, pair.lr).min(1.0);
+    pair.aic_change = -pair.lr + 2.0 * pair.dof as f64;
+    pair.bic_change = -pair.lr + pair.dof as f64 * (cur.e.len() as f64).ln();
+    let crit = pc.criterion(&pc.realize(&pc.split(&fit.u).1)?)?;
+    pair.rms_db_before = residuals::rms_db(&crit, &cur.e);
+    Ok(Some((pair, partner)))
+}
+
+/// The problem of the fit `fit`'s effects.
+fn pc_of<'a>(setting: Setting<'a>, fit: &Current) -> Problem<'a> {
+    setting.problem(fit.effects.clone())
+}
+
+/// The first effect to accept in place of the round's best single `best`, when another first
+/// effect's pair stands above the best single's own pair and passes the tests of the module
+/// doc; `None` otherwise.
 fn choose(
     setting: Setting,
     cur: &Current,
@@ -170,177 +246,27 @@ fn choose(
     pairs: &[Pair],
     best: usize,
 ) -> Option<usize> {
-    let holds = |p: &Pair, i: usize| p.members.0 == i || p.members.1 == i;
     let m = |p: &Pair| margin(&p.refit, threshold);
     let winner = pairs.iter().max_by(|a, b| m(a).total_cmp(&m(b)))?;
-    if holds(winner, best) {
+    if winner.first == best {
         return None;
     }
-    // Where the one-at-a-time loop would go: the best single with its best partner.
-    let with_best = pairs
+    // Where the one-at-a-time loop would go: the best single with its best next effect, or the
+    // best single alone where none could be refitted.
+    let rival = pairs
         .iter()
-        .filter(|p| holds(p, best))
-        .map(m)
-        .fold(f64::NEG_INFINITY, f64::max);
-    let rival = if with_best.is_finite() {
-        with_best
-    } else {
-        margin(&refits[best], threshold)
-    };
+        .find(|p| p.first == best)
+        .map_or_else(|| margin(&refits[best], threshold), m);
     if m(winner) - rival <= PAIR_LEVEL {
         return None;
     }
-    let (a, b) = winner.members;
-    let j_pair = winner.refit.criterion_after;
-    // Each member is needed beside the other: the other's single refit against the pair.
-    let needed = |without: usize, dropped: usize| {
-        2.0 * (refits[without].criterion_after - j_pair) / sigma2
-            > critical(refits[dropped].dof, threshold)
-    };
-    if !(needed(a, b) && needed(b, a)) {
-        return None;
-    }
-    // Both members physical and identified in the pair fit.
+    // The partner is significant beside the first effect, the first effect acceptable alone.
     let f_hi = setting.f_hi;
-    let effect = |i: usize| fits[i].effects.last();
-    let (ea, eb) = (effect(a)?, effect(b)?);
-    let qa = ea.params(f_hi).len();
-    let (pa, pb) = winner.refit.params.split_at(qa.min(winner.refit.params.len()));
-    if unidentifiable(&ea.params(f_hi), pa, f_hi, threshold).is_some()
-        || unidentifiable(&eb.params(f_hi), pb, f_hi, threshold).is_some()
-    {
-        return None;
-    }
-    // The stronger member first, if it stands alone as the round would accept it.
-    let mut order = [a, b];
-    order.sort_by(|&x, &y| margin(&refits[y], threshold).total_cmp(&margin(&refits[x], threshold)));
-    order.into_iter().find(|&i| {
-        let own = fits[i].effects.last().map(|e| e.params(f_hi));
-        own.is_some_and(|own| {
-            unidentifiable(&own, &refits[i].params, f_hi, threshold).is_none()
-                && partial_fix(&refits[i], cur, sigma2).is_none()
-        })
-    })
-}
-
-/// The joint refit of the two single refits' fits `(fa, fb)` (each the round's fit `cur` with
-/// one more effect): both effects' parameters and every variable free, from each single's end
-/// with the other's parameters at its own single refit's values or at its nested value,
-/// whichever fits better; the lower end kept. Its
-/// likelihood ratio is against `cur`, on both effects' parameters.
-fn refit_pair(
-    setting: Setting,
-    cur: &Current,
-    (fa, fb): (&Current, &Current),
-    sigma2: f64,
-) -> Result<Refit, RefitError> {
-    let Setting {
-        obs, opts, f_hi, ..
-    } = setting;
-    let n = cur.u.len();
-    let (Some(ea), Some(eb)) = (fa.effects.last(), fb.effects.last()) else {
-        return Err(RefitError::TooFewObservations {
-            observations: cur.e.len(),
-            parameters: n,
-        });
-    };
-    let mut effects = cur.effects.clone();
-    effects.extend([ea.clone(), eb.clone()]);
-    let mut p = setting.problem(effects);
-    let m = cur.e.len();
-    if m <= p.scale.len() + 1 {
-        return Err(RefitError::TooFewObservations {
-            observations: m,
-            parameters: p.scale.len(),
-        });
-    }
-    let (ta, tb) = (&fa.u.as_slice()[n..], &fb.u.as_slice()[n..]);
-    let join = |head: &[f64], a: &[f64], b: &[f64]| {
-        DVector::from_iterator(
-            head.len() + a.len() + b.len(),
-            head.iter().chain(a).chain(b).copied(),
-        )
-    };
-    // The other effect at its nested value: the single's own end, which the joint refit can
-    // only improve on.
-    let nested = |e: &Effect| -> Vec<f64> {
-        e.params(f_hi).iter().map(|np| np.nested / np.scale).collect()
-    };
-    let (na, nb) = (nested(ea), nested(eb));
-    let (ha, hb) = (&fa.u.as_slice()[..n], &fb.u.as_slice()[..n]);
-    let starts = [
-        [join(ha, ta, tb), join(ha, ta, &nb)],
-        [join(hb, ta, tb), join(hb, &na, tb)],
-    ];
-    let (lo, hi) = p.bounds();
-    let settings = opts.identification.settings;
-    let mut best: Option<optimize::Outcome> = None;
-    for from_end in starts {
-        // A start the model cannot evaluate is skipped; the other may still be.
-        let Some((j, u)) = lowest_start(&mut p, setting.solves, from_end) else {
-            continue;
-        };
-        if !j.is_finite() {
-            continue;
-        }
-        let end = optimize::minimize(
-            opts.identification.optimizer,
-            &mut p,
-            &u,
-            &lo,
-            &hi,
-            &settings,
-            &mut |_| {},
-        )?;
-        if best.as_ref().is_none_or(|b| end.criterion < b.criterion) {
-            best = Some(end);
-        }
-    }
-    let Some(out) = best else {
-        return Err(RefitError::TooFewObservations {
-            observations: m,
-            parameters: p.scale.len(),
-        });
-    };
-    let (e, jac) = p.eval(&out.u, true)?;
-    let jac = jac.ok_or(EvalError::NoJacobian)?;
-    let q = ta.len() + tb.len();
-    let j0 = 0.5 * cur.e.norm_squared();
-    let j1 = 0.5 * e.norm_squared();
-    let lr = (2.0 * (j0 - j1) / sigma2).max(0.0);
-    // A resonator's LR is maximised over its tuning frequency too: its p-value counts them.
-    let lines = obs.lines_hz();
-    let searched = (ea.tunings_searched(&lines, f_hi) * eb.tunings_searched(&lines, f_hi)) as f64;
-    let p_value = (chi2_tail(q as f64, lr) * searched).min(1.0);
-    let next = Current {
-        effects: p.effects.clone(),
-        u: out.u,
-        e,
-        jac,
-    };
-    let mut all = estimates(&p, &next, f_hi, sigma2);
-    let pb = all.pop().unwrap_or_default();
-    let mut params = all.pop().unwrap_or_default();
-    params.extend(pb);
-    let crit = p.criterion(&p.realize(&p.split(&next.u).1)?)?;
-    let n_obs = m as f64;
-    Ok(Refit {
-        effect: format!("{} + {}", ea.describe(), eb.describe()),
-        kind: "pair".into(),
-        criterion_before: j0,
-        criterion_after: j1,
-        rms_db_before: residuals::rms_db(&crit, &cur.e),
-        rms_db_after: residuals::rms_db(&crit, &next.e),
-        lr,
-        dof: q,
-        p_value,
-        aic_change: -lr + 2.0 * q as f64,
-        bic_change: -lr + q as f64 * n_obs.ln(),
-        params,
-        stop: out.stop.describe(),
-        converged: out.stop.converged(),
-        equivalent: Vec::new(),
-        family: Vec::new(),
-        place: None,
-    })
+    let first = &refits[winner.first];
+    let own = fits[winner.first].effects.last().map(|e| e.params(f_hi));
+    let acceptable = own.is_some_and(|own| {
+        unidentifiable(&own, &first.params, f_hi, threshold).is_none()
+            && partial_fix(first, cur, sigma2).is_none()
+    });
+    (winner.partner.p_value < threshold && acceptable).then_some(winner.first)
 }
