@@ -2,43 +2,40 @@
 //! misfit above the noise level.
 //!
 //! A round adds one effect, the most significant single refit. With two effects A and B in the
-//! data, a look-alike C of neither can explain more than A or B alone (it mimics part of both),
-//! so C is accepted first and the next rounds, and the swaps, must undo it. Judging the round's
-//! leading refits in pairs tells the two apart: A with B explains the data, C with any partner
-//! less.
+//! data, a look-alike C of neither can explain about as much as A alone, or more (it mimics
+//! part of both), so C is accepted first and the next rounds, and the swaps, must undo it.
+//! Judging the round's leading refits by the pair each makes with its best next effect tells
+//! them apart: A with B explains the data, C with any partner less.
 //!
 //! What it does, only where the best single refit C leaves the misfit above the noise level (χ²
-//! at the diagnosis's level, the test the escalation uses):
+//! for the observations less the fit's parameters, at the diagnosis's level, against the gates'
+//! level of `noise.rs`, as the escalation judges it):
 //!
-//! 1. the round's significant refits with the largest margins ([`PAIR_CONTENDERS`] of them, one
-//!    per family: different places or kinds) are taken as the pair's possible members;
-//! 2. every pair of them is refitted jointly — both effects' parameters and every variable free
-//!    — from the two single refits' ends, each with the other effect's parameters at its own
-//!    single refit's values or at its nested value, whichever fits better (the nested value is
-//!    the single's end itself: a single refit's size can be far off where the effect only mimics
-//!    the other one), the lower end kept;
-//! 3. the pair with the largest margin of its likelihood ratio over its critical value (against
-//!    the fit the round starts from, `dof` = both effects' parameters, at the round's Bonferroni
-//!    threshold) wins. When it does not hold C, it replaces C as the round's choice only if
-//!    - it stands above the best pair holding C by more than [`PAIR_LEVEL`] in that margin (the
-//!      data tell the two answers apart; C with its best partner is where the one-at-a-time
-//!      loop would go), or above C alone where no pair holding C could be refitted;
-//!    - each member is needed beside the other: dropping either (the other's single refit
-//!      against the pair) raises the criterion by more than the critical value of the dropped
-//!      member's parameters at the round's threshold;
-//!    - both members' estimates in the pair fit are physical and identified (the acceptance's
-//!      own rule, [`unidentifiable`]);
-//! 4. the winning pair's stronger member (larger margin alone) is accepted in C's place, if its
-//!    single refit is acceptable on its own (physical, identified, more than a partial fix),
-//!    else the other member. The next round then finds the other member with the first in the
-//!    model, where the look-alike no longer explains more than it does.
+//! 1. C and the round's next significant refits by margin (their likelihood ratio over its
+//!    critical value at the round's Bonferroni threshold), [`PAIR_FIRSTS`] in all, are the
+//!    possible first effects;
+//! 2. for each, the candidates are ranked by their score at its single refit's fit, as a round
+//!    ranks them, and the [`PAIR_PARTNERS`] leading families' first members are refitted from
+//!    that fit (every variable and both effects' parameters free, exploring the partner's
+//!    starts as a round's leaders do); the lowest end is that first effect's pair. The partners
+//!    are not limited to the round's own refits: with A in, B can rank first although alone it
+//!    ranked far down;
+//! 3. each pair's margin is its likelihood ratio against the fit the round started from, on
+//!    both effects' parameters, over the critical value at the round's threshold. When the
+//!    pair with the largest margin is not C's, its first effect takes C's place only if its
+//!    margin stands above C's pair's by more than [`PAIR_LEVEL`] (an LR of 3.84: the data tell
+//!    the two answers apart; C with its best next effect is where the one-at-a-time loop would
+//!    go, or C alone where no partner of C could be refitted), its partner is significant at the
+//!    threshold of the ranking with the first effect in, and the first effect's own single refit
+//!    is acceptable as the round's (physical, identified, more than a partial fix). The next
+//!    round then ranks and refits with the first effect in, as any round does.
 //!
-//! The pairs' refits are reported in the round's `pairs` (JSON and progress lines) as refits
-//! whose `effect` names both effects and whose `dof` counts both effects' parameters.
+//! Each first effect's pair is reported in the round's `pairs` (JSON, text and progress lines)
+//! as a refit whose `effect` names both effects and whose `dof` and `params` are both effects'.
 //!
-//! Cost: at most `PAIR_CONTENDERS·(PAIR_CONTENDERS−1)/2` pair refits of two starts each, in
-//! parallel, in a round whose best refit is above the noise level — none on a round that reaches
-//! it (the FWD-32J demo's).
+//! Cost: [`PAIR_FIRSTS`] rankings and `PAIR_FIRSTS·PAIR_PARTNERS` refits (each partner's in
+//! parallel) in a round whose best refit is above the noise level; nothing in a round that
+//! reaches it (the FWD-32J demo's).
 
 use super::round::{
     in_parallel, margin, partial_fix, rank, refit, score_start, unidentifiable, Refitted,
