@@ -432,6 +432,9 @@ pub struct Timing {
     pub refits: f64,
     /// The swaps of accepted effects for effects of other kinds (see `swap.rs`).
     pub swaps: f64,
+    /// The pair judgement of rounds whose best refit left the misfit above the noise level
+    /// (see `pairs.rs`).
+    pub pairs: f64,
     /// Placement refinement, backward checks and the final analysis.
     pub other: f64,
 }
@@ -440,8 +443,8 @@ pub struct Timing {
 pub fn timing_text(d: &Diagnosis) -> String {
     let t = &d.timing;
     format!(
-        "time: base fit {:.2} s, ranking {:.2} s, refits {:.2} s, swaps {:.2} s, placement and checks {:.2} s",
-        t.base_fit, t.ranking, t.refits, t.swaps, t.other
+        "time: base fit {:.2} s, ranking {:.2} s, refits {:.2} s, pairs {:.2} s, swaps {:.2} s, placement and checks {:.2} s",
+        t.base_fit, t.ranking, t.refits, t.pairs, t.swaps, t.other
     )
 }
 
@@ -611,8 +614,10 @@ pub fn diagnose(
             &mut not_tried,
             progress,
         );
-        // A pair without the best single that explains the data better puts its stronger
-        // member in the single's place (`pairs.rs`).
+        timing.refits += t.elapsed().as_secs_f64();
+        // A leading refit whose pair with its best next effect explains the data better than
+        // the best single's own pair takes its place (`pairs.rs`).
+        let t = std::time::Instant::now();
         let judged = pairs::judge_pairs(setting, &so_far.cur, ranking.level(), &refitted, progress);
         let Refitted {
             refits,
@@ -624,7 +629,7 @@ pub fn diagnose(
         if let Some(first) = judged.first {
             best = Some((first, fits[first].clone()));
         }
-        timing.refits += t.elapsed().as_secs_f64();
+        timing.pairs += t.elapsed().as_secs_f64();
         let mut round = Round {
             candidates: ranking.scored.len(),
             ranked: ranking.ranked.clone(),
@@ -687,6 +692,7 @@ pub fn diagnose(
         - timing.base_fit
         - timing.ranking
         - timing.refits
+        - timing.pairs
         - timing.swaps;
     d.timing = timing;
     d.base = base;
