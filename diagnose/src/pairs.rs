@@ -100,7 +100,11 @@ pub(super) fn judge_pairs(
             Ok(Some((refit, partner))) => {
                 progress(&format!(
                     "pair {}: J {:.1} → {:.1}, LR = {:.1} ({} dof)",
-                    refit.effect, refit.criterion_before, refit.criterion_after, refit.lr, refit.dof
+                    refit.effect,
+                    refit.criterion_before,
+                    refit.criterion_after,
+                    refit.lr,
+                    refit.dof
                 ));
                 pairs.push(Pair {
                     first,
@@ -146,8 +150,7 @@ fn leading(refits: &[Refit], best: usize, threshold: f64) -> Vec<usize> {
     order.sort_by(|&a, &b| margin(&refits[b], threshold).total_cmp(&margin(&refits[a], threshold)));
     let mut out: Vec<usize> = vec![best];
     for i in order {
-        if out.len() < PAIR_FIRSTS && !out.iter().any(|&j| refits[j].effect == refits[i].effect)
-        {
+        if out.len() < PAIR_FIRSTS && !out.iter().any(|&j| refits[j].effect == refits[i].effect) {
             out.push(i);
         }
     }
@@ -193,7 +196,14 @@ fn best_partner(
         .collect();
     let jobs: Vec<usize> = (0..partners.len()).collect();
     let ends = in_parallel(&jobs, |&k| {
-        refit(setting, fit, partners[k], &steps[k], Some(&steps[k]), sigma2)
+        refit(
+            setting,
+            fit,
+            partners[k],
+            &steps[k],
+            Some(&steps[k]),
+            sigma2,
+        )
     });
     let Some((partner, next)) = ends
         .into_iter()
@@ -213,7 +223,7 @@ fn best_partner(
     pair.kind = "pair".into();
     pair.criterion_before = 0.5 * cur.e.norm_squared();
     pair.lr = (2.0 * (pair.criterion_before - pair.criterion_after) / sigma2).max(0.0);
-    pair.params = estimates(&pc_of(setting, &next), &next, f_hi, sigma2)
+    pair.params = estimates(&setting.problem(next.effects.clone()), &next, f_hi, sigma2)
         .into_iter()
         .skip(cur.effects.len())
         .flatten()
@@ -225,11 +235,6 @@ fn best_partner(
     let crit = pc.criterion(&pc.realize(&pc.split(&fit.u).1)?)?;
     pair.rms_db_before = residuals::rms_db(&crit, &cur.e);
     Ok(Some((pair, partner)))
-}
-
-/// The problem of the fit `fit`'s effects.
-fn pc_of<'a>(setting: Setting<'a>, fit: &Current) -> Problem<'a> {
-    setting.problem(fit.effects.clone())
 }
 
 /// The first effect to accept in place of the round's best single `best`, when another first

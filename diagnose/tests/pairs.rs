@@ -60,9 +60,12 @@ fn the_first_effect_is_the_one_whose_pair_explains_the_data() {
     }
     // Its pair holds the other injected effect, the slideways' own ψn, and fits better.
     assert!(
-        round.pairs.iter().any(|p| p.effect.starts_with(&first.effect)
-            && injected.iter().any(|e| p.effect.ends_with(e.as_str()))
-            && p.criterion_after < first.criterion_after),
+        round
+            .pairs
+            .iter()
+            .any(|p| p.effect.starts_with(&first.effect)
+                && injected.iter().any(|e| p.effect.ends_with(e.as_str()))
+                && p.criterion_after < first.criterion_after),
         "{:?}",
         round.pairs
     );
