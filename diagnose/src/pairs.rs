@@ -60,6 +60,8 @@ struct Pair {
     first: usize,
     refit: Refit,
     partner: Refit,
+    /// Whether the pair's fit explains the data: not above the noise level.
+    explains: bool,
 }
 
 /// Judges the round's leading refits (`refitted`, from the fit `cur` at the round's `level`)
@@ -97,7 +99,7 @@ pub(super) fn judge_pairs(
     let mut pairs: Vec<Pair> = Vec::new();
     for &first in &firsts {
         match best_partner(setting, cur, &fits[first], level.sigma2) {
-            Ok(Some((refit, partner))) => {
+            Ok(Some((refit, partner, next))) => {
                 progress(&format!(
                     "pair {}: J {:.1} → {:.1}, LR = {:.1} ({} dof)",
                     refit.effect,
@@ -110,6 +112,7 @@ pub(super) fn judge_pairs(
                     first,
                     refit,
                     partner,
+                    explains: !above_noise(setting, level, &next),
                 });
             }
             Ok(None) => {}
@@ -161,13 +164,13 @@ fn leading(refits: &[Refit], best: usize, threshold: f64) -> Vec<usize> {
 /// score there (as a round does), the [`PAIR_PARTNERS`] leading families' first members refitted
 /// from `fit` with every parameter free; the lowest end as the pair (a refit against `cur`, the
 /// fit the round started from, on both effects' parameters) and the partner's own refit.
-/// `None` when no partner could be refitted.
+/// `None` when no partner could be refitted. The pair's fit is the third.
 fn best_partner(
     setting: Setting,
     cur: &Current,
     fit: &Current,
     sigma2: f64,
-) -> Result<Option<(Refit, Refit)>, DiagnoseError> {
+) -> Result<Option<(Refit, Refit, Current)>, DiagnoseError> {
     let Setting {
         obs, opts, f_hi, ..
     } = setting;
@@ -234,7 +237,7 @@ fn best_partner(
     pair.bic_change = -pair.lr + pair.dof as f64 * (cur.e.len() as f64).ln();
     let crit = pc.criterion(&pc.realize(&pc.split(&fit.u).1)?)?;
     pair.rms_db_before = residuals::rms_db(&crit, &cur.e);
-    Ok(Some((pair, partner)))
+    Ok(Some((pair, partner, next)))
 }
 
 /// The first effect to accept in place of the round's best single `best`, when another first
@@ -250,7 +253,11 @@ fn choose(
 ) -> Option<usize> {
     let m = |p: &Pair| margin(&p.refit, threshold);
     let winner = pairs.iter().max_by(|a, b| m(a).total_cmp(&m(b)))?;
-    if winner.first == best {
+    // Only a pair that explains the data settles the first effect: where the best pair still
+    // leaves misfit above the noise level, a third effect or a place the relocation after
+    // acceptance finds can reorder the pairs, and the one-at-a-time loop's own steps judge
+    // better.
+    if winner.first == best || !winner.explains {
         return None;
     }
     // Where the one-at-a-time loop would go: the best single with its best next effect, or the
