@@ -35,9 +35,9 @@
 //!    **damping splits** get the short refits instead.
 //!    **Pair judgement** (`pairs.rs`): where the best refit still leaves the misfit above the
 //!    noise level, it and the next leading refits are each judged with their best next effect
-//!    (a ranking at their fit and a few refits); another refit whose pair stands above the best
-//!    one's by an LR of 3.84 takes its place: a look-alike of two effects at once explains more
-//!    than either alone but less with any partner.
+//!    (a ranking at their fit and a few refits); another refit whose pair explains the data and
+//!    stands above the best one's by an LR of 3.84 takes its place: a look-alike of two effects
+//!    at once explains more than either alone but less with any partner.
 //! 6. **Acceptance** (`round.rs`): the most significant refit is accepted when its LR beats the
 //!    round's Bonferroni threshold, its estimates are physical (none at a bound, a resonator
 //!    tuned within the band), its size stands from its nested value at the round's own level

@@ -22,13 +22,20 @@
 //!    ranked far down;
 //! 3. each pair's margin is its likelihood ratio against the fit the round started from, on
 //!    both effects' parameters, over the critical value at the round's threshold. When the
-//!    pair with the largest margin is not C's, its first effect takes C's place only if its
-//!    margin stands above C's pair's by more than [`PAIR_LEVEL`] (an LR of 3.84: the data tell
-//!    the two answers apart; C with its best next effect is where the one-at-a-time loop would
-//!    go, or C alone where no partner of C could be refitted), its partner is significant at the
-//!    threshold of the ranking with the first effect in, and the first effect's own single refit
-//!    is acceptable as the round's (physical, identified, more than a partial fix). The next
-//!    round then ranks and refits with the first effect in, as any round does.
+//!    pair with the largest margin is not C's, its first effect takes C's place only if
+//!    - the pair explains the data (its fit is not above the noise level, the same test). Where
+//!      even the best pair leaves misfit, a third effect, or the place the relocation after
+//!      acceptance finds for a point mass or resonator, can reorder the pairs: on the blind
+//!      suite, switching there put a resonator on the wrong body or of the wrong kind first in
+//!      three cases of 64 where the one-at-a-time loop, its relocation moving the effect to its
+//!      own body, was right;
+//!    - its margin stands above C's pair's by more than [`PAIR_LEVEL`] (an LR of 3.84: the data
+//!      tell the two answers apart; C with its best next effect is where the one-at-a-time loop
+//!      would go, or C alone where no partner of C could be refitted);
+//!    - its partner is significant at the round's threshold, and the first effect's own single
+//!      refit is acceptable as the round's (physical, identified, more than a partial fix).
+//!
+//!    The next round then ranks and refits with the first effect in, as any round does.
 //!
 //! Each first effect's pair is reported in the round's `pairs` (JSON, text and progress lines)
 //! as a refit whose `effect` names both effects and whose `dof` and `params` are both effects'.
