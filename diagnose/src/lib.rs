@@ -289,10 +289,11 @@ pub struct Round {
     /// parameter or a confidence interval that includes the nested value ("indicated but not
     /// identifiable").
     pub not_identifiable: Vec<NotTried>,
-    /// Pairs of the leading refits refitted jointly, where the best single refit left the misfit
-    /// above the noise level (`effect` names both, `dof` counts both effects' parameters; the
-    /// likelihood ratio is against the fit the round started from). A pair without the best
-    /// single that the data prefer puts its stronger member in that single's place.
+    /// Where the best refit left the misfit above the noise level, each leading refit with its
+    /// best next effect, as a refit (`effect` "first + next", `dof` and `params` both effects';
+    /// the likelihood ratio against the fit the round started from). A first effect whose pair
+    /// explains the data and that the data prefer to the best refit's own pair was accepted in
+    /// its place (see `pairs.rs`).
     pub pairs: Vec<Refit>,
 }
 
