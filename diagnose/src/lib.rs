@@ -33,6 +33,11 @@
 //!    candidate of the kinds without a point, the families whose short refit ends below the best
 //!    refit then refitted in full. When the misfit is small but above the noise level, the
 //!    **damping splits** get the short refits instead.
+//!    **Pair judgement** (`pairs.rs`): where the best refit still leaves the misfit above the
+//!    noise level, it and the next leading refits are each judged with their best next effect
+//!    (a ranking at their fit and a few refits); another refit whose pair explains the data and
+//!    stands above the best one's by an LR of 3.84 takes its place: a look-alike of two effects
+//!    at once explains more than either alone but less with any partner.
 //! 6. **Acceptance** (`round.rs`): the most significant refit is accepted when its LR beats the
 //!    round's Bonferroni threshold, its estimates are physical (none at a bound, a resonator
 //!    tuned within the band), its size stands from its nested value at the round's own level
@@ -76,6 +81,7 @@ pub mod final_model;
 pub mod generate;
 pub mod lowrank;
 mod noise;
+mod pairs;
 mod placement;
 pub mod problem;
 pub mod request;
@@ -283,6 +289,12 @@ pub struct Round {
     /// parameter or a confidence interval that includes the nested value ("indicated but not
     /// identifiable").
     pub not_identifiable: Vec<NotTried>,
+    /// Where the best refit left the misfit above the noise level, each leading refit with its
+    /// best next effect, as a refit (`effect` "first + next", `dof` and `params` both effects';
+    /// the likelihood ratio against the fit the round started from). A first effect whose pair
+    /// explains the data and that the data prefer to the best refit's own pair was accepted in
+    /// its place (see `pairs.rs`).
+    pub pairs: Vec<Refit>,
 }
 
 /// An accepted effect replaced by one of another kind on the same bodies.
@@ -421,6 +433,9 @@ pub struct Timing {
     pub refits: f64,
     /// The swaps of accepted effects for effects of other kinds (see `swap.rs`).
     pub swaps: f64,
+    /// The pair judgement of rounds whose best refit left the misfit above the noise level
+    /// (see `pairs.rs`).
+    pub pairs: f64,
     /// Placement refinement, backward checks and the final analysis.
     pub other: f64,
 }
@@ -429,8 +444,8 @@ pub struct Timing {
 pub fn timing_text(d: &Diagnosis) -> String {
     let t = &d.timing;
     format!(
-        "time: base fit {:.2} s, ranking {:.2} s, refits {:.2} s, swaps {:.2} s, placement and checks {:.2} s",
-        t.base_fit, t.ranking, t.refits, t.swaps, t.other
+        "time: base fit {:.2} s, ranking {:.2} s, refits {:.2} s, pairs {:.2} s, swaps {:.2} s, placement and checks {:.2} s",
+        t.base_fit, t.ranking, t.refits, t.pairs, t.swaps, t.other
     )
 }
 
@@ -500,6 +515,7 @@ struct Level {
 }
 
 /// The state of the extended fit after a round.
+#[derive(Clone)]
 struct Current {
     effects: Vec<Effect>,
     u: DVector<f64>,
@@ -589,12 +605,7 @@ pub fn diagnose(
         )?;
         timing.ranking += t.elapsed().as_secs_f64();
         let t = std::time::Instant::now();
-        let Refitted {
-            refits,
-            best,
-            not_identifiable,
-            contenders,
-        } = refit_leading(
+        let refitted = refit_leading(
             setting,
             &so_far.cur,
             Leading {
@@ -605,6 +616,21 @@ pub fn diagnose(
             progress,
         );
         timing.refits += t.elapsed().as_secs_f64();
+        // A leading refit whose pair with its best next effect explains the data better than
+        // the best single's own pair takes its place (`pairs.rs`).
+        let t = std::time::Instant::now();
+        let judged = pairs::judge_pairs(setting, &so_far.cur, ranking.level(), &refitted, progress);
+        let Refitted {
+            refits,
+            mut best,
+            not_identifiable,
+            contenders,
+            fits,
+        } = refitted;
+        if let Some(first) = judged.first {
+            best = Some((first, fits[first].clone()));
+        }
+        timing.pairs += t.elapsed().as_secs_f64();
         let mut round = Round {
             candidates: ranking.scored.len(),
             ranked: ranking.ranked.clone(),
@@ -616,6 +642,7 @@ pub fn diagnose(
             replaced: Vec::new(),
             placed: None,
             not_identifiable,
+            pairs: judged.pairs,
         };
         let Some((i, next)) = best else {
             let t = std::time::Instant::now();
@@ -666,6 +693,7 @@ pub fn diagnose(
         - timing.base_fit
         - timing.ranking
         - timing.refits
+        - timing.pairs
         - timing.swaps;
     d.timing = timing;
     d.base = base;

@@ -171,6 +171,8 @@ pub(super) struct Refitted {
     pub(super) not_identifiable: Vec<NotTried>,
     /// Every member refit the round could have accepted.
     pub(super) contenders: Vec<Contender>,
+    /// The fit each of `refits` ended at, in the same order (the pair judgement starts from them).
+    pub(super) fits: Vec<Current>,
 }
 
 /// What a round refits: the ranking and the leading candidates' screens.
@@ -322,7 +324,8 @@ fn judge_families(
         threshold, sigma2, ..
     } = ranking;
     let mut refits: Vec<Refit> = Vec::new();
-    let mut best: Option<(usize, Current)> = None;
+    let mut fits: Vec<Current> = Vec::new();
+    let mut best: Option<usize> = None;
     let mut not_identifiable = Vec::new();
     let mut contenders = Vec::new();
     for (f, Job { family, members }) in jobs.iter().enumerate() {
@@ -359,12 +362,12 @@ fn judge_families(
         // compare the LR's margin over its critical value at the threshold.
         let better = best
             .as_ref()
-            .is_none_or(|(b, _)| margin(&r, *threshold) > margin(&refits[*b], *threshold));
+            .is_none_or(|b| margin(&r, *threshold) > margin(&refits[*b], *threshold));
         let why = unidentifiable(&cand.params(f_hi), &r.params, f_hi, *threshold)
             .or_else(|| partial_fix(&r, cur, *sigma2));
         if r.p_value < *threshold {
             match why {
-                None if better => best = Some((refits.len(), next)),
+                None if better => best = Some(refits.len()),
                 None => {}
                 Some(reason) => {
                     progress(&format!("indicated but not added: {} ({reason})", r.effect));
@@ -385,12 +388,14 @@ fn judge_families(
             });
         }
         refits.push(r);
+        fits.push(next);
     }
     Refitted {
         refits,
-        best,
+        best: best.map(|b| (b, fits[b].clone())),
         not_identifiable,
         contenders,
+        fits,
     }
 }
 

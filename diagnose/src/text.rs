@@ -200,6 +200,13 @@ pub(super) fn round_text(s: &mut String, i: usize, r: &Round) {
             f.bic_change
         );
     }
+    for f in &r.pairs {
+        let _ = writeln!(
+            s,
+            "    pair: {}: J {:.1} → {:.1}, LR {:.1} ({} dof), p {:.1e}",
+            f.effect, f.criterion_before, f.criterion_after, f.lr, f.dof, f.p_value
+        );
+    }
     for m in &r.relocated {
         let _ = writeln!(
             s,

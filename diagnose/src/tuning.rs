@@ -192,3 +192,20 @@ pub(crate) const SWAPS_REFITTED: usize = 3;
 /// refits to a criterion a few units above the answer's, is within the margin and is listed
 /// beside the spring.
 pub(crate) const LOOK_ALIKE_WINDOW: f64 = 2.0 * EQUIVALENT_LR;
+
+// The pair judgement (`pairs.rs`).
+
+/// First effects judged by their best next effect where the round's best single leaves the
+/// misfit above the noise level: the best single and the round's next significant refits by
+/// margin. Each costs one ranking and [`PAIR_PARTNERS`] refits.
+pub(crate) const PAIR_FIRSTS: usize = 3;
+
+/// Next effects refitted for each first effect: the leading families of the ranking with the
+/// first effect in (one refit each, exploring its starts as a round's leaders do).
+pub(crate) const PAIR_PARTNERS: usize = 3;
+
+/// The margin (likelihood ratio over its critical value at the round's threshold) by which
+/// another first effect's pair must stand above the best single's own pair to take the single's
+/// place: χ² with 1 degree of freedom at 95 %, the level at which the diagnosis says the data
+/// tell two refits apart ([`EQUIVALENT_LR`]).
+pub(crate) const PAIR_LEVEL: f64 = EQUIVALENT_LR;
