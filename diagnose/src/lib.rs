@@ -592,6 +592,8 @@ pub fn diagnose(
     // round back (an effect is tried for a swap once, so this ends).
     let mut rounds_left = opts.max_effects;
     let mut swap_tried = Vec::new();
+    // The partner of a pair that chose the last round's first effect (`pairs.rs`).
+    let mut carried: Option<pairs::Carried> = None;
     while rounds_left > 0 {
         rounds_left -= 1;
         let t = std::time::Instant::now();
@@ -611,6 +613,7 @@ pub fn diagnose(
             Leading {
                 ranking: &ranking,
                 screened: &screened,
+                carried: carried.as_ref(),
             },
             &mut not_tried,
             progress,
@@ -630,6 +633,7 @@ pub fn diagnose(
         if let Some(first) = judged.first {
             best = Some((first, fits[first].clone()));
         }
+        carried = judged.partner;
         timing.pairs += t.elapsed().as_secs_f64();
         let mut round = Round {
             candidates: ranking.scored.len(),

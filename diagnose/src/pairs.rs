@@ -35,7 +35,8 @@
 //!    - its partner is significant at the round's threshold, and the first effect's own single
 //!      refit is acceptable as the round's (physical, identified, more than a partial fix).
 //!
-//!    The next round then ranks and refits with the first effect in, as any round does.
+//!    The next round then ranks and refits with the first effect in, as any round does, and
+//!    refits the chosen pair's partner among its leaders ([`Carried`]).
 //!
 //! Each first effect's pair is reported in the round's `pairs` (JSON, text and progress lines)
 //! as a refit whose `effect` names both effects and whose `dof` and `params` are both effects'.
@@ -59,6 +60,22 @@ pub(super) struct Judged {
     /// The round's refit to accept instead of its best single (index into its refits), when
     /// another first effect's pair explains the data better.
     pub(super) first: Option<usize>,
+    /// That pair's partner and its fitted parameters (SI): the next round refits it among its
+    /// leaders (see [`Carried`]).
+    pub(super) partner: Option<Carried>,
+}
+
+/// The partner of the pair that chose a round's first effect, carried into the next round:
+/// ranked at the accepted fit, the partner can stand below the next round's own leaders — a
+/// spring along the excitation's direction that the first effect's refit made room for scores
+/// below springs the joints can imitate —, and the round that follows refits it with them,
+/// from where the pair left it.
+#[derive(Debug, Clone)]
+pub(super) struct Carried {
+    /// The partner, as the ranking generated it.
+    pub(super) effect: Effect,
+    /// Its parameters in the pair's fit (SI).
+    pub(super) values: Vec<f64>,
 }
 
 /// One first effect's best pair: the round's refit `first` (index), the pair as a refit, and
@@ -67,6 +84,8 @@ struct Pair {
     first: usize,
     refit: Refit,
     partner: Refit,
+    /// The partner as the pair's ranking generated it, and its values there.
+    carried: Option<Carried>,
     /// Whether the pair's fit explains the data: not above the noise level.
     explains: bool,
 }
@@ -84,6 +103,7 @@ pub(super) fn judge_pairs(
     let mut judged = Judged {
         pairs: Vec::new(),
         first: None,
+        partner: None,
     };
     let Refitted {
         refits, fits, best, ..
@@ -115,10 +135,15 @@ pub(super) fn judge_pairs(
                     refit.lr,
                     refit.dof
                 ));
+                let carried = next.effects.last().map(|effect| Carried {
+                    effect: effect.clone(),
+                    values: partner.params.iter().map(|p| p.value).collect(),
+                });
                 pairs.push(Pair {
                     first,
                     refit,
                     partner,
+                    carried,
                     explains: !above_noise(setting, level, &next),
                 });
             }
@@ -130,6 +155,13 @@ pub(super) fn judge_pairs(
         }
     }
     judged.first = choose(setting, cur, level, refitted, &pairs, best);
+    judged.partner = judged.first.and_then(|first| {
+        pairs
+            .iter()
+            .filter(|p| p.first == first)
+            .min_by(|a, b| a.refit.criterion_after.total_cmp(&b.refit.criterion_after))
+            .and_then(|p| p.carried.clone())
+    });
     if let Some(first) = judged.first {
         progress(&format!(
             "pair judgement: adding {} first in place of {} (with its best next effect it explains the data better)",

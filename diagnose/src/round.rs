@@ -175,11 +175,13 @@ pub(super) struct Refitted {
     pub(super) fits: Vec<Current>,
 }
 
-/// What a round refits: the ranking and the leading candidates' screens.
+/// What a round refits: the ranking, the leading candidates' screens, and the partner a pair
+/// chose in the round before, if any.
 #[derive(Clone, Copy)]
 pub(super) struct Leading<'a> {
     pub(super) ranking: &'a Ranking,
     pub(super) screened: &'a [Screened],
+    pub(super) carried: Option<&'a super::pairs::Carried>,
 }
 
 /// The families refitted and their members' refits (`outcomes[f]` for `jobs[f]`).
@@ -215,7 +217,11 @@ fn escalate<'r>(
     progress: &mut dyn FnMut(&str),
 ) -> Escalation<'r> {
     let Setting { opts, f_hi, .. } = setting;
-    let Leading { ranking, screened } = leading;
+    let Leading {
+        ranking,
+        screened,
+        carried,
+    } = leading;
     let m = cur.e.len();
     // "Large" and "above the noise" are judged against R's level when it is known; when R is
     // known only up to scale (σ̂² would make every reduced χ² 1), against the data's own noise
@@ -224,6 +230,13 @@ fn escalate<'r>(
     let large = cur.e.norm_squared() / gate > LARGE_MISFIT * m as f64;
     let base_j = 0.5 * cur.e.norm_squared();
     let mut jobs = refit_jobs(ranking, screened, opts.refit, f_hi);
+    if let Some(job) = carried_job(ranking, screened, &jobs, carried, f_hi) {
+        progress(&format!(
+            "refitting the partner the last round's pair judgement chose: {}",
+            job.members[0].effect.describe()
+        ));
+        jobs.push(job);
+    }
     let run = |jobs: &[Job]| run_jobs(setting, cur, jobs, large, ranking.sigma2);
     report_jobs(&jobs, screened, ranking, base_j, progress);
     let mut outcomes = run(&jobs);
@@ -570,6 +583,34 @@ pub(super) fn refit_jobs<'r>(
         }
     }
     jobs
+}
+
+/// The refit job of the partner a pair chose in the round before (`carried`), started from its
+/// values in that pair, where no job of `jobs` holds its family. The partner is found among the
+/// round's candidates by its description (a resonator retuned by this round's score is another
+/// candidate, and is not carried).
+pub(super) fn carried_job<'r>(
+    ranking: &'r Ranking,
+    screened: &[Screened],
+    jobs: &[Job],
+    carried: Option<&super::pairs::Carried>,
+    f_hi: f64,
+) -> Option<Job<'r>> {
+    let carried = carried?;
+    let described = carried.effect.describe();
+    let index = (0..ranking.scored.len())
+        .find(|&j| ranking.candidates[ranking.scored[j].candidate].describe() == described)?;
+    let family = ranking.family_index(index);
+    let held = jobs.iter().any(|job| {
+        (family.is_some() && job.family == family)
+            || job.members.iter().any(|m| m.effect.describe() == described)
+    });
+    let lead = Screened {
+        index,
+        criterion: f64::INFINITY,
+        start: carried.values.clone(),
+    };
+    (!held).then(|| family_job(ranking, screened, &lead, family, f_hi))
 }
 
 /// The refits of the kinds the leading families' `jobs` leave out, for when the misfit was large
