@@ -515,7 +515,6 @@ struct Level {
 }
 
 /// The state of the extended fit after a round.
-#[derive(Clone)]
 struct Current {
     effects: Vec<Effect>,
     u: DVector<f64>,
@@ -625,14 +624,12 @@ pub fn diagnose(
         let judged = pairs::judge_pairs(setting, &so_far.cur, ranking.level(), &refitted, progress);
         let Refitted {
             refits,
-            mut best,
+            best,
             not_identifiable,
             contenders,
-            fits,
+            mut fits,
         } = refitted;
-        if let Some(first) = judged.first {
-            best = Some((first, fits[first].clone()));
-        }
+        let best = judged.first.or(best).map(|i| (i, fits.swap_remove(i)));
         carried = judged.partner;
         timing.pairs += t.elapsed().as_secs_f64();
         let mut round = Round {

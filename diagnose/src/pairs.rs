@@ -108,10 +108,10 @@ pub(super) fn judge_pairs(
     let Refitted {
         refits, fits, best, ..
     } = refitted;
-    let Some((best, best_fit)) = best.as_ref().map(|(b, f)| (*b, f)) else {
+    let Some(best) = *best else {
         return judged;
     };
-    if !above_noise(setting, level, best_fit) {
+    if !above_noise(setting, level, &fits[best]) {
         return judged;
     }
     let firsts = leading(refits, best, level.threshold);

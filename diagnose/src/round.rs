@@ -165,8 +165,8 @@ pub(super) struct Refitted {
     /// The refit that stands for each family refitted.
     pub(super) refits: Vec<Refit>,
     /// The most significant of them that passes the round's threshold and is physical (index
-    /// into `refits`), with its fit.
-    pub(super) best: Option<(usize, Current)>,
+    /// into `refits` and `fits`).
+    pub(super) best: Option<usize>,
     /// The significant ones that were not physical or identifiable, and why.
     pub(super) not_identifiable: Vec<NotTried>,
     /// Every member refit the round could have accepted.
@@ -405,7 +405,7 @@ fn judge_families(
     }
     Refitted {
         refits,
-        best: best.map(|b| (b, fits[b].clone())),
+        best,
         not_identifiable,
         contenders,
         fits,
@@ -1943,9 +1943,6 @@ mod tests {
         assert!(kind_jobs(&ranking, &screened, &all, 100.0, 400.0).is_empty());
     }
 
-    /// The short refits that went below the best refit so far lead refits of their families,
-    /// lowest first, up to `n`, and none of a family a job already holds; those that did not go
-    /// below it lead none.
     #[test]
     fn the_halving_keeps_the_lowest_share_and_never_fewer_than_the_minimum() {
         let reached = |n: usize| -> Vec<(usize, f64)> {
@@ -1969,6 +1966,9 @@ mod tests {
         assert_eq!(going_on(reached(many)), lowest(many, share));
     }
 
+    /// The short refits that went below the best refit so far lead refits of their families,
+    /// lowest first, up to `n`, and none of a family a job already holds; those that did not go
+    /// below it lead none.
     #[test]
     fn a_short_refit_below_the_best_refit_leads_its_family_s_refit() {
         let candidates = vec![

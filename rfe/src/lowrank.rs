@@ -281,15 +281,17 @@ impl Update {
     /// `(ΔA_SS, A_SN, A_NN)` at `omega`.
     fn blocks(&self, omega: f64) -> (DMatrix<C64>, DMatrix<C64>, DMatrix<C64>) {
         let w2 = omega * omega;
-        let with_mass = |k: &DMatrix<C64>, m: &DMatrix<f64>| {
-            DMatrix::from_fn(k.nrows(), k.ncols(), |i, j| k[(i, j)] - m[(i, j)] * w2)
-        };
         (
-            with_mass(&self.k_ss, &self.m_ss),
-            with_mass(&self.k_sn, &self.m_sn),
-            with_mass(&self.k_nn, &self.m_nn),
+            with_mass(&self.k_ss, &self.m_ss, w2),
+            with_mass(&self.k_sn, &self.m_sn, w2),
+            with_mass(&self.k_nn, &self.m_nn, w2),
         )
     }
+}
+
+/// `K + jD − ω² M` of a block, `w2` = ω².
+fn with_mass(k: &DMatrix<C64>, m: &DMatrix<f64>, w2: f64) -> DMatrix<C64> {
+    DMatrix::from_fn(k.nrows(), k.ncols(), |i, j| k[(i, j)] - m[(i, j)] * w2)
 }
 
 /// The dense mass matrix of a system (its diagonal and couplings), row-major.
@@ -641,18 +643,15 @@ impl Base {
         let f = self.states.freqs_hz[k];
         let w2 = (TWO_PI * f).powi(2);
         let singular = || LowRankError::Singular { freq_hz: f };
-        let with_mass = |k: &DMatrix<C64>, m: &DMatrix<f64>| {
-            DMatrix::from_fn(k.nrows(), k.ncols(), |i, j| k[(i, j)] - m[(i, j)] * w2)
-        };
         let q = &reduced.q;
-        let mut c = with_mass(&reduced.k_rr, &reduced.m_rr);
+        let mut c = with_mass(&reduced.k_rr, &reduced.m_rr, w2);
         let mut p = u.p_s.map(|v| C64::new(v, 0.0));
         let p_n = u.p_n.map(|v| C64::new(v, 0.0));
-        let a_sn = with_mass(&u.k_sn, &u.m_sn);
-        let nn_lu = with_mass(&u.k_nn, &u.m_nn).lu();
+        let a_sn = with_mass(&u.k_sn, &u.m_sn, w2);
+        let nn_lu = with_mass(&u.k_nn, &u.m_nn, w2).lu();
         if u.new_dofs > 0 {
             // The Schur complement of the new DOFs, in the reduced basis.
-            let a_rn = with_mass(&reduced.k_rn, &reduced.m_rn);
+            let a_rn = with_mass(&reduced.k_rn, &reduced.m_rn, w2);
             let x = nn_lu.solve(&a_rn.transpose()).ok_or_else(singular)?;
             c -= &a_rn * x;
             let y = nn_lu.solve(&p_n).ok_or_else(singular)?;
